@@ -1,0 +1,303 @@
+"""Exact optics of the mirror space: the ground truth everything is scored against.
+
+A vertical planar mirror reflects the board plane across its surface line and leaves
+heights unchanged.  So an object's virtual image is its top-view reflection, the angle
+of arrival α is the bearing of that image from the camera, and d_total = d1 + d2 is
+the camera's distance to it (paper eqs 1–4).  Whether the image actually reaches the
+camera depends on the mirror's finite rectangle (horizontally *and* vertically), the
+walls on either leg of the path, and the camera's field of view.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from mirrorsim.scene import (
+    OCCLUDER_THICKNESS,
+    PENCIL_RADIUS,
+    TARGET_THICKNESS,
+    Beacon,
+    Camera,
+    Mirror,
+    Scene,
+    Target,
+)
+from solver.geometry import (
+    bearing_deg,
+    reflect,
+    segment_crossing,
+    signed_distance,
+    unit,
+)
+
+AXIS_SAMPLES = 41  # heights sampled along an object's upright axis
+
+
+@dataclass(frozen=True)
+class MirrorImage:
+    """Where a board point appears in the mirror, seen from the camera."""
+
+    virtual: np.ndarray  # the point's reflection across the mirror line
+    alpha_deg: float  # bearing camera → virtual image, (-180, 180]
+    d_total: float  # |camera → virtual| = d1 + d2
+    d1: float  # camera → reflection point
+    d2: float  # reflection point → object
+    reflection_point: np.ndarray  # where the path meets the mirror line
+    mirror_offset: float  # reflection point's signed distance from the mirror centre, along yaw
+
+
+def mirror_image(camera: Camera, mirror: Mirror, point) -> MirrorImage:
+    """Virtual image, α, d_total and reflection point of a board point."""
+    cam = np.asarray(camera.position, float)
+    p = np.asarray(point, float)
+    v = reflect(p, mirror.center, mirror.yaw)
+    d_total = float(np.linalg.norm(v - cam))
+    # The camera→virtual segment crosses the mirror line at the fraction of its length
+    # given by the two points' distances from the line (they are on opposite sides).
+    sc = float(signed_distance(cam, mirror.center, mirror.yaw))
+    sv = float(signed_distance(v, mirror.center, mirror.yaw))
+    t = sc / (sc - sv)
+    r = cam + t * (v - cam)
+    offset = float((r - np.asarray(mirror.center, float)) @ unit(mirror.yaw))
+    return MirrorImage(
+        virtual=v,
+        alpha_deg=float(bearing_deg(cam, v)),
+        d_total=d_total,
+        d1=float(np.linalg.norm(r - cam)),
+        d2=float(np.linalg.norm(p - r)),
+        reflection_point=r,
+        mirror_offset=offset,
+    )
+
+
+def camera_axes(camera: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Forward, right and down unit vectors of the level camera (3-D)."""
+    f = unit(camera.pan_deg)
+    forward = np.array([f[0], f[1], 0.0])
+    right = np.array([f[1], -f[0], 0.0])
+    down = np.array([0.0, 0.0, -1.0])
+    return forward, right, down
+
+
+def project(camera: Camera, points3) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pinhole projection of 3-D points (OpenCV pixel convention: centres at integers).
+
+    Returns
+    -------
+    u, v : ndarray
+        Pixel coordinates (+u right, +v down).
+    depth : ndarray
+        Distance along the optical axis (negative behind the camera).
+    """
+    p = np.asarray(points3, float) - camera.center3
+    forward, right, down = camera_axes(camera)
+    z = p @ forward
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = camera.cx + camera.fx * (p @ right) / z
+        v = camera.cy + camera.fx * (p @ down) / z
+    return u, v, z
+
+
+@dataclass(frozen=True)
+class ImageExtent:
+    """Where an object's virtual image falls on the sensor (exact pinhole projection)."""
+
+    u_axis: float  # column of the upright axis
+    v_top: float  # row of the axis's top end
+    v_bottom: float  # row of its foot (board level)
+
+    @property
+    def height_px(self) -> float:
+        return self.v_bottom - self.v_top
+
+
+def image_extent(scene: Scene, obj: Target | Beacon) -> ImageExtent:
+    """Projection of the virtual image of the object's upright axis."""
+    v = mirror_image(scene.camera, scene.mirror, obj.position).virtual
+    top = _height(obj)
+    u, vv, _ = project(scene.camera, np.array([[v[0], v[1], top], [v[0], v[1], 0.0]]))
+    return ImageExtent(float(u[0]), float(vv[0]), float(vv[1]))
+
+
+def _height(obj: Target | Beacon) -> float:
+    return obj.size[1] if isinstance(obj, Target) else obj.height
+
+
+@dataclass(frozen=True)
+class Visibility:
+    """How much of an object's image reaches the camera through the mirror."""
+
+    axis_fraction: float  # fraction of the upright axis (sampled heights) that is seen
+    fraction: float  # fraction over the axis and the object's two side edges
+    reason: str  # why samples are lost ('' when the whole object is seen)
+
+    @property
+    def clipped(self) -> bool:
+        return self.fraction < 1.0
+
+
+def _walls(scene: Scene, obj) -> list[tuple[str, np.ndarray, np.ndarray, float]]:
+    """Upright blockers as (name, start, end, height) segments; the target blocks beacons.
+
+    Walls and the panel are boxes: each contributes the four sides of its footprint.
+    """
+    walls = []
+    for i, o in enumerate(scene.occluders):
+        walls += _box_sides(f"occluders[{i}]", o.start, o.end, OCCLUDER_THICKNESS, o.height)
+    if not isinstance(obj, Target):
+        t0, t1 = scene.target.ends()
+        walls += _box_sides("the target panel", t0, t1, TARGET_THICKNESS, scene.target.height)
+    return walls
+
+
+def _box_sides(name: str, start, end, thickness: float, height: float):
+    a, b = np.asarray(start, float), np.asarray(end, float)
+    d = (b - a) / np.linalg.norm(b - a)
+    n = np.array([-d[1], d[0]]) * thickness / 2.0
+    c = [a - n, b - n, b + n, a + n]
+    return [(name, c[k], c[(k + 1) % 4], height) for k in range(4)]
+
+
+def _blocked(walls, a3: np.ndarray, b3: np.ndarray) -> str:
+    """Name of the first wall that the 3-D segment a3→b3 passes through, or ''."""
+    for name, w0, w1, h in walls:
+        u = segment_crossing(a3[:2], b3[:2], w0, w1)
+        if u is not None and a3[2] + u * (b3[2] - a3[2]) < h:
+            return name
+    return ""
+
+
+def _sample_columns(scene: Scene, obj) -> list[np.ndarray]:
+    """Board points of the object's central axis and its two side edges."""
+    p = np.asarray(obj.position, float)
+    if isinstance(obj, Target):
+        e0, e1 = obj.ends()
+        return [p, e0, e1]
+    # a pencil: its silhouette edges across the line of sight
+    r = mirror_image(scene.camera, scene.mirror, p).reflection_point
+    side = unit(bearing_deg(p, r) + 90.0) * PENCIL_RADIUS * math.cos(math.pi / 6)
+    return [p, p - side, p + side]
+
+
+def _sample_failure(scene: Scene, walls, point, z: float) -> str:
+    """Why the image of the 3-D point (point, z) does not reach the camera, or ''."""
+    cam, mir = scene.camera, scene.mirror
+    img = mirror_image(cam, mir, point)
+    half_w = mir.size[0] / 2.0
+    if abs(img.mirror_offset) > half_w:
+        return (f"its reflection point falls {abs(img.mirror_offset) - half_w:.2f} cm beyond "
+                f"the mirror's {'end at +yaw' if img.mirror_offset > 0 else 'end at -yaw'}")
+    t = img.d1 / img.d_total
+    zc = cam.height + t * (z - cam.height)
+    if zc > mir.size[1]:
+        return f"the ray meets the mirror plane {zc - mir.size[1]:.2f} cm above its top edge"
+    if zc < 0.0:
+        return f"the ray meets the mirror plane {-zc:.2f} cm below the board"
+    u, v, depth = project(cam, np.array([img.virtual[0], img.virtual[1], z]))
+    if depth <= 0 or not (-0.5 <= u <= cam.width - 0.5 and -0.5 <= v <= cam.height_px - 0.5):
+        return (f"it lies outside the camera's field of view (pan {cam.pan_deg:.2f}°, "
+                f"pixel ({float(u):.0f}, {float(v):.0f}))")
+    r3 = np.array([img.reflection_point[0], img.reflection_point[1], zc])
+    blocker = _blocked(walls, cam.center3, r3) or _blocked(
+        walls, r3, np.array([point[0], point[1], z]))
+    if blocker:
+        return f"the path through the mirror is blocked by {blocker}"
+    return ""
+
+
+def visibility(scene: Scene, obj: Target | Beacon) -> Visibility:
+    """Sample the object's axis and side edges; say how much reaches the camera and why not.
+
+    The camera's pan must be resolved (``scene.camera.pan_deg``).
+    """
+    walls = _walls(scene, obj)
+    heights = np.linspace(0.0, _height(obj), AXIS_SAMPLES)
+    cols = _sample_columns(scene, obj)
+    seen = np.zeros((len(cols), len(heights)), bool)
+    reasons: list[str] = []
+    for i, col in enumerate(cols):
+        for j, z in enumerate(heights):
+            why = _sample_failure(scene, walls, col, float(z))
+            seen[i, j] = not why
+            if why and (i == 0 or not reasons):
+                reasons.append(why)
+    axis = float(seen[0].mean())
+    reason = ""
+    if not seen.all():
+        # the axis sample nearest mid-height that fails says most about the set-up
+        lost = [j for j in np.argsort(np.abs(heights - heights[-1] / 2)) if not seen[0, j]]
+        if lost:
+            reason = _sample_failure(scene, walls, cols[0], float(heights[lost[0]]))
+            hidden = (1.0 - axis) * heights[-1]
+            reason = f"{hidden:.2f} of its {heights[-1]:g} cm height lost: {reason}"
+        else:
+            reason = f"a side edge is lost: {reasons[0]}"
+    return Visibility(axis_fraction=axis, fraction=float(seen.mean()), reason=reason)
+
+
+def direct_view_fraction(scene: Scene, obj: Target | Beacon) -> float:
+    """Fraction of the object's axis the camera could see directly (panning to it).
+
+    The mirror's back counts as a wall, as do the occluders.
+    """
+    m0, m1 = scene.mirror.ends()
+    walls = _walls(scene, obj) + [("the mirror", m0, m1, scene.mirror.size[1])]
+    p = np.asarray(obj.position, float)
+    heights = np.linspace(0.0, _height(obj), AXIS_SAMPLES)
+    free = [not _blocked(walls, scene.camera.center3, np.array([p[0], p[1], z])) for z in heights]
+    return float(np.mean(free))
+
+
+def ground_truth(scene: Scene) -> dict:
+    """The exact ground truth of a scene as the JSON-ready dict of INTERFACE.md.
+
+    The renderer adds ``bbox_px`` and ``visible_px`` from its object-id pass.
+    """
+    cam, mir = scene.camera, scene.mirror
+
+    def entry(obj) -> dict:
+        img = mirror_image(cam, mir, obj.position)
+        ext = image_extent(scene, obj)
+        vis = visibility(scene, obj)
+        return {
+            "position": list(obj.position),
+            "virtual": _r(img.virtual),
+            "alpha_deg": _r(img.alpha_deg),
+            "d_total": _r(img.d_total),
+            "d1": _r(img.d1),
+            "d2": _r(img.d2),
+            "reflection_point": _r(img.reflection_point),
+            "mirror_offset": _r(img.mirror_offset),
+            "image_px": {"u_axis": _r(ext.u_axis), "v_top": _r(ext.v_top),
+                         "v_bottom": _r(ext.v_bottom), "height": _r(ext.height_px)},
+            "visible_fraction": _r(vis.fraction),
+            "clipped": vis.clipped,
+        }
+
+    target = {**entry(scene.target), "size": list(scene.target.size),
+              "facing_deg": _r(scene.target.facing_deg)}
+    beacons = [{**entry(b), "height": b.height} for b in scene.beacons]
+    return {
+        "scene": scene.name,
+        "camera": {"position": list(cam.position), "height": cam.height,
+                   "pan_deg": _r(cam.pan_deg), "hfov_deg": cam.hfov,
+                   "resolution": list(cam.resolution), "fx": _r(cam.fx), "fy": _r(cam.fx),
+                   "cx": cam.cx, "cy": cam.cy},
+        "mirror": {"center": list(mir.center), "yaw_deg": _r(float(np.mod(mir.yaw, 180.0))),
+                   "size": list(mir.size)},
+        "target": target,
+        "beacons": beacons,
+        "occluders": [{"start": list(o.start), "end": list(o.end), "height": o.height}
+                      for o in scene.occluders],
+        "direct_view_fraction": _r(direct_view_fraction(scene, scene.target)),
+    }
+
+
+def _r(x, nd: int = 9):
+    """Round for JSON: 1e-9 cm / deg is far below anything measurable."""
+    if isinstance(x, np.ndarray):
+        return [round(float(v), nd) for v in x]
+    return round(float(x), nd)
