@@ -232,7 +232,7 @@ def visibility(scene: Scene, obj: Target | Beacon) -> Visibility:
         if lost:
             reason = _sample_failure(scene, walls, cols[0], float(heights[lost[0]]))
             hidden = (1.0 - axis) * heights[-1]
-            reason = f"{hidden:.2f} of its {heights[-1]:g} cm height lost: {reason}"
+            reason = f"{hidden:.2f} of its {heights[-1]:.2f} cm height lost: {reason}"
         else:
             reason = f"a side edge is lost: {reasons[0]}"
     return Visibility(axis_fraction=axis, fraction=float(seen.mean()), reason=reason)

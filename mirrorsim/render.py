@@ -36,6 +36,7 @@ from solver.geometry import line_normal, signed_distance, unit
 # Labels of the object-id pass.  Beacons take BEACON_LABEL + i, occluders after them.
 BACKGROUND_LABEL, MIRROR_LABEL, TARGET_LABEL, BEACON_LABEL = 0, 1, 2, 3
 
+IN_MIRROR = 100  # ids.png: label + IN_MIRROR where the pixel sees it in the mirror
 PASS_SPP = 16  # samples per render pass: one progress step each
 BOARD_TEXELS_PER_CM = 24
 # camera → mirror → object, with light sampled there: the shortest path that lights
@@ -174,8 +175,10 @@ def _pencil_meshes(position, height: float) -> dict[str, mi.Mesh]:
         props["bsdf"] = mi.load_dict(_diffuse(part))
         mesh = mi.Mesh(part, len(verts), len(faces), props=props, has_vertex_normals=False)
         params = mi.traverse(mesh)
-        params["vertex_positions"] = dr.ravel(mi.Point3f(*verts.T.astype(np.float32)))
-        params["faces"] = dr.ravel(mi.Vector3u(*faces.T.astype(np.uint32)))
+        # the buffers' own types differ between scalar and JIT variants
+        pos, idx = params["vertex_positions"], params["faces"]
+        params["vertex_positions"] = type(pos)(verts.astype(np.float32).ravel())
+        params["faces"] = type(idx)(faces.astype(np.uint32).ravel())
         params.update()
         meshes[part] = mesh
     return meshes
@@ -298,21 +301,6 @@ def _render_frame(mi_scene, spp: int, seed: int, progress) -> np.ndarray:
     return (acc / spp).astype(np.float32)
 
 
-def _mirror_bbox(scene: Scene) -> tuple[int, int, int, int]:
-    """Pixel range [u0, u1) × [v0, v1) covering the mirror's glass, with a margin."""
-    cam, m = scene.camera, scene.mirror
-    e0, e1 = m.ends()
-    corners = np.array([[*e, z] for e in (e0, e1) for z in (0.0, m.size[1])])
-    u, v, depth = optics.project(cam, corners)
-    if (depth <= 0).any():
-        return 0, cam.width, 0, cam.height_px
-    u0 = int(np.clip(math.floor(u.min()) - 2, 0, cam.width))
-    u1 = int(np.clip(math.ceil(u.max()) + 3, 0, cam.width))
-    v0 = int(np.clip(math.floor(v.min()) - 2, 0, cam.height_px))
-    v1 = int(np.clip(math.ceil(v.max()) + 3, 0, cam.height_px))
-    return u0, u1, v0, v1
-
-
 def id_pass(mi_scene, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
     """Object ids at pixel centres: the first surface hit, and what the mirror shows.
 
@@ -323,25 +311,14 @@ def id_pass(mi_scene, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
     Returns
     -------
     first, in_mirror : ndarray of uint8, shape (H, W)
-        Labels (MIRROR_LABEL, TARGET_LABEL, BEACON_LABEL + i, …; 0 elsewhere).
-        ``in_mirror`` is 0 off the glass.  Only the mirror's pixel box is cast.
+        Labels (MIRROR_LABEL, TARGET_LABEL, BEACON_LABEL + i, …; 0 for anything else).
+        ``in_mirror`` is 0 off the glass.
     """
     cam = scene.camera
-    W, H = cam.width, cam.height_px
-    first = np.zeros((H, W), np.uint8)
-    second = np.zeros((H, W), np.uint8)
-    u0, u1, v0, v1 = _mirror_bbox(scene)
-    if u1 <= u0 or v1 <= v0:
-        return first, second
     shapes = [(s, _label_of(s.id(), len(scene.beacons))) for s in mi_scene.shapes()]
     sensor = mi_scene.sensors()[0]
-    if dr.is_jit_v(mi.Float):
-        f, s = _id_pass_jit(mi_scene, sensor, shapes, (u0, u1, v0, v1), W, H)
-    else:
-        f, s = _id_pass_scalar(mi_scene, sensor, shapes, (u0, u1, v0, v1), W, H)
-    first[v0:v1, u0:u1] = f
-    second[v0:v1, u0:u1] = s
-    return first, second
+    cast = _id_pass_jit if dr.is_jit_v(mi.Float) else _id_pass_scalar
+    return cast(mi_scene, sensor, shapes, cam.width, cam.height_px)
 
 
 def _reflected_ray(ray, si):
@@ -349,12 +326,10 @@ def _reflected_ray(ray, si):
     return si.spawn_ray(ray.d - 2.0 * dr.dot(ray.d, n) * n)
 
 
-def _id_pass_jit(mi_scene, sensor, shapes, box, W, H):
-    u0, u1, v0, v1 = box
-    w, h = u1 - u0, v1 - v0
-    idx = dr.arange(mi.UInt32, w * h)
-    px = mi.Float(idx % w) + (u0 + 0.5)
-    py = mi.Float(idx // w) + (v0 + 0.5)
+def _id_pass_jit(mi_scene, sensor, shapes, W, H):
+    idx = dr.arange(mi.UInt32, W * H)
+    px = mi.Float(idx % W) + 0.5
+    py = mi.Float(idx // W) + 0.5
     ray, _ = sensor.sample_ray(0.0, 0.5, mi.Point2f(px / W, py / H), mi.Point2f(0.5, 0.5))
 
     def labels(si):
@@ -369,29 +344,34 @@ def _id_pass_jit(mi_scene, sensor, shapes, box, W, H):
     on_glass = first == MIRROR_LABEL
     si2 = mi_scene.ray_intersect(_reflected_ray(ray, si), on_glass)
     second = dr.select(on_glass, labels(si2), BACKGROUND_LABEL)
-    to_np = lambda a: np.asarray(a, dtype=np.uint8).reshape(h, w)  # noqa: E731
+    to_np = lambda a: np.asarray(a, dtype=np.uint8).reshape(H, W)  # noqa: E731
     return to_np(first), to_np(second)
 
 
-def _id_pass_scalar(mi_scene, sensor, shapes, box, W, H):
-    u0, u1, v0, v1 = box
+def _id_pass_scalar(mi_scene, sensor, shapes, W, H):
     by_id = {s.id(): label for s, label in shapes}
-    first = np.zeros((v1 - v0, u1 - u0), np.uint8)
+    first = np.zeros((H, W), np.uint8)
     second = np.zeros_like(first)
-    for j in range(v0, v1):
-        for i in range(u0, u1):
+    for j in range(H):
+        for i in range(W):
             ray, _ = sensor.sample_ray(0.0, 0.5, mi.Point2f((i + 0.5) / W, (j + 0.5) / H),
                                        mi.Point2f(0.5, 0.5))
             si = mi_scene.ray_intersect(ray)
             if not si.is_valid():
                 continue
             lab = by_id.get(si.shape.id(), BACKGROUND_LABEL)
-            first[j - v0, i - u0] = lab
+            first[j, i] = lab
             if lab == MIRROR_LABEL:
                 si2 = mi_scene.ray_intersect(_reflected_ray(ray, si))
                 if si2.is_valid():
-                    second[j - v0, i - u0] = by_id.get(si2.shape.id(), BACKGROUND_LABEL)
+                    second[j, i] = by_id.get(si2.shape.id(), BACKGROUND_LABEL)
     return first, second
+
+
+def encode_ids(first: np.ndarray, in_mirror: np.ndarray) -> np.ndarray:
+    """One uint8 image of both id maps: the direct label, or IN_MIRROR + the label that
+    the mirror shows on the glass (so IN_MIRROR alone is glass showing the room)."""
+    return np.where(first == MIRROR_LABEL, IN_MIRROR + in_mirror, first).astype(np.uint8)
 
 
 def to_srgb8(linear: np.ndarray) -> np.ndarray:
@@ -466,7 +446,8 @@ def render_scene(
     truth["mirror"]["bbox_px"], truth["mirror"]["visible_px"] = _mask_stats(first == MIRROR_LABEL)
     truth["id_labels"] = {"background": BACKGROUND_LABEL, "mirror": MIRROR_LABEL,
                           "target": TARGET_LABEL, "beacons": BEACON_LABEL,
-                          "occluders": BEACON_LABEL + len(scene.beacons)}
+                          "occluders": BEACON_LABEL + len(scene.beacons),
+                          "seen_in_mirror_offset": IN_MIRROR}
     truth["render"] = {"variant": chosen, "spp": spp, "seed": seed,
                        "seconds_render": round(t_render, 3), "seconds_total": round(seconds, 3),
                        "mitsuba": mi.__version__}
@@ -474,8 +455,7 @@ def render_scene(
     out.mkdir(parents=True, exist_ok=True)
     files = {
         out / f"{scene.name}.png": to_srgb8(linear),
-        out / f"{scene.name}.ids.png": np.where(first == MIRROR_LABEL, in_mirror, first)
-        .astype(np.uint8),
+        out / f"{scene.name}.ids.png": encode_ids(first, in_mirror),
     }
     tmp_paths = []
     try:

@@ -1,0 +1,49 @@
+# The README's two commands: `make demo` (the main job on the bundled default scene)
+# and `make test`.  Each sets up what it needs: a virtual environment in .venv and,
+# where apt works as root, libLLVM 19 for Mitsuba's fast LLVM backend.
+PYTHON ?= python3
+VENV   := .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed
+
+.PHONY: demo test test-fast lint bench setup llvm clean
+
+setup: $(STAMP) llvm
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/pip install -q --upgrade pip
+	$(BIN)/pip install -q -e '.[test]'
+	touch $@
+
+# libLLVM 15/16 crash drjit's LLVM backend and 19 works; without it mirrorsim still
+# runs, on the slower scalar backend.  Best effort: never fails the build.
+llvm:
+	@if ls /usr/lib/*/libLLVM-19.so* /usr/lib/libLLVM-19.so* >/dev/null 2>&1; then :; \
+	elif command -v apt-get >/dev/null 2>&1 && [ "$$(id -u)" = 0 ]; then \
+	  echo "installing libllvm19 (Mitsuba's fast CPU backend)"; \
+	  apt-get install -y -q libllvm19 >/dev/null 2>&1 || \
+	  { apt-get update -q >/dev/null 2>&1 && apt-get install -y -q libllvm19 >/dev/null 2>&1; } || \
+	  echo "warning: could not install libllvm19; rendering will use scalar_rgb"; \
+	else echo "note: install libLLVM 19 (apt-get install libllvm19) for the fast backend"; fi
+
+demo: setup
+	$(BIN)/mirrorsim check scenes/default.yaml
+	$(BIN)/mirrorsim render scenes/default.yaml
+	$(BIN)/mirrorsim plot scenes/default.yaml
+
+test: setup
+	$(BIN)/python -m pytest
+	$(BIN)/ruff check .
+
+test-fast: setup
+	$(BIN)/python -m pytest -m "not slow"
+
+lint: setup
+	$(BIN)/ruff check .
+
+bench: setup
+	$(BIN)/python bench/render.py
+
+clean:
+	rm -rf $(VENV) renders/*/ .pytest_cache .ruff_cache .hypothesis

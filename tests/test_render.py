@@ -1,0 +1,137 @@
+"""Rendering at small resolution: the id pass against exact optics, colours, determinism."""
+
+import json
+
+import numpy as np
+import pytest
+
+from mirrorsim import optics
+from mirrorsim.render import BEACON_LABEL, IN_MIRROR, MIRROR_LABEL, TARGET_LABEL, render_scene
+from mirrorsim.scene import load_scene
+
+from .conftest import SCENES, small_scene
+
+
+def _read_png(path):
+    import mitsuba as mi
+
+    return np.array(mi.Bitmap(str(path)))
+
+
+@pytest.fixture(scope="module")
+def default_small(tmp_path_factory):
+    scene = small_scene("default", 480, 272, spp=4)
+    res = render_scene(scene, tmp_path_factory.mktemp("r"), progress=False)
+    return scene, res
+
+
+def test_files_and_sizes(default_small):
+    scene, res = default_small
+    img = _read_png(res.png)
+    assert img.shape == (272, 480, 3) and img.dtype == np.uint8
+    truth = json.loads(res.truth_json.read_text())
+    assert truth["scene"] == "default" and truth["render"]["spp"] == 4
+    ids = _read_png(res.ids_png)
+    assert ids.shape == (272, 480)
+
+
+@pytest.mark.parametrize("which", ["target", "beacon"])
+def test_id_pass_places_image_where_optics_projects_it(default_small, which):
+    scene, res = default_small
+    ids = _read_png(res.ids_png)
+    obj = scene.target if which == "target" else scene.beacons[0]
+    label = IN_MIRROR + (TARGET_LABEL if which == "target" else BEACON_LABEL)
+    ext = optics.image_extent(scene, obj)
+    vs, us = np.nonzero(ids == label)
+    assert len(us) > 20
+    # the object is symmetric about its upright axis: its pixels centre on that column
+    assert abs(us.mean() - ext.u_axis) <= 1.0
+    # pixel centres inside the projected extent: first row ≥ top, last row ≤ foot (+1 px)
+    assert ext.v_top - 1.0 <= vs.min() <= ext.v_top + 1.0
+    assert ext.v_bottom - 1.0 <= vs.max() <= ext.v_bottom + 1.0
+    entry = res.truth["target"] if which == "target" else res.truth["beacons"][0]
+    assert entry["visible_px"] == len(us)
+    assert entry["bbox_px"] == [us.min(), vs.min(), us.max(), vs.max()]
+
+
+def test_mirror_really_reflects(default_small):
+    scene, res = default_small
+    ids = _read_png(res.ids_png)
+    img = _read_png(res.png).astype(float)
+    tgt, pencil = ids == IN_MIRROR + TARGET_LABEL, ids == IN_MIRROR + BEACON_LABEL
+    # the target is seen only in the mirror, never directly (the wall hides it) ...
+    assert tgt.sum() > 100 and (ids == TARGET_LABEL).sum() == 0
+    # ... and all of its pixels lie inside the mirror glass's image region
+    glass = ids >= IN_MIRROR
+    vs, us = np.nonzero(glass)
+    tv, tu = np.nonzero(tgt)
+    assert tu.min() >= us.min() and tu.max() <= us.max()
+    assert tv.min() >= vs.min() and tv.max() <= vs.max()
+    # where the target itself stands, the camera sees the occluder
+    p = scene.target.position
+    u, v, depth = optics.project(scene.camera, [[p[0], p[1], scene.target.height / 2]])
+    occ = BEACON_LABEL + len(scene.beacons)
+    assert depth[0] > 0 and ids[int(round(v[0])), int(round(u[0]))] == occ
+    # the pencil stands in front of the mirror: seen both directly and in the mirror
+    assert (ids == BEACON_LABEL).sum() > 0 and pencil.sum() > 0
+    # in the frame, the target's reflection is the grey panel, the pencil's is yellow
+    grey = img[tgt].mean(axis=0)
+    assert np.ptp(grey) < 0.12 * grey.mean() and 60 < grey.mean() < 200
+    yellow = img[pencil].mean(axis=0)
+    assert yellow[0] > 1.4 * yellow[2]
+    assert (ids == MIRROR_LABEL).sum() == 0  # glass pixels carry the IN_MIRROR offset
+
+
+def test_same_seed_same_bytes_other_seed_differs(tmp_path):
+    scene = small_scene("exp1", 160, 92, spp=2)
+    a = render_scene(scene, tmp_path / "a", progress=False)
+    b = render_scene(scene, tmp_path / "b", progress=False)
+    c = render_scene(scene, tmp_path / "c", seed=7, progress=False)
+    assert a.png.read_bytes() == b.png.read_bytes()
+    assert a.png.read_bytes() != c.png.read_bytes()
+    assert a.ids_png.read_bytes() == c.ids_png.read_bytes()  # geometry, not sampling
+
+
+def test_scalar_and_jit_id_passes_agree(tmp_path):
+    from mirrorsim.backend import choose_variant
+
+    if choose_variant("auto") == "scalar_rgb":
+        pytest.skip("no JIT backend here to compare with")
+    scene = small_scene("exp3", 128, 74, spp=1)
+    jit = render_scene(scene, tmp_path / "jit", progress=False)
+    scalar = render_scene(scene, tmp_path / "scalar", variant="scalar", progress=False)
+    a, b = _read_png(jit.ids_png), _read_png(scalar.ids_png)
+    assert (a == b).mean() > 0.995
+    assert scalar.truth["target"]["visible_px"] > 0
+    # and the frames look alike (same scene, different samplers)
+    fa, fb = _read_png(jit.png).astype(float), _read_png(scalar.png).astype(float)
+    assert abs(fa.mean() - fb.mean()) < 0.05 * fa.mean()
+
+
+def test_refuses_bad_spp(tmp_path):
+    scene = small_scene("default", 64, 36)
+    with pytest.raises(ValueError, match="spp"):
+        render_scene(scene, tmp_path, spp=0, progress=False)
+    assert not any(tmp_path.iterdir())
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["exp1", "default"])
+def test_full_size_frame(name, tmp_path):
+    scene = load_scene(SCENES / f"{name}.yaml")
+    res = render_scene(scene, tmp_path, progress=False)
+    img = _read_png(res.png)
+    assert img.shape == (1088, 1920, 3)
+    ids = _read_png(res.ids_png)
+    for entry, obj, label in [(res.truth["target"], scene.target, TARGET_LABEL),
+                              (res.truth["beacons"][0], scene.beacons[0], BEACON_LABEL)]:
+        exact = optics.mirror_image(scene.camera, scene.mirror, obj.position)
+        assert entry["alpha_deg"] == pytest.approx(exact.alpha_deg, abs=1e-6)
+        assert entry["d_total"] == pytest.approx(exact.d_total, abs=1e-6)
+        ext = optics.image_extent(scene, obj)
+        vs, us = np.nonzero(ids == label)
+        assert entry["visible_px"] > 500
+        assert ext.v_top - 1 <= vs.min() <= ext.v_top + 1
+        assert ext.v_bottom - 1 <= vs.max() <= ext.v_bottom + 1
+        if not entry["clipped"]:
+            assert abs(us.mean() - ext.u_axis) <= 1.0

@@ -1,0 +1,93 @@
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from mirrorsim.cli import main
+from mirrorsim.scene import SceneError, load_scene
+
+from .conftest import SCENES
+
+BAD = sorted((Path(__file__).parent / "bad_scenes").glob("*.yaml"))
+
+
+def _expected(path: Path) -> str:
+    return path.read_text().splitlines()[0].split("expect:", 1)[1].strip()
+
+
+def test_corpus_is_large_enough():
+    assert len(BAD) >= 25
+
+
+@pytest.mark.parametrize("path", BAD, ids=[p.stem for p in BAD])
+def test_bad_scene_names_file_and_key(path):
+    with pytest.raises(SceneError) as err:
+        load_scene(path)
+    msg = str(err.value)
+    assert "\n" not in msg
+    assert msg.startswith(str(path))
+    expect = _expected(path)
+    assert err.value.key == expect or expect in err.value.message, msg
+
+
+@pytest.mark.parametrize("path", BAD, ids=[p.stem for p in BAD])
+def test_bad_scene_cli_exit_2_one_line_nothing_written(path, tmp_path, capsys):
+    out = tmp_path / "out"
+    code = main(["render", str(path), "--out", str(out), "--quiet"])
+    captured = capsys.readouterr()
+    assert code == 2
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: ") and str(path) in lines[0]
+    assert "Traceback" not in captured.err
+    assert not out.exists()
+
+
+def test_bad_scene_as_a_real_process(tmp_path):
+    path = next(p for p in BAD if p.stem == "negative_size")
+    proc = subprocess.run([sys.executable, "-m", "mirrorsim.cli", "check", str(path)],
+                          capture_output=True, text=True)
+    assert proc.returncode == 2
+    assert proc.stderr.count("\n") == 1 and "mirror.size[1]" in proc.stderr
+    assert "Traceback" not in proc.stderr
+
+
+def test_missing_file():
+    with pytest.raises(SceneError, match="no such file"):
+        load_scene(SCENES / "nope.yaml")
+
+
+@pytest.mark.parametrize("name", ["default", "exp1", "exp2", "exp3"])
+def test_bundled_scenes_load(name):
+    s = load_scene(SCENES / f"{name}.yaml")
+    assert s.name == name
+    assert s.mirror.size == (18.2, 13.25)
+    assert s.target.size == (9.9, 15.25)
+    assert math.isfinite(s.camera.pan_deg) and math.isfinite(s.target.facing_deg)
+
+
+def test_paper_table3_real_data_in_exp_scenes():
+    table3 = {  # X_ref, theta_ref, X_tar, X_bea
+        "exp1": ((27.5, 65), 38, (55, 70), (32, 62.5)),
+        "exp2": ((15.5, 34), 0, (23.5, 16.4), (18.2, 0)),
+        "exp3": ((16, 34.5), 38.3, (65.5, 42.7), (17, 33.5)),
+    }
+    for name, (ref, yaw, tar, bea) in table3.items():
+        s = load_scene(SCENES / f"{name}.yaml")
+        assert s.camera.position == (0, 0)
+        assert s.mirror.center == ref and s.mirror.yaw == yaw
+        assert s.target.position == tar and s.beacons[0].position == bea
+        assert s.beacons[0].height == 4.2
+
+
+def test_check_command_prints_summary(capsys):
+    assert main(["check", str(SCENES / "exp1.yaml")]) == 0
+    out = capsys.readouterr().out
+    assert "66.678" in out and "98.523" in out and "NLOS" in out
+
+
+def test_plot_command_writes_png(tmp_path):
+    out = tmp_path / "top.png"
+    assert main(["plot", str(SCENES / "default.yaml"), "--out", str(out)]) == 0
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and out.stat().st_size > 20_000
