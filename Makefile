@@ -19,7 +19,7 @@ $(STAMP): pyproject.toml
 # libLLVM 15/16 crash drjit's LLVM backend and 19 works; without it mirrorsim still
 # runs, on the slower scalar backend.  Best effort: never fails the build.
 llvm:
-	@if ls /usr/lib/*/libLLVM-19.so* /usr/lib/libLLVM-19.so* >/dev/null 2>&1; then :; \
+	@if [ -n "$$(ls /usr/lib/*/libLLVM-19.so* /usr/lib/libLLVM-19.so* 2>/dev/null)" ]; then :; \
 	elif command -v apt-get >/dev/null 2>&1 && [ "$$(id -u)" = 0 ]; then \
 	  echo "installing libllvm19 (Mitsuba's fast CPU backend)"; \
 	  apt-get install -y -q libllvm19 >/dev/null 2>&1 || \

@@ -37,7 +37,7 @@ from solver.geometry import line_normal, signed_distance, unit
 BACKGROUND_LABEL, MIRROR_LABEL, TARGET_LABEL, BEACON_LABEL = 0, 1, 2, 3
 
 IN_MIRROR = 100  # ids.png: label + IN_MIRROR where the pixel sees it in the mirror
-PASS_SPP = 16  # samples per render pass: one progress step each
+PASS_SPP = 4  # samples per render pass: one progress step each (no measurable cost)
 BOARD_TEXELS_PER_CM = 24
 # camera → mirror → object, with light sampled there: the shortest path that lights
 # the mirror images (each extra bounce costs about as much again)
