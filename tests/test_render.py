@@ -123,15 +123,19 @@ def test_full_size_frame(name, tmp_path):
     img = _read_png(res.png)
     assert img.shape == (1088, 1920, 3)
     ids = _read_png(res.ids_png)
-    for entry, obj, label in [(res.truth["target"], scene.target, TARGET_LABEL),
-                              (res.truth["beacons"][0], scene.beacons[0], BEACON_LABEL)]:
+    for entry, obj, label in [(res.truth["target"], scene.target, IN_MIRROR + TARGET_LABEL),
+                              (res.truth["beacons"][0], scene.beacons[0],
+                               IN_MIRROR + BEACON_LABEL)]:
         exact = optics.mirror_image(scene.camera, scene.mirror, obj.position)
         assert entry["alpha_deg"] == pytest.approx(exact.alpha_deg, abs=1e-6)
         assert entry["d_total"] == pytest.approx(exact.d_total, abs=1e-6)
         ext = optics.image_extent(scene, obj)
         vs, us = np.nonzero(ids == label)
         assert entry["visible_px"] > 500
-        assert ext.v_top - 1 <= vs.min() <= ext.v_top + 1
+        # the pencil's graphite point is narrower than a pixel for its last ~1.5 px, so
+        # pixel-centre rays first meet it a little below the apex
+        top_slack = 2.0 if obj in scene.beacons else 1.0
+        assert ext.v_top - 1 <= vs.min() <= ext.v_top + top_slack
         assert ext.v_bottom - 1 <= vs.max() <= ext.v_bottom + 1
         if not entry["clipped"]:
             assert abs(us.mean() - ext.u_axis) <= 1.0
