@@ -457,17 +457,21 @@ def _resolve_pan(scene: Scene) -> Camera:
     return Camera(cam.position, cam.height, cam.resolution, cam.hfov, cam.pan, pan_deg)
 
 
-def footprints(scene: Scene) -> list[tuple[str, np.ndarray, np.ndarray, float]]:
-    """Each object's footprint as a capsule: (key, segment start, segment end, radius)."""
+def footprints(scene: Scene, bkey=None) -> list[tuple[str, np.ndarray, np.ndarray, float]]:
+    """Each object's footprint as a capsule: (key, segment start, segment end, radius).
+
+    ``bkey(i)`` names beacon i's key as the file wrote it (``beacon`` or ``beacons[i]``).
+    """
+    if bkey is None:
+        bkey = (lambda i: f"beacons[{i}]") if len(scene.beacons) > 1 else (lambda i: "beacon")
     out = []
     m0, m1 = scene.mirror.ends()
     out.append(("mirror.center", m0, m1, MIRROR_DEPTH))
     t0, t1 = scene.target.ends()
     out.append(("target.position", t0, t1, TARGET_THICKNESS / 2))
-    multi = len(scene.beacons) > 1
     for i, b in enumerate(scene.beacons):
         p = np.asarray(b.position, float)
-        out.append((f"beacons[{i}].position" if multi else "beacon.position", p, p, PENCIL_RADIUS))
+        out.append((f"{bkey(i)}.position", p, p, PENCIL_RADIUS))
     for i, o in enumerate(scene.occluders):
         out.append((f"occluders[{i}]", np.asarray(o.start, float), np.asarray(o.end, float),
                     OCCLUDER_THICKNESS / 2))
@@ -475,7 +479,7 @@ def footprints(scene: Scene) -> list[tuple[str, np.ndarray, np.ndarray, float]]:
 
 
 def _check_overlaps(scene: Scene, r: _Reader, bkey) -> None:
-    fps = footprints(scene)
+    fps = footprints(scene, bkey)
     for j in range(len(fps)):
         for i in range(j):
             ki, a0, a1, ra = fps[i]

@@ -34,8 +34,8 @@ def test_virtual_image_properties(cx, cy, mx, my, yaw, px, py):
     assert math.isclose(img.d_total, img.d1 + img.d2, rel_tol=0, abs_tol=1e-9)
     assert math.isclose(img.d_total, float(np.hypot(*(img.virtual - (cx, cy)))), abs_tol=1e-9)
     # the path: d1 along alpha, then d2 along the reflected bearing 2·yaw − alpha.
-    # (The paper's eq 1 writes alpha − 2·yaw; that is the mirror image of this path
-    # about the camera's x axis and lands elsewhere unless alpha = 2·yaw mod 180.)
+    # (The paper's eq 1 writes alpha − 2·yaw, the negative of that bearing: the two
+    # agree only when alpha = 2·yaw mod 180.)
     end = np.array([cx, cy]) + img.d1 * unit(img.alpha_deg) + img.d2 * unit(2 * yaw - img.alpha_deg)
     assert np.allclose(end, (px, py), atol=1e-8)
     # angle of incidence equals angle of reflection at the mirror

@@ -139,3 +139,24 @@ def test_full_size_frame(name, tmp_path):
         assert ext.v_bottom - 1 <= vs.max() <= ext.v_bottom + 1
         if not entry["clipped"]:
             assert abs(us.mean() - ext.u_axis) <= 1.0
+
+
+def test_several_beacons_each_get_their_label(tmp_path):
+    import copy
+
+    from mirrorsim.scene import scene_from_dict
+
+    from .conftest import scene_dict
+
+    d = copy.deepcopy(scene_dict("default"))
+    d["camera"]["resolution"] = [320, 182]
+    d["beacons"] = [d.pop("beacon"), {"position": [28, 57], "height": 5.0}]
+    scene = scene_from_dict(d)
+    res = render_scene(scene, tmp_path, spp=1, progress=False)
+    ids = _read_png(res.ids_png)
+    for i, b in enumerate(scene.beacons):
+        entry = res.truth["beacons"][i]
+        assert entry["height"] == b.height
+        assert entry["visible_px"] == (ids == IN_MIRROR + BEACON_LABEL + i).sum() > 0
+    # the occluder's label comes after the beacons'
+    assert (ids == BEACON_LABEL + 2).sum() > 0
