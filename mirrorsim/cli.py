@@ -9,6 +9,12 @@ import warnings
 from pathlib import Path
 
 from mirrorsim.scene import SceneError, load_scene
+from solver.measurements import MeasurementError
+from solver.sltr import SolverError  # light: scipy is imported only where it is used
+
+
+class BadArgument(ValueError):
+    """A command-line value out of range (exit 2)."""
 
 EXIT_BAD_INPUT = 2
 EXIT_FAILED = 1
@@ -48,12 +54,61 @@ def build_parser() -> argparse.ArgumentParser:
                        "its image reaches the camera through the mirror. No rendering.")
     _scene_arg(p)
     p.add_argument("--json", metavar="FILE", help="write the exact ground truth (- = stdout)")
+    p.add_argument("--measurements", metavar="FILE",
+                   help="write the exact (noise-free) measurements for `mirrorsim solve`")
 
     p = sub.add_parser("plot", help="top view of a scene (board, camera, mirror, rays)",
                        description="Draw the top view: board, camera and its field of view, "
                        "occluders, mirror, target, beacons, virtual images and rays.")
     _scene_arg(p)
     p.add_argument("--out", type=Path, help="PNG to write (default renders/<name>/<name>.top.png)")
+
+    p = sub.add_parser("solve", help="localize the mirror and the target from measurements",
+                       description="Read MEASUREMENTS.json (INTERFACE.md: observer, target "
+                       "alpha/d_total, beacons with positions) and estimate the mirror line and "
+                       "the target.  One beacon and no sigma: the exact closed form; otherwise "
+                       "weighted least squares, with the target's covariance and 95 % error "
+                       "ellipse when `sigma` is given.")
+    p.add_argument("measurements", type=Path)
+    p.add_argument("--json", metavar="FILE", help="write the solution (- = stdout)")
+
+    p = sub.add_parser("montecarlo", help="the paper's Table 1 protocol",
+                       description="Table 1 of the paper: d_total = 5, alpha = 70 deg, Gaussian "
+                       "noise with the table's sigmas, ITERATIONS draws per row; RMSE of the "
+                       "reflector (the target's reflection point) and of the target, next to "
+                       "the paper's.  The paper does not say where the mirror and beacon stand: "
+                       "the options below set them.")
+    p.add_argument("--iterations", type=int, default=200)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--alpha", type=float, default=70.0, help="target's alpha (deg)")
+    p.add_argument("--d-total", type=float, default=5.0, help="target's d_total")
+    p.add_argument("--d1", type=float, default=3.0, help="observer → mirror along the ray")
+    p.add_argument("--incidence", type=float, default=30.0,
+                   help="mirror's turn from facing the ray square-on (deg)")
+    p.add_argument("--beacon-depth", type=float, default=0.5,
+                   help="beacon's distance in front of the mirror")
+    p.add_argument("--beacon-along", type=float, default=0.3,
+                   help="beacon's offset along the mirror from the reflection point")
+    p.add_argument("--sigma", nargs=2, type=float, action="append", metavar=("ALPHA", "D"),
+                   help="a row of your own (deg, distance units); repeatable")
+    p.add_argument("--json", metavar="FILE")
+
+    p = sub.add_parser("plan", help="beacon placement analysis and the best beacon position",
+                       description="For SCENE's camera and target measurement: the paper's "
+                       "placement numbers (eqs 7-21: step b, half-width a/2, N_bea, the three "
+                       "paths), the exact region where a beacon is seen for every mirror "
+                       "orientation within +-eps, and the beacon position on the board with the "
+                       "least expected target error over a prior of mirror poses around the "
+                       "scene's mirror, with a heat map.")
+    _scene_arg(p)
+    p.add_argument("--sigma-alpha", type=float, default=0.01, help="deg (default 0.01)")
+    p.add_argument("--sigma-d", type=float, default=0.002, help="relative (default 0.002)")
+    p.add_argument("--eps", type=float, default=5.0, help="orientation range ±eps (deg)")
+    p.add_argument("--yaw-spread", type=float, default=3.0, help="prior yaw ± (deg)")
+    p.add_argument("--d1-spread", type=float, default=2.0, help="prior mirror distance ± (cm)")
+    p.add_argument("--step", type=float, default=1.0, help="grid step of the search (cm)")
+    p.add_argument("--out", type=Path, help="PNG (default renders/<name>/<name>.plan.png)")
+    p.add_argument("--json", metavar="FILE")
     return parser
 
 
@@ -62,9 +117,12 @@ def main(argv: list[str] | None = None) -> int:
     warnings.showwarning = _one_line_warning
     try:
         return _COMMANDS[args.command](args)
-    except SceneError as exc:
+    except (SceneError, MeasurementError, BadArgument) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except SolverError as exc:
+        print(f"error: cannot solve: {exc}", file=sys.stderr)
+        return EXIT_FAILED
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
@@ -145,7 +203,16 @@ def _cmd_check(args) -> int:
     direct = optics.direct_view_fraction(scene, scene.target)
     print("target is hidden from the camera's direct view (NLOS)" if direct == 0.0 else
           f"target is {100 * direct:.0f}% directly visible: not NLOS")
-    _write_json(args.json, optics.ground_truth(scene))
+    truth = optics.ground_truth(scene)
+    _write_json(args.json, truth)
+    if args.measurements:
+        _write_json(args.measurements, {
+            "observer": list(cam.position),
+            "target": {"alpha_deg": truth["target"]["alpha_deg"],
+                       "d_total": truth["target"]["d_total"]},
+            "beacons": [{"position": b["position"], "alpha_deg": b["alpha_deg"],
+                         "d_total": b["d_total"]} for b in truth["beacons"]],
+            "source": "exact geometry (mirrorsim check)"})
     return 0
 
 
@@ -158,7 +225,100 @@ def _cmd_plot(args) -> int:
     return 0
 
 
-_COMMANDS = {"render": _cmd_render, "check": _cmd_check, "plot": _cmd_plot}
+def _cmd_solve(args) -> int:
+    from solver.measurements import load_measurements
+    from solver.sltr import solve_measurements
+
+    m = load_measurements(args.measurements)
+    sol = solve_measurements(m.observer, m.beacons, m.targets, m.sigma)
+    print(f"{args.measurements}: {sol.method}")
+    print(f"  mirror  yaw {sol.mirror.yaw_deg:.4f}°  through ({sol.mirror.point[0]:.3f}, "
+          f"{sol.mirror.point[1]:.3f})")
+    print(f"  target  ({sol.target[0]:.4f}, {sol.target[1]:.4f})  reflection point "
+          f"({sol.target_reflection_point[0]:.3f}, {sol.target_reflection_point[1]:.3f})")
+    if sol.covariance is not None:
+        major, minor, angle = sol.ellipse95()
+        print(f"  95 % ellipse of the target: {major:.3f} × {minor:.3f} cm, major axis at "
+              f"{angle:.1f}°")
+    _write_json(args.json, sol.to_json())
+    return 0
+
+
+def _cmd_montecarlo(args) -> int:
+    from solver.montecarlo import PAPER_TABLE1, Table1Geometry, table1
+
+    if args.iterations < 2:
+        raise BadArgument(f"--iterations: {args.iterations} must be ≥ 2")
+    try:
+        geometry = Table1Geometry(args.alpha, args.d_total, args.d1, args.incidence,
+                                  args.beacon_depth, args.beacon_along)
+        geometry.layout()
+    except (ValueError, SolverError) as exc:
+        raise BadArgument(f"geometry: {exc}") from None
+    rows = PAPER_TABLE1 if not args.sigma else tuple(
+        (a, d, float("nan"), float("nan")) for a, d in args.sigma)
+    res = table1(args.iterations, geometry, args.seed, rows)
+    g = res["geometry"]
+    print(f"Table 1 protocol: {args.iterations} draws per row; target at alpha {g['alpha_deg']:g}°,"
+          f" d_total {g['d_total']:g}; mirror through ({g['mirror_point'][0]:.3f}, "
+          f"{g['mirror_point'][1]:.3f}) at yaw {g['mirror_yaw_deg']:.1f}°; beacon at "
+          f"({g['beacon'][0]:.3f}, {g['beacon'][1]:.3f})")
+    print(f"{'v(alpha)':>9} {'v(d)':>6} | {'paper ref':>9} {'paper tar':>9} | "
+          f"{'ours ref':>9} {'ours tar':>9} {'yaw (deg)':>9}")
+    for r in res["rows"]:
+        print(f"{r['sigma_alpha_deg']:9.2f} {r['sigma_d']:6.2f} | {r['paper_rmse_ref']:9.3f} "
+              f"{r['paper_rmse_tar']:9.3f} | {r['rmse_ref']:9.3f} {r['rmse_tar']:9.3f} "
+              f"{r['rmse_yaw_deg']:9.2f}")
+    _write_json(args.json, res)
+    return 0
+
+
+def _cmd_plan(args) -> int:
+    from mirrorsim.planning import plan_scene, plan_summary
+    from mirrorsim.plot import plot_plan
+    from solver.sltr import Sigma
+
+    scene = _load(args.scene)
+    for flag, v in (("--sigma-alpha", args.sigma_alpha), ("--sigma-d", args.sigma_d),
+                    ("--eps", args.eps), ("--step", args.step)):
+        if not v > 0:
+            raise BadArgument(f"{flag}: {v} must be > 0")
+    if args.eps >= 45:
+        raise BadArgument(f"--eps: {args.eps} must be < 45")
+    plan = plan_scene(scene, Sigma(args.sigma_alpha, args.sigma_d), args.eps,
+                      args.yaw_spread, args.d1_spread, args.step)
+    summ = plan_summary(plan)
+    p = summ["paper"]
+    print(f"{scene.name}: target alpha {summ['target']['alpha_deg']:.3f}°, d_total "
+          f"{summ['target']['d_total']:.2f} cm, mirror {scene.mirror.size[0]:g} cm wide, "
+          f"eps ±{args.eps:g}°")
+    print(f"  paper (eqs 9-18): step b = {p['b']:.3f} cm, a/2 = {p['half_a']:.3f} cm, "
+          f"triangle {p['area']:.2f} cm², N_bea = 2·d_total/b = {p['n_beacons']:.1f}")
+    q = summ["paper_eq15_perpendicular"]
+    print(f"  eq 15 with the line perpendicular to the observation line (as its text says): "
+          f"a/2 = {q['half_a']:.3f} cm")
+    print(f"  exact region seen for every orientation: {summ['exact_region_area']:.0f} cm²; "
+          "area vs d_total (paper / exact): " + ", ".join(
+              f"{a['d_total']:g}: {a['paper']:.2f}/{a['exact']:.0f}"
+              for a in summ["area_vs_d_total"]))
+    L = summ["path_lengths"]
+    print(f"  paths over {summ['n_steps']} steps: linear {L['linear']:.1f}, rectangular "
+          f"{L['rectangular']:.1f}, saw-tooth {L['sawtooth']:.1f} cm")
+    sb, bb = summ["scene_beacon"], summ["best_beacon"]
+    print(f"  expected target RMSE at sigma ({args.sigma_alpha:g}°, {100 * args.sigma_d:g} %) "
+          f"over {summ['mirror_poses']} mirror poses:")
+    print(f"    scene's beacon {list(scene.beacons[0].position)}: {sb['rmse']:.3f} cm "
+          f"(seen under {100 * sb['seen_fraction']:.0f}% of poses)")
+    print(f"    best position ({bb['position'][0]:.1f}, {bb['position'][1]:.1f}): "
+          f"{bb['rmse']:.3f} cm")
+    out = args.out or Path("renders") / scene.name / f"{scene.name}.plan.png"
+    print(f"  figure: {plot_plan(scene, plan, out)}")
+    _write_json(args.json, summ)
+    return 0
+
+
+_COMMANDS = {"render": _cmd_render, "check": _cmd_check, "plot": _cmd_plot,
+             "solve": _cmd_solve, "montecarlo": _cmd_montecarlo, "plan": _cmd_plan}
 
 
 if __name__ == "__main__":

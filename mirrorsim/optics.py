@@ -25,13 +25,8 @@ from mirrorsim.scene import (
     Scene,
     Target,
 )
-from solver.geometry import (
-    bearing_deg,
-    reflect,
-    segment_crossing,
-    signed_distance,
-    unit,
-)
+from solver.geometry import bearing_deg, segment_crossing, signed_distance, unit
+from solver.sltr import observe
 
 AXIS_SAMPLES = 41  # heights sampled along an object's upright axis
 
@@ -50,26 +45,17 @@ class MirrorImage:
 
 
 def mirror_image(camera: Camera, mirror: Mirror, point) -> MirrorImage:
-    """Virtual image, α, d_total and reflection point of a board point."""
-    cam = np.asarray(camera.position, float)
-    p = np.asarray(point, float)
-    v = reflect(p, mirror.center, mirror.yaw)
-    d_total = float(np.linalg.norm(v - cam))
-    # The camera→virtual segment crosses the mirror line at the fraction of its length
-    # given by the two points' distances from the line (they are on opposite sides).
-    sc = float(signed_distance(cam, mirror.center, mirror.yaw))
-    sv = float(signed_distance(v, mirror.center, mirror.yaw))
-    t = sc / (sc - sv)
-    r = cam + t * (v - cam)
-    offset = float((r - np.asarray(mirror.center, float)) @ unit(mirror.yaw))
+    """Virtual image, α, d_total and reflection point of a board point (solver's model)."""
+    obs = observe(camera.position, mirror.center, mirror.yaw, point, strict=False)
+    r = np.asarray(obs.reflection_point, float)
     return MirrorImage(
-        virtual=v,
-        alpha_deg=float(bearing_deg(cam, v)),
-        d_total=d_total,
-        d1=float(np.linalg.norm(r - cam)),
-        d2=float(np.linalg.norm(p - r)),
+        virtual=np.asarray(obs.virtual, float),
+        alpha_deg=float(obs.alpha_deg),
+        d_total=float(obs.d_total),
+        d1=float(obs.d1),
+        d2=float(obs.d2),
         reflection_point=r,
-        mirror_offset=offset,
+        mirror_offset=float((r - np.asarray(mirror.center, float)) @ unit(mirror.yaw)),
     )
 
 
@@ -185,6 +171,9 @@ def _sample_columns(scene: Scene, obj) -> list[np.ndarray]:
 def _sample_failure(scene: Scene, walls, point, z: float) -> str:
     """Why the image of the 3-D point (point, z) does not reach the camera, or ''."""
     cam, mir = scene.camera, scene.mirror
+    side = signed_distance(point, mir.center, mir.yaw)
+    if side * signed_distance(cam.position, mir.center, mir.yaw) <= 0:
+        return "it stands behind the mirror's line"
     img = mirror_image(cam, mir, point)
     half_w = mir.size[0] / 2.0
     if abs(img.mirror_offset) > half_w:

@@ -87,3 +87,94 @@ def plot_top_view(scene: Scene, out: str | Path, *, dpi: int = 150) -> Path:
         plt.close(fig)
         tmp.unlink(missing_ok=True)
     return out
+
+
+def plot_plan(scene: Scene, plan: dict, out: str | Path, *, dpi: int = 130) -> Path:
+    """The placement analysis in four panels (like the paper's Figs. 4–6): the paper's
+    triangle and the exact region where a beacon is seen for every mirror orientation
+    within ±ε; the three moving-beacon paths; the expected target error over the board
+    with the best position; the beacon area against d_total (paper vs exact)."""
+    out = Path(out)
+    fig, axes = plt.subplots(2, 2, figsize=(12, 11))
+    geo, alpha = plan["geometry"], plan["target_alpha_deg"]
+    R = np.asarray(geo.R) + np.asarray(scene.camera.position, float)
+
+    ax = axes[0, 0]
+    reg = plan["region"]
+    ax.contourf(reg["xs"], reg["ys"], reg["mask"].astype(float), levels=[0.5, 1.5],
+                colors=["#9ecae1"], alpha=0.7)
+    for side in (1, -1):
+        tri = geo.triangle(alpha, side) + np.asarray(scene.camera.position, float)
+        ax.fill(tri[:, 0], tri[:, 1], facecolor="#fdae6b", edgecolor="#e6550d", alpha=0.8,
+                label="paper's triangle (a/2 × b)" if side == 1 else None)
+    c = np.asarray(scene.camera.position, float)
+    ax.plot(*zip(c, c + 1.2 * plan["target_d_total"] * unit(alpha), strict=True), "k:", lw=0.8)
+    half = unit(alpha + 90.0) * scene.mirror.size[0] / 2
+    ax.plot(*zip(R - half, R + half, strict=True), color="#2a7fbf", lw=3,
+            label="mirror at R = d_total along α, square-on (±ε)")
+    ax.plot(*R, "k+", ms=12)
+    ax.set_title(f"where a beacon is seen for every mirror orientation within ±{plan['eps_deg']:g}°"
+                 "\n(blue: exact; orange: the paper's triangle)", fontsize=9)
+    ax.set_aspect("equal")
+    ax.legend(fontsize=7, loc="upper left")
+    zoom = 1.6 * scene.mirror.size[0]
+    ax.set_xlim(R[0] - zoom, R[0] + zoom)
+    ax.set_ylim(R[1] - zoom, R[1] + zoom)
+
+    ax = axes[0, 1]
+    colours = {"linear": "green", "rectangular": "orange", "sawtooth": "blue"}
+    for k, (kind, pts) in enumerate(plan["paths"].items()):
+        shift = np.array([k * (geo.half_a * 2.6), 0.0])
+        ax.plot(pts[:, 0] + shift[0], pts[:, 1], "-o", ms=2, color=colours[kind],
+                label=f"{kind}: {plan['path_lengths'][kind]:.1f} cm")
+    ax.set_aspect("equal")
+    ax.set_title(f"moving-beacon paths (eqs 19–21), {plan['n_steps']} steps of b = "
+                 f"{geo.b:.2f} cm, a = {2 * geo.half_a:.2f} cm", fontsize=9)
+    ax.legend(fontsize=7)
+
+    ax = axes[1, 0]
+    best = plan["best"]
+    err = np.where(np.isfinite(best["map"]), best["map"], np.nan)
+    im = ax.pcolormesh(best["xs"], best["ys"], np.log10(err), cmap="viridis_r", shading="auto",
+                       vmin=np.log10(max(np.nanmin(err), 1e-3)),
+                       vmax=np.log10(max(np.nanmin(err), 1e-3)) + 2)
+    cb = fig.colorbar(im, ax=ax, shrink=0.8)
+    cb.set_label("log10 expected target RMSE (cm)")
+    for o in scene.occluders:
+        ax.plot(*zip(o.start, o.end, strict=True), color="#555", lw=4)
+    m0, m1 = scene.mirror.ends()
+    ax.plot(*zip(m0, m1, strict=True), color="#2a7fbf", lw=3)
+    ax.plot(*scene.target.position, "r*", ms=12, mec="k")
+    for b in scene.beacons:
+        ax.plot(*b.position, "o", color="#d4a017", mec="k",
+                label=f"scene beacon: {plan['scene_beacon_rmse']:.2f} cm")
+    ax.plot(*best["position"], "wP", ms=12, mec="k", label=f"best: {best['rmse']:.2f} cm")
+    ax.set_xlim(0, scene.board.size[0])
+    ax.set_ylim(0, scene.board.size[1])
+    ax.set_aspect("equal")
+    ax.legend(fontsize=7, loc="upper left")
+    ax.set_title(f"expected target error, σ = ({plan['sigma'].alpha_deg:g}°, "
+                 f"{100 * plan['sigma'].d_total_rel:g} %), {plan['n_poses']} mirror poses",
+                 fontsize=9)
+
+    ax = axes[1, 1]
+    ds, lit, exact = plan["area_vs_d"]
+    ax.plot(ds, lit, "o-", color="#e6550d", label="paper's triangle (eqs 14, 18)")
+    ax.plot(ds, exact, "s-", color="#3182bd", label="exact region (numerical)")
+    ax.set_xlabel("d_total (cm)")
+    ax.set_ylabel("area (cm²)")
+    ax.set_yscale("log")
+    ax.set_title("Section 7's claim: the area does not depend on d_total", fontsize=9)
+    ax.legend(fontsize=7)
+    ax.grid(alpha=0.3)
+
+    fig.suptitle(f"{scene.name}: beacon placement", fontsize=11)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(f".{out.name}.tmp{os.getpid()}.png")
+    try:
+        fig.savefig(tmp, dpi=dpi, bbox_inches="tight")
+        os.replace(tmp, out)
+    finally:
+        plt.close(fig)
+        tmp.unlink(missing_ok=True)
+    return out
