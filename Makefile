@@ -44,6 +44,7 @@ lint: setup
 
 bench: setup
 	$(BIN)/python bench/render.py
+	$(BIN)/python bench/particle.py
 
 clean:
 	rm -rf $(VENV) renders/*/ .pytest_cache .ruff_cache .hypothesis

@@ -28,7 +28,7 @@ class PFParams:
     """Noise levels of the filter."""
 
     sigma: Sigma = Sigma(0.05, 0.005)
-    sigma_trs: float = 0.2  # translation noise per step (cm)
+    sigma_trs: float = 0.1  # translation noise per step (cm)
 
 
 def _predict_obs(particles: np.ndarray, observer: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

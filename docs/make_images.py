@@ -1,0 +1,37 @@
+"""Regenerate the pictures the README shows (run from the repository root):
+
+    python docs/make_images.py
+
+Renders the default scene, draws its top view and the placement analysis of exp3, and
+saves downscaled JPEG copies of the frame (the full PNGs stay in renders/).
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+from PIL import Image  # installed with matplotlib
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = ROOT / "docs"
+
+
+def run(*args: str) -> None:
+    subprocess.run([sys.executable, "-m", "mirrorsim.cli", *args], cwd=ROOT, check=True)
+
+
+def main() -> None:
+    run("render", "scenes/default.yaml", "--quiet")
+    run("plot", "scenes/default.yaml", "--out", str(DOCS / "default_top.png"))
+    run("plan", "scenes/exp3.yaml", "--out", str(DOCS / "plan_exp3.png"))
+    frame = np.asarray(Image.open(ROOT / "renders" / "default" / "default.png").convert("RGB"))
+    Image.fromarray(frame).resize((960, 544), Image.LANCZOS).save(DOCS / "default_frame.jpg",
+                                                                  quality=88)
+    Image.fromarray(frame[330:720, 760:1180]).save(DOCS / "default_mirror_crop.jpg", quality=92)
+
+
+if __name__ == "__main__":
+    main()
