@@ -63,6 +63,29 @@ def build_parser() -> argparse.ArgumentParser:
     _scene_arg(p)
     p.add_argument("--out", type=Path, help="PNG to write (default renders/<name>/<name>.top.png)")
 
+    p = sub.add_parser("detect", help="measure alpha and d_total from a rendered frame",
+                       description="Find the target's and the beacons' images in FRAME and "
+                       "measure each one's angle of arrival and, by size constancy, its "
+                       "d_total.  Uses only the image, the scene's camera block, the beacons' "
+                       "known positions and heights, the objects' sizes, and the calibration "
+                       "(`mirrorsim calibrate`, made and cached on first use).")
+    p.add_argument("frame", type=Path, help="the rendered PNG")
+    p.add_argument("--scene", type=Path, required=True, help="the scene file (camera, beacons)")
+    p.add_argument("--json", metavar="FILE", help="write the measurements (- = stdout)")
+    p.add_argument("--annotate", type=Path, metavar="OUT.png",
+                   help="draw the detections on the frame")
+    p.add_argument("--variant", default="auto", choices=["auto", "cuda", "llvm", "scalar"],
+                   help="backend for a calibration render, if one is needed")
+
+    p = sub.add_parser("calibrate", help="size-constancy constants for a scene's camera",
+                       description="Render the target and the pencil in direct view at 100 cm, "
+                       "facing SCENE's camera on its optical axis, measure them as the detector "
+                       "does and cache K = s_px * d per camera and object.")
+    _scene_arg(p)
+    p.add_argument("--refresh", action="store_true", help="re-render even if cached")
+    p.add_argument("--variant", default="auto", choices=["auto", "cuda", "llvm", "scalar"])
+    p.add_argument("--json", metavar="FILE")
+
     p = sub.add_parser("solve", help="localize the mirror and the target from measurements",
                        description="Read MEASUREMENTS.json (INTERFACE.md: observer, target "
                        "alpha/d_total, beacons with positions) and estimate the mirror line and "
@@ -122,6 +145,11 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_BAD_INPUT
     except SolverError as exc:
         print(f"error: cannot solve: {exc}", file=sys.stderr)
+        return EXIT_FAILED
+    except RuntimeError as exc:  # DetectionError, BackendError: the run itself failed
+        if type(exc).__name__ not in ("DetectionError", "BackendError"):
+            raise
+        print(f"error: {exc}", file=sys.stderr)
         return EXIT_FAILED
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
@@ -225,6 +253,52 @@ def _cmd_plot(args) -> int:
     return 0
 
 
+def _cmd_detect(args) -> int:
+    from mirrorsim.calibrate import calibrate
+    from mirrorsim.detect import DetectorView, annotate, detect_frame, read_frame, write_png
+
+    scene = _load(args.scene)
+    view = DetectorView.from_scene(scene)
+    image = read_frame(args.frame)
+    cal = calibrate(view.camera, view.target_size, view.beacons[0].height, variant=args.variant)
+    res = detect_frame(image, view, cal)
+    t = res["target"]
+    d = "not measured (clipped)" if t["d_total"] is None else f"{t['d_total']:.3f} cm"
+    print(f"{args.frame}: target α {t['alpha_deg']:.4f}°  d_total {d}"
+          + ("  [clipped]" if t["clipped"] else ""))
+    for i, b in enumerate(res["beacons"]):
+        print(f"  beacon {i} at {b['position']}: α {b['alpha_deg']:.4f}°  d_total "
+              f"{b['d_total']:.3f} cm (mirror image)")
+    for im in res["detector"]["images"]:
+        if im["source"] == "direct":
+            print(f"  beacon {im['beacon_index']} also seen directly at u = {im['u_axis']:.1f} "
+                  "px (not used)")
+    if args.annotate:
+        write_png(args.annotate, annotate(image, res))
+        print(f"  annotated: {args.annotate}")
+    _write_json(args.json, res)
+    return 0
+
+
+def _cmd_calibrate(args) -> int:
+    from mirrorsim.calibrate import D_REF, calibrate
+    from mirrorsim.detect import FRONT_OFFSET
+
+    scene = _load(args.scene)
+    cal = calibrate(scene.camera, scene.target.size, scene.beacons[0].height,
+                    variant=args.variant, refresh=args.refresh)
+    cam = scene.camera
+    print(f"camera {cam.width}×{cam.height_px}, hfov {cam.hfov:g}°, height {cam.height:g} cm "
+          f"(fx {cam.fx:.2f} px)")
+    print(f"  target {scene.target.size[1]:g} cm high: K = {cal.target_k:.1f} px·cm "
+          f"({cal.target_k / (D_REF - FRONT_OFFSET['target']):.2f} px at 1 m; the paper's "
+          "camera: 229 px)")
+    print(f"  pencil's painted band: K = {cal.pencil_k:.1f} px·cm "
+          f"({cal.pencil_k / (D_REF - FRONT_OFFSET['beacon']):.2f} px at 1 m)")
+    _write_json(args.json, {"key": cal.key, "target_k": cal.target_k, "pencil_k": cal.pencil_k})
+    return 0
+
+
 def _cmd_solve(args) -> int:
     from solver.measurements import load_measurements
     from solver.sltr import solve_measurements
@@ -318,7 +392,8 @@ def _cmd_plan(args) -> int:
 
 
 _COMMANDS = {"render": _cmd_render, "check": _cmd_check, "plot": _cmd_plot,
-             "solve": _cmd_solve, "montecarlo": _cmd_montecarlo, "plan": _cmd_plan}
+             "detect": _cmd_detect, "calibrate": _cmd_calibrate, "solve": _cmd_solve,
+             "montecarlo": _cmd_montecarlo, "plan": _cmd_plan}
 
 
 if __name__ == "__main__":

@@ -54,9 +54,11 @@ _COLOURS = {
     "graphite": (0.03, 0.03, 0.03),
     "mirror_back": (0.02, 0.02, 0.02),
     "frame": (0.04, 0.04, 0.045),
-    "occluder": (0.55, 0.56, 0.60),
-    "floor": (0.22, 0.23, 0.25),
-    "walls": (0.30, 0.33, 0.40),  # emitted radiance of the room map from here on
+    # Only the target is a neutral grey: walls, floor and occluders are coloured, so the
+    # detector can find the panel by its (known) appearance.
+    "occluder": (0.25, 0.38, 0.60),  # blue-painted walls
+    "floor": (0.14, 0.20, 0.10),  # green linoleum
+    "walls": (0.50, 0.38, 0.22),  # emitted radiance of the room map from here on: beige
     "panel": (0.10, 0.07, 0.05),
     "baseboard": (0.55, 0.55, 0.52),
     "ceiling": (0.90, 0.88, 0.82),
@@ -508,3 +510,52 @@ class _Progress:
         if self.enabled:
             sys.stderr.write(f"\r{self.label}: done in {message}{' ' * 30}\n")
             sys.stderr.flush()
+
+
+def render_reference(camera, kind: str, size: tuple[float, float] | float, *,
+                     distance: float = 100.0, spp: int = 64, variant: str = "auto",
+                     margin_px: int = 24) -> np.ndarray:
+    """An object seen directly, facing the camera on its optical axis at ``distance``.
+
+    For size-constancy calibration: ``kind`` is ``"target"`` (size = (width, height))
+    or ``"pencil"`` (size = its height).  Only the object's neighbourhood is rendered
+    (a film crop); the camera model is the given one.  Returns the crop as 8-bit sRGB.
+    """
+    from mirrorsim.scene import Beacon, Board, Camera, Mirror, RenderSettings, Target
+
+    pan = 45.0
+    cam = Camera(position=(0.0, 0.0), height=camera.height, resolution=camera.resolution,
+                 hfov=camera.hfov, pan=pan, pan_deg=pan)
+    p = tuple(distance * unit(pan))
+    behind = (-25.0, -5.0)  # what the reference does not show stands behind the camera
+    if kind == "target":
+        w, h = size
+        target = Target(position=p, size=(w, h), facing_deg=pan + 180.0)
+        beacons: tuple = ()
+        half_w, top = w / 2, h
+    elif kind == "pencil":
+        target = Target(position=behind, size=(9.9, 15.25), facing_deg=pan)
+        beacons = (Beacon(position=p, height=float(size)),)
+        half_w, top = PENCIL_RADIUS, float(size)
+    else:
+        raise ValueError(f"unknown reference object {kind!r}")
+    # a plain board: a hole under the reference object's foot would bias its calibration
+    scene = Scene(name=f"reference-{kind}", board=Board(size=(80.0, 80.0), hole_pitch=0.0),
+                  camera=cam,
+                  mirror=Mirror(center=(-10.0, -20.0), yaw=0.0, size=(18.2, 13.25)),
+                  target=target, beacons=beacons, render=RenderSettings(spp=spp))
+    pts = np.array([[*(np.array(p) + s * half_w * unit(pan + 90)), z]
+                    for s in (-1, 1) for z in (0.0, top)])
+    u, v, _ = optics.project(cam, pts)
+    u0 = int(max(0, math.floor(u.min()) - margin_px))
+    v0 = int(max(0, math.floor(v.min()) - margin_px))
+    u1 = int(min(cam.width, math.ceil(u.max()) + margin_px + 1))
+    v1 = int(min(cam.height_px, math.ceil(v.max()) + margin_px + 1))
+    chosen = choose_variant(variant)
+    with _variant(chosen):
+        d = build_scene_dict(scene, spp=spp)
+        d["sensor"]["film"].update({"crop_offset_x": u0, "crop_offset_y": v0,
+                                    "crop_width": u1 - u0, "crop_height": v1 - v0})
+        mi_scene = mi.load_dict(d, optimize=False)
+        linear = _render_frame(mi_scene, spp, 0, lambda f: None)
+    return to_srgb8(linear)

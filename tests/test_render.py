@@ -76,7 +76,7 @@ def test_mirror_really_reflects(default_small):
     assert (ids == BEACON_LABEL).sum() > 0 and pencil.sum() > 0
     # in the frame, the target's reflection is the grey panel, the pencil's is yellow
     grey = img[tgt].mean(axis=0)
-    assert np.ptp(grey) < 0.12 * grey.mean() and 60 < grey.mean() < 200
+    assert np.ptp(grey) < 0.2 * grey.mean() and 50 < grey.mean() < 200  # lit by a warm room
     yellow = img[pencil].mean(axis=0)
     assert yellow[0] > 1.4 * yellow[2]
     assert (ids == MIRROR_LABEL).sum() == 0  # glass pixels carry the IN_MIRROR offset

@@ -1,0 +1,483 @@
+"""The detector: α and d_total of the target and the beacons, from a rendered frame.
+
+The only module that imports OpenCV.  What it may use (:class:`DetectorView`): the
+image, the camera (position, height, pan, intrinsics), the beacons' known positions and
+heights, the objects' appearance and sizes, and the calibration.  Never the target's or
+the mirror's pose, nor the ground truth.
+
+Model
+-----
+* **Finding.** The target is a neutral mid-grey panel: pixels of low chroma and mid
+  value, opened with a disc wider than the mirror's frame bars (so the frame and the
+  pegboard's holes drop out), kept where the connected region is a filled upright
+  rectangle; then re-grown around its own median colour so a neighbour of another grey
+  does not merge into it.  The pencil is the only strongly saturated yellow (its paint):
+  saturation > 0.55 and (R+G)/2 − B > 30.
+* **Edges, sub-pixel.** Along a band of columns (or rows) an edge is located by the
+  *area* method: with the inside and outside colours taken a few pixels either side,
+  each pixel's coverage c = ((x − out)·(in − out))/|in − out|² is summed over a window
+  spanning the edge; for a box-filtered render (area-weighted pixels) this is exact up to
+  noise.  Bands give independent estimates; their median resists partial occlusion.
+* **α** = pan − atan((u_axis − cx)/fx): the bearing of the image's upright axis
+  (+u is to the right, i.e. clockwise).
+* **d_total.** A level pinhole images an upright segment of height H at depth Z with
+  fy·H/Z pixels, so s_px · Z = K (size constancy along the optical axis) and
+  d_total = Z / cos φ with φ = atan((u_axis − cx)/fx).  K is calibrated per object and
+  camera by :mod:`mirrorsim.calibrate` with exactly this measurement; the target's s_px
+  is its panel's height, the pencil's is its painted band (the sharpened tip is thinner
+  than a pixel at its point and is not measured).
+* **Clipping.** The panel is seen square-on, so its width is 9.9/15.25 of its height: a
+  narrower image is clipped at a side (the side whose outside is darker: the mirror's
+  frame), the axis then comes from the other edge and the known half-width; a shorter
+  one is clipped at the top and its d_total is not reported.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import asdict, dataclass, field
+
+import cv2
+import numpy as np
+
+from mirrorsim.scene import PENCIL_RADIUS, TARGET_THICKNESS, Beacon, Camera, Scene
+from solver.geometry import bearing_deg, wrap_bearing
+
+FRAME_OPEN_PX = 13  # wider than the mirror frame's bars at the distances of our scenes
+RATIO_TOLERANCE = 0.004  # relative; the panel's width/height ratio is exact when unclipped
+
+
+class DetectionError(RuntimeError):
+    """Nothing usable was found in the frame (the message says what)."""
+
+
+@dataclass(frozen=True)
+class DetectorView:
+    """All the detector may know about a scene."""
+
+    camera: Camera
+    beacons: tuple[Beacon, ...]
+    target_size: tuple[float, float]
+
+    @classmethod
+    def from_scene(cls, scene: Scene) -> DetectorView:
+        """Take the camera, the beacons and the target's size, nothing else."""
+        return cls(camera=scene.camera, beacons=scene.beacons, target_size=scene.target.size)
+
+
+@dataclass
+class ImageMeasurement:
+    """One object's image: its upright axis, vertical extent and derived α, d_total."""
+
+    kind: str  # "target" or "beacon"
+    source: str  # "mirror" or "direct"
+    bbox_px: list[int]
+    u_axis: float
+    v_top: float | None
+    v_bottom: float | None
+    height_px: float | None
+    width_px: float | None
+    clipped: str = ""  # '', 'top', 'left', 'right'
+    alpha_deg: float = float("nan")
+    d_total: float | None = None
+    beacon_index: int | None = None
+    notes: list[str] = field(default_factory=list)
+
+
+# ---------------------------------------------------------------- edge measurement
+
+
+def _edge_by_area(profile: np.ndarray, start: int, inside: np.ndarray, outside: np.ndarray,
+                  inside_first: bool) -> float | None:
+    """Sub-pixel edge position in a 1-D colour profile (rows of ``profile``: positions
+    start, start+1, …) by summing pixel coverages; ``None`` if there is no contrast."""
+    d = inside - outside
+    dd = float(d @ d)
+    if dd < 5.0**2:  # linear 0–255 scale
+        return None
+    # not clipped to [0, 1]: clipping noise on the flat parts would bias the sum inwards
+    c = ((profile - outside) @ d) / dd
+    if inside_first:
+        return start - 0.5 + float(c.sum())
+    return start - 0.5 + float((1.0 - c).sum())
+
+
+def _band_edges(img: np.ndarray, lo: int, hi: int, band, axis: int,
+                centre: tuple[float | None, float | None] = (None, None), half: int = 5,
+                gap: int = 3, depth: int = 6):
+    """Edges at the two ends of an object spanning [lo, hi] along ``axis`` (0: rows, i.e.
+    top and bottom; 1: columns, i.e. left and right), in the mean profile of ``band``
+    (the columns, or rows, across it).  Each edge is summed over ``half`` pixels either
+    side of ``centre`` (default: the region's own end).
+
+    Returns (edge_lo, edge_hi, outside_lo, outside_hi); an edge is None without contrast.
+    """
+    n = img.shape[axis]
+
+    def line(i: int) -> np.ndarray:
+        i = min(max(i, 0), n - 1)
+        return (img[i, band] if axis == 0 else img[band, i]).mean(axis=0)
+
+    def med(rng) -> np.ndarray:
+        return np.median([line(i) for i in rng], axis=0)
+
+    # inside colours near each end: shading across the object does not bias the edges
+    in_lo = med(range(lo + gap, min(hi, lo + gap + depth) + 1))
+    in_hi = med(range(max(lo, hi - gap - depth), hi - gap + 1))
+    out_lo = med(range(lo - gap - depth, lo - gap + 1))
+    out_hi = med(range(hi + gap, hi + gap + depth + 1))
+    c_lo = lo if centre[0] is None else int(round(centre[0]))
+    c_hi = hi if centre[1] is None else int(round(centre[1]))
+    a0, b0 = c_lo - half, c_hi - half
+    first = np.array([line(i) for i in range(a0, c_lo + half + 1)])
+    last = np.array([line(i) for i in range(b0, c_hi + half + 1)])
+    e_lo = _edge_by_area(first, a0, in_lo, out_lo, inside_first=False)
+    e_hi = _edge_by_area(last, b0, in_hi, out_hi, inside_first=True)
+    return e_lo, e_hi, out_lo, out_hi
+
+
+def _local_edge(img: np.ndarray, band, axis: int, guess: float, inside_first: bool):
+    """Refine an edge near ``guess`` on the mean profile of ``band``: coverages of the
+    three pixels about it, against the median colours 2–5 px either side.  Local levels
+    keep a shadow a few pixels away (a contact shadow at the foot) out of it.
+
+    Returns (edge or None, outside colour).
+    """
+    n = img.shape[axis]
+    c = int(round(guess))
+
+    def line(i: int) -> np.ndarray:
+        i = min(max(i, 0), n - 1)
+        return (img[i, band] if axis == 0 else img[band, i]).mean(axis=0)
+
+    # medians over a few pixels: the pegboard's holes next to a foot are outliers
+    before = np.median([line(c - k) for k in range(2, 6)], axis=0)
+    after = np.median([line(c + k) for k in range(2, 6)], axis=0)
+    inside, outside = (before, after) if inside_first else (after, before)
+    window = np.array([line(i) for i in (c - 1, c, c + 1)])
+    return _edge_by_area(window, c - 1, inside, outside, inside_first), outside
+
+
+def _median_edges(img, lo, hi, cross_lo, cross_hi, axis, band_px=3):
+    """Edges at both ends of an object, robust and precise.
+
+    Bands of ``band_px`` across the object's middle 60 % each give a coarse edge; bands
+    more than 1 px from the median (partly occluded ones) are dropped; the final edge is
+    measured on the mean profile of the rest by :func:`_local_edge`.
+    Returns (edge_lo, edge_hi, outside_lo, outside_hi).
+    """
+    span = cross_hi - cross_lo + 1
+    a = cross_lo + int(0.2 * span)
+    b = max(a + 1, cross_hi - int(0.2 * span) + 1)
+    bands = [np.arange(s, min(s + band_px, b)) for s in range(a, b, band_px)]
+    coarse = [_band_edges(img, lo, hi, band, axis) for band in bands]
+    final = []
+    outs = []
+    for end in (0, 1):
+        vals = [c[end] for c in coarse if c[end] is not None]
+        if not vals:
+            final.append(None)
+            outs.append(np.median([c[2 + end] for c in coarse], axis=0))
+            continue
+        m = float(np.median(vals))
+        near = [band for band, c in zip(bands, coarse, strict=True)
+                if c[end] is not None and abs(c[end] - m) < 1.0]
+        keep = np.concatenate(near) if near else np.concatenate(bands)
+        e, out = _local_edge(img, keep, axis, m, inside_first=(end == 1))
+        final.append(e)
+        outs.append(out)
+    return final[0], final[1], outs[0], outs[1]
+
+
+# ------------------------------------------------------------------ segmentation
+
+
+def _components(mask: np.ndarray, min_area: int):
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), 8)
+    out = []
+    for k in range(1, n):
+        x, y, w, h, area = stats[k]
+        if area >= min_area:
+            out.append((k, int(x), int(y), int(w), int(h), int(area)))
+    return labels, out
+
+
+def _target_region(img: np.ndarray, ratio: float) -> tuple[int, int, int, int] | None:
+    """Bounding box (u0, v0, u1, v1) of the grey panel's image, or None."""
+    blur = cv2.GaussianBlur(img, (5, 5), 0)
+    vmax, vmin = cv2.max(cv2.max(blur[..., 0], blur[..., 1]), blur[..., 2]), \
+        cv2.min(cv2.min(blur[..., 0], blur[..., 1]), blur[..., 2])
+    neutral = (vmax - vmin) < 0.12 * vmax + 6
+    mask = neutral & (vmax > 20) & (vmax < 135)
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (FRAME_OPEN_PX, FRAME_OPEN_PX))
+    mask = cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_OPEN, kernel).astype(bool)
+    labels, comps = _components(mask, 300)
+    best = None
+    for k, x, y, w, h, area in comps:
+        aspect = h / w
+        if area / (w * h) < 0.75 or not (0.8 / ratio <= aspect <= 4.0):
+            continue
+        # re-grow around the region's own colour: separates a differently grey neighbour
+        core = blur[labels == k]
+        med = np.median(core, axis=0)
+        similar = (np.abs(blur - med).max(axis=2) < 22) & neutral
+        similar = cv2.morphologyEx(similar.astype(np.uint8), cv2.MORPH_OPEN, kernel)
+        lab2, comps2 = _components(similar, 300)
+        cy, cx = y + h // 2, x + w // 2
+        k2 = lab2[cy, cx]
+        for kk, x2, y2, w2, h2, area2 in comps2:
+            if kk == k2 and area2 / (w2 * h2) >= 0.75 and (best is None or area2 > best[4]):
+                best = (x2, y2, x2 + w2 - 1, y2 + h2 - 1, area2)
+    return None if best is None else best[:4]
+
+
+def _pencil_regions(img: np.ndarray) -> list[tuple[int, int, int, int]]:
+    """Bounding boxes of painted (yellow) pencil bands."""
+    blur = cv2.GaussianBlur(img, (3, 3), 0)
+    r, g, b = blur[..., 0], blur[..., 1], blur[..., 2]
+    vmax, vmin = cv2.max(cv2.max(r, g), b), cv2.min(cv2.min(r, g), b)
+    sat = (vmax - vmin) / np.maximum(vmax, 1.0)
+    yellow = (r + g) / 2 - b
+    mask = (sat > 0.55) & (yellow > 30) & (vmax > 40)
+    mask = cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
+    _, comps = _components(mask, 30)
+    return [(x, y, x + w - 1, y + h - 1) for _, x, y, w, h, _ in comps if h >= 2 * w * 0.8]
+
+
+# ------------------------------------------------------------------ measurement
+
+
+def to_linear(srgb: np.ndarray) -> np.ndarray:
+    """8-bit sRGB values → linear radiance on the same 0–255 scale.
+
+    A box-filtered pixel is the area-weighted mean of *linear* radiance; coverages
+    measured on the gamma-encoded values would be biased by the curve.
+    """
+    return _LINEAR_LUT[np.asarray(srgb).astype(np.uint8)]
+
+
+_x = np.arange(256, dtype=np.float64) / 255.0
+_LINEAR_LUT = (255.0 * np.where(_x <= 0.04045, _x / 12.92, ((_x + 0.055) / 1.055) ** 2.4)
+               ).astype(np.float32)
+
+
+def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str,
+                   width_over_height: float | None = None) -> ImageMeasurement:
+    """Sub-pixel axis column and vertical extent of an object's image in ``box``.
+
+    ``img`` holds linear radiance (see :func:`to_linear`).
+    """
+    u0, v0, u1, v1 = box
+    top, bottom, _, _ = _median_edges(img, v0, v1, u0, u1, axis=0)
+    left, right, out_left, out_right = _median_edges(img, u0, u1, v0, v1, axis=1)
+    m = ImageMeasurement(kind=kind, source="mirror", bbox_px=[u0, v0, u1, v1],
+                         u_axis=float("nan"), v_top=top, v_bottom=bottom,
+                         height_px=None if top is None or bottom is None else bottom - top,
+                         width_px=None if left is None or right is None else right - left)
+    if left is not None and right is not None:
+        m.u_axis = (left + right) / 2
+    elif width_over_height and top is not None and bottom is not None and (left or right):
+        # one side has no edge (it runs into the mirror's frame): axis from the other
+        half = width_over_height * (bottom - top) / 2
+        m.u_axis = left + half if left is not None else right - half
+        m.clipped = "right" if left is not None else "left"
+        m.notes.append(f"no edge on the {m.clipped}: clipped there, axis from the other edge")
+    if top is None or bottom is None:
+        m.clipped = "top"
+        m.notes.append("no contrast at the top or bottom edge: height not measured")
+    if width_over_height and m.height_px and m.width_px:
+        r = m.width_px / (width_over_height * m.height_px)
+        if r > 1 + RATIO_TOLERANCE:
+            m.clipped = "top"
+            m.notes.append(f"image {100 * (r - 1):.1f}% shorter than its width implies: "
+                           "clipped at the top, height not used")
+            m.height_px = None
+        elif r < 1 - RATIO_TOLERANCE:
+            dark_left = float(out_left.sum()) < float(out_right.sum())
+            m.clipped = "left" if dark_left else "right"
+            half = width_over_height * m.height_px / 2
+            m.u_axis = right - half if dark_left else left + half
+            m.notes.append(f"image {100 * (1 - r):.1f}% narrower than its height implies: "
+                           f"clipped on the {m.clipped}, axis from the other edge")
+    return m
+
+
+# The measured edges belong to the face nearest the camera: the panel's front (half its
+# thickness before its centre), the pencil's near side (between a flat, 0.346 cm, and a
+# corner, 0.4 cm, of the hexagon).  Size constancy holds for that face's depth.
+FRONT_OFFSET = {"target": TARGET_THICKNESS / 2,
+                "beacon": PENCIL_RADIUS * (1 + math.cos(math.pi / 6)) / 2}
+
+
+@dataclass
+class Calibration:
+    """Size-constancy constants K = s_px · (d − front offset) (px·cm), target and pencil."""
+
+    target_k: float
+    pencil_k: float
+    key: str = ""
+
+
+def alpha_of(camera: Camera, u: float) -> float:
+    """Bearing of the image column u (sub-pixel)."""
+    return float(wrap_bearing(camera.pan_deg - math.degrees(math.atan2(u - camera.cx,
+                                                                        camera.fx))))
+
+
+def distance_of(camera: Camera, u: float, height_px: float, k: float,
+                front_offset: float = 0.0) -> float:
+    """d_total from size constancy: the measured face's depth K/s along the axis, plus
+    its offset before the object's centre, divided by cos φ."""
+    phi = math.atan2(u - camera.cx, camera.fx)
+    return (k / height_px + front_offset) / math.cos(phi)
+
+
+def detect_frame(image: np.ndarray, view: DetectorView, calibration: Calibration) -> dict:
+    """Measure the target and each beacon in an RGB uint8 frame.
+
+    Returns
+    -------
+    dict
+        The measurements of INTERFACE.md plus a ``detector`` block with each image's
+        pixels (axis column, edges, bbox, clipping, direct or mirror).
+
+    Raises
+    ------
+    DetectionError
+        If the target or a beacon's mirror image cannot be found.
+    """
+    cam = view.camera
+    img = np.asarray(image, dtype=np.float32)
+    if img.ndim != 3 or img.shape[:2] != (cam.height_px, cam.width):
+        raise DetectionError(f"the frame is {img.shape[1::-1] if img.ndim >= 2 else img.shape} "
+                             f"px but the camera is {cam.width}×{cam.height_px}")
+    ratio = view.target_size[0] / view.target_size[1]
+    box = _target_region(img, ratio)
+    if box is None:
+        raise DetectionError("no target (grey upright panel) found in the frame")
+    linear = to_linear(img)
+    target = measure_region(linear, box, "target", ratio)
+    target.alpha_deg = alpha_of(cam, target.u_axis)
+    if target.height_px is not None:
+        target.d_total = distance_of(cam, target.u_axis, target.height_px, calibration.target_k,
+                                     FRONT_OFFSET["target"])
+
+    # the paint's blue is ~0 on lit and shadowed faces alike: its blue channel alone
+    # gives coverages that the hexagon's shading does not disturb
+    blue = np.ascontiguousarray(linear[..., 2:3])
+    pencils = [measure_region(blue, b, "beacon") for b in _pencil_regions(img)]
+    pencils = [p for p in pencils if p.height_px and np.isfinite(p.u_axis)]
+    for p in pencils:
+        p.alpha_deg = alpha_of(cam, p.u_axis)
+        p.d_total = distance_of(cam, p.u_axis, p.height_px, calibration.pencil_k,
+                                FRONT_OFFSET["beacon"])
+    mirror_imgs = _assign_beacons(pencils, view, calibration)
+
+    out = {
+        "observer": list(cam.position),
+        "target": {"alpha_deg": target.alpha_deg, "d_total": target.d_total,
+                   "clipped": bool(target.clipped)},
+        "beacons": [{"position": list(b.position), "alpha_deg": m.alpha_deg,
+                     "d_total": m.d_total, "clipped": bool(m.clipped), "source": "mirror"}
+                    for b, m in zip(view.beacons, mirror_imgs, strict=True)],
+        "detector": {"target": _public(target), "images": [_public(p) for p in pencils]},
+    }
+    return out
+
+
+def _public(m: ImageMeasurement) -> dict:
+    d = asdict(m)
+    return {k: (round(v, 4) if isinstance(v, float) else v) for k, v in d.items()}
+
+
+def _assign_beacons(pencils: list[ImageMeasurement], view: DetectorView,
+                    calibration: Calibration) -> list[ImageMeasurement]:
+    """Tell direct images (where the known beacon itself would appear) from mirror images,
+    and give each beacon its mirror image."""
+    cam = view.camera
+    mirror_cands = []
+    for p in pencils:
+        for i, b in enumerate(view.beacons):
+            bearing = float(bearing_deg(cam.position, b.position))
+            dist = float(np.hypot(b.position[0] - cam.position[0],
+                                  b.position[1] - cam.position[1]))
+            if abs(wrap_bearing(p.alpha_deg - bearing)) < 0.3 and \
+                    abs(p.d_total - dist) < 0.05 * dist:
+                p.source, p.beacon_index = "direct", i
+                p.notes.append(f"direct view of beacon {i} (bearing and distance agree with "
+                               "its known position)")
+                break
+        else:
+            mirror_cands.append(p)
+    n = len(view.beacons)
+    if len(mirror_cands) < n:
+        raise DetectionError(f"found {len(mirror_cands)} pencil image(s) in the mirror for "
+                             f"{n} beacon(s) ({len(pencils) - len(mirror_cands)} direct)")
+    if n == 1:
+        best = max(mirror_cands, key=lambda p: p.height_px)
+        best.beacon_index = 0
+        return [best]
+    # several beacons: the assignment under which all imply the same mirror line
+    best_perm, best_spread = None, math.inf
+    for perm in itertools.permutations(mirror_cands, n):
+        lines = [_bisector(cam, b, p) for b, p in zip(view.beacons, perm, strict=True)]
+        spread = float(np.var([ln[0] for ln in lines]) + np.var([ln[1] for ln in lines]))
+        if spread < best_spread:
+            best_perm, best_spread = perm, spread
+    for i, p in enumerate(best_perm):
+        p.beacon_index = i
+    return list(best_perm)
+
+
+def _bisector(cam: Camera, beacon: Beacon, m: ImageMeasurement) -> tuple[float, float]:
+    """(yaw, offset) of the mirror line this beacon/image pair implies."""
+    a = math.radians(m.alpha_deg)
+    v = np.array(cam.position) + m.d_total * np.array([math.cos(a), math.sin(a)])
+    b = np.asarray(beacon.position, float)
+    sep = v - b
+    yaw = math.degrees(math.atan2(sep[1], sep[0])) + 90.0
+    n = np.array([-math.sin(math.radians(yaw)), math.cos(math.radians(yaw))])
+    return math.cos(2 * math.radians(yaw)), float(n @ ((b + v) / 2)) * 0.01
+
+
+# -------------------------------------------------------------------- drawing
+
+
+def annotate(image: np.ndarray, result: dict) -> np.ndarray:
+    """Draw the detections (boxes, axis columns, edges, α and d) on a copy of the frame."""
+    out = np.ascontiguousarray(image[..., ::-1].copy())  # OpenCV draws in BGR
+    items = [result["detector"]["target"]] + result["detector"]["images"]
+    for m in items:
+        colour = (0, 0, 255) if m["kind"] == "target" else (
+            (255, 128, 0) if m["source"] == "mirror" else (160, 160, 160))
+        u0, v0, u1, v1 = m["bbox_px"]
+        cv2.rectangle(out, (u0 - 2, v0 - 2), (u1 + 2, v1 + 2), colour, 1)
+        if np.isfinite(m["u_axis"]):
+            x = int(round(m["u_axis"]))
+            cv2.line(out, (x, v0 - 12), (x, v1 + 12), colour, 1)
+        for v in (m["v_top"], m["v_bottom"]):
+            if v is not None:
+                y = int(round(v))
+                cv2.line(out, (u0 - 8, y), (u1 + 8, y), (0, 255, 0), 1)
+        d = "—" if m["d_total"] is None else f"{m['d_total']:.2f} cm"
+        label = f"{m['kind']} ({m['source']}): a {m['alpha_deg']:.3f} deg, d {d}"
+        if m["clipped"]:
+            label += f", clipped {m['clipped']}"
+        y = max(14, v0 - 8)
+        cv2.putText(out, label, (max(0, u0 - 40), y), cv2.FONT_HERSHEY_SIMPLEX, 0.45, colour,
+                    1, cv2.LINE_AA)
+    return out[..., ::-1]
+
+
+def read_frame(path) -> np.ndarray:
+    """An 8-bit RGB frame from a PNG (raises DetectionError if unreadable)."""
+    bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if bgr is None:
+        raise DetectionError(f"{path}: cannot read the image")
+    return bgr[..., ::-1]
+
+
+def write_png(path, rgb: np.ndarray) -> None:
+    if not cv2.imwrite(str(path), np.ascontiguousarray(rgb[..., ::-1])):
+        raise OSError(f"cannot write {path}")
