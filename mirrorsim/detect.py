@@ -103,44 +103,13 @@ def _edge_by_area(profile: np.ndarray, start: int, inside: np.ndarray, outside: 
     return start - 0.5 + float((1.0 - c).sum())
 
 
-def _band_edges(img: np.ndarray, lo: int, hi: int, band, axis: int,
-                centre: tuple[float | None, float | None] = (None, None), half: int = 5,
-                gap: int = 3, depth: int = 6):
-    """Edges at the two ends of an object spanning [lo, hi] along ``axis`` (0: rows, i.e.
-    top and bottom; 1: columns, i.e. left and right), in the mean profile of ``band``
-    (the columns, or rows, across it).  Each edge is summed over ``half`` pixels either
-    side of ``centre`` (default: the region's own end).
-
-    Returns (edge_lo, edge_hi, outside_lo, outside_hi); an edge is None without contrast.
-    """
-    n = img.shape[axis]
-
-    def line(i: int) -> np.ndarray:
-        i = min(max(i, 0), n - 1)
-        return (img[i, band] if axis == 0 else img[band, i]).mean(axis=0)
-
-    def med(rng) -> np.ndarray:
-        return np.median([line(i) for i in rng], axis=0)
-
-    # inside colours near each end: shading across the object does not bias the edges
-    in_lo = med(range(lo + gap, min(hi, lo + gap + depth) + 1))
-    in_hi = med(range(max(lo, hi - gap - depth), hi - gap + 1))
-    out_lo = med(range(lo - gap - depth, lo - gap + 1))
-    out_hi = med(range(hi + gap, hi + gap + depth + 1))
-    c_lo = lo if centre[0] is None else int(round(centre[0]))
-    c_hi = hi if centre[1] is None else int(round(centre[1]))
-    a0, b0 = c_lo - half, c_hi - half
-    first = np.array([line(i) for i in range(a0, c_lo + half + 1)])
-    last = np.array([line(i) for i in range(b0, c_hi + half + 1)])
-    e_lo = _edge_by_area(first, a0, in_lo, out_lo, inside_first=False)
-    e_hi = _edge_by_area(last, b0, in_hi, out_hi, inside_first=True)
-    return e_lo, e_hi, out_lo, out_hi
-
-
-def _local_edge(img: np.ndarray, band, axis: int, guess: float, inside_first: bool):
-    """Refine an edge near ``guess`` on the mean profile of ``band``: coverages of the
-    three pixels about it, against the median colours 2–5 px either side.  Local levels
-    keep a shadow a few pixels away (a contact shadow at the foot) out of it.
+def _local_edge(img: np.ndarray, band, axis: int, guess: float, inside_first: bool,
+                reach: int = 6, half: int = 1):
+    """An edge near ``guess`` in the mean profile of ``band`` (the columns, or rows,
+    across it): coverages of the 2·half + 1 pixels about it, against the median colours
+    of the next 4 pixels either side (inside: no further than ``reach``).  Local levels
+    keep a shadow or a neighbour a few pixels away (a contact shadow at a foot, another
+    object beside a thin pencil) out of it; medians drop the pegboard's holes.
 
     Returns (edge or None, outside colour).
     """
@@ -151,40 +120,44 @@ def _local_edge(img: np.ndarray, band, axis: int, guess: float, inside_first: bo
         i = min(max(i, 0), n - 1)
         return (img[i, band] if axis == 0 else img[band, i]).mean(axis=0)
 
-    # medians over a few pixels: the pegboard's holes next to a foot are outliers
-    before = np.median([line(c - k) for k in range(2, 6)], axis=0)
-    after = np.median([line(c + k) for k in range(2, 6)], axis=0)
+    k_out = range(half + 1, half + 5)
+    k_in = range(half + 1, max(half + 2, min(half + 5, reach)))
+    before = np.median([line(c - k) for k in (k_in if inside_first else k_out)], axis=0)
+    after = np.median([line(c + k) for k in (k_out if inside_first else k_in)], axis=0)
     inside, outside = (before, after) if inside_first else (after, before)
-    window = np.array([line(i) for i in (c - 1, c, c + 1)])
-    return _edge_by_area(window, c - 1, inside, outside, inside_first), outside
+    window = np.array([line(i) for i in range(c - half, c + half + 1)])
+    return _edge_by_area(window, c - half, inside, outside, inside_first), outside
 
 
 def _median_edges(img, lo, hi, cross_lo, cross_hi, axis, band_px=3):
-    """Edges at both ends of an object, robust and precise.
+    """Edges at both ends of an object spanning [lo, hi] along ``axis`` (0: top and
+    bottom, 1: left and right), robust and precise.
 
-    Bands of ``band_px`` across the object's middle 60 % each give a coarse edge; bands
-    more than 1 px from the median (partly occluded ones) are dropped; the final edge is
-    measured on the mean profile of the rest by :func:`_local_edge`.
+    Bands of ``band_px`` across the object's middle 60 % each give an edge near the
+    region's boundary (±2 px); bands more than 1 px from their median (partly occluded
+    ones) are dropped; the final edge is measured on the mean profile of the rest.
     Returns (edge_lo, edge_hi, outside_lo, outside_hi).
     """
     span = cross_hi - cross_lo + 1
     a = cross_lo + int(0.2 * span)
     b = max(a + 1, cross_hi - int(0.2 * span) + 1)
     bands = [np.arange(s, min(s + band_px, b)) for s in range(a, b, band_px)]
-    coarse = [_band_edges(img, lo, hi, band, axis) for band in bands]
-    final = []
-    outs = []
-    for end in (0, 1):
-        vals = [c[end] for c in coarse if c[end] is not None]
+    reach = max(2, (hi - lo) // 2)
+    final, outs = [], []
+    for end, guess in ((0, lo), (1, hi)):
+        coarse = [_local_edge(img, band, axis, guess, end == 1, reach, half=2)
+                  for band in bands]
+        vals = [e for e, _ in coarse if e is not None]
         if not vals:
             final.append(None)
-            outs.append(np.median([c[2 + end] for c in coarse], axis=0))
+            outs.append(np.median([o for _, o in coarse], axis=0))
             continue
         m = float(np.median(vals))
-        near = [band for band, c in zip(bands, coarse, strict=True)
-                if c[end] is not None and abs(c[end] - m) < 1.0]
+        near = [band for band, (e, _) in zip(bands, coarse, strict=True)
+                if e is not None and abs(e - m) < 1.0]
         keep = np.concatenate(near) if near else np.concatenate(bands)
-        e, out = _local_edge(img, keep, axis, m, inside_first=(end == 1))
+        # round(m) is the pixel the edge crosses: the window is centred on it
+        e, out = _local_edge(img, keep, axis, m, end == 1, reach)
         final.append(e)
         outs.append(out)
     return final[0], final[1], outs[0], outs[1]
@@ -287,13 +260,16 @@ def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str,
         m.clipped = "top"
         m.notes.append("no contrast at the top or bottom edge: height not measured")
     if width_over_height and m.height_px and m.width_px:
-        r = m.width_px / (width_over_height * m.height_px)
-        if r > 1 + RATIO_TOLERANCE:
+        expected = width_over_height * m.height_px
+        r = m.width_px / expected
+        # edges are good to ~0.1 px each: a clip must exceed that as well as the tolerance
+        tol = max(RATIO_TOLERANCE, 0.6 / expected)
+        if r > 1 + tol:
             m.clipped = "top"
             m.notes.append(f"image {100 * (r - 1):.1f}% shorter than its width implies: "
                            "clipped at the top, height not used")
             m.height_px = None
-        elif r < 1 - RATIO_TOLERANCE:
+        elif r < 1 - tol:
             dark_left = float(out_left.sum()) < float(out_right.sum())
             m.clipped = "left" if dark_left else "right"
             half = width_over_height * m.height_px / 2
