@@ -28,9 +28,7 @@ llvm:
 	else echo "note: install libLLVM 19 (apt-get install libllvm19) for the fast backend"; fi
 
 demo: setup
-	$(BIN)/mirrorsim check scenes/default.yaml
-	$(BIN)/mirrorsim render scenes/default.yaml
-	$(BIN)/mirrorsim plot scenes/default.yaml
+	$(BIN)/mirrorsim evaluate scenes/default.yaml
 
 test: setup
 	$(BIN)/python -m pytest
@@ -44,7 +42,9 @@ lint: setup
 
 bench: setup
 	$(BIN)/python bench/render.py
+	$(BIN)/python bench/detect.py
 	$(BIN)/python bench/particle.py
+	$(BIN)/python bench/paper.py
 
 clean:
 	rm -rf $(VENV) renders/*/ .pytest_cache .ruff_cache .hypothesis

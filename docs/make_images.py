@@ -27,6 +27,10 @@ def main() -> None:
     run("render", "scenes/default.yaml", "--quiet")
     run("plot", "scenes/default.yaml", "--out", str(DOCS / "default_top.png"))
     run("plan", "scenes/exp3.yaml", "--out", str(DOCS / "plan_exp3.png"))
+    run("detect", "renders/default/default.png", "--scene", "scenes/default.yaml",
+        "--annotate", str(ROOT / "renders" / "default" / "default.annotated.png"))
+    ann = np.asarray(Image.open(ROOT / "renders" / "default" / "default.annotated.png"))
+    Image.fromarray(ann[300:720, 700:1240]).save(DOCS / "default_annotated.jpg", quality=90)
     frame = np.asarray(Image.open(ROOT / "renders" / "default" / "default.png").convert("RGB"))
     Image.fromarray(frame).resize((960, 544), Image.LANCZOS).save(DOCS / "default_frame.jpg",
                                                                   quality=88)

@@ -86,6 +86,22 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--variant", default="auto", choices=["auto", "cuda", "llvm", "scalar"])
     p.add_argument("--json", metavar="FILE")
 
+    p = sub.add_parser("evaluate", help="render, detect, solve and score against ground truth",
+                       description="The main job: render SCENE (or reuse a render of the same "
+                       "scene, spp and seed), detect the target and beacons, localize mirror and "
+                       "target, and score everything against the exact ground truth.  Prints a "
+                       "table; writes DIR/<name>.report.json, DIR/<name>.eval.png (truth vs "
+                       "estimate with the 95 %% error ellipse) and the annotated frame(s).  A "
+                       "scene with several beacons renders one frame per beacon and reports "
+                       "the error as beacons are added.  Exit 0 whenever it ran.")
+    _scene_arg(p)
+    p.add_argument("--out", type=Path, help="output folder (default renders/<name>/)")
+    p.add_argument("--json", metavar="FILE", help="also write the report here (- = stdout)")
+    p.add_argument("--spp", type=int, help="samples per pixel (default: the scene's, else 16)")
+    p.add_argument("--seed", type=int)
+    p.add_argument("--variant", default="auto", choices=["auto", "cuda", "llvm", "scalar"])
+    p.add_argument("--quiet", action="store_true", help="no progress line")
+
     p = sub.add_parser("solve", help="localize the mirror and the target from measurements",
                        description="Read MEASUREMENTS.json (INTERFACE.md: observer, target "
                        "alpha/d_total, beacons with positions) and estimate the mirror line and "
@@ -154,6 +170,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # output piped into `head` and the like
+        sys.stderr.close()
+        return 0
 
 
 def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
@@ -299,6 +318,31 @@ def _cmd_calibrate(args) -> int:
     return 0
 
 
+def _cmd_evaluate(args) -> int:
+    from mirrorsim.evaluate import evaluate_scene, report_table
+    from mirrorsim.plot import plot_evaluation
+
+    scene = _load(args.scene)
+    if args.spp is not None and args.spp < 1:
+        raise BadArgument(f"--spp: {args.spp} must be ≥ 1")
+    if args.seed is not None and args.seed < 0:
+        raise BadArgument(f"--seed: {args.seed} must be ≥ 0")
+    out = args.out or Path("renders") / scene.name
+    report = evaluate_scene(scene, out, spp=args.spp, seed=args.seed, variant=args.variant,
+                            progress=not args.quiet)
+    reused = all(f["reused"] for f in report["frames"])
+    print(f"{scene.name}: {len(report['frames'])} frame(s), {report['render']['spp']} spp, "
+          f"{report['render']['variant']}{' (reused)' if reused else ''}")
+    print(report_table(report))
+    path = out / f"{scene.name}.report.json"
+    path.write_text(json.dumps(report, indent=2) + "\n")
+    fig = plot_evaluation(scene, report, out / f"{scene.name}.eval.png")
+    print(f"report: {path}\ntop view: {fig}\nannotated: "
+          + ", ".join(f["annotated"] for f in report["frames"]))
+    _write_json(args.json, report)
+    return 0
+
+
 def _cmd_solve(args) -> int:
     from solver.measurements import load_measurements
     from solver.sltr import solve_measurements
@@ -392,8 +436,8 @@ def _cmd_plan(args) -> int:
 
 
 _COMMANDS = {"render": _cmd_render, "check": _cmd_check, "plot": _cmd_plot,
-             "detect": _cmd_detect, "calibrate": _cmd_calibrate, "solve": _cmd_solve,
-             "montecarlo": _cmd_montecarlo, "plan": _cmd_plan}
+             "evaluate": _cmd_evaluate, "detect": _cmd_detect, "calibrate": _cmd_calibrate,
+             "solve": _cmd_solve, "montecarlo": _cmd_montecarlo, "plan": _cmd_plan}
 
 
 if __name__ == "__main__":

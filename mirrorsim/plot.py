@@ -19,8 +19,61 @@ from solver.geometry import unit  # noqa: E402
 def plot_top_view(scene: Scene, out: str | Path, *, dpi: int = 150) -> Path:
     """Draw board, camera and field of view, occluders, mirror, target, beacons,
     virtual images and the rays camera → mirror → object; write a PNG atomically."""
-    out = Path(out)
     fig, ax = plt.subplots(figsize=(7.5, 7.5))
+    _draw_top_view(ax, scene)
+    return _save(fig, Path(out), dpi)
+
+
+def _save(fig, out: Path, dpi: int) -> Path:
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(f".{out.name}.tmp{os.getpid()}.png")
+    try:
+        fig.savefig(tmp, dpi=dpi, bbox_inches="tight")
+        os.replace(tmp, out)
+    finally:
+        plt.close(fig)
+        tmp.unlink(missing_ok=True)
+    return out
+
+
+def plot_evaluation(scene: Scene, report: dict, out: str | Path, *, dpi: int = 130) -> Path:
+    """Truth against estimate (like the paper's Figs. 7 and 11): the top view with the
+    estimated mirror line and target, and a close-up of the target with the solver's
+    95 % error ellipse."""
+    from matplotlib.patches import Ellipse
+
+    fig, (ax, zoom) = plt.subplots(1, 2, figsize=(14, 7))
+    _draw_top_view(ax, scene)
+    sol, err = report["solution"], report["errors"]
+    p = np.asarray(sol["mirror"]["point"], float)
+    d = unit(sol["mirror"]["yaw_deg"]) * 2 * scene.mirror.size[0]
+    est = np.asarray(sol["target"]["position"], float)
+    truth = np.asarray(scene.target.position, float)
+    for a in (ax, zoom):
+        a.plot(*zip(p - d, p + d, strict=True), color="#d62728", ls="--", lw=1.2,
+               label=f"estimated mirror (yaw error {err['mirror_yaw_deg']:.3f}°)")
+        a.plot(*est, "x", color="#d62728", ms=10, mew=2,
+               label=f"estimated target (error {err['target_cm']:.3f} cm)")
+    ax.legend(loc="upper left", fontsize=7, framealpha=0.9)
+    cov = sol.get("covariance", {}).get("target_ellipse95")
+    half = max(1.0, 2.5 * err["target_cm"])
+    if cov:
+        zoom.add_patch(Ellipse(est, 2 * cov["major"], 2 * cov["minor"], angle=cov["angle_deg"],
+                               fill=False, color="#d62728", lw=1.2, label="95 % error ellipse"))
+        half = max(half, 1.3 * cov["major"])
+    zoom.plot(*truth, "*", color="#c0392b", ms=16, mec="k", label="true target")
+    t0, t1 = scene.target.ends()
+    zoom.plot(*zip(t0, t1, strict=True), color="#c0392b", lw=3, alpha=0.4)
+    zoom.set_xlim(truth[0] - half, truth[0] + half)
+    zoom.set_ylim(truth[1] - half, truth[1] + half)
+    zoom.set_aspect("equal")
+    zoom.grid(alpha=0.3)
+    zoom.legend(loc="upper left", fontsize=8)
+    zoom.set_title("the target: truth, estimate and the solver's 95 % ellipse")
+    return _save(fig, Path(out), dpi)
+
+
+def _draw_top_view(ax, scene: Scene) -> None:
     sx, sy = scene.board.size
     ax.add_patch(plt.Rectangle((0, 0), sx, sy, facecolor="#e8d4b0", edgecolor="#8a6d3b",
                                lw=1.2, zorder=0, label="board"))
@@ -78,15 +131,6 @@ def plot_top_view(scene: Scene, out: str | Path, *, dpi: int = 150) -> Path:
     ax.set_title(f"{scene.name}: top view (dashed: to the virtual images)")
     ax.legend(loc="upper left", fontsize=7, framealpha=0.9)
     ax.grid(alpha=0.2)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(f".{out.name}.tmp{os.getpid()}.png")
-    try:
-        fig.savefig(tmp, dpi=dpi, bbox_inches="tight")
-        os.replace(tmp, out)
-    finally:
-        plt.close(fig)
-        tmp.unlink(missing_ok=True)
-    return out
 
 
 def plot_plan(scene: Scene, plan: dict, out: str | Path, *, dpi: int = 130) -> Path:
@@ -169,12 +213,4 @@ def plot_plan(scene: Scene, plan: dict, out: str | Path, *, dpi: int = 130) -> P
     ax.grid(alpha=0.3)
 
     fig.suptitle(f"{scene.name}: beacon placement", fontsize=11)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(f".{out.name}.tmp{os.getpid()}.png")
-    try:
-        fig.savefig(tmp, dpi=dpi, bbox_inches="tight")
-        os.replace(tmp, out)
-    finally:
-        plt.close(fig)
-        tmp.unlink(missing_ok=True)
-    return out
+    return _save(fig, out, dpi)

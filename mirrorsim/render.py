@@ -407,6 +407,7 @@ def render_scene(
     seed: int | None = None,
     variant: str = "auto",
     progress: bool = True,
+    fingerprint: str | None = None,
 ) -> RenderResult:
     """Render ``scene`` and write ``<name>.png``, ``<name>.json`` and ``<name>.ids.png``.
 
@@ -422,6 +423,9 @@ def render_scene(
     variant : {'auto', 'cuda', 'llvm', 'scalar'} or a Mitsuba variant name
     progress : bool
         Print a progress line on stderr.
+    fingerprint : str, optional
+        Recorded in the ground truth's ``render`` block (``evaluate`` reuses a render
+        whose fingerprint matches).
     """
     spp = scene.render.spp if spp is None else spp
     seed = scene.render.seed if seed is None else seed
@@ -452,7 +456,7 @@ def render_scene(
                           "seen_in_mirror_offset": IN_MIRROR}
     truth["render"] = {"variant": chosen, "spp": spp, "seed": seed,
                        "seconds_render": round(t_render, 3), "seconds_total": round(seconds, 3),
-                       "mitsuba": mi.__version__}
+                       "mitsuba": mi.__version__, "fingerprint": fingerprint}
 
     out.mkdir(parents=True, exist_ok=True)
     files = {

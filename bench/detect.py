@@ -1,0 +1,155 @@
+"""Benchmark: the detector's accuracy on rendered full-size frames, and how it depends on spp.
+
+    python bench/detect.py [--frames 20] [--spp 16] [--sweep 4 16 64 256]
+                           [--sweep-scenes 3] [--seed 0] [--out DIR]
+
+Frames: the bundled scenes (default, exp1–3) and random valid variations of the default
+scene (mirror pose, target and beacon positions; kept only if the scene validates and
+both images are whole in the mirror).  Errors are against each render's exact ground
+truth.  Prints Markdown tables: median and 95th percentile of |Δα| and |Δd|/d for target
+and beacon, detection time per frame, and the same at each spp of the sweep.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+import platform
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from mirrorsim import optics  # noqa: E402
+from mirrorsim.calibrate import calibrate  # noqa: E402
+from mirrorsim.detect import DetectionError, DetectorView, detect_frame, read_frame  # noqa: E402
+from mirrorsim.render import render_scene  # noqa: E402
+from mirrorsim.scene import SceneError, load_scene, scene_from_dict  # noqa: E402
+
+BUNDLED = ("default", "exp1", "exp2", "exp3")
+
+
+def random_scenes(n: int, rng: np.random.Generator) -> list:
+    """Valid variations of the default scene with both images whole in the mirror."""
+    base = yaml.safe_load((ROOT / "scenes" / "default.yaml").read_text())
+    out, tries = [], 0
+    while len(out) < n and tries < 5000:
+        tries += 1
+        d = copy.deepcopy(base)
+        d["name"] = f"random{len(out):03d}"
+        d["mirror"]["center"] = [float(rng.uniform(20, 45)), float(rng.uniform(45, 70))]
+        d["mirror"]["yaw"] = float(rng.uniform(0, 45))
+        d["target"]["position"] = [float(rng.uniform(35, 78)), float(rng.uniform(25, 78))]
+        yaw = np.radians(d["mirror"]["yaw"])
+        n_hat = np.array([np.sin(yaw), -np.cos(yaw)])  # towards the camera's side
+        along = np.array([np.cos(yaw), np.sin(yaw)])
+        b = (np.array(d["mirror"]["center"]) + rng.uniform(4, 14) * n_hat
+             + rng.uniform(-5, 5) * along)
+        d["beacon"]["position"] = [float(b[0]), float(b[1])]
+        d["camera"]["pan"] = "mirror"
+        try:
+            s = scene_from_dict(d, default_name=d["name"])
+        except SceneError:
+            continue
+        if s.warnings or any(optics.visibility(s, o).fraction < 1 for o in (s.target,
+                                                                            *s.beacons)):
+            continue
+        out.append(s)
+    return out
+
+
+def measure(scene, spp: int, tmp: Path) -> dict:
+    res = render_scene(scene, tmp / scene.name, spp=spp, progress=False)
+    cal = calibrate(scene.camera, scene.target.size, scene.beacons[0].height)
+    img = read_frame(res.png)
+    t0 = time.perf_counter()
+    try:
+        out = detect_frame(img, DetectorView.from_scene(scene), cal)
+    except DetectionError as exc:
+        return {"scene": scene.name, "spp": spp, "error": str(exc)}
+    dt = time.perf_counter() - t0
+    t, b = res.truth["target"], res.truth["beacons"][0]
+    mt, mb = out["target"], out["beacons"][0]
+    return {
+        "scene": scene.name, "spp": spp, "seconds": dt,
+        "target_dalpha": abs(mt["alpha_deg"] - t["alpha_deg"]),
+        "target_drel": None if mt["d_total"] is None
+        else abs(mt["d_total"] - t["d_total"]) / t["d_total"],
+        "beacon_dalpha": abs(mb["alpha_deg"] - b["alpha_deg"]),
+        "beacon_drel": abs(mb["d_total"] - b["d_total"]) / b["d_total"],
+        "target_d": t["d_total"], "beacon_d": b["d_total"],
+    }
+
+
+def summary(rows: list[dict]) -> dict:
+    ok = [r for r in rows if "error" not in r]
+
+    def stat(key, scale=1.0):
+        v = np.array([r[key] for r in ok if r[key] is not None]) * scale
+        return (float(np.median(v)), float(np.percentile(v, 95))) if len(v) else (np.nan,) * 2
+
+    return {"frames": len(rows), "failed": len(rows) - len(ok),
+            "target_alpha": stat("target_dalpha"), "target_d_pct": stat("target_drel", 100),
+            "beacon_alpha": stat("beacon_dalpha"), "beacon_d_pct": stat("beacon_drel", 100),
+            "seconds": stat("seconds")}
+
+
+def table(title: str, summaries: dict) -> str:
+    lines = [f"\n{title}\n",
+             "| spp | frames (failed) | target \\|Δα\\| ° median / p95 | target \\|Δd\\|/d % "
+             "median / p95 | beacon \\|Δα\\| ° median / p95 | beacon \\|Δd\\|/d % median / p95 |"
+             " detect s median |",
+             "|---|---|---|---|---|---|---|"]
+    for spp, s in summaries.items():
+        f = lambda p, nd: f"{p[0]:.{nd}f} / {p[1]:.{nd}f}"  # noqa: E731
+        lines.append(f"| {spp} | {s['frames']} ({s['failed']}) | {f(s['target_alpha'], 4)} | "
+                     f"{f(s['target_d_pct'], 3)} | {f(s['beacon_alpha'], 4)} | "
+                     f"{f(s['beacon_d_pct'], 3)} | {s['seconds'][0]:.2f} |")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--frames", type=int, default=20)
+    ap.add_argument("--spp", type=int, default=16)
+    ap.add_argument("--sweep", type=int, nargs="*", default=[4, 16, 64, 256])
+    ap.add_argument("--sweep-scenes", type=int, default=3)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--out", type=Path, help="write all rows as JSON here")
+    args = ap.parse_args()
+
+    rng = np.random.default_rng(args.seed)
+    bundled = [load_scene(ROOT / "scenes" / f"{n}.yaml") for n in BUNDLED]
+    scenes = bundled + random_scenes(max(0, args.frames - len(bundled)), rng)
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for k, s in enumerate(scenes):
+            rows.append(measure(s, args.spp, Path(tmp)))
+            print(f"[{k + 1}/{len(scenes)}] {s.name}: {rows[-1]}", file=sys.stderr)
+        sweep = {}
+        for spp in args.sweep:
+            sweep[spp] = [measure(s, spp, Path(tmp)) for s in scenes[:args.sweep_scenes]]
+            print(f"sweep {spp} spp done", file=sys.stderr)
+    print(f"Detector accuracy, 1920×1088 frames; {platform.machine()}, Python "
+          f"{platform.python_version()}, seed {args.seed}")
+    print(table(f"All {len(scenes)} frames at {args.spp} spp:", {args.spp: summary(rows)}))
+    if args.sweep:
+        print(table(f"By spp ({args.sweep_scenes} scenes: "
+                    f"{', '.join(s.name for s in scenes[:args.sweep_scenes])}):",
+                    {spp: summary(r) for spp, r in sweep.items()}))
+    failed = [r for r in rows if "error" in r]
+    for r in failed:
+        print(f"\nfailed: {r['scene']}: {r['error']}")
+    if args.out:
+        args.out.write_text(json.dumps({"rows": rows, "sweep": sweep}, indent=1))
+
+
+if __name__ == "__main__":
+    main()
