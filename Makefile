@@ -45,6 +45,7 @@ bench: setup
 	$(BIN)/python bench/detect.py
 	$(BIN)/python bench/particle.py
 	$(BIN)/python bench/paper.py
+	$(BIN)/python bench/evaluate.py
 
 clean:
 	rm -rf $(VENV) renders/*/ .pytest_cache .ruff_cache .hypothesis

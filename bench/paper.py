@@ -25,7 +25,7 @@ from mirrorsim.evaluate import DETECTOR_SIGMA, evaluate_scene  # noqa: E402
 from mirrorsim.planning import plan_scene  # noqa: E402
 from mirrorsim.scene import Beacon, load_scene  # noqa: E402
 from solver.measurements import load_measurements  # noqa: E402
-from solver.montecarlo import PAPER_TABLE1, run_row  # noqa: E402
+from solver.montecarlo import PAPER_TABLE1, run_row, table1  # noqa: E402
 from solver.sltr import solve_measurements  # noqa: E402
 
 # Table 3's "Measured data" rows and RMSE(tar)
@@ -74,11 +74,11 @@ def main() -> None:
     print("| σ(α) ° | σ(d) | paper ref / tar | ours, same σ's | ours, detector's σ's "
           f"({DETECTOR_SIGMA.alpha_deg}°, {100 * DETECTOR_SIGMA.d_total_rel:g} %) |")
     print("|---|---|---|---|---|")
-    for sa, sd, pref, ptar in PAPER_TABLE1:
-        same = run_row(sa, sd, 200, rng=0)
-        det = run_row(DETECTOR_SIGMA.alpha_deg, DETECTOR_SIGMA.d_total_rel * 5.0, 200, rng=0)
-        print(f"| {sa} | {sd} | {pref} / {ptar} | {same['rmse_ref']:.3f} / "
-              f"{same['rmse_tar']:.3f} | {det['rmse_ref']:.4f} / {det['rmse_tar']:.4f} |")
+    same = table1(200, rng=0)["rows"]  # as `mirrorsim montecarlo` prints it
+    det = run_row(DETECTOR_SIGMA.alpha_deg, DETECTOR_SIGMA.d_total_rel * 5.0, 200, rng=0)
+    for (sa, sd, pref, ptar), row in zip(PAPER_TABLE1, same, strict=True):
+        print(f"| {sa} | {sd} | {pref} / {ptar} | {row['rmse_ref']:.3f} / "
+              f"{row['rmse_tar']:.3f} | {det['rmse_ref']:.4f} / {det['rmse_tar']:.4f} |")
 
 
 if __name__ == "__main__":
