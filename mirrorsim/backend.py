@@ -65,6 +65,25 @@ def cache_path() -> Path:
     return Path(root) / "backend.json"
 
 
+def read_cache(path: Path) -> dict:
+    """A JSON cache file's contents ({} if missing or unreadable)."""
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return {}
+
+
+def write_cache(path: Path, data: dict) -> None:
+    """Replace a JSON cache file atomically; an unwritable cache only costs a redo."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(f".tmp{os.getpid()}")
+        tmp.write_text(json.dumps(data, indent=1))
+        os.replace(tmp, path)
+    except OSError:
+        pass
+
+
 def _machine_key(variant: str) -> str:
     """What a probe's answer depends on: machine, Python, package versions, LLVM choice."""
     parts = [
@@ -111,23 +130,12 @@ def probe(variant: str, *, use_cache: bool = True) -> tuple[bool, str]:
     """
     key = _machine_key(variant)
     path = cache_path()
-    cache: dict = {}
-    if use_cache and path.exists():
-        try:
-            cache = json.loads(path.read_text())
-        except (OSError, ValueError):
-            cache = {}
-        if key in cache:
-            return bool(cache[key]["ok"]), str(cache[key]["detail"])
+    cache = read_cache(path)
+    if use_cache and key in cache:
+        return bool(cache[key]["ok"]), str(cache[key]["detail"])
     ok, detail = _run_probe(variant)
     cache[key] = {"variant": variant, "ok": ok, "detail": detail}
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(f".tmp{os.getpid()}")
-        tmp.write_text(json.dumps(cache, indent=1))
-        os.replace(tmp, path)
-    except OSError:
-        pass  # an unwritable cache only costs a re-probe next time
+    write_cache(path, cache)
     return ok, detail
 
 

@@ -13,11 +13,9 @@ bias common to both cancels.  Results are cached per camera and object in
 
 from __future__ import annotations
 
-import json
-import os
 from pathlib import Path
 
-from mirrorsim.backend import cache_path
+from mirrorsim.backend import cache_path, read_cache, write_cache
 from mirrorsim.detect import (
     FRONT_OFFSET,
     Calibration,
@@ -71,12 +69,7 @@ def calibrate(camera: Camera, target_size, pencil_height: float, *, variant: str
     """K for the target and the pencil with this camera (cached)."""
     key = calibration_key(camera, target_size, pencil_height)
     path = _cache_file()
-    cache = {}
-    if path.exists():
-        try:
-            cache = json.loads(path.read_text())
-        except (OSError, ValueError):
-            cache = {}
+    cache = read_cache(path)
     if key in cache and not refresh:
         c = cache[key]
         return Calibration(target_k=c["target_k"], pencil_k=c["pencil_k"], key=key)
@@ -86,11 +79,5 @@ def calibrate(camera: Camera, target_size, pencil_height: float, *, variant: str
                       pencil_k=s_p * (D_REF - FRONT_OFFSET["beacon"]), key=key)
     cache[key] = {"target_k": cal.target_k, "pencil_k": cal.pencil_k,
                   "target_px_at_100cm": s_t, "pencil_paint_px_at_100cm": s_p}
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(f".tmp{os.getpid()}")
-        tmp.write_text(json.dumps(cache, indent=1))
-        os.replace(tmp, path)
-    except OSError:
-        pass
+    write_cache(path, cache)
     return cal

@@ -8,8 +8,8 @@ import sys
 import warnings
 from pathlib import Path
 
-from mirrorsim.scene import SceneError, load_scene
-from solver.measurements import MeasurementError
+from mirrorsim.scene import load_scene
+from solver.measurements import InputError
 from solver.sltr import SolverError  # light: scipy is imported only where it is used
 
 
@@ -156,7 +156,7 @@ def main(argv: list[str] | None = None) -> int:
     warnings.showwarning = _one_line_warning
     try:
         return _COMMANDS[args.command](args)
-    except (SceneError, MeasurementError, BadArgument) as exc:
+    except (InputError, BadArgument) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except SolverError as exc:

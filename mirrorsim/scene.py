@@ -18,6 +18,7 @@ import numpy as np
 import yaml
 
 from solver.geometry import bearing_deg, segment_distance, signed_distance, unit
+from solver.measurements import InputError
 
 # Physical dimensions of the rendered objects that the scene file does not set (cm).
 # They enter the overlap checks, so they live here rather than in the renderer.
@@ -31,12 +32,8 @@ EDGE_ON_LIMIT_DEG = 5.0  # a mirror seen at a more grazing angle than this is ed
 PAN_WORDS = ("mirror", "target", "beacon")
 
 
-class SceneError(ValueError):
+class SceneError(InputError):
     """A bad scene file: ``str(err)`` is the one-line message for the user."""
-
-    def __init__(self, file: str | Path, key: str, message: str):
-        self.file, self.key, self.message = str(file), key, message
-        super().__init__(f"{file}: {key}: {message}" if key else f"{file}: {message}")
 
 
 @dataclass(frozen=True)

@@ -12,12 +12,16 @@ from typing import Any
 from solver.sltr import BeaconMeasurement, Sigma
 
 
-class MeasurementError(ValueError):
-    """Bad measurement file: ``str(err)`` is one line naming the file and the key."""
+class InputError(ValueError):
+    """Bad input file: ``str(err)`` is one line naming the file, the key and the value."""
 
     def __init__(self, file: str | Path, key: str, message: str):
         self.file, self.key, self.message = str(file), key, message
         super().__init__(f"{file}: {key}: {message}" if key else f"{file}: {message}")
+
+
+class MeasurementError(InputError):
+    """A bad measurement file."""
 
 
 @dataclass(frozen=True)
