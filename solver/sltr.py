@@ -21,7 +21,7 @@ in the caller's unit (cm in mirrorsim).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -384,7 +384,24 @@ def solve_measurements(observer, beacons: list[BeaconMeasurement],
                        ) -> Solution:
     """The solver's front door: the closed form for one beacon and one target without
     σ's, weighted least squares (with covariance when σ's are given) otherwise."""
-    if len(beacons) == 1 and len(targets) == 1 and sigma is None:
+    if len(beacons) == 1 and len(targets) == 1:
         b = beacons[0]
-        return solve_single(observer, b.position, b.alpha_deg, b.d_total, *targets[0])
+        sol = solve_single(observer, b.position, b.alpha_deg, b.d_total, *targets[0])
+        if sigma is None:
+            return sol
+        # four measurements, four unknowns: least squares is the closed form, and the
+        # covariance is J⁻¹ Σ J⁻ᵀ (no iterations, and no scipy to import)
+        params = np.array([sol.mirror.yaw_deg, sol.mirror.rho, *sol.target])
+        o = np.asarray(observer, float)
+        pts = np.vstack([np.asarray(b.position, float), sol.target])
+        _, d, da, dd = predict(params, o, pts)
+        J = np.array([[*da[0, :2], 0, 0], [*dd[0, :2], 0, 0], da[1], dd[1]])
+        sd = np.array([sigma.alpha_deg, sigma.d_total_rel * b.d_total,
+                       sigma.alpha_deg, sigma.d_total_rel * targets[0][1]])
+        if abs(np.linalg.det(J)) < 1e-12:
+            raise SolverError("the measurements do not determine the mirror and the target "
+                              "(singular Jacobian)")
+        Jinv = np.linalg.inv(J)
+        cov = Jinv @ np.diag(sd**2) @ Jinv.T
+        return replace(sol, covariance=cov, method="closed form with covariance")
     return solve_lsq(observer, beacons, targets, sigma)

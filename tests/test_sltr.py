@@ -135,6 +135,19 @@ def test_least_squares_agrees_with_closed_form_on_one_beacon():
         assert abs((ls.mirror.yaw_deg - cf.mirror.yaw_deg + 90) % 180 - 90) < 1e-8
 
 
+def test_closed_form_covariance_equals_least_squares():
+    from solver.sltr import solve_measurements
+
+    o = np.zeros(2)
+    bs, ts = _measure(o, (16.0, 34.5), 38.3, [(17, 33.5)], (65.5, 42.7))
+    sig = Sigma(0.01, 0.002)
+    cf = solve_measurements(o, bs, ts, sig)
+    ls = solve_lsq(o, bs, ts, sig)
+    assert cf.method.startswith("closed form")
+    assert np.allclose(cf.covariance, ls.covariance, rtol=1e-6, atol=1e-12)
+    assert np.allclose(cf.target, ls.target, atol=1e-9)
+
+
 def test_covariance_matches_monte_carlo_spread():
     o, m, yaw = np.zeros(2), (27.5, 65.0), 38.0
     beacons, target = [(32, 62.5), (22, 55)], (55, 70)
