@@ -407,7 +407,9 @@ def _assign_beacons(pencils: list[ImageMeasurement], view: DetectorView,
 
 
 def _bisector(cam: Camera, beacon: Beacon, m: ImageMeasurement) -> tuple[float, float]:
-    """(yaw, offset) of the mirror line this beacon/image pair implies."""
+    """The mirror line this beacon/image pair implies, as comparable numbers: cos 2·yaw
+    (a line's direction is modulo 180°) and its offset in metres (so that a 1 cm
+    disagreement weighs like a ~1° one)."""
     a = math.radians(m.alpha_deg)
     v = np.array(cam.position) + m.d_total * np.array([math.cos(a), math.sin(a)])
     b = np.asarray(beacon.position, float)
