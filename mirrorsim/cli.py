@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import warnings
 from pathlib import Path
@@ -102,6 +103,36 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--variant", default="auto", choices=["auto", "cuda", "llvm", "scalar"])
     p.add_argument("--quiet", action="store_true", help="no progress line")
 
+    p = sub.add_parser("dataset", help="many random scenes, rendered, detected and scored",
+                       description="Draw N random valid scenes from a spec (default "
+                       "scenes/dataset_spec.yaml), render, detect, solve and score each, in "
+                       "parallel worker processes (or on a Dask cluster), and write "
+                       "DIR/dataset.parquet (a row per scene), DIR/scenes/*.yaml, "
+                       "DIR/frames/ and a dataset card DIR/README.md.  Interrupted runs "
+                       "resume with --resume; the same seed gives the same rows whatever "
+                       "the number of workers.")
+    p.add_argument("--n", type=int, required=True, help="number of scenes")
+    p.add_argument("--seed", type=int, required=True)
+    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--workers", type=int, default=max(1, (os.cpu_count() or 2) // 2),
+                   help="worker processes (default: half the cores)")
+    p.add_argument("--spec", type=Path, help="ranges of the random scenes (YAML)")
+    p.add_argument("--spp", type=int, help="samples per pixel (default: the spec's)")
+    p.add_argument("--variant", default="auto", choices=["auto", "cuda", "llvm", "scalar"])
+    p.add_argument("--resume", action="store_true", help="finish an interrupted run")
+    p.add_argument("--executor", default="local", choices=["local", "dask"])
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="Dask scheduler (tcp://host:8786); default: a local cluster")
+    p.add_argument("--quiet", action="store_true")
+
+    p = sub.add_parser("errormodel", help="fit the detector's error model to a dataset",
+                       description="Fit bias and spread of alpha and d_total/d against "
+                       "distance, off-axis bearing, mirror incidence and image size; write "
+                       "DIR/error_model.json (give it to solve, montecarlo or plan with "
+                       "--error-model) and DIR/error_model.png.")
+    p.add_argument("dataset", type=Path)
+    p.add_argument("--out", type=Path, help="model file (default DIR/error_model.json)")
+
     p = sub.add_parser("solve", help="localize the mirror and the target from measurements",
                        description="Read MEASUREMENTS.json (INTERFACE.md: observer, target "
                        "alpha/d_total, beacons with positions) and estimate the mirror line and "
@@ -110,6 +141,9 @@ def build_parser() -> argparse.ArgumentParser:
                        "ellipse when `sigma` is given.")
     p.add_argument("measurements", type=Path)
     p.add_argument("--json", metavar="FILE", help="write the solution (- = stdout)")
+    p.add_argument("--error-model", type=Path, metavar="FILE",
+                   help="take sigma from an error model (`mirrorsim errormodel`) where the "
+                   "file gives none")
 
     p = sub.add_parser("montecarlo", help="the paper's Table 1 protocol",
                        description="Table 1 of the paper: d_total = 5, alpha = 70 deg, Gaussian "
@@ -130,6 +164,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="beacon's offset along the mirror from the reflection point")
     p.add_argument("--sigma", nargs=2, type=float, action="append", metavar=("ALPHA", "D"),
                    help="a row of your own (deg, distance units); repeatable")
+    p.add_argument("--error-model", type=Path, metavar="FILE",
+                   help="add a row with the σ's of an error model (`mirrorsim errormodel`)")
     p.add_argument("--json", metavar="FILE")
 
     p = sub.add_parser("plan", help="beacon placement analysis and the best beacon position",
@@ -146,6 +182,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--yaw-spread", type=float, default=3.0, help="prior yaw ± (deg)")
     p.add_argument("--d1-spread", type=float, default=2.0, help="prior mirror distance ± (cm)")
     p.add_argument("--step", type=float, default=1.0, help="grid step of the search (cm)")
+    p.add_argument("--error-model", type=Path, metavar="FILE",
+                   help="take the σ's from an error model instead")
     p.add_argument("--out", type=Path, help="PNG (default renders/<name>/<name>.plan.png)")
     p.add_argument("--json", metavar="FILE")
     return parser
@@ -343,12 +381,56 @@ def _cmd_evaluate(args) -> int:
     return 0
 
 
+def _cmd_dataset(args) -> int:
+    from mirrorsim.dataset import DatasetError, run_dataset
+
+    for flag, v, lo in (("--n", args.n, 1), ("--seed", args.seed, 0),
+                        ("--workers", args.workers, 1)):
+        if v < lo:
+            raise BadArgument(f"{flag}: {v} must be ≥ {lo}")
+    if args.spp is not None and args.spp < 1:
+        raise BadArgument(f"--spp: {args.spp} must be ≥ 1")
+    try:
+        res = run_dataset(args.n, args.seed, args.out, workers=args.workers,
+                          spec_path=args.spec, spp=args.spp, variant=args.variant,
+                          resume=args.resume, executor=args.executor,
+                          scheduler=args.scheduler, progress=not args.quiet)
+    except DatasetError as exc:
+        raise BadArgument(str(exc)) from None
+    print(f"{args.out}: {res['rows']} rows ({res['computed']} computed now, "
+          f"{res['already_done']} already done, {res['failed']} failed) → {res['parquet']}")
+    return 0
+
+
+def _cmd_errormodel(args) -> int:
+    from mirrorsim import errormodel
+
+    if not (args.dataset / "dataset.parquet").exists():
+        raise BadArgument(f"{args.dataset}: no dataset.parquet here (run `mirrorsim dataset`)")
+    cols = errormodel.read_columns(args.dataset)
+    try:
+        model = errormodel.fit(cols)
+    except ValueError as exc:
+        raise BadArgument(f"{args.dataset}: {exc}") from None
+    out = args.out or args.dataset / "error_model.json"
+    errormodel.write_model(model, out)
+    png = errormodel.plot(cols, model, out.with_suffix(".png"))
+    print(errormodel.summary(model))
+    print(f"model: {out}\nplots: {png}")
+    return 0
+
+
 def _cmd_solve(args) -> int:
     from solver.measurements import load_measurements
     from solver.sltr import solve_measurements
 
     m = load_measurements(args.measurements)
-    sol = solve_measurements(m.observer, m.beacons, m.targets, m.sigma)
+    sigma = m.sigma
+    if sigma is None and args.error_model:
+        from mirrorsim.errormodel import load_sigma
+
+        sigma = load_sigma(args.error_model)
+    sol = solve_measurements(m.observer, m.beacons, m.targets, sigma)
     print(f"{args.measurements}: {sol.method}")
     print(f"  mirror  yaw {sol.mirror.yaw_deg:.4f}°  through ({sol.mirror.point[0]:.3f}, "
           f"{sol.mirror.point[1]:.3f})")
@@ -375,6 +457,11 @@ def _cmd_montecarlo(args) -> int:
         raise BadArgument(f"geometry: {exc}") from None
     rows = PAPER_TABLE1 if not args.sigma else tuple(
         (a, d, float("nan"), float("nan")) for a, d in args.sigma)
+    if args.error_model:
+        from mirrorsim.errormodel import load_sigma
+
+        em = load_sigma(args.error_model)
+        rows = (*rows, (em.alpha_deg, em.d_total_rel * args.d_total, float("nan"), float("nan")))
     res = table1(args.iterations, geometry, args.seed, rows)
     g = res["geometry"]
     print(f"Table 1 protocol: {args.iterations} draws per row; target at alpha {g['alpha_deg']:g}°,"
@@ -403,7 +490,13 @@ def _cmd_plan(args) -> int:
             raise BadArgument(f"{flag}: {v} must be > 0")
     if args.eps >= 45:
         raise BadArgument(f"--eps: {args.eps} must be < 45")
-    plan = plan_scene(scene, Sigma(args.sigma_alpha, args.sigma_d), args.eps,
+    sigma = Sigma(args.sigma_alpha, args.sigma_d)
+    if args.error_model:
+        from mirrorsim.errormodel import load_sigma
+
+        sigma = load_sigma(args.error_model)
+        args.sigma_alpha, args.sigma_d = sigma.alpha_deg, sigma.d_total_rel
+    plan = plan_scene(scene, sigma, args.eps,
                       args.yaw_spread, args.d1_spread, args.step)
     summ = plan_summary(plan)
     p = summ["paper"]
@@ -437,7 +530,8 @@ def _cmd_plan(args) -> int:
 
 _COMMANDS = {"render": _cmd_render, "check": _cmd_check, "plot": _cmd_plot,
              "evaluate": _cmd_evaluate, "detect": _cmd_detect, "calibrate": _cmd_calibrate,
-             "solve": _cmd_solve, "montecarlo": _cmd_montecarlo, "plan": _cmd_plan}
+             "solve": _cmd_solve, "montecarlo": _cmd_montecarlo, "plan": _cmd_plan,
+             "dataset": _cmd_dataset, "errormodel": _cmd_errormodel}
 
 
 if __name__ == "__main__":

@@ -1,0 +1,313 @@
+"""Datasets for error modelling: many random scenes rendered, detected, solved and scored.
+
+Layout of a dataset folder::
+
+    DIR/scenes/<name>.yaml    each scene as a normal scene file (rerun one alone with
+                              `mirrorsim evaluate`)
+    DIR/frames/<name>/…       its frame, ground truth, ids and annotated frame
+    DIR/rows/<name>.json      its finished row (written last, atomically: a row file
+                              exists only for a complete scene)
+    DIR/dataset.parquet       all rows, one per scene, in index order
+    DIR/README.md             the dataset card
+    DIR/dataset.json          how it was made (seed, n, spec, spp): --resume checks it
+
+Scene i is drawn from ``SeedSequence(seed).spawn(n)[i]`` and rendered with seed i, so a
+row depends on (seed, i) alone: the same seed gives the same rows whatever the number of
+workers or interruptions.  Work runs in worker processes that are recycled every few
+scenes (Mitsuba leaks when scenes are reloaded in one process), or on a Dask cluster.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import sys
+import time
+import traceback
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from mirrorsim.scene import RenderSettings
+
+ROW_SCHEMA_VERSION = 1
+RECYCLE_EVERY = 8  # scenes per worker process before it is replaced
+
+
+def scene_name(i: int) -> str:
+    return f"scene{i:06d}"
+
+
+def _atomic_write(path: Path, text: str) -> None:
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+def process_one(i: int, seed: int, n: int, spec: dict, out: str, spp: int | None,
+                variant: str) -> dict:
+    """Draw, render, detect, solve and score scene i; write its files; return its row.
+
+    A failure is recorded in the row (``error``), never raised.
+    """
+    from mirrorsim import optics
+    from mirrorsim.evaluate import evaluate_scene
+    from mirrorsim.sampler import sample_scene, to_yaml
+
+    out_dir = Path(out)
+    name = scene_name(i)
+    t0 = time.perf_counter()
+    row: dict = {"index": i, "scene": name, "seed": seed, "schema": ROW_SCHEMA_VERSION}
+    try:
+        ss = np.random.SeedSequence(seed).spawn(n)[i]
+        scene = sample_scene(spec, np.random.default_rng(ss), name)
+        scene = replace(scene, render=RenderSettings(spp=spp or scene.render.spp, seed=i))
+        _atomic_write(out_dir / "scenes" / f"{name}.yaml", to_yaml(scene))
+        t1 = time.perf_counter()
+        rep = evaluate_scene(scene, out_dir / "frames" / name, variant=variant, progress=False)
+        row.update(_flatten(scene, rep, optics))
+        row["seconds_sample"] = t1 - t0
+        row["error"] = ""
+    except Exception as exc:  # recorded, not fatal: one bad scene must not stop a run
+        row["error"] = f"{type(exc).__name__}: {exc}"
+        row["traceback"] = traceback.format_exc(limit=3)
+    row["seconds_total"] = time.perf_counter() - t0
+    _atomic_write(out_dir / "rows" / f"{name}.json", json.dumps(row))
+    return row
+
+
+def _flatten(scene, rep: dict, optics) -> dict:
+    """The row's columns: scene parameters, truth, measurements, solution, errors."""
+    cam, mir, t = scene.camera, scene.mirror, rep["truth"]
+    meas, sol, err = rep["measurements"], rep["solution"], rep["errors"]
+    row = {
+        "camera_x": cam.position[0], "camera_y": cam.position[1], "camera_height": cam.height,
+        "camera_pan_deg": cam.pan_deg, "hfov_deg": cam.hfov,
+        "mirror_x": mir.center[0], "mirror_y": mir.center[1], "mirror_yaw_deg": mir.yaw % 180,
+        "mirror_width": mir.size[0], "mirror_height": mir.size[1],
+        "target_x": scene.target.position[0], "target_y": scene.target.position[1],
+        "variant": rep["render"]["variant"], "spp": rep["render"]["spp"],
+        "render_seed": rep["render"]["seed"],
+    }
+    for kind, truth, m in (("target", t["target"], meas["target"]),
+                           ("beacon", t["beacons"][0], meas["beacons"][0])):
+        pos = truth["position"]
+        img = optics.mirror_image(cam, mir, pos)
+        incidence = _incidence_deg(cam, mir, img)
+        off_axis = (truth["alpha_deg"] - cam.pan_deg + 180.0) % 360.0 - 180.0
+        row.update({
+            f"{kind}_pos_x": pos[0], f"{kind}_pos_y": pos[1],
+            f"{kind}_alpha_true": truth["alpha_deg"], f"{kind}_d_true": truth["d_total"],
+            f"{kind}_d1": truth["d1"], f"{kind}_d2": truth["d2"],
+            f"{kind}_off_axis_deg": off_axis, f"{kind}_incidence_deg": incidence,
+            f"{kind}_height_px_true": truth["image_px"]["height"],
+            f"{kind}_alpha_meas": m["alpha_deg"],
+            f"{kind}_d_meas": m["d_total"] if m["d_total"] is not None else math.nan,
+            f"{kind}_alpha_err": m["alpha_deg"] - truth["alpha_deg"],
+            f"{kind}_d_rel_err": (m["d_total"] - truth["d_total"]) / truth["d_total"]
+            if m["d_total"] is not None else math.nan,
+            f"{kind}_clipped": bool(m.get("clipped", False)),
+        })
+    row.update({
+        "est_target_x": sol["target"]["position"][0], "est_target_y": sol["target"]["position"][1],
+        "est_mirror_yaw_deg": sol["mirror"]["yaw_deg"],
+        "err_target_cm": err["target_cm"], "err_mirror_yaw_deg": err["mirror_yaw_deg"],
+        "err_mirror_offset_cm": err["mirror_offset_cm"],
+        "err_reflection_point_cm": err["reflection_point_cm"],
+        "target_rmse95_cm": err["target_rmse95_cm"] if err["target_rmse95_cm"] else math.nan,
+    })
+    return row
+
+
+def _incidence_deg(cam, mir, img) -> float:
+    """Angle between the camera's ray to the mirror and the mirror's normal."""
+    ray = np.asarray(img.reflection_point) - np.asarray(cam.position, float)
+    n = np.array([-math.sin(math.radians(mir.yaw)), math.cos(math.radians(mir.yaw))])
+    c = abs(ray @ n) / np.linalg.norm(ray)
+    return math.degrees(math.acos(min(1.0, c)))
+
+
+# ------------------------------------------------------------------- the run
+
+
+class DatasetError(RuntimeError):
+    """A run that cannot start (e.g. a folder holding another dataset)."""
+
+
+def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
+                spec_path: str | Path | None = None, spp: int | None = None,
+                variant: str = "auto", resume: bool = False, executor: str = "local",
+                scheduler: str | None = None, progress: bool = True) -> dict:
+    """Make (or finish) a dataset of ``n`` scenes; return a summary.
+
+    Raises
+    ------
+    DatasetError
+        If ``out`` holds a dataset made with other settings, or holds one and
+        ``resume`` is false.
+    """
+    from mirrorsim.backend import choose_variant
+    from mirrorsim.sampler import load_spec
+
+    out = Path(out)
+    spec = load_spec(spec_path)
+    meta = {"n": n, "seed": seed, "spp": spp, "spec": spec}
+    meta_path = out / "dataset.json"
+    if meta_path.exists():
+        old = json.loads(meta_path.read_text())
+        same = {k: old.get(k) for k in ("n", "seed", "spp", "spec")} == meta
+        if not resume:
+            raise DatasetError(f"{out} already holds a dataset: pass --resume to finish it, "
+                               "or choose another --out")
+        if not same:
+            raise DatasetError(f"{out} holds a dataset made with other settings "
+                               f"(n={old.get('n')}, seed={old.get('seed')}, spp={old.get('spp')})")
+    for sub in ("scenes", "frames", "rows"):
+        (out / sub).mkdir(parents=True, exist_ok=True)
+    if not meta_path.exists():
+        _atomic_write(meta_path, json.dumps(meta, indent=1))
+    # the probe runs once here rather than in every worker
+    chosen = choose_variant(variant)
+    todo = [i for i in range(n) if not (out / "rows" / f"{scene_name(i)}.json").exists()]
+    done_before = n - len(todo)
+    bar = _Bar(len(todo), enabled=progress)
+    args = [(i, seed, n, spec, str(out), spp, chosen) for i in todo]
+    if executor == "dask":
+        for _ in _run_dask(args, scheduler):
+            bar.step()
+    elif workers <= 1:
+        for a in args:
+            process_one(*a)
+            bar.step()
+    else:
+        import multiprocessing as mp
+
+        ctx = mp.get_context("spawn")  # a fresh interpreter: no inherited Mitsuba state
+        with ctx.Pool(workers, maxtasksperchild=RECYCLE_EVERY) as pool:
+            for _ in pool.imap_unordered(_star, args):
+                bar.step()
+    bar.close()
+    rows = collect_rows(out, n)
+    write_table(out, rows)
+    write_card(out, meta, rows, chosen)
+    failed = [r for r in rows if r.get("error")]
+    return {"rows": len(rows), "computed": len(todo), "already_done": done_before,
+            "failed": len(failed), "parquet": str(out / "dataset.parquet")}
+
+
+def _star(a):
+    return process_one(*a)
+
+
+def _run_dask(args, scheduler: str | None):
+    from dask.distributed import Client, LocalCluster, as_completed
+
+    cluster = None
+    if scheduler is None:
+        cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True)
+        client = Client(cluster)
+    else:
+        client = Client(scheduler)
+    try:
+        futures = [client.submit(process_one, *a, pure=False) for a in args]
+        for f in as_completed(futures):
+            yield f.result()
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def collect_rows(out: Path, n: int) -> list[dict]:
+    rows = []
+    for i in range(n):
+        p = Path(out) / "rows" / f"{scene_name(i)}.json"
+        if p.exists():
+            rows.append(json.loads(p.read_text()))
+    return rows
+
+
+def write_table(out: Path, rows: list[dict]) -> Path:
+    """All rows as one Parquet table (pyarrow), written atomically."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    cols: dict[str, list] = {}
+    keys = sorted({k for r in rows for k in r if k != "traceback"},
+                  key=lambda k: (k not in ("index", "scene", "error"), k))
+    for k in keys:
+        cols[k] = [r.get(k) for r in rows]
+    table = pa.table(cols) if rows else pa.table({"index": pa.array([], pa.int64())})
+    path = Path(out) / "dataset.parquet"
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+    pq.write_table(table, tmp)
+    os.replace(tmp, path)
+    return path
+
+
+def write_card(out: Path, meta: dict, rows: list[dict], variant: str) -> None:
+    ok = [r for r in rows if not r.get("error")]
+    med = lambda k: float(np.nanmedian([abs(r[k]) for r in ok])) if ok else math.nan  # noqa: E731
+    text = f"""# mirrorsim dataset
+
+Made with `mirrorsim dataset --n {meta['n']} --seed {meta['seed']}`
+({'scene spp' if meta['spp'] is None else f"--spp {meta['spp']}"}; backend {variant}).
+{len(rows)} rows, {len(rows) - len(ok)} failed (their `error` column says why).
+
+Each row is one random scene (`scenes/<scene>.yaml`, a normal scene file: rerun it with
+`mirrorsim evaluate`), its frame (`frames/<scene>/`), and these columns of
+`dataset.parquet`:
+
+- `index`, `scene`, `seed`, `render_seed`, `variant`, `spp`, `error` (empty if fine);
+- scene parameters: `camera_x`, `camera_y`, `camera_height`, `camera_pan_deg`,
+  `hfov_deg`, `mirror_x`, `mirror_y`, `mirror_yaw_deg`, `mirror_width`,
+  `mirror_height`, `target_x`, `target_y` (cm, degrees);
+- for `target_*` and `beacon_*`: position `pos_x`, `pos_y`; ground truth `alpha_true`,
+  `d_true`, `d1`, `d2`; geometry `off_axis_deg` (bearing of the image off the optical
+  axis), `incidence_deg` (camera ray against the mirror's normal), `height_px_true`
+  (exact image height of the upright axis); measurements `alpha_meas`, `d_meas`; errors
+  `alpha_err` (deg, measured − true) and `d_rel_err` (relative); `clipped`;
+- solution: `est_target_x`, `est_target_y`, `est_mirror_yaw_deg`; errors
+  `err_target_cm`, `err_mirror_yaw_deg`, `err_mirror_offset_cm`,
+  `err_reflection_point_cm`; the solver's 95 % bound `target_rmse95_cm`;
+- timings: `seconds_sample`, `seconds_total`.
+
+Median |errors| here: target α {med('target_alpha_err'):.4f}°, target d
+{100 * med('target_d_rel_err'):.3f} %, beacon α {med('beacon_alpha_err'):.4f}°, beacon d
+{100 * med('beacon_d_rel_err'):.3f} %, target {med('err_target_cm'):.3f} cm.
+
+Scene i is drawn from `SeedSequence({meta['seed']}).spawn({meta['n']})[i]` with the spec in
+`dataset.json` and rendered with seed i.  `mirrorsim errormodel DIR` fits the error
+model.
+"""
+    _atomic_write(Path(out) / "README.md", text)
+
+
+class _Bar:
+    """Progress with rate and ETA on stderr."""
+
+    def __init__(self, total: int, enabled: bool = True):
+        self.total, self.done, self.enabled = total, 0, enabled
+        self.t0 = time.perf_counter()
+        self._show()
+
+    def step(self) -> None:
+        self.done += 1
+        self._show()
+
+    def _show(self) -> None:
+        if not self.enabled:
+            return
+        el = time.perf_counter() - self.t0
+        rate = self.done / el * 60 if el > 0 and self.done else 0.0
+        eta = (self.total - self.done) / (rate / 60) if rate else 0.0
+        frac = self.done / self.total if self.total else 1.0
+        sys.stderr.write(f"\r[{'#' * int(30 * frac):<30}] {self.done}/{self.total} scenes, "
+                         f"{rate:.1f}/min, ETA {eta:.0f} s   ")
+        sys.stderr.flush()
+
+    def close(self) -> None:
+        if self.enabled:
+            sys.stderr.write("\n")

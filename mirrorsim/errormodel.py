@@ -1,0 +1,150 @@
+"""The error model: bias and spread of the detector's α and d_total/d against geometry.
+
+For each object (target, beacon) and quantity (α error in degrees, relative d_total
+error), a linear model in the features [1, d_total, |off-axis bearing|, mirror
+incidence, 1/image height in px]: the bias by least squares, the spread by least
+squares on the absolute residuals (× √(π/2), so it estimates a Gaussian σ).  The model
+file also holds the typical σ's that `solve`, `montecarlo` and `plan` take
+(``--error-model FILE``).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+
+from solver.sltr import Sigma
+
+FEATURES = ("1", "d_total_cm", "abs_off_axis_deg", "incidence_deg", "inv_height_px")
+QUANTITIES = {"alpha": "alpha_err", "d_rel": "d_rel_err"}
+
+
+def _design(cols: dict, kind: str) -> np.ndarray:
+    d = np.asarray(cols[f"{kind}_d_true"], float)
+    return np.column_stack([np.ones_like(d), d,
+                            np.abs(np.asarray(cols[f"{kind}_off_axis_deg"], float)),
+                            np.asarray(cols[f"{kind}_incidence_deg"], float),
+                            1.0 / np.asarray(cols[f"{kind}_height_px_true"], float)])
+
+
+def fit(cols: dict) -> dict:
+    """Fit the model to dataset columns (name → sequence); rows with errors or missing
+    values are left out."""
+    model = {"features": list(FEATURES), "objects": {}}
+    ok = np.array([not e for e in cols.get("error", [""] * len(cols["index"]))])
+    for kind in ("target", "beacon"):
+        X_all = _design(cols, kind)
+        model["objects"][kind] = {}
+        for q, col in QUANTITIES.items():
+            y = np.asarray(cols[f"{kind}_{col}"], float)
+            m = ok & np.isfinite(y) & np.isfinite(X_all).all(axis=1)
+            X, yy = X_all[m], y[m]
+            if len(yy) < len(FEATURES) + 2:
+                raise ValueError(f"too few usable rows ({len(yy)}) to fit {kind} {q}")
+            bias, *_ = np.linalg.lstsq(X, yy, rcond=None)
+            resid = yy - X @ bias
+            spread, *_ = np.linalg.lstsq(X, np.abs(resid) * math.sqrt(math.pi / 2), rcond=None)
+            sd = np.maximum(X @ spread, 0.0)
+            model["objects"][kind][q] = {
+                "bias": bias.tolist(), "spread": spread.tolist(), "n": int(len(yy)),
+                "rms": float(np.sqrt(np.mean(yy**2))),
+                "typical_sigma": float(np.sqrt(np.mean(sd**2 + (X @ bias) ** 2))),
+            }
+    obj = model["objects"]
+    model["sigma"] = {  # the larger of target's and beacon's: one σ pair for the solver
+        "alpha_deg": max(obj[k]["alpha"]["typical_sigma"] for k in obj),
+        "d_total_rel": max(obj[k]["d_rel"]["typical_sigma"] for k in obj),
+    }
+    return model
+
+
+def predict(model: dict, kind: str, quantity: str, features: np.ndarray
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """(bias, σ) of a quantity for feature rows (k, 5) in FEATURES order."""
+    m = model["objects"][kind][quantity]
+    X = np.atleast_2d(features)
+    return X @ np.asarray(m["bias"]), np.maximum(X @ np.asarray(m["spread"]), 0.0)
+
+
+def load_sigma(path: str | Path) -> Sigma:
+    """The typical σ's of a model file, as the solver takes them."""
+    from solver.measurements import InputError
+
+    try:
+        model = json.loads(Path(path).read_text())
+        s = model["sigma"]
+        return Sigma(float(s["alpha_deg"]), float(s["d_total_rel"]))
+    except FileNotFoundError:
+        raise InputError(path, "", "no such file") from None
+    except (ValueError, KeyError, TypeError) as exc:
+        raise InputError(path, "sigma", f"not an error model file ({exc})") from None
+
+
+def read_columns(dataset_dir: str | Path) -> dict:
+    import pyarrow.parquet as pq
+
+    return pq.read_table(Path(dataset_dir) / "dataset.parquet").to_pydict()
+
+
+def summary(model: dict) -> str:
+    lines = [f"error model: features {', '.join(model['features'])}"]
+    for kind, qs in model["objects"].items():
+        for q, m in qs.items():
+            unit = "°" if q == "alpha" else " (relative)"
+            lines.append(f"  {kind:6s} {q:5s}: n={m['n']}, RMS {m['rms']:.5f}{unit}, typical σ "
+                         f"{m['typical_sigma']:.5f}; bias coef {np.round(m['bias'], 6).tolist()}")
+    s = model["sigma"]
+    lines.append(f"  σ for the solver: α {s['alpha_deg']:.5f}°, "
+                 f"d_total {100 * s['d_total_rel']:.3f} %")
+    return "\n".join(lines)
+
+
+def plot(cols: dict, model: dict, out: str | Path) -> Path:
+    """Errors against distance and incidence, with the fitted bias ± σ, and histograms."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(2, 4, figsize=(18, 8))
+    ok = np.array([not e for e in cols.get("error", [""] * len(cols["index"]))])
+    for r, (q, col, scale, unit) in enumerate((("alpha", "alpha_err", 1.0, "°"),
+                                                ("d_rel", "d_rel_err", 100.0, "%"))):
+        for kind, colour in (("target", "#c0392b"), ("beacon", "#d4a017")):
+            y = np.asarray(cols[f"{kind}_{col}"], float) * scale
+            X = _design(cols, kind)
+            m = ok & np.isfinite(y)
+            for c, (fi, name) in enumerate(((1, "d_total (cm)"), (3, "incidence (°)"))):
+                ax = axes[r, c]
+                ax.scatter(X[m, fi], y[m], s=8, color=colour, alpha=0.6, label=kind)
+                xs = np.linspace(X[m, fi].min(), X[m, fi].max(), 50)
+                F = np.tile(X[m].mean(axis=0), (50, 1))
+                F[:, fi] = xs
+                b, sd = predict(model, kind, q, F)
+                ax.plot(xs, b * scale, color=colour)
+                ax.fill_between(xs, (b - sd) * scale, (b + sd) * scale, color=colour, alpha=0.15)
+                ax.set_xlabel(name)
+                ax.set_ylabel(f"{q} error ({unit})")
+            axes[r, 2 if kind == "target" else 3].hist(y[m], bins=30, color=colour, alpha=0.8)
+            axes[r, 2 if kind == "target" else 3].set_title(f"{kind}: {q} error ({unit})")
+        axes[r, 0].legend(fontsize=8)
+    fig.suptitle("detector error against geometry (lines: fitted bias, bands: ±σ at mean "
+                 "features)")
+    fig.tight_layout()
+    out = Path(out)
+    tmp = out.with_name(f".{out.name}.tmp{os.getpid()}.png")
+    fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+    os.replace(tmp, out)
+    return out
+
+
+def write_model(model: dict, path: str | Path) -> None:
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+    tmp.write_text(json.dumps(model, indent=1))
+    os.replace(tmp, path)

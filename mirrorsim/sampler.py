@@ -1,0 +1,128 @@
+"""Random valid scenes for datasets, drawn from the ranges of a spec file.
+
+Seeded with the ``int | numpy.random.Generator`` convention; each drawn scene is a normal
+scene (it validates, and `to_yaml` writes it as a scene file that `mirrorsim evaluate`
+reruns alone).
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from mirrorsim import optics
+from mirrorsim.scene import Scene, SceneError, scene_from_dict
+
+DEFAULT_SPEC = Path(__file__).resolve().parents[1] / "scenes" / "dataset_spec.yaml"
+
+
+def load_spec(path: str | Path | None = None) -> dict:
+    """Read a spec file (default: the bundled one); raise SceneError on a bad one."""
+    path = Path(path) if path else DEFAULT_SPEC
+    try:
+        spec = yaml.safe_load(path.read_text())
+    except FileNotFoundError:
+        raise SceneError(path, "", "no such file") from None
+    except yaml.YAMLError as exc:
+        raise SceneError(path, "", f"malformed YAML: {str(exc).splitlines()[0]}") from None
+    required = {"board", "camera", "mirror", "target", "beacon", "occluder"}
+    if not isinstance(spec, dict):
+        raise SceneError(path, "(top level)", "expected a mapping")
+    for k in sorted(required - set(spec)):
+        raise SceneError(path, k, "missing required key")
+    # a trial draw finds range errors (wrong types, lo > hi) with their key
+    _draw(spec, np.random.default_rng(0), path)
+    return spec
+
+
+def _value(spec: dict, key: str, rng: np.random.Generator, where) -> Any:
+    v = spec[key]
+    if isinstance(v, list) and len(v) == 2 and all(isinstance(x, int | float) and
+                                                   not isinstance(x, bool) for x in v):
+        lo, hi = float(v[0]), float(v[1])
+        if lo > hi:
+            raise SceneError(where, key, f"{v}: the range's low end exceeds its high end")
+        return float(rng.uniform(lo, hi))
+    if isinstance(v, int | float) and not isinstance(v, bool):
+        return float(v)
+    raise SceneError(where, key, f"expected a number or [lo, hi], got {v!r}")
+
+
+def _draw(spec: dict, rng: np.random.Generator, where="<spec>") -> dict:
+    """One candidate scene dict (not yet validated)."""
+    g = lambda block, key: _value(spec[block], key, rng, where)  # noqa: E731
+    cam = {"position": [g("camera", "x"), g("camera", "y")], "height": g("camera", "height"),
+           "hfov": g("camera", "hfov"),
+           "resolution": list(spec["camera"].get("resolution", [1920, 1088])),
+           "pan": spec["camera"].get("pan", "mirror")}
+    yaw = g("mirror", "yaw")
+    centre = np.array([g("mirror", "x"), g("mirror", "y")])
+    mirror = {"center": centre.tolist(), "yaw": yaw,
+              "size": [g("mirror", "width"), g("mirror", "height")]}
+    target = {"position": [g("target", "x"), g("target", "y")],
+              "size": list(spec["target"]["size"])}
+    # the beacon in front of the mirror (on the camera's side)
+    n = np.array([-math.sin(math.radians(yaw)), math.cos(math.radians(yaw))])
+    if n @ (np.asarray(cam["position"]) - centre) < 0:
+        n = -n
+    along = np.array([math.cos(math.radians(yaw)), math.sin(math.radians(yaw))])
+    b = centre + g("beacon", "depth") * n + g("beacon", "along") * along
+    beacon = {"position": b.tolist(), "height": g("beacon", "height")}
+    # a wall across the direct line camera → target, perpendicular to it
+    c, t = np.asarray(cam["position"]), np.asarray(target["position"])
+    mid = c + g("occluder", "at") * (t - c)
+    u = (t - c) / max(np.linalg.norm(t - c), 1e-9)
+    half = g("occluder", "length") / 2 * np.array([-u[1], u[0]])
+    occ = {"start": (mid - half).tolist(), "end": (mid + half).tolist(),
+           "height": g("occluder", "height")}
+    return {"board": copy.deepcopy(spec["board"]), "camera": cam, "mirror": mirror,
+            "target": target, "beacon": beacon, "occluders": [occ],
+            "render": {"spp": int(spec.get("render", {}).get("spp", 16)), "seed": 0}}
+
+
+def sample_scene(spec: dict, rng: int | np.random.Generator | None, name: str) -> Scene:
+    """Draw until a usable scene comes: valid, NLOS, both images whole in the mirror.
+
+    Raises
+    ------
+    RuntimeError
+        If ``max_tries`` draws give none (the ranges are too tight).
+    """
+    rng = np.random.default_rng(rng)
+    for _ in range(int(spec.get("max_tries", 5000))):
+        d = _draw(spec, rng)
+        d["name"] = name
+        try:
+            s = scene_from_dict(d, source=name, default_name=name)
+        except SceneError:
+            continue
+        if s.warnings:
+            continue
+        if all(optics.visibility(s, o).fraction == 1.0 for o in (s.target, *s.beacons)):
+            return s
+    raise RuntimeError(f"no usable scene in {spec.get('max_tries', 5000)} draws: widen the "
+                       "spec's ranges")
+
+
+def to_yaml(scene: Scene) -> str:
+    """The scene as a scene file (INTERFACE.md's format)."""
+    c, m, t = scene.camera, scene.mirror, scene.target
+    d = {"name": scene.name,
+         "board": {"size": list(scene.board.size), "hole_pitch": scene.board.hole_pitch},
+         "camera": {"position": list(c.position), "height": c.height,
+                    "resolution": list(c.resolution), "hfov": c.hfov, "pan": c.pan},
+         "mirror": {"center": list(m.center), "yaw": m.yaw, "size": list(m.size)},
+         "target": {"position": list(t.position), "size": list(t.size)},
+         "beacons": [{"position": list(b.position), "height": b.height}
+                     for b in scene.beacons],
+         "occluders": [{"start": list(o.start), "end": list(o.end), "height": o.height}
+                       for o in scene.occluders],
+         "render": {"spp": scene.render.spp, "seed": scene.render.seed}}
+    if len(scene.beacons) == 1:
+        d["beacon"] = d.pop("beacons")[0]
+    return yaml.safe_dump(d, sort_keys=False)

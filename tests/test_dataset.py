@@ -1,0 +1,145 @@
+"""Datasets: end to end, determinism across workers, resume after a kill, Dask, and the
+error model's fit."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mirrorsim import errormodel
+from mirrorsim.cli import main
+from mirrorsim.dataset import collect_rows, run_dataset
+from mirrorsim.scene import load_scene
+
+SPEC = Path(__file__).parent / "data" / "tiny_spec.yaml"
+VOLATILE = ("seconds_total", "seconds_sample", "traceback")
+
+
+def _stable(rows):
+    return [{k: v for k, v in r.items() if k not in VOLATILE} for r in rows]
+
+
+@pytest.fixture(scope="module")
+def one_worker(tmp_path_factory):
+    out = tmp_path_factory.mktemp("ds") / "a"
+    res = run_dataset(3, 7, out, workers=1, spec_path=SPEC, progress=False)
+    return out, res
+
+
+def test_tiny_dataset_end_to_end(one_worker):
+    out, res = one_worker
+    assert res["rows"] == 3 and res["computed"] == 3
+    import pyarrow.parquet as pq
+
+    table = pq.read_table(out / "dataset.parquet").to_pydict()
+    assert table["index"] == [0, 1, 2]
+    for col in ("target_alpha_err", "beacon_d_rel_err", "err_target_cm", "variant", "spp",
+                "mirror_yaw_deg", "target_incidence_deg"):
+        assert col in table
+    assert "dataset.parquet" in (out / "README.md").read_text()
+    # every row's scene is a normal scene file that loads on its own
+    for i in range(3):
+        s = load_scene(out / "scenes" / f"scene{i:06d}.yaml")
+        assert s.render.seed == i and s.camera.resolution == (960, 544)
+
+
+def test_same_rows_whatever_the_workers(one_worker, tmp_path):
+    out, _ = one_worker
+    run_dataset(3, 7, tmp_path / "b", workers=2, spec_path=SPEC, progress=False)
+    assert _stable(collect_rows(tmp_path / "b", 3)) == _stable(collect_rows(out, 3))
+
+
+def test_existing_folder_needs_resume(one_worker, capsys):
+    out, _ = one_worker
+    assert main(["dataset", "--n", "3", "--seed", "7", "--out", str(out), "--spec", str(SPEC),
+                 "--quiet"]) == 2
+    assert "--resume" in capsys.readouterr().err
+    assert main(["dataset", "--n", "3", "--seed", "8", "--out", str(out), "--spec", str(SPEC),
+                 "--resume", "--quiet"]) == 2  # other settings
+
+
+def test_resume_after_kill(one_worker, tmp_path):
+    """kill -9 the whole run after its first finished row, then --resume: no row lost,
+    none duplicated, and the rows are those of an uninterrupted run."""
+    out, _ = one_worker
+    dst = tmp_path / "k"
+    cmd = [sys.executable, "-m", "mirrorsim.cli", "dataset", "--n", "3", "--seed", "7",
+           "--out", str(dst), "--spec", str(SPEC), "--workers", "2", "--quiet"]
+    proc = subprocess.Popen(cmd, start_new_session=True)
+    deadline = time.time() + 300
+    while time.time() < deadline and not list((dst / "rows").glob("*.json")):
+        time.sleep(0.2)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    assert subprocess.run(cmd + ["--resume"]).returncode == 0
+    rows = collect_rows(dst, 3)
+    assert [r["index"] for r in rows] == [0, 1, 2]
+    assert _stable(rows) == _stable(collect_rows(out, 3))
+    assert not list((dst / "rows").glob(".*tmp*"))
+
+
+def test_dask_local_cluster_gives_the_same_rows(one_worker, tmp_path):
+    pytest.importorskip("dask.distributed")
+    out, _ = one_worker
+    run_dataset(2, 7, tmp_path / "d", executor="dask", spec_path=SPEC, progress=False)
+    assert _stable(collect_rows(tmp_path / "d", 2)) == _stable(collect_rows(out, 3)[:2])
+
+
+def test_error_model_recovers_a_known_law():
+    """Synthetic rows with α error ~ N(0.001 + 2e-5·d, 0.002 + 3e-5·d) and d error ~
+    N(−0.001, 0.003 + 0.5/height_px): the fit finds those coefficients."""
+    rng = np.random.default_rng(0)
+    n = 4000
+    cols = {"index": list(range(n)), "error": [""] * n}
+    for kind in ("target", "beacon"):
+        d = rng.uniform(40, 140, n)
+        h = rng.uniform(40, 300, n)
+        cols[f"{kind}_d_true"] = d
+        cols[f"{kind}_off_axis_deg"] = rng.uniform(-20, 20, n)
+        cols[f"{kind}_incidence_deg"] = rng.uniform(0, 60, n)
+        cols[f"{kind}_height_px_true"] = h
+        cols[f"{kind}_alpha_err"] = rng.normal(0.001 + 2e-5 * d, 0.002 + 3e-5 * d)
+        cols[f"{kind}_d_rel_err"] = rng.normal(-0.001, 0.003 + 0.5 / h)
+    model = errormodel.fit(cols)
+    a = model["objects"]["target"]["alpha"]
+    assert a["bias"][1] == pytest.approx(2e-5, abs=4e-6)
+    assert a["spread"][1] == pytest.approx(3e-5, abs=8e-6)
+    r = model["objects"]["beacon"]["d_rel"]
+    assert r["bias"][0] == pytest.approx(-0.001, abs=4e-4)
+    assert r["spread"][4] == pytest.approx(0.5, rel=0.15)
+    # the solver's σ pair comes out of the model
+    assert 0.002 < model["sigma"]["alpha_deg"] < 0.01
+
+
+def test_errormodel_command_on_a_dataset(one_worker, tmp_path, capsys):
+    out, _ = one_worker
+    # three rows are too few for five coefficients: a clear refusal
+    assert main(["errormodel", str(out)]) == 2
+    assert "too few" in capsys.readouterr().err
+    # a model file feeds solve/montecarlo/plan
+    rng = np.random.default_rng(1)
+    n = 50
+    cols = {"index": list(range(n)), "error": [""] * n}
+    for kind in ("target", "beacon"):
+        cols.update({f"{kind}_d_true": rng.uniform(40, 140, n),
+                     f"{kind}_off_axis_deg": rng.uniform(-20, 20, n),
+                     f"{kind}_incidence_deg": rng.uniform(0, 60, n),
+                     f"{kind}_height_px_true": rng.uniform(40, 300, n),
+                     f"{kind}_alpha_err": rng.normal(0, 0.004, n),
+                     f"{kind}_d_rel_err": rng.normal(0, 0.005, n)})
+    model_path = tmp_path / "m.json"
+    errormodel.write_model(errormodel.fit(cols), model_path)
+    assert main(["montecarlo", "--error-model", str(model_path)]) == 0
+    assert len(capsys.readouterr().out.strip().splitlines()) == 6  # a 4th row
+    meas = tmp_path / "meas.json"
+    main(["check", str(Path(__file__).parents[1] / "scenes" / "exp1.yaml"),
+          "--measurements", str(meas)])
+    assert main(["solve", str(meas), "--error-model", str(model_path), "--json", "-"]) == 0
+    printed = capsys.readouterr().out
+    assert "covariance" in json.loads(printed[printed.index("{"):])
