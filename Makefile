@@ -46,6 +46,7 @@ bench: setup
 	$(BIN)/python bench/particle.py
 	$(BIN)/python bench/paper.py
 	$(BIN)/python bench/evaluate.py
+	$(BIN)/python bench/dataset.py
 
 clean:
 	rm -rf $(VENV) renders/*/ .pytest_cache .ruff_cache .hypothesis

@@ -397,8 +397,9 @@ def _cmd_dataset(args) -> int:
                           scheduler=args.scheduler, progress=not args.quiet)
     except DatasetError as exc:
         raise BadArgument(str(exc)) from None
-    print(f"{args.out}: {res['rows']} rows ({res['computed']} computed now, "
-          f"{res['already_done']} already done, {res['failed']} failed) → {res['parquet']}")
+    print(f"{args.out}: {res['rows']} rows ({res['computed']} computed now in "
+          f"{res['seconds']:.0f} s, {res['per_minute']:.1f} scenes/min; "
+          f"{res['already_done']} already done; {res['failed']} failed) → {res['parquet']}")
     return 0
 
 

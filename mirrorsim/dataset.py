@@ -171,6 +171,7 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
     # the probe runs once here rather than in every worker
     chosen = choose_variant(variant)
     todo = [i for i in range(n) if not (out / "rows" / f"{scene_name(i)}.json").exists()]
+    t_start = time.perf_counter()
     done_before = n - len(todo)
     bar = _Bar(len(todo), enabled=progress)
     args = [(i, seed, n, spec, str(out), spp, chosen) for i in todo]
@@ -189,12 +190,14 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
             for _ in pool.imap_unordered(_star, args):
                 bar.step()
     bar.close()
+    wall = time.perf_counter() - t_start
     rows = collect_rows(out, n)
     write_table(out, rows)
     write_card(out, meta, rows, chosen)
     failed = [r for r in rows if r.get("error")]
     return {"rows": len(rows), "computed": len(todo), "already_done": done_before,
-            "failed": len(failed), "parquet": str(out / "dataset.parquet")}
+            "failed": len(failed), "parquet": str(out / "dataset.parquet"),
+            "seconds": wall, "per_minute": len(todo) / wall * 60 if todo and wall else 0.0}
 
 
 def _star(a):
