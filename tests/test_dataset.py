@@ -143,3 +143,12 @@ def test_errormodel_command_on_a_dataset(one_worker, tmp_path, capsys):
     assert main(["solve", str(meas), "--error-model", str(model_path), "--json", "-"]) == 0
     printed = capsys.readouterr().out
     assert "covariance" in json.loads(printed[printed.index("{"):])
+
+
+def test_bad_spec_is_refused_with_its_key(tmp_path, capsys):
+    bad = tmp_path / "spec.yaml"
+    bad.write_text(SPEC.read_text().replace("yaw: [5, 35]", "yaw: [35, 5]"))
+    assert main(["dataset", "--n", "1", "--seed", "0", "--out", str(tmp_path / "o"),
+                 "--spec", str(bad), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "yaw" in err and "low end" in err and not (tmp_path / "o").exists()
