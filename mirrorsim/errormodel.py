@@ -31,6 +31,18 @@ def _design(cols: dict, kind: str) -> np.ndarray:
                             1.0 / np.asarray(cols[f"{kind}_height_px_true"], float)])
 
 
+def _lstsq(X: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Least squares on standardized features, dropping directions the data do not
+    determine: for one object the image height is ∝ 1/d_total, so those two features are
+    nearly collinear and a plain fit would trade huge opposite coefficients."""
+    mu = X[:, 1:].mean(axis=0)
+    sd = X[:, 1:].std(axis=0)
+    sd[sd == 0] = 1.0
+    Z = np.column_stack([np.ones(len(X)), (X[:, 1:] - mu) / sd])
+    bz, *_ = np.linalg.lstsq(Z, y, rcond=2e-2)
+    return np.r_[bz[0] - np.sum(bz[1:] * mu / sd), bz[1:] / sd]
+
+
 def fit(cols: dict) -> dict:
     """Fit the model to dataset columns (name → sequence); rows with errors or missing
     values are left out."""
@@ -45,9 +57,9 @@ def fit(cols: dict) -> dict:
             X, yy = X_all[m], y[m]
             if len(yy) < len(FEATURES) + 2:
                 raise ValueError(f"too few usable rows ({len(yy)}) to fit {kind} {q}")
-            bias, *_ = np.linalg.lstsq(X, yy, rcond=None)
+            bias = _lstsq(X, yy)
             resid = yy - X @ bias
-            spread, *_ = np.linalg.lstsq(X, np.abs(resid) * math.sqrt(math.pi / 2), rcond=None)
+            spread = _lstsq(X, np.abs(resid) * math.sqrt(math.pi / 2))
             sd = np.maximum(X @ spread, 0.0)
             model["objects"][kind][q] = {
                 "bias": bias.tolist(), "spread": spread.tolist(), "n": int(len(yy)),
