@@ -183,12 +183,7 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
             process_one(*a)
             bar.step()
     else:
-        import multiprocessing as mp
-
-        ctx = mp.get_context("spawn")  # a fresh interpreter: no inherited Mitsuba state
-        with ctx.Pool(workers, maxtasksperchild=RECYCLE_EVERY) as pool:
-            for _ in pool.imap_unordered(_star, args):
-                bar.step()
+        _run_local(args, workers, out, bar)
     bar.close()
     wall = time.perf_counter() - t_start
     rows = collect_rows(out, n)
@@ -200,8 +195,31 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
             "seconds": wall, "per_minute": len(todo) / wall * 60 if todo and wall else 0.0}
 
 
-def _star(a):
-    return process_one(*a)
+def _run_local(args: list[tuple], workers: int, out: Path, bar) -> None:
+    """Worker processes, replaced every RECYCLE_EVERY scenes.  A worker that dies (killed,
+    out of memory) breaks the pool: a new one takes the scenes that have no row yet."""
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures.process import BrokenProcessPool
+
+    ctx = mp.get_context("spawn")  # a fresh interpreter: no inherited Mitsuba state
+    for attempt in range(3):
+        remaining = [a for a in args
+                     if not (out / "rows" / f"{scene_name(a[0])}.json").exists()]
+        if not remaining:
+            return
+        try:
+            with ProcessPoolExecutor(workers, mp_context=ctx,
+                                     max_tasks_per_child=RECYCLE_EVERY) as ex:
+                for f in as_completed([ex.submit(process_one, *a) for a in remaining]):
+                    f.result()
+                    bar.step()
+            return
+        except BrokenProcessPool:
+            print(f"\nwarning: a worker process died; restarting the pool for the "
+                  f"unfinished scenes (attempt {attempt + 2} of 3)", file=sys.stderr)
+    raise DatasetError("worker processes keep dying; the rows done so far are kept "
+                       "(rerun with --resume)")
 
 
 def _run_dask(args, scheduler: str | None):

@@ -152,3 +152,28 @@ def test_bad_spec_is_refused_with_its_key(tmp_path, capsys):
                  "--spec", str(bad), "--quiet"]) == 2
     err = capsys.readouterr().err
     assert "yaw" in err and "low end" in err and not (tmp_path / "o").exists()
+
+
+def test_a_killed_worker_is_replaced(one_worker, tmp_path):
+    """kill -9 one worker process mid-run: the run itself carries on and completes."""
+    out, _ = one_worker
+    dst = tmp_path / "w"
+    cmd = [sys.executable, "-m", "mirrorsim.cli", "dataset", "--n", "3", "--seed", "7",
+           "--out", str(dst), "--spec", str(SPEC), "--workers", "2", "--quiet"]
+    proc = subprocess.Popen(cmd, start_new_session=True, stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 120
+    victim = None
+    while time.time() < deadline and victim is None and proc.poll() is None:
+        kids = subprocess.run(["pgrep", "-P", str(proc.pid)], capture_output=True,
+                              text=True).stdout.split()
+        workers = [k for k in kids if "spawn_main" in Path(f"/proc/{k}/cmdline").read_text(
+            errors="ignore")] if kids else []
+        if workers and (dst / "scenes").exists() and list((dst / "scenes").glob("*.yaml")):
+            victim = int(workers[0])
+        time.sleep(0.2)
+    assert victim is not None
+    os.kill(victim, signal.SIGKILL)
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 0
+    assert "a worker process died" in err
+    assert _stable(collect_rows(dst, 3)) == _stable(collect_rows(out, 3))
