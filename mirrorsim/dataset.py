@@ -139,7 +139,8 @@ class DatasetError(RuntimeError):
 def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
                 spec_path: str | Path | None = None, spp: int | None = None,
                 variant: str = "auto", resume: bool = False, executor: str = "local",
-                scheduler: str | None = None, progress: bool = True) -> dict:
+                scheduler: str | None = None, progress: bool = True,
+                recycle_every: int = RECYCLE_EVERY) -> dict:
     """Make (or finish) a dataset of ``n`` scenes; return a summary.
 
     Raises
@@ -183,7 +184,7 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
             process_one(*a)
             bar.step()
     else:
-        _run_local(args, workers, out, bar)
+        _run_local(args, workers, out, bar, recycle_every)
     bar.close()
     wall = time.perf_counter() - t_start
     rows = collect_rows(out, n)
@@ -195,31 +196,37 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
             "seconds": wall, "per_minute": len(todo) / wall * 60 if todo and wall else 0.0}
 
 
-def _run_local(args: list[tuple], workers: int, out: Path, bar) -> None:
-    """Worker processes, replaced every RECYCLE_EVERY scenes.  A worker that dies (killed,
-    out of memory) breaks the pool: a new one takes the scenes that have no row yet."""
+def _run_local(args: list[tuple], workers: int, out: Path, bar,
+               recycle_every: int = RECYCLE_EVERY) -> None:
+    """Worker processes, replaced every ``recycle_every`` scenes: each chunk of
+    workers × recycle_every scenes gets a fresh pool (ProcessPoolExecutor's own
+    max_tasks_per_child hangs on Python 3.11 once its first workers retire).  A worker
+    that dies (killed, out of memory) breaks the pool: a new one takes the scenes that
+    have no row yet."""
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor, as_completed
     from concurrent.futures.process import BrokenProcessPool
 
     ctx = mp.get_context("spawn")  # a fresh interpreter: no inherited Mitsuba state
-    for attempt in range(3):
+    deaths = 0
+    while True:
         remaining = [a for a in args
                      if not (out / "rows" / f"{scene_name(a[0])}.json").exists()]
         if not remaining:
             return
+        chunk = remaining[:workers * recycle_every]
         try:
-            with ProcessPoolExecutor(workers, mp_context=ctx,
-                                     max_tasks_per_child=RECYCLE_EVERY) as ex:
-                for f in as_completed([ex.submit(process_one, *a) for a in remaining]):
+            with ProcessPoolExecutor(workers, mp_context=ctx) as ex:
+                for f in as_completed([ex.submit(process_one, *a) for a in chunk]):
                     f.result()
                     bar.step()
-            return
         except BrokenProcessPool:
-            print(f"\nwarning: a worker process died; restarting the pool for the "
-                  f"unfinished scenes (attempt {attempt + 2} of 3)", file=sys.stderr)
-    raise DatasetError("worker processes keep dying; the rows done so far are kept "
-                       "(rerun with --resume)")
+            deaths += 1
+            if deaths > 3:
+                raise DatasetError("worker processes keep dying; the rows done so far are "
+                                   "kept (rerun with --resume)") from None
+            print("\nwarning: a worker process died; a new pool takes the unfinished "
+                  "scenes", file=sys.stderr)
 
 
 def _run_dask(args, scheduler: str | None):

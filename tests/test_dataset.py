@@ -51,7 +51,9 @@ def test_tiny_dataset_end_to_end(one_worker):
 
 def test_same_rows_whatever_the_workers(one_worker, tmp_path):
     out, _ = one_worker
-    run_dataset(3, 7, tmp_path / "b", workers=2, spec_path=SPEC, progress=False)
+    # recycling every scene exercises the replacement of worker processes too
+    run_dataset(3, 7, tmp_path / "b", workers=2, spec_path=SPEC, progress=False,
+                recycle_every=1)
     assert _stable(collect_rows(tmp_path / "b", 3)) == _stable(collect_rows(out, 3))
 
 
