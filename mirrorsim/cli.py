@@ -19,6 +19,7 @@ class BadArgument(ValueError):
 
 EXIT_BAD_INPUT = 2
 EXIT_FAILED = 1
+VARIANT_CHOICES = ["auto", "cuda", "llvm", "scalar"]
 
 
 def _scene_arg(p: argparse.ArgumentParser) -> None:
@@ -43,7 +44,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--spp", type=int, help="samples per pixel (default: the scene's, else 16)")
     p.add_argument("--seed", type=int, help="sampler seed (default: the scene's, else 0)")
     p.add_argument("--variant", default="auto",
-                   choices=["auto", "cuda", "llvm", "scalar"],
+                   choices=VARIANT_CHOICES,
                    help="Mitsuba backend; auto = cuda if a GPU works, else llvm if its probe "
                    "renders, else scalar (default: auto)")
     p.add_argument("--json", metavar="FILE", help="also write the ground truth here (- = stdout)")
@@ -75,7 +76,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", metavar="FILE", help="write the measurements (- = stdout)")
     p.add_argument("--annotate", type=Path, metavar="OUT.png",
                    help="draw the detections on the frame")
-    p.add_argument("--variant", default="auto", choices=["auto", "cuda", "llvm", "scalar"],
+    p.add_argument("--variant", default="auto", choices=VARIANT_CHOICES,
                    help="backend for a calibration render, if one is needed")
 
     p = sub.add_parser("calibrate", help="size-constancy constants for a scene's camera",
@@ -84,7 +85,7 @@ def build_parser() -> argparse.ArgumentParser:
                        "does and cache K = s_px * d per camera and object.")
     _scene_arg(p)
     p.add_argument("--refresh", action="store_true", help="re-render even if cached")
-    p.add_argument("--variant", default="auto", choices=["auto", "cuda", "llvm", "scalar"])
+    p.add_argument("--variant", default="auto", choices=VARIANT_CHOICES)
     p.add_argument("--json", metavar="FILE")
 
     p = sub.add_parser("evaluate", help="render, detect, solve and score against ground truth",
@@ -100,7 +101,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", metavar="FILE", help="also write the report here (- = stdout)")
     p.add_argument("--spp", type=int, help="samples per pixel (default: the scene's, else 16)")
     p.add_argument("--seed", type=int)
-    p.add_argument("--variant", default="auto", choices=["auto", "cuda", "llvm", "scalar"])
+    p.add_argument("--variant", default="auto", choices=VARIANT_CHOICES)
     p.add_argument("--quiet", action="store_true", help="no progress line")
 
     p = sub.add_parser("dataset", help="many random scenes, rendered, detected and scored",
@@ -118,7 +119,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="worker processes (default: half the cores)")
     p.add_argument("--spec", type=Path, help="ranges of the random scenes (YAML)")
     p.add_argument("--spp", type=int, help="samples per pixel (default: the spec's)")
-    p.add_argument("--variant", default="auto", choices=["auto", "cuda", "llvm", "scalar"])
+    p.add_argument("--variant", default="auto", choices=VARIANT_CHOICES)
     p.add_argument("--resume", action="store_true", help="finish an interrupted run")
     p.add_argument("--executor", default="local", choices=["local", "dask"])
     p.add_argument("--scheduler", metavar="ADDRESS",
@@ -213,6 +214,13 @@ def main(argv: list[str] | None = None) -> int:
         return 0
 
 
+def _at_least(*checks: tuple[str, int | None, int]) -> None:
+    """Refuse (exit 2) an option given below its least value; None means not given."""
+    for flag, value, low in checks:
+        if value is not None and value < low:
+            raise BadArgument(f"{flag}: {value} must be ≥ {low}")
+
+
 def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
     print(f"warning: {message}", file=sys.stderr)
 
@@ -239,11 +247,7 @@ def _cmd_render(args) -> int:
     from mirrorsim.render import render_scene
 
     scene = _load(args.scene)
-    for flag, value in (("--spp", args.spp), ("--seed", args.seed)):
-        if value is not None and value < (1 if flag == "--spp" else 0):
-            print(f"error: {flag}: {value} must be ≥ {1 if flag == '--spp' else 0}",
-                  file=sys.stderr)
-            return EXIT_BAD_INPUT
+    _at_least(("--spp", args.spp, 1), ("--seed", args.seed, 0))
     try:
         res = render_scene(scene, args.out, spp=args.spp, seed=args.seed,
                            variant=args.variant, progress=not args.quiet)
@@ -361,10 +365,7 @@ def _cmd_evaluate(args) -> int:
     from mirrorsim.plot import plot_evaluation
 
     scene = _load(args.scene)
-    if args.spp is not None and args.spp < 1:
-        raise BadArgument(f"--spp: {args.spp} must be ≥ 1")
-    if args.seed is not None and args.seed < 0:
-        raise BadArgument(f"--seed: {args.seed} must be ≥ 0")
+    _at_least(("--spp", args.spp, 1), ("--seed", args.seed, 0))
     out = args.out or Path("renders") / scene.name
     report = evaluate_scene(scene, out, spp=args.spp, seed=args.seed, variant=args.variant,
                             progress=not args.quiet)
@@ -384,12 +385,8 @@ def _cmd_evaluate(args) -> int:
 def _cmd_dataset(args) -> int:
     from mirrorsim.dataset import DatasetError, run_dataset
 
-    for flag, v, lo in (("--n", args.n, 1), ("--seed", args.seed, 0),
-                        ("--workers", args.workers, 1)):
-        if v < lo:
-            raise BadArgument(f"{flag}: {v} must be ≥ {lo}")
-    if args.spp is not None and args.spp < 1:
-        raise BadArgument(f"--spp: {args.spp} must be ≥ 1")
+    _at_least(("--n", args.n, 1), ("--seed", args.seed, 0), ("--workers", args.workers, 1),
+              ("--spp", args.spp, 1))
     try:
         res = run_dataset(args.n, args.seed, args.out, workers=args.workers,
                           spec_path=args.spec, spp=args.spp, variant=args.variant,
