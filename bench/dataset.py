@@ -27,14 +27,14 @@ def main() -> None:
     ap.add_argument("--variants", nargs="+", default=["llvm", "scalar"])
     ap.add_argument("--spp", type=int)
     a = ap.parse_args()
-    subprocess.run([sys.executable, "-m", "mirrorsim.cli", "calibrate", "scenes/default.yaml"],
+    subprocess.run([sys.executable, "-m", "mirrorsim", "calibrate", "scenes/default.yaml"],
                    cwd=ROOT, check=True, capture_output=True)
     print(f"dataset throughput, {a.n} scenes of 1920×1088, {a.workers} workers "
           f"({platform.machine()}, Python {platform.python_version()})\n")
     print("| variant | wall (s) | scenes/min |\n|---|---|---|")
     for v in a.variants:
         with tempfile.TemporaryDirectory() as tmp:
-            cmd = [sys.executable, "-m", "mirrorsim.cli", "dataset", "--n", str(a.n), "--seed",
+            cmd = [sys.executable, "-m", "mirrorsim", "dataset", "--n", str(a.n), "--seed",
                    "0", "--out", f"{tmp}/ds", "--workers", str(a.workers), "--variant", v,
                    "--quiet"] + (["--spp", str(a.spp)] if a.spp else [])
             t0 = time.perf_counter()

@@ -29,9 +29,10 @@ sys.path.insert(0, str(ROOT))
 
 from mirrorsim import optics  # noqa: E402
 from mirrorsim.calibrate import calibrate  # noqa: E402
-from mirrorsim.detect import DetectionError, DetectorView, detect_frame, read_frame  # noqa: E402
-from mirrorsim.render import render_scene  # noqa: E402
-from mirrorsim.scene import SceneError, load_scene, scene_from_dict  # noqa: E402
+from mirrorsim.detect import DetectorView, detect_frame, read_frame  # noqa: E402
+from mirrorsim.errors import DetectionError, SceneError  # noqa: E402
+from mirrorsim.frames import render_to_files  # noqa: E402
+from mirrorsim.scenefile import load_scene, scene_from_dict  # noqa: E402
 
 BUNDLED = ("default", "exp1", "exp2", "exp3")
 
@@ -66,7 +67,7 @@ def random_scenes(n: int, rng: np.random.Generator) -> list:
 
 
 def measure(scene, spp: int, tmp: Path) -> dict:
-    res = render_scene(scene, tmp / scene.name, spp=spp, progress=False)
+    res = render_to_files(scene, tmp / scene.name, spp=spp, progress=False)
     cal = calibrate(scene.camera, scene.target.size, scene.beacons[0].height)
     img = read_frame(res.png)
     t0 = time.perf_counter()
@@ -75,16 +76,15 @@ def measure(scene, spp: int, tmp: Path) -> dict:
     except DetectionError as exc:
         return {"scene": scene.name, "spp": spp, "error": str(exc)}
     dt = time.perf_counter() - t0
-    t, b = res.truth["target"], res.truth["beacons"][0]
-    mt, mb = out["target"], out["beacons"][0]
+    t, b = res.truth.target, res.truth.beacons[0]
+    mt, mb = out.target, out.beacons[0][1]
     return {
         "scene": scene.name, "spp": spp, "seconds": dt,
-        "target_dalpha": abs(mt["alpha_deg"] - t["alpha_deg"]),
-        "target_drel": None if mt["d_total"] is None
-        else abs(mt["d_total"] - t["d_total"]) / t["d_total"],
-        "beacon_dalpha": abs(mb["alpha_deg"] - b["alpha_deg"]),
-        "beacon_drel": abs(mb["d_total"] - b["d_total"]) / b["d_total"],
-        "target_d": t["d_total"], "beacon_d": b["d_total"],
+        "target_dalpha": abs(mt.alpha_deg - t.alpha_deg),
+        "target_drel": None if mt.d_total is None else abs(mt.d_total - t.d_total) / t.d_total,
+        "beacon_dalpha": abs(mb.alpha_deg - b.alpha_deg),
+        "beacon_drel": abs(mb.d_total - b.d_total) / b.d_total,
+        "target_d": t.d_total, "beacon_d": b.d_total,
     }
 
 

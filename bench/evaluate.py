@@ -22,7 +22,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def run(args: list[str]) -> float:
     t0 = time.perf_counter()
-    subprocess.run([sys.executable, "-m", "mirrorsim.cli", *args], cwd=ROOT, check=True,
+    subprocess.run([sys.executable, "-m", "mirrorsim", *args], cwd=ROOT, check=True,
                    capture_output=True)
     return time.perf_counter() - t0
 

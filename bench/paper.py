@@ -22,8 +22,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from mirrorsim.evaluate import DETECTOR_SIGMA, evaluate_scene  # noqa: E402
+from mirrorsim.model import Beacon  # noqa: E402
 from mirrorsim.planning import plan_scene  # noqa: E402
-from mirrorsim.scene import Beacon, load_scene  # noqa: E402
+from mirrorsim.scenefile import load_scene  # noqa: E402
+from solver.geometry import yaw_difference  # noqa: E402
 from solver.measurements import load_measurements  # noqa: E402
 from solver.montecarlo import PAPER_TABLE1, run_row, table1  # noqa: E402
 from solver.sltr import solve_measurements  # noqa: E402
@@ -50,23 +52,23 @@ def main() -> None:
         scene = load_scene(ROOT / "scenes" / f"{name}.yaml")
         truth = np.asarray(scene.target.position, float)
         rep = evaluate_scene(scene, args.out / name, spp=args.spp, progress=False)
-        e = rep["errors"]
+        e = rep.errors
         m = load_measurements(ROOT / "scenes" / "measurements" / f"{name}_paper.json")
         geo = solve_measurements(m.observer, m.beacons, m.targets, m.sigma)
         geo_err = float(np.linalg.norm(geo.target - truth))
-        geo_yaw = abs((geo.mirror.yaw_deg - scene.mirror.yaw + 90) % 180 - 90)
+        geo_yaw = yaw_difference(geo.mirror.yaw_deg, scene.mirror.yaw)
         plan = plan_scene(scene)
         best = plan["best"]["position"]
         moved = replace(scene, name=f"{name}_planned",
                         beacons=(Beacon((float(best[0]), float(best[1])),
                                         scene.beacons[0].height),))
         rep2 = evaluate_scene(moved, args.out / f"{name}_planned", spp=args.spp, progress=False)
-        e2 = rep2["errors"]
+        e2 = rep2.errors
         paper_yaw = abs(paper["yaw"] - scene.mirror.yaw)
         print(f"| {name.upper()} | {tuple(scene.target.position)} | {paper['tar']} "
-              f"({paper['rmse']:.2f}; yaw off {paper_yaw:.2f}°) | {e['target_cm']:.2f} / "
-              f"{e['mirror_yaw_deg']:.3f}° | {geo_err:.2f} / {geo_yaw:.2f}° | "
-              f"{e2['target_cm']:.2f} / {e2['mirror_yaw_deg']:.3f}° "
+              f"({paper['rmse']:.2f}; yaw off {paper_yaw:.2f}°) | {e.target_cm:.2f} / "
+              f"{e.mirror_yaw_deg:.3f}° | {geo_err:.2f} / {geo_yaw:.2f}° | "
+              f"{e2.target_cm:.2f} / {e2.mirror_yaw_deg:.3f}° "
               f"(beacon at ({best[0]:.1f}, {best[1]:.1f})) |")
 
     print("\nTable 1: Monte Carlo, 200 draws per row (RMSE of the target's reflection "

@@ -25,15 +25,15 @@ from mirrorsim.backend import VARIANTS, probe  # noqa: E402
 
 _CHILD = r"""
 import json, sys, time
-from mirrorsim.scene import load_scene
-from mirrorsim.render import render_scene
+from mirrorsim.scenefile import load_scene
+from mirrorsim.frames import render_to_files
 scene = load_scene(sys.argv[1])
 t0 = time.perf_counter()
-res = render_scene(scene, sys.argv[2], spp=int(sys.argv[3]), variant=sys.argv[4],
-                   progress=False)
+res = render_to_files(scene, sys.argv[2], spp=int(sys.argv[3]), variant=sys.argv[4],
+                      progress=False)
 print(json.dumps({"wall_s": time.perf_counter() - t0,
-                  "render_s": res.truth["render"]["seconds_render"],
-                  "spp": res.truth["render"]["spp"]}))
+                  "render_s": res.truth.render.seconds_render,
+                  "spp": res.truth.render.spp}))
 """
 
 
@@ -46,7 +46,7 @@ def main() -> None:
                     choices=list(VARIANTS))
     args = ap.parse_args()
 
-    from mirrorsim.scene import load_scene
+    from mirrorsim.scenefile import load_scene
 
     scene = load_scene(args.scene)
     spp = args.spp or scene.render.spp

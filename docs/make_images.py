@@ -21,10 +21,12 @@ DOCS = ROOT / "docs"
 
 
 def run(*args: str) -> None:
+    """Run a mirrorsim command."""
     subprocess.run([sys.executable, "-m", "mirrorsim.cli", *args], cwd=ROOT, check=True)
 
 
 def main() -> None:
+    """Make the README's pictures."""
     run("evaluate", "scenes/default.yaml", "--quiet")
     (DOCS / "default_eval.png").write_bytes(
         (ROOT / "renders" / "default" / "default.eval.png").read_bytes())

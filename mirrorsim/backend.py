@@ -10,7 +10,6 @@ that renders a tiny mirror scene, and the answer is cached per machine and softw
 from __future__ import annotations
 
 import hashlib
-import json
 import os
 import platform
 import subprocess
@@ -18,6 +17,9 @@ import sys
 import warnings
 from importlib import metadata
 from pathlib import Path
+
+from mirrorsim.errors import BackendError
+from mirrorsim.io import read_json_cache, write_json_cache
 
 VARIANTS = {"cuda": "cuda_ad_rgb", "llvm": "llvm_ad_rgb", "scalar": "scalar_rgb"}
 PROBE_TIMEOUT_S = 180
@@ -54,34 +56,11 @@ print("mirrorsim-probe-ok")
 """
 
 
-class BackendError(RuntimeError):
-    """The requested variant does not work here."""
-
-
 def cache_path() -> Path:
     """Where probe answers are kept (``MIRRORSIM_CACHE_DIR`` overrides)."""
     root = os.environ.get("MIRRORSIM_CACHE_DIR") or os.path.join(
         os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"), "mirrorsim")
     return Path(root) / "backend.json"
-
-
-def read_cache(path: Path) -> dict:
-    """A JSON cache file's contents ({} if missing or unreadable)."""
-    try:
-        return json.loads(path.read_text())
-    except (OSError, ValueError):
-        return {}
-
-
-def write_cache(path: Path, data: dict) -> None:
-    """Replace a JSON cache file atomically; an unwritable cache only costs a redo."""
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(f".tmp{os.getpid()}")
-        tmp.write_text(json.dumps(data, indent=1))
-        os.replace(tmp, path)
-    except OSError:
-        pass
 
 
 def _machine_key(variant: str) -> str:
@@ -130,12 +109,12 @@ def probe(variant: str, *, use_cache: bool = True) -> tuple[bool, str]:
     """
     key = _machine_key(variant)
     path = cache_path()
-    cache = read_cache(path)
+    cache = read_json_cache(path)
     if use_cache and key in cache:
         return bool(cache[key]["ok"]), str(cache[key]["detail"])
     ok, detail = _run_probe(variant)
     cache[key] = {"variant": variant, "ok": ok, "detail": detail}
-    write_cache(path, cache)
+    write_json_cache(path, cache)
     return ok, detail
 
 

@@ -5,60 +5,85 @@ centre, :data:`mirrorsim.detect.FRONT_OFFSET`: the panel's half-thickness, the
 pencil's mean near-side radius.)
 
 Like the paper (229 px at 1 m for its target), each object is rendered in direct view
-at d_ref = 100 cm, facing the camera on its optical axis, and measured exactly as the
-detector measures images in the mirror (:func:`mirrorsim.detect.measure_region`), so a
-bias common to both cancels.  Results are cached per camera and object in
-``<cache>/calibration.json`` (``MIRRORSIM_CACHE_DIR`` or ``~/.cache/mirrorsim``).
+at d_ref = 100 cm, facing the camera on its optical axis, on a plain board, and measured
+exactly as the detector measures images in the mirror
+(:func:`mirrorsim.detect.measure_object`), so a bias common to both cancels.  Results
+are cached per camera and object in ``<cache>/calibration.json`` (``MIRRORSIM_CACHE_DIR``
+or ``~/.cache/mirrorsim``).
 """
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
-from mirrorsim.backend import cache_path, read_cache, write_cache
-from mirrorsim.detect import (
-    FRONT_OFFSET,
-    Calibration,
-    DetectionError,
-    _pencil_regions,
-    _target_region,
-    measure_region,
-    to_linear,
-)
-from mirrorsim.scene import Camera
+import numpy as np
+
+from mirrorsim import optics
+from mirrorsim.backend import cache_path
+from mirrorsim.detect import FRONT_OFFSET, Calibration, measure_object
+from mirrorsim.errors import DetectionError
+from mirrorsim.io import read_json_cache, write_json_cache
+from mirrorsim.model import PENCIL_RADIUS, Beacon, Board, Camera, Target
+from solver.geometry import unit
 
 D_REF = 100.0
 CALIBRATION_SPP = 64
+REFERENCE_PAN = 45.0  # the reference camera looks along the board's diagonal
+MARGIN_PX = 24  # rendered around the object's projected outline
 
 
 def calibration_key(camera: Camera, target_size, pencil_height: float) -> str:
+    """What K depends on: the camera model, the objects' sizes and the method."""
     return (f"{camera.width}x{camera.height_px}|hfov={camera.hfov:.9g}|h={camera.height:.9g}|"
             f"target={target_size[0]:.9g}x{target_size[1]:.9g}|pencil={pencil_height:.9g}|"
-            f"spp={CALIBRATION_SPP}|front-offset|plain")
+            f"spp={CALIBRATION_SPP}|front-offset|plain|direct")
 
 
-def _cache_file() -> Path:
-    return cache_path().with_name("calibration.json")
+def reference_camera(camera: Camera) -> Camera:
+    """The scene's camera model at the board's corner, looking along REFERENCE_PAN."""
+    return Camera(position=(0.0, 0.0), height=camera.height, resolution=camera.resolution,
+                  hfov=camera.hfov, pan=REFERENCE_PAN, pan_deg=REFERENCE_PAN)
+
+
+def reference_object(kind: str, size, distance: float = D_REF) -> Target | Beacon:
+    """The object on the reference camera's optical axis at ``distance``, facing it."""
+    p = tuple(float(v) for v in distance * unit(REFERENCE_PAN))
+    if kind == "target":
+        return Target(position=p, size=tuple(size), facing_deg=REFERENCE_PAN + 180.0)
+    if kind == "pencil":
+        return Beacon(position=p, height=float(size))
+    raise ValueError(f"unknown reference object {kind!r}")
+
+
+def reference_crop(camera: Camera, obj: Target | Beacon) -> tuple[int, int, int, int]:
+    """The film region (u0, v0, u1, v1) around the object's projected outline."""
+    half_w = obj.size[0] / 2 if isinstance(obj, Target) else PENCIL_RADIUS
+    top = obj.size[1] if isinstance(obj, Target) else obj.height
+    across = unit(REFERENCE_PAN + 90)
+    pts = np.array([[*(np.asarray(obj.position) + s * half_w * across), z]
+                    for s in (-1, 1) for z in (0.0, top)])
+    u, v, _ = optics.project(camera, pts)
+    return (int(max(0, math.floor(u.min()) - MARGIN_PX)),
+            int(max(0, math.floor(v.min()) - MARGIN_PX)),
+            int(min(camera.width, math.ceil(u.max()) + MARGIN_PX + 1)),
+            int(min(camera.height_px, math.ceil(v.max()) + MARGIN_PX + 1)))
 
 
 def measure_reference(camera: Camera, kind: str, size, variant: str = "auto") -> float:
     """Pixel height of the object at D_REF, as the detector measures it."""
-    from mirrorsim.render import render_reference
+    from mirrorsim.render import render_direct  # Mitsuba only when a render is needed
 
-    img = render_reference(camera, kind, size, distance=D_REF, spp=CALIBRATION_SPP,
-                           variant=variant).astype("float32")
-    if kind == "target":
-        box = _target_region(img, size[0] / size[1])
-        boxes = [] if box is None else [box]
-    else:
-        boxes = _pencil_regions(img)
-    if not boxes:
-        raise DetectionError(f"calibration: the {kind} was not found in its reference render")
-    box = max(boxes, key=lambda b: (b[2] - b[0]) * (b[3] - b[1]))
-    linear = to_linear(img)
-    if kind == "pencil":  # as the detector does: the paint's blue channel
-        linear = linear[..., 2:3]
-    m = measure_region(linear, box, kind, size[0] / size[1] if kind == "target" else None)
+    cam = reference_camera(camera)
+    obj = reference_object(kind, size)
+    # a plain board: a hole under the reference object's foot would bias its calibration
+    img = render_direct(Board(size=(80.0, 80.0), hole_pitch=0.0), cam, obj,
+                        spp=CALIBRATION_SPP, crop=reference_crop(cam, obj), variant=variant)
+    ratio = size[0] / size[1] if kind == "target" else None
+    try:
+        m = measure_object(img, kind, ratio)
+    except DetectionError as exc:
+        raise DetectionError(f"calibration: {exc} (the {kind}'s reference render)") from None
     if m.height_px is None:
         raise DetectionError(f"calibration: the {kind}'s height could not be measured")
     return m.height_px
@@ -69,7 +94,7 @@ def calibrate(camera: Camera, target_size, pencil_height: float, *, variant: str
     """K for the target and the pencil with this camera (cached)."""
     key = calibration_key(camera, target_size, pencil_height)
     path = _cache_file()
-    cache = read_cache(path)
+    cache = read_json_cache(path)
     if key in cache and not refresh:
         c = cache[key]
         return Calibration(target_k=c["target_k"], pencil_k=c["pencil_k"], key=key)
@@ -79,5 +104,9 @@ def calibrate(camera: Camera, target_size, pencil_height: float, *, variant: str
                       pencil_k=s_p * (D_REF - FRONT_OFFSET["beacon"]), key=key)
     cache[key] = {"target_k": cal.target_k, "pencil_k": cal.pencil_k,
                   "target_px_at_100cm": s_t, "pencil_paint_px_at_100cm": s_p}
-    write_cache(path, cache)
+    write_json_cache(path, cache)
     return cal
+
+
+def _cache_file() -> Path:
+    return cache_path().with_name("calibration.json")

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import sys
 import time
 import traceback
@@ -29,21 +28,21 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
-from mirrorsim.scene import RenderSettings
+from mirrorsim.errors import InputError, RunFailed
+from mirrorsim.io import atomic_path, write_json, write_text
+from mirrorsim.model import RenderSettings, Scene
+from mirrorsim.report import ObjectTruth, Report
+from solver.geometry import yaw_difference
 
 ROW_SCHEMA_VERSION = 1
 RECYCLE_EVERY = 8  # scenes per worker process before it is replaced
 
 
 def scene_name(i: int) -> str:
+    """File name of scene i."""
     return f"scene{i:06d}"
-
-
-def _atomic_write(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    tmp.write_text(text)
-    os.replace(tmp, path)
 
 
 def process_one(i: int, seed: int, n: int, spec: dict, out: str, spp: int | None,
@@ -52,7 +51,6 @@ def process_one(i: int, seed: int, n: int, spec: dict, out: str, spp: int | None
 
     A failure is recorded in the row (``error``), never raised.
     """
-    from mirrorsim import optics
     from mirrorsim.evaluate import evaluate_scene
     from mirrorsim.sampler import sample_scene, to_yaml
 
@@ -64,76 +62,75 @@ def process_one(i: int, seed: int, n: int, spec: dict, out: str, spp: int | None
         ss = np.random.SeedSequence(seed).spawn(n)[i]
         scene = sample_scene(spec, np.random.default_rng(ss), name)
         scene = replace(scene, render=RenderSettings(spp=spp or scene.render.spp, seed=i))
-        _atomic_write(out_dir / "scenes" / f"{name}.yaml", to_yaml(scene))
+        write_text(out_dir / "scenes" / f"{name}.yaml", to_yaml(scene))
         t1 = time.perf_counter()
         rep = evaluate_scene(scene, out_dir / "frames" / name, variant=variant, progress=False)
-        row.update(_flatten(scene, rep, optics))
+        row.update(_flatten(scene, rep))
         row["seconds_sample"] = t1 - t0
         row["error"] = ""
     except Exception as exc:  # recorded, not fatal: one bad scene must not stop a run
         row["error"] = f"{type(exc).__name__}: {exc}"
         row["traceback"] = traceback.format_exc(limit=3)
     row["seconds_total"] = time.perf_counter() - t0
-    _atomic_write(out_dir / "rows" / f"{name}.json", json.dumps(row))
+    write_json(out_dir / "rows" / f"{name}.json", row)
     return row
 
 
-def _flatten(scene, rep: dict, optics) -> dict:
+def _flatten(scene: Scene, rep: Report) -> dict:
     """The row's columns: scene parameters, truth, measurements, solution, errors."""
-    cam, mir, t = scene.camera, scene.mirror, rep["truth"]
-    meas, sol, err = rep["measurements"], rep["solution"], rep["errors"]
+    cam, mir, t = scene.camera, scene.mirror, rep.truth
+    meas, sol, err = rep.measurements, rep.solution, rep.errors
     row = {
         "camera_x": cam.position[0], "camera_y": cam.position[1], "camera_height": cam.height,
         "camera_pan_deg": cam.pan_deg, "hfov_deg": cam.hfov,
         "mirror_x": mir.center[0], "mirror_y": mir.center[1], "mirror_yaw_deg": mir.yaw % 180,
         "mirror_width": mir.size[0], "mirror_height": mir.size[1],
         "target_x": scene.target.position[0], "target_y": scene.target.position[1],
-        "variant": rep["render"]["variant"], "spp": rep["render"]["spp"],
-        "render_seed": rep["render"]["seed"],
+        "variant": rep.render.variant, "spp": rep.render.spp, "render_seed": rep.render.seed,
     }
-    for kind, truth, m in (("target", t["target"], meas["target"]),
-                           ("beacon", t["beacons"][0], meas["beacons"][0])):
-        pos = truth["position"]
-        img = optics.mirror_image(cam, mir, pos)
-        incidence = _incidence_deg(cam, mir, img)
-        off_axis = (truth["alpha_deg"] - cam.pan_deg + 180.0) % 360.0 - 180.0
+    b, frame = meas.beacons[0], rep.frames[0]
+    for kind, truth, (alpha, d), clipped in (
+            ("target", t.target, meas.targets[0], frame.target_clipped),
+            ("beacon", t.beacons[0], (b.alpha_deg, b.d_total), frame.beacon_clipped)):
         row.update({
-            f"{kind}_pos_x": pos[0], f"{kind}_pos_y": pos[1],
-            f"{kind}_alpha_true": truth["alpha_deg"], f"{kind}_d_true": truth["d_total"],
-            f"{kind}_d1": truth["d1"], f"{kind}_d2": truth["d2"],
-            f"{kind}_off_axis_deg": off_axis, f"{kind}_incidence_deg": incidence,
-            f"{kind}_height_px_true": truth["image_px"]["height"],
-            f"{kind}_alpha_meas": m["alpha_deg"],
-            f"{kind}_d_meas": m["d_total"] if m["d_total"] is not None else math.nan,
-            f"{kind}_alpha_err": m["alpha_deg"] - truth["alpha_deg"],
-            f"{kind}_d_rel_err": (m["d_total"] - truth["d_total"]) / truth["d_total"]
-            if m["d_total"] is not None else math.nan,
-            f"{kind}_clipped": bool(m.get("clipped", False)),
+            f"{kind}_pos_x": truth.position[0], f"{kind}_pos_y": truth.position[1],
+            f"{kind}_alpha_true": truth.alpha_deg, f"{kind}_d_true": truth.d_total,
+            f"{kind}_d1": truth.d1, f"{kind}_d2": truth.d2,
+            f"{kind}_off_axis_deg": (truth.alpha_deg - cam.pan_deg + 180.0) % 360.0 - 180.0,
+            f"{kind}_incidence_deg": _incidence_deg(scene, truth),
+            f"{kind}_height_px_true": truth.image_px.height,
+            f"{kind}_alpha_meas": alpha, f"{kind}_d_meas": d,
+            f"{kind}_alpha_err": alpha - truth.alpha_deg,
+            f"{kind}_d_rel_err": (d - truth.d_total) / truth.d_total,
+            f"{kind}_clipped": bool(clipped),
         })
     row.update({
-        "est_target_x": sol["target"]["position"][0], "est_target_y": sol["target"]["position"][1],
-        "est_mirror_yaw_deg": sol["mirror"]["yaw_deg"],
-        "err_target_cm": err["target_cm"], "err_mirror_yaw_deg": err["mirror_yaw_deg"],
-        "err_mirror_offset_cm": err["mirror_offset_cm"],
-        "err_reflection_point_cm": err["reflection_point_cm"],
-        "target_rmse95_cm": err["target_rmse95_cm"] if err["target_rmse95_cm"] else math.nan,
+        "est_target_x": float(sol.target[0]), "est_target_y": float(sol.target[1]),
+        "est_mirror_yaw_deg": sol.mirror.yaw_deg,
+        "err_target_cm": err.target_cm, "err_mirror_yaw_deg": err.mirror_yaw_deg,
+        "err_mirror_offset_cm": err.mirror_offset_cm,
+        "err_reflection_point_cm": err.reflection_point_cm,
+        "target_ellipse95_major_cm": (math.nan if err.target_ellipse95_major_cm is None
+                                      else err.target_ellipse95_major_cm),
     })
     return row
 
 
-def _incidence_deg(cam, mir, img) -> float:
+def _incidence_deg(scene: Scene, truth: ObjectTruth) -> float:
     """Angle between the camera's ray to the mirror and the mirror's normal."""
-    ray = np.asarray(img.reflection_point) - np.asarray(cam.position, float)
-    n = np.array([-math.sin(math.radians(mir.yaw)), math.cos(math.radians(mir.yaw))])
-    c = abs(ray @ n) / np.linalg.norm(ray)
-    return math.degrees(math.acos(min(1.0, c)))
+    ray = np.asarray(truth.reflection_point) - np.asarray(scene.camera.position, float)
+    ray_bearing = math.degrees(math.atan2(ray[1], ray[0]))
+    return 90.0 - float(yaw_difference(ray_bearing, scene.mirror.yaw))
 
 
 # ------------------------------------------------------------------- the run
 
 
-class DatasetError(RuntimeError):
-    """A run that cannot start (e.g. a folder holding another dataset)."""
+class DatasetError(InputError):
+    """A run that cannot start (e.g. a folder holding another dataset): bad input."""
+
+    def __init__(self, folder: str | Path, message: str):
+        super().__init__(folder, "", message)
 
 
 def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
@@ -160,29 +157,29 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
         old = json.loads(meta_path.read_text())
         same = {k: old.get(k) for k in ("n", "seed", "spp", "spec")} == meta
         if not resume:
-            raise DatasetError(f"{out} already holds a dataset: pass --resume to finish it, "
+            raise DatasetError(out, "already holds a dataset: pass --resume to finish it, "
                                "or choose another --out")
         if not same:
-            raise DatasetError(f"{out} holds a dataset made with other settings "
+            raise DatasetError(out, f"holds a dataset made with other settings "
                                f"(n={old.get('n')}, seed={old.get('seed')}, spp={old.get('spp')})")
     for sub in ("scenes", "frames", "rows"):
         (out / sub).mkdir(parents=True, exist_ok=True)
     if not meta_path.exists():
-        _atomic_write(meta_path, json.dumps(meta, indent=1))
+        write_json(meta_path, meta)
     # the probe runs once here rather than in every worker
     chosen = choose_variant(variant)
     todo = [i for i in range(n) if not (out / "rows" / f"{scene_name(i)}.json").exists()]
     t_start = time.perf_counter()
     done_before = n - len(todo)
-    bar = _Bar(len(todo), enabled=progress)
+    bar = tqdm(total=len(todo), unit="scene", disable=not progress, desc="dataset")
     args = [(i, seed, n, spec, str(out), spp, chosen) for i in todo]
     if executor == "dask":
         for _ in _run_dask(args, scheduler):
-            bar.step()
+            bar.update()
     elif workers <= 1:
         for a in args:
             process_one(*a)
-            bar.step()
+            bar.update()
     else:
         _run_local(args, workers, out, bar, recycle_every)
     bar.close()
@@ -219,12 +216,12 @@ def _run_local(args: list[tuple], workers: int, out: Path, bar,
             with ProcessPoolExecutor(workers, mp_context=ctx) as ex:
                 for f in as_completed([ex.submit(process_one, *a) for a in chunk]):
                     f.result()
-                    bar.step()
+                    bar.update()
         except BrokenProcessPool:
             deaths += 1
             if deaths > 3:
-                raise DatasetError("worker processes keep dying; the rows done so far are "
-                                   "kept (rerun with --resume)") from None
+                raise RunFailed("worker processes keep dying; the rows done so far are "
+                                "kept (rerun with --resume)") from None
             print("\nwarning: a worker process died; a new pool takes the unfinished "
                   "scenes", file=sys.stderr)
 
@@ -249,6 +246,7 @@ def _run_dask(args, scheduler: str | None):
 
 
 def collect_rows(out: Path, n: int) -> list[dict]:
+    """The finished rows of scenes 0..n-1, in index order."""
     rows = []
     for i in range(n):
         p = Path(out) / "rows" / f"{scene_name(i)}.json"
@@ -269,13 +267,13 @@ def write_table(out: Path, rows: list[dict]) -> Path:
         cols[k] = [r.get(k) for r in rows]
     table = pa.table(cols) if rows else pa.table({"index": pa.array([], pa.int64())})
     path = Path(out) / "dataset.parquet"
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    pq.write_table(table, tmp)
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp:
+        pq.write_table(table, tmp)
     return path
 
 
 def write_card(out: Path, meta: dict, rows: list[dict], variant: str) -> None:
+    """Write the dataset card DIR/README.md."""
     ok = [r for r in rows if not r.get("error")]
     med = lambda k: float(np.nanmedian([abs(r[k]) for r in ok])) if ok else math.nan  # noqa: E731
     text = f"""# mirrorsim dataset
@@ -299,7 +297,8 @@ Each row is one random scene (`scenes/<scene>.yaml`, a normal scene file: rerun 
   `alpha_err` (deg, measured − true) and `d_rel_err` (relative); `clipped`;
 - solution: `est_target_x`, `est_target_y`, `est_mirror_yaw_deg`; errors
   `err_target_cm`, `err_mirror_yaw_deg`, `err_mirror_offset_cm`,
-  `err_reflection_point_cm`; the solver's 95 % bound `target_rmse95_cm`;
+  `err_reflection_point_cm`; the solver's own bound `target_ellipse95_major_cm`
+  (semi-major axis of its 95 % error ellipse);
 - timings: `seconds_sample`, `seconds_total`.
 
 Median |errors| here: target α {med('target_alpha_err'):.4f}°, target d
@@ -310,32 +309,4 @@ Scene i is drawn from `SeedSequence({meta['seed']}).spawn({meta['n']})[i]` with 
 `dataset.json` and rendered with seed i.  `mirrorsim errormodel DIR` fits the error
 model.
 """
-    _atomic_write(Path(out) / "README.md", text)
-
-
-class _Bar:
-    """Progress with rate and ETA on stderr."""
-
-    def __init__(self, total: int, enabled: bool = True):
-        self.total, self.done, self.enabled = total, 0, enabled
-        self.t0 = time.perf_counter()
-        self._show()
-
-    def step(self) -> None:
-        self.done += 1
-        self._show()
-
-    def _show(self) -> None:
-        if not self.enabled:
-            return
-        el = time.perf_counter() - self.t0
-        rate = self.done / el * 60 if el > 0 and self.done else 0.0
-        eta = (self.total - self.done) / (rate / 60) if rate else 0.0
-        frac = self.done / self.total if self.total else 1.0
-        sys.stderr.write(f"\r[{'#' * int(30 * frac):<30}] {self.done}/{self.total} scenes, "
-                         f"{rate:.1f}/min, ETA {eta:.0f} s   ")
-        sys.stderr.flush()
-
-    def close(self) -> None:
-        if self.enabled:
-            sys.stderr.write("\n")
+    write_text(Path(out) / "README.md", text)

@@ -36,20 +36,19 @@ from __future__ import annotations
 
 import itertools
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 
 import cv2
 import numpy as np
 
-from mirrorsim.scene import PENCIL_RADIUS, TARGET_THICKNESS, Beacon, Camera, Scene
+from mirrorsim.errors import DetectionError
+from mirrorsim.measure import ImageMeasurement, measure_region, to_linear
+from mirrorsim.model import PENCIL_RADIUS, TARGET_THICKNESS, Beacon, Camera, Point2, Scene
 from solver.geometry import bearing_deg, wrap_bearing
+from solver.measurements import Measurements
+from solver.sltr import BeaconMeasurement
 
 FRAME_OPEN_PX = 13  # wider than the mirror frame's bars at the distances of our scenes
-RATIO_TOLERANCE = 0.004  # relative; the panel's width/height ratio is exact when unclipped
-
-
-class DetectionError(RuntimeError):
-    """Nothing usable was found in the frame (the message says what)."""
 
 
 @dataclass(frozen=True)
@@ -65,104 +64,6 @@ class DetectorView:
         """Take the camera, the beacons and the target's size, nothing else."""
         return cls(camera=scene.camera, beacons=scene.beacons, target_size=scene.target.size)
 
-
-@dataclass
-class ImageMeasurement:
-    """One object's image: its upright axis, vertical extent and derived α, d_total."""
-
-    kind: str  # "target" or "beacon"
-    source: str  # "mirror" or "direct"
-    bbox_px: list[int]
-    u_axis: float
-    v_top: float | None
-    v_bottom: float | None
-    height_px: float | None
-    width_px: float | None
-    clipped: str = ""  # '', 'top', 'left', 'right'
-    alpha_deg: float = float("nan")
-    d_total: float | None = None
-    beacon_index: int | None = None
-    notes: list[str] = field(default_factory=list)
-
-
-# ---------------------------------------------------------------- edge measurement
-
-
-def _edge_by_area(profile: np.ndarray, start: int, inside: np.ndarray, outside: np.ndarray,
-                  inside_first: bool) -> float | None:
-    """Sub-pixel edge position in a 1-D colour profile (rows of ``profile``: positions
-    start, start+1, …) by summing pixel coverages; ``None`` if there is no contrast."""
-    d = inside - outside
-    dd = float(d @ d)
-    if dd < 5.0**2:  # linear 0–255 scale
-        return None
-    # not clipped to [0, 1]: clipping noise on the flat parts would bias the sum inwards
-    c = ((profile - outside) @ d) / dd
-    if inside_first:
-        return start - 0.5 + float(c.sum())
-    return start - 0.5 + float((1.0 - c).sum())
-
-
-def _local_edge(img: np.ndarray, band, axis: int, guess: float, inside_first: bool,
-                reach: int = 6, half: int = 1):
-    """An edge near ``guess`` in the mean profile of ``band`` (the columns, or rows,
-    across it): coverages of the 2·half + 1 pixels about it, against the median colours
-    of the next 4 pixels either side (inside: no further than ``reach``).  Local levels
-    keep a shadow or a neighbour a few pixels away (a contact shadow at a foot, another
-    object beside a thin pencil) out of it; medians drop the pegboard's holes.
-
-    Returns (edge or None, outside colour).
-    """
-    n = img.shape[axis]
-    c = int(round(guess))
-
-    def line(i: int) -> np.ndarray:
-        i = min(max(i, 0), n - 1)
-        return (img[i, band] if axis == 0 else img[band, i]).mean(axis=0)
-
-    k_out = range(half + 1, half + 5)
-    k_in = range(half + 1, max(half + 2, min(half + 5, reach)))
-    before = np.median([line(c - k) for k in (k_in if inside_first else k_out)], axis=0)
-    after = np.median([line(c + k) for k in (k_out if inside_first else k_in)], axis=0)
-    inside, outside = (before, after) if inside_first else (after, before)
-    window = np.array([line(i) for i in range(c - half, c + half + 1)])
-    return _edge_by_area(window, c - half, inside, outside, inside_first), outside
-
-
-def _median_edges(img, lo, hi, cross_lo, cross_hi, axis, band_px=3):
-    """Edges at both ends of an object spanning [lo, hi] along ``axis`` (0: top and
-    bottom, 1: left and right), robust and precise.
-
-    Bands of ``band_px`` across the object's middle 60 % each give an edge near the
-    region's boundary (±2 px); bands more than 1 px from their median (partly occluded
-    ones) are dropped; the final edge is measured on the mean profile of the rest.
-    Returns (edge_lo, edge_hi, outside_lo, outside_hi).
-    """
-    span = cross_hi - cross_lo + 1
-    a = cross_lo + int(0.2 * span)
-    b = max(a + 1, cross_hi - int(0.2 * span) + 1)
-    bands = [np.arange(s, min(s + band_px, b)) for s in range(a, b, band_px)]
-    reach = max(2, (hi - lo) // 2)
-    final, outs = [], []
-    for end, guess in ((0, lo), (1, hi)):
-        coarse = [_local_edge(img, band, axis, guess, end == 1, reach, half=2)
-                  for band in bands]
-        vals = [e for e, _ in coarse if e is not None]
-        if not vals:
-            final.append(None)
-            outs.append(np.median([o for _, o in coarse], axis=0))
-            continue
-        m = float(np.median(vals))
-        near = [band for band, (e, _) in zip(bands, coarse, strict=True)
-                if e is not None and abs(e - m) < 1.0]
-        keep = np.concatenate(near) if near else np.concatenate(bands)
-        # round(m) is the pixel the edge crosses: the window is centred on it
-        e, out = _local_edge(img, keep, axis, m, end == 1, reach)
-        final.append(e)
-        outs.append(out)
-    return final[0], final[1], outs[0], outs[1]
-
-
 # ------------------------------------------------------------------ segmentation
 
 
@@ -176,7 +77,7 @@ def _components(mask: np.ndarray, min_area: int):
     return labels, out
 
 
-def _target_region(img: np.ndarray, ratio: float) -> tuple[int, int, int, int] | None:
+def find_target(img: np.ndarray, ratio: float) -> tuple[int, int, int, int] | None:
     """Bounding box (u0, v0, u1, v1) of the grey panel's image, or None."""
     blur = cv2.GaussianBlur(img, (5, 5), 0)
     vmax, vmin = cv2.max(cv2.max(blur[..., 0], blur[..., 1]), blur[..., 2]), \
@@ -205,7 +106,7 @@ def _target_region(img: np.ndarray, ratio: float) -> tuple[int, int, int, int] |
     return None if best is None else best[:4]
 
 
-def _pencil_regions(img: np.ndarray) -> list[tuple[int, int, int, int]]:
+def find_pencils(img: np.ndarray) -> list[tuple[int, int, int, int]]:
     """Bounding boxes of painted (yellow) pencil bands."""
     blur = cv2.GaussianBlur(img, (3, 3), 0)
     r, g, b = blur[..., 0], blur[..., 1], blur[..., 2]
@@ -217,71 +118,6 @@ def _pencil_regions(img: np.ndarray) -> list[tuple[int, int, int, int]]:
     _, comps = _components(mask, 30)
     return [(x, y, x + w - 1, y + h - 1) for _, x, y, w, h, _ in comps if h >= 2 * w * 0.8]
 
-
-# ------------------------------------------------------------------ measurement
-
-
-def to_linear(srgb: np.ndarray) -> np.ndarray:
-    """8-bit sRGB values → linear radiance on the same 0–255 scale.
-
-    A box-filtered pixel is the area-weighted mean of *linear* radiance; coverages
-    measured on the gamma-encoded values would be biased by the curve.
-    """
-    return _LINEAR_LUT[np.asarray(srgb).astype(np.uint8)]
-
-
-_x = np.arange(256, dtype=np.float64) / 255.0
-_LINEAR_LUT = (255.0 * np.where(_x <= 0.04045, _x / 12.92, ((_x + 0.055) / 1.055) ** 2.4)
-               ).astype(np.float32)
-
-
-def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str,
-                   width_over_height: float | None = None) -> ImageMeasurement:
-    """Sub-pixel axis column and vertical extent of an object's image in ``box``.
-
-    ``img`` holds linear radiance (see :func:`to_linear`).
-    """
-    u0, v0, u1, v1 = box
-    top, bottom, _, _ = _median_edges(img, v0, v1, u0, u1, axis=0)
-    left, right, out_left, out_right = _median_edges(img, u0, u1, v0, v1, axis=1)
-    m = ImageMeasurement(kind=kind, source="mirror", bbox_px=[u0, v0, u1, v1],
-                         u_axis=float("nan"), v_top=top, v_bottom=bottom,
-                         height_px=None if top is None or bottom is None else bottom - top,
-                         width_px=None if left is None or right is None else right - left)
-    if left is not None and right is not None:
-        m.u_axis = (left + right) / 2
-    elif width_over_height and top is not None and bottom is not None and (left or right):
-        # one side has no edge (it runs into the mirror's frame): axis from the other
-        half = width_over_height * (bottom - top) / 2
-        m.u_axis = left + half if left is not None else right - half
-        m.clipped = "right" if left is not None else "left"
-        m.notes.append(f"no edge on the {m.clipped}: clipped there, axis from the other edge")
-    if top is None or bottom is None:
-        m.clipped = "top"
-        m.notes.append("no contrast at the top or bottom edge: height not measured")
-    if width_over_height and m.height_px and m.width_px:
-        expected = width_over_height * m.height_px
-        r = m.width_px / expected
-        # edges are good to ~0.1 px each: a clip must exceed that as well as the tolerance
-        tol = max(RATIO_TOLERANCE, 0.6 / expected)
-        if r > 1 + tol:
-            m.clipped = "top"
-            m.notes.append(f"image {100 * (r - 1):.1f}% shorter than its width implies: "
-                           "clipped at the top, height not used")
-            m.height_px = None
-        elif r < 1 - tol:
-            dark_left = float(out_left.sum()) < float(out_right.sum())
-            m.clipped = "left" if dark_left else "right"
-            half = width_over_height * m.height_px / 2
-            m.u_axis = right - half if dark_left else left + half
-            m.notes.append(f"image {100 * (1 - r):.1f}% narrower than its height implies: "
-                           f"clipped on the {m.clipped}, axis from the other edge")
-    return m
-
-
-# The measured edges belong to the face nearest the camera: the panel's front (half its
-# thickness before its centre), the pencil's near side (between a flat, 0.346 cm, and a
-# corner, 0.4 cm, of the hexagon).  Size constancy holds for that face's depth.
 FRONT_OFFSET = {"target": TARGET_THICKNESS / 2,
                 "beacon": PENCIL_RADIUS * (1 + math.cos(math.pi / 6)) / 2}
 
@@ -309,14 +145,77 @@ def distance_of(camera: Camera, u: float, height_px: float, k: float,
     return (k / height_px + front_offset) / math.cos(phi)
 
 
-def detect_frame(image: np.ndarray, view: DetectorView, calibration: Calibration) -> dict:
-    """Measure the target and each beacon in an RGB uint8 frame.
+@dataclass
+class Detection:
+    """What the detector measured in one frame."""
 
-    Returns
-    -------
-    dict
-        The measurements of INTERFACE.md plus a ``detector`` block with each image's
-        pixels (axis column, edges, bbox, clipping, direct or mirror).
+    observer: Point2
+    target: ImageMeasurement
+    beacons: list[tuple[Beacon, ImageMeasurement]]  # each beacon and its mirror image
+    images: list[ImageMeasurement]  # every pencil image found (mirror and direct)
+
+    def measurements(self) -> Measurements:
+        """The solver's inputs (raises DetectionError if the target's d_total is missing)."""
+        if self.target.d_total is None:
+            raise DetectionError("the target's d_total could not be measured (its image is "
+                                 "clipped at the top)")
+        return Measurements(observer=self.observer,
+                            targets=[(self.target.alpha_deg, self.target.d_total)],
+                            beacons=self.beacon_measurements())
+
+    def beacon_measurements(self) -> list[BeaconMeasurement]:
+        """Each beacon's known position with its mirror image's α and d_total."""
+        return [BeaconMeasurement(tuple(b.position), m.alpha_deg, m.d_total)
+                for b, m in self.beacons]
+
+    def to_json(self) -> dict:
+        """The measurements of INTERFACE.md plus a ``detector`` block with each image's
+        pixels (axis column, edges, bbox, clipping, direct or mirror)."""
+        t = self.target
+        return {
+            "observer": list(self.observer),
+            "target": {"alpha_deg": t.alpha_deg, "d_total": t.d_total,
+                       "clipped": bool(t.clipped)},
+            "beacons": [{"position": list(b.position), "alpha_deg": m.alpha_deg,
+                         "d_total": m.d_total, "clipped": bool(m.clipped), "source": "mirror"}
+                        for b, m in self.beacons],
+            "detector": {"target": _public(t), "images": [_public(p) for p in self.images]},
+        }
+
+
+def measure_object(img: np.ndarray, kind: str, target_ratio: float | None = None
+                   ) -> ImageMeasurement:
+    """Find and measure the largest image of the target (``kind="target"``, with its
+    width/height ``target_ratio``) or of a pencil in an 8-bit RGB image, exactly as
+    :func:`detect_frame` measures it (calibration uses this on its reference renders).
+
+    Raises
+    ------
+    DetectionError
+        If no such object is found.
+    """
+    img = np.asarray(img, dtype=np.float32)
+    linear = to_linear(img)
+    if kind == "target":
+        box = find_target(img, target_ratio)
+        if box is None:
+            raise DetectionError("no target (grey upright panel) found in the frame")
+        return measure_region(linear, box, "target", target_ratio)
+    boxes = find_pencils(img)
+    if not boxes:
+        raise DetectionError("no pencil (yellow upright band) found in the frame")
+    box = max(boxes, key=lambda b: (b[2] - b[0]) * (b[3] - b[1]))
+    return measure_region(_pencil_channel(linear), box, "beacon")
+
+
+def _pencil_channel(linear: np.ndarray) -> np.ndarray:
+    # the paint's blue is ~0 on lit and shadowed faces alike: its blue channel alone
+    # gives coverages that the hexagon's shading does not disturb
+    return np.ascontiguousarray(linear[..., 2:3])
+
+
+def detect_frame(image: np.ndarray, view: DetectorView, calibration: Calibration) -> Detection:
+    """Measure the target and each beacon in an RGB uint8 frame.
 
     Raises
     ------
@@ -329,37 +228,22 @@ def detect_frame(image: np.ndarray, view: DetectorView, calibration: Calibration
         raise DetectionError(f"the frame is {img.shape[1::-1] if img.ndim >= 2 else img.shape} "
                              f"px but the camera is {cam.width}×{cam.height_px}")
     ratio = view.target_size[0] / view.target_size[1]
-    box = _target_region(img, ratio)
-    if box is None:
-        raise DetectionError("no target (grey upright panel) found in the frame")
-    linear = to_linear(img)
-    target = measure_region(linear, box, "target", ratio)
+    target = measure_object(img, "target", ratio)
     target.alpha_deg = alpha_of(cam, target.u_axis)
     if target.height_px is not None:
         target.d_total = distance_of(cam, target.u_axis, target.height_px, calibration.target_k,
                                      FRONT_OFFSET["target"])
 
-    # the paint's blue is ~0 on lit and shadowed faces alike: its blue channel alone
-    # gives coverages that the hexagon's shading does not disturb
-    blue = np.ascontiguousarray(linear[..., 2:3])
-    pencils = [measure_region(blue, b, "beacon") for b in _pencil_regions(img)]
+    blue = _pencil_channel(to_linear(img))
+    pencils = [measure_region(blue, b, "beacon") for b in find_pencils(img)]
     pencils = [p for p in pencils if p.height_px and np.isfinite(p.u_axis)]
     for p in pencils:
         p.alpha_deg = alpha_of(cam, p.u_axis)
         p.d_total = distance_of(cam, p.u_axis, p.height_px, calibration.pencil_k,
                                 FRONT_OFFSET["beacon"])
-    mirror_imgs = _assign_beacons(pencils, view, calibration)
-
-    out = {
-        "observer": list(cam.position),
-        "target": {"alpha_deg": target.alpha_deg, "d_total": target.d_total,
-                   "clipped": bool(target.clipped)},
-        "beacons": [{"position": list(b.position), "alpha_deg": m.alpha_deg,
-                     "d_total": m.d_total, "clipped": bool(m.clipped), "source": "mirror"}
-                    for b, m in zip(view.beacons, mirror_imgs, strict=True)],
-        "detector": {"target": _public(target), "images": [_public(p) for p in pencils]},
-    }
-    return out
+    mirror_imgs = _assign_beacons(pencils, view)
+    return Detection(observer=tuple(cam.position), target=target,
+                     beacons=list(zip(view.beacons, mirror_imgs, strict=True)), images=pencils)
 
 
 def _public(m: ImageMeasurement) -> dict:
@@ -367,8 +251,8 @@ def _public(m: ImageMeasurement) -> dict:
     return {k: (round(v, 4) if isinstance(v, float) else v) for k, v in d.items()}
 
 
-def _assign_beacons(pencils: list[ImageMeasurement], view: DetectorView,
-                    calibration: Calibration) -> list[ImageMeasurement]:
+def _assign_beacons(pencils: list[ImageMeasurement], view: DetectorView
+                    ) -> list[ImageMeasurement]:
     """Tell direct images (where the known beacon itself would appear) from mirror images,
     and give each beacon its mirror image."""
     cam = view.camera
@@ -422,26 +306,25 @@ def _bisector(cam: Camera, beacon: Beacon, m: ImageMeasurement) -> tuple[float, 
 # -------------------------------------------------------------------- drawing
 
 
-def annotate(image: np.ndarray, result: dict) -> np.ndarray:
+def annotate(image: np.ndarray, detection: Detection) -> np.ndarray:
     """Draw the detections (boxes, axis columns, edges, α and d) on a copy of the frame."""
     out = np.ascontiguousarray(image[..., ::-1].copy())  # OpenCV draws in BGR
-    items = [result["detector"]["target"]] + result["detector"]["images"]
-    for m in items:
-        colour = (0, 0, 255) if m["kind"] == "target" else (
-            (255, 128, 0) if m["source"] == "mirror" else (160, 160, 160))
-        u0, v0, u1, v1 = m["bbox_px"]
+    for m in [detection.target, *detection.images]:
+        colour = (0, 0, 255) if m.kind == "target" else (
+            (255, 128, 0) if m.source == "mirror" else (160, 160, 160))
+        u0, v0, u1, v1 = m.bbox_px
         cv2.rectangle(out, (u0 - 2, v0 - 2), (u1 + 2, v1 + 2), colour, 1)
-        if np.isfinite(m["u_axis"]):
-            x = int(round(m["u_axis"]))
+        if np.isfinite(m.u_axis):
+            x = int(round(m.u_axis))
             cv2.line(out, (x, v0 - 12), (x, v1 + 12), colour, 1)
-        for v in (m["v_top"], m["v_bottom"]):
+        for v in (m.v_top, m.v_bottom):
             if v is not None:
                 y = int(round(v))
                 cv2.line(out, (u0 - 8, y), (u1 + 8, y), (0, 255, 0), 1)
-        d = "—" if m["d_total"] is None else f"{m['d_total']:.2f} cm"
-        label = f"{m['kind']} ({m['source']}): a {m['alpha_deg']:.3f} deg, d {d}"
-        if m["clipped"]:
-            label += f", clipped {m['clipped']}"
+        d = "—" if m.d_total is None else f"{m.d_total:.2f} cm"
+        label = f"{m.kind} ({m.source}): a {m.alpha_deg:.3f} deg, d {d}"
+        if m.clipped:
+            label += f", clipped {m.clipped}"
         y = max(14, v0 - 8)
         cv2.putText(out, label, (max(0, u0 - 40), y), cv2.FONT_HERSHEY_SIMPLEX, 0.45, colour,
                     1, cv2.LINE_AA)
@@ -457,5 +340,9 @@ def read_frame(path) -> np.ndarray:
 
 
 def write_png(path, rgb: np.ndarray) -> None:
-    if not cv2.imwrite(str(path), np.ascontiguousarray(rgb[..., ::-1])):
-        raise OSError(f"cannot write {path}")
+    """Write an RGB uint8 image as a PNG, atomically."""
+    from mirrorsim.io import atomic_path
+
+    with atomic_path(path) as tmp:
+        if not cv2.imwrite(str(tmp), np.ascontiguousarray(rgb[..., ::-1])):
+            raise OSError(f"cannot write {path}")

@@ -12,11 +12,12 @@ from __future__ import annotations
 
 import json
 import math
-import os
 from pathlib import Path
 
 import numpy as np
 
+from mirrorsim.errors import InputError
+from mirrorsim.io import atomic_path, write_json
 from solver.sltr import Sigma
 
 FEATURES = ("1", "d_total_cm", "abs_off_axis_deg", "incidence_deg", "inv_height_px")
@@ -84,8 +85,6 @@ def predict(model: dict, kind: str, quantity: str, features: np.ndarray
 
 def load_sigma(path: str | Path) -> Sigma:
     """The typical σ's of a model file, as the solver takes them."""
-    from solver.measurements import InputError
-
     try:
         model = json.loads(Path(path).read_text())
         s = model["sigma"]
@@ -97,12 +96,14 @@ def load_sigma(path: str | Path) -> Sigma:
 
 
 def read_columns(dataset_dir: str | Path) -> dict:
+    """The dataset table as columns (name → list)."""
     import pyarrow.parquet as pq
 
     return pq.read_table(Path(dataset_dir) / "dataset.parquet").to_pydict()
 
 
 def summary(model: dict) -> str:
+    """The model in a few printed lines."""
     lines = [f"error model: features {', '.join(model['features'])}"]
     for kind, qs in model["objects"].items():
         for q, m in qs.items():
@@ -148,15 +149,14 @@ def plot(cols: dict, model: dict, out: str | Path) -> Path:
                  "features)")
     fig.tight_layout()
     out = Path(out)
-    tmp = out.with_name(f".{out.name}.tmp{os.getpid()}.png")
-    fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    os.replace(tmp, out)
+    try:
+        with atomic_path(out) as tmp:
+            fig.savefig(tmp, dpi=110)
+    finally:
+        plt.close(fig)
     return out
 
 
 def write_model(model: dict, path: str | Path) -> None:
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    tmp.write_text(json.dumps(model, indent=1))
-    os.replace(tmp, path)
+    """Write the model file (strict JSON, atomically)."""
+    write_json(path, model)

@@ -15,16 +15,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mirrorsim.scene import (
+from mirrorsim.model import (
     OCCLUDER_THICKNESS,
     PENCIL_RADIUS,
     TARGET_THICKNESS,
     Beacon,
     Camera,
     Mirror,
+    Point2,
     Scene,
     Target,
 )
+from mirrorsim.report import GroundTruth, ImagePx, ObjectTruth
 from solver.geometry import bearing_deg, segment_crossing, signed_distance, unit
 from solver.sltr import observe
 
@@ -44,9 +46,10 @@ class MirrorImage:
     mirror_offset: float  # reflection point's signed distance from the mirror centre, along yaw
 
 
-def mirror_image(camera: Camera, mirror: Mirror, point) -> MirrorImage:
-    """Virtual image, α, d_total and reflection point of a board point (solver's model)."""
-    obs = observe(camera.position, mirror.center, mirror.yaw, point, strict=False)
+def mirror_image(observer: Point2, mirror: Mirror, point) -> MirrorImage:
+    """Virtual image, α, d_total and reflection point of a board point seen from
+    ``observer`` (the camera's position), by the solver's forward model."""
+    obs = observe(observer, mirror.center, mirror.yaw, point, strict=False)
     r = np.asarray(obs.reflection_point, float)
     return MirrorImage(
         virtual=np.asarray(obs.virtual, float),
@@ -57,6 +60,26 @@ def mirror_image(camera: Camera, mirror: Mirror, point) -> MirrorImage:
         reflection_point=r,
         mirror_offset=float((r - np.asarray(mirror.center, float)) @ unit(mirror.yaw)),
     )
+
+
+def target_facing(observer: Point2, mirror: Mirror, target_position: Point2) -> float:
+    """Bearing of the panel's front normal: it faces its reflection point, i.e. the
+    camera's virtual image, so the camera sees its face square-on in the mirror."""
+    rp = mirror_image(observer, mirror, target_position).reflection_point
+    return math.degrees(math.atan2(rp[1] - target_position[1], rp[0] - target_position[0]))
+
+
+def resolve_pan(observer: Point2, pan: float | str, mirror: Mirror, target_position: Point2,
+                beacon_position: Point2) -> float:
+    """The optical axis's bearing for a pan as written: degrees, or the bearing of the
+    mirror's centre, or of the target's or the first beacon's virtual image."""
+    if pan == "mirror":
+        return float(bearing_deg(observer, mirror.center))
+    if pan == "target":
+        return mirror_image(observer, mirror, target_position).alpha_deg
+    if pan == "beacon":
+        return mirror_image(observer, mirror, beacon_position).alpha_deg
+    return float(pan)
 
 
 def camera_axes(camera: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -97,12 +120,13 @@ class ImageExtent:
 
     @property
     def height_px(self) -> float:
+        """Image height of the axis (px)."""
         return self.v_bottom - self.v_top
 
 
 def image_extent(scene: Scene, obj: Target | Beacon) -> ImageExtent:
     """Projection of the virtual image of the object's upright axis."""
-    v = mirror_image(scene.camera, scene.mirror, obj.position).virtual
+    v = mirror_image(scene.camera.position, scene.mirror, obj.position).virtual
     top = _height(obj)
     u, vv, _ = project(scene.camera, np.array([[v[0], v[1], top], [v[0], v[1], 0.0]]))
     return ImageExtent(float(u[0]), float(vv[0]), float(vv[1]))
@@ -122,6 +146,7 @@ class Visibility:
 
     @property
     def clipped(self) -> bool:
+        """Whether any sampled point is lost."""
         return self.fraction < 1.0
 
 
@@ -163,7 +188,7 @@ def _sample_columns(scene: Scene, obj) -> list[np.ndarray]:
         e0, e1 = obj.ends()
         return [p, e0, e1]
     # a pencil: its silhouette edges across the line of sight
-    r = mirror_image(scene.camera, scene.mirror, p).reflection_point
+    r = mirror_image(scene.camera.position, scene.mirror, p).reflection_point
     side = unit(bearing_deg(p, r) + 90.0) * PENCIL_RADIUS * math.cos(math.pi / 6)
     return [p, p - side, p + side]
 
@@ -174,7 +199,7 @@ def _sample_failure(scene: Scene, walls, point, z: float) -> str:
     side = signed_distance(point, mir.center, mir.yaw)
     if side * signed_distance(cam.position, mir.center, mir.yaw) <= 0:
         return "it stands behind the mirror's line"
-    img = mirror_image(cam, mir, point)
+    img = mirror_image(cam.position, mir, point)
     half_w = mir.size[0] / 2.0
     if abs(img.mirror_offset) > half_w:
         return (f"its reflection point falls {abs(img.mirror_offset) - half_w:.2f} cm beyond "
@@ -198,10 +223,7 @@ def _sample_failure(scene: Scene, walls, point, z: float) -> str:
 
 
 def visibility(scene: Scene, obj: Target | Beacon) -> Visibility:
-    """Sample the object's axis and side edges; say how much reaches the camera and why not.
-
-    The camera's pan must be resolved (``scene.camera.pan_deg``).
-    """
+    """Sample the object's axis and side edges; say how much reaches the camera and why not."""
     walls = _walls(scene, obj)
     heights = np.linspace(0.0, _height(obj), AXIS_SAMPLES)
     cols = _sample_columns(scene, obj)
@@ -240,53 +262,35 @@ def direct_view_fraction(scene: Scene, obj: Target | Beacon) -> float:
     return float(np.mean(free))
 
 
-def ground_truth(scene: Scene) -> dict:
-    """The exact ground truth of a scene as the JSON-ready dict of INTERFACE.md.
-
-    The renderer adds ``bbox_px`` and ``visible_px`` from its object-id pass.
-    """
+def ground_truth(scene: Scene) -> GroundTruth:
+    """The exact ground truth of a scene; the renderer adds what its id pass sees."""
     cam, mir = scene.camera, scene.mirror
 
-    def entry(obj) -> dict:
-        img = mirror_image(cam, mir, obj.position)
+    def entry(obj, **extra) -> ObjectTruth:
+        img = mirror_image(cam.position, mir, obj.position)
         ext = image_extent(scene, obj)
         vis = visibility(scene, obj)
-        return {
-            "position": list(obj.position),
-            "virtual": _r(img.virtual),
-            "alpha_deg": _r(img.alpha_deg),
-            "d_total": _r(img.d_total),
-            "d1": _r(img.d1),
-            "d2": _r(img.d2),
-            "reflection_point": _r(img.reflection_point),
-            "mirror_offset": _r(img.mirror_offset),
-            "image_px": {"u_axis": _r(ext.u_axis), "v_top": _r(ext.v_top),
-                         "v_bottom": _r(ext.v_bottom), "height": _r(ext.height_px)},
-            "visible_fraction": _r(vis.fraction),
-            "clipped": vis.clipped,
-        }
+        return ObjectTruth(
+            position=tuple(obj.position), virtual=_r2(img.virtual), alpha_deg=_r(img.alpha_deg),
+            d_total=_r(img.d_total), d1=_r(img.d1), d2=_r(img.d2),
+            reflection_point=_r2(img.reflection_point), mirror_offset=_r(img.mirror_offset),
+            image_px=ImagePx(_r(ext.u_axis), _r(ext.v_top), _r(ext.v_bottom),
+                             _r(ext.height_px)),
+            visible_fraction=_r(vis.fraction), clipped=vis.clipped, **extra)
 
-    target = {**entry(scene.target), "size": list(scene.target.size),
-              "facing_deg": _r(scene.target.facing_deg)}
-    beacons = [{**entry(b), "height": b.height} for b in scene.beacons]
-    return {
-        "scene": scene.name,
-        "camera": {"position": list(cam.position), "height": cam.height,
-                   "pan_deg": _r(cam.pan_deg), "hfov_deg": cam.hfov,
-                   "resolution": list(cam.resolution), "fx": _r(cam.fx), "fy": _r(cam.fx),
-                   "cx": cam.cx, "cy": cam.cy},
-        "mirror": {"center": list(mir.center), "yaw_deg": _r(float(np.mod(mir.yaw, 180.0))),
-                   "size": list(mir.size)},
-        "target": target,
-        "beacons": beacons,
-        "occluders": [{"start": list(o.start), "end": list(o.end), "height": o.height}
-                      for o in scene.occluders],
-        "direct_view_fraction": _r(direct_view_fraction(scene, scene.target)),
-    }
+    return GroundTruth(
+        scene=scene.name, camera=cam, mirror=mir,
+        target=entry(scene.target, size=tuple(scene.target.size),
+                     facing_deg=_r(scene.target.facing_deg)),
+        beacons=tuple(entry(b, height=b.height) for b in scene.beacons),
+        occluders=scene.occluders,
+        direct_view_fraction=_r(direct_view_fraction(scene, scene.target)))
 
 
-def _r(x, nd: int = 9):
+def _r(x: float) -> float:
     """Round for JSON: 1e-9 cm / deg is far below anything measurable."""
-    if isinstance(x, np.ndarray):
-        return [round(float(v), nd) for v in x]
-    return round(float(x), nd)
+    return round(float(x), 9)
+
+
+def _r2(v) -> tuple[float, float]:
+    return (_r(v[0]), _r(v[1]))

@@ -9,7 +9,8 @@ from dataclasses import replace
 import numpy as np
 
 from mirrorsim import optics
-from mirrorsim.scene import (
+from mirrorsim.errors import BadArgument
+from mirrorsim.model import (
     MIRROR_DEPTH,
     OCCLUDER_THICKNESS,
     PENCIL_RADIUS,
@@ -41,10 +42,24 @@ def plan_scene(scene: Scene, sigma: Sigma | None = None, eps_deg: float = 5.0,
     The target's α and d_total are taken as measured without error; the mirror prior is
     centred on the scene's mirror (its reflection point along the target's ray, its yaw)
     with the given spreads.
+
+    Raises
+    ------
+    BadArgument
+        For a σ, ε or step that is not > 0, ε ≥ 45° or a negative spread.
     """
     sigma = sigma or Sigma()
+    for flag, v in (("--sigma-alpha", sigma.alpha_deg), ("--sigma-d", sigma.d_total_rel),
+                    ("--eps", eps_deg), ("--step", step)):
+        if not v > 0:
+            raise BadArgument(flag, f"{v} must be > 0")
+    for flag, v in (("--yaw-spread", yaw_spread_deg), ("--d1-spread", d1_spread)):
+        if not v >= 0:
+            raise BadArgument(flag, f"{v} must be ≥ 0")
+    if eps_deg >= 45:
+        raise BadArgument("--eps", f"{eps_deg} must be < 45")
     cam, mir = scene.camera, scene.mirror
-    img = optics.mirror_image(cam, mir, scene.target.position)
+    img = optics.mirror_image(cam.position, mir, scene.target.position)
     o = np.asarray(cam.position, float)
     s = mir.size[0]
     geo = paper_placement(img.alpha_deg, img.d_total, s, eps_deg)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import matplotlib
@@ -12,7 +11,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from mirrorsim import optics  # noqa: E402
-from mirrorsim.scene import Scene  # noqa: E402
+from mirrorsim.io import atomic_path  # noqa: E402
+from mirrorsim.model import Scene  # noqa: E402
+from mirrorsim.report import Report  # noqa: E402
 from solver.geometry import unit  # noqa: E402
 
 
@@ -26,17 +27,15 @@ def plot_top_view(scene: Scene, out: str | Path, *, dpi: int = 150) -> Path:
 
 def _save(fig, out: Path, dpi: int) -> Path:
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(f".{out.name}.tmp{os.getpid()}.png")
     try:
-        fig.savefig(tmp, dpi=dpi, bbox_inches="tight")
-        os.replace(tmp, out)
+        with atomic_path(out) as tmp:
+            fig.savefig(tmp, dpi=dpi, bbox_inches="tight")
     finally:
         plt.close(fig)
-        tmp.unlink(missing_ok=True)
     return out
 
 
-def plot_evaluation(scene: Scene, report: dict, out: str | Path, *, dpi: int = 130) -> Path:
+def plot_evaluation(scene: Scene, report: Report, out: str | Path, *, dpi: int = 130) -> Path:
     """Truth against estimate (like the paper's Figs. 7 and 11): the top view with the
     estimated mirror line and target, and a close-up of the target with the solver's
     95 % error ellipse."""
@@ -44,23 +43,24 @@ def plot_evaluation(scene: Scene, report: dict, out: str | Path, *, dpi: int = 1
 
     fig, (ax, zoom) = plt.subplots(1, 2, figsize=(14, 7))
     _draw_top_view(ax, scene)
-    sol, err = report["solution"], report["errors"]
-    p = np.asarray(sol["mirror"]["point"], float)
-    d = unit(sol["mirror"]["yaw_deg"]) * 2 * scene.mirror.size[0]
-    est = np.asarray(sol["target"]["position"], float)
+    sol, err = report.solution, report.errors
+    p = np.asarray(sol.mirror.point, float)
+    d = unit(sol.mirror.yaw_deg) * 2 * scene.mirror.size[0]
+    est = np.asarray(sol.target, float)
     truth = np.asarray(scene.target.position, float)
     for a in (ax, zoom):
         a.plot(*zip(p - d, p + d, strict=True), color="#d62728", ls="--", lw=1.2,
-               label=f"estimated mirror (yaw error {err['mirror_yaw_deg']:.3f}°)")
+               label=f"estimated mirror (yaw error {err.mirror_yaw_deg:.3f}°)")
         a.plot(*est, "x", color="#d62728", ms=10, mew=2,
-               label=f"estimated target (error {err['target_cm']:.3f} cm)")
+               label=f"estimated target (error {err.target_cm:.3f} cm)")
     ax.legend(loc="upper left", fontsize=7, framealpha=0.9)
-    cov = sol.get("covariance", {}).get("target_ellipse95")
-    half = max(1.0, 2.5 * err["target_cm"])
-    if cov:
-        zoom.add_patch(Ellipse(est, 2 * cov["major"], 2 * cov["minor"], angle=cov["angle_deg"],
-                               fill=False, color="#d62728", lw=1.2, label="95 % error ellipse"))
-        half = max(half, 1.3 * cov["major"])
+    ellipse = sol.ellipse95()
+    half = max(1.0, 2.5 * err.target_cm)
+    if ellipse is not None:
+        major, minor, angle = ellipse
+        zoom.add_patch(Ellipse(est, 2 * major, 2 * minor, angle=angle, fill=False,
+                               color="#d62728", lw=1.2, label="95 % error ellipse"))
+        half = max(half, 1.3 * major)
     zoom.plot(*truth, "*", color="#c0392b", ms=16, mec="k", label="true target")
     t0, t1 = scene.target.ends()
     zoom.plot(*zip(t0, t1, strict=True), color="#c0392b", lw=3, alpha=0.4)
@@ -107,7 +107,7 @@ def _draw_top_view(ax, scene: Scene) -> None:
     objects += [(f"beacon {i}" if len(scene.beacons) > 1 else "beacon", b, "#d4a017", "o", 7)
                 for i, b in enumerate(scene.beacons)]
     for label, obj, colour, marker, ms in objects:
-        img = optics.mirror_image(cam, scene.mirror, obj.position)
+        img = optics.mirror_image(cam.position, scene.mirror, obj.position)
         p, v, r = np.asarray(obj.position, float), img.virtual, img.reflection_point
         ax.plot(*zip(c, r, p, strict=True), color=colour, lw=1.2, zorder=3)
         ax.plot(*zip(r, v, strict=True), color=colour, lw=0.9, ls="--", zorder=3)
@@ -120,7 +120,8 @@ def _draw_top_view(ax, scene: Scene) -> None:
     ax.plot(*zip(t0, t1, strict=True), color="#c0392b", lw=3, zorder=5)
 
     pts = [np.array([0, 0]), np.array([sx, sy])]
-    pts += [optics.mirror_image(cam, scene.mirror, o.position).virtual for _, o, *_ in objects]
+    pts += [optics.mirror_image(cam.position, scene.mirror, o.position).virtual
+            for _, o, *_ in objects]
     pts = np.array(pts)
     lo, hi = pts.min(axis=0) - 5, pts.max(axis=0) + 5
     ax.set_xlim(lo[0], hi[0])

@@ -16,7 +16,10 @@ import numpy as np
 import yaml
 
 from mirrorsim import optics
-from mirrorsim.scene import Scene, SceneError, scene_from_dict
+from mirrorsim.errors import RunFailed, SceneError
+from mirrorsim.model import Scene
+from mirrorsim.scenefile import read_yaml, scene_from_dict
+from solver.reader import Reader, show
 
 DEFAULT_SPEC = Path(__file__).resolve().parents[1] / "scenes" / "dataset_spec.yaml"
 
@@ -24,38 +27,34 @@ DEFAULT_SPEC = Path(__file__).resolve().parents[1] / "scenes" / "dataset_spec.ya
 def load_spec(path: str | Path | None = None) -> dict:
     """Read a spec file (default: the bundled one); raise SceneError on a bad one."""
     path = Path(path) if path else DEFAULT_SPEC
-    try:
-        spec = yaml.safe_load(path.read_text())
-    except FileNotFoundError:
-        raise SceneError(path, "", "no such file") from None
-    except yaml.YAMLError as exc:
-        raise SceneError(path, "", f"malformed YAML: {str(exc).splitlines()[0]}") from None
-    required = {"board", "camera", "mirror", "target", "beacon", "occluder"}
-    if not isinstance(spec, dict):
-        raise SceneError(path, "(top level)", "expected a mapping")
-    for k in sorted(required - set(spec)):
-        raise SceneError(path, k, "missing required key")
+    spec = read_yaml(path)
+    Reader(path, SceneError).mapping(
+        spec, "", {"board", "camera", "mirror", "target", "beacon", "occluder"},
+        {"render", "max_tries"})
     # a trial draw finds range errors (wrong types, lo > hi) with their key
     _draw(spec, np.random.default_rng(0), path)
     return spec
 
 
-def _value(spec: dict, key: str, rng: np.random.Generator, where) -> Any:
-    v = spec[key]
-    if isinstance(v, list) and len(v) == 2 and all(isinstance(x, int | float) and
-                                                   not isinstance(x, bool) for x in v):
-        lo, hi = float(v[0]), float(v[1])
+def _value(spec: dict, block: str, key: str, rng: np.random.Generator, where) -> Any:
+    r = Reader(where, SceneError)
+    if not isinstance(spec[block], dict):
+        raise r.fail(block, f"expected a mapping, got {show(spec[block])}")
+    v = spec[block].get(key)
+    if isinstance(v, list) and len(v) == 2:
+        lo = r.number(v[0], f"{block}.{key}[0]")
+        hi = r.number(v[1], f"{block}.{key}[1]")
         if lo > hi:
-            raise SceneError(where, key, f"{v}: the range's low end exceeds its high end")
+            raise r.fail(f"{block}.{key}", f"{v}: the range's low end exceeds its high end")
         return float(rng.uniform(lo, hi))
-    if isinstance(v, int | float) and not isinstance(v, bool):
-        return float(v)
-    raise SceneError(where, key, f"expected a number or [lo, hi], got {v!r}")
+    if v is None:
+        raise r.fail(f"{block}.{key}", "missing required key (a number or [lo, hi])")
+    return r.number(v, f"{block}.{key}")
 
 
 def _draw(spec: dict, rng: np.random.Generator, where="<spec>") -> dict:
     """One candidate scene dict (not yet validated)."""
-    g = lambda block, key: _value(spec[block], key, rng, where)  # noqa: E731
+    g = lambda block, key: _value(spec, block, key, rng, where)  # noqa: E731
     cam = {"position": [g("camera", "x"), g("camera", "y")], "height": g("camera", "height"),
            "hfov": g("camera", "hfov"),
            "resolution": list(spec["camera"].get("resolution", [1920, 1088])),
@@ -90,7 +89,7 @@ def sample_scene(spec: dict, rng: int | np.random.Generator | None, name: str) -
 
     Raises
     ------
-    RuntimeError
+    RunFailed
         If ``max_tries`` draws give none (the ranges are too tight).
     """
     rng = np.random.default_rng(rng)
@@ -105,7 +104,7 @@ def sample_scene(spec: dict, rng: int | np.random.Generator | None, name: str) -
             continue
         if all(optics.visibility(s, o).fraction == 1.0 for o in (s.target, *s.beacons)):
             return s
-    raise RuntimeError(f"no usable scene in {spec.get('max_tries', 5000)} draws: widen the "
+    raise RunFailed(f"no usable scene in {spec.get('max_tries', 5000)} draws: widen the "
                        "spec's ranges")
 
 

@@ -1,0 +1,1 @@
+"""SLTR mathematics: pure numpy/scipy; imports nothing of mirrorsim, Mitsuba or OpenCV."""

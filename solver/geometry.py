@@ -126,3 +126,9 @@ def segment_crossing(
     if 0.0 <= u <= 1.0 and 0.0 <= w <= 1.0:
         return u
     return None
+
+
+def yaw_difference(a_deg: ArrayLike, b_deg: ArrayLike) -> np.ndarray | float:
+    """|a − b| between two line directions, in [0, 90]: lines have no sense of direction."""
+    d = np.abs((np.asarray(a_deg, float) - np.asarray(b_deg, float) + 90.0) % 180.0 - 90.0)
+    return float(d) if d.ndim == 0 else d

@@ -11,8 +11,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from solver.geometry import line_normal, unit
-from solver.sltr import closed_form_unchecked, observe
+from solver.geometry import line_normal, unit, yaw_difference
+from solver.sltr import Sigma, closed_form_unchecked, observe
 
 # v(α) [deg], v(d_total) [distance units], RMSE(ref), RMSE(tar): the paper's Table 1
 PAPER_TABLE1 = (
@@ -76,7 +76,7 @@ def run_row(sigma_alpha_deg: float, sigma_d: float, iterations: int = 200,
     ref_err = np.linalg.norm(est["target_reflection_point"][ok] - g["target_reflection_point"],
                              axis=1)
     tar_err = np.linalg.norm(est["target"][ok] - g["target"], axis=1)
-    yaw_err = (est["yaw_deg"][ok] - g["yaw_deg"] + 90.0) % 180.0 - 90.0
+    yaw_err = yaw_difference(est["yaw_deg"][ok], g["yaw_deg"])
     return {"rmse_ref": float(np.sqrt(np.mean(ref_err ** 2))),
             "rmse_tar": float(np.sqrt(np.mean(tar_err ** 2))),
             "rmse_yaw_deg": float(np.sqrt(np.mean(yaw_err ** 2))),
@@ -99,3 +99,14 @@ def table1(iterations: int = 200, geometry: Table1Geometry | None = None,
                          "mirror_yaw_deg": float(lay["yaw_deg"]),
                          "target": lay["target"].tolist(), "beacon": lay["beacon"].tolist()},
             "iterations": iterations, "rows": out}
+
+
+def table_rows(sigmas: list[tuple[float, float]] | None = None,
+               relative: Sigma | None = None, d_total: float = 5.0) -> tuple:
+    """The rows to run: the paper's (or ``sigmas``: (σ_α deg, σ_d) pairs without paper
+    figures), plus one for a relative σ (an error model's) at ``d_total``."""
+    nan = float("nan")
+    rows = PAPER_TABLE1 if not sigmas else tuple((a, d, nan, nan) for a, d in sigmas)
+    if relative is not None:
+        rows = (*rows, (relative.alpha_deg, relative.d_total_rel * d_total, nan, nan))
+    return rows

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from solver.geometry import line_normal, wrap_bearing
-from solver.sltr import Sigma
+from solver.sltr import Sigma, observe
 
 ROUGHEN = (0.02, 0.02)  # jitter of the static mirror (deg, cm) so resampling keeps diversity
 
@@ -32,13 +32,11 @@ class PFParams:
 
 
 def _predict_obs(particles: np.ndarray, observer: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """α and d of each particle's beacon in each particle's mirror."""
-    b, th, rho = particles[:, :2], particles[:, 2], particles[:, 3]
-    n = line_normal(th)
-    s = np.sum(b * n, axis=1) - rho
-    v = b - 2.0 * s[:, None] * n
-    rel = v - observer
-    return np.degrees(np.arctan2(rel[:, 1], rel[:, 0])), np.hypot(rel[:, 0], rel[:, 1])
+    """α and d of each particle's beacon in each particle's mirror (the solver's
+    forward model, :func:`solver.sltr.observe`, on the particles' lines n·x = ρ)."""
+    th, rho = particles[:, 2], particles[:, 3]
+    obs = observe(observer, rho[:, None] * line_normal(th), th, particles[:, :2], strict=False)
+    return np.asarray(obs.alpha_deg), np.asarray(obs.d_total)
 
 
 def pf_step(particles: np.ndarray, weights: np.ndarray, control: np.ndarray,
@@ -102,6 +100,7 @@ class MovingBeaconFilter:
         self.weights = np.full(n, 1.0 / n)
 
     def step(self, control, observation) -> None:
+        """Move by ``control`` and weigh by ``observation`` (α, d_total)."""
         self.particles, self.weights = pf_step(self.particles, self.weights, control,
                                                observation, self.observer, self.params,
                                                self.rng)

@@ -152,6 +152,7 @@ def path_points(kind: str, origin, alpha_deg: float, a: float, b: float, n: int)
 
 
 def polyline_length(points: np.ndarray) -> float:
+    """Length of the path through ``points`` in order."""
     return float(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1)))
 
 
@@ -208,6 +209,7 @@ class MirrorPrior:
     n: int = 5
 
     def poses(self, observer, target_alpha_deg: float) -> list[tuple[np.ndarray, float]]:
+        """Mirror poses (a point on the line, yaw) spread around the prior's centre."""
         out = []
         for dd in np.linspace(-self.d1_spread, self.d1_spread, self.n):
             for dy in np.linspace(-self.yaw_spread_deg, self.yaw_spread_deg, self.n):

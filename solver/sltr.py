@@ -25,14 +25,14 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from solver.errors import SolverError
 from solver.geometry import line_normal, reflect, unit, wrap_bearing, wrap_yaw
 
 ArrayLike = np.typing.ArrayLike
 EPS = 1e-9
 
-
-class SolverError(ValueError):
-    """Input the method cannot solve (degenerate geometry or impossible measurements)."""
+__all__ = ["SolverError", "MirrorLine", "Observation", "Solution", "BeaconMeasurement",
+           "Sigma", "observe", "locate", "solve_single", "solve_lsq", "solve_measurements"]
 
 
 @dataclass(frozen=True)
@@ -49,6 +49,7 @@ class MirrorLine:
 
     @classmethod
     def from_params(cls, theta_deg: float, rho: float) -> MirrorLine:
+        """The line n(θ)·x = ρ."""
         n = line_normal(theta_deg)
         return cls(float(wrap_yaw(theta_deg)), rho * n)
 
@@ -127,6 +128,7 @@ class Solution:
 
     @property
     def target_covariance(self) -> np.ndarray | None:
+        """The target's 2×2 covariance block, if σ's were given."""
         return None if self.covariance is None else self.covariance[2:, 2:]
 
     def ellipse95(self) -> tuple[float, float, float] | None:
@@ -136,6 +138,7 @@ class Solution:
         return None if cov is None else error_ellipse(cov, 0.95)
 
     def to_json(self) -> dict:
+        """The solution document of INTERFACE.md."""
         out = {
             "mirror": {"yaw_deg": self.mirror.yaw_deg, "point": self.mirror.point.tolist()},
             "target": {"position": self.target.tolist(),
@@ -152,6 +155,17 @@ class Solution:
                 "target_ellipse95": {"major": major, "minor": minor, "angle_deg": angle},
             }
         return out
+
+    @classmethod
+    def from_json(cls, d: dict) -> Solution:
+        """Inverse of :meth:`to_json`."""
+        cov = d.get("covariance", {}).get("params")
+        return cls(mirror=MirrorLine(d["mirror"]["yaw_deg"], np.asarray(d["mirror"]["point"])),
+                   target=np.asarray(d["target"]["position"], float),
+                   target_reflection_point=np.asarray(d["target"]["reflection_point"], float),
+                   beacon_reflection_points=np.asarray(d["beacon_reflection_points"], float),
+                   covariance=None if cov is None else np.asarray(cov, float),
+                   method=d["method"])
 
 
 def error_ellipse(cov: ArrayLike, level: float = 0.95) -> tuple[float, float, float]:
@@ -261,6 +275,8 @@ def closed_form_unchecked(observer, beacon, beacon_alpha_deg, beacon_d_total,
 
 @dataclass(frozen=True)
 class BeaconMeasurement:
+    """A beacon's known position and its image's measured α and d_total."""
+
     position: tuple[float, float]
     alpha_deg: float
     d_total: float

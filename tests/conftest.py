@@ -8,7 +8,8 @@ from pathlib import Path
 import pytest
 import yaml
 
-from mirrorsim.scene import Scene, scene_from_dict
+from mirrorsim.model import Scene
+from mirrorsim.scenefile import scene_from_dict
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENES = ROOT / "scenes"
@@ -32,3 +33,27 @@ def _private_cache(tmp_path_factory, monkeypatch):
     """Backend probe answers go to a per-session folder, never the user's cache."""
     cache = tmp_path_factory.getbasetemp() / "mirrorsim-cache"
     monkeypatch.setenv("MIRRORSIM_CACHE_DIR", str(cache))
+
+
+@pytest.fixture(scope="session")
+def fast_variant() -> str:
+    """The Mitsuba variant the renderer's tests run on: the fastest that works here
+    (``cuda_ad_rgb``, else ``llvm_ad_rgb``, else ``scalar_rgb``), named in their output."""
+    from mirrorsim.backend import choose_variant
+
+    return choose_variant("auto")
+
+
+@pytest.fixture(scope="session")
+def jit_variant(fast_variant) -> str:
+    """A JIT variant (LLVM or CUDA); skips where only scalar_rgb works."""
+    if fast_variant == "scalar_rgb":
+        pytest.skip("no JIT backend here")
+    return fast_variant
+
+
+def pytest_report_header(config) -> str:  # noqa: ARG001
+    """Say which Mitsuba backend the rendering tests run on."""
+    from mirrorsim.backend import choose_variant
+
+    return f"mirrorsim rendering tests run on: {choose_variant('auto')} (fast_variant fixture)"

@@ -15,30 +15,34 @@ import pytest
 from mirrorsim import errormodel
 from mirrorsim.cli import main
 from mirrorsim.dataset import collect_rows, run_dataset
-from mirrorsim.scene import load_scene
+from mirrorsim.scenefile import load_scene
 
 SPEC = Path(__file__).parent / "data" / "tiny_spec.yaml"
 VOLATILE = ("seconds_total", "seconds_sample", "traceback")
 
 
 def _stable(rows):
+    """Rows without their timings; every row must be a success (identical failures
+    would otherwise compare equal)."""
+    assert rows and all(r["error"] == "" for r in rows), [r.get("error") for r in rows]
     return [{k: v for k, v in r.items() if k not in VOLATILE} for r in rows]
 
 
 @pytest.fixture(scope="module")
 def one_worker(tmp_path_factory):
     out = tmp_path_factory.mktemp("ds") / "a"
-    res = run_dataset(3, 7, out, workers=1, spec_path=SPEC, progress=False)
+    res = run_dataset(3, 3, out, workers=1, spec_path=SPEC, progress=False)
     return out, res
 
 
 def test_tiny_dataset_end_to_end(one_worker):
     out, res = one_worker
-    assert res["rows"] == 3 and res["computed"] == 3
+    assert res["rows"] == 3 and res["computed"] == 3 and res["failed"] == 0
     import pyarrow.parquet as pq
 
     table = pq.read_table(out / "dataset.parquet").to_pydict()
     assert table["index"] == [0, 1, 2]
+    assert table["error"] == ["", "", ""]
     for col in ("target_alpha_err", "beacon_d_rel_err", "err_target_cm", "variant", "spp",
                 "mirror_yaw_deg", "target_incidence_deg"):
         assert col in table
@@ -52,14 +56,14 @@ def test_tiny_dataset_end_to_end(one_worker):
 def test_same_rows_whatever_the_workers(one_worker, tmp_path):
     out, _ = one_worker
     # recycling every scene exercises the replacement of worker processes too
-    run_dataset(3, 7, tmp_path / "b", workers=2, spec_path=SPEC, progress=False,
+    run_dataset(3, 3, tmp_path / "b", workers=2, spec_path=SPEC, progress=False,
                 recycle_every=1)
     assert _stable(collect_rows(tmp_path / "b", 3)) == _stable(collect_rows(out, 3))
 
 
 def test_existing_folder_needs_resume(one_worker, capsys):
     out, _ = one_worker
-    assert main(["dataset", "--n", "3", "--seed", "7", "--out", str(out), "--spec", str(SPEC),
+    assert main(["dataset", "--n", "3", "--seed", "3", "--out", str(out), "--spec", str(SPEC),
                  "--quiet"]) == 2
     assert "--resume" in capsys.readouterr().err
     assert main(["dataset", "--n", "3", "--seed", "8", "--out", str(out), "--spec", str(SPEC),
@@ -71,7 +75,7 @@ def test_resume_after_kill(one_worker, tmp_path):
     none duplicated, and the rows are those of an uninterrupted run."""
     out, _ = one_worker
     dst = tmp_path / "k"
-    cmd = [sys.executable, "-m", "mirrorsim.cli", "dataset", "--n", "3", "--seed", "7",
+    cmd = [sys.executable, "-m", "mirrorsim", "dataset", "--n", "3", "--seed", "3",
            "--out", str(dst), "--spec", str(SPEC), "--workers", "2", "--quiet"]
     proc = subprocess.Popen(cmd, start_new_session=True)
     deadline = time.time() + 300
@@ -89,7 +93,7 @@ def test_resume_after_kill(one_worker, tmp_path):
 def test_dask_local_cluster_gives_the_same_rows(one_worker, tmp_path):
     pytest.importorskip("dask.distributed")
     out, _ = one_worker
-    run_dataset(2, 7, tmp_path / "d", executor="dask", spec_path=SPEC, progress=False)
+    run_dataset(2, 3, tmp_path / "d", executor="dask", spec_path=SPEC, progress=False)
     assert _stable(collect_rows(tmp_path / "d", 2)) == _stable(collect_rows(out, 3)[:2])
 
 
@@ -153,14 +157,14 @@ def test_bad_spec_is_refused_with_its_key(tmp_path, capsys):
     assert main(["dataset", "--n", "1", "--seed", "0", "--out", str(tmp_path / "o"),
                  "--spec", str(bad), "--quiet"]) == 2
     err = capsys.readouterr().err
-    assert "yaw" in err and "low end" in err and not (tmp_path / "o").exists()
+    assert "mirror.yaw" in err and "low end" in err and not (tmp_path / "o").exists()
 
 
 def test_a_killed_worker_is_replaced(one_worker, tmp_path):
     """kill -9 one worker process mid-run: the run itself carries on and completes."""
     out, _ = one_worker
     dst = tmp_path / "w"
-    cmd = [sys.executable, "-m", "mirrorsim.cli", "dataset", "--n", "3", "--seed", "7",
+    cmd = [sys.executable, "-m", "mirrorsim", "dataset", "--n", "3", "--seed", "3",
            "--out", str(dst), "--spec", str(SPEC), "--workers", "2", "--quiet"]
     proc = subprocess.Popen(cmd, start_new_session=True, stderr=subprocess.PIPE, text=True)
     deadline = time.time() + 120

@@ -7,7 +7,8 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from mirrorsim import optics
-from mirrorsim.scene import Camera, Mirror, scene_from_dict
+from mirrorsim.model import Camera, Mirror
+from mirrorsim.scenefile import scene_from_dict
 from solver.geometry import signed_distance, unit
 
 from .conftest import scene_dict
@@ -27,7 +28,7 @@ def test_virtual_image_properties(cx, cy, mx, my, yaw, px, py):
     sc = signed_distance((cx, cy), (mx, my), yaw)
     sp = signed_distance((px, py), (mx, my), yaw)
     assume(abs(sc) > 0.5 and abs(sp) > 0.5 and sc * sp > 0)  # both in front of the mirror
-    img = optics.mirror_image(cam, mirror, (px, py))
+    img = optics.mirror_image(cam.position, mirror, (px, py))
     # the reflection point lies on the mirror line
     assert abs(signed_distance(img.reflection_point, (mx, my), yaw)) < 1e-9
     # |camera → virtual| = d1 + d2 (paper eq 4)
@@ -48,7 +49,7 @@ def test_virtual_image_properties(cx, cy, mx, my, yaw, px, py):
 def test_ground_truth_matches_interface_figures():
     """INTERFACE.md quotes exp1's geometry: alpha and d_total of target and beacon."""
     s = scene_from_dict(scene_dict("exp1"))
-    gt = optics.ground_truth(s)
+    gt = optics.ground_truth(s).to_json()
     assert gt["target"]["alpha_deg"] == pytest.approx(66.678, abs=1e-3)
     assert gt["target"]["d_total"] == pytest.approx(98.523, abs=1e-3)
     assert gt["beacons"][0]["alpha_deg"] == pytest.approx(69.499, abs=1e-3)
@@ -84,7 +85,7 @@ def test_vertical_clipping_by_the_mirror_top(height):
     mirror_h = d["mirror"]["size"][1]
     target_h = d["target"]["size"][1]
     s = scene_from_dict(d)
-    img = optics.mirror_image(s.camera, s.mirror, s.target.position)
+    img = optics.mirror_image(s.camera.position, s.mirror, s.target.position)
     t = img.d1 / img.d_total
     z_cross = height + t * (target_h - height)
     vis = optics.visibility(s, s.target)

@@ -17,7 +17,7 @@ from solver.placement import (
     polyline_length,
     region_area,
 )
-from solver.sltr import Sigma, observe
+from solver.sltr import BeaconMeasurement, Sigma, observe, solve_lsq, solve_measurements
 
 
 def test_paper_step_and_width_by_slopes():
@@ -57,18 +57,30 @@ def test_path_lengths_match_the_polylines():
             assert polyline_length(pts) == pytest.approx(eq[kind], rel=1e-12), kind
 
 
+@pytest.mark.parametrize("a, b, n", [(1.0, 2.0, 10), (2.9, 4.6, 7), (3.0, 1.0, 4)])
+def test_path_length_formulas_are_the_paths_lengths(a, b, n):
+    """Eqs 19–21 against the length of the drawn paths (an independent computation)."""
+    L = path_lengths(a, b, n)
+    for kind in ("linear", "rectangular", "sawtooth"):
+        pts = path_points(kind, (40.0, 40.0), 63.0, a, b, n)
+        assert L[kind] == pytest.approx(polyline_length(pts), rel=1e-12)
+
+
 def test_rectangular_shortest_claim_holds_for_b_greater_than_a_only():
-    n = 10
-    for a, b in [(1.0, 2.0), (1.0, 5.0), (2.9, 4.6)]:
-        L = path_lengths(a, b, n)
-        assert L["rectangular"] < L["sawtooth"] and L["rectangular"] < L["linear"]
-    L = path_lengths(3.0, 1.0, n)  # b < a: the linear path is shorter
-    assert L["linear"] < L["rectangular"]
-    # the paper's chain a + b < sqrt(a² + b²) is never true for positive a, b
-    assert all(a + b > math.hypot(a, b) for a, b in [(1, 2), (0.1, 5), (3, 3)])
-    # and saw-tooth < linear fails for b only slightly above a
-    L = path_lengths(1.0, 1.1, n)
-    assert L["sawtooth"] > L["linear"]
+    # values worked by hand: a = 1, b = 2, n = 10: linear 1 + 18·2 = 37,
+    # rectangular 1 + 9·3 = 28, saw-tooth 1 + 9·(1 + √5) = 30.125
+    L = path_lengths(1.0, 2.0, 10)
+    assert L["linear"] == pytest.approx(37.0)
+    assert L["rectangular"] == pytest.approx(28.0)
+    assert L["sawtooth"] == pytest.approx(1 + 9 * (1 + math.sqrt(5)))
+    # b < a: the linear path is shorter (a = 3, b = 1, n = 10: 21 vs 39)
+    L = path_lengths(3.0, 1.0, 10)
+    assert (L["linear"], L["rectangular"]) == pytest.approx((21.0, 39.0))
+    # saw-tooth < linear fails for b only slightly above a (a = 1, b = 1.1, n = 10:
+    # 1 + 9·(1 + 1.487) = 23.38 > 1 + 18·1.1 = 20.8)
+    L = path_lengths(1.0, 1.1, 10)
+    assert L["sawtooth"] == pytest.approx(1 + 9 * (1 + math.hypot(1, 1.1)))
+    assert L["sawtooth"] > L["linear"] == pytest.approx(20.8)
 
 
 def test_algorithm1_beacon_count_and_sides():
@@ -97,6 +109,15 @@ def test_expected_error_matches_least_squares_and_best_is_much_better():
     err, seen = expected_target_error(o, ot.alpha_deg, ot.d_total, np.array([[17.0, 33.5]]),
                                       [(m, yaw)], sig, 18.2, min_depth=0.0)
     assert seen[0] == 1.0 and err[0] == pytest.approx(2.4, abs=0.1)
+    # the same figure from the solver's own covariance (least squares with σ's) on the
+    # exact measurements of this pose: sqrt(trace) of the target block
+    ob = observe(o, m, yaw, (17.0, 33.5))
+    sol = solve_measurements(o, [BeaconMeasurement((17.0, 33.5), ob.alpha_deg, ob.d_total)],
+                             [(ot.alpha_deg, ot.d_total)], sig)
+    assert err[0] == pytest.approx(np.sqrt(np.trace(sol.target_covariance)), rel=1e-6)
+    lsq = solve_lsq(o, [BeaconMeasurement((17.0, 33.5), ob.alpha_deg, ob.d_total)],
+                    [(ot.alpha_deg, ot.d_total)], sig)
+    assert err[0] == pytest.approx(np.sqrt(np.trace(lsq.target_covariance)), rel=1e-4)
     best = best_beacon(o, ot.alpha_deg, ot.d_total, [(m, yaw)], sig, 18.2, (80, 80), step=1.0)
     assert best["rmse"] < 0.3
     # with a prior of mirror poses the best position is still an order of magnitude better

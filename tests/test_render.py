@@ -6,8 +6,10 @@ import numpy as np
 import pytest
 
 from mirrorsim import optics
-from mirrorsim.render import BEACON_LABEL, IN_MIRROR, MIRROR_LABEL, TARGET_LABEL, render_scene
-from mirrorsim.scene import load_scene
+from mirrorsim.frames import render_to_files
+from mirrorsim.mitsuba_scene import BEACON_LABEL, MIRROR_LABEL, TARGET_LABEL
+from mirrorsim.render import IN_MIRROR
+from mirrorsim.scenefile import load_scene, scene_from_dict
 
 from .conftest import SCENES, small_scene
 
@@ -19,9 +21,10 @@ def _read_png(path):
 
 
 @pytest.fixture(scope="module")
-def default_small(tmp_path_factory):
+def default_small(tmp_path_factory, fast_variant):
     scene = small_scene("default", 480, 272, spp=4)
-    res = render_scene(scene, tmp_path_factory.mktemp("r"), progress=False)
+    res = render_to_files(scene, tmp_path_factory.mktemp("r"), variant=fast_variant,
+                          progress=False)
     return scene, res
 
 
@@ -49,9 +52,11 @@ def test_id_pass_places_image_where_optics_projects_it(default_small, which):
     # pixel centres inside the projected extent: first row ≥ top, last row ≤ foot (+1 px)
     assert ext.v_top - 1.0 <= vs.min() <= ext.v_top + 1.0
     assert ext.v_bottom - 1.0 <= vs.max() <= ext.v_bottom + 1.0
-    entry = res.truth["target"] if which == "target" else res.truth["beacons"][0]
-    assert entry["visible_px"] == len(us)
-    assert entry["bbox_px"] == [us.min(), vs.min(), us.max(), vs.max()]
+    entry = res.truth.target if which == "target" else res.truth.beacons[0]
+    assert entry.visible_px == len(us)
+    assert entry.bbox_px == (us.min(), vs.min(), us.max(), vs.max())
+    on_disk = json.loads(res.truth_json.read_text())
+    assert on_disk == res.truth.to_json()
 
 
 def test_mirror_really_reflects(default_small):
@@ -82,27 +87,25 @@ def test_mirror_really_reflects(default_small):
     assert (ids == MIRROR_LABEL).sum() == 0  # glass pixels carry the IN_MIRROR offset
 
 
-def test_same_seed_same_bytes_other_seed_differs(tmp_path):
+def test_same_seed_same_bytes_other_seed_differs(tmp_path, fast_variant):
     scene = small_scene("exp1", 160, 92, spp=2)
-    a = render_scene(scene, tmp_path / "a", progress=False)
-    b = render_scene(scene, tmp_path / "b", progress=False)
-    c = render_scene(scene, tmp_path / "c", seed=7, progress=False)
+    a = render_to_files(scene, tmp_path / "a", variant=fast_variant, progress=False)
+    b = render_to_files(scene, tmp_path / "b", variant=fast_variant, progress=False)
+    c = render_to_files(scene, tmp_path / "c", seed=7, variant=fast_variant, progress=False)
     assert a.png.read_bytes() == b.png.read_bytes()
     assert a.png.read_bytes() != c.png.read_bytes()
     assert a.ids_png.read_bytes() == c.ids_png.read_bytes()  # geometry, not sampling
 
 
-def test_scalar_and_jit_id_passes_agree(tmp_path):
-    from mirrorsim.backend import choose_variant
-
-    if choose_variant("auto") == "scalar_rgb":
-        pytest.skip("no JIT backend here to compare with")
+def test_scalar_and_jit_id_passes_agree(tmp_path, jit_variant):
     scene = small_scene("exp3", 128, 74, spp=1)
-    jit = render_scene(scene, tmp_path / "jit", progress=False)
-    scalar = render_scene(scene, tmp_path / "scalar", variant="scalar", progress=False)
+    jit = render_to_files(scene, tmp_path / "jit", variant=jit_variant, progress=False)
+    scalar = render_to_files(scene, tmp_path / "scalar", variant="scalar", progress=False)
+    assert jit.truth.render.variant == jit_variant
+    assert scalar.truth.render.variant == "scalar_rgb"
     a, b = _read_png(jit.ids_png), _read_png(scalar.ids_png)
     assert (a == b).mean() > 0.995
-    assert scalar.truth["target"]["visible_px"] > 0
+    assert scalar.truth.target.visible_px > 0
     # and the frames look alike (same scene, different samplers)
     fa, fb = _read_png(jit.png).astype(float), _read_png(scalar.png).astype(float)
     assert abs(fa.mean() - fb.mean()) < 0.05 * fa.mean()
@@ -111,52 +114,55 @@ def test_scalar_and_jit_id_passes_agree(tmp_path):
 def test_refuses_bad_spp(tmp_path):
     scene = small_scene("default", 64, 36)
     with pytest.raises(ValueError, match="spp"):
-        render_scene(scene, tmp_path, spp=0, progress=False)
+        render_to_files(scene, tmp_path, spp=0, progress=False)
     assert not any(tmp_path.iterdir())
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["exp1", "default"])
-def test_full_size_frame(name, tmp_path):
+def test_full_size_frame(name, tmp_path, fast_variant):
     scene = load_scene(SCENES / f"{name}.yaml")
-    res = render_scene(scene, tmp_path, progress=False)
+    res = render_to_files(scene, tmp_path, variant=fast_variant, progress=False)
     img = _read_png(res.png)
     assert img.shape == (1088, 1920, 3)
     ids = _read_png(res.ids_png)
-    for entry, obj, label in [(res.truth["target"], scene.target, IN_MIRROR + TARGET_LABEL),
-                              (res.truth["beacons"][0], scene.beacons[0],
+    for entry, obj, label in [(res.truth.target, scene.target, IN_MIRROR + TARGET_LABEL),
+                              (res.truth.beacons[0], scene.beacons[0],
                                IN_MIRROR + BEACON_LABEL)]:
-        exact = optics.mirror_image(scene.camera, scene.mirror, obj.position)
-        assert entry["alpha_deg"] == pytest.approx(exact.alpha_deg, abs=1e-6)
-        assert entry["d_total"] == pytest.approx(exact.d_total, abs=1e-6)
+        exact = optics.mirror_image(scene.camera.position, scene.mirror, obj.position)
+        assert entry.alpha_deg == pytest.approx(exact.alpha_deg, abs=1e-6)
+        assert entry.d_total == pytest.approx(exact.d_total, abs=1e-6)
         ext = optics.image_extent(scene, obj)
         vs, us = np.nonzero(ids == label)
-        assert entry["visible_px"] > 500
+        assert entry.visible_px > 500
         # the pencil's graphite point is narrower than a pixel for its last ~1.5 px, so
         # pixel-centre rays first meet it a little below the apex
         top_slack = 2.0 if obj in scene.beacons else 1.0
         assert ext.v_top - 1 <= vs.min() <= ext.v_top + top_slack
         assert ext.v_bottom - 1 <= vs.max() <= ext.v_bottom + 1
-        if not entry["clipped"]:
+        if not entry.clipped:
             assert abs(us.mean() - ext.u_axis) <= 1.0
 
 
-def test_several_beacons_each_get_their_label(tmp_path):
+def test_several_beacons_each_get_their_label(tmp_path, fast_variant):
     import copy
-
-    from mirrorsim.scene import scene_from_dict
 
     from .conftest import scene_dict
 
     d = copy.deepcopy(scene_dict("default"))
-    d["camera"]["resolution"] = [320, 182]
+    d["camera"]["resolution"] = [640, 363]
     d["beacons"] = [d.pop("beacon"), {"position": [28, 57], "height": 5.0}]
     scene = scene_from_dict(d)
-    res = render_scene(scene, tmp_path, spp=1, progress=False)
+    res = render_to_files(scene, tmp_path, spp=1, variant=fast_variant, progress=False)
     ids = _read_png(res.ids_png)
     for i, b in enumerate(scene.beacons):
-        entry = res.truth["beacons"][i]
-        assert entry["height"] == b.height
-        assert entry["visible_px"] == (ids == IN_MIRROR + BEACON_LABEL + i).sum() > 0
+        vs, us = np.nonzero(ids == IN_MIRROR + BEACON_LABEL + i)
+        assert res.truth.beacons[i].visible_px == len(us) > 0
+        # each label sits where the exact projection puts that beacon's image (the two
+        # images are ~20 px apart here, so a swapped label fails), its foot and top too
+        ext = optics.image_extent(scene, b)
+        assert abs(us.mean() - ext.u_axis) <= 1.0
+        assert ext.v_bottom - 1 <= vs.max() <= ext.v_bottom + 1
+        assert ext.v_top - 1 <= vs.min() <= ext.v_top + 2
     # the occluder's label comes after the beacons'
     assert (ids == BEACON_LABEL + 2).sum() > 0

@@ -1,0 +1,76 @@
+"""The command registry and the options several commands share (one wording each)."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+from mirrorsim.errors import BadArgument
+from mirrorsim.model import Scene
+from mirrorsim.scenefile import MAX_SPP, load_scene
+
+VARIANT_CHOICES = ["auto", "cuda", "llvm", "scalar"]
+
+Options = Callable[[argparse.ArgumentParser], None]
+Handler = Callable[[argparse.Namespace], int]
+COMMANDS: dict[str, tuple[str, str, Options, Handler]] = {}
+
+
+def command(name: str, summary: str, description: str, options: Options):
+    """Register the decorated handler as subcommand ``name``, with its ``options``."""
+    def register(handler: Handler) -> Handler:
+        COMMANDS[name] = (summary, description, options, handler)
+        return handler
+    return register
+
+
+def common(p: argparse.ArgumentParser, *, scene: bool = True, out: str | None = None,
+           json: str | None = None, spp: bool = False, variant: bool = False,
+           quiet: bool = False) -> None:
+    """Add the shared options: SCENE, --out, --json, --spp/--seed, --variant, --quiet."""
+    if scene:
+        p.add_argument("scene", type=Path, help="scene file (YAML, see INTERFACE.md)")
+    if out:
+        p.add_argument("--out", type=Path, help=out)
+    if json:
+        p.add_argument("--json", metavar="FILE", help=f"write {json} here (- = stdout)")
+    if spp:
+        p.add_argument("--spp", type=int, help=f"samples per pixel, 1..{MAX_SPP} "
+                       "(default: the scene's, else 16)")
+        p.add_argument("--seed", type=int, help="sampler seed ≥ 0 (default: the scene's, else 0)")
+    if variant:
+        p.add_argument("--variant", default="auto", choices=VARIANT_CHOICES,
+                       help="Mitsuba backend; auto = cuda if a GPU works, else llvm if its "
+                       "probe renders, else scalar (default: auto)")
+    if quiet:
+        p.add_argument("--quiet", action="store_true", help="no progress display")
+
+
+def at_least(*checks: tuple[str, int | None, int]) -> None:
+    """Refuse (exit 2) an option given below its least value; None means not given."""
+    for flag, value, low in checks:
+        if value is not None and value < low:
+            raise BadArgument(flag, f"{value} must be ≥ {low}")
+
+
+def check_spp_seed(args: argparse.Namespace) -> None:
+    """Refuse --spp outside 1..MAX_SPP and a negative --seed."""
+    at_least(("--spp", args.spp, 1), ("--seed", args.seed, 0))
+    if args.spp is not None and args.spp > MAX_SPP:
+        raise BadArgument("--spp", f"{args.spp} must be ≤ {MAX_SPP}")
+
+
+def load(path: Path) -> Scene:
+    """Load a scene and print its warnings on stderr."""
+    scene = load_scene(path)
+    for w in scene.warnings:
+        print(f"warning: {path}: {w}", file=sys.stderr)
+    return scene
+
+
+def default_workers() -> int:
+    """Half the cores (a render uses several threads per worker)."""
+    return max(1, (os.cpu_count() or 2) // 2)

@@ -1,0 +1,167 @@
+"""The commands on one scene: render, check, plot, detect, calibrate, evaluate."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from mirrorsim.cli_options import check_spp_seed, command, common, load
+from mirrorsim.io import emit_json
+
+
+def _render_options(p):
+    common(p, out="output folder (default renders/<name>/)", json="the ground truth",
+            spp=True, variant=True, quiet=True)
+
+
+@command("render", "render the frame and write its ground truth",
+         "Render SCENE with Mitsuba 3 and write DIR/<name>.png (sRGB, 8-bit), DIR/<name>.json "
+         "(exact ground truth, with each object's bbox_px and visible_px in the mirror from an "
+         "object-id pass) and DIR/<name>.ids.png (the id labels).",
+         _render_options)
+def _render(args) -> int:
+    from mirrorsim.frames import render_to_files
+    from mirrorsim.tables import render_summary
+
+    scene = load(args.scene)
+    check_spp_seed(args)
+    files = render_to_files(scene, args.out, spp=args.spp, seed=args.seed,
+                            variant=args.variant, progress=not args.quiet)
+    print(render_summary(scene, files))
+    emit_json(args.json, files.truth.to_json())
+    return 0
+
+
+def _check_options(p):
+    common(p, json="the exact ground truth")
+    p.add_argument("--measurements", metavar="FILE",
+                   help="write the exact (noise-free) measurements for `mirrorsim solve`")
+
+
+@command("check", "validate a scene and say what the camera sees",
+         "Validate SCENE and print, for the target and each beacon, its virtual image, alpha, "
+         "d_total, reflection point and how much of its image reaches the camera through the "
+         "mirror. No rendering.",
+         _check_options)
+def _check(args) -> int:
+    from mirrorsim import optics
+    from mirrorsim.tables import check_table
+
+    scene = load(args.scene)
+    print(check_table(scene))
+    truth = optics.ground_truth(scene)
+    emit_json(args.json, truth.to_json())
+    if args.measurements:
+        emit_json(args.measurements, {**truth.exact_measurements().to_json(),
+                                      "source": "exact geometry (mirrorsim check)"})
+    return 0
+
+
+def _plot_options(p):
+    common(p, out="PNG to write (default renders/<name>/<name>.top.png)")
+
+
+@command("plot", "top view of a scene (board, camera, mirror, rays)",
+         "Draw the top view: board, camera and its field of view, occluders, mirror, target, "
+         "beacons, virtual images and rays.",
+         _plot_options)
+def _plot(args) -> int:
+    from mirrorsim.plot import plot_top_view
+
+    scene = load(args.scene)
+    print(plot_top_view(scene, args.out or Path("renders") / scene.name / f"{scene.name}.top.png"))
+    return 0
+
+
+def _detect_options(p):
+    p.add_argument("frame", type=Path, help="the rendered PNG")
+    p.add_argument("--scene", type=Path, required=True, help="the scene file (camera, beacons)")
+    common(p, scene=False, json="the measurements", variant=True)
+    p.add_argument("--annotate", type=Path, metavar="OUT.png",
+                   help="draw the detections on the frame")
+
+
+@command("detect", "measure alpha and d_total from a rendered frame",
+         "Find the target's and the beacons' images in FRAME and measure each one's angle of "
+         "arrival and, by size constancy, its d_total.  Uses only the image, the scene's camera "
+         "block, the beacons' known positions and heights, the objects' sizes, and the "
+         "calibration (`mirrorsim calibrate`, made and cached on first use).",
+         _detect_options)
+def _detect(args) -> int:
+    from mirrorsim.calibrate import calibrate
+    from mirrorsim.detect import DetectorView, annotate, detect_frame, read_frame, write_png
+    from mirrorsim.tables import detect_summary
+
+    view = DetectorView.from_scene(load(args.scene))
+    image = read_frame(args.frame)
+    cal = calibrate(view.camera, view.target_size, view.beacons[0].height, variant=args.variant)
+    det = detect_frame(image, view, cal)
+    print(detect_summary(str(args.frame), det))
+    if args.annotate:
+        write_png(args.annotate, annotate(image, det))
+        print(f"  annotated: {args.annotate}")
+    emit_json(args.json, det.to_json())
+    return 0
+
+
+def _calibrate_options(p):
+    common(p, json="the constants", variant=True)
+    p.add_argument("--refresh", action="store_true", help="re-render even if cached")
+
+
+@command("calibrate", "size-constancy constants for a scene's camera",
+         "Render the target and the pencil in direct view at 100 cm, facing SCENE's camera on "
+         "its optical axis, measure them as the detector does and cache K = s_px * d per "
+         "camera and object.",
+         _calibrate_options)
+def _calibrate(args) -> int:
+    from mirrorsim.calibrate import D_REF, calibrate
+    from mirrorsim.detect import FRONT_OFFSET
+
+    scene = load(args.scene)
+    cam = scene.camera
+    cal = calibrate(cam, scene.target.size, scene.beacons[0].height, variant=args.variant,
+                    refresh=args.refresh)
+    print(f"camera {cam.width}×{cam.height_px}, hfov {cam.hfov:g}°, height {cam.height:g} cm "
+          f"(fx {cam.fx:.2f} px)")
+    print(f"  target {scene.target.size[1]:g} cm high: K = {cal.target_k:.1f} px·cm "
+          f"({cal.target_k / (D_REF - FRONT_OFFSET['target']):.2f} px at 1 m; the paper's "
+          "camera: 229 px)")
+    print(f"  pencil's painted band: K = {cal.pencil_k:.1f} px·cm "
+          f"({cal.pencil_k / (D_REF - FRONT_OFFSET['beacon']):.2f} px at 1 m)")
+    emit_json(args.json, {"key": cal.key, "target_k": cal.target_k, "pencil_k": cal.pencil_k})
+    return 0
+
+
+def _evaluate_options(p):
+    common(p, out="output folder (default renders/<name>/)", json="the report", spp=True,
+            variant=True, quiet=True)
+
+
+@command("evaluate", "render, detect, solve and score against ground truth",
+         "The main job: render SCENE (or reuse a render of the same scene, spp and seed), detect "
+         "the target and beacons, localize mirror and target, and score everything against the "
+         "exact ground truth.  Prints a table; writes DIR/<name>.report.json, DIR/<name>.eval.png "
+         "(truth vs estimate with the 95 %% error ellipse) and the annotated frame(s).  A scene "
+         "with several beacons renders one frame per beacon and reports the error as beacons "
+         "are added.  Exit 0 whenever it ran.",
+         _evaluate_options)
+def _evaluate(args) -> int:
+    from mirrorsim.evaluate import evaluate_scene
+    from mirrorsim.io import write_json
+    from mirrorsim.plot import plot_evaluation
+    from mirrorsim.tables import report_table
+
+    scene = load(args.scene)
+    check_spp_seed(args)
+    out = args.out or Path("renders") / scene.name
+    report = evaluate_scene(scene, out, spp=args.spp, seed=args.seed, variant=args.variant,
+                            progress=not args.quiet)
+    print(f"{scene.name}: {len(report.frames)} frame(s), {report.render.spp} spp, "
+          f"{report.render.variant}{' (reused)' if report.reused else ''}")
+    print(report_table(report))
+    path = write_json(out / f"{scene.name}.report.json", report.to_json())
+    fig = plot_evaluation(scene, report, out / f"{scene.name}.eval.png")
+    print(f"report: {path}\ntop view: {fig}\nannotated: "
+          + ", ".join(f.annotated for f in report.frames))
+    emit_json(args.json, report.to_json())
+    return 0

@@ -1,0 +1,49 @@
+"""The exception classes that reach the user, and the exit status of each.
+
+Bad input (a file, a key or an option the user can fix) exits with status 2;
+a run that failed (nothing usable in a frame, a backend that does not work here,
+measurements the solver cannot solve) exits with status 1.  The CLI maps classes to
+statuses with :func:`exit_status`; nothing is told apart by name.
+"""
+
+from __future__ import annotations
+
+from solver.errors import InputError, SolverError
+
+EXIT_BAD_INPUT = 2
+EXIT_FAILED = 1
+
+__all__ = ["InputError", "SolverError", "SceneError", "BadArgument", "RunFailed",
+           "DetectionError", "BackendError", "EXIT_BAD_INPUT", "EXIT_FAILED", "exit_status"]
+
+
+class SceneError(InputError):
+    """A bad scene or dataset-spec file."""
+
+
+class BadArgument(InputError):
+    """A command-line option out of range: ``BadArgument("--spp", "0 must be ≥ 1")``."""
+
+    def __init__(self, option: str, message: str):
+        super().__init__(option, "", message)
+
+
+class RunFailed(RuntimeError):
+    """The run itself failed (exit status 1); the message says why."""
+
+
+class DetectionError(RunFailed):
+    """Nothing usable was found in a frame (the message says what)."""
+
+
+class BackendError(RunFailed):
+    """The requested Mitsuba variant does not work on this machine."""
+
+
+def exit_status(exc: BaseException) -> int | None:
+    """The exit status for an exception the user should see as one line, else None."""
+    if isinstance(exc, InputError):
+        return EXIT_BAD_INPUT
+    if isinstance(exc, RunFailed | SolverError):
+        return EXIT_FAILED
+    return None

@@ -1,0 +1,131 @@
+"""A rendered frame's files: ``<name>.png``, the ground truth ``<name>.json`` and the
+object ids ``<name>.ids.png``; computed once, written atomically, reused by fingerprint.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from mirrorsim import optics
+from mirrorsim.io import atomic_path, dumps
+from mirrorsim.mitsuba_scene import BACKGROUND_LABEL, BEACON_LABEL, MIRROR_LABEL, TARGET_LABEL
+from mirrorsim.model import Scene
+from mirrorsim.render import (
+    IN_MIRROR,
+    MITSUBA_VERSION,
+    RenderedFrame,
+    encode_ids,
+    render_frame,
+    to_srgb8,
+    write_png,
+)
+from mirrorsim.report import GroundTruth, MirrorPixels, RenderInfo
+
+
+@dataclass(frozen=True)
+class FrameFiles:
+    """A frame on disk and its ground truth."""
+
+    png: Path
+    truth_json: Path
+    ids_png: Path
+    truth: GroundTruth
+    reused: bool = False
+
+    @property
+    def seconds(self) -> float:
+        """Wall time of the render (0 if reused)."""
+        r = self.truth.render
+        return 0.0 if self.reused or r is None or r.seconds_total is None else r.seconds_total
+
+
+def default_out(scene: Scene) -> Path:
+    """Where a scene's files go unless told otherwise: ``renders/<name>/``."""
+    return Path("renders") / scene.name
+
+
+def scene_fingerprint(scene: Scene, spp: int, seed: int) -> str:
+    """What a render depends on: the scene's content (not its file name), spp, seed."""
+    d = asdict(replace(scene, source="", warnings=()))
+    text = json.dumps(d, sort_keys=True, default=str) + f"|{spp}|{seed}"
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def truth_of(scene: Scene, frame: RenderedFrame, fingerprint: str | None) -> GroundTruth:
+    """The exact ground truth with what the id pass saw of each object."""
+    truth = optics.ground_truth(scene)
+
+    def seen(obj, label: int):
+        bbox, n = _mask_stats(frame.in_mirror == label)
+        return replace(obj, bbox_px=bbox, visible_px=n)
+
+    return replace(
+        truth,
+        target=seen(truth.target, TARGET_LABEL),
+        beacons=tuple(seen(b, BEACON_LABEL + i) for i, b in enumerate(truth.beacons)),
+        mirror_pixels=MirrorPixels(*_mask_stats(frame.first == MIRROR_LABEL)),
+        id_labels={"background": BACKGROUND_LABEL, "mirror": MIRROR_LABEL,
+                   "target": TARGET_LABEL, "beacons": BEACON_LABEL,
+                   "occluders": BEACON_LABEL + len(scene.beacons),
+                   "seen_in_mirror_offset": IN_MIRROR},
+        render=RenderInfo(variant=frame.variant, spp=frame.spp, seed=frame.seed,
+                          seconds_render=round(frame.seconds_render, 3),
+                          seconds_total=round(frame.seconds_total, 3),
+                          mitsuba=MITSUBA_VERSION, fingerprint=fingerprint))
+
+
+def write_frame(scene: Scene, frame: RenderedFrame, out: Path,
+                fingerprint: str | None = None) -> FrameFiles:
+    """Write the frame, its ids and its truth into ``out``; all three appear together."""
+    out.mkdir(parents=True, exist_ok=True)
+    truth = truth_of(scene, frame, fingerprint)
+    png, ids, js = (out / f"{scene.name}{ext}" for ext in (".png", ".ids.png", ".json"))
+    with contextlib.ExitStack() as stack:
+        tmp_png, tmp_ids, tmp_js = (stack.enter_context(atomic_path(p)) for p in (png, ids, js))
+        write_png(tmp_png, to_srgb8(frame.linear))
+        write_png(tmp_ids, encode_ids(frame.first, frame.in_mirror))
+        tmp_js.write_text(dumps(truth.to_json()))
+    return FrameFiles(png=png, truth_json=js, ids_png=ids, truth=truth)
+
+
+def render_to_files(scene: Scene, out: str | Path | None = None, *, spp: int | None = None,
+                    seed: int | None = None, variant: str = "auto", progress: bool = True,
+                    reuse: bool = False) -> FrameFiles:
+    """Render ``scene`` (or, with ``reuse``, take a render of exactly this scene, spp and
+    seed already in ``out``) and write its files (default folder ``renders/<name>/``)."""
+    spp = scene.render.spp if spp is None else spp
+    seed = scene.render.seed if seed is None else seed
+    out = Path(out) if out is not None else default_out(scene)
+    fp = scene_fingerprint(scene, spp, seed)
+    if reuse:
+        found = _reusable(scene, out, fp)
+        if found is not None:
+            return found
+    frame = render_frame(scene, spp=spp, seed=seed, variant=variant, progress=progress)
+    return write_frame(scene, frame, out, fp)
+
+
+def _reusable(scene: Scene, out: Path, fingerprint: str) -> FrameFiles | None:
+    png, ids, js = (out / f"{scene.name}{ext}" for ext in (".png", ".ids.png", ".json"))
+    if not (png.exists() and js.exists()):
+        return None
+    try:
+        truth = GroundTruth.from_json(json.loads(js.read_text()))
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    if truth.render is None or truth.render.fingerprint != fingerprint:
+        return None
+    return FrameFiles(png=png, truth_json=js, ids_png=ids, truth=truth, reused=True)
+
+
+def _mask_stats(mask: np.ndarray) -> tuple[tuple[int, int, int, int] | None, int]:
+    vs, us = np.nonzero(mask)
+    if len(us) == 0:
+        return None, 0
+    return (int(us.min()), int(vs.min()), int(us.max()), int(vs.max())), int(len(us))

@@ -1,0 +1,175 @@
+"""The scene as data: complete, immutable, no I/O.
+
+Every field is known when a :class:`Scene` is made: the camera's resolved pan and the
+target's facing are computed from the geometry by :mod:`mirrorsim.optics` when
+:mod:`mirrorsim.scenefile` builds the model, never left as placeholders.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from solver.geometry import line_normal, signed_distance, unit
+
+# Physical dimensions of the rendered objects that the scene file does not set (cm).
+# They enter the overlap checks, so they live with the model rather than the renderer.
+MIRROR_DEPTH = 0.6  # glass + dark backing + frame, behind the reflective plane
+MIRROR_FRAME = 0.5  # frame width on the sides and top, outside the reflective area
+TARGET_THICKNESS = 0.4
+PENCIL_RADIUS = 0.4  # circumradius of the hexagonal pencil (0.69 cm across flats)
+OCCLUDER_THICKNESS = 1.0
+
+PAN_WORDS = ("mirror", "target", "beacon")
+
+Point2 = tuple[float, float]
+
+
+@dataclass(frozen=True)
+class Board:
+    """The pegboard: ``size`` (cm) and its hole grid (``hole_pitch`` 0 = plain)."""
+
+    size: Point2
+    hole_pitch: float = 2.5
+    hole_diameter: float = 0.6
+
+
+@dataclass(frozen=True)
+class Camera:
+    """A level pinhole camera; ``pan`` as written, ``pan_deg`` the resolved bearing."""
+
+    position: Point2
+    height: float
+    resolution: tuple[int, int]
+    hfov: float
+    pan: float | str
+    pan_deg: float
+
+    @property
+    def width(self) -> int:
+        """Image width in px."""
+        return self.resolution[0]
+
+    @property
+    def height_px(self) -> int:
+        """Image height in px."""
+        return self.resolution[1]
+
+    @property
+    def fx(self) -> float:
+        """Focal length in px: (W/2)/tan(hfov/2); square pixels, so fy = fx."""
+        return (self.width / 2.0) / math.tan(math.radians(self.hfov) / 2.0)
+
+    @property
+    def cx(self) -> float:
+        """Principal point's column, OpenCV convention (pixel centres at integers)."""
+        return self.width / 2.0 - 0.5
+
+    @property
+    def cy(self) -> float:
+        """Principal point's row."""
+        return self.height_px / 2.0 - 0.5
+
+    @property
+    def center3(self) -> np.ndarray:
+        """Optical centre in 3-D."""
+        return np.array([self.position[0], self.position[1], self.height])
+
+
+@dataclass(frozen=True)
+class Mirror:
+    """A vertical rectangle standing on the board, its bottom edge along ``yaw``."""
+
+    center: Point2
+    yaw: float
+    size: Point2  # width along the surface line, height
+
+    def ends(self) -> tuple[np.ndarray, np.ndarray]:
+        """The two ends of the reflective bottom edge."""
+        c, d = np.asarray(self.center, float), unit(self.yaw) * self.size[0] / 2.0
+        return c - d, c + d
+
+    def normal_towards(self, point) -> np.ndarray:
+        """Unit normal of the mirror's line on the side of ``point`` (2-D)."""
+        n = line_normal(self.yaw)
+        return n if signed_distance(point, self.center, self.yaw) >= 0 else -n
+
+
+@dataclass(frozen=True)
+class Target:
+    """An upright panel (width, height) whose face turns to ``facing_deg``."""
+
+    position: Point2
+    size: Point2
+    facing_deg: float
+
+    @property
+    def height(self) -> float:
+        """Panel height (cm)."""
+        return self.size[1]
+
+    def ends(self) -> tuple[np.ndarray, np.ndarray]:
+        """Ends of the panel's footprint (its width runs across the facing direction)."""
+        p, d = np.asarray(self.position, float), unit(self.facing_deg + 90.0) * self.size[0] / 2
+        return p - d, p + d
+
+
+@dataclass(frozen=True)
+class Beacon:
+    """An upright pencil: its axis over ``position``, ``height`` above the board."""
+
+    position: Point2
+    height: float
+
+
+@dataclass(frozen=True)
+class Occluder:
+    """An upright wall from ``start`` to ``end``."""
+
+    start: Point2
+    end: Point2
+    height: float
+
+
+@dataclass(frozen=True)
+class RenderSettings:
+    """Samples per pixel and the sampler's seed."""
+
+    spp: int = 16
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A validated scene.  Build one with :func:`mirrorsim.scenefile.load_scene`."""
+
+    name: str
+    board: Board
+    camera: Camera
+    mirror: Mirror
+    target: Target
+    beacons: tuple[Beacon, ...]
+    occluders: tuple[Occluder, ...] = ()
+    render: RenderSettings = field(default_factory=RenderSettings)
+    source: str = "<scene>"
+    warnings: tuple[str, ...] = ()
+
+
+def footprints(scene: Scene, bkey=None) -> list[tuple[str, np.ndarray, np.ndarray, float]]:
+    """Each object's footprint as a capsule: (key, segment start, segment end, radius).
+
+    ``bkey(i)`` names beacon i's key as the file wrote it (``beacon`` or ``beacons[i]``).
+    """
+    if bkey is None:
+        bkey = (lambda i: f"beacons[{i}]") if len(scene.beacons) > 1 else (lambda _i: "beacon")
+    out = [("mirror.center", *scene.mirror.ends(), MIRROR_DEPTH),
+           ("target.position", *scene.target.ends(), TARGET_THICKNESS / 2)]
+    for i, b in enumerate(scene.beacons):
+        p = np.asarray(b.position, float)
+        out.append((f"{bkey(i)}.position", p, p, PENCIL_RADIUS))
+    for i, o in enumerate(scene.occluders):
+        out.append((f"occluders[{i}]", np.asarray(o.start, float), np.asarray(o.end, float),
+                    OCCLUDER_THICKNESS / 2))
+    return out

@@ -1,0 +1,21 @@
+"""The solver's exception classes (the solver imports nothing of mirrorsim).
+
+:class:`InputError` is bad input a user can fix (a command exits with status 2);
+:class:`SolverError` is input that the method cannot solve (status 1).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+class InputError(ValueError):
+    """Bad input: ``str(err)`` is one line naming the file, the key path and the value."""
+
+    def __init__(self, file: str | Path, key: str, message: str):
+        self.file, self.key, self.message = str(file), key, message
+        super().__init__(f"{file}: {key}: {message}" if key else f"{file}: {message}")
+
+
+class SolverError(ValueError):
+    """Input the method cannot solve (degenerate geometry or impossible measurements)."""

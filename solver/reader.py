@@ -1,0 +1,94 @@
+"""Typed reading of parsed YAML or JSON with one-line errors naming file and key path.
+
+One reader serves every input file: scenes, dataset specs and measurements.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+from solver.errors import InputError
+
+
+def show(value: Any) -> str:
+    """A short rendering of an input value for error messages."""
+    if isinstance(value, str):
+        return repr(value) if len(value) <= 40 else repr(value[:37] + "...")
+    if isinstance(value, dict):
+        return "a mapping"
+    if isinstance(value, list) and len(value) > 4:
+        return f"a list of {len(value)} items"
+    if value is None:
+        return "nothing (null)"
+    return str(value)
+
+
+class Reader:
+    """Reads typed values, raising ``error_class`` with the file, key path and value.
+
+    Parameters
+    ----------
+    source : str or Path
+        The file named in messages.
+    error_class : type
+        An :class:`InputError` subclass to raise.
+    """
+
+    def __init__(self, source: str | Path, error_class: type[InputError] = InputError):
+        self.source = str(source)
+        self.error_class = error_class
+
+    def fail(self, key: str, message: str) -> InputError:
+        """The error to raise for ``key`` (not raised here, so callers ``raise`` it)."""
+        return self.error_class(self.source, key, message)
+
+    def mapping(self, value: Any, key: str, required: set[str] | tuple[str, ...],
+                optional: set[str] | tuple[str, ...] = ()) -> dict:
+        """A mapping with exactly the allowed keys and all the required ones."""
+        allowed = set(required) | set(optional)
+        if not isinstance(value, dict):
+            raise self.fail(key or "(top level)", f"expected a mapping, got {show(value)}")
+        prefix = f"{key}." if key else ""
+        for k in value:
+            if not isinstance(k, str) or k not in allowed:
+                raise self.fail(f"{prefix}{k}",
+                                f"unknown key (allowed here: {', '.join(sorted(allowed))})")
+        for k in sorted(required):
+            if k not in value:
+                raise self.fail(f"{prefix}{k}", "missing required key")
+        return value
+
+    def number(self, value: Any, key: str, *, positive: bool = False, low: float | None = None,
+               high: float | None = None) -> float:
+        """A finite number, optionally > 0 and within [low, high]."""
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise self.fail(key, f"expected a number, got {show(value)}")
+        v = float(value)
+        if not math.isfinite(v):
+            raise self.fail(key, f"{show(value)} is not a finite number")
+        if positive and v <= 0.0:
+            raise self.fail(key, f"{show(value)} must be > 0")
+        if low is not None and v < low:
+            raise self.fail(key, f"{show(value)} must be ≥ {low:g}")
+        if high is not None and v > high:
+            raise self.fail(key, f"{show(value)} must be ≤ {high:g}")
+        return v
+
+    def integer(self, value: Any, key: str, *, low: int, high: int | None = None) -> int:
+        """An integer within [low, high]."""
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise self.fail(key, f"expected an integer, got {show(value)}")
+        if value < low:
+            raise self.fail(key, f"{value} must be ≥ {low}")
+        if high is not None and value > high:
+            raise self.fail(key, f"{value} must be ≤ {high}")
+        return value
+
+    def pair(self, value: Any, key: str, *, positive: bool = False) -> tuple[float, float]:
+        """A list of two numbers."""
+        if not isinstance(value, list | tuple) or len(value) != 2:
+            raise self.fail(key, f"expected a list of two numbers, got {show(value)}")
+        return (self.number(value[0], f"{key}[0]", positive=positive),
+                self.number(value[1], f"{key}[1]", positive=positive))
