@@ -5,17 +5,22 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from mirrorsim.cli_options import at_least, command, common, default_workers, load
+from mirrorsim.cli_options import (
+    at_least,
+    command,
+    common,
+    default_workers,
+    error_model_sigma,
+    load,
+)
 from mirrorsim.errors import BadArgument
 from mirrorsim.io import emit_json
 
 
 def _solve_options(p):
     p.add_argument("measurements", type=Path)
-    common(p, scene=False, json="the solution")
-    p.add_argument("--error-model", type=Path, metavar="FILE",
-                   help="take sigma from an error model (`mirrorsim errormodel`) where the "
-                   "file gives none")
+    common(p, scene=False, json="the solution",
+           error_model="where the measurements give no sigma, take")
 
 
 @command("solve", "localize the mirror and the target from measurements",
@@ -29,11 +34,7 @@ def _solve(args) -> int:
     from solver.sltr import solve_measurements
 
     m = load_measurements(args.measurements)
-    sigma = m.sigma
-    if sigma is None and args.error_model:
-        from mirrorsim.errormodel import load_sigma
-
-        sigma = load_sigma(args.error_model)
+    sigma = m.sigma or error_model_sigma(args)
     sol = solve_measurements(m.observer, m.beacons, m.targets, sigma)
     print(solution_summary(str(args.measurements), sol))
     emit_json(args.json, sol.to_json())
@@ -54,9 +55,7 @@ def _montecarlo_options(p):
                    help="beacon's offset along the mirror from the reflection point")
     p.add_argument("--sigma", nargs=2, type=float, action="append", metavar=("ALPHA", "D"),
                    help="a row of your own (deg, distance units); repeatable")
-    p.add_argument("--error-model", type=Path, metavar="FILE",
-                   help="add a row with the σ's of an error model (`mirrorsim errormodel`)")
-    common(p, scene=False, json="the table")
+    common(p, scene=False, json="the table", error_model="add a row with")
 
 
 @command("montecarlo", "the paper's Table 1 protocol",
@@ -76,12 +75,8 @@ def _montecarlo(args) -> int:
         geometry.layout()
     except (ValueError, SolverError) as exc:
         raise BadArgument("geometry", str(exc)) from None
-    em = None
-    if args.error_model:
-        from mirrorsim.errormodel import load_sigma
-
-        em = load_sigma(args.error_model)
-    res = table1(args.iterations, geometry, args.seed, table_rows(args.sigma, em, args.d_total))
+    rows = table_rows(args.sigma, error_model_sigma(args), args.d_total)
+    res = table1(args.iterations, geometry, args.seed, rows)
     print(montecarlo_table(res))
     emit_json(args.json, res)
     return 0
@@ -95,8 +90,7 @@ def _plan_options(p):
     p.add_argument("--yaw-spread", type=float, default=3.0, help="prior yaw ± (deg)")
     p.add_argument("--d1-spread", type=float, default=2.0, help="prior mirror distance ± (cm)")
     p.add_argument("--step", type=float, default=1.0, help="grid step of the search (cm)")
-    p.add_argument("--error-model", type=Path, metavar="FILE",
-                   help="take the σ's from an error model instead")
+    common(p, scene=False, error_model="instead of --sigma-alpha/--sigma-d, take")
 
 
 @command("plan", "beacon placement analysis and the best beacon position",
@@ -112,11 +106,7 @@ def _plan(args) -> int:
     from solver.sltr import Sigma
 
     scene = load(args.scene)
-    sigma = Sigma(args.sigma_alpha, args.sigma_d)
-    if args.error_model:
-        from mirrorsim.errormodel import load_sigma
-
-        sigma = load_sigma(args.error_model)
+    sigma = error_model_sigma(args) or Sigma(args.sigma_alpha, args.sigma_d)
     plan = plan_scene(scene, sigma, args.eps, args.yaw_spread, args.d1_spread, args.step)
     summ = plan_summary(plan)
     print(plan_text(scene, summ))

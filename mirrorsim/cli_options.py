@@ -29,8 +29,9 @@ def command(name: str, summary: str, description: str, options: Options):
 
 def common(p: argparse.ArgumentParser, *, scene: bool = True, out: str | None = None,
            json: str | None = None, spp: bool = False, variant: bool = False,
-           quiet: bool = False) -> None:
-    """Add the shared options: SCENE, --out, --json, --spp/--seed, --variant, --quiet."""
+           quiet: bool = False, error_model: str | None = None) -> None:
+    """Add the shared options: SCENE, --out, --json, --spp/--seed, --variant, --quiet,
+    --error-model."""
     if scene:
         p.add_argument("scene", type=Path, help="scene file (YAML, see INTERFACE.md)")
     if out:
@@ -47,6 +48,18 @@ def common(p: argparse.ArgumentParser, *, scene: bool = True, out: str | None = 
                        "probe renders, else scalar (default: auto)")
     if quiet:
         p.add_argument("--quiet", action="store_true", help="no progress display")
+    if error_model:
+        p.add_argument("--error-model", type=Path, metavar="FILE",
+                       help=f"{error_model} the σ's of an error model (`mirrorsim errormodel`)")
+
+
+def error_model_sigma(args: argparse.Namespace):
+    """The σ's of ``--error-model``, or None where it is not given."""
+    if not args.error_model:
+        return None
+    from mirrorsim.errormodel import load_sigma
+
+    return load_sigma(args.error_model)
 
 
 def at_least(*checks: tuple[str, int | None, int]) -> None:
