@@ -13,7 +13,7 @@ import sys
 import warnings
 
 from mirrorsim import __version__, cli_analysis, cli_scene  # noqa: F401 (they register)
-from mirrorsim.cli_options import COMMANDS
+from mirrorsim.cli_options import COMMANDS, check_outputs
 from mirrorsim.errors import SolverError, exit_status
 
 # the order of `mirrorsim --help`: the main job first
@@ -43,6 +43,7 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     warnings.showwarning = _one_line_warning
     try:
+        check_outputs(args)
         return args.handler(args)
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)

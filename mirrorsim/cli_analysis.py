@@ -3,6 +3,7 @@ errormodel."""
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 from mirrorsim.cli_options import (
@@ -12,6 +13,7 @@ from mirrorsim.cli_options import (
     default_workers,
     error_model_sigma,
     load,
+    output,
 )
 from mirrorsim.errors import BadArgument
 from mirrorsim.io import emit_json
@@ -83,7 +85,8 @@ def _montecarlo(args) -> int:
 
 
 def _plan_options(p):
-    common(p, out="PNG (default renders/<name>/<name>.plan.png)", json="the analysis")
+    common(p, out="PNG (default renders/<name>/<name>.plan.png)", out_kind="file",
+           json="the analysis")
     p.add_argument("--sigma-alpha", type=float, default=0.01, help="deg (default 0.01)")
     p.add_argument("--sigma-d", type=float, default=0.002, help="relative (default 0.002)")
     p.add_argument("--eps", type=float, default=5.0, help="orientation range ±eps (deg)")
@@ -119,8 +122,8 @@ def _plan(args) -> int:
 def _dataset_options(p):
     p.add_argument("--n", type=int, required=True, help="number of scenes")
     p.add_argument("--seed", type=int, required=True)
-    p.add_argument("--out", type=Path, required=True,
-                   help="a new or empty folder, or (with --resume) one of its datasets")
+    output(p, "--out", "dir", type=Path, required=True,
+           help="a new or empty folder, or (with --resume) one of its datasets")
     p.add_argument("--workers", type=int, default=default_workers(),
                    help="worker processes (default: half the cores)")
     p.add_argument("--spec", type=Path, help="ranges of the random scenes (YAML)")
@@ -150,12 +153,19 @@ def _dataset(args) -> int:
     print(f"{args.out}: {res['rows']} rows ({res['computed']} computed now in "
           f"{res['seconds']:.0f} s, {res['per_minute']:.1f} scenes/min; "
           f"{res['already_done']} already done; {res['failed']} failed) → {res['parquet']}")
+    if res["retry"]:
+        i, why = next(iter(res["retry"].items()))
+        print(f"error: {len(res['retry'])} scene(s) failed for a reason outside the scene "
+              f"(scene {i}: {why}); they have no row: rerun with --resume", file=sys.stderr)
+        return 1
     return 0
 
 
 def _errormodel_options(p):
     p.add_argument("dataset", type=Path)
-    p.add_argument("--out", type=Path, help="model file (default DIR/error_model.json)")
+    output(p, "--out", "file", type=Path,
+           help="model file, *.json (default DIR/error_model.json; the plots go beside it, "
+           "*.png)")
 
 
 @command("errormodel", "fit the detector's error model to a dataset",

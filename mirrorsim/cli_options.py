@@ -9,6 +9,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from mirrorsim.errors import BadArgument
+from mirrorsim.io import check_output_dir, check_output_file
 from mirrorsim.model import Scene
 from mirrorsim.scenefile import MAX_SPP, load_scene
 
@@ -27,17 +28,34 @@ def command(name: str, summary: str, description: str, options: Options):
     return register
 
 
+def output(p: argparse.ArgumentParser, flag: str, kind: str, **kwargs) -> None:
+    """Add an output option; ``kind`` "file" or "dir" says how :func:`check_outputs`
+    checks it before the command does any work."""
+    action = p.add_argument(flag, **kwargs)
+    p.set_defaults(outputs=[*(p.get_default("outputs") or []), (action.dest, flag, kind)])
+
+
+def check_outputs(args: argparse.Namespace) -> None:
+    """Refuse unwritable output paths (exit 2) before any work is done."""
+    for dest, flag, kind in getattr(args, "outputs", None) or []:
+        value = getattr(args, dest)
+        if kind == "dir":
+            check_output_dir(value, flag)
+        else:
+            check_output_file(value, flag)
+
+
 def common(p: argparse.ArgumentParser, *, scene: bool = True, out: str | None = None,
-           json: str | None = None, spp: bool = False, variant: bool = False,
-           quiet: bool = False, error_model: str | None = None) -> None:
+           out_kind: str = "dir", json: str | None = None, spp: bool = False,
+           variant: bool = False, quiet: bool = False, error_model: str | None = None) -> None:
     """Add the shared options: SCENE, --out, --json, --spp/--seed, --variant, --quiet,
     --error-model."""
     if scene:
         p.add_argument("scene", type=Path, help="scene file (YAML, see INTERFACE.md)")
     if out:
-        p.add_argument("--out", type=Path, help=out)
+        output(p, "--out", out_kind, type=Path, help=out)
     if json:
-        p.add_argument("--json", metavar="FILE", help=f"write {json} here (- = stdout)")
+        output(p, "--json", "file", metavar="FILE", help=f"write {json} here (- = stdout)")
     if spp:
         p.add_argument("--spp", type=int, help=f"samples per pixel, 1..{MAX_SPP} "
                        "(default: the scene's, else 16)")

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from mirrorsim.cli_options import check_spp_seed, command, common, load
+from mirrorsim.cli_options import check_spp_seed, command, common, load, output
+from mirrorsim.errors import DetectionError
 from mirrorsim.io import emit_json
 
 
@@ -33,8 +34,8 @@ def _render(args) -> int:
 
 def _check_options(p):
     common(p, json="the exact ground truth")
-    p.add_argument("--measurements", metavar="FILE",
-                   help="write the exact (noise-free) measurements for `mirrorsim solve`")
+    output(p, "--measurements", "file", metavar="FILE",
+           help="write the exact (noise-free) measurements for `mirrorsim solve`")
 
 
 @command("check", "validate a scene and say what the camera sees",
@@ -57,7 +58,7 @@ def _check(args) -> int:
 
 
 def _plot_options(p):
-    common(p, out="PNG to write (default renders/<name>/<name>.top.png)")
+    common(p, out="PNG to write (default renders/<name>/<name>.top.png)", out_kind="file")
 
 
 @command("plot", "top view of a scene (board, camera, mirror, rays)",
@@ -76,8 +77,8 @@ def _detect_options(p):
     p.add_argument("frame", type=Path, help="the rendered PNG")
     p.add_argument("--scene", type=Path, required=True, help="the scene file (camera, beacons)")
     common(p, scene=False, json="the measurements", variant=True)
-    p.add_argument("--annotate", type=Path, metavar="OUT.png",
-                   help="draw the detections on the frame")
+    output(p, "--annotate", "file", type=Path, metavar="OUT.png",
+           help="draw the detections on the frame")
 
 
 @command("detect", "measure alpha and d_total from a rendered frame",
@@ -94,7 +95,10 @@ def _detect(args) -> int:
     view = DetectorView.from_scene(load(args.scene))
     image = read_frame(args.frame)
     cal = calibrate(view.camera, view.target_size, view.beacons[0].height, variant=args.variant)
-    det = detect_frame(image, view, cal)
+    try:
+        det = detect_frame(image, view, cal)
+    except DetectionError as exc:
+        raise DetectionError(f"{args.frame} (scene {args.scene}): {exc}") from None
     print(detect_summary(str(args.frame), det))
     if args.annotate:
         write_png(args.annotate, annotate(image, det))

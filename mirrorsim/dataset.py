@@ -11,17 +11,19 @@ Layout of a dataset folder::
     DIR/README.md             the dataset card
     DIR/dataset.json          how it was made (seed, n, spec, spp): --resume checks it
 
-Scene i is drawn from ``SeedSequence(seed).spawn(n)[i]`` and rendered with seed i, so a
-row depends on (seed, i) alone: the same seed gives the same rows whatever the number of
-workers or interruptions.  Work runs in worker processes that are recycled every few
-scenes (Mitsuba leaks when scenes are reloaded in one process), or on a Dask cluster.
+Scene i is drawn from ``SeedSequence(seed, spawn_key=(i,))`` (the same as
+``SeedSequence(seed).spawn(n)[i]``) and rendered with seed i, so a row depends on
+(seed, i) alone: the same seed gives the same rows whatever the number of workers or
+interruptions.  A scene that fails for its own reason (no valid draw, nothing detected,
+unsolvable) is a row with ``error``; one that fails for a reason outside it (an
+interrupt, a dead worker, memory, disk) leaves no row and is redone on ``--resume``.
+Work runs in worker processes (:mod:`mirrorsim.workers`) or on a Dask cluster.
 """
 
 from __future__ import annotations
 
 import json
 import math
-import sys
 import time
 import traceback
 from dataclasses import replace
@@ -30,14 +32,20 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from mirrorsim.errors import InputError, RunFailed
+from mirrorsim.errors import BadArgument, DetectionError, InputError, SolverError
 from mirrorsim.io import atomic_path, write_json, write_text
 from mirrorsim.model import RenderSettings, Scene
 from mirrorsim.report import ObjectTruth, Report
+from mirrorsim.sampler import NoValidScene
+from mirrorsim.workers import run_dask, run_local
 from solver.geometry import yaw_difference
 
 ROW_SCHEMA_VERSION = 1
 RECYCLE_EVERY = 8  # scenes per worker process before it is replaced
+MAX_SCENES = 1_000_000  # a documented bound on --n
+DATASET_FORMAT = "mirrorsim-dataset"
+# failures that belong to the scene (recorded as its row); all else is redone on resume
+SCENE_FAILURES = (InputError, DetectionError, SolverError, NoValidScene)
 
 
 def scene_name(i: int) -> str:
@@ -45,11 +53,12 @@ def scene_name(i: int) -> str:
     return f"scene{i:06d}"
 
 
-def process_one(i: int, seed: int, n: int, spec: dict, out: str, spp: int | None,
+def process_one(i: int, seed: int, spec: dict, out: str, spp: int | None,
                 variant: str) -> dict:
-    """Draw, render, detect, solve and score scene i; write its files; return its row.
+    """Draw, render, detect, solve and score scene i; write its files and its row.
 
-    A failure is recorded in the row (``error``), never raised.
+    Returns the row; a failure of the scene itself is recorded in it (``error``).  A
+    failure from outside the scene writes no row and returns ``{"index": i, "retry": why}``.
     """
     from mirrorsim.evaluate import evaluate_scene
     from mirrorsim.sampler import sample_scene, to_yaml
@@ -59,8 +68,8 @@ def process_one(i: int, seed: int, n: int, spec: dict, out: str, spp: int | None
     t0 = time.perf_counter()
     row: dict = {"index": i, "scene": name, "seed": seed, "schema": ROW_SCHEMA_VERSION}
     try:
-        ss = np.random.SeedSequence(seed).spawn(n)[i]
-        scene = sample_scene(spec, np.random.default_rng(ss), name)
+        rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(i,)))
+        scene = sample_scene(spec, rng, name)
         scene = replace(scene, render=RenderSettings(spp=spp or scene.render.spp, seed=i))
         write_text(out_dir / "scenes" / f"{name}.yaml", to_yaml(scene))
         t1 = time.perf_counter()
@@ -68,9 +77,11 @@ def process_one(i: int, seed: int, n: int, spec: dict, out: str, spp: int | None
         row.update(_flatten(scene, rep))
         row["seconds_sample"] = t1 - t0
         row["error"] = ""
-    except Exception as exc:  # recorded, not fatal: one bad scene must not stop a run
+    except SCENE_FAILURES as exc:  # the scene's own: recorded, one bad scene must not stop a run
         row["error"] = f"{type(exc).__name__}: {exc}"
         row["traceback"] = traceback.format_exc(limit=3)
+    except Exception as exc:  # outside the scene: no row, so --resume redoes it
+        return {"index": i, "retry": f"{type(exc).__name__}: {exc}"}
     row["seconds_total"] = time.perf_counter() - t0
     write_json(out_dir / "rows" / f"{name}.json", row)
     return row
@@ -143,106 +154,88 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
     Raises
     ------
     DatasetError
-        If ``out`` holds a dataset made with other settings, or holds one and
-        ``resume`` is false.
+        If ``out`` is not a new or empty folder, or (with ``resume``) one of this
+        command's datasets made with the same settings.
+    BadArgument
+        For ``n`` outside 1..MAX_SCENES.
     """
     from mirrorsim.backend import choose_variant
     from mirrorsim.sampler import load_spec
 
+    if not 1 <= n <= MAX_SCENES:
+        raise BadArgument("--n", f"{n} must be within 1..{MAX_SCENES}")
     out = Path(out)
     spec = load_spec(spec_path)
-    meta = {"n": n, "seed": seed, "spp": spp, "spec": spec}
-    meta_path = out / "dataset.json"
-    if meta_path.exists():
-        old = json.loads(meta_path.read_text())
-        same = {k: old.get(k) for k in ("n", "seed", "spp", "spec")} == meta
-        if not resume:
-            raise DatasetError(out, "already holds a dataset: pass --resume to finish it, "
-                               "or choose another --out")
-        if not same:
-            raise DatasetError(out, f"holds a dataset made with other settings "
-                               f"(n={old.get('n')}, seed={old.get('seed')}, spp={old.get('spp')})")
+    meta = {"format": DATASET_FORMAT, "n": n, "seed": seed, "spp": spp, "spec": spec}
+    _claim_folder(out, meta, resume)
     for sub in ("scenes", "frames", "rows"):
         (out / sub).mkdir(parents=True, exist_ok=True)
-    if not meta_path.exists():
-        write_json(meta_path, meta)
-    # the probe runs once here rather than in every worker
-    chosen = choose_variant(variant)
-    todo = [i for i in range(n) if not (out / "rows" / f"{scene_name(i)}.json").exists()]
+    if not (out / "dataset.json").exists():
+        write_json(out / "dataset.json", meta)
+    chosen = choose_variant(variant)  # the probe runs once here rather than in every worker
+    retry: dict[int, str] = {}
+
+    def pending() -> set[int]:
+        done = {p.stem for p in (out / "rows").glob("scene*.json")}
+        return {i for i in range(n) if scene_name(i) not in done} - set(retry)
+
+    todo = sorted(pending())
     t_start = time.perf_counter()
-    done_before = n - len(todo)
     bar = tqdm(total=len(todo), unit="scene", disable=not progress, desc="dataset")
-    args = [(i, seed, n, spec, str(out), spp, chosen) for i in todo]
-    if executor == "dask":
-        for _ in _run_dask(args, scheduler):
-            bar.update()
-    elif workers <= 1:
-        for a in args:
-            process_one(*a)
-            bar.update()
-    else:
-        _run_local(args, workers, out, bar, recycle_every)
-    bar.close()
+
+    def on_result(row: dict) -> None:
+        if "retry" in row:
+            retry[row["index"]] = row["retry"]
+        bar.update()
+
+    jobs = [(i, seed, spec, str(out), spp, chosen) for i in todo]
+    try:
+        if executor == "dask":
+            run_dask(process_one, jobs, scheduler, on_result)
+        elif workers <= 1:
+            for job in jobs:
+                on_result(process_one(*job))
+        else:
+            run_local(process_one, jobs, workers, pending, on_result, recycle_every)
+    finally:
+        bar.close()
     wall = time.perf_counter() - t_start
     rows = collect_rows(out, n)
     write_table(out, rows)
     write_card(out, meta, rows, chosen)
-    failed = [r for r in rows if r.get("error")]
-    return {"rows": len(rows), "computed": len(todo), "already_done": done_before,
-            "failed": len(failed), "parquet": str(out / "dataset.parquet"),
-            "seconds": wall, "per_minute": len(todo) / wall * 60 if todo and wall else 0.0}
+    return {"rows": len(rows), "computed": len(todo) - len(retry),
+            "already_done": n - len(todo), "failed": sum(bool(r.get("error")) for r in rows),
+            "retry": retry, "parquet": str(out / "dataset.parquet"), "seconds": wall,
+            "per_minute": len(todo) / wall * 60 if todo and wall else 0.0}
 
 
-def _run_local(args: list[tuple], workers: int, out: Path, bar,
-               recycle_every: int = RECYCLE_EVERY) -> None:
-    """Worker processes, replaced every ``recycle_every`` scenes: each chunk of
-    workers × recycle_every scenes gets a fresh pool (ProcessPoolExecutor's own
-    max_tasks_per_child hangs on Python 3.11 once its first workers retire).  A worker
-    that dies (killed, out of memory) breaks the pool: a new one takes the scenes that
-    have no row yet."""
-    import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor, as_completed
-    from concurrent.futures.process import BrokenProcessPool
-
-    ctx = mp.get_context("spawn")  # a fresh interpreter: no inherited Mitsuba state
-    deaths = 0
-    while True:
-        remaining = [a for a in args
-                     if not (out / "rows" / f"{scene_name(a[0])}.json").exists()]
-        if not remaining:
-            return
-        chunk = remaining[:workers * recycle_every]
-        try:
-            with ProcessPoolExecutor(workers, mp_context=ctx) as ex:
-                for f in as_completed([ex.submit(process_one, *a) for a in chunk]):
-                    f.result()
-                    bar.update()
-        except BrokenProcessPool:
-            deaths += 1
-            if deaths > 3:
-                raise RunFailed("worker processes keep dying; the rows done so far are "
-                                "kept (rerun with --resume)") from None
-            print("\nwarning: a worker process died; a new pool takes the unfinished "
-                  "scenes", file=sys.stderr)
-
-
-def _run_dask(args, scheduler: str | None):
-    from dask.distributed import Client, LocalCluster, as_completed
-
-    cluster = None
-    if scheduler is None:
-        cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True)
-        client = Client(cluster)
-    else:
-        client = Client(scheduler)
+def _claim_folder(out: Path, meta: dict, resume: bool) -> None:
+    """``out`` must be new or empty, or hold this command's dataset (with --resume)."""
+    if out.exists() and not out.is_dir():
+        raise DatasetError(out, "is a file; --out wants a new or empty folder")
+    meta_path = out / "dataset.json"
+    if not meta_path.exists():
+        if out.is_dir() and any(out.iterdir()):
+            shown = ", ".join(sorted(p.name for p in out.iterdir())[:3])
+            raise DatasetError(out, f"holds other files ({shown}, …), not a dataset: use a new "
+                               "or empty folder")
+        if resume:
+            raise DatasetError(out, "--resume: there is no dataset here to resume")
+        return
     try:
-        futures = [client.submit(process_one, *a, pure=False) for a in args]
-        for f in as_completed(futures):
-            yield f.result()
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
+        old = json.loads(meta_path.read_text())
+    except (OSError, ValueError) as exc:
+        raise DatasetError(meta_path, f"not a readable dataset description ({exc})") from None
+    keys = ("n", "seed", "spp", "spec")
+    if not isinstance(old, dict) or not all(k in old for k in keys) or old.get(
+            "format", DATASET_FORMAT) != DATASET_FORMAT:
+        raise DatasetError(out, "holds a dataset.json that is not a mirrorsim dataset's")
+    if not resume:
+        raise DatasetError(out, "already holds a dataset: pass --resume to finish it, "
+                           "or choose another --out")
+    if {k: old[k] for k in keys} != {k: meta[k] for k in keys}:
+        raise DatasetError(out, f"holds a dataset made with other settings "
+                           f"(n={old['n']}, seed={old['seed']}, spp={old['spp']})")
 
 
 def collect_rows(out: Path, n: int) -> list[dict]:

@@ -36,14 +36,24 @@ from __future__ import annotations
 
 import itertools
 import math
+import warnings
 from dataclasses import asdict, dataclass
+from pathlib import Path
 
 import cv2
 import numpy as np
 
-from mirrorsim.errors import DetectionError
+from mirrorsim.errors import DetectionError, InputError
 from mirrorsim.measure import ImageMeasurement, measure_region, to_linear
-from mirrorsim.model import PENCIL_RADIUS, TARGET_THICKNESS, Beacon, Camera, Point2, Scene
+from mirrorsim.model import (
+    PENCIL_RADIUS,
+    TARGET_THICKNESS,
+    Beacon,
+    Camera,
+    Point2,
+    Scene,
+    pencil_paint_height,
+)
 from solver.geometry import bearing_deg, wrap_bearing
 from solver.measurements import Measurements
 from solver.sltr import BeaconMeasurement
@@ -172,15 +182,13 @@ class Detection:
         """The measurements of INTERFACE.md plus a ``detector`` block with each image's
         pixels (axis column, edges, bbox, clipping, direct or mirror)."""
         t = self.target
-        return {
-            "observer": list(self.observer),
-            "target": {"alpha_deg": t.alpha_deg, "d_total": t.d_total,
-                       "clipped": bool(t.clipped)},
-            "beacons": [{"position": list(b.position), "alpha_deg": m.alpha_deg,
-                         "d_total": m.d_total, "clipped": bool(m.clipped), "source": "mirror"}
-                        for b, m in self.beacons],
-            "detector": {"target": _public(t), "images": [_public(p) for p in self.images]},
-        }
+        out = Measurements(observer=self.observer, targets=[(t.alpha_deg, t.d_total)],
+                           beacons=self.beacon_measurements()).to_json()
+        out["target"]["clipped"] = bool(t.clipped)
+        for entry, (_, m) in zip(out["beacons"], self.beacons, strict=True):
+            entry.update(clipped=bool(m.clipped), source="mirror")
+        out["detector"] = {"target": _public(t), "images": [_public(p) for p in self.images]}
+        return out
 
 
 def measure_object(img: np.ndarray, kind: str, target_ratio: float | None = None
@@ -241,9 +249,50 @@ def detect_frame(image: np.ndarray, view: DetectorView, calibration: Calibration
         p.alpha_deg = alpha_of(cam, p.u_axis)
         p.d_total = distance_of(cam, p.u_axis, p.height_px, calibration.pencil_k,
                                 FRONT_OFFSET["beacon"])
+    for m in (target, *pencils):
+        _check_stands_on_board(cam, m, view)
     mirror_imgs = _assign_beacons(pencils, view)
-    return Detection(observer=tuple(cam.position), target=target,
-                     beacons=list(zip(view.beacons, mirror_imgs, strict=True)), images=pencils)
+    det = Detection(observer=tuple(cam.position), target=target,
+                    beacons=list(zip(view.beacons, mirror_imgs, strict=True)), images=pencils)
+    _check_a_mirror_fits(det)
+    return det
+
+
+FOOT_TOLERANCE = (3.0, 0.05)  # px, and a fraction of the image's height: the larger
+
+
+def _check_stands_on_board(cam: Camera, m: ImageMeasurement, view: DetectorView) -> None:
+    """An upright object on the board, seen by a level camera h cm high, has its foot
+    h/H of its image height s below the principal row: v_foot = cy + s·h/H (for a mirror
+    image too: a vertical mirror keeps heights).  A frame that is flipped, of another
+    camera or of another scene breaks this."""
+    if m.height_px is None or m.v_bottom is None:
+        return
+    height = (view.target_size[1] if m.kind == "target"
+              else pencil_paint_height(view.beacons[0].height))
+    expected = cam.cy + m.height_px * cam.height / height
+    tol = max(FOOT_TOLERANCE[0], FOOT_TOLERANCE[1] * m.height_px)
+    if abs(m.v_bottom - expected) > tol:
+        raise DetectionError(
+            f"the {m.kind} image at column {m.u_axis:.0f} does not stand on the board as seen "
+            f"from {cam.height:g} cm: its foot is at row {m.v_bottom:.1f}, its height puts it "
+            f"at row {expected:.1f} (a flipped frame, or another camera's or scene's?)")
+
+
+def _check_a_mirror_fits(det: Detection) -> None:
+    """Each beacon's mirror image must imply a mirror (its image farther than the beacon
+    stands) behind which the target's image leads to a point in front of it."""
+    from solver.sltr import SolverError, solve_single
+
+    for b, m in det.beacons:
+        try:
+            if det.target.d_total is not None:
+                solve_single(det.observer, b.position, m.alpha_deg, m.d_total,
+                             det.target.alpha_deg, det.target.d_total)
+        except SolverError as exc:
+            raise DetectionError(f"no mirror fits these images ({exc}): a frame of another "
+                                 "scene, a mirrored frame, or a beacon not where it is "
+                                 "believed?") from None
 
 
 def _public(m: ImageMeasurement) -> dict:
@@ -332,10 +381,34 @@ def annotate(image: np.ndarray, detection: Detection) -> np.ndarray:
 
 
 def read_frame(path) -> np.ndarray:
-    """An 8-bit RGB frame from a PNG (raises DetectionError if unreadable)."""
-    bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    """An 8-bit RGB frame from a PNG or JPEG file.
+
+    Raises
+    ------
+    InputError
+        If the file is missing, not a PNG or JPEG, or damaged (one line, no library
+        noise).  A JPEG gives a warning: compression blurs the edges that are measured.
+    """
+    try:
+        data = np.frombuffer(Path(path).read_bytes(), np.uint8)
+    except FileNotFoundError:
+        raise InputError(path, "", "no such file") from None
+    except OSError as exc:
+        raise InputError(path, "", f"cannot read: {exc.strerror or exc}") from None
+    head = data[:8].tobytes()
+    if not (head.startswith(b"\x89PNG\r\n\x1a\n") or head.startswith(b"\xff\xd8\xff")):
+        raise InputError(path, "", "not a PNG or JPEG image")
+    level = cv2.utils.logging.getLogLevel()
+    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
+    try:
+        bgr = cv2.imdecode(data, cv2.IMREAD_COLOR)
+    finally:
+        cv2.utils.logging.setLogLevel(level)
     if bgr is None:
-        raise DetectionError(f"{path}: cannot read the image")
+        raise InputError(path, "", "a damaged image that cannot be decoded")
+    if head.startswith(b"\xff\xd8\xff"):
+        warnings.warn(f"{path}: a JPEG frame: compression blurs the edges the detector "
+                      "measures; expect larger errors", RuntimeWarning, stacklevel=2)
     return bgr[..., ::-1]
 
 

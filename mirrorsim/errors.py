@@ -13,7 +13,7 @@ from solver.errors import InputError, SolverError
 EXIT_BAD_INPUT = 2
 EXIT_FAILED = 1
 
-__all__ = ["InputError", "SolverError", "SceneError", "BadArgument", "RunFailed",
+__all__ = ["InputError", "SolverError", "SceneError", "BadArgument", "OutputError", "RunFailed",
            "DetectionError", "BackendError", "EXIT_BAD_INPUT", "EXIT_FAILED", "exit_status"]
 
 
@@ -26,6 +26,13 @@ class BadArgument(InputError):
 
     def __init__(self, option: str, message: str):
         super().__init__(option, "", message)
+
+
+class OutputError(InputError):
+    """An output path that cannot be written (exit 2): ``OutputError(path, message)``."""
+
+    def __init__(self, path, message: str):
+        super().__init__(path, "", message)
 
 
 class RunFailed(RuntimeError):

@@ -52,7 +52,10 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, spp: int 
         files = render_to_files(sub, out, spp=spp, seed=seed, variant=variant,
                                 progress=progress, reuse=True)
         image = read_frame(files.png)
-        det = detect_frame(image, DetectorView.from_scene(sub), cal)
+        try:
+            det = detect_frame(image, DetectorView.from_scene(sub), cal)
+        except DetectionError as exc:
+            raise DetectionError(f"{files.png}: {exc}") from None
         annotated = out / f"{sub.name}.annotated.png"
         write_png(annotated, annotate(image, det))
         frames.append(FrameRecord(str(files.png), str(annotated), files.reused,

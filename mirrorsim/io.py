@@ -9,15 +9,21 @@ become ``null``.
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import math
 import os
 import sys
+import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from mirrorsim.errors import OutputError
+
+PROBE_BYTES = 64 * 1024  # written and synced where outputs will go: a full disk says so
 
 
 def jsonable(value: Any) -> Any:
@@ -50,15 +56,70 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     """A temporary path beside ``path``; renamed onto it when the block ends cleanly.
 
     The temporary name keeps the destination's suffix, so writers that choose a format
-    by suffix (matplotlib, OpenCV, Mitsuba) write the right one.
+    by suffix (matplotlib, OpenCV, Mitsuba) write the right one.  A failing write (a full
+    disk, no permission) leaves nothing behind and raises :class:`OutputError`.
     """
     path = Path(path)
     tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}{path.suffix}")
     try:
         yield tmp
         os.replace(tmp, path)
+    except OSError as exc:
+        raise OutputError(path, f"cannot write: {_why(exc)}") from None
     finally:
-        tmp.unlink(missing_ok=True)
+        with contextlib.suppress(OSError):
+            tmp.unlink(missing_ok=True)
+
+
+def _why(exc: OSError) -> str:
+    if exc.errno == errno.ENOSPC:
+        return "no space left on the device"
+    return exc.strerror or str(exc)
+
+
+def check_output_file(path: str | Path | None, option: str) -> None:
+    """Refuse (OutputError, exit 2) a file output that cannot be written, before any work:
+    a missing parent folder, a folder in its place, no permission, a full disk."""
+    if path is None or str(path) == "-":
+        return
+    path = Path(path)
+    if path.is_dir():
+        raise OutputError(path, f"{option}: is a folder; a file is wanted here")
+    if path.exists() and not path.is_file():
+        raise OutputError(path, f"{option}: not a regular file (a device, pipe or socket)")
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.is_dir():
+        raise OutputError(path, f"{option}: no such folder {str(parent)!r}")
+    _probe(parent, path, option)
+
+
+def check_output_dir(path: str | Path | None, option: str) -> None:
+    """Refuse a folder output that cannot be made or written (its parent must exist)."""
+    if path is None:
+        return
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise OutputError(path, f"{option}: is a file; a folder is wanted here")
+    if path.is_dir():
+        _probe(path, path, option)
+        return
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.is_dir():
+        raise OutputError(path, f"{option}: no such folder {str(parent)!r} (make it first)")
+    _probe(parent, path, option)
+
+
+def _probe(folder: Path, path: Path, option: str) -> None:
+    """Create, fill and remove a small file in ``folder``: the only sure test that it
+    can be written (root ignores permission bits; a full disk fails only on writing)."""
+    try:
+        with tempfile.NamedTemporaryFile(dir=folder, prefix=".mirrorsim-probe") as f:
+            f.write(b"\0" * PROBE_BYTES)
+            f.flush()
+            os.fsync(f.fileno())
+    except OSError as exc:
+        raise OutputError(path, f"{option}: cannot write in {str(folder)!r}: {_why(exc)}"
+                          ) from None
 
 
 def write_text(path: str | Path, text: str) -> Path:

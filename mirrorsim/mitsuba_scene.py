@@ -26,6 +26,7 @@ from mirrorsim.model import (
     Camera,
     Scene,
     Target,
+    pencil_paint_height,
 )
 from solver.geometry import line_normal, unit
 
@@ -124,7 +125,7 @@ def _room_envmap(width: int = 64) -> np.ndarray:
 
 def _pencil_meshes(position, height: float) -> dict[str, mi.Mesh]:
     """An upright hexagonal pencil: painted prism, sharpened wood cone, graphite tip."""
-    cone, lead = min(1.2, 0.35 * height), min(0.3, 0.1 * height)
+    cone, lead = height - pencil_paint_height(height), min(0.3, 0.1 * height)
     angles = np.deg2rad(np.arange(6) * 60.0 + 30.0)
 
     def ring(radius: float, z: float) -> np.ndarray:

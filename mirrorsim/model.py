@@ -116,6 +116,11 @@ class Target:
         return p - d, p + d
 
 
+def pencil_paint_height(height: float) -> float:
+    """Height of a pencil's painted band, below its sharpened cone (cm)."""
+    return height - min(1.2, 0.35 * height)
+
+
 @dataclass(frozen=True)
 class Beacon:
     """An upright pencil: its axis over ``position``, ``height`` above the board."""

@@ -17,22 +17,67 @@ import yaml
 
 from mirrorsim import optics
 from mirrorsim.errors import RunFailed, SceneError
-from mirrorsim.model import Scene
-from mirrorsim.scenefile import read_yaml, scene_from_dict
+from mirrorsim.model import PAN_WORDS, Scene
+from mirrorsim.scenefile import MAX_SPP, read_yaml, scene_from_dict
 from solver.reader import Reader, show
 
 DEFAULT_SPEC = Path(__file__).resolve().parents[1] / "scenes" / "dataset_spec.yaml"
 
 
+MAX_TRIES = 100_000  # a documented bound on a spec's max_tries
+PROBE_TRIES = 300  # a spec that gives no valid scene in this many draws is refused at once
+
+
+class NoValidScene(RunFailed):
+    """No draw of a spec gave a usable scene (the scene's own failure in a dataset)."""
+
+
 def load_spec(path: str | Path | None = None) -> dict:
-    """Read a spec file (default: the bundled one); raise SceneError on a bad one."""
+    """Read and check a spec file (default: the bundled one).
+
+    Every fixed value is checked as a scene file's would be, every range as a range, and
+    a few draws must give a usable scene.
+
+    Raises
+    ------
+    SceneError
+        Naming the file, the key path (``mirror.yaw``) and the value.
+    """
     path = Path(path) if path else DEFAULT_SPEC
     spec = read_yaml(path)
-    Reader(path, SceneError).mapping(
-        spec, "", {"board", "camera", "mirror", "target", "beacon", "occluder"},
-        {"render", "max_tries"})
-    # a trial draw finds range errors (wrong types, lo > hi) with their key
+    r = Reader(path, SceneError)
+    r.mapping(spec, "", {"board", "camera", "mirror", "target", "beacon", "occluder"},
+              {"render", "max_tries"})
+    r.mapping(spec["board"], "board", {"size"}, {"hole_pitch"})
+    r.pair(spec["board"]["size"], "board.size", positive=True)
+    r.mapping(spec["camera"], "camera", {"x", "y", "height", "hfov"}, {"resolution", "pan"})
+    res = spec["camera"].get("resolution", [1920, 1088])
+    if not isinstance(res, list) or len(res) != 2:
+        raise r.fail("camera.resolution", f"expected [width, height] in px, got {show(res)}")
+    r.integer(res[0], "camera.resolution[0]", low=2)
+    r.integer(res[1], "camera.resolution[1]", low=2)
+    pan = spec["camera"].get("pan", "mirror")
+    if not isinstance(pan, str):
+        r.number(pan, "camera.pan")
+    elif pan not in PAN_WORDS:
+        raise r.fail("camera.pan", f"{show(pan)}: expected a bearing in degrees or one of "
+                     f"{', '.join(PAN_WORDS)}")
+    r.mapping(spec["mirror"], "mirror", {"x", "y", "yaw", "width", "height"})
+    r.mapping(spec["target"], "target", {"x", "y", "size"})
+    r.pair(spec["target"]["size"], "target.size", positive=True)
+    r.mapping(spec["beacon"], "beacon", {"depth", "along", "height"})
+    r.mapping(spec["occluder"], "occluder", {"at", "length", "height"})
+    if "render" in spec:
+        r.mapping(spec["render"], "render", set(), {"spp"})
+        r.integer(spec["render"].get("spp", 16), "render.spp", low=1, high=MAX_SPP)
+    r.integer(spec.get("max_tries", 5000), "max_tries", low=1, high=MAX_TRIES)
+    # draws find range errors (wrong types, lo > hi) with their key, and a spec under
+    # which no usable scene exists
     _draw(spec, np.random.default_rng(0), path)
+    try:
+        sample_scene(spec, 0, "probe", tries=min(PROBE_TRIES, spec.get("max_tries", 5000)))
+    except NoValidScene as exc:
+        raise r.fail("", str(exc)) from None
     return spec
 
 
@@ -84,28 +129,39 @@ def _draw(spec: dict, rng: np.random.Generator, where="<spec>") -> dict:
             "render": {"spp": int(spec.get("render", {}).get("spp", 16)), "seed": 0}}
 
 
-def sample_scene(spec: dict, rng: int | np.random.Generator | None, name: str) -> Scene:
+def sample_scene(spec: dict, rng: int | np.random.Generator | None, name: str,
+                 tries: int | None = None) -> Scene:
     """Draw until a usable scene comes: valid, NLOS, both images whole in the mirror.
 
     Raises
     ------
-    RunFailed
-        If ``max_tries`` draws give none (the ranges are too tight).
+    NoValidScene
+        If ``tries`` (default: the spec's ``max_tries``) draws give none, saying why the
+        draws were refused most often.
     """
     rng = np.random.default_rng(rng)
-    for _ in range(int(spec.get("max_tries", 5000))):
+    tries = int(spec.get("max_tries", 5000)) if tries is None else tries
+    reasons: dict[str, int] = {}
+    for _ in range(tries):
         d = _draw(spec, rng)
         d["name"] = name
         try:
             s = scene_from_dict(d, source=name, default_name=name)
-        except SceneError:
+        except SceneError as exc:
+            why = f"the scene's {exc.key or 'file'}"
+            reasons[why] = reasons.get(why, 0) + 1
             continue
         if s.warnings:
+            why = "an image clipped or the target seen directly"
+            reasons[why] = reasons.get(why, 0) + 1
             continue
         if all(optics.visibility(s, o).fraction == 1.0 for o in (s.target, *s.beacons)):
             return s
-    raise RunFailed(f"no usable scene in {spec.get('max_tries', 5000)} draws: widen the "
-                       "spec's ranges")
+        why = "an image not whole in the mirror"
+        reasons[why] = reasons.get(why, 0) + 1
+    common = max(reasons, key=reasons.get) if reasons else "nothing"
+    raise NoValidScene(f"no usable scene in {tries} draws (refused most often for "
+                       f"{common}: {reasons.get(common, 0)} times); widen the spec's ranges")
 
 
 def to_yaml(scene: Scene) -> str:

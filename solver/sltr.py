@@ -203,13 +203,19 @@ def mirror_from_beacon(observer: ArrayLike, beacon: ArrayLike, alpha_deg: ArrayL
     # B′ at d_total ≥ |O B| (the path via the mirror is never shorter than the direct one)
     direct = np.linalg.norm(b - o, axis=-1)
     if np.any(d < direct - 1e-9 * np.maximum(1.0, d)):
-        raise SolverError(f"beacon d_total {d} is shorter than the beacon's direct distance "
-                          f"{direct}: no mirror can produce this image")
+        raise SolverError(f"beacon d_total {_show(d)} is shorter than the beacon's direct "
+                          f"distance {_show(direct)}: no mirror can produce this image")
     mid = (b + bv) / 2.0
     # the line is perpendicular to B′ − B
     yaw = wrap_yaw(np.degrees(np.arctan2(sep[..., 1], sep[..., 0])) + 90.0)
     r = _ray_hits_line(o, alpha_deg, mid, yaw)
     return np.asarray(yaw), mid, r
+
+
+def _show(x) -> str:
+    """Numbers in messages: 3 decimals, scalars or arrays."""
+    a = np.round(np.asarray(x, float), 3)
+    return f"{float(a):g}" if a.ndim == 0 else np.array2string(a, separator=", ")
 
 
 def _ray_hits_line(o, alpha_deg, point, yaw_deg) -> np.ndarray:
@@ -242,8 +248,8 @@ def solve_single(observer: ArrayLike, beacon: ArrayLike, beacon_alpha_deg: Array
     rt = _ray_hits_line(o, target_alpha_deg, mid, yaw)
     d1 = np.linalg.norm(rt - o, axis=-1)
     if np.any(dt <= d1):
-        raise SolverError(f"target d_total {dt} does not reach past the mirror "
-                          f"(the mirror is {d1} away along the target's ray)")
+        raise SolverError(f"target d_total {_show(dt)} does not reach past the mirror "
+                          f"(the mirror is {_show(d1)} away along the target's ray)")
     target = locate(o, mid, yaw, target_alpha_deg, dt)
     mirror = MirrorLine(float(yaw), mid) if np.ndim(yaw) == 0 else MirrorLine(yaw, mid)
     return Solution(mirror=mirror, target=target, target_reflection_point=rt,
