@@ -12,11 +12,15 @@ from mirrorsim.cli_options import (
     common,
     default_workers,
     error_model_sigma,
+    finite,
     load,
     output,
 )
 from mirrorsim.errors import BadArgument
 from mirrorsim.io import emit_json
+from solver.measurements import SIGMA_ALPHA_MAX_DEG
+
+MAX_ITERATIONS = 1_000_000  # draws per Monte Carlo row: about a second a row at the most
 
 
 def _solve_options(p):
@@ -71,6 +75,13 @@ def _montecarlo(args) -> int:
     from solver.sltr import SolverError
 
     at_least(("--iterations", args.iterations, 2))
+    if args.iterations > MAX_ITERATIONS:
+        raise BadArgument("--iterations", f"{args.iterations} must be ≤ {MAX_ITERATIONS}")
+    finite(args, "alpha", "d_total", "d1", "incidence", "beacon_depth", "beacon_along", "sigma")
+    for a, d in args.sigma or []:
+        if not (0 <= a <= SIGMA_ALPHA_MAX_DEG and 0 <= d <= args.d_total):
+            raise BadArgument("--sigma", f"{a:g} {d:g}: need 0 ≤ σ_α ≤ "
+                              f"{SIGMA_ALPHA_MAX_DEG:g}° and 0 ≤ σ_d ≤ d_total")
     try:
         geometry = Table1Geometry(args.alpha, args.d_total, args.d1, args.incidence,
                                   args.beacon_depth, args.beacon_along)
@@ -108,6 +119,7 @@ def _plan(args) -> int:
     from mirrorsim.tables import plan_text
     from solver.sltr import Sigma
 
+    finite(args, "sigma_alpha", "sigma_d", "eps", "yaw_spread", "d1_spread", "step")
     scene = load(args.scene)
     sigma = error_model_sigma(args) or Sigma(args.sigma_alpha, args.sigma_d)
     plan = plan_scene(scene, sigma, args.eps, args.yaw_spread, args.d1_spread, args.step)
@@ -175,6 +187,9 @@ def _errormodel_options(p):
 def _errormodel(args) -> int:
     from mirrorsim import errormodel
 
+    if args.out is not None and args.out.suffix != ".json":
+        raise BadArgument("--out", f"{args.out}: the model is JSON: give a *.json path (its "
+                          "plots go beside it as *.png)")
     if not (args.dataset / "dataset.parquet").exists():
         raise BadArgument(str(args.dataset), "no dataset.parquet here (run `mirrorsim dataset`)")
     cols = errormodel.read_columns(args.dataset)

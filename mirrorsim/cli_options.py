@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 from collections.abc import Callable
@@ -85,6 +86,16 @@ def at_least(*checks: tuple[str, int | None, int]) -> None:
     for flag, value, low in checks:
         if value is not None and value < low:
             raise BadArgument(flag, f"{value} must be ≥ {low}")
+
+
+def finite(args: argparse.Namespace, *dests: str) -> None:
+    """Refuse NaN or infinite values of float options (argparse's float takes "nan")."""
+    for dest in dests:
+        values = getattr(args, dest)
+        for v in (values if isinstance(values, list) else [values]):
+            for x in (v if isinstance(v, list) else [v]):
+                if x is not None and not math.isfinite(x):
+                    raise BadArgument("--" + dest.replace("_", "-"), f"{x} is not a finite number")
 
 
 def check_spp_seed(args: argparse.Namespace) -> None:

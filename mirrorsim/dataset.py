@@ -175,11 +175,11 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
     chosen = choose_variant(variant)  # the probe runs once here rather than in every worker
     retry: dict[int, str] = {}
 
-    def pending() -> set[int]:
-        done = {p.stem for p in (out / "rows").glob("scene*.json")}
-        return {i for i in range(n) if scene_name(i) not in done} - set(retry)
+    def is_done(i: int) -> bool:
+        return i in retry or (out / "rows" / f"{scene_name(i)}.json").exists()
 
-    todo = sorted(pending())
+    done = {p.stem for p in (out / "rows").glob("scene*.json")}
+    todo = [i for i in range(n) if scene_name(i) not in done]
     t_start = time.perf_counter()
     bar = tqdm(total=len(todo), unit="scene", disable=not progress, desc="dataset")
 
@@ -196,7 +196,7 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
             for job in jobs:
                 on_result(process_one(*job))
         else:
-            run_local(process_one, jobs, workers, pending, on_result, recycle_every)
+            run_local(process_one, jobs, workers, is_done, on_result, recycle_every)
     finally:
         bar.close()
     wall = time.perf_counter() - t_start

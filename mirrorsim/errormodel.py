@@ -18,6 +18,8 @@ import numpy as np
 
 from mirrorsim.errors import InputError
 from mirrorsim.io import atomic_path, write_json
+from solver.measurements import read_sigma
+from solver.reader import Reader
 from solver.sltr import Sigma
 
 FEATURES = ("1", "d_total_cm", "abs_off_axis_deg", "incidence_deg", "inv_height_px")
@@ -84,15 +86,18 @@ def predict(model: dict, kind: str, quantity: str, features: np.ndarray
 
 
 def load_sigma(path: str | Path) -> Sigma:
-    """The typical σ's of a model file, as the solver takes them."""
+    """The typical σ's of a model file, as the solver takes them (checked as a
+    measurement file's ``sigma`` is)."""
     try:
         model = json.loads(Path(path).read_text())
-        s = model["sigma"]
-        return Sigma(float(s["alpha_deg"]), float(s["d_total_rel"]))
     except FileNotFoundError:
         raise InputError(path, "", "no such file") from None
-    except (ValueError, KeyError, TypeError) as exc:
-        raise InputError(path, "sigma", f"not an error model file ({exc})") from None
+    except (OSError, ValueError) as exc:
+        raise InputError(path, "", f"not an error model file ({exc})") from None
+    r = Reader(path)
+    if not isinstance(model, dict) or "sigma" not in model:
+        raise r.fail("sigma", "missing: not an error model file (`mirrorsim errormodel`)")
+    return read_sigma(r, model["sigma"])
 
 
 def read_columns(dataset_dir: str | Path) -> dict:

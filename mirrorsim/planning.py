@@ -18,6 +18,7 @@ from mirrorsim.model import (
     Beacon,
     Scene,
 )
+from solver.measurements import SIGMA_ALPHA_MAX_DEG, SIGMA_D_REL_MAX
 from solver.placement import (
     MirrorPrior,
     best_beacon,
@@ -32,6 +33,8 @@ from solver.placement import (
 from solver.sltr import Sigma
 
 AREA_DISTANCES = (25.0, 50.0, 100.0, 200.0, 400.0, 1000.0)
+# cm: finer grids take long without news (exp1 here: 1 cm 7 s, 0.5 cm 11 s, 0.25 cm 26 s)
+MIN_STEP = 0.5
 
 
 def plan_scene(scene: Scene, sigma: Sigma | None = None, eps_deg: float = 5.0,
@@ -49,15 +52,16 @@ def plan_scene(scene: Scene, sigma: Sigma | None = None, eps_deg: float = 5.0,
         For a σ, ε or step that is not > 0, ε ≥ 45° or a negative spread.
     """
     sigma = sigma or Sigma()
-    for flag, v in (("--sigma-alpha", sigma.alpha_deg), ("--sigma-d", sigma.d_total_rel),
-                    ("--eps", eps_deg), ("--step", step)):
-        if not v > 0:
-            raise BadArgument(flag, f"{v} must be > 0")
+    for flag, v, hi in (("--sigma-alpha", sigma.alpha_deg, SIGMA_ALPHA_MAX_DEG),
+                        ("--sigma-d", sigma.d_total_rel, SIGMA_D_REL_MAX), ("--eps", eps_deg, 45)):
+        if not 0 < v < hi or (flag != "--eps" and v == hi):
+            raise BadArgument(flag, f"{v} must be > 0 and {'<' if flag == '--eps' else '≤'} "
+                              f"{hi:g}")
+    if not MIN_STEP <= step <= 20:
+        raise BadArgument("--step", f"{step} must be within [{MIN_STEP:g}, 20] cm")
     for flag, v in (("--yaw-spread", yaw_spread_deg), ("--d1-spread", d1_spread)):
-        if not v >= 0:
-            raise BadArgument(flag, f"{v} must be ≥ 0")
-    if eps_deg >= 45:
-        raise BadArgument("--eps", f"{eps_deg} must be < 45")
+        if not 0 <= v <= 30:
+            raise BadArgument(flag, f"{v} must be within [0, 30]")
     cam, mir = scene.camera, scene.mirror
     img = optics.mirror_image(cam.position, mir, scene.target.position)
     o = np.asarray(cam.position, float)

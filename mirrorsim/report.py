@@ -135,13 +135,14 @@ class GroundTruth:
 
     @property
     def mirror_yaw_deg(self) -> float:
-        """The mirror's yaw in [0, 180)."""
-        return float(wrap_yaw(self.mirror.yaw))
+        """The mirror's yaw in [0, 180), rounded as its JSON is (so a truth read back from
+        its file scores exactly as the one computed)."""
+        return round(float(wrap_yaw(self.mirror.yaw)), 9)
 
     def to_json(self) -> dict:
         """The ground-truth document of INTERFACE.md."""
         cam, mir = self.camera, self.mirror
-        mirror = {"center": list(mir.center), "yaw_deg": round(self.mirror_yaw_deg, 9),
+        mirror = {"center": list(mir.center), "yaw_deg": self.mirror_yaw_deg,
                   "size": list(mir.size)}
         if self.mirror_pixels is not None:
             mirror["bbox_px"] = (None if self.mirror_pixels.bbox_px is None

@@ -42,18 +42,16 @@ def _sigint_held() -> Iterator[None]:
         signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
-def run_local(fn: Callable, jobs: list[tuple], workers: int, pending: Callable[[], set],
+def run_local(fn: Callable, jobs: list[tuple], workers: int, is_done: Callable[[int], bool],
               on_result: Callable[[object], None], recycle_every: int) -> None:
-    """Call ``fn(*job)`` for every job whose first element (its index) is still in
-    ``pending()``, in ``workers`` processes; ``on_result`` gets each return value."""
+    """Call ``fn(*job)`` for each job in ``workers`` processes; ``on_result`` gets each
+    return value.  After a worker's death the jobs of its pool for which ``is_done(index)``
+    is false (the index is a job's first element) go to a new pool."""
     ctx = mp.get_context("spawn")  # a fresh interpreter: no inherited Mitsuba state
     deaths = 0
-    while True:
-        todo = pending()
-        remaining = [j for j in jobs if j[0] in todo]
-        if not remaining:
-            return
-        chunk = remaining[:workers * recycle_every]
+    remaining = list(jobs)
+    while remaining:
+        chunk, rest = remaining[:workers * recycle_every], remaining[workers * recycle_every:]
         ex = None
         try:
             with _sigint_held():
@@ -62,6 +60,7 @@ def run_local(fn: Callable, jobs: list[tuple], workers: int, pending: Callable[[
             for f in as_completed(futures):
                 on_result(f.result())
             ex.shutdown(wait=True)
+            remaining = rest
         except BrokenProcessPool:
             _stop(ex)
             deaths += 1
@@ -70,6 +69,7 @@ def run_local(fn: Callable, jobs: list[tuple], workers: int, pending: Callable[[
                                 "kept (rerun with --resume)") from None
             print("\nwarning: a worker process died; a new pool takes the unfinished "
                   "scenes", file=sys.stderr)
+            remaining = [j for j in chunk if not is_done(j[0])] + rest
         except BaseException:  # Ctrl-C above all: the workers stop now, not after their scene
             _stop(ex)
             raise

@@ -12,6 +12,9 @@ from solver.errors import InputError
 from solver.reader import Reader
 from solver.sltr import BeaconMeasurement, Sigma
 
+# σ's beyond these are no measurement: a bearing known to ±45° or a distance to ±100 %
+SIGMA_ALPHA_MAX_DEG = 45.0
+SIGMA_D_REL_MAX = 1.0
 # what detect adds beside the solver's inputs; the solver ignores it
 _DETECTOR_KEYS = ("bbox_px", "height_px", "u_axis", "clipped", "source")
 
@@ -89,9 +92,14 @@ def measurements_from_dict(data: Any, source: str | Path = "<measurements>") -> 
             r.pair(b["position"], f"{key}.position"),
             r.number(b["alpha_deg"], f"{key}.alpha_deg"),
             r.number(b["d_total"], f"{key}.d_total", positive=True)))
-    sigma = None
-    if "sigma" in top:
-        s = r.mapping(top["sigma"], "sigma", ("alpha_deg", "d_total_rel"))
-        sigma = Sigma(r.number(s["alpha_deg"], "sigma.alpha_deg", positive=True),
-                      r.number(s["d_total_rel"], "sigma.d_total_rel", positive=True))
+    sigma = read_sigma(r, top["sigma"]) if "sigma" in top else None
     return Measurements(observer, targets, beacons, sigma)
+
+
+def read_sigma(r: Reader, value: Any, key: str = "sigma") -> Sigma:
+    """A ``sigma`` block: α in degrees and d_total relative, each > 0 and sensible."""
+    s = r.mapping(value, key, ("alpha_deg", "d_total_rel"))
+    return Sigma(r.number(s["alpha_deg"], f"{key}.alpha_deg", positive=True,
+                          high=SIGMA_ALPHA_MAX_DEG),
+                 r.number(s["d_total_rel"], f"{key}.d_total_rel", positive=True,
+                          high=SIGMA_D_REL_MAX))

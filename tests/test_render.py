@@ -166,3 +166,14 @@ def test_several_beacons_each_get_their_label(tmp_path, fast_variant):
         assert ext.v_top - 1 <= vs.min() <= ext.v_top + 2
     # the occluder's label comes after the beacons'
     assert (ids == BEACON_LABEL + 2).sum() > 0
+
+
+def test_truth_read_back_from_its_file_is_the_truth(default_small):
+    """A reused render scores exactly as a fresh one: the truth survives its JSON."""
+    from mirrorsim.report import GroundTruth
+
+    _, res = default_small
+    back = GroundTruth.from_json(json.loads(res.truth_json.read_text()))
+    assert back.to_json() == res.truth.to_json()
+    assert back.mirror_yaw_deg == res.truth.mirror_yaw_deg
+    assert back.target == res.truth.target and back.beacons == res.truth.beacons

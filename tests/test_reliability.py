@@ -1,0 +1,372 @@
+"""Bad input and interruption, by class (issue 10): each class with cases of its own.
+
+Every bad input must give exit 2, one line on stderr naming what is wrong, no
+traceback and nothing written; interruptions must stop at once and lose, double or
+corrupt nothing.
+"""
+
+import copy
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from mirrorsim import io
+from mirrorsim.cli import main
+
+from .conftest import ROOT, SCENES, scene_dict
+
+SPEC = ROOT / "tests" / "data" / "tiny_spec.yaml"
+DEFAULT = str(SCENES / "default.yaml")
+
+
+def _refused(capsys, argv, *, status=2, says=()) -> str:
+    """Run the CLI; assert the status and a single clean stderr line; return that line."""
+    assert main(argv) == status
+    err = capsys.readouterr().err.strip().splitlines()
+    errors = [ln for ln in err if ln.startswith("error: ")]
+    assert len(errors) == 1 and "Traceback" not in "\n".join(err), err
+    for word in says:
+        assert word in errors[0], errors[0]
+    return errors[0]
+
+
+def _files(folder: Path) -> set[str]:
+    return {str(p.relative_to(folder)) for p in folder.rglob("*")} if folder.exists() else set()
+
+
+# ------------------------------------------------------------ 1. interruptions
+
+
+def test_ctrl_c_during_dataset_stops_at_once_and_resume_is_exact(tmp_path):
+    """Ctrl-C to the whole process group (as a terminal sends it) with two workers busy:
+    the run stops within seconds, no worker survives, no row is half-written or
+    recorded as a failure, and --resume gives the rows of an uninterrupted run."""
+    out = tmp_path / "ds"
+    cmd = [sys.executable, "-m", "mirrorsim", "dataset", "--n", "4", "--seed", "11",
+           "--out", str(out), "--spec", str(SPEC), "--workers", "2", "--quiet"]
+    proc = subprocess.Popen(cmd, start_new_session=True, stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 120
+    while time.time() < deadline and not list((out / "rows").glob("scene*.json")):
+        time.sleep(0.1)
+    os.killpg(proc.pid, signal.SIGINT)
+    t0 = time.time()
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 130 and "interrupted" in err
+    assert time.time() - t0 < 20  # "within a few seconds": generous for a slow machine
+    # nothing of that session is left running (multiprocessing's resource tracker may
+    # take a moment to see its parent gone)
+    while time.time() - t0 < 30:
+        try:
+            os.killpg(proc.pid, 0)
+        except ProcessLookupError:
+            break
+        time.sleep(0.2)
+    else:
+        raise AssertionError("a process of the interrupted run is still alive")
+    rows = [json.loads(p.read_text()) for p in sorted((out / "rows").glob("scene*.json"))]
+    assert 1 <= len(rows) < 4 and all(r["error"] == "" for r in rows)
+    assert subprocess.run(cmd + ["--resume"], capture_output=True).returncode == 0
+    ref = tmp_path / "ref"
+    assert main(["dataset", "--n", "4", "--seed", "11", "--out", str(ref), "--spec", str(SPEC),
+                 "--workers", "1", "--quiet"]) == 0
+    volatile = {"seconds_total", "seconds_sample"}
+
+    def rows_of(folder):
+        return [{k: v for k, v in json.loads(p.read_text()).items() if k not in volatile}
+                for p in sorted((folder / "rows").glob("scene*.json"))]
+
+    assert rows_of(out) == rows_of(ref) and len(rows_of(ref)) == 4
+    assert all(r["error"] == "" for r in rows_of(ref))
+
+
+@pytest.mark.parametrize("exc, recorded", [
+    (MemoryError("out of memory"), False),  # outside the scene: redone on resume
+    (OSError(28, "No space left on device"), False),
+    ("detection", True),  # the scene's own: a row with its error
+])
+def test_only_the_scenes_own_failures_become_rows(tmp_path, monkeypatch, exc, recorded):
+    from mirrorsim import dataset, evaluate
+    from mirrorsim.errors import DetectionError
+    from mirrorsim.sampler import load_spec
+
+    def failing(*_args, **_kwargs):
+        raise DetectionError("nothing found") if exc == "detection" else exc
+
+    monkeypatch.setattr(evaluate, "evaluate_scene", failing)
+    for sub in ("scenes", "rows", "frames"):
+        (tmp_path / sub).mkdir()
+    row = dataset.process_one(0, 1, load_spec(SPEC), str(tmp_path), 1, "scalar_rgb")
+    assert (tmp_path / "rows" / "scene000000.json").exists() == recorded
+    assert ("retry" in row) != recorded
+    if recorded:
+        assert row["error"].startswith("DetectionError")
+
+
+# ------------------------------------------------------- 2. other people's files
+
+
+def test_dataset_never_writes_into_a_folder_of_other_files(tmp_path, capsys):
+    folder = tmp_path / "mine"
+    folder.mkdir()
+    (folder / "notes.txt").write_text("my notes")
+    before = _files(folder)
+    _refused(capsys, ["dataset", "--n", "1", "--seed", "0", "--out", str(folder), "--spec",
+                      str(SPEC)], says=("notes.txt", "not a dataset"))
+    assert _files(folder) == before and (folder / "notes.txt").read_text() == "my notes"
+    # --resume on it is no better, nor on a folder whose dataset.json is someone else's
+    _refused(capsys, ["dataset", "--n", "1", "--seed", "0", "--out", str(folder), "--spec",
+                      str(SPEC), "--resume"])
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "dataset.json").write_text('{"name": "not ours"}')
+    _refused(capsys, ["dataset", "--n", "1", "--seed", "0", "--out", str(other), "--spec",
+                      str(SPEC), "--resume"], says=("not a mirrorsim dataset",))
+    (other / "dataset.json").write_text("{broken")
+    _refused(capsys, ["dataset", "--n", "1", "--seed", "0", "--out", str(other), "--spec",
+                      str(SPEC), "--resume"], says=("dataset.json",))
+    # a new folder inside an existing one is fine; --resume where nothing is is not
+    _refused(capsys, ["dataset", "--n", "1", "--seed", "0", "--out", str(tmp_path / "new"),
+                      "--spec", str(SPEC), "--resume"], says=("no dataset here",))
+    assert not (tmp_path / "new").exists()
+
+
+def test_errormodel_out_must_be_a_json_model(tmp_path, capsys):
+    ds = tmp_path / "ds"
+    ds.mkdir()
+    (ds / "dataset.parquet").write_bytes(b"PAR1 not really")
+    for bad in ("model.png", "dataset.parquet", "model"):
+        _refused(capsys, ["errormodel", str(ds), "--out", str(ds / bad)], says=("*.json",))
+    assert _files(ds) == {"dataset.parquet"}
+
+
+# ------------------------------------------------------------- 3. output paths
+
+
+@pytest.mark.parametrize("argv_of", [
+    lambda t: ["check", DEFAULT, "--json", str(t / "missing" / "truth.json")],
+    lambda t: ["check", DEFAULT, "--measurements", str(t)],  # a folder where a file goes
+    lambda _t: ["check", DEFAULT, "--json", "/proc/mirrorsim.json"],  # nothing can be made
+    lambda t: ["render", DEFAULT, "--out", str(t / "a" / "b"), "--spp", "1"],
+    lambda t: ["evaluate", DEFAULT, "--out", str(t / "file.txt")],  # a file where a folder goes
+    lambda t: ["plot", DEFAULT, "--out", str(t / "no" / "top.png")],
+    lambda t: ["plan", DEFAULT, "--json", str(t / "no" / "plan.json")],
+    lambda t: ["solve", str(t / "m.json"), "--json", "/dev/null"],  # a device: never replaced
+    lambda t: ["detect", str(t / "f.png"), "--scene", DEFAULT, "--annotate",
+               str(t / "no" / "a.png")],
+], ids=["json-missing-parent", "measurements-is-folder", "json-in-proc", "render-out-deep",
+        "evaluate-out-is-file", "plot-missing-parent", "plan-json-missing", "solve-json-device",
+        "detect-annotate-missing"])
+def test_unwritable_outputs_are_refused_before_any_work(tmp_path, capsys, argv_of):
+    (tmp_path / "file.txt").write_text("x")
+    (tmp_path / "m.json").write_text(json.dumps({
+        "observer": [0, 0], "target": {"alpha_deg": 66.68, "d_total": 98.52},
+        "beacons": [{"position": [32, 62.5], "alpha_deg": 69.5, "d_total": 74.7}]}))
+    (tmp_path / "f.png").write_bytes(b"not even read")
+    before = _files(tmp_path)
+    _refused(capsys, argv_of(tmp_path))  # before rendering or detecting: no render folder
+    assert _files(tmp_path) == before
+
+
+def test_a_full_disk_is_refused_in_one_line(tmp_path, capsys):
+    full = tmp_path / "full"
+    full.mkdir()
+    if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=32k", "tmpfs", str(full)],
+                      capture_output=True).returncode != 0:
+        pytest.skip("cannot mount a small tmpfs here (not root?)")
+    try:
+        line = _refused(capsys, ["check", DEFAULT, "--json", str(full / "truth.json")])
+        assert "no space left" in line
+        assert list(full.iterdir()) == []
+    finally:
+        subprocess.run(["umount", str(full)], check=False)
+
+
+def test_json_is_strict_and_atomic_writes_leave_nothing_on_failure(tmp_path):
+    text = io.dumps({"a": math.nan, "b": [math.inf, 1.5], "c": np.float32(2.0)})
+    assert json.loads(text) == {"a": None, "b": [None, 1.5], "c": 2.0}
+    assert "NaN" not in text and "Infinity" not in text
+    target = tmp_path / "x.json"
+    with pytest.raises(RuntimeError), io.atomic_path(target) as tmp:
+        tmp.write_text("half")
+        raise RuntimeError("interrupted mid-write")
+    assert list(tmp_path.iterdir()) == []
+
+
+# --------------------------------------------------------- 4. bounds and hangs
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["render", DEFAULT, "--spp", "70000"], "--spp"),
+    (["evaluate", DEFAULT, "--spp", "0"], "--spp"),
+    (["dataset", "--n", "5000000", "--seed", "0", "--out", "X", "--spec", str(SPEC)], "--n"),
+    (["plan", DEFAULT, "--step", "0.2"], "--step"),
+    (["montecarlo", "--iterations", "5000000"], "--iterations"),
+])
+def test_documented_bounds_refused_at_once(tmp_path, capsys, argv, says):
+    argv = [str(tmp_path / "o") if a == "X" else a for a in argv]
+    _refused(capsys, argv, says=(says,))
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_spec_with_no_valid_scene_says_so_and_stops(tmp_path, capsys):
+    spec = yaml.safe_load(SPEC.read_text())
+    spec["max_tries"] = 100000
+    spec["beacon"]["depth"] = [40, 50]  # far behind the camera's side of the board
+    path = tmp_path / "spec.yaml"
+    path.write_text(yaml.safe_dump(spec))
+    # refused after its first few hundred draws, not after max_tries = 100000
+    _refused(capsys, ["dataset", "--n", "2", "--seed", "0", "--out", str(tmp_path / "o"),
+                      "--spec", str(path)], says=("no usable scene in 300 draws", "widen"))
+    assert not (tmp_path / "o").exists()
+
+
+# ------------------------------------------------------------ 5. silent nonsense
+
+
+@pytest.mark.parametrize("edit, key", [
+    (lambda s: s["render"].update(spp=-3), "render.spp"),
+    (lambda s: s["camera"].update(resolution=[1920]), "camera.resolution"),
+    (lambda s: s["camera"].update(pan="left"), "camera.pan"),
+    (lambda s: s.update(max_tries=0), "max_tries"),
+    (lambda s: s["beacon"].update(height="tall"), "beacon.height"),
+    (lambda s: s["target"].update(y=[70, 30]), "target.y"),
+    (lambda s: s["occluder"].pop("at"), "occluder.at"),
+    (lambda s: s.update(extra=1), "extra"),
+])
+def test_spec_values_that_would_fail_every_scene_are_refused(tmp_path, capsys, edit, key):
+    spec = yaml.safe_load(SPEC.read_text())
+    edit(spec)
+    path = tmp_path / "spec.yaml"
+    path.write_text(yaml.safe_dump(spec))
+    _refused(capsys, ["dataset", "--n", "1", "--seed", "0", "--out", str(tmp_path / "o"),
+                      "--spec", str(path)], says=(str(path), key))
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("sigma, key", [
+    ({"alpha_deg": -0.01, "d_total_rel": 0.002}, "sigma.alpha_deg"),
+    ({"alpha_deg": 0.01, "d_total_rel": 0}, "sigma.d_total_rel"),
+    ({"alpha_deg": 1e300, "d_total_rel": 0.002}, "sigma.alpha_deg"),
+    ({"alpha_deg": 0.01}, "sigma.d_total_rel"),
+])
+def test_error_model_sigmas_are_checked_like_a_measurement_files(tmp_path, capsys, sigma,
+                                                                 key):
+    model = tmp_path / "model.json"
+    # NaN cannot be written as strict JSON; Python's json reads it, so try it too
+    model.write_text(json.dumps({"sigma": sigma}))
+    meas = tmp_path / "m.json"
+    assert main(["check", str(SCENES / "exp1.yaml"), "--measurements", str(meas)]) == 0
+    capsys.readouterr()
+    _refused(capsys, ["solve", str(meas), "--error-model", str(model), "--json",
+                      str(tmp_path / "s.json")], says=(str(model), key))
+    _refused(capsys, ["plan", DEFAULT, "--error-model", str(model)], says=(key,))
+    _refused(capsys, ["montecarlo", "--error-model", str(model)], says=(key,))
+    assert not (tmp_path / "s.json").exists()
+    model.write_text('{"sigma": {"alpha_deg": NaN, "d_total_rel": 0.002}}')
+    _refused(capsys, ["plan", DEFAULT, "--error-model", str(model)], says=("alpha_deg",))
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["montecarlo", "--incidence", "inf"], "--incidence"),
+    (["montecarlo", "--sigma", "nan", "0.1"], "--sigma"),
+    (["montecarlo", "--beacon-depth", "-1"], "geometry"),
+    (["plan", DEFAULT, "--d1-spread", "-2"], "--d1-spread"),
+    (["plan", DEFAULT, "--sigma-d", "2"], "--sigma-d"),
+])
+def test_options_out_of_their_domain_are_refused(capsys, argv, says):
+    _refused(capsys, argv, says=(says,))
+
+
+@pytest.mark.parametrize("edit, key", [
+    (lambda m: m.update(target=[]), "target"),
+    (lambda m: m.update(sigma={"alpha_deg": 0.01, "d_total_rel": 1e300}), "sigma.d_total_rel"),
+    (lambda m: m["beacons"][0].update(position=[1]), "beacons[0].position"),
+])
+def test_measurement_files_refused_as_bad_input(tmp_path, capsys, edit, key):
+    m = {"observer": [0, 0], "target": {"alpha_deg": 66.68, "d_total": 98.52},
+         "beacons": [{"position": [32, 62.5], "alpha_deg": 69.5, "d_total": 74.7}]}
+    edit(m)
+    path = tmp_path / "m.json"
+    path.write_text(json.dumps(m))
+    _refused(capsys, ["solve", str(path)], says=(str(path), key))
+
+
+# ------------------------------------------------------ 6. detect on the wrong input
+
+
+@pytest.fixture(scope="module")
+def half_frames(tmp_path_factory):
+    """The default scene and EXP3 at half size, rendered once."""
+    from mirrorsim.frames import render_to_files
+
+    folder = tmp_path_factory.mktemp("frames")
+    scenes = {}
+    for name in ("default", "exp3"):
+        d = copy.deepcopy(scene_dict(name))
+        d["camera"]["resolution"] = [960, 544]
+        path = folder / f"{name}.yaml"
+        path.write_text(yaml.safe_dump(d))
+        from mirrorsim.scenefile import load_scene
+
+        files = render_to_files(load_scene(path), folder / name, spp=8, progress=False)
+        scenes[name] = (path, files.png)
+    return folder, scenes
+
+
+def _detect_process(frame, scene) -> subprocess.CompletedProcess:
+    """As a real process, so that C-level noise on stderr (libpng, OpenCV) is seen."""
+    return subprocess.run([sys.executable, "-m", "mirrorsim", "detect", str(frame), "--scene",
+                           str(scene)], capture_output=True, text=True)
+
+
+def test_upside_down_and_other_scenes_frames_are_errors_naming_frame_and_scene(half_frames):
+    import cv2
+
+    folder, scenes = half_frames
+    scene, png = scenes["default"]
+    img = cv2.imread(str(png))
+    upside = folder / "upside_down.png"
+    cv2.imwrite(str(upside), cv2.rotate(img, cv2.ROTATE_180))
+    mirrored = folder / "mirrored.png"
+    cv2.imwrite(str(mirrored), img[:, ::-1])
+    for frame, which in ((upside, scene), (mirrored, scene), (scenes["exp3"][1], scene)):
+        proc = _detect_process(frame, which)
+        assert proc.returncode == 1, proc.stdout
+        lines = proc.stderr.strip().splitlines()
+        assert len(lines) == 1 and str(frame) in lines[0] and str(which) in lines[0], lines
+
+
+def test_damaged_frames_give_one_line_and_no_library_noise(half_frames):
+    folder, scenes = half_frames
+    scene, png = scenes["default"]
+    cut = folder / "cut.png"
+    cut.write_bytes(png.read_bytes()[:2000])
+    text = folder / "notes.png"
+    text.write_text("not an image")
+    for frame, says in ((cut, "damaged"), (text, "not a PNG or JPEG"),
+                        (folder / "absent.png", "no such file")):
+        proc = _detect_process(frame, scene)
+        assert proc.returncode == 2
+        lines = proc.stderr.strip().splitlines()
+        assert len(lines) == 1 and says in lines[0] and str(frame) in lines[0], lines
+
+
+def test_a_jpeg_frame_is_measured_with_a_warning(half_frames):
+    import cv2
+
+    folder, scenes = half_frames
+    scene, png = scenes["default"]
+    jpg = folder / "frame.jpg"
+    cv2.imwrite(str(jpg), cv2.imread(str(png)), [cv2.IMWRITE_JPEG_QUALITY, 95])
+    proc = _detect_process(jpg, scene)
+    assert proc.returncode == 0
+    assert proc.stderr.startswith("warning: ") and "JPEG" in proc.stderr
