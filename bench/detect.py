@@ -29,7 +29,8 @@ sys.path.insert(0, str(ROOT))
 
 from mirrorsim import optics  # noqa: E402
 from mirrorsim.calibrate import calibrate  # noqa: E402
-from mirrorsim.detect import DetectorView, detect_frame, read_frame  # noqa: E402
+from mirrorsim.capture import CaptureRecord  # noqa: E402
+from mirrorsim.detect import detect_frame, read_frame  # noqa: E402
 from mirrorsim.errors import DetectionError, SceneError  # noqa: E402
 from mirrorsim.frames import render_to_files  # noqa: E402
 from mirrorsim.scenefile import load_scene, scene_from_dict  # noqa: E402
@@ -72,7 +73,7 @@ def measure(scene, spp: int, tmp: Path) -> dict:
     img = read_frame(res.png)
     t0 = time.perf_counter()
     try:
-        out = detect_frame(img, DetectorView.from_scene(scene), cal)
+        out = detect_frame(img, CaptureRecord.from_scene(scene), cal)
     except DetectionError as exc:
         return {"scene": scene.name, "spp": spp, "error": str(exc)}
     dt = time.perf_counter() - t0

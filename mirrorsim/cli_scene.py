@@ -74,8 +74,12 @@ def _plot(args) -> int:
 
 
 def _detect_options(p):
-    p.add_argument("frame", type=Path, help="the rendered PNG")
-    p.add_argument("--scene", type=Path, required=True, help="the scene file (camera, beacons)")
+    p.add_argument("frame", type=Path, help="the frame (PNG, or JPEG)")
+    source = p.add_mutually_exclusive_group(required=True)
+    source.add_argument("--capture", type=Path, metavar="FILE.capture.json",
+                        help="the frame's capture record (`render` writes it beside the frame)")
+    source.add_argument("--scene", type=Path,
+                        help="a scene file: its capture record is made from it")
     common(p, scene=False, json="the measurements", variant=True)
     output(p, "--annotate", "file", type=Path, metavar="OUT.png",
            help="draw the detections on the frame")
@@ -83,22 +87,27 @@ def _detect_options(p):
 
 @command("detect", "measure alpha and d_total from a rendered frame",
          "Find the target's and the beacons' images in FRAME and measure each one's angle of "
-         "arrival and, by size constancy, its d_total.  Uses only the image, the scene's camera "
-         "block, the beacons' known positions and heights, the objects' sizes, and the "
+         "arrival and, by size constancy, its d_total.  Uses only the image and its capture "
+         "record (the camera as its mount reports it, the beacons' believed positions and "
+         "heights, the target's size: never the mirror or where the target stands) and the "
          "calibration (`mirrorsim calibrate`, made and cached on first use).",
          _detect_options)
 def _detect(args) -> int:
     from mirrorsim.calibrate import calibrate
-    from mirrorsim.detect import DetectorView, annotate, detect_frame, read_frame, write_png
+    from mirrorsim.capture import CaptureRecord, load_capture
+    from mirrorsim.detect import annotate, detect_frame, read_frame, write_png
     from mirrorsim.tables import detect_summary
 
-    view = DetectorView.from_scene(load(args.scene))
+    if args.capture:
+        view, source = load_capture(args.capture), f"capture {args.capture}"
+    else:
+        view, source = CaptureRecord.from_scene(load(args.scene)), f"scene {args.scene}"
     image = read_frame(args.frame)
     cal = calibrate(view.camera, view.target_size, view.beacons[0].height, variant=args.variant)
     try:
         det = detect_frame(image, view, cal)
     except DetectionError as exc:
-        raise DetectionError(f"{args.frame} (scene {args.scene}): {exc}") from None
+        raise DetectionError(f"{args.frame} ({source}): {exc}") from None
     print(detect_summary(str(args.frame), det))
     if args.annotate:
         write_png(args.annotate, annotate(image, det))

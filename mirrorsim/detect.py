@@ -1,9 +1,10 @@
 """The detector: α and d_total of the target and the beacons, from a rendered frame.
 
-The only module that imports OpenCV.  What it may use (:class:`DetectorView`): the
-image, the camera (position, height, pan, intrinsics), the beacons' known positions and
-heights, the objects' appearance and sizes, and the calibration.  Never the target's or
-the mirror's pose, nor the ground truth.
+With :mod:`mirrorsim.measure`, the detector; the only module that imports OpenCV
+(besides the image effects to come).  What it may use: the image and its capture record
+(:class:`~mirrorsim.capture.CaptureRecord`: the camera as its mount reports it, the
+beacons' believed positions and heights, the target's size), the objects' appearance,
+and the calibration.  Never the target's or the mirror's pose, nor the ground truth.
 
 Model
 -----
@@ -43,6 +44,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from mirrorsim.capture import CaptureRecord
 from mirrorsim.errors import DetectionError, InputError
 from mirrorsim.measure import ImageMeasurement, measure_region, to_linear
 from mirrorsim.model import (
@@ -51,7 +53,6 @@ from mirrorsim.model import (
     Beacon,
     Camera,
     Point2,
-    Scene,
     pencil_paint_height,
 )
 from solver.geometry import bearing_deg, wrap_bearing
@@ -60,19 +61,6 @@ from solver.sltr import BeaconMeasurement
 
 FRAME_OPEN_PX = 13  # wider than the mirror frame's bars at the distances of our scenes
 
-
-@dataclass(frozen=True)
-class DetectorView:
-    """All the detector may know about a scene."""
-
-    camera: Camera
-    beacons: tuple[Beacon, ...]
-    target_size: tuple[float, float]
-
-    @classmethod
-    def from_scene(cls, scene: Scene) -> DetectorView:
-        """Take the camera, the beacons and the target's size, nothing else."""
-        return cls(camera=scene.camera, beacons=scene.beacons, target_size=scene.target.size)
 
 # ------------------------------------------------------------------ segmentation
 
@@ -222,7 +210,7 @@ def _pencil_channel(linear: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(linear[..., 2:3])
 
 
-def detect_frame(image: np.ndarray, view: DetectorView, calibration: Calibration) -> Detection:
+def detect_frame(image: np.ndarray, view: CaptureRecord, calibration: Calibration) -> Detection:
     """Measure the target and each beacon in an RGB uint8 frame.
 
     Raises
@@ -261,7 +249,7 @@ def detect_frame(image: np.ndarray, view: DetectorView, calibration: Calibration
 FOOT_TOLERANCE = (3.0, 0.05)  # px, and a fraction of the image's height: the larger
 
 
-def _check_stands_on_board(cam: Camera, m: ImageMeasurement, view: DetectorView) -> None:
+def _check_stands_on_board(cam: Camera, m: ImageMeasurement, view: CaptureRecord) -> None:
     """An upright object on the board, seen by a level camera h cm high, has its foot
     h/H of its image height s below the principal row: v_foot = cy + s·h/H (for a mirror
     image too: a vertical mirror keeps heights).  A frame that is flipped, of another
@@ -300,7 +288,7 @@ def _public(m: ImageMeasurement) -> dict:
     return {k: (round(v, 4) if isinstance(v, float) else v) for k, v in d.items()}
 
 
-def _assign_beacons(pencils: list[ImageMeasurement], view: DetectorView
+def _assign_beacons(pencils: list[ImageMeasurement], view: CaptureRecord
                     ) -> list[ImageMeasurement]:
     """Tell direct images (where the known beacon itself would appear) from mirror images,
     and give each beacon its mirror image."""

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from mirrorsim.calibrate import calibrate
-from mirrorsim.detect import DetectorView, annotate, detect_frame, read_frame, write_png
+from mirrorsim.detect import annotate, detect_frame, read_frame, write_png
 from mirrorsim.errors import DetectionError
 from mirrorsim.frames import default_out, render_to_files
 from mirrorsim.model import Scene
@@ -42,7 +42,6 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, spp: int 
     seed = scene.render.seed if seed is None else seed
     out = Path(out_dir) if out_dir is not None else default_out(scene)
     cam = scene.camera
-    cal = calibrate(cam, scene.target.size, scene.beacons[0].height, variant=variant)
 
     per_beacon = [scene] if len(scene.beacons) == 1 else [
         replace(scene, name=f"{scene.name}_b{i}", beacons=(b,))
@@ -51,9 +50,11 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, spp: int 
     for sub in per_beacon:
         files = render_to_files(sub, out, spp=spp, seed=seed, variant=variant,
                                 progress=progress, reuse=True)
+        cal = calibrate(files.capture.camera, files.capture.target_size,
+                        files.capture.beacons[0].height, variant=variant)
         image = read_frame(files.png)
         try:
-            det = detect_frame(image, DetectorView.from_scene(sub), cal)
+            det = detect_frame(image, files.capture, cal)  # the record, never the scene
         except DetectionError as exc:
             raise DetectionError(f"{files.png}: {exc}") from None
         annotated = out / f"{sub.name}.annotated.png"

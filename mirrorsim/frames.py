@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from mirrorsim import optics
+from mirrorsim.capture import CaptureRecord, load_capture
 from mirrorsim.io import atomic_path, dumps
 from mirrorsim.mitsuba_scene import BACKGROUND_LABEL, BEACON_LABEL, MIRROR_LABEL, TARGET_LABEL
 from mirrorsim.model import Scene
@@ -30,11 +31,14 @@ from mirrorsim.report import GroundTruth, MirrorPixels, RenderInfo
 
 @dataclass(frozen=True)
 class FrameFiles:
-    """A frame on disk and its ground truth."""
+    """A frame on disk, its capture record (what the detector may know) and its ground
+    truth (for scoring only)."""
 
     png: Path
     truth_json: Path
     ids_png: Path
+    capture_json: Path
+    capture: CaptureRecord
     truth: GroundTruth
     reused: bool = False
 
@@ -82,16 +86,27 @@ def truth_of(scene: Scene, frame: RenderedFrame, fingerprint: str | None) -> Gro
 
 def write_frame(scene: Scene, frame: RenderedFrame, out: Path,
                 fingerprint: str | None = None) -> FrameFiles:
-    """Write the frame, its ids and its truth into ``out``; all three appear together."""
+    """Write the frame, its ids, its capture record and its truth into ``out``; they
+    appear together."""
     out.mkdir(parents=True, exist_ok=True)
     truth = truth_of(scene, frame, fingerprint)
-    png, ids, js = (out / f"{scene.name}{ext}" for ext in (".png", ".ids.png", ".json"))
+    png, ids, js, cap = _paths(scene, out)
+    capture = CaptureRecord.from_scene(scene, frame=png.name)
     with contextlib.ExitStack() as stack:
-        tmp_png, tmp_ids, tmp_js = (stack.enter_context(atomic_path(p)) for p in (png, ids, js))
+        tmp_png, tmp_ids, tmp_js, tmp_cap = (stack.enter_context(atomic_path(p))
+                                             for p in (png, ids, js, cap))
         write_png(tmp_png, to_srgb8(frame.linear))
         write_png(tmp_ids, encode_ids(frame.first, frame.in_mirror))
         tmp_js.write_text(dumps(truth.to_json()))
-    return FrameFiles(png=png, truth_json=js, ids_png=ids, truth=truth)
+        tmp_cap.write_text(dumps(capture.to_json()))
+    return FrameFiles(png=png, truth_json=js, ids_png=ids, capture_json=cap, capture=capture,
+                      truth=truth)
+
+
+def _paths(scene: Scene, out: Path) -> tuple[Path, Path, Path, Path]:
+    """The frame, its ids, its truth and its capture record."""
+    return tuple(out / f"{scene.name}{ext}"
+                 for ext in (".png", ".ids.png", ".json", ".capture.json"))
 
 
 def render_to_files(scene: Scene, out: str | Path | None = None, *, spp: int | None = None,
@@ -112,16 +127,18 @@ def render_to_files(scene: Scene, out: str | Path | None = None, *, spp: int | N
 
 
 def _reusable(scene: Scene, out: Path, fingerprint: str) -> FrameFiles | None:
-    png, ids, js = (out / f"{scene.name}{ext}" for ext in (".png", ".ids.png", ".json"))
-    if not (png.exists() and js.exists()):
+    png, ids, js, cap = _paths(scene, out)
+    if not (png.exists() and js.exists() and cap.exists()):
         return None
     try:
         truth = GroundTruth.from_json(json.loads(js.read_text()))
-    except (OSError, ValueError, KeyError, TypeError):
+        capture = load_capture(cap)
+    except (OSError, ValueError, KeyError, TypeError):  # CaptureError is a ValueError
         return None
     if truth.render is None or truth.render.fingerprint != fingerprint:
         return None
-    return FrameFiles(png=png, truth_json=js, ids_png=ids, truth=truth, reused=True)
+    return FrameFiles(png=png, truth_json=js, ids_png=ids, capture_json=cap, capture=capture,
+                      truth=truth, reused=True)
 
 
 def _mask_stats(mask: np.ndarray) -> tuple[tuple[int, int, int, int] | None, int]:

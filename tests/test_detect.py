@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 from mirrorsim.calibrate import calibrate
+from mirrorsim.capture import CaptureRecord
 from mirrorsim.cli import main
-from mirrorsim.detect import DetectorView, detect_frame, read_frame
+from mirrorsim.detect import detect_frame, read_frame
 from mirrorsim.errors import DetectionError
 from mirrorsim.frames import render_to_files
 from mirrorsim.model import Mirror, Target
@@ -38,7 +39,7 @@ def half_default(tmp_path_factory):
 
 def test_half_size_default_accuracy(half_default):
     scene, res, cal = half_default
-    out = detect_frame(read_frame(res.png), DetectorView.from_scene(scene), cal)
+    out = detect_frame(read_frame(res.png), CaptureRecord.from_scene(scene), cal)
     da_t, dd_t, da_b, dd_b = _truth_errors(out, res.truth)
     assert da_t < 0.02 and dd_t < 0.004
     assert da_b < 0.03 and dd_b < 0.015
@@ -48,16 +49,16 @@ def test_detector_ignores_target_and_mirror_pose(half_default):
     """Scrambling what the detector must not know changes nothing it reports."""
     scene, res, cal = half_default
     img = read_frame(res.png)
-    a = detect_frame(img, DetectorView.from_scene(scene), cal)
+    a = detect_frame(img, CaptureRecord.from_scene(scene), cal)
     scrambled = replace(scene, target=Target((5.0, 75.0), scene.target.size, 123.0),
                         mirror=Mirror((70.0, 10.0), 99.0, (30.0, 2.0)))
-    b = detect_frame(img, DetectorView.from_scene(scrambled), cal)
+    b = detect_frame(img, CaptureRecord.from_scene(scrambled), cal)
     assert a.to_json() == b.to_json()
 
 
 def test_direct_and_mirror_images_of_the_beacon_told_apart(half_default):
     scene, res, cal = half_default
-    out = detect_frame(read_frame(res.png), DetectorView.from_scene(scene), cal)
+    out = detect_frame(read_frame(res.png), CaptureRecord.from_scene(scene), cal)
     sources = sorted(im.source for im in out.images)
     assert sources == ["direct", "mirror"]
     direct = next(im for im in out.images if im.source == "direct")
@@ -72,7 +73,7 @@ def test_empty_frame_is_a_clear_error(half_default, tmp_path, capsys):
     scene, res, cal = half_default
     blank = np.full((544, 960, 3), 180, np.uint8)
     with pytest.raises(DetectionError, match="no target"):
-        detect_frame(blank, DetectorView.from_scene(scene), cal)
+        detect_frame(blank, CaptureRecord.from_scene(scene), cal)
     from mirrorsim.detect import write_png
 
     f = tmp_path / "blank.png"
@@ -93,7 +94,7 @@ def test_empty_frame_is_a_clear_error(half_default, tmp_path, capsys):
 def test_wrong_frame_size_is_refused(half_default):
     scene, res, cal = half_default
     with pytest.raises(DetectionError, match="px but the camera"):
-        detect_frame(np.zeros((100, 100, 3), np.uint8), DetectorView.from_scene(scene), cal)
+        detect_frame(np.zeros((100, 100, 3), np.uint8), CaptureRecord.from_scene(scene), cal)
 
 
 def test_calibration_matches_the_pinhole():
@@ -113,7 +114,7 @@ def test_full_size_frames(name, tmp_path):
     scene = load_scene(SCENES / f"{name}.yaml")
     res = render_to_files(scene, tmp_path, progress=False)
     cal = calibrate(scene.camera, scene.target.size, scene.beacons[0].height)
-    out = detect_frame(read_frame(res.png), DetectorView.from_scene(scene), cal)
+    out = detect_frame(read_frame(res.png), CaptureRecord.from_scene(scene), cal)
     da_t, dd_t, da_b, dd_b = _truth_errors(out, res.truth)
     assert da_t < 0.01 and da_b < 0.01
     assert dd_t < 0.002 and dd_b < 0.008
@@ -129,5 +130,62 @@ def test_beacon_image_near_the_mirror_edge_is_found(tmp_path):
     scene = load_scene(SCENES.parent / "tests" / "data" / "beacon_near_mirror_edge.yaml")
     res = render_to_files(scene, tmp_path, progress=False)
     cal = calibrate(scene.camera, scene.target.size, scene.beacons[0].height)
-    det = detect_frame(read_frame(res.png), DetectorView.from_scene(scene), cal)
+    det = detect_frame(read_frame(res.png), CaptureRecord.from_scene(scene), cal)
     assert abs(det.beacons[0][1].alpha_deg - res.truth.beacons[0].alpha_deg) < 0.02
+
+
+def test_detect_reads_only_the_capture_record(half_default, tmp_path, capsys):
+    """render writes <name>.capture.json; detect --capture reads it and the pixels only:
+    moving the mirror and the target in the scene file afterwards changes nothing, and
+    --scene (the record made from the unchanged scene) gives the same numbers."""
+    import json
+
+    import yaml
+
+    from mirrorsim.capture import load_capture
+
+    from .conftest import scene_dict
+
+    scene, res, _ = half_default
+    record = json.loads(res.capture_json.read_text())
+    assert record["frame"] == res.png.name and "mirror" not in record
+    assert "position" not in record["target"]
+    assert load_capture(res.capture_json) == res.capture
+    by_capture = tmp_path / "a.json"
+    assert main(["detect", str(res.png), "--capture", str(res.capture_json), "--json",
+                 str(by_capture)]) == 0
+    d = scene_dict("default")
+    d["camera"]["resolution"] = [960, 544]
+    original = tmp_path / "s.yaml"
+    original.write_text(yaml.safe_dump(d))
+    by_scene = tmp_path / "b.json"
+    assert main(["detect", str(res.png), "--scene", str(original), "--json",
+                 str(by_scene)]) == 0
+    assert json.loads(by_scene.read_text()) == json.loads(by_capture.read_text())
+    d["mirror"]["center"] = [40.0, 70.0]
+    d["target"]["position"] = [60.0, 40.0]
+    original.write_text(yaml.safe_dump(d))  # the scene moves; the frame and record do not
+    again = tmp_path / "c.json"
+    assert main(["detect", str(res.png), "--capture", str(res.capture_json), "--json",
+                 str(again)]) == 0
+    assert json.loads(again.read_text()) == json.loads(by_capture.read_text())
+    capsys.readouterr()
+
+
+@pytest.mark.parametrize("edit, key", [
+    (lambda r: r["camera"].pop("pan_deg"), "camera.pan_deg"),
+    (lambda r: r["camera"].update(fx=900.0), "camera.fx"),
+    (lambda r: r["beacons"][0].update(height=-4), "beacons[0].height"),
+    (lambda r: r.update(mirror={"center": [1, 2]}), "mirror"),
+])
+def test_a_bad_capture_record_is_bad_input(half_default, tmp_path, capsys, edit, key):
+    import json
+
+    _, res, _ = half_default
+    record = json.loads(res.capture_json.read_text())
+    edit(record)
+    path = tmp_path / "bad.capture.json"
+    path.write_text(json.dumps(record))
+    assert main(["detect", str(res.png), "--capture", str(path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(path) in err[0] and key in err[0]
