@@ -2,6 +2,11 @@
 
     python bench/detect.py [--frames 20] [--spp 16] [--sweep 4 16 64 256]
                            [--sweep-scenes 3] [--seed 0] [--out DIR]
+    python bench/detect.py --offaxis [-25 -20 … 25] [--spp 16] [--plot docs/detect_offaxis.png]
+
+``--offaxis``: the default scene with the camera panned so that the target's image lies
+each given angle off the optical axis; the signed errors of α and d_total (target and
+beacon) against that angle, as a table and a plot.
 
 Frames: the bundled scenes (default, exp1–3) and random valid variations of the default
 scene (mirror pose, target and beacon positions; kept only if the scene validates and
@@ -116,8 +121,83 @@ def table(title: str, summaries: dict) -> str:
     return "\n".join(lines)
 
 
+def offaxis_scenes(angles: list[float]) -> list:
+    """The default scene panned to put the target's image ``angle`` off the axis."""
+    base = yaml.safe_load((ROOT / "scenes" / "default.yaml").read_text())
+    ref = scene_from_dict(base)
+    alpha = optics.mirror_image(ref.camera.position, ref.mirror, ref.target.position).alpha_deg
+    out = []
+    for a in angles:
+        d = copy.deepcopy(base)
+        d["name"] = f"offaxis{a:.1f}".replace("-", "m")
+        d["camera"]["pan"] = float(alpha - a)  # +a: the image right of the axis
+        out.append(scene_from_dict(d, default_name=d["name"]))
+    return out
+
+
+def measure_signed(scene, spp: int, tmp: Path) -> dict:
+    """Signed errors of one frame (target and beacon), with the target's off-axis angle."""
+    res = render_to_files(scene, tmp / scene.name, spp=spp, progress=False)
+    cal = calibrate(scene.camera, scene.target.size, scene.beacons[0].height)
+    det = detect_frame(read_frame(res.png), res.capture, cal)
+    t, b = res.truth.target, res.truth.beacons[0]
+    mt, mb = det.target, det.beacons[0][1]
+    return {"scene": scene.name, "spp": spp,
+            "off_axis_deg": scene.camera.pan_deg - t.alpha_deg,
+            "target_dalpha": mt.alpha_deg - t.alpha_deg,
+            "target_drel": None if mt.d_total is None else (mt.d_total - t.d_total) / t.d_total,
+            "target_clipped": mt.clipped,
+            "beacon_dalpha": mb.alpha_deg - b.alpha_deg,
+            "beacon_drel": (mb.d_total - b.d_total) / b.d_total}
+
+
+def offaxis_main(args) -> None:
+    scenes = offaxis_scenes(args.offaxis)
+    with tempfile.TemporaryDirectory() as tmp:
+        rows = []
+        for s in scenes:
+            rows.append(measure_signed(s, args.spp, Path(tmp)))
+            print(f"{s.name}: {rows[-1]}", file=sys.stderr)
+    print(f"Off-axis sweep, default scene, 1920×1088, {args.spp} spp; {platform.machine()}")
+    print("\n| target off axis (°) | target Δα (°) | target Δd/d (%) | beacon Δα (°) | "
+          "beacon Δd/d (%) | clipped |")
+    print("|---|---|---|---|---|---|")
+    for r in rows:
+        dd = "—" if r["target_drel"] is None else f"{100 * r['target_drel']:+.3f}"
+        print(f"| {r['off_axis_deg']:+.1f} | {r['target_dalpha']:+.4f} | {dd} | "
+              f"{r['beacon_dalpha']:+.4f} | {100 * r['beacon_drel']:+.3f} | "
+              f"{r['target_clipped'] or 'no'} |")
+    if args.plot:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        x = [r["off_axis_deg"] for r in rows]
+        fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4))
+        a1.plot(x, [r["target_dalpha"] for r in rows], "o-", label="target")
+        a1.plot(x, [r["beacon_dalpha"] for r in rows], "s-", label="beacon")
+        a1.set_xlabel("target's image off the optical axis (°)")
+        a1.set_ylabel("α error (°)")
+        a2.plot(x, [100 * (r["target_drel"] or np.nan) for r in rows], "o-", label="target")
+        a2.plot(x, [100 * r["beacon_drel"] for r in rows], "s-", label="beacon")
+        a2.set_xlabel("target's image off the optical axis (°)")
+        a2.set_ylabel("d_total error (%)")
+        for a in (a1, a2):
+            a.axhline(0, color="k", lw=0.5)
+            a.grid(alpha=0.3)
+            a.legend()
+        fig.suptitle(f"detector errors against off-axis angle (default scene, {args.spp} spp)")
+        fig.tight_layout()
+        fig.savefig(args.plot, dpi=110)
+        print(f"\nplot: {args.plot}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--offaxis", type=float, nargs="*",
+                    help="off-axis angles of the target's image (default −25…25 in 5° steps)")
+    ap.add_argument("--plot", type=Path, help="with --offaxis: the plot to write")
     ap.add_argument("--frames", type=int, default=20)
     ap.add_argument("--spp", type=int, default=16)
     ap.add_argument("--sweep", type=int, nargs="*", default=[4, 16, 64, 256])
@@ -125,6 +205,10 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, help="write all rows as JSON here")
     args = ap.parse_args()
+    if args.offaxis is not None:
+        args.offaxis = args.offaxis or [float(a) for a in range(-25, 26, 5)]
+        offaxis_main(args)
+        return
 
     rng = np.random.default_rng(args.seed)
     bundled = [load_scene(ROOT / "scenes" / f"{n}.yaml") for n in BUNDLED]

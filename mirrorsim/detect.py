@@ -129,18 +129,95 @@ class Calibration:
     key: str = ""
 
 
+RATIO_TOLERANCE = 0.004  # relative: the panel's angular width/height ratio is exact unclipped
+
+
 def alpha_of(camera: Camera, u: float) -> float:
     """Bearing of the image column u (sub-pixel)."""
-    return float(wrap_bearing(camera.pan_deg - math.degrees(math.atan2(u - camera.cx,
-                                                                        camera.fx))))
+    return float(wrap_bearing(camera.pan_deg - math.degrees(_off_axis(camera, u))))
+
+
+def _off_axis(camera: Camera, u: float) -> float:
+    """Angle (rad) of column u right of the optical axis."""
+    return math.atan2(u - camera.cx, camera.fx)
+
+
+def _column(camera: Camera, phi: float) -> float:
+    return camera.cx + camera.fx * math.tan(phi)
+
+
+def _axis_between(camera: Camera, u_left: float, u_right: float) -> tuple[float, float]:
+    """The bearing of an upright object's axis from its two silhouette edges, and its
+    column.  The object (a panel square-on to the line of sight, a pencil) subtends
+    equal angles either side of its axis, so the axis lies at the *mean angle* of the
+    edges, not at their mean column (that is off by about (w/2d)²·tan φ)."""
+    phi = (_off_axis(camera, u_left) + _off_axis(camera, u_right)) / 2
+    return float(wrap_bearing(camera.pan_deg - math.degrees(phi))), _column(camera, phi)
 
 
 def distance_of(camera: Camera, u: float, height_px: float, k: float,
                 front_offset: float = 0.0) -> float:
-    """d_total from size constancy: the measured face's depth K/s along the axis, plus
-    its offset before the object's centre, divided by cos φ."""
-    phi = math.atan2(u - camera.cx, camera.fx)
-    return (k / height_px + front_offset) / math.cos(phi)
+    """d_total from size constancy: the measured face's depth K/s along the optical axis,
+    over cos φ, is its distance along the line of sight; plus the face's offset before
+    the object's centre (along the line of sight too)."""
+    return k / height_px / math.cos(_off_axis(camera, u)) + front_offset
+
+
+def _target_geometry(cam: Camera, m: ImageMeasurement, size: Point2, k: float) -> None:
+    """The panel's bearing, clipping and distance from its edges.
+
+    Seen square-on at distance D (front face), the panel's half-width subtends
+    β = atan((w/2)/D) and its height s = f·H/(D·cos φ) pixels, so tan β = w·s·cos φ/(2fH):
+    its angular width follows from its height, exactly, at any angle off the axis.  An
+    image narrower than that, whose missing side runs into something dark (the mirror's
+    frame), is clipped there and its axis is β from the other edge; one wider than its
+    height allows, under something dark, is clipped at the top and its height is not used.
+    """
+    w, h = size
+    edges = {"left": m.u_left, "right": m.u_right}
+    present = [k_ for k_, u in edges.items() if u is not None]
+    dark = {side: m.outside.get(side, math.inf) < 0.5 * m.inside
+            for side in ("left", "right", "top")}
+    if m.height_px is not None and present:
+        phi0 = (sum(_off_axis(cam, edges[s_]) for s_ in present) / len(present))
+        beta = math.atan(w * m.height_px * math.cos(phi0) / (2 * cam.fx * h))
+        if len(present) == 2:
+            half = (_off_axis(cam, m.u_right) - _off_axis(cam, m.u_left)) / 2
+            r = half / beta
+            tol = max(RATIO_TOLERANCE, 0.3 / max(m.width_px, 1.0))
+            if r > 1 + tol and dark["top"]:
+                m.clipped = "top"
+                m.notes.append(f"image {100 * (r - 1):.1f}% shorter than its width implies, "
+                               "under a dark edge: clipped at the top, height not used")
+                m.height_px = None
+            elif r < 1 - tol and (dark["left"] or dark["right"]):
+                side = "left" if m.outside["left"] <= m.outside["right"] else "right"
+                m.clipped = side
+                present = ["right" if side == "left" else "left"]
+                m.notes.append(f"image {100 * (1 - r):.1f}% narrower than its height implies, "
+                               f"beside a dark edge: clipped on the {side}, axis from the "
+                               "other edge")
+            elif abs(r - 1) > tol:
+                m.notes.append(f"angular width {100 * (r - 1):+.1f}% off what its height "
+                               "implies, with no dark edge to clip it: not treated as clipped")
+        else:
+            m.clipped = "right" if present == ["left"] else "left"
+            m.notes.append(f"no edge on the {m.clipped}: clipped there, axis from the other")
+        if len(present) == 1:
+            side = present[0]
+            phi_edge = _off_axis(cam, edges[side])
+            phi = phi_edge + beta if side == "left" else phi_edge - beta
+            m.u_axis = _column(cam, phi)
+            m.alpha_deg = alpha_of(cam, m.u_axis)
+        else:
+            m.alpha_deg, m.u_axis = _axis_between(cam, m.u_left, m.u_right)
+    elif len(present) == 2:
+        m.alpha_deg, m.u_axis = _axis_between(cam, m.u_left, m.u_right)
+    else:
+        raise DetectionError("the target's image has neither a measurable height nor two "
+                             "side edges")
+    if m.height_px is not None:
+        m.d_total = distance_of(cam, m.u_axis, m.height_px, k, FRONT_OFFSET["target"])
 
 
 @dataclass
@@ -196,7 +273,7 @@ def measure_object(img: np.ndarray, kind: str, target_ratio: float | None = None
         box = find_target(img, target_ratio)
         if box is None:
             raise DetectionError("no target (grey upright panel) found in the frame")
-        return measure_region(linear, box, "target", target_ratio)
+        return measure_region(linear, box, "target")
     boxes = find_pencils(img)
     if not boxes:
         raise DetectionError("no pencil (yellow upright band) found in the frame")
@@ -223,18 +300,14 @@ def detect_frame(image: np.ndarray, view: CaptureRecord, calibration: Calibratio
     if img.ndim != 3 or img.shape[:2] != (cam.height_px, cam.width):
         raise DetectionError(f"the frame is {img.shape[1::-1] if img.ndim >= 2 else img.shape} "
                              f"px but the camera is {cam.width}×{cam.height_px}")
-    ratio = view.target_size[0] / view.target_size[1]
-    target = measure_object(img, "target", ratio)
-    target.alpha_deg = alpha_of(cam, target.u_axis)
-    if target.height_px is not None:
-        target.d_total = distance_of(cam, target.u_axis, target.height_px, calibration.target_k,
-                                     FRONT_OFFSET["target"])
-
+    target = measure_object(img, "target", view.target_size[0] / view.target_size[1])
+    _target_geometry(cam, target, view.target_size, calibration.target_k)
     blue = _pencil_channel(to_linear(img))
     pencils = [measure_region(blue, b, "beacon") for b in find_pencils(img)]
-    pencils = [p for p in pencils if p.height_px and np.isfinite(p.u_axis)]
+    pencils = [p for p in pencils if p.height_px and p.u_left is not None
+               and p.u_right is not None]
     for p in pencils:
-        p.alpha_deg = alpha_of(cam, p.u_axis)
+        p.alpha_deg, p.u_axis = _axis_between(cam, p.u_left, p.u_right)
         p.d_total = distance_of(cam, p.u_axis, p.height_px, calibration.pencil_k,
                                 FRONT_OFFSET["beacon"])
     for m in (target, *pencils):

@@ -1,11 +1,14 @@
 """The error model: bias and spread of the detector's α and d_total/d against geometry.
 
 For each object (target, beacon) and quantity (α error in degrees, relative d_total
-error), a linear model in the features [1, d_total, |off-axis bearing|, mirror
-incidence, 1/image height in px]: the bias by least squares, the spread by least
-squares on the absolute residuals (× √(π/2), so it estimates a Gaussian σ).  The model
-file also holds the typical σ's that `solve`, `montecarlo` and `plan` take
-(``--error-model FILE``).
+error), a linear model in the features [1, d_total, signed off-axis bearing, mirror
+incidence, 1/image height in px]: the bias by a robust fit (Huber loss, scipy's
+``least_squares``: a few gross errors do not drag it), the spread by the same on the
+absolute residuals (× √(π/2), so it estimates a Gaussian σ) of the rows within
+``GROSS`` robust σ's; the rows beyond are counted as gross errors.  The off-axis bearing is
+signed (α − pan: + = left of the axis): a bias that changes sign across the axis is a line
+through zero, which |off-axis| cannot represent.  The model file also holds the
+typical σ's that `solve`, `montecarlo` and `plan` take (``--error-model FILE``).
 """
 
 from __future__ import annotations
@@ -22,28 +25,42 @@ from solver.measurements import read_sigma
 from solver.reader import Reader
 from solver.sltr import Sigma
 
-FEATURES = ("1", "d_total_cm", "abs_off_axis_deg", "incidence_deg", "inv_height_px")
+FEATURES = ("1", "d_total_cm", "off_axis_deg", "incidence_deg", "inv_height_px")
 QUANTITIES = {"alpha": "alpha_err", "d_rel": "d_rel_err"}
+GROSS = 6.0  # residuals beyond this many robust σ's are gross errors, counted apart
 
 
 def _design(cols: dict, kind: str) -> np.ndarray:
     d = np.asarray(cols[f"{kind}_d_true"], float)
     return np.column_stack([np.ones_like(d), d,
-                            np.abs(np.asarray(cols[f"{kind}_off_axis_deg"], float)),
+                            np.asarray(cols[f"{kind}_off_axis_deg"], float),
                             np.asarray(cols[f"{kind}_incidence_deg"], float),
                             1.0 / np.asarray(cols[f"{kind}_height_px_true"], float)])
 
 
-def _lstsq(X: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Least squares on standardized features, dropping directions the data do not
-    determine: for one object the image height is ∝ 1/d_total, so those two features are
-    nearly collinear and a plain fit would trade huge opposite coefficients."""
+def _robust_fit(X: np.ndarray, y: np.ndarray, cut: float = 1.345) -> np.ndarray:
+    """A Huber-loss linear fit on standardized features, dropping directions the data do
+    not determine: for one object the image height is ∝ 1/d_total, so those two features
+    are nearly collinear and a plain fit would trade huge opposite coefficients.
+
+    ``cut``: where the loss turns linear, in robust σ's of the first residuals (1.345:
+    95 % efficient for Gaussian errors).
+    """
+    from scipy.optimize import least_squares
+
     mu = X[:, 1:].mean(axis=0)
     sd = X[:, 1:].std(axis=0)
     sd[sd == 0] = 1.0
-    Z = np.column_stack([np.ones(len(X)), (X[:, 1:] - mu) / sd])
-    bz, *_ = np.linalg.lstsq(Z, y, rcond=2e-2)
-    return np.r_[bz[0] - np.sum(bz[1:] * mu / sd), bz[1:] / sd]
+    Z = (X[:, 1:] - mu) / sd
+    _, sv, vt = np.linalg.svd(Z, full_matrices=False)
+    basis = vt[sv > 2e-2 * sv[0]].T  # the determined directions
+    A = np.column_stack([np.ones(len(X)), Z @ basis])
+    w0, *_ = np.linalg.lstsq(A, y, rcond=None)
+    r0 = y - A @ w0
+    scale = 1.4826 * float(np.median(np.abs(r0 - np.median(r0)))) or float(np.std(r0)) or 1.0
+    w = least_squares(lambda w: A @ w - y, w0, loss="huber", f_scale=cut * scale).x
+    bz = basis @ w[1:]
+    return np.r_[w[0] - np.sum(bz * mu / sd), bz / sd]
 
 
 def fit(cols: dict) -> dict:
@@ -60,12 +77,18 @@ def fit(cols: dict) -> dict:
             X, yy = X_all[m], y[m]
             if len(yy) < len(FEATURES) + 2:
                 raise ValueError(f"too few usable rows ({len(yy)}) to fit {kind} {q}")
-            bias = _lstsq(X, yy)
+            bias = _robust_fit(X, yy)
             resid = yy - X @ bias
-            spread = _lstsq(X, np.abs(resid) * math.sqrt(math.pi / 2))
+            # gross errors (beyond GROSS robust σ's) are counted, not fitted: the spread
+            # is the Gaussian part's
+            sigma0 = 1.4826 * float(np.median(np.abs(resid - np.median(resid))))
+            keep = np.abs(resid) <= GROSS * sigma0 if sigma0 > 0 else np.ones(len(yy), bool)
+            spread = _robust_fit(X[keep], np.abs(resid[keep]) * math.sqrt(math.pi / 2),
+                                 cut=GROSS)
             sd = np.maximum(X @ spread, 0.0)
             model["objects"][kind][q] = {
                 "bias": bias.tolist(), "spread": spread.tolist(), "n": int(len(yy)),
+                "gross_errors": int((~keep).sum()),
                 "rms": float(np.sqrt(np.mean(yy**2))),
                 "typical_sigma": float(np.sqrt(np.mean(sd**2 + (X @ bias) ** 2))),
             }
@@ -113,7 +136,8 @@ def summary(model: dict) -> str:
     for kind, qs in model["objects"].items():
         for q, m in qs.items():
             unit = "°" if q == "alpha" else " (relative)"
-            lines.append(f"  {kind:6s} {q:5s}: n={m['n']}, RMS {m['rms']:.5f}{unit}, typical σ "
+            lines.append(f"  {kind:6s} {q:5s}: n={m['n']} ({m.get('gross_errors', 0)} gross), "
+                         f"RMS {m['rms']:.5f}{unit}, typical σ "
                          f"{m['typical_sigma']:.5f}; bias coef {np.round(m['bias'], 6).tolist()}")
     s = model["sigma"]
     lines.append(f"  σ for the solver: α {s['alpha_deg']:.5f}°, "

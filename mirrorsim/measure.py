@@ -13,8 +13,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-RATIO_TOLERANCE = 0.004  # relative; the panel's width/height ratio is exact when unclipped
-
 
 @dataclass
 class ImageMeasurement:
@@ -23,11 +21,16 @@ class ImageMeasurement:
     kind: str  # "target" or "beacon"
     source: str  # "mirror" or "direct"
     bbox_px: list[int]
-    u_axis: float
+    u_axis: float  # the column of the upright axis's bearing (see mirrorsim.detect)
     v_top: float | None
     v_bottom: float | None
     height_px: float | None
     width_px: float | None
+    u_left: float | None = None  # the side edges (None: no contrast there)
+    u_right: float | None = None
+    # mean linear radiance just outside each edge, and inside (for the clip decision)
+    outside: dict[str, float] = field(default_factory=dict)
+    inside: float = float("nan")
     clipped: str = ""  # '', 'top', 'left', 'right'
     alpha_deg: float = float("nan")
     d_total: float | None = None
@@ -127,50 +130,31 @@ _LINEAR_LUT = (255.0 * np.where(_x <= 0.04045, _x / 12.92, ((_x + 0.055) / 1.055
                ).astype(np.float32)
 
 
-def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str,
-                   width_over_height: float | None = None) -> ImageMeasurement:
-    """Sub-pixel axis column and vertical extent of an object's image in ``box``.
+def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str
+                   ) -> ImageMeasurement:
+    """Sub-pixel edges of an object's image in ``box``: top and bottom, left and right,
+    with the radiance just outside each (pixels only: :mod:`mirrorsim.detect` turns them
+    into a bearing and a distance with the camera's geometry).
 
     ``img`` holds linear radiance (see :func:`to_linear`).
     """
     u0, v0, u1, v1 = box
-    top, bottom, _, _ = _median_edges(img, v0, v1, u0, u1, axis=0)
+    top, bottom, out_top, out_bottom = _median_edges(img, v0, v1, u0, u1, axis=0)
     left, right, out_left, out_right = _median_edges(img, u0, u1, v0, v1, axis=1)
-    m = ImageMeasurement(kind=kind, source="mirror", bbox_px=[u0, v0, u1, v1],
-                         u_axis=float("nan"), v_top=top, v_bottom=bottom,
-                         height_px=None if top is None or bottom is None else bottom - top,
-                         width_px=None if left is None or right is None else right - left)
+    core = img[v0 + (v1 - v0) // 4: v1 - (v1 - v0) // 4 + 1,
+               u0 + (u1 - u0) // 4: u1 - (u1 - u0) // 4 + 1]
+    m = ImageMeasurement(
+        kind=kind, source="mirror", bbox_px=[u0, v0, u1, v1], u_axis=float("nan"),
+        v_top=top, v_bottom=bottom,
+        height_px=None if top is None or bottom is None else bottom - top,
+        width_px=None if left is None or right is None else right - left,
+        u_left=left, u_right=right,
+        outside={k: float(np.mean(o)) for k, o in (("left", out_left), ("right", out_right),
+                                                    ("top", out_top), ("bottom", out_bottom))},
+        inside=float(np.median(core.reshape(-1, img.shape[-1]).mean(axis=1))))
     if left is not None and right is not None:
         m.u_axis = (left + right) / 2
-    elif width_over_height and top is not None and bottom is not None and (left or right):
-        # one side has no edge (it runs into the mirror's frame): axis from the other
-        half = width_over_height * (bottom - top) / 2
-        m.u_axis = left + half if left is not None else right - half
-        m.clipped = "right" if left is not None else "left"
-        m.notes.append(f"no edge on the {m.clipped}: clipped there, axis from the other edge")
     if top is None or bottom is None:
         m.clipped = "top"
         m.notes.append("no contrast at the top or bottom edge: height not measured")
-    if width_over_height and m.height_px and m.width_px:
-        expected = width_over_height * m.height_px
-        r = m.width_px / expected
-        # edges are good to ~0.1 px each: a clip must exceed that as well as the tolerance
-        tol = max(RATIO_TOLERANCE, 0.6 / expected)
-        if r > 1 + tol:
-            m.clipped = "top"
-            m.notes.append(f"image {100 * (r - 1):.1f}% shorter than its width implies: "
-                           "clipped at the top, height not used")
-            m.height_px = None
-        elif r < 1 - tol:
-            dark_left = float(out_left.sum()) < float(out_right.sum())
-            m.clipped = "left" if dark_left else "right"
-            half = width_over_height * m.height_px / 2
-            m.u_axis = right - half if dark_left else left + half
-            m.notes.append(f"image {100 * (1 - r):.1f}% narrower than its height implies: "
-                           f"clipped on the {m.clipped}, axis from the other edge")
     return m
-
-
-# The measured edges belong to the face nearest the camera: the panel's front (half its
-# thickness before its centre), the pencil's near side (between a flat, 0.346 cm, and a
-# corner, 0.4 cm, of the hexagon).  Size constancy holds for that face's depth.

@@ -123,6 +123,34 @@ def test_error_model_recovers_a_known_law():
     assert 0.002 < model["sigma"]["alpha_deg"] < 0.01
 
 
+def test_error_model_fits_a_signed_off_axis_bias_through_outliers():
+    """α bias = 0.003°·(off-axis/10°) changes sign across the axis; σ = 0.002°; 3 % of the
+    rows are gross errors of ±0.5°.  The signed, robust fit recovers the slope and a σ
+    near 0.002° (a least-squares fit on |off-axis| can do neither: its σ would be
+    ≈ 0.087° from the outliers alone)."""
+    rng = np.random.default_rng(1)
+    n = 3000
+    cols = {"index": list(range(n)), "error": [""] * n}
+    for kind in ("target", "beacon"):
+        off = rng.uniform(-25, 25, n)
+        cols[f"{kind}_d_true"] = rng.uniform(40, 140, n)
+        cols[f"{kind}_off_axis_deg"] = off
+        cols[f"{kind}_incidence_deg"] = rng.uniform(0, 60, n)
+        cols[f"{kind}_height_px_true"] = rng.uniform(40, 300, n)
+        err = 0.0003 * off + rng.normal(0, 0.002, n)
+        gross = rng.random(n) < 0.03
+        err[gross] += rng.choice([-0.5, 0.5], gross.sum())
+        cols[f"{kind}_alpha_err"] = err
+        cols[f"{kind}_d_rel_err"] = rng.normal(0, 0.001, n)
+    model = errormodel.fit(cols)
+    a = model["objects"]["target"]["alpha"]
+    assert errormodel.FEATURES[2] == "off_axis_deg"
+    assert a["bias"][2] == pytest.approx(0.0003, rel=0.05)
+    middle = np.array([[1.0, 90.0, 0.0, 30.0, 1 / 170]])
+    bias, sd = errormodel.predict(model, "target", "alpha", middle)
+    assert abs(bias[0]) < 0.0005 and sd[0] == pytest.approx(0.002, rel=0.3)
+
+
 def test_errormodel_command_on_a_dataset(one_worker, tmp_path, capsys):
     out, _ = one_worker
     # three rows are too few for five coefficients: a clear refusal

@@ -189,3 +189,28 @@ def test_a_bad_capture_record_is_bad_input(half_default, tmp_path, capsys, edit,
     assert main(["detect", str(res.png), "--capture", str(path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and str(path) in err[0] and key in err[0]
+
+
+@pytest.mark.parametrize("off_axis", [-20.0, 0.0, 20.0])
+def test_off_axis_target_has_no_bearing_bias_and_is_not_clipped(tmp_path, off_axis):
+    """The panel's edges lie at φ ± β: the axis is their mean angle.  Their mean column
+    would be off by −(w/2d)²·tan φ ≈ 0.054° at 20° here (independent of resolution);
+    perspective widens the image by 1/cos φ, which must not read as a clip."""
+    import copy
+
+    from mirrorsim import optics
+    from mirrorsim.scenefile import scene_from_dict
+
+    from .conftest import scene_dict
+
+    d = copy.deepcopy(scene_dict("default"))
+    ref = scene_from_dict(d)
+    alpha = optics.mirror_image(ref.camera.position, ref.mirror, ref.target.position).alpha_deg
+    d["camera"].update(resolution=[960, 544], pan=float(alpha - off_axis))
+    scene = scene_from_dict(d, default_name="offaxis")
+    res = render_to_files(scene, tmp_path, spp=16, progress=False)
+    cal = calibrate(scene.camera, scene.target.size, scene.beacons[0].height)
+    det = detect_frame(read_frame(res.png), res.capture, cal)
+    assert det.target.clipped == "" and det.target.d_total is not None
+    assert abs(det.target.alpha_deg - res.truth.target.alpha_deg) < 0.012
+    assert abs(det.target.d_total - res.truth.target.d_total) / res.truth.target.d_total < 0.004
