@@ -34,11 +34,13 @@ sys.path.insert(0, str(ROOT))
 
 from mirrorsim import optics  # noqa: E402
 from mirrorsim.calibrate import calibrate  # noqa: E402
-from mirrorsim.capture import CaptureRecord  # noqa: E402
 from mirrorsim.detect import detect_frame, read_frame  # noqa: E402
 from mirrorsim.errors import DetectionError, SceneError  # noqa: E402
+from mirrorsim.evaluate import DETECTOR_SIGMA  # noqa: E402
 from mirrorsim.frames import render_to_files  # noqa: E402
+from mirrorsim.sampler import load_spec, sample_scene  # noqa: E402
 from mirrorsim.scenefile import load_scene, scene_from_dict  # noqa: E402
+from solver.sltr import solve_measurements  # noqa: E402
 
 BUNDLED = ("default", "exp1", "exp2", "exp3")
 
@@ -78,14 +80,21 @@ def measure(scene, spp: int, tmp: Path) -> dict:
     img = read_frame(res.png)
     t0 = time.perf_counter()
     try:
-        out = detect_frame(img, CaptureRecord.from_scene(scene), cal)
+        out = detect_frame(img, res.capture, cal)
     except DetectionError as exc:
         return {"scene": scene.name, "spp": spp, "error": str(exc)}
     dt = time.perf_counter() - t0
     t, b = res.truth.target, res.truth.beacons[0]
     mt, mb = out.target, out.beacons[0][1]
+    target_cm = None
+    if mt.d_total is not None:  # end to end: the solver on these measurements
+        meas = out.measurements()
+        sol = solve_measurements(meas.observer, meas.beacons, meas.targets, DETECTOR_SIGMA)
+        target_cm = float(np.linalg.norm(sol.target - np.asarray(t.position)))
     return {
-        "scene": scene.name, "spp": spp, "seconds": dt,
+        "scene": scene.name, "spp": spp, "seconds": dt, "target_cm": target_cm,
+        "target_clipped": mt.clipped, "truth_clipped": t.clipped,
+        "off_axis_deg": t.alpha_deg - scene.camera.pan_deg,
         "target_dalpha": abs(mt.alpha_deg - t.alpha_deg),
         "target_drel": None if mt.d_total is None else abs(mt.d_total - t.d_total) / t.d_total,
         "beacon_dalpha": abs(mb.alpha_deg - b.alpha_deg),
@@ -101,23 +110,29 @@ def summary(rows: list[dict]) -> dict:
         v = np.array([r[key] for r in ok if r[key] is not None]) * scale
         return (float(np.median(v)), float(np.percentile(v, 95))) if len(v) else (np.nan,) * 2
 
+    gross = [r for r in ok if max(r["target_dalpha"], r["beacon_dalpha"]) > 0.1
+             or max(r["target_drel"] or 0, r["beacon_drel"]) > 0.03]
+    false_clip = [r for r in ok if r.get("target_clipped") and not r.get("truth_clipped")]
     return {"frames": len(rows), "failed": len(rows) - len(ok),
             "target_alpha": stat("target_dalpha"), "target_d_pct": stat("target_drel", 100),
             "beacon_alpha": stat("beacon_dalpha"), "beacon_d_pct": stat("beacon_drel", 100),
-            "seconds": stat("seconds")}
+            "target_cm": stat("target_cm"), "gross": [r["scene"] for r in gross],
+            "false_clipped": [r["scene"] for r in false_clip], "seconds": stat("seconds")}
 
 
 def table(title: str, summaries: dict) -> str:
     lines = [f"\n{title}\n",
              "| spp | frames (failed) | target \\|Δα\\| ° median / p95 | target \\|Δd\\|/d % "
              "median / p95 | beacon \\|Δα\\| ° median / p95 | beacon \\|Δd\\|/d % median / p95 |"
+             " end-to-end target cm median / p95 | gross errors | false clips |"
              " detect s median |",
-             "|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for spp, s in summaries.items():
         f = lambda p, nd: f"{p[0]:.{nd}f} / {p[1]:.{nd}f}"  # noqa: E731
         lines.append(f"| {spp} | {s['frames']} ({s['failed']}) | {f(s['target_alpha'], 4)} | "
                      f"{f(s['target_d_pct'], 3)} | {f(s['beacon_alpha'], 4)} | "
-                     f"{f(s['beacon_d_pct'], 3)} | {s['seconds'][0]:.2f} |")
+                     f"{f(s['beacon_d_pct'], 3)} | {f(s['target_cm'], 3)} | "
+                     f"{len(s['gross'])} | {len(s['false_clipped'])} | {s['seconds'][0]:.2f} |")
     return "\n".join(lines)
 
 
@@ -203,6 +218,8 @@ def main() -> None:
     ap.add_argument("--sweep", type=int, nargs="*", default=[4, 16, 64, 256])
     ap.add_argument("--sweep-scenes", type=int, default=3)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--spec", type=Path, help="draw the frames from a dataset spec (e.g. "
+                    "scenes/dataset_spec.yaml) instead of the bundled scenes and variations")
     ap.add_argument("--out", type=Path, help="write all rows as JSON here")
     args = ap.parse_args()
     if args.offaxis is not None:
@@ -211,8 +228,13 @@ def main() -> None:
         return
 
     rng = np.random.default_rng(args.seed)
-    bundled = [load_scene(ROOT / "scenes" / f"{n}.yaml") for n in BUNDLED]
-    scenes = bundled + random_scenes(max(0, args.frames - len(bundled)), rng)
+    if args.spec:
+        spec = load_spec(args.spec)
+        scenes = [sample_scene(spec, np.random.SeedSequence(args.seed, spawn_key=(i,)),
+                               f"spec{i:03d}") for i in range(args.frames)]
+    else:
+        bundled = [load_scene(ROOT / "scenes" / f"{n}.yaml") for n in BUNDLED]
+        scenes = bundled + random_scenes(max(0, args.frames - len(bundled)), rng)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for k, s in enumerate(scenes):
@@ -232,6 +254,10 @@ def main() -> None:
     failed = [r for r in rows if "error" in r]
     for r in failed:
         print(f"\nfailed: {r['scene']}: {r['error']}")
+    for r in rows:
+        if "error" not in r and (r["scene"] in summary(rows)["gross"]
+                                 or r["scene"] in summary(rows)["false_clipped"]):
+            print(f"\ngross error or false clip: {r}")
     if args.out:
         args.out.write_text(json.dumps({"rows": rows, "sweep": sweep}, indent=1))
 

@@ -31,13 +31,15 @@ D_REF = 100.0
 CALIBRATION_SPP = 64
 REFERENCE_PAN = 45.0  # the reference camera looks along the board's diagonal
 MARGIN_PX = 24  # rendered around the object's projected outline
+# bump whenever the measurement changes, so that no K measured the old way is reused
+METHOD = "foot-near-2"
 
 
 def calibration_key(camera: Camera, target_size, pencil_height: float) -> str:
     """What K depends on: the camera model, the objects' sizes and the method."""
     return (f"{camera.width}x{camera.height_px}|hfov={camera.hfov:.9g}|h={camera.height:.9g}|"
             f"target={target_size[0]:.9g}x{target_size[1]:.9g}|pencil={pencil_height:.9g}|"
-            f"spp={CALIBRATION_SPP}|front-offset|plain|direct")
+            f"spp={CALIBRATION_SPP}|{METHOD}")
 
 
 def reference_camera(camera: Camera) -> Camera:

@@ -35,8 +35,6 @@ Model
 
 from __future__ import annotations
 
-import itertools
-import math
 import warnings
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -44,22 +42,28 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from mirrorsim.assign import assign_beacons
 from mirrorsim.capture import CaptureRecord
 from mirrorsim.errors import DetectionError, InputError
+from mirrorsim.image_geometry import (
+    FRONT_OFFSET,
+    Calibration,
+    distance_of,
+    pencil_geometry,
+    target_geometry,
+)
 from mirrorsim.measure import ImageMeasurement, measure_region, to_linear
 from mirrorsim.model import (
-    PENCIL_RADIUS,
-    TARGET_THICKNESS,
     Beacon,
     Camera,
     Point2,
     pencil_paint_height,
 )
-from solver.geometry import bearing_deg, wrap_bearing
 from solver.measurements import Measurements
 from solver.sltr import BeaconMeasurement
 
 FRAME_OPEN_PX = 13  # wider than the mirror frame's bars at the distances of our scenes
+MERGED_MIN_AREA = 2000  # px: a grey region this large that is no panel may hold one
 
 
 # ------------------------------------------------------------------ segmentation
@@ -87,19 +91,25 @@ def find_target(img: np.ndarray, ratio: float) -> tuple[int, int, int, int] | No
     labels, comps = _components(mask, 300)
     best = None
     for k, x, y, w, h, area in comps:
-        aspect = h / w
-        if area / (w * h) < 0.75 or not (0.8 / ratio <= aspect <= 4.0):
+        whole = area / (w * h) >= 0.75 and 0.8 / ratio <= h / w <= 4.0
+        if not whole and area < MERGED_MIN_AREA:
             continue
-        # re-grow around the region's own colour: separates a differently grey neighbour
+        # re-grow around the region's own colour: separates a differently grey neighbour,
+        # also one that merged with the panel into a region no panel could be
         core = blur[labels == k]
         med = np.median(core, axis=0)
         similar = (np.abs(blur - med).max(axis=2) < 22) & neutral
         similar = cv2.morphologyEx(similar.astype(np.uint8), cv2.MORPH_OPEN, kernel)
         lab2, comps2 = _components(similar, 300)
-        cy, cx = y + h // 2, x + w // 2
-        k2 = lab2[cy, cx]
+        seed = lab2[y + h // 2, x + w // 2]
         for kk, x2, y2, w2, h2, area2 in comps2:
-            if kk == k2 and area2 / (w2 * h2) >= 0.75 and (best is None or area2 > best[4]):
+            if area2 / (w2 * h2) < 0.75 or not 0.8 / ratio <= h2 / w2 <= 4.0:
+                continue
+            if whole and kk != seed:
+                continue
+            if not whole and np.count_nonzero((lab2 == kk) & (labels == k)) < 0.5 * area2:
+                continue
+            if best is None or area2 > best[4]:
                 best = (x2, y2, x2 + w2 - 1, y2 + h2 - 1, area2)
     return None if best is None else best[:4]
 
@@ -115,110 +125,6 @@ def find_pencils(img: np.ndarray) -> list[tuple[int, int, int, int]]:
     mask = cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
     _, comps = _components(mask, 30)
     return [(x, y, x + w - 1, y + h - 1) for _, x, y, w, h, _ in comps if h >= 2 * w * 0.8]
-
-FRONT_OFFSET = {"target": TARGET_THICKNESS / 2,
-                "beacon": PENCIL_RADIUS * (1 + math.cos(math.pi / 6)) / 2}
-
-
-@dataclass
-class Calibration:
-    """Size-constancy constants K = s_px · (d − front offset) (px·cm), target and pencil."""
-
-    target_k: float
-    pencil_k: float
-    key: str = ""
-
-
-RATIO_TOLERANCE = 0.004  # relative: the panel's angular width/height ratio is exact unclipped
-
-
-def alpha_of(camera: Camera, u: float) -> float:
-    """Bearing of the image column u (sub-pixel)."""
-    return float(wrap_bearing(camera.pan_deg - math.degrees(_off_axis(camera, u))))
-
-
-def _off_axis(camera: Camera, u: float) -> float:
-    """Angle (rad) of column u right of the optical axis."""
-    return math.atan2(u - camera.cx, camera.fx)
-
-
-def _column(camera: Camera, phi: float) -> float:
-    return camera.cx + camera.fx * math.tan(phi)
-
-
-def _axis_between(camera: Camera, u_left: float, u_right: float) -> tuple[float, float]:
-    """The bearing of an upright object's axis from its two silhouette edges, and its
-    column.  The object (a panel square-on to the line of sight, a pencil) subtends
-    equal angles either side of its axis, so the axis lies at the *mean angle* of the
-    edges, not at their mean column (that is off by about (w/2d)²·tan φ)."""
-    phi = (_off_axis(camera, u_left) + _off_axis(camera, u_right)) / 2
-    return float(wrap_bearing(camera.pan_deg - math.degrees(phi))), _column(camera, phi)
-
-
-def distance_of(camera: Camera, u: float, height_px: float, k: float,
-                front_offset: float = 0.0) -> float:
-    """d_total from size constancy: the measured face's depth K/s along the optical axis,
-    over cos φ, is its distance along the line of sight; plus the face's offset before
-    the object's centre (along the line of sight too)."""
-    return k / height_px / math.cos(_off_axis(camera, u)) + front_offset
-
-
-def _target_geometry(cam: Camera, m: ImageMeasurement, size: Point2, k: float) -> None:
-    """The panel's bearing, clipping and distance from its edges.
-
-    Seen square-on at distance D (front face), the panel's half-width subtends
-    β = atan((w/2)/D) and its height s = f·H/(D·cos φ) pixels, so tan β = w·s·cos φ/(2fH):
-    its angular width follows from its height, exactly, at any angle off the axis.  An
-    image narrower than that, whose missing side runs into something dark (the mirror's
-    frame), is clipped there and its axis is β from the other edge; one wider than its
-    height allows, under something dark, is clipped at the top and its height is not used.
-    """
-    w, h = size
-    edges = {"left": m.u_left, "right": m.u_right}
-    present = [k_ for k_, u in edges.items() if u is not None]
-    dark = {side: m.outside.get(side, math.inf) < 0.5 * m.inside
-            for side in ("left", "right", "top")}
-    if m.height_px is not None and present:
-        phi0 = (sum(_off_axis(cam, edges[s_]) for s_ in present) / len(present))
-        beta = math.atan(w * m.height_px * math.cos(phi0) / (2 * cam.fx * h))
-        if len(present) == 2:
-            half = (_off_axis(cam, m.u_right) - _off_axis(cam, m.u_left)) / 2
-            r = half / beta
-            tol = max(RATIO_TOLERANCE, 0.3 / max(m.width_px, 1.0))
-            if r > 1 + tol and dark["top"]:
-                m.clipped = "top"
-                m.notes.append(f"image {100 * (r - 1):.1f}% shorter than its width implies, "
-                               "under a dark edge: clipped at the top, height not used")
-                m.height_px = None
-            elif r < 1 - tol and (dark["left"] or dark["right"]):
-                side = "left" if m.outside["left"] <= m.outside["right"] else "right"
-                m.clipped = side
-                present = ["right" if side == "left" else "left"]
-                m.notes.append(f"image {100 * (1 - r):.1f}% narrower than its height implies, "
-                               f"beside a dark edge: clipped on the {side}, axis from the "
-                               "other edge")
-            elif abs(r - 1) > tol:
-                m.notes.append(f"angular width {100 * (r - 1):+.1f}% off what its height "
-                               "implies, with no dark edge to clip it: not treated as clipped")
-        else:
-            m.clipped = "right" if present == ["left"] else "left"
-            m.notes.append(f"no edge on the {m.clipped}: clipped there, axis from the other")
-        if len(present) == 1:
-            side = present[0]
-            phi_edge = _off_axis(cam, edges[side])
-            phi = phi_edge + beta if side == "left" else phi_edge - beta
-            m.u_axis = _column(cam, phi)
-            m.alpha_deg = alpha_of(cam, m.u_axis)
-        else:
-            m.alpha_deg, m.u_axis = _axis_between(cam, m.u_left, m.u_right)
-    elif len(present) == 2:
-        m.alpha_deg, m.u_axis = _axis_between(cam, m.u_left, m.u_right)
-    else:
-        raise DetectionError("the target's image has neither a measurable height nor two "
-                             "side edges")
-    if m.height_px is not None:
-        m.d_total = distance_of(cam, m.u_axis, m.height_px, k, FRONT_OFFSET["target"])
-
 
 @dataclass
 class Detection:
@@ -301,18 +207,18 @@ def detect_frame(image: np.ndarray, view: CaptureRecord, calibration: Calibratio
         raise DetectionError(f"the frame is {img.shape[1::-1] if img.ndim >= 2 else img.shape} "
                              f"px but the camera is {cam.width}×{cam.height_px}")
     target = measure_object(img, "target", view.target_size[0] / view.target_size[1])
-    _target_geometry(cam, target, view.target_size, calibration.target_k)
+    target_geometry(cam, target, view.target_size, calibration.target_k)
     blue = _pencil_channel(to_linear(img))
     pencils = [measure_region(blue, b, "beacon") for b in find_pencils(img)]
-    pencils = [p for p in pencils if p.height_px and p.u_left is not None
-               and p.u_right is not None]
+    pencils = [p for p in pencils if p.height_px and (p.u_left, p.u_right) != (None, None)]
+    paint = pencil_paint_height(view.beacons[0].height)
     for p in pencils:
-        p.alpha_deg, p.u_axis = _axis_between(cam, p.u_left, p.u_right)
+        pencil_geometry(cam, p, paint)
         p.d_total = distance_of(cam, p.u_axis, p.height_px, calibration.pencil_k,
                                 FRONT_OFFSET["beacon"])
     for m in (target, *pencils):
         _check_stands_on_board(cam, m, view)
-    mirror_imgs = _assign_beacons(pencils, view)
+    mirror_imgs = assign_beacons(pencils, view)
     det = Detection(observer=tuple(cam.position), target=target,
                     beacons=list(zip(view.beacons, mirror_imgs, strict=True)), images=pencils)
     _check_a_mirror_fits(det)
@@ -359,59 +265,6 @@ def _check_a_mirror_fits(det: Detection) -> None:
 def _public(m: ImageMeasurement) -> dict:
     d = asdict(m)
     return {k: (round(v, 4) if isinstance(v, float) else v) for k, v in d.items()}
-
-
-def _assign_beacons(pencils: list[ImageMeasurement], view: CaptureRecord
-                    ) -> list[ImageMeasurement]:
-    """Tell direct images (where the known beacon itself would appear) from mirror images,
-    and give each beacon its mirror image."""
-    cam = view.camera
-    mirror_cands = []
-    for p in pencils:
-        for i, b in enumerate(view.beacons):
-            bearing = float(bearing_deg(cam.position, b.position))
-            dist = float(np.hypot(b.position[0] - cam.position[0],
-                                  b.position[1] - cam.position[1]))
-            if abs(wrap_bearing(p.alpha_deg - bearing)) < 0.3 and \
-                    abs(p.d_total - dist) < 0.05 * dist:
-                p.source, p.beacon_index = "direct", i
-                p.notes.append(f"direct view of beacon {i} (bearing and distance agree with "
-                               "its known position)")
-                break
-        else:
-            mirror_cands.append(p)
-    n = len(view.beacons)
-    if len(mirror_cands) < n:
-        raise DetectionError(f"found {len(mirror_cands)} pencil image(s) in the mirror for "
-                             f"{n} beacon(s) ({len(pencils) - len(mirror_cands)} direct)")
-    if n == 1:
-        best = max(mirror_cands, key=lambda p: p.height_px)
-        best.beacon_index = 0
-        return [best]
-    # several beacons: the assignment under which all imply the same mirror line
-    best_perm, best_spread = None, math.inf
-    for perm in itertools.permutations(mirror_cands, n):
-        lines = [_bisector(cam, b, p) for b, p in zip(view.beacons, perm, strict=True)]
-        spread = float(np.var([ln[0] for ln in lines]) + np.var([ln[1] for ln in lines]))
-        if spread < best_spread:
-            best_perm, best_spread = perm, spread
-    for i, p in enumerate(best_perm):
-        p.beacon_index = i
-    return list(best_perm)
-
-
-def _bisector(cam: Camera, beacon: Beacon, m: ImageMeasurement) -> tuple[float, float]:
-    """The mirror line this beacon/image pair implies, as comparable numbers: cos 2·yaw
-    (a line's direction is modulo 180°) and its offset in metres (so that a 1 cm
-    disagreement weighs like a ~1° one)."""
-    a = math.radians(m.alpha_deg)
-    v = np.array(cam.position) + m.d_total * np.array([math.cos(a), math.sin(a)])
-    b = np.asarray(beacon.position, float)
-    sep = v - b
-    yaw = math.degrees(math.atan2(sep[1], sep[0])) + 90.0
-    n = np.array([-math.sin(math.radians(yaw)), math.cos(math.radians(yaw))])
-    return math.cos(2 * math.radians(yaw)), float(n @ ((b + v) / 2)) * 0.01
-
 
 # -------------------------------------------------------------------- drawing
 

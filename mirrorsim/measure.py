@@ -57,12 +57,18 @@ def _edge_by_area(profile: np.ndarray, start: int, inside: np.ndarray, outside: 
 
 
 def _local_edge(img: np.ndarray, band, axis: int, guess: float, inside_first: bool,
-                reach: int = 6, half: int = 1):
+                reach: int = 6, half: int = 1, near: bool = False):
     """An edge near ``guess`` in the mean profile of ``band`` (the columns, or rows,
     across it): coverages of the 2·half + 1 pixels about it, against the median colours
     of the next 4 pixels either side (inside: no further than ``reach``).  Local levels
     keep a shadow or a neighbour a few pixels away (a contact shadow at a foot, another
     object beside a thin pencil) out of it; medians drop the pegboard's holes.
+
+    ``near``: for an object's foot.  The board in its contact shadow brightens over the
+    first pixels away from the foot, so an outside level taken 2–5 px away counts the
+    darker pixels next to the edge as partly inside (the foot measured 0.3–0.6 px low on
+    full-size frames).  Here the level is the first pixel past the edge's own, and the
+    window ends at the edge's pixel.
 
     Returns (edge or None, outside colour).
     """
@@ -78,6 +84,14 @@ def _local_edge(img: np.ndarray, band, axis: int, guess: float, inside_first: bo
     before = np.median([line(c - k) for k in (k_in if inside_first else k_out)], axis=0)
     after = np.median([line(c + k) for k in (k_out if inside_first else k_in)], axis=0)
     inside, outside = (before, after) if inside_first else (after, before)
+    if near:
+        # the outside darkens towards the edge (a contact shadow on the board): its level
+        # is the first pixel past the edge's, and the window stops at the edge's pixel
+        step = 1 if inside_first else -1
+        level = line(c + step)
+        lo = c - half if inside_first else c
+        window = np.array([line(i) for i in range(lo, lo + half + 1)])
+        return _edge_by_area(window, lo, inside, level, inside_first), outside
     window = np.array([line(i) for i in range(c - half, c + half + 1)])
     return _edge_by_area(window, c - half, inside, outside, inside_first), outside
 
@@ -110,7 +124,7 @@ def _median_edges(img, lo, hi, cross_lo, cross_hi, axis, band_px=3):
                 if e is not None and abs(e - m) < 1.0]
         keep = np.concatenate(near) if near else np.concatenate(bands)
         # round(m) is the pixel the edge crosses: the window is centred on it
-        e, out = _local_edge(img, keep, axis, m, end == 1, reach)
+        e, out = _local_edge(img, keep, axis, m, end == 1, reach, near=axis == 0 and end == 1)
         final.append(e)
         outs.append(out)
     return final[0], final[1], outs[0], outs[1]

@@ -28,11 +28,13 @@ def small_scene(name: str, width: int = 320, height: int = 182, **render) -> Sce
     return scene_from_dict(d, source=f"{name}.yaml", default_name=name)
 
 
-@pytest.fixture(autouse=True)
-def _private_cache(tmp_path_factory, monkeypatch):
-    """Backend probe answers go to a per-session folder, never the user's cache."""
-    cache = tmp_path_factory.getbasetemp() / "mirrorsim-cache"
-    monkeypatch.setenv("MIRRORSIM_CACHE_DIR", str(cache))
+@pytest.fixture(autouse=True, scope="session")
+def _private_cache(tmp_path_factory):
+    """Probe answers and calibrations go to a per-session folder, never the user's cache
+    (session-wide, so that module-scoped fixtures use it too)."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("MIRRORSIM_CACHE_DIR", str(tmp_path_factory.getbasetemp() / "mirrorsim-cache"))
+        yield
 
 
 @pytest.fixture(scope="session")

@@ -58,7 +58,9 @@ def test_same_rows_whatever_the_workers(one_worker, tmp_path):
     # recycling every scene exercises the replacement of worker processes too
     run_dataset(3, 3, tmp_path / "b", workers=2, spec_path=SPEC, progress=False,
                 recycle_every=1)
-    assert _stable(collect_rows(tmp_path / "b", 3)) == _stable(collect_rows(out, 3))
+    a, b = _stable(collect_rows(out, 3)), _stable(collect_rows(tmp_path / "b", 3))
+    assert a == b, [{k: (x[k], y.get(k)) for k in x if x[k] != y.get(k)}
+                    for x, y in zip(a, b, strict=True)]
 
 
 def test_existing_folder_needs_resume(one_worker, capsys):
