@@ -145,7 +145,7 @@ def offaxis_scenes(angles: list[float]) -> list:
     for a in angles:
         d = copy.deepcopy(base)
         d["name"] = f"offaxis{a:.1f}".replace("-", "m")
-        d["camera"]["pan"] = float(alpha - a)  # +a: the image right of the axis
+        d["camera"]["pan"] = float(alpha - a)  # +a: α − pan = a, the image left of the axis
         out.append(scene_from_dict(d, default_name=d["name"]))
     return out
 
@@ -158,7 +158,7 @@ def measure_signed(scene, spp: int, tmp: Path) -> dict:
     t, b = res.truth.target, res.truth.beacons[0]
     mt, mb = det.target, det.beacons[0][1]
     return {"scene": scene.name, "spp": spp,
-            "off_axis_deg": scene.camera.pan_deg - t.alpha_deg,
+            "off_axis_deg": t.alpha_deg - scene.camera.pan_deg,  # as the dataset's column
             "target_dalpha": mt.alpha_deg - t.alpha_deg,
             "target_drel": None if mt.d_total is None else (mt.d_total - t.d_total) / t.d_total,
             "target_clipped": mt.clipped,
@@ -174,7 +174,7 @@ def offaxis_main(args) -> None:
             rows.append(measure_signed(s, args.spp, Path(tmp)))
             print(f"{s.name}: {rows[-1]}", file=sys.stderr)
     print(f"Off-axis sweep, default scene, 1920×1088, {args.spp} spp; {platform.machine()}")
-    print("\n| target off axis (°) | target Δα (°) | target Δd/d (%) | beacon Δα (°) | "
+    print("\n| target off axis α − pan (°) | target Δα (°) | target Δd/d (%) | beacon Δα (°) | "
           "beacon Δd/d (%) | clipped |")
     print("|---|---|---|---|---|---|")
     for r in rows:
@@ -192,11 +192,11 @@ def offaxis_main(args) -> None:
         fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4))
         a1.plot(x, [r["target_dalpha"] for r in rows], "o-", label="target")
         a1.plot(x, [r["beacon_dalpha"] for r in rows], "s-", label="beacon")
-        a1.set_xlabel("target's image off the optical axis (°)")
+        a1.set_xlabel("target's image off the optical axis, α − pan (°)")
         a1.set_ylabel("α error (°)")
         a2.plot(x, [100 * (r["target_drel"] or np.nan) for r in rows], "o-", label="target")
         a2.plot(x, [100 * r["beacon_drel"] for r in rows], "s-", label="beacon")
-        a2.set_xlabel("target's image off the optical axis (°)")
+        a2.set_xlabel("target's image off the optical axis, α − pan (°)")
         a2.set_ylabel("d_total error (%)")
         for a in (a1, a2):
             a.axhline(0, color="k", lw=0.5)

@@ -9,7 +9,6 @@ target stands.
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -17,7 +16,7 @@ from typing import Any
 
 from mirrorsim.errors import InputError
 from mirrorsim.model import Beacon, Camera, Point2, Scene
-from solver.reader import Reader
+from solver.reader import Reader, read_json
 
 REFERENCE_DISTANCE = 100.0  # cm: where calibration stands its reference objects
 
@@ -102,11 +101,4 @@ class CaptureRecord:
 
 def load_capture(path: str | Path) -> CaptureRecord:
     """Read a ``<name>.capture.json`` (raises CaptureError)."""
-    path = Path(path)
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise CaptureError(path, "", "no such file") from None
-    except (OSError, ValueError) as exc:
-        raise CaptureError(path, "", f"not a readable JSON capture record ({exc})") from None
-    return CaptureRecord.from_json(data, path)
+    return CaptureRecord.from_json(read_json(path, CaptureError), path)

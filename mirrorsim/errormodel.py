@@ -13,16 +13,14 @@ typical σ's that `solve`, `montecarlo` and `plan` take (``--error-model FILE``)
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 
 import numpy as np
 
-from mirrorsim.errors import InputError
 from mirrorsim.io import atomic_path, write_json
 from solver.measurements import read_sigma
-from solver.reader import Reader
+from solver.reader import Reader, read_json
 from solver.sltr import Sigma
 
 FEATURES = ("1", "d_total_cm", "off_axis_deg", "incidence_deg", "inv_height_px")
@@ -111,12 +109,7 @@ def predict(model: dict, kind: str, quantity: str, features: np.ndarray
 def load_sigma(path: str | Path) -> Sigma:
     """The typical σ's of a model file, as the solver takes them (checked as a
     measurement file's ``sigma`` is)."""
-    try:
-        model = json.loads(Path(path).read_text())
-    except FileNotFoundError:
-        raise InputError(path, "", "no such file") from None
-    except (OSError, ValueError) as exc:
-        raise InputError(path, "", f"not an error model file ({exc})") from None
+    model = read_json(path)
     r = Reader(path)
     if not isinstance(model, dict) or "sigma" not in model:
         raise r.fail("sigma", "missing: not an error model file (`mirrorsim errormodel`)")

@@ -13,7 +13,7 @@ import numpy as np
 from mirrorsim.model import Camera, Mirror, Occluder, Point2
 from solver.geometry import line_normal, wrap_yaw, yaw_difference
 from solver.measurements import Measurements
-from solver.sltr import Solution
+from solver.sltr import BeaconMeasurement, Solution
 
 
 def _pt(v) -> Point2:
@@ -190,8 +190,6 @@ class GroundTruth:
 
     def exact_measurements(self) -> Measurements:
         """The noise-free measurements of this truth (what a perfect detector reports)."""
-        from solver.sltr import BeaconMeasurement
-
         return Measurements(
             observer=self.camera.position,
             targets=[(self.target.alpha_deg, self.target.d_total)],
@@ -306,10 +304,8 @@ class Report:
     @classmethod
     def from_json(cls, d: dict) -> Report:
         """Inverse of :meth:`to_json`."""
-        from solver.measurements import measurements_from_dict
-
         return cls(scene=d["scene"], truth=GroundTruth.from_json(d["truth"]),
-                   measurements=measurements_from_dict(d["measurements"]),
+                   measurements=Measurements.from_json(d["measurements"]),
                    solution=Solution.from_json(d["solution"]),
                    errors=Score.from_json(d["errors"]),
                    frames=tuple(FrameRecord(**f) for f in d["frames"]),

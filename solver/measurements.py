@@ -3,13 +3,12 @@ usable for real measurements as well as simulated ones."""
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from solver.errors import InputError
-from solver.reader import Reader
+from solver.reader import Reader, read_json
 from solver.sltr import BeaconMeasurement, Sigma
 
 # σ's beyond these are no measurement: a bearing known to ±45° or a distance to ±100 %
@@ -53,17 +52,7 @@ class Measurements:
 
 def load_measurements(path: str | Path) -> Measurements:
     """Parse and validate a measurements file (raises :class:`MeasurementError`)."""
-    path = Path(path)
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise MeasurementError(path, "", "no such file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise MeasurementError(path, "", f"cannot read: {exc}") from None
-    except json.JSONDecodeError as exc:
-        raise MeasurementError(path, "", f"malformed JSON: line {exc.lineno}, column "
-                               f"{exc.colno}: {exc.msg}") from None
-    return measurements_from_dict(data, path)
+    return measurements_from_dict(read_json(path, MeasurementError), path)
 
 
 def measurements_from_dict(data: Any, source: str | Path = "<measurements>") -> Measurements:

@@ -5,6 +5,7 @@ One reader serves every input file: scenes, dataset specs and measurements.
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 from typing import Any
@@ -23,6 +24,21 @@ def show(value: Any) -> str:
     if value is None:
         return "nothing (null)"
     return str(value)
+
+
+def read_json(path: str | Path, error_class: type[InputError] = InputError) -> Any:
+    """Parse a JSON file, raising ``error_class`` with one line for a missing, unreadable
+    or malformed one."""
+    path = Path(path)
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise error_class(path, "", "no such file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise error_class(path, "", f"cannot read: {exc}") from None
+    except json.JSONDecodeError as exc:
+        raise error_class(path, "", f"malformed JSON: line {exc.lineno}, column "
+                          f"{exc.colno}: {exc.msg}") from None
 
 
 class Reader:
