@@ -43,6 +43,8 @@ lint: setup
 bench: setup
 	$(BIN)/python bench/render.py
 	$(BIN)/python bench/detect.py
+	$(BIN)/python bench/detect.py --offaxis --plot docs/detect_offaxis.png
+	$(BIN)/python bench/edges.py
 	$(BIN)/python bench/particle.py
 	$(BIN)/python bench/paper.py
 	$(BIN)/python bench/evaluate.py
