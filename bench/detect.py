@@ -254,9 +254,9 @@ def main() -> None:
     failed = [r for r in rows if "error" in r]
     for r in failed:
         print(f"\nfailed: {r['scene']}: {r['error']}")
+    s = summary(rows)
     for r in rows:
-        if "error" not in r and (r["scene"] in summary(rows)["gross"]
-                                 or r["scene"] in summary(rows)["false_clipped"]):
+        if r["scene"] in s["gross"] or r["scene"] in s["false_clipped"]:
             print(f"\ngross error or false clip: {r}")
     if args.out:
         args.out.write_text(json.dumps({"rows": rows, "sweep": sweep}, indent=1))

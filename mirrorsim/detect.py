@@ -162,11 +162,12 @@ class Detection:
         return out
 
 
-def measure_object(img: np.ndarray, kind: str, target_ratio: float | None = None
-                   ) -> ImageMeasurement:
+def measure_object(img: np.ndarray, kind: str, target_ratio: float | None = None,
+                   linear: np.ndarray | None = None) -> ImageMeasurement:
     """Find and measure the largest image of the target (``kind="target"``, with its
     width/height ``target_ratio``) or of a pencil in an 8-bit RGB image, exactly as
     :func:`detect_frame` measures it (calibration uses this on its reference renders).
+    ``linear``: the image already converted by :func:`to_linear`, if the caller has it.
 
     Raises
     ------
@@ -174,7 +175,7 @@ def measure_object(img: np.ndarray, kind: str, target_ratio: float | None = None
         If no such object is found.
     """
     img = np.asarray(img, dtype=np.float32)
-    linear = to_linear(img)
+    linear = to_linear(img) if linear is None else linear
     if kind == "target":
         box = find_target(img, target_ratio)
         if box is None:
@@ -206,9 +207,10 @@ def detect_frame(image: np.ndarray, view: CaptureRecord, calibration: Calibratio
     if img.ndim != 3 or img.shape[:2] != (cam.height_px, cam.width):
         raise DetectionError(f"the frame is {img.shape[1::-1] if img.ndim >= 2 else img.shape} "
                              f"px but the camera is {cam.width}×{cam.height_px}")
-    target = measure_object(img, "target", view.target_size[0] / view.target_size[1])
+    linear = to_linear(img)
+    target = measure_object(img, "target", view.target_size[0] / view.target_size[1], linear)
     target_geometry(cam, target, view.target_size, calibration.target_k)
-    blue = _pencil_channel(to_linear(img))
+    blue = _pencil_channel(linear)
     pencils = [measure_region(blue, b, "beacon") for b in find_pencils(img)]
     pencils = [p for p in pencils if p.height_px and (p.u_left, p.u_right) != (None, None)]
     paint = pencil_paint_height(view.beacons[0].height)

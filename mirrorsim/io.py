@@ -158,5 +158,5 @@ def write_json_cache(path: Path, data: dict) -> None:
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         write_json(path, data)
-    except OSError:
+    except (OSError, OutputError):  # atomic writes report a failure as OutputError
         pass

@@ -370,3 +370,13 @@ def test_a_jpeg_frame_is_measured_with_a_warning(half_frames):
     proc = _detect_process(jpg, scene)
     assert proc.returncode == 0
     assert proc.stderr.startswith("warning: ") and "JPEG" in proc.stderr
+
+
+def test_an_unwritable_cache_only_costs_a_redo(tmp_path, monkeypatch):
+    """The backend probe and calibration caches: a failed write is not an error."""
+    from mirrorsim.io import read_json_cache, write_json_cache
+
+    monkeypatch.setattr(io.os, "replace", lambda *_a: (_ for _ in ()).throw(OSError(28, "full")))
+    write_json_cache(tmp_path / "cache.json", {"k": 1})  # no exception
+    assert read_json_cache(tmp_path / "cache.json") == {}
+    assert list(tmp_path.iterdir()) == []
