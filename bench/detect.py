@@ -1,8 +1,12 @@
-"""Benchmark: the detector's accuracy on rendered full-size frames, and how it depends on spp.
+"""Benchmark: the detector's accuracy on rendered full-size frames, by sampler and spp.
 
-    python bench/detect.py [--frames 20] [--spp 16] [--sweep 4 16 64 256]
-                           [--sweep-scenes 3] [--seed 0] [--out DIR]
-    python bench/detect.py --offaxis [-25 -20 … 25] [--spp 16] [--plot docs/detect_offaxis.png]
+    python bench/detect.py [--frames 20] [--spec SPEC] [--render independent:16 multijitter:4 …]
+                           [--seed 0] [--out FILE]
+    python bench/detect.py --offaxis [-25 -20 … 25] [--render multijitter:4]
+                           [--plot docs/detect_offaxis.png]
+
+``--render``: the render settings compared, each SAMPLER:SPP, every one over all the
+frames (default: the scenes' own settings, i.e. mirrorsim's defaults).
 
 ``--offaxis``: the default scene with the camera panned so that the target's image lies
 each given angle off the optical axis; the signed errors of α and d_total (target and
@@ -12,7 +16,8 @@ Frames: the bundled scenes (default, exp1–3) and random valid variations of th
 scene (mirror pose, target and beacon positions; kept only if the scene validates and
 both images are whole in the mirror).  Errors are against each render's exact ground
 truth.  Prints Markdown tables: median and 95th percentile of |Δα| and |Δd|/d for target
-and beacon, detection time per frame, and the same at each spp of the sweep.
+and beacon, end-to-end target error, gross errors and false clips, detection time per
+frame, for each render setting.
 """
 
 from __future__ import annotations
@@ -24,6 +29,7 @@ import platform
 import sys
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -74,8 +80,21 @@ def random_scenes(n: int, rng: np.random.Generator) -> list:
     return out
 
 
-def measure(scene, spp: int, tmp: Path) -> dict:
-    res = render_to_files(scene, tmp / scene.name, spp=spp, progress=False)
+def with_render(scene, config: str | None):
+    """The scene with the render setting SAMPLER:SPP (None: as it is)."""
+    if config is None:
+        return scene
+    sampler, spp = config.split(":")
+    return replace(scene, render=replace(scene.render, sampler=sampler, spp=int(spp)))
+
+
+def label(scene) -> str:
+    return f"{scene.render.sampler}:{scene.render.spp}"
+
+
+def measure(scene, tmp: Path) -> dict:
+    spp = label(scene)
+    res = render_to_files(scene, tmp / scene.name, progress=False)
     cal = calibrate(scene.camera, scene.target.size, scene.beacons[0].height)
     img = read_frame(res.png)
     t0 = time.perf_counter()
@@ -100,6 +119,7 @@ def measure(scene, spp: int, tmp: Path) -> dict:
         "beacon_dalpha": abs(mb.alpha_deg - b.alpha_deg),
         "beacon_drel": abs(mb.d_total - b.d_total) / b.d_total,
         "target_d": t.d_total, "beacon_d": b.d_total,
+        "beacon_drel_signed": (mb.d_total - b.d_total) / b.d_total,
     }
 
 
@@ -122,8 +142,9 @@ def summary(rows: list[dict]) -> dict:
 
 def table(title: str, summaries: dict) -> str:
     lines = [f"\n{title}\n",
-             "| spp | frames (failed) | target \\|Δα\\| ° median / p95 | target \\|Δd\\|/d % "
-             "median / p95 | beacon \\|Δα\\| ° median / p95 | beacon \\|Δd\\|/d % median / p95 |"
+             "| sampler:spp | frames (failed) | target \\|Δα\\| ° median / p95 | "
+             "target \\|Δd\\|/d % median / p95 | beacon \\|Δα\\| ° median / p95 | "
+             "beacon \\|Δd\\|/d % median / p95 |"
              " end-to-end target cm median / p95 | gross errors | false clips |"
              " detect s median |",
              "|---|---|---|---|---|---|---|---|---|---|"]
@@ -150,9 +171,10 @@ def offaxis_scenes(angles: list[float]) -> list:
     return out
 
 
-def measure_signed(scene, spp: int, tmp: Path) -> dict:
+def measure_signed(scene, tmp: Path) -> dict:
     """Signed errors of one frame (target and beacon), with the target's off-axis angle."""
-    res = render_to_files(scene, tmp / scene.name, spp=spp, progress=False)
+    spp = label(scene)
+    res = render_to_files(scene, tmp / scene.name, progress=False)
     cal = calibrate(scene.camera, scene.target.size, scene.beacons[0].height)
     det = detect_frame(read_frame(res.png), res.capture, cal)
     t, b = res.truth.target, res.truth.beacons[0]
@@ -167,13 +189,14 @@ def measure_signed(scene, spp: int, tmp: Path) -> dict:
 
 
 def offaxis_main(args) -> None:
-    scenes = offaxis_scenes(args.offaxis)
+    scenes = [with_render(s, args.render[0]) for s in offaxis_scenes(args.offaxis)]
+    setting = label(scenes[0])
     with tempfile.TemporaryDirectory() as tmp:
         rows = []
         for s in scenes:
-            rows.append(measure_signed(s, args.spp, Path(tmp)))
+            rows.append(measure_signed(s, Path(tmp)))
             print(f"{s.name}: {rows[-1]}", file=sys.stderr)
-    print(f"Off-axis sweep, default scene, 1920×1088, {args.spp} spp; {platform.machine()}")
+    print(f"Off-axis sweep, default scene, 1920×1088, {setting}; {platform.machine()}")
     print("\n| target off axis α − pan (°) | target Δα (°) | target Δd/d (%) | beacon Δα (°) | "
           "beacon Δd/d (%) | clipped |")
     print("|---|---|---|---|---|---|")
@@ -202,7 +225,7 @@ def offaxis_main(args) -> None:
             a.axhline(0, color="k", lw=0.5)
             a.grid(alpha=0.3)
             a.legend()
-        fig.suptitle(f"detector errors against off-axis angle (default scene, {args.spp} spp)")
+        fig.suptitle(f"detector errors against off-axis angle (default scene, {setting})")
         fig.tight_layout()
         fig.savefig(args.plot, dpi=110)
         print(f"\nplot: {args.plot}")
@@ -214,9 +237,8 @@ def main() -> None:
                     help="off-axis angles of the target's image (default −25…25 in 5° steps)")
     ap.add_argument("--plot", type=Path, help="with --offaxis: the plot to write")
     ap.add_argument("--frames", type=int, default=20)
-    ap.add_argument("--spp", type=int, default=16)
-    ap.add_argument("--sweep", type=int, nargs="*", default=[4, 16, 64, 256])
-    ap.add_argument("--sweep-scenes", type=int, default=3)
+    ap.add_argument("--render", nargs="*", default=[None], metavar="SAMPLER:SPP",
+                    help="render settings to compare (default: the scenes' own)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--spec", type=Path, help="draw the frames from a dataset spec (e.g. "
                     "scenes/dataset_spec.yaml) instead of the bundled scenes and variations")
@@ -235,31 +257,27 @@ def main() -> None:
     else:
         bundled = [load_scene(ROOT / "scenes" / f"{n}.yaml") for n in BUNDLED]
         scenes = bundled + random_scenes(max(0, args.frames - len(bundled)), rng)
-    rows = []
+    by_config: dict[str, list[dict]] = {}
     with tempfile.TemporaryDirectory() as tmp:
-        for k, s in enumerate(scenes):
-            rows.append(measure(s, args.spp, Path(tmp)))
-            print(f"[{k + 1}/{len(scenes)}] {s.name}: {rows[-1]}", file=sys.stderr)
-        sweep = {}
-        for spp in args.sweep:
-            sweep[spp] = [measure(s, spp, Path(tmp)) for s in scenes[:args.sweep_scenes]]
-            print(f"sweep {spp} spp done", file=sys.stderr)
+        for config in args.render:
+            for k, s in enumerate(scenes):
+                s = with_render(s, config)
+                row = measure(s, Path(tmp))
+                by_config.setdefault(label(s), []).append(row)
+                print(f"[{label(s)} {k + 1}/{len(scenes)}] {s.name}: {row}", file=sys.stderr)
     print(f"Detector accuracy, 1920×1088 frames; {platform.machine()}, Python "
           f"{platform.python_version()}, seed {args.seed}")
-    print(table(f"All {len(scenes)} frames at {args.spp} spp:", {args.spp: summary(rows)}))
-    if args.sweep:
-        print(table(f"By spp ({args.sweep_scenes} scenes: "
-                    f"{', '.join(s.name for s in scenes[:args.sweep_scenes])}):",
-                    {spp: summary(r) for spp, r in sweep.items()}))
-    failed = [r for r in rows if "error" in r]
-    for r in failed:
-        print(f"\nfailed: {r['scene']}: {r['error']}")
-    s = summary(rows)
-    for r in rows:
-        if r["scene"] in s["gross"] or r["scene"] in s["false_clipped"]:
-            print(f"\ngross error or false clip: {r}")
+    print(table(f"{len(scenes)} frames{' of ' + str(args.spec) if args.spec else ''}:",
+                {c: summary(rows) for c, rows in by_config.items()}))
+    for c, rows in by_config.items():
+        s = summary(rows)
+        for r in rows:
+            if "error" in r:
+                print(f"\n{c} failed: {r['scene']}: {r['error']}")
+            elif r["scene"] in s["gross"] or r["scene"] in s["false_clipped"]:
+                print(f"\n{c} gross error or false clip: {r}")
     if args.out:
-        args.out.write_text(json.dumps({"rows": rows, "sweep": sweep}, indent=1))
+        args.out.write_text(json.dumps(by_config, indent=1))
 
 
 if __name__ == "__main__":

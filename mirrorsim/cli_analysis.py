@@ -15,6 +15,7 @@ from mirrorsim.cli_options import (
     finite,
     load,
     output,
+    sampler_option,
 )
 from mirrorsim.errors import BadArgument
 from mirrorsim.io import emit_json
@@ -140,6 +141,7 @@ def _dataset_options(p):
                    help="worker processes (default: half the cores)")
     p.add_argument("--spec", type=Path, help="ranges of the random scenes (YAML)")
     p.add_argument("--spp", type=int, help="samples per pixel (default: the spec's)")
+    sampler_option(p)
     common(p, scene=False, variant=True, quiet=True)
     p.add_argument("--resume", action="store_true", help="finish an interrupted run")
     p.add_argument("--executor", default="local", choices=["local", "dask"])
@@ -159,7 +161,7 @@ def _dataset(args) -> int:
     at_least(("--n", args.n, 1), ("--seed", args.seed, 0), ("--workers", args.workers, 1),
              ("--spp", args.spp, 1))
     res = run_dataset(args.n, args.seed, args.out, workers=args.workers, spec_path=args.spec,
-                      spp=args.spp, variant=args.variant, resume=args.resume,
+                      spp=args.spp, sampler=args.sampler, variant=args.variant, resume=args.resume,
                       executor=args.executor, scheduler=args.scheduler,
                       progress=not args.quiet)
     print(f"{args.out}: {res['rows']} rows ({res['computed']} computed now in "

@@ -7,11 +7,12 @@ import math
 import os
 import sys
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 
 from mirrorsim.errors import BadArgument
 from mirrorsim.io import check_output_dir, check_output_file
-from mirrorsim.model import Scene
+from mirrorsim.model import SAMPLERS, RenderSettings, Scene
 from mirrorsim.scenefile import MAX_SPP, load_scene
 
 VARIANT_CHOICES = ["auto", "cuda", "llvm", "scalar"]
@@ -61,6 +62,7 @@ def common(p: argparse.ArgumentParser, *, scene: bool = True, out: str | None = 
         p.add_argument("--spp", type=int, help=f"samples per pixel, 1..{MAX_SPP} "
                        "(default: the scene's, else 16)")
         p.add_argument("--seed", type=int, help="sampler seed ≥ 0 (default: the scene's, else 0)")
+        sampler_option(p)
     if variant:
         p.add_argument("--variant", default="auto", choices=VARIANT_CHOICES,
                        help="Mitsuba backend; auto = cuda if a GPU works, else llvm if its "
@@ -98,11 +100,21 @@ def finite(args: argparse.Namespace, *dests: str) -> None:
                     raise BadArgument("--" + dest.replace("_", "-"), f"{x} is not a finite number")
 
 
-def check_spp_seed(args: argparse.Namespace) -> None:
-    """Refuse --spp outside 1..MAX_SPP and a negative --seed."""
+def sampler_option(p: argparse.ArgumentParser) -> None:
+    """--sampler, for commands that render."""
+    p.add_argument("--sampler", choices=SAMPLERS,
+                   help="Mitsuba sampler (default: the scene's render.sampler, else "
+                   f"{RenderSettings().sampler}); see README, Throughput")
+
+
+def render_options(args: argparse.Namespace, scene: Scene) -> Scene:
+    """Refuse --spp outside 1..MAX_SPP and a negative --seed; the scene with --sampler."""
     at_least(("--spp", args.spp, 1), ("--seed", args.seed, 0))
     if args.spp is not None and args.spp > MAX_SPP:
         raise BadArgument("--spp", f"{args.spp} must be ≤ {MAX_SPP}")
+    if args.sampler is None:
+        return scene
+    return replace(scene, render=replace(scene.render, sampler=args.sampler))
 
 
 def load(path: Path) -> Scene:

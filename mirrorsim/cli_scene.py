@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from mirrorsim.cli_options import check_spp_seed, command, common, load, output
+from mirrorsim.cli_options import command, common, load, output, render_options
 from mirrorsim.errors import DetectionError
 from mirrorsim.io import emit_json
 
@@ -23,8 +23,7 @@ def _render(args) -> int:
     from mirrorsim.frames import render_to_files
     from mirrorsim.tables import render_summary
 
-    scene = load(args.scene)
-    check_spp_seed(args)
+    scene = render_options(args, load(args.scene))
     files = render_to_files(scene, args.out, spp=args.spp, seed=args.seed,
                             variant=args.variant, progress=not args.quiet)
     print(render_summary(scene, files))
@@ -164,8 +163,7 @@ def _evaluate(args) -> int:
     from mirrorsim.plot import plot_evaluation
     from mirrorsim.tables import report_table
 
-    scene = load(args.scene)
-    check_spp_seed(args)
+    scene = render_options(args, load(args.scene))
     out = args.out or Path("renders") / scene.name
     report = evaluate_scene(scene, out, spp=args.spp, seed=args.seed, variant=args.variant,
                             progress=not args.quiet)

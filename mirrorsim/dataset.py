@@ -34,7 +34,7 @@ from tqdm import tqdm
 
 from mirrorsim.errors import BadArgument, DetectionError, InputError, SolverError
 from mirrorsim.io import atomic_path, write_json, write_text
-from mirrorsim.model import RenderSettings, Scene
+from mirrorsim.model import Scene
 from mirrorsim.report import ObjectTruth, Report
 from mirrorsim.sampler import NoValidScene
 from mirrorsim.workers import run_dask, run_local
@@ -70,7 +70,7 @@ def process_one(i: int, seed: int, spec: dict, out: str, spp: int | None,
     try:
         rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(i,)))
         scene = sample_scene(spec, rng, name)
-        scene = replace(scene, render=RenderSettings(spp=spp or scene.render.spp, seed=i))
+        scene = replace(scene, render=replace(scene.render, spp=spp or scene.render.spp, seed=i))
         write_text(out_dir / "scenes" / f"{name}.yaml", to_yaml(scene))
         t1 = time.perf_counter()
         rep = evaluate_scene(scene, out_dir / "frames" / name, variant=variant, progress=False)
@@ -97,7 +97,8 @@ def _flatten(scene: Scene, rep: Report) -> dict:
         "mirror_x": mir.center[0], "mirror_y": mir.center[1], "mirror_yaw_deg": mir.yaw % 180,
         "mirror_width": mir.size[0], "mirror_height": mir.size[1],
         "target_x": scene.target.position[0], "target_y": scene.target.position[1],
-        "variant": rep.render.variant, "spp": rep.render.spp, "render_seed": rep.render.seed,
+        "variant": rep.render.variant, "spp": rep.render.spp, "sampler": rep.render.sampler,
+        "render_seed": rep.render.seed,
     }
     b, frame = meas.beacons[0], rep.frames[0]
     for kind, truth, (alpha, d), clipped in (
@@ -146,7 +147,8 @@ class DatasetError(InputError):
 
 def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
                 spec_path: str | Path | None = None, spp: int | None = None,
-                variant: str = "auto", resume: bool = False, executor: str = "local",
+                sampler: str | None = None, variant: str = "auto", resume: bool = False,
+                executor: str = "local",
                 scheduler: str | None = None, progress: bool = True,
                 recycle_every: int = RECYCLE_EVERY) -> dict:
     """Make (or finish) a dataset of ``n`` scenes; return a summary.
@@ -166,6 +168,8 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
         raise BadArgument("--n", f"{n} must be within 1..{MAX_SCENES}")
     out = Path(out)
     spec = load_spec(spec_path)
+    if sampler is not None:  # part of the spec, so that --resume checks it
+        spec = {**spec, "render": {**spec.get("render", {}), "sampler": sampler}}
     meta = {"format": DATASET_FORMAT, "n": n, "seed": seed, "spp": spp, "spec": spec}
     _claim_folder(out, meta, resume)
     for sub in ("scenes", "frames", "rows"):
@@ -279,7 +283,7 @@ Each row is one random scene (`scenes/<scene>.yaml`, a normal scene file: rerun 
 `mirrorsim evaluate`), its frame (`frames/<scene>/`), and these columns of
 `dataset.parquet`:
 
-- `index`, `scene`, `seed`, `render_seed`, `variant`, `spp`, `error` (empty if fine);
+- `index`, `scene`, `seed`, `render_seed`, `variant`, `spp`, `sampler`, `error` (empty if fine);
 - scene parameters: `camera_x`, `camera_y`, `camera_height`, `camera_pan_deg`,
   `hfov_deg`, `mirror_x`, `mirror_y`, `mirror_yaw_deg`, `mirror_width`,
   `mirror_height`, `target_x`, `target_y` (cm, degrees);

@@ -85,6 +85,7 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, spp: int 
                          for k in range(1, len(beacons) + 1))
     return Report(scene=scene.name, truth=truth, measurements=measurements, solution=sol,
                   errors=score(truth, measurements, sol), frames=tuple(frames),
-                  render=RenderInfo(variant=truths[0].render.variant, spp=spp, seed=seed),
+                  render=RenderInfo(variant=truths[0].render.variant, spp=spp, seed=seed,
+                                    sampler=scene.render.sampler),
                   calibration={"target_k": cal.target_k, "pencil_k": cal.pencil_k},
                   error_vs_beacons=by_count)

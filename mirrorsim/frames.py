@@ -20,6 +20,7 @@ from mirrorsim.model import Scene
 from mirrorsim.render import (
     IN_MIRROR,
     MITSUBA_VERSION,
+    RENDER_METHOD,
     RenderedFrame,
     encode_ids,
     render_frame,
@@ -55,9 +56,10 @@ def default_out(scene: Scene) -> Path:
 
 
 def scene_fingerprint(scene: Scene, spp: int, seed: int) -> str:
-    """What a render depends on: the scene's content (not its file name), spp, seed."""
+    """What a render depends on: the scene's content (not its file name, with its
+    sampler), spp, seed and the way frames are rendered."""
     d = asdict(replace(scene, source="", warnings=()))
-    text = json.dumps(d, sort_keys=True, default=str) + f"|{spp}|{seed}"
+    text = json.dumps(d, sort_keys=True, default=str) + f"|{spp}|{seed}|{RENDER_METHOD}"
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
@@ -79,6 +81,7 @@ def truth_of(scene: Scene, frame: RenderedFrame, fingerprint: str | None) -> Gro
                    "occluders": BEACON_LABEL + len(scene.beacons),
                    "seen_in_mirror_offset": IN_MIRROR},
         render=RenderInfo(variant=frame.variant, spp=frame.spp, seed=frame.seed,
+                          sampler=frame.sampler,
                           seconds_render=round(frame.seconds_render, 3),
                           seconds_total=round(frame.seconds_total, 3),
                           mitsuba=MITSUBA_VERSION, fingerprint=fingerprint))

@@ -171,7 +171,7 @@ def build_scene_dict(scene: Scene, *, spp: int) -> dict:
     Shape keys are prefixed with the object they belong to (``mirror``, ``target``,
     ``beacon0``, ``occluder0``…), which is how the id pass labels pixels.
     """
-    d = _stage(scene.board, scene.camera, spp)
+    d = _stage(scene.board, scene.camera, spp, scene.render.sampler)
     d.update(_mirror_shapes(scene))
     d.update(_target_shapes(scene.target))
     for i, b in enumerate(scene.beacons):
@@ -191,7 +191,7 @@ def build_direct_dict(board: Board, camera: Camera, obj: Target | Beacon, *, spp
 
     ``crop`` = (u0, v0, u1, v1) renders only that part of the film.
     """
-    d = _stage(board, camera, spp)
+    d = _stage(board, camera, spp, "independent")
     d.update(_target_shapes(obj) if isinstance(obj, Target) else _pencil_shapes(0, obj))
     if crop is not None:
         u0, v0, u1, v1 = crop
@@ -203,7 +203,7 @@ def build_direct_dict(board: Board, camera: Camera, obj: Target | Beacon, *, spp
 ZHAT = np.array([0.0, 0.0, 1.0])
 
 
-def _stage(board: Board, cam: Camera, spp: int) -> dict:
+def _stage(board: Board, cam: Camera, spp: int, sampler: str) -> dict:
     """Integrator, camera, room, light and the board: everything but the objects."""
     sx, sy = board.size
     bc = _v3((sx / 2, sy / 2))
@@ -219,7 +219,7 @@ def _stage(board: Board, cam: Camera, spp: int) -> dict:
             "far_clip": 10000.0,
             "to_world": mi.ScalarTransform4f().look_at(
                 origin=list(cam.center3), target=list(cam.center3 + forward), up=[0, 0, 1]),
-            "sampler": {"type": "independent", "sample_count": spp},
+            "sampler": {"type": sampler, "sample_count": spp},
             "film": {"type": "hdrfilm", "width": cam.width, "height": cam.height_px,
                      "rfilter": {"type": "box"}, "pixel_format": "rgb"},
         },

@@ -19,6 +19,9 @@ from solver.geometry import line_normal, signed_distance, unit
 MIRROR_DEPTH = 0.6  # glass + dark backing + frame, behind the reflective plane
 MIRROR_FRAME = 0.5  # frame width on the sides and top, outside the reflective area
 TARGET_THICKNESS = 0.4
+# Mitsuba samplers a scene may name: plain random, or stratified in every dimension
+# (any sample count; edges converge faster, see README "Throughput")
+SAMPLERS = ("independent", "multijitter")
 PENCIL_RADIUS = 0.4  # circumradius of the hexagonal pencil (0.69 cm across flats)
 OCCLUDER_THICKNESS = 1.0
 
@@ -140,10 +143,11 @@ class Occluder:
 
 @dataclass(frozen=True)
 class RenderSettings:
-    """Samples per pixel and the sampler's seed."""
+    """Samples per pixel, the sampler and its seed."""
 
     spp: int = 16
     seed: int = 0
+    sampler: str = "independent"
 
 
 @dataclass(frozen=True)

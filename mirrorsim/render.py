@@ -29,7 +29,10 @@ from mirrorsim.mitsuba_scene import (
 from mirrorsim.model import Beacon, Board, Camera, Scene, Target
 
 IN_MIRROR = 100  # ids.png: label + IN_MIRROR where the pixel sees it in the mirror
-PASS_SPP = 4  # samples per render pass: one progress step each (no measurable cost)
+# samples per render call: one progress step each.  A stratified sampler stratifies
+# within a call, so the passes are large; a dataset's few-spp frame is one call.
+PASS_SPP = 16
+RENDER_METHOD = "passes16"  # part of a frame's fingerprint: bump when renders change
 MITSUBA_VERSION = mi.__version__
 
 
@@ -47,6 +50,7 @@ class RenderedFrame:
     variant: str
     spp: int
     seed: int
+    sampler: str
     seconds_render: float
     seconds_total: float
 
@@ -92,7 +96,8 @@ def render_frame(scene: Scene, *, spp: int, seed: int, variant: str = "auto",
         t_render = time.perf_counter() - t0
         first, in_mirror = id_pass(mi_scene, scene)
     return RenderedFrame(linear=linear, first=first, in_mirror=in_mirror, variant=chosen,
-                         spp=spp, seed=seed, seconds_render=t_render,
+                         spp=spp, seed=seed, sampler=scene.render.sampler,
+                         seconds_render=t_render,
                          seconds_total=time.perf_counter() - t0)
 
 

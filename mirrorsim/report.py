@@ -92,6 +92,7 @@ class RenderInfo:
     variant: str
     spp: int
     seed: int
+    sampler: str = "independent"
     seconds_render: float | None = None
     seconds_total: float | None = None
     mitsuba: str | None = None
@@ -100,14 +101,16 @@ class RenderInfo:
     def to_json(self) -> dict:
         """The truth's ``render`` block."""
         return {"variant": self.variant, "spp": self.spp, "seed": self.seed,
+                "sampler": self.sampler,
                 "seconds_render": self.seconds_render, "seconds_total": self.seconds_total,
                 "mitsuba": self.mitsuba, "fingerprint": self.fingerprint}
 
     @classmethod
     def from_json(cls, d: dict) -> RenderInfo:
         """Inverse of :meth:`to_json`."""
-        return cls(**{k: d.get(k) for k in ("variant", "spp", "seed", "seconds_render",
-                                               "seconds_total", "mitsuba", "fingerprint")})
+        fields = ("variant", "spp", "seed", "seconds_render", "seconds_total", "mitsuba",
+                  "fingerprint")
+        return cls(**{k: d.get(k) for k in fields}, sampler=d.get("sampler", "independent"))
 
 
 @dataclass(frozen=True)
@@ -294,7 +297,7 @@ class Report:
                "solution": self.solution.to_json(), "errors": self.errors.to_json(),
                "frames": [asdict(f) for f in self.frames],
                "render": {"spp": self.render.spp, "seed": self.render.seed,
-                          "variant": self.render.variant},
+                          "sampler": self.render.sampler, "variant": self.render.variant},
                "calibration": dict(self.calibration)}
         if self.error_vs_beacons:
             out["error_vs_beacons"] = [{"beacons": k + 1, **s.to_json()}
@@ -310,7 +313,8 @@ class Report:
                    errors=Score.from_json(d["errors"]),
                    frames=tuple(FrameRecord(**f) for f in d["frames"]),
                    render=RenderInfo(d["render"]["variant"], d["render"]["spp"],
-                                     d["render"]["seed"]),
+                                     d["render"]["seed"],
+                                     d["render"].get("sampler", "independent")),
                    calibration=dict(d["calibration"]),
                    error_vs_beacons=tuple(
                        Score.from_json({k: v for k, v in e.items() if k != "beacons"})

@@ -17,13 +17,14 @@ import yaml
 
 from mirrorsim import optics
 from mirrorsim.errors import RunFailed, SceneError
-from mirrorsim.model import PAN_WORDS, Scene
+from mirrorsim.model import PAN_WORDS, SAMPLERS, RenderSettings, Scene
 from mirrorsim.scenefile import MAX_SPP, read_yaml, scene_from_dict
 from solver.reader import Reader, show
 
 DEFAULT_SPEC = Path(__file__).resolve().parents[1] / "scenes" / "dataset_spec.yaml"
 
 
+DEFAULT_RENDER = RenderSettings()
 MAX_TRIES = 100_000  # a documented bound on a spec's max_tries
 PROBE_TRIES = 300  # a spec that gives no valid scene in this many draws is refused at once
 
@@ -68,8 +69,11 @@ def load_spec(path: str | Path | None = None) -> dict:
     r.mapping(spec["beacon"], "beacon", {"depth", "along", "height"})
     r.mapping(spec["occluder"], "occluder", {"at", "length", "height"})
     if "render" in spec:
-        r.mapping(spec["render"], "render", set(), {"spp"})
-        r.integer(spec["render"].get("spp", 16), "render.spp", low=1, high=MAX_SPP)
+        r.mapping(spec["render"], "render", set(), {"spp", "sampler"})
+        r.integer(spec["render"].get("spp", DEFAULT_RENDER.spp), "render.spp", low=1,
+                  high=MAX_SPP)
+        r.choice(spec["render"].get("sampler", DEFAULT_RENDER.sampler), "render.sampler",
+                 SAMPLERS)
     r.integer(spec.get("max_tries", 5000), "max_tries", low=1, high=MAX_TRIES)
     # draws find range errors (wrong types, lo > hi) with their key, and a spec under
     # which no usable scene exists
@@ -126,7 +130,9 @@ def _draw(spec: dict, rng: np.random.Generator, where="<spec>") -> dict:
            "height": g("occluder", "height")}
     return {"board": copy.deepcopy(spec["board"]), "camera": cam, "mirror": mirror,
             "target": target, "beacon": beacon, "occluders": [occ],
-            "render": {"spp": int(spec.get("render", {}).get("spp", 16)), "seed": 0}}
+            "render": {"spp": int(spec.get("render", {}).get("spp", DEFAULT_RENDER.spp)),
+                       "seed": 0,
+                       "sampler": spec.get("render", {}).get("sampler", DEFAULT_RENDER.sampler)}}
 
 
 def sample_scene(spec: dict, rng: int | np.random.Generator | None, name: str,
@@ -177,7 +183,8 @@ def to_yaml(scene: Scene) -> str:
                      for b in scene.beacons],
          "occluders": [{"start": list(o.start), "end": list(o.end), "height": o.height}
                        for o in scene.occluders],
-         "render": {"spp": scene.render.spp, "seed": scene.render.seed}}
+         "render": {"spp": scene.render.spp, "seed": scene.render.seed,
+                    "sampler": scene.render.sampler}}
     if len(scene.beacons) == 1:
         d["beacon"] = d.pop("beacons")[0]
     return yaml.safe_dump(d, sort_keys=False)

@@ -22,6 +22,7 @@ from mirrorsim import optics
 from mirrorsim.errors import SceneError
 from mirrorsim.model import (
     PAN_WORDS,
+    SAMPLERS,
     Beacon,
     Board,
     Camera,
@@ -139,10 +140,11 @@ def scene_from_dict(data: Any, source: str = "<scene>", default_name: str = "sce
     occluders = _occluders(r, top.get("occluders", []))
     rs = RenderSettings()
     if "render" in top:
-        rr = r.mapping(top["render"], "render", set(), {"spp", "seed"})
+        rr = r.mapping(top["render"], "render", set(), {"spp", "seed", "sampler"})
         rs = RenderSettings(
             spp=r.integer(rr.get("spp", rs.spp), "render.spp", low=1, high=MAX_SPP),
             seed=r.integer(rr.get("seed", rs.seed), "render.seed", low=0),
+            sampler=r.choice(rr.get("sampler", rs.sampler), "render.sampler", SAMPLERS),
         )
 
     on_board = _board_check(r, board)
