@@ -41,7 +41,10 @@ from mirrorsim.workers import run_dask, run_local
 from solver.geometry import yaw_difference
 
 ROW_SCHEMA_VERSION = 1
-RECYCLE_EVERY = 8  # scenes per worker process before it is replaced
+# a worker retires past this resident memory; measured on llvm_ad_rgb, a warm worker
+# holds ~550 MiB after its first full-size scene and grows < 0.5 MiB per scene after
+# (README "Throughput"), so this only stops a leak that a future Mitsuba might bring
+MAX_WORKER_RSS_MB = 3072
 MAX_SCENES = 1_000_000  # a documented bound on --n
 DATASET_FORMAT = "mirrorsim-dataset"
 # failures that belong to the scene (recorded as its row); all else is redone on resume
@@ -128,6 +131,21 @@ def _flatten(scene: Scene, rep: Report) -> dict:
     return row
 
 
+def _calibrate_models(spec: dict, variant: str, progress: bool) -> None:
+    """Calibrate each of the spec's camera models once, before the workers start, so
+    that they all find K in the cache (with ranges instead of models, or a drawn pencil
+    height, each scene calibrates its own camera as it comes)."""
+    from mirrorsim.calibrate import calibrate
+    from mirrorsim.sampler import camera_models
+
+    cams, height = camera_models(spec), spec["beacon"]["height"]
+    if cams is None or isinstance(height, list):
+        return
+    for cam in tqdm(cams, desc="calibrating camera models", unit="model",
+                    disable=not progress, leave=False):
+        calibrate(cam, tuple(spec["target"]["size"]), float(height), variant=variant)
+
+
 def _incidence_deg(scene: Scene, truth: ObjectTruth) -> float:
     """Angle between the camera's ray to the mirror and the mirror's normal."""
     ray = np.asarray(truth.reflection_point) - np.asarray(scene.camera.position, float)
@@ -150,7 +168,7 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
                 sampler: str | None = None, variant: str = "auto", resume: bool = False,
                 executor: str = "local",
                 scheduler: str | None = None, progress: bool = True,
-                recycle_every: int = RECYCLE_EVERY) -> dict:
+                max_rss_mb: float = MAX_WORKER_RSS_MB) -> dict:
     """Make (or finish) a dataset of ``n`` scenes; return a summary.
 
     Raises
@@ -177,6 +195,7 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
     if not (out / "dataset.json").exists():
         write_json(out / "dataset.json", meta)
     chosen = choose_variant(variant)  # the probe runs once here rather than in every worker
+    _calibrate_models(spec, chosen, progress)
     retry: dict[int, str] = {}
 
     def is_done(i: int) -> bool:
@@ -200,7 +219,7 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
             for job in jobs:
                 on_result(process_one(*job))
         else:
-            run_local(process_one, jobs, workers, is_done, on_result, recycle_every)
+            run_local(process_one, jobs, workers, is_done, on_result, max_rss_mb)
     finally:
         bar.close()
     wall = time.perf_counter() - t_start

@@ -10,6 +10,7 @@ World units are the scene's centimetres; the Mitsuba world frame is the board fr
 
 from __future__ import annotations
 
+import functools
 import math
 
 import mitsuba as mi
@@ -82,8 +83,10 @@ def _v3(v2, z=0.0) -> np.ndarray:
     return np.array([v2[0], v2[1], z], dtype=float)
 
 
+@functools.lru_cache(maxsize=8)  # built once per worker for a dataset's board, not per scene
 def _board_texture(board: Board) -> np.ndarray:
-    """Pegboard albedo: a regular grid of dark round holes, anti-aliased."""
+    """Pegboard albedo: a regular grid of dark round holes, anti-aliased (cached: the
+    caller must not modify it; mi.Bitmap copies it)."""
     sx, sy = board.size
     nx, ny = (max(2, round(s * BOARD_TEXELS_PER_CM)) for s in (sx, sy))
     base = np.broadcast_to(np.array(_COLOURS["board"], np.float32), (ny, nx, 3)).copy()
@@ -101,6 +104,7 @@ def _board_texture(board: Board) -> np.ndarray:
     return base * (1 - hole) + np.array(_COLOURS["hole"], np.float32) * hole
 
 
+@functools.lru_cache(maxsize=1)
 def _room_envmap(width: int = 64) -> np.ndarray:
     """A latitude-longitude room: floor, walls with darker doors/shelves, bright ceiling.
 

@@ -17,7 +17,7 @@ import yaml
 
 from mirrorsim import optics
 from mirrorsim.errors import RunFailed, SceneError
-from mirrorsim.model import PAN_WORDS, SAMPLERS, RenderSettings, Scene
+from mirrorsim.model import PAN_WORDS, SAMPLERS, Camera, RenderSettings, Scene
 from mirrorsim.scenefile import MAX_SPP, read_yaml, scene_from_dict
 from solver.reader import Reader, show
 
@@ -51,12 +51,20 @@ def load_spec(path: str | Path | None = None) -> dict:
               {"render", "max_tries"})
     r.mapping(spec["board"], "board", {"size"}, {"hole_pitch"})
     r.pair(spec["board"]["size"], "board.size", positive=True)
-    r.mapping(spec["camera"], "camera", {"x", "y", "height", "hfov"}, {"resolution", "pan"})
-    res = spec["camera"].get("resolution", [1920, 1088])
-    if not isinstance(res, list) or len(res) != 2:
-        raise r.fail("camera.resolution", f"expected [width, height] in px, got {show(res)}")
-    r.integer(res[0], "camera.resolution[0]", low=2)
-    r.integer(res[1], "camera.resolution[1]", low=2)
+    cam = r.mapping(spec["camera"], "camera", {"x", "y"},
+                    {"height", "hfov", "resolution", "pan", "models"})
+    if "models" in cam:
+        if not isinstance(cam["models"], list) or not cam["models"]:
+            raise r.fail("camera.models", f"expected a list of camera models, got "
+                         f"{show(cam['models'])}")
+        extra = {"height", "hfov", "resolution"} & set(cam)
+        if extra:
+            raise r.fail(f"camera.{sorted(extra)[0]}", "give it in each of camera.models, "
+                         "not beside them")
+        for k, m in enumerate(cam["models"]):
+            _check_model(r, m, f"camera.models[{k}]", required={"height", "hfov"})
+    else:
+        _check_model(r, cam, "camera", required={"height", "hfov"}, ranges=True)
     pan = spec["camera"].get("pan", "mirror")
     if not isinstance(pan, str):
         r.number(pan, "camera.pan")
@@ -85,6 +93,32 @@ def load_spec(path: str | Path | None = None) -> dict:
     return spec
 
 
+def _check_model(r: Reader, m: Any, key: str, required: set[str],
+                 ranges: bool = False) -> None:
+    """A camera model: mount height (cm), hfov (°), resolution; fixed numbers, or (for
+    the camera block without models) ranges, which _value checks."""
+    if not ranges:
+        r.mapping(m, key, required, {"resolution"})
+        r.number(m["height"], f"{key}.height", positive=True)
+        r.number(m["hfov"], f"{key}.hfov", low=1.0, high=179.0)
+    res = m.get("resolution", [1920, 1088])
+    if not isinstance(res, list) or len(res) != 2:
+        raise r.fail(f"{key}.resolution", f"expected [width, height] in px, got {show(res)}")
+    r.integer(res[0], f"{key}.resolution[0]", low=2)
+    r.integer(res[1], f"{key}.resolution[1]", low=2)
+
+
+def camera_models(spec: dict) -> list[Camera] | None:
+    """The spec's camera models as cameras (position and pan irrelevant: what K depends
+    on), or None when the spec draws heights or fields of view from ranges."""
+    models = spec["camera"].get("models")
+    if models is None:
+        return None
+    return [Camera(position=(0.0, 0.0), height=float(m["height"]), hfov=float(m["hfov"]),
+                   resolution=tuple(m.get("resolution", [1920, 1088])), pan=0.0, pan_deg=0.0)
+            for m in models]
+
+
 def _value(spec: dict, block: str, key: str, rng: np.random.Generator, where) -> Any:
     r = Reader(where, SceneError)
     if not isinstance(spec[block], dict):
@@ -104,9 +138,16 @@ def _value(spec: dict, block: str, key: str, rng: np.random.Generator, where) ->
 def _draw(spec: dict, rng: np.random.Generator, where="<spec>") -> dict:
     """One candidate scene dict (not yet validated)."""
     g = lambda block, key: _value(spec, block, key, rng, where)  # noqa: E731
-    cam = {"position": [g("camera", "x"), g("camera", "y")], "height": g("camera", "height"),
-           "hfov": g("camera", "hfov"),
-           "resolution": list(spec["camera"].get("resolution", [1920, 1088])),
+    position = [g("camera", "x"), g("camera", "y")]
+    models = spec["camera"].get("models")
+    if models:  # a lab's few cameras, each on its mount: one calibration each
+        m = models[int(rng.integers(len(models)))]
+        height, hfov = float(m["height"]), float(m["hfov"])
+        res = m.get("resolution", [1920, 1088])
+    else:
+        height, hfov = g("camera", "height"), g("camera", "hfov")
+        res = spec["camera"].get("resolution", [1920, 1088])
+    cam = {"position": position, "height": height, "hfov": hfov, "resolution": list(res),
            "pan": spec["camera"].get("pan", "mirror")}
     yaw = g("mirror", "yaw")
     centre = np.array([g("mirror", "x"), g("mirror", "y")])

@@ -55,9 +55,10 @@ def test_tiny_dataset_end_to_end(one_worker):
 
 def test_same_rows_whatever_the_workers(one_worker, tmp_path):
     out, _ = one_worker
-    # recycling every scene exercises the replacement of worker processes too
+    # a memory limit every worker passes at once: each retires after one scene, which
+    # exercises the replacement of worker processes too
     run_dataset(3, 3, tmp_path / "b", workers=2, spec_path=SPEC, progress=False,
-                recycle_every=1)
+                max_rss_mb=1)
     a, b = _stable(collect_rows(out, 3)), _stable(collect_rows(tmp_path / "b", 3))
     assert a == b, [{k: (x[k], y.get(k)) for k in x if x[k] != y.get(k)}
                     for x, y in zip(a, b, strict=True)]
