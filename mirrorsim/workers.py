@@ -47,7 +47,7 @@ def _sigint_held() -> Iterator[None]:
 
 
 def rss_mb() -> float:
-    """This process's resident memory now (MiB; Linux), or 0 where it cannot be read."""
+    """Resident memory of the calling process now (MiB; Linux), or 0 if unreadable."""
     try:
         with open("/proc/self/statm") as f:
             pages = int(f.read().split()[1])
