@@ -19,6 +19,7 @@ from mirrorsim.cli_options import (
 )
 from mirrorsim.errors import BadArgument
 from mirrorsim.io import emit_json
+from mirrorsim.report import EXTRA_FILES
 from solver.measurements import SIGMA_ALPHA_MAX_DEG
 
 MAX_ITERATIONS = 1_000_000  # draws per Monte Carlo row: about a second a row at the most
@@ -142,6 +143,10 @@ def _dataset_options(p):
     p.add_argument("--spec", type=Path, help="ranges of the random scenes (YAML)")
     p.add_argument("--spp", type=int, help="samples per pixel (default: the spec's)")
     sampler_option(p)
+    p.add_argument("--keep", nargs="*", default=[], choices=EXTRA_FILES,
+                   help="files to write beside each frame besides its PNG, capture record "
+                   "and truth: ids (the id labels), annotated (the detections drawn); "
+                   "default none")
     common(p, scene=False, variant=True, quiet=True)
     p.add_argument("--resume", action="store_true", help="finish an interrupted run")
     p.add_argument("--executor", default="local", choices=["local", "dask"])
@@ -161,7 +166,8 @@ def _dataset(args) -> int:
     at_least(("--n", args.n, 1), ("--seed", args.seed, 0), ("--workers", args.workers, 1),
              ("--spp", args.spp, 1))
     res = run_dataset(args.n, args.seed, args.out, workers=args.workers, spec_path=args.spec,
-                      spp=args.spp, sampler=args.sampler, variant=args.variant, resume=args.resume,
+                      spp=args.spp, sampler=args.sampler, variant=args.variant,
+                      keep=tuple(args.keep), resume=args.resume,
                       executor=args.executor, scheduler=args.scheduler,
                       progress=not args.quiet)
     print(f"{args.out}: {res['rows']} rows ({res['computed']} computed now in "

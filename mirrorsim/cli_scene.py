@@ -6,7 +6,7 @@ from pathlib import Path
 
 from mirrorsim.cli_options import command, common, load, output, render_options
 from mirrorsim.errors import DetectionError
-from mirrorsim.io import emit_json
+from mirrorsim.io import emit_json, write_png
 
 
 def _render_options(p):
@@ -94,7 +94,7 @@ def _detect_options(p):
 def _detect(args) -> int:
     from mirrorsim.calibrate import calibrate
     from mirrorsim.capture import CaptureRecord, load_capture
-    from mirrorsim.detect import annotate, detect_frame, read_frame, write_png
+    from mirrorsim.detect import annotate, detect_frame, read_frame
     from mirrorsim.tables import detect_summary
 
     if args.capture:

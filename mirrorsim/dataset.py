@@ -4,7 +4,8 @@ Layout of a dataset folder::
 
     DIR/scenes/<name>.yaml    each scene as a normal scene file (rerun one alone with
                               `mirrorsim evaluate`)
-    DIR/frames/<name>/…       its frame, ground truth, ids and annotated frame
+    DIR/frames/<name>/…       its frame, capture record and ground truth (with --keep
+                              ids, annotated: its id labels, the annotated frame)
     DIR/rows/<name>.json      its finished row (written last, atomically: a row file
                               exists only for a complete scene)
     DIR/dataset.parquet       all rows, one per scene, in index order
@@ -57,7 +58,7 @@ def scene_name(i: int) -> str:
 
 
 def process_one(i: int, seed: int, spec: dict, out: str, spp: int | None,
-                variant: str) -> dict:
+                variant: str, keep: tuple[str, ...] = ()) -> dict:
     """Draw, render, detect, solve and score scene i; write its files and its row.
 
     Returns the row; a failure of the scene itself is recorded in it (``error``).  A
@@ -76,7 +77,8 @@ def process_one(i: int, seed: int, spec: dict, out: str, spp: int | None,
         scene = replace(scene, render=replace(scene.render, spp=spp or scene.render.spp, seed=i))
         write_text(out_dir / "scenes" / f"{name}.yaml", to_yaml(scene))
         t1 = time.perf_counter()
-        rep = evaluate_scene(scene, out_dir / "frames" / name, variant=variant, progress=False)
+        rep = evaluate_scene(scene, out_dir / "frames" / name, variant=variant, progress=False,
+                             keep=keep)
         row.update(_flatten(scene, rep))
         row["seconds_sample"] = t1 - t0
         row["error"] = ""
@@ -166,6 +168,7 @@ class DatasetError(InputError):
 def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
                 spec_path: str | Path | None = None, spp: int | None = None,
                 sampler: str | None = None, variant: str = "auto", resume: bool = False,
+                keep: tuple[str, ...] = (),
                 executor: str = "local",
                 scheduler: str | None = None, progress: bool = True,
                 max_rss_mb: float = MAX_WORKER_RSS_MB) -> dict:
@@ -211,7 +214,7 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
             retry[row["index"]] = row["retry"]
         bar.update()
 
-    jobs = [(i, seed, spec, str(out), spp, chosen) for i in todo]
+    jobs = [(i, seed, spec, str(out), spp, chosen, tuple(keep)) for i in todo]
     try:
         if executor == "dask":
             run_dask(process_one, jobs, scheduler, on_result)

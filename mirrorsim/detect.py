@@ -326,12 +326,3 @@ def read_frame(path) -> np.ndarray:
         warnings.warn(f"{path}: a JPEG frame: compression blurs the edges the detector "
                       "measures; expect larger errors", RuntimeWarning, stacklevel=2)
     return bgr[..., ::-1]
-
-
-def write_png(path, rgb: np.ndarray) -> None:
-    """Write an RGB uint8 image as a PNG, atomically."""
-    from mirrorsim.io import atomic_path
-
-    with atomic_path(path) as tmp:
-        if not cv2.imwrite(str(tmp), np.ascontiguousarray(rgb[..., ::-1])):
-            raise OSError(f"cannot write {path}")

@@ -14,11 +14,12 @@ from pathlib import Path
 import numpy as np
 
 from mirrorsim.calibrate import calibrate
-from mirrorsim.detect import annotate, detect_frame, read_frame, write_png
+from mirrorsim.detect import annotate, detect_frame, read_frame
 from mirrorsim.errors import DetectionError
 from mirrorsim.frames import default_out, render_to_files
+from mirrorsim.io import write_png
 from mirrorsim.model import Scene
-from mirrorsim.report import FrameRecord, RenderInfo, Report, score
+from mirrorsim.report import EXTRA_FILES, FrameRecord, RenderInfo, Report, score
 from solver.measurements import Measurements
 from solver.sltr import Sigma, solve_measurements
 
@@ -30,8 +31,12 @@ DETECTOR_SIGMA = Sigma(alpha_deg=0.005, d_total_rel=0.006)
 
 def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, spp: int | None = None,
                    seed: int | None = None, variant: str = "auto", progress: bool = True,
-                   sigma: Sigma = DETECTOR_SIGMA) -> Report:
+                   sigma: Sigma = DETECTOR_SIGMA, keep: tuple[str, ...] = EXTRA_FILES
+                   ) -> Report:
     """Render (or reuse), detect, solve and score ``scene``; return the report.
+
+    ``keep``: which of EXTRA_FILES to write beside each frame (the id labels, the
+    annotated frame).
 
     Raises
     ------
@@ -49,7 +54,7 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, spp: int 
     frames, detections, truths = [], [], []
     for sub in per_beacon:
         files = render_to_files(sub, out, spp=spp, seed=seed, variant=variant,
-                                progress=progress, reuse=True)
+                                progress=progress, reuse=True, ids="ids" in keep)
         cal = calibrate(files.capture.camera, files.capture.target_size,
                         files.capture.beacons[0].height, variant=variant)
         image = read_frame(files.png)
@@ -57,9 +62,10 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, spp: int 
             det = detect_frame(image, files.capture, cal)  # the record, never the scene
         except DetectionError as exc:
             raise DetectionError(f"{files.png}: {exc}") from None
-        annotated = out / f"{sub.name}.annotated.png"
-        write_png(annotated, annotate(image, det))
-        frames.append(FrameRecord(str(files.png), str(annotated), files.reused,
+        annotated = ""
+        if "annotated" in keep:
+            annotated = str(write_png(out / f"{sub.name}.annotated.png", annotate(image, det)))
+        frames.append(FrameRecord(str(files.png), annotated, files.reused,
                                   det.target.clipped, det.beacons[0][1].clipped))
         detections.append(det)
         truths.append(files.truth)

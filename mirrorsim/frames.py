@@ -14,7 +14,7 @@ import numpy as np
 
 from mirrorsim import optics
 from mirrorsim.capture import CaptureRecord, load_capture
-from mirrorsim.io import atomic_path, dumps
+from mirrorsim.io import atomic_path, dumps, encode_png
 from mirrorsim.mitsuba_scene import BACKGROUND_LABEL, BEACON_LABEL, MIRROR_LABEL, TARGET_LABEL
 from mirrorsim.model import Scene
 from mirrorsim.render import (
@@ -25,7 +25,6 @@ from mirrorsim.render import (
     encode_ids,
     render_frame,
     to_srgb8,
-    write_png,
 )
 from mirrorsim.report import GroundTruth, MirrorPixels, RenderInfo
 
@@ -37,7 +36,7 @@ class FrameFiles:
 
     png: Path
     truth_json: Path
-    ids_png: Path
+    ids_png: Path | None  # None: not kept (a dataset's --keep)
     capture_json: Path
     capture: CaptureRecord
     truth: GroundTruth
@@ -88,22 +87,22 @@ def truth_of(scene: Scene, frame: RenderedFrame, fingerprint: str | None) -> Gro
 
 
 def write_frame(scene: Scene, frame: RenderedFrame, out: Path,
-                fingerprint: str | None = None) -> FrameFiles:
-    """Write the frame, its ids, its capture record and its truth into ``out``; they
-    appear together."""
+                fingerprint: str | None = None, ids: bool = True) -> FrameFiles:
+    """Write the frame, its capture record, its truth and (``ids``) its id labels into
+    ``out``; they appear together."""
     out.mkdir(parents=True, exist_ok=True)
     truth = truth_of(scene, frame, fingerprint)
-    png, ids, js, cap = _paths(scene, out)
+    png, ids_png, js, cap = _paths(scene, out)
     capture = CaptureRecord.from_scene(scene, frame=png.name)
+    files = {png: encode_png(to_srgb8(frame.linear)),
+             js: dumps(truth.to_json()).encode(), cap: dumps(capture.to_json()).encode()}
+    if ids:
+        files[ids_png] = encode_png(encode_ids(frame.first, frame.in_mirror))
     with contextlib.ExitStack() as stack:
-        tmp_png, tmp_ids, tmp_js, tmp_cap = (stack.enter_context(atomic_path(p))
-                                             for p in (png, ids, js, cap))
-        write_png(tmp_png, to_srgb8(frame.linear))
-        write_png(tmp_ids, encode_ids(frame.first, frame.in_mirror))
-        tmp_js.write_text(dumps(truth.to_json()))
-        tmp_cap.write_text(dumps(capture.to_json()))
-    return FrameFiles(png=png, truth_json=js, ids_png=ids, capture_json=cap, capture=capture,
-                      truth=truth)
+        for path, data in files.items():
+            stack.enter_context(atomic_path(path)).write_bytes(data)
+    return FrameFiles(png=png, truth_json=js, ids_png=ids_png if ids else None,
+                      capture_json=cap, capture=capture, truth=truth)
 
 
 def _paths(scene: Scene, out: Path) -> tuple[Path, Path, Path, Path]:
@@ -114,9 +113,10 @@ def _paths(scene: Scene, out: Path) -> tuple[Path, Path, Path, Path]:
 
 def render_to_files(scene: Scene, out: str | Path | None = None, *, spp: int | None = None,
                     seed: int | None = None, variant: str = "auto", progress: bool = True,
-                    reuse: bool = False) -> FrameFiles:
+                    reuse: bool = False, ids: bool = True) -> FrameFiles:
     """Render ``scene`` (or, with ``reuse``, take a render of exactly this scene, spp and
-    seed already in ``out``) and write its files (default folder ``renders/<name>/``)."""
+    seed already in ``out``) and write its files (default folder ``renders/<name>/``;
+    the id labels only with ``ids``)."""
     spp = scene.render.spp if spp is None else spp
     seed = scene.render.seed if seed is None else seed
     out = Path(out) if out is not None else default_out(scene)
@@ -126,7 +126,7 @@ def render_to_files(scene: Scene, out: str | Path | None = None, *, spp: int | N
         if found is not None:
             return found
     frame = render_frame(scene, spp=spp, seed=seed, variant=variant, progress=progress)
-    return write_frame(scene, frame, out, fp)
+    return write_frame(scene, frame, out, fp, ids)
 
 
 def _reusable(scene: Scene, out: Path, fingerprint: str) -> FrameFiles | None:
@@ -140,8 +140,8 @@ def _reusable(scene: Scene, out: Path, fingerprint: str) -> FrameFiles | None:
         return None
     if truth.render is None or truth.render.fingerprint != fingerprint:
         return None
-    return FrameFiles(png=png, truth_json=js, ids_png=ids, capture_json=cap, capture=capture,
-                      truth=truth, reused=True)
+    return FrameFiles(png=png, truth_json=js, ids_png=ids if ids.exists() else None,
+                      capture_json=cap, capture=capture, truth=truth, reused=True)
 
 
 def _mask_stats(mask: np.ndarray) -> tuple[tuple[int, int, int, int] | None, int]:

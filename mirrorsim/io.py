@@ -129,6 +129,29 @@ def write_text(path: str | Path, text: str) -> Path:
     return Path(path)
 
 
+def encode_png(pixels: np.ndarray) -> bytes:
+    """8-bit pixels (H, W, 3) RGB or (H, W) grey as PNG bytes.
+
+    zlib level 1: 2 % larger files than level 6 and ~3× faster to write (a full-size
+    frame in ~0.1 s; README "Throughput").
+    """
+    import cv2
+
+    px = np.ascontiguousarray(pixels[..., ::-1] if pixels.ndim == 3 else pixels)
+    ok, buf = cv2.imencode(".png", px, [cv2.IMWRITE_PNG_COMPRESSION, 1])
+    if not ok:
+        raise ValueError(f"cannot encode an image of shape {pixels.shape} as PNG")
+    return buf.tobytes()
+
+
+def write_png(path: str | Path, pixels: np.ndarray) -> Path:
+    """Write 8-bit pixels (RGB or grey) as a PNG atomically."""
+    data = encode_png(pixels)
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(data)
+    return Path(path)
+
+
 def write_json(path: str | Path, data: Any) -> Path:
     """Write strict JSON atomically."""
     return write_text(path, dumps(data))

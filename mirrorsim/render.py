@@ -201,11 +201,3 @@ def to_srgb8(linear: np.ndarray) -> np.ndarray:
     x = np.clip(np.asarray(linear, np.float64), 0.0, 1.0)
     s = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
     return np.round(s * 255.0).astype(np.uint8)
-
-
-
-def write_png(path, pixels: np.ndarray) -> None:
-    """Write 8-bit pixels (RGB: sRGB-tagged; 2-D: grey) as a PNG with Mitsuba."""
-    bmp = mi.Bitmap(np.ascontiguousarray(pixels))
-    bmp.set_srgb_gamma(pixels.ndim == 3)
-    bmp.write(str(path))

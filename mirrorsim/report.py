@@ -259,6 +259,10 @@ def score(truth: GroundTruth, measurements: Measurements, sol: Solution) -> Scor
     )
 
 
+# optional files beside each frame (its PNG, truth and capture record are always written)
+EXTRA_FILES = ("ids", "annotated")
+
+
 @dataclass(frozen=True)
 class FrameRecord:
     """One frame of an evaluation: its files, whether it was reused, and where the

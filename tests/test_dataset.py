@@ -47,6 +47,9 @@ def test_tiny_dataset_end_to_end(one_worker):
                 "mirror_yaw_deg", "target_incidence_deg"):
         assert col in table
     assert "dataset.parquet" in (out / "README.md").read_text()
+    # by default a frame's PNG, truth and capture record only (no ids, no annotated)
+    assert sorted(f.name for f in (out / "frames" / "scene000000").iterdir()) == [
+        "scene000000.capture.json", "scene000000.json", "scene000000.png"]
     # every row's scene is a normal scene file that loads on its own
     for i in range(3):
         s = load_scene(out / "scenes" / f"scene{i:06d}.yaml")
@@ -62,6 +65,18 @@ def test_same_rows_whatever_the_workers(one_worker, tmp_path):
     a, b = _stable(collect_rows(out, 3)), _stable(collect_rows(tmp_path / "b", 3))
     assert a == b, [{k: (x[k], y.get(k)) for k in x if x[k] != y.get(k)}
                     for x, y in zip(a, b, strict=True)]
+
+
+def test_keep_writes_the_optional_files(one_worker, tmp_path):
+    out, _ = one_worker
+    assert main(["dataset", "--n", "1", "--seed", "3", "--out", str(tmp_path / "k"),
+                 "--spec", str(SPEC), "--keep", "ids", "annotated", "--workers", "1",
+                 "--quiet"]) == 0
+    names = {f.name for f in (tmp_path / "k" / "frames" / "scene000000").iterdir()}
+    assert {"scene000000.ids.png", "scene000000.annotated.png"} <= names
+    # the same row as without them
+    assert (_stable(collect_rows(tmp_path / "k", 1))
+            == _stable(collect_rows(out, 3))[:1])
 
 
 def test_existing_folder_needs_resume(one_worker, capsys):

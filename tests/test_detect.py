@@ -74,7 +74,7 @@ def test_empty_frame_is_a_clear_error(half_default, tmp_path, capsys):
     blank = np.full((544, 960, 3), 180, np.uint8)
     with pytest.raises(DetectionError, match="no target"):
         detect_frame(blank, CaptureRecord.from_scene(scene), cal)
-    from mirrorsim.detect import write_png
+    from mirrorsim.io import write_png
 
     f = tmp_path / "blank.png"
     write_png(f, blank)
