@@ -193,33 +193,54 @@ def _sample_columns(scene: Scene, obj) -> list[np.ndarray]:
     return [p, p - side, p + side]
 
 
-def _sample_failure(scene: Scene, walls, point, z: float) -> str:
-    """Why the image of the 3-D point (point, z) does not reach the camera, or ''."""
+def _column_failures(scene: Scene, walls, point, heights: np.ndarray) -> list[str]:
+    """Why the image of each 3-D point (point, z), z in ``heights``, does not reach the
+    camera ('' where it does).  What depends on the board point alone (the mirror's
+    side, the reflection point, where each wall crosses the paths in plan) is computed
+    once per column; the heights are vectorized (the dataset sampler's hot loop)."""
     cam, mir = scene.camera, scene.mirror
+    heights = np.asarray(heights, float)
+    n = len(heights)
     side = signed_distance(point, mir.center, mir.yaw)
     if side * signed_distance(cam.position, mir.center, mir.yaw) <= 0:
-        return "it stands behind the mirror's line"
+        return ["it stands behind the mirror's line"] * n
     img = mirror_image(cam.position, mir, point)
     half_w = mir.size[0] / 2.0
     if abs(img.mirror_offset) > half_w:
-        return (f"its reflection point falls {abs(img.mirror_offset) - half_w:.2f} cm beyond "
-                f"the mirror's {'end at +yaw' if img.mirror_offset > 0 else 'end at -yaw'}")
+        return [f"its reflection point falls {abs(img.mirror_offset) - half_w:.2f} cm beyond "
+                f"the mirror's {'end at +yaw' if img.mirror_offset > 0 else 'end at -yaw'}"] * n
     t = img.d1 / img.d_total
-    zc = cam.height + t * (z - cam.height)
-    if zc > mir.size[1]:
-        return f"the ray meets the mirror plane {zc - mir.size[1]:.2f} cm above its top edge"
-    if zc < 0.0:
-        return f"the ray meets the mirror plane {-zc:.2f} cm below the board"
-    u, v, depth = project(cam, np.array([img.virtual[0], img.virtual[1], z]))
-    if depth <= 0 or not (-0.5 <= u <= cam.width - 0.5 and -0.5 <= v <= cam.height_px - 0.5):
-        return (f"it lies outside the camera's field of view (pan {cam.pan_deg:.2f}°, "
-                f"pixel ({float(u):.0f}, {float(v):.0f}))")
-    r3 = np.array([img.reflection_point[0], img.reflection_point[1], zc])
-    blocker = _blocked(walls, cam.center3, r3) or _blocked(
-        walls, r3, np.array([point[0], point[1], z]))
-    if blocker:
-        return f"the path through the mirror is blocked by {blocker}"
-    return ""
+    zc = cam.height + t * (heights - cam.height)
+    u, v, depth = project(cam, np.column_stack([np.full(n, img.virtual[0]),
+                                                np.full(n, img.virtual[1]), heights]))
+    outside = (depth <= 0) | (u < -0.5) | (u > cam.width - 0.5) | (v < -0.5) | (
+        v > cam.height_px - 0.5)
+    # the first wall (in the walls' order) under each path: camera → mirror, then
+    # mirror → object; in plan both paths are the same for every height
+    r2 = np.asarray(img.reflection_point, float)
+    blocker = np.full(n, "", dtype=object)
+    for a2, b2, za, zb in ((np.asarray(cam.position, float), r2, np.full(n, cam.height), zc),
+                           (r2, np.asarray(point, float), zc, heights)):
+        for name, w0, w1, h in walls:
+            cross = segment_crossing(a2, b2, w0, w1)
+            if cross is not None:
+                hit = (za + cross * (zb - za) < h) & (blocker == "")
+                blocker[hit] = name
+    out = []
+    for k in range(n):
+        if zc[k] > mir.size[1]:
+            out.append(f"the ray meets the mirror plane {zc[k] - mir.size[1]:.2f} cm above "
+                       "its top edge")
+        elif zc[k] < 0.0:
+            out.append(f"the ray meets the mirror plane {-zc[k]:.2f} cm below the board")
+        elif outside[k]:
+            out.append(f"it lies outside the camera's field of view (pan {cam.pan_deg:.2f}°, "
+                       f"pixel ({float(u[k]):.0f}, {float(v[k]):.0f}))")
+        elif blocker[k]:
+            out.append(f"the path through the mirror is blocked by {blocker[k]}")
+        else:
+            out.append("")
+    return out
 
 
 def visibility(scene: Scene, obj: Target | Beacon) -> Visibility:
@@ -227,25 +248,20 @@ def visibility(scene: Scene, obj: Target | Beacon) -> Visibility:
     walls = _walls(scene, obj)
     heights = np.linspace(0.0, _height(obj), AXIS_SAMPLES)
     cols = _sample_columns(scene, obj)
-    seen = np.zeros((len(cols), len(heights)), bool)
-    reasons: list[str] = []
-    for i, col in enumerate(cols):
-        for j, z in enumerate(heights):
-            why = _sample_failure(scene, walls, col, float(z))
-            seen[i, j] = not why
-            if why and (i == 0 or not reasons):
-                reasons.append(why)
+    why = [_column_failures(scene, walls, col, heights) for col in cols]
+    seen = np.array([[not w for w in col] for col in why])
     axis = float(seen[0].mean())
     reason = ""
     if not seen.all():
         # the axis sample nearest mid-height that fails says most about the set-up
         lost = [j for j in np.argsort(np.abs(heights - heights[-1] / 2)) if not seen[0, j]]
         if lost:
-            reason = _sample_failure(scene, walls, cols[0], float(heights[lost[0]]))
             hidden = (1.0 - axis) * heights[-1]
-            reason = f"{hidden:.2f} of its {heights[-1]:.2f} cm height lost: {reason}"
+            reason = (f"{hidden:.2f} of its {heights[-1]:.2f} cm height lost: "
+                      f"{why[0][lost[0]]}")
         else:
-            reason = f"a side edge is lost: {reasons[0]}"
+            first = next(w for col in why[1:] for w in col if w)
+            reason = f"a side edge is lost: {first}"
     return Visibility(axis_fraction=axis, fraction=float(seen.mean()), reason=reason)
 
 
