@@ -24,8 +24,8 @@ from solver.measurements import Measurements
 from solver.sltr import Sigma, solve_measurements
 
 # Measurement σ's the solver weights with: the detector's accuracy on full-size frames
-# at 16 spp (bench/detect.py; README): α to ~0.005° (p95), the target's d_total to ~0.1 %,
-# the pencil's to ~0.6 % (median).  One σ_d serves both: the larger.
+# at the default render settings (bench/detect.py; README): α to ~0.005° (p95), the
+# target's d_total to ~0.1 %, the pencil's to ~0.6 % (mean).  One σ_d serves both.
 DETECTOR_SIGMA = Sigma(alpha_deg=0.005, d_total_rel=0.006)
 
 

@@ -114,6 +114,10 @@ def render_direct(board: Board, camera: Camera, obj: Target | Beacon, *, spp: in
 def _accumulate(mi_scene, spp: int, seed: int, step: Callable[[int], object]) -> np.ndarray:
     """Linear RGB, averaged over passes of PASS_SPP samples (one progress step each)."""
     passes = [PASS_SPP] * (spp // PASS_SPP) + ([spp % PASS_SPP] if spp % PASS_SPP else [])
+    if len(passes) == 1:  # the common case in datasets: no float64 sum to make
+        img = np.array(mi.render(mi_scene, spp=spp, seed=seed * 65536), dtype=np.float32)
+        step(spp)
+        return img
     acc = None
     for k, n in enumerate(passes):
         # seeds are spaced so that passes of different renders never share one

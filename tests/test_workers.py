@@ -22,6 +22,10 @@ def _grow(i: int, mb: int) -> tuple[int, int]:
     return i, os.getpid()
 
 
+def _rss(i: int) -> tuple[int, float]:
+    return i, rss_mb()
+
+
 def _die_once(i: int, marker: str) -> tuple[int, int]:
     """The first worker to take job 1 dies without an answer (as kill -9 would)."""
     if i == 1 and not Path(marker).exists():
@@ -50,9 +54,9 @@ def test_a_warm_worker_takes_every_job_without_a_limit():
 
 
 def test_a_worker_past_its_memory_limit_is_replaced():
-    # each job holds 64 MiB more; a limit 100 MiB above a fresh interpreter's footprint
-    # lets a worker finish one or two jobs before it retires
-    limit = rss_mb() + 100
+    # each job holds 64 MiB more; a limit 100 MiB above a fresh worker's footprint lets
+    # a worker finish one or two jobs before it retires
+    limit = _run(_rss, [(0,)])[0][1] + 100
     got = _run(_grow, [(i, 64) for i in range(6)], workers=2, max_rss_mb=limit)
     assert sorted(i for i, _ in got) == list(range(6))  # each once, none lost
     assert len({pid for _, pid in got}) >= 3
