@@ -125,6 +125,16 @@ def load(path: Path) -> Scene:
     return scene
 
 
+def preload(module: str) -> None:
+    """Import ``module`` in a background thread: a command that will need it later
+    (matplotlib for a plot) imports it while Mitsuba renders, which releases the GIL
+    (measured: the render 2.03 → 2.12 s, the import's 0.6 s hidden)."""
+    import importlib
+    import threading
+
+    threading.Thread(target=importlib.import_module, args=(module,), daemon=True).start()
+
+
 def default_workers() -> int:
     """Half the cores (a render uses several threads per worker)."""
     return max(1, (os.cpu_count() or 2) // 2)

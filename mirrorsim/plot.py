@@ -29,7 +29,9 @@ def _save(fig, out: Path, dpi: int) -> Path:
     out.parent.mkdir(parents=True, exist_ok=True)
     try:
         with atomic_path(out) as tmp:
-            fig.savefig(tmp, dpi=dpi, bbox_inches="tight")
+            # tight layout rather than bbox_inches="tight": one drawing instead of two
+            fig.set_layout_engine("tight")
+            fig.savefig(tmp, dpi=dpi)
     finally:
         plt.close(fig)
     return out

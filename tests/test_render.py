@@ -177,3 +177,25 @@ def test_truth_read_back_from_its_file_is_the_truth(default_small):
     assert back.to_json() == res.truth.to_json()
     assert back.mirror_yaw_deg == res.truth.mirror_yaw_deg
     assert back.target == res.truth.target and back.beacons == res.truth.beacons
+
+
+def test_srgb_encoding_matches_the_transfer_curve():
+    """to_srgb8's lookup against IEC 61966-2-1 evaluated and rounded directly, on random
+    values and just either side of every code's edge."""
+    from mirrorsim.render import to_srgb8
+
+    def curve(x):
+        x = np.clip(np.asarray(x, np.float64), 0.0, 1.0)
+        s = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+        return np.round(s * 255.0).astype(np.uint8)
+
+    rng = np.random.default_rng(3)
+    s = (np.arange(1, 256) - 0.5) / 255.0
+    edges = np.where(s <= 0.04045, s / 12.92, ((s + 0.055) / 1.055) ** 2.4).astype(np.float32)
+    x = np.concatenate([rng.random(200_000), rng.random(200_000) ** 4 * 0.05,
+                        rng.normal(0.5, 0.7, 50_000), [0.0, -0.0, 1.0, 7.0, -2.0],
+                        edges, np.nextafter(edges, np.float32(-1)),
+                        np.nextafter(edges, np.float32(2))]).astype(np.float32)
+    x = x[: len(x) // 3 * 3].reshape(-1, 1, 3)
+    assert np.array_equal(to_srgb8(x), curve(x))
+    assert to_srgb8(x).shape == x.shape and to_srgb8(x).dtype == np.uint8
