@@ -57,14 +57,13 @@ def load_spec(path: str | Path | None = None) -> dict:
         if not isinstance(cam["models"], list) or not cam["models"]:
             raise r.fail("camera.models", f"expected a list of camera models, got "
                          f"{show(cam['models'])}")
-        extra = {"height", "hfov", "resolution"} & set(cam)
+        extra = {"height", "hfov"} & set(cam)  # a resolution beside them is their default
         if extra:
             raise r.fail(f"camera.{sorted(extra)[0]}", "give it in each of camera.models, "
                          "not beside them")
         for k, m in enumerate(cam["models"]):
-            _check_model(r, m, f"camera.models[{k}]", required={"height", "hfov"})
-    else:
-        _check_model(r, cam, "camera", required={"height", "hfov"}, ranges=True)
+            _check_model(r, m, f"camera.models[{k}]")
+    _check_model(r, cam, "camera", ranges=True)  # its resolution (the models' default)
     pan = spec["camera"].get("pan", "mirror")
     if not isinstance(pan, str):
         r.number(pan, "camera.pan")
@@ -93,12 +92,11 @@ def load_spec(path: str | Path | None = None) -> dict:
     return spec
 
 
-def _check_model(r: Reader, m: Any, key: str, required: set[str],
-                 ranges: bool = False) -> None:
+def _check_model(r: Reader, m: Any, key: str, ranges: bool = False) -> None:
     """A camera model: mount height (cm), hfov (°), resolution; fixed numbers, or (for
-    the camera block without models) ranges, which _value checks."""
+    the camera block) ranges, which _value checks when it draws."""
     if not ranges:
-        r.mapping(m, key, required, {"resolution"})
+        r.mapping(m, key, {"height", "hfov"}, {"resolution"})
         r.number(m["height"], f"{key}.height", positive=True)
         r.number(m["hfov"], f"{key}.hfov", low=1.0, high=179.0)
     res = m.get("resolution", [1920, 1088])
@@ -114,8 +112,9 @@ def camera_models(spec: dict) -> list[Camera] | None:
     models = spec["camera"].get("models")
     if models is None:
         return None
+    default = spec["camera"].get("resolution", [1920, 1088])
     return [Camera(position=(0.0, 0.0), height=float(m["height"]), hfov=float(m["hfov"]),
-                   resolution=tuple(m.get("resolution", [1920, 1088])), pan=0.0, pan_deg=0.0)
+                   resolution=tuple(m.get("resolution", default)), pan=0.0, pan_deg=0.0)
             for m in models]
 
 
@@ -143,7 +142,7 @@ def _draw(spec: dict, rng: np.random.Generator, where="<spec>") -> dict:
     if models:  # a lab's few cameras, each on its mount: one calibration each
         m = models[int(rng.integers(len(models)))]
         height, hfov = float(m["height"]), float(m["hfov"])
-        res = m.get("resolution", [1920, 1088])
+        res = m.get("resolution", spec["camera"].get("resolution", [1920, 1088]))
     else:
         height, hfov = g("camera", "height"), g("camera", "hfov")
         res = spec["camera"].get("resolution", [1920, 1088])

@@ -229,3 +229,30 @@ def test_a_killed_worker_is_replaced(one_worker, tmp_path):
     assert proc.returncode == 0
     assert "a worker process died" in err
     assert _stable(collect_rows(dst, 3)) == _stable(collect_rows(out, 3))
+
+
+def test_camera_models_are_calibrated_once_before_the_workers(tmp_path):
+    """A spec with camera models: every model is calibrated up front (a one-scene
+    dataset leaves both models' K in the cache, though its scene uses one), and every
+    scene's camera is one of the models."""
+    import yaml
+
+    from mirrorsim.calibrate import _cache_file, calibration_key
+    from mirrorsim.sampler import camera_models, load_spec
+
+    spec = yaml.safe_load(SPEC.read_text())
+    for k in ("height", "hfov"):
+        spec["camera"].pop(k)
+    spec["camera"]["models"] = [{"height": 5.5, "hfov": 65.2}, {"height": 7.5, "hfov": 62}]
+    path = tmp_path / "spec.yaml"
+    path.write_text(yaml.safe_dump(spec))
+    cams = camera_models(load_spec(path))
+    assert [c.resolution for c in cams] == [(960, 544)] * 2  # the camera block's default
+    keys = [calibration_key(c, (9.9, 15.25), 4.2) for c in cams]
+    run_dataset(1, 1, tmp_path / "one", workers=1, spec_path=path, progress=False)
+    cache = json.loads(_cache_file().read_text())
+    assert all(k in cache for k in keys)
+    run_dataset(3, 1, tmp_path / "d", workers=1, spec_path=path, progress=False)
+    for i in range(3):
+        cam = load_scene(tmp_path / "d" / "scenes" / f"scene{i:06d}.yaml").camera
+        assert (cam.height, cam.hfov) in {(5.5, 65.2), (7.5, 62.0)}

@@ -241,6 +241,13 @@ def test_a_spec_with_no_valid_scene_says_so_and_stops(tmp_path, capsys):
     (lambda s: s["target"].update(y=[70, 30]), "target.y"),
     (lambda s: s["occluder"].pop("at"), "occluder.at"),
     (lambda s: s.update(extra=1), "extra"),
+    (lambda s: s["render"].update(sampler="sobol"), "render.sampler"),
+    (lambda s: s["camera"].update(models=[]), "camera.models"),
+    (lambda s: s["camera"].update(models=[{"height": 6, "hfov": 65.2}]), "camera.height"),
+    (lambda s: [s["camera"].pop(k) for k in ("height", "hfov")] and s["camera"].update(
+        models=[{"height": 6, "hfov": 400}]), "camera.models[0].hfov"),
+    (lambda s: [s["camera"].pop(k) for k in ("height", "hfov")] and s["camera"].update(
+        models=[{"height": 6, "hfov": 60}, {"hfov": 60}]), "camera.models[1]"),
 ])
 def test_spec_values_that_would_fail_every_scene_are_refused(tmp_path, capsys, edit, key):
     spec = yaml.safe_load(SPEC.read_text())
