@@ -43,8 +43,8 @@ from solver.geometry import yaw_difference
 
 ROW_SCHEMA_VERSION = 1
 # a worker retires past this resident memory; measured on llvm_ad_rgb, a warm worker
-# holds ~550 MiB after its first full-size scene and grows < 0.5 MiB per scene after
-# (README "Throughput"), so this only stops a leak that a future Mitsuba might bring
+# holds ~500 MiB after its first full-size scene and no more after 30 (README
+# "Throughput"), so this only stops a leak that another Mitsuba might bring
 MAX_WORKER_RSS_MB = 3072
 MAX_SCENES = 1_000_000  # a documented bound on --n
 DATASET_FORMAT = "mirrorsim-dataset"

@@ -98,16 +98,9 @@ def _board_texture(board: Board) -> np.ndarray:
     y = sy - (np.arange(ny) + 0.5) * sy / ny
     dx = (x - pitch / 2) % pitch - pitch / 2
     dy = (y - pitch / 2) % pitch - pitch / 2
-    # only texels within a hole's radius + 1 texel of its centre line in both axes can
-    # be covered (elsewhere the clip below gives 0): ~7 % of the board at the default
-    # pitch, so the distances are computed there alone
-    near = board.hole_diameter / 2 + 1.0 / BOARD_TEXELS_PER_CM
-    cols, rows = np.nonzero(np.abs(dx) < near)[0], np.nonzero(np.abs(dy) < near)[0]
-    dist = np.hypot(dx[cols][None, :], dy[rows][:, None])
-    hole = np.zeros((ny, nx), np.float32)
-    hole[np.ix_(rows, cols)] = np.clip(
-        0.5 + (board.hole_diameter / 2 - dist) * BOARD_TEXELS_PER_CM, 0, 1)
-    hole = hole[..., None]
+    dist = np.hypot(dx[None, :], dy[:, None])
+    hole = np.clip(0.5 + (board.hole_diameter / 2 - dist) * BOARD_TEXELS_PER_CM, 0, 1)
+    hole = hole[..., None].astype(np.float32)
     return base * (1 - hole) + np.array(_COLOURS["hole"], np.float32) * hole
 
 
