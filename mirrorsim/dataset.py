@@ -74,7 +74,11 @@ def process_one(i: int, seed: int, spec: dict, out: str, spp: int | None,
     try:
         rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(i,)))
         scene = sample_scene(spec, rng, name)
-        scene = replace(scene, render=replace(scene.render, spp=spp or scene.render.spp, seed=i))
+        rs = scene.render
+        n = spp or rs.spp
+        scene = replace(scene, render=replace(
+            rs, spp=n, seed=i,
+            background_spp=None if rs.background_spp is None else min(rs.background_spp, n)))
         write_text(out_dir / "scenes" / f"{name}.yaml", to_yaml(scene))
         t1 = time.perf_counter()
         rep = evaluate_scene(scene, out_dir / "frames" / name, variant=variant, progress=False,
@@ -103,6 +107,7 @@ def _flatten(scene: Scene, rep: Report) -> dict:
         "mirror_width": mir.size[0], "mirror_height": mir.size[1],
         "target_x": scene.target.position[0], "target_y": scene.target.position[1],
         "variant": rep.render.variant, "spp": rep.render.spp, "sampler": rep.render.sampler,
+        "background_spp": scene.render.background_spp or scene.render.spp,
         "render_seed": rep.render.seed,
     }
     b, frame = meas.beacons[0], rep.frames[0]
@@ -305,7 +310,8 @@ Each row is one random scene (`scenes/<scene>.yaml`, a normal scene file: rerun 
 `mirrorsim evaluate`), its frame (`frames/<scene>/`), and these columns of
 `dataset.parquet`:
 
-- `index`, `scene`, `seed`, `render_seed`, `variant`, `spp`, `sampler`, `error` (empty if fine);
+- `index`, `scene`, `seed`, `render_seed`, `variant`, `spp` (in the mirror's image),
+  `background_spp`, `sampler`, `error` (empty if fine);
 - scene parameters: `camera_x`, `camera_y`, `camera_height`, `camera_pan_deg`,
   `hfov_deg`, `mirror_x`, `mirror_y`, `mirror_yaw_deg`, `mirror_width`,
   `mirror_height`, `target_x`, `target_y` (cm, degrees);

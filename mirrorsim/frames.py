@@ -80,7 +80,7 @@ def truth_of(scene: Scene, frame: RenderedFrame, fingerprint: str | None) -> Gro
                    "occluders": BEACON_LABEL + len(scene.beacons),
                    "seen_in_mirror_offset": IN_MIRROR},
         render=RenderInfo(variant=frame.variant, spp=frame.spp, seed=frame.seed,
-                          sampler=frame.sampler,
+                          sampler=frame.sampler, background_spp=frame.background_spp,
                           seconds_render=round(frame.seconds_render, 3),
                           seconds_total=round(frame.seconds_total, 3),
                           mitsuba=MITSUBA_VERSION, fingerprint=fingerprint))

@@ -169,13 +169,18 @@ def _pencil_meshes(position, height: float) -> dict[str, mi.Mesh]:
         meshes[part] = mesh
     return meshes
 
-def build_scene_dict(scene: Scene, *, spp: int) -> dict:
+def build_scene_dict(scene: Scene, *, spp: int,
+                     crop: tuple[int, int, int, int] | None = None) -> dict:
     """The Mitsuba scene description (the variant must already be set).
 
     Shape keys are prefixed with the object they belong to (``mirror``, ``target``,
-    ``beacon0``, ``occluder0``…), which is how the id pass labels pixels.
+    ``beacon0``, ``occluder0``…), which is how the id pass labels pixels.  ``crop`` =
+    (u0, v0, u1, v1) adds a second sensor, ``sensor_crop``: the same camera rendering
+    only that part of the film.
     """
     d = _stage(scene.board, scene.camera, spp, scene.render.sampler)
+    if crop is not None:
+        d["sensor_crop"] = _cropped(d["sensor"], crop)
     d.update(_mirror_shapes(scene))
     d.update(_target_shapes(scene.target))
     for i, b in enumerate(scene.beacons):
@@ -198,10 +203,16 @@ def build_direct_dict(board: Board, camera: Camera, obj: Target | Beacon, *, spp
     d = _stage(board, camera, spp, "independent")
     d.update(_target_shapes(obj) if isinstance(obj, Target) else _pencil_shapes(0, obj))
     if crop is not None:
-        u0, v0, u1, v1 = crop
-        d["sensor"]["film"].update({"crop_offset_x": u0, "crop_offset_y": v0,
-                                    "crop_width": u1 - u0, "crop_height": v1 - v0})
+        d["sensor"] = _cropped(d["sensor"], crop)
     return d
+
+
+def _cropped(sensor: dict, crop: tuple[int, int, int, int]) -> dict:
+    """A copy of a sensor description that renders only the film's ``crop``."""
+    u0, v0, u1, v1 = crop
+    film = {**sensor["film"], "crop_offset_x": u0, "crop_offset_y": v0,
+            "crop_width": u1 - u0, "crop_height": v1 - v0}
+    return {**sensor, "sampler": dict(sensor["sampler"]), "film": film}
 
 
 ZHAT = np.array([0.0, 0.0, 1.0])

@@ -150,6 +150,9 @@ class RenderSettings:
     spp: int = 8
     seed: int = 0
     sampler: str = "multijitter"
+    # samples per pixel outside the mirror's image (None: spp).  Every measurement is
+    # made on the mirror's image, so a dataset spends its samples there
+    background_spp: int | None = None
 
 
 @dataclass(frozen=True)

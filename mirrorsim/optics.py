@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mirrorsim.model import (
+    MIRROR_FRAME,
     OCCLUDER_THICKNESS,
     PENCIL_RADIUS,
     TARGET_THICKNESS,
@@ -263,6 +264,24 @@ def visibility(scene: Scene, obj: Target | Beacon) -> Visibility:
             first = next(w for col in why[1:] for w in col if w)
             reason = f"a side edge is lost: {first}"
     return Visibility(axis_fraction=axis, fraction=float(seen.mean()), reason=reason)
+
+
+def mirror_box(scene: Scene, margin_px: int = 8) -> tuple[int, int, int, int] | None:
+    """The film region (u0, v0, u1, v1), end-exclusive, that holds the mirror and its
+    frame, ``margin_px`` wider all round and clipped to the film; None if part of the
+    mirror lies behind the camera (no finite box)."""
+    cam, m = scene.camera, scene.mirror
+    c, d = np.asarray(m.center, float), unit(m.yaw) * (m.size[0] / 2 + MIRROR_FRAME)
+    top = m.size[1] + MIRROR_FRAME
+    pts = np.array([[*(c + s * d), z] for s in (-1, 1) for z in (0.0, top)])
+    u, v, depth = project(cam, pts)
+    if (depth <= 0).any():
+        return None
+    u0 = int(max(0, math.floor(u.min()) - margin_px))
+    v0 = int(max(0, math.floor(v.min()) - margin_px))
+    u1 = int(min(cam.width, math.ceil(u.max()) + margin_px + 1))
+    v1 = int(min(cam.height_px, math.ceil(v.max()) + margin_px + 1))
+    return (u0, v0, u1, v1) if u1 > u0 and v1 > v0 else None
 
 
 def direct_view_fraction(scene: Scene, obj: Target | Beacon) -> float:

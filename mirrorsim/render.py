@@ -18,6 +18,7 @@ import mitsuba as mi
 import numpy as np
 from tqdm import tqdm
 
+from mirrorsim import optics
 from mirrorsim.backend import choose_variant
 from mirrorsim.mitsuba_scene import (
     BACKGROUND_LABEL,
@@ -32,7 +33,7 @@ IN_MIRROR = 100  # ids.png: label + IN_MIRROR where the pixel sees it in the mir
 # samples per render call: one progress step each.  A stratified sampler stratifies
 # within a call, so the passes are large; a dataset's few-spp frame is one call.
 PASS_SPP = 16
-RENDER_METHOD = "passes16"  # part of a frame's fingerprint: bump when renders change
+RENDER_METHOD = "passes16-ss"  # part of a frame's fingerprint: bump when renders change
 MITSUBA_VERSION = mi.__version__
 
 
@@ -51,6 +52,7 @@ class RenderedFrame:
     spp: int
     seed: int
     sampler: str
+    background_spp: int | None  # outside the mirror's image (None: spp everywhere)
     seconds_render: float
     seconds_total: float
 
@@ -88,15 +90,25 @@ def render_frame(scene: Scene, *, spp: int, seed: int, variant: str = "auto",
         raise ValueError(f"spp must be ≥ 1 and seed ≥ 0 (got spp={spp}, seed={seed})")
     chosen = choose_variant(variant)
     t0 = time.perf_counter()
+    background = min(scene.render.background_spp or spp, spp)
+    box = optics.mirror_box(scene) if background < spp else None
     with variant_scope(chosen):
-        mi_scene = mi.load_dict(build_scene_dict(scene, spp=spp), optimize=False)
-        with tqdm(total=spp, unit="spp", disable=not progress, leave=False,
+        mi_scene = mi.load_dict(build_scene_dict(scene, spp=spp, crop=box), optimize=False)
+        full, *crop = mi_scene.sensors()
+        with tqdm(total=spp if box is None else background + spp, unit="spp",
+                  disable=not progress, leave=False,
                   desc=f"rendering {scene.name} ({chosen})") as bar:
-            linear = _accumulate(mi_scene, spp, seed, bar.update)
+            linear = _accumulate(mi_scene, full, spp if box is None else background,
+                                 (seed, 0), bar.update)
+            if box is not None:  # the mirror's region at the full spp, its own seeds
+                u0, v0, u1, v1 = box
+                linear[v0:v1, u0:u1] = _accumulate(mi_scene, crop[0], spp, (seed, 1),
+                                                   bar.update)
         t_render = time.perf_counter() - t0
         first, in_mirror = id_pass(mi_scene, scene)
     return RenderedFrame(linear=linear, first=first, in_mirror=in_mirror, variant=chosen,
                          spp=spp, seed=seed, sampler=scene.render.sampler,
+                         background_spp=None if box is None else background,
                          seconds_render=t_render,
                          seconds_total=time.perf_counter() - t0)
 
@@ -108,20 +120,31 @@ def render_direct(board: Board, camera: Camera, obj: Target | Beacon, *, spp: in
     with variant_scope(choose_variant(variant)):
         d = build_direct_dict(board, camera, obj, spp=spp, crop=crop)
         mi_scene = mi.load_dict(d, optimize=False)
-        return to_srgb8(_accumulate(mi_scene, spp, 0, lambda _n: None))
+        return to_srgb8(_accumulate(mi_scene, mi_scene.sensors()[0], spp, (0, 0),
+                                    lambda _n: None))
 
 
-def _accumulate(mi_scene, spp: int, seed: int, step: Callable[[int], object]) -> np.ndarray:
-    """Linear RGB, averaged over passes of PASS_SPP samples (one progress step each)."""
+def _pass_seed(seed: tuple[int, int], k: int) -> int:
+    """Mitsuba's 32-bit seed of pass k of a render (seed, stream): hashed by a
+    SeedSequence, so that any seed ≥ 0 works (Mitsuba refuses seeds ≥ 2³²) and passes
+    of different renders or streams do not share one."""
+    return int(np.random.SeedSequence([*seed, k]).generate_state(1)[0])
+
+
+def _accumulate(mi_scene, sensor, spp: int, seed: tuple[int, int],
+                step: Callable[[int], object]) -> np.ndarray:
+    """Linear RGB, averaged over passes of PASS_SPP samples (one progress step each);
+    ``seed`` is (the render's seed, a stream number)."""
     passes = [PASS_SPP] * (spp // PASS_SPP) + ([spp % PASS_SPP] if spp % PASS_SPP else [])
     if len(passes) == 1:  # the common case in datasets: no float64 sum to make
-        img = np.array(mi.render(mi_scene, spp=spp, seed=seed * 65536), dtype=np.float32)
+        img = np.array(mi.render(mi_scene, sensor=sensor, spp=spp, seed=_pass_seed(seed, 0)),
+                       dtype=np.float32)
         step(spp)
         return img
     acc = None
     for k, n in enumerate(passes):
-        # seeds are spaced so that passes of different renders never share one
-        img = np.asarray(mi.render(mi_scene, spp=n, seed=seed * 65536 + k), dtype=np.float64)
+        img = np.asarray(mi.render(mi_scene, sensor=sensor, spp=n, seed=_pass_seed(seed, k)),
+                         dtype=np.float64)
         acc = img * n if acc is None else acc + img * n
         step(n)
     return (acc / spp).astype(np.float32)
@@ -142,7 +165,7 @@ def id_pass(mi_scene, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
     """
     cam = scene.camera
     shapes = [(s, label_of(s.id(), len(scene.beacons))) for s in mi_scene.shapes()]
-    sensor = mi_scene.sensors()[0]
+    sensor = mi_scene.sensors()[0]  # the full film (a crop sensor comes second)
     cast = _id_pass_jit if dr.is_jit_v(mi.Float) else _id_pass_scalar
     return cast(mi_scene, sensor, shapes, cam.width, cam.height_px)
 

@@ -76,9 +76,12 @@ def load_spec(path: str | Path | None = None) -> dict:
     r.mapping(spec["beacon"], "beacon", {"depth", "along", "height"})
     r.mapping(spec["occluder"], "occluder", {"at", "length", "height"})
     if "render" in spec:
-        r.mapping(spec["render"], "render", set(), {"spp", "sampler"})
-        r.integer(spec["render"].get("spp", DEFAULT_RENDER.spp), "render.spp", low=1,
-                  high=MAX_SPP)
+        r.mapping(spec["render"], "render", set(), {"spp", "sampler", "background_spp"})
+        spp = r.integer(spec["render"].get("spp", DEFAULT_RENDER.spp), "render.spp", low=1,
+                        high=MAX_SPP)
+        if spec["render"].get("background_spp") is not None:
+            r.integer(spec["render"]["background_spp"], "render.background_spp", low=1,
+                      high=spp)
         r.choice(spec["render"].get("sampler", DEFAULT_RENDER.sampler), "render.sampler",
                  SAMPLERS)
     r.integer(spec.get("max_tries", 5000), "max_tries", low=1, high=MAX_TRIES)
@@ -170,9 +173,16 @@ def _draw(spec: dict, rng: np.random.Generator, where="<spec>") -> dict:
            "height": g("occluder", "height")}
     return {"board": copy.deepcopy(spec["board"]), "camera": cam, "mirror": mirror,
             "target": target, "beacon": beacon, "occluders": [occ],
-            "render": {"spp": int(spec.get("render", {}).get("spp", DEFAULT_RENDER.spp)),
-                       "seed": 0,
-                       "sampler": spec.get("render", {}).get("sampler", DEFAULT_RENDER.sampler)}}
+            "render": _render_block(spec.get("render", {}))}
+
+
+def _render_block(r: dict) -> dict:
+    """A drawn scene's ``render`` block from the spec's (seed set per scene later)."""
+    out = {"spp": int(r.get("spp", DEFAULT_RENDER.spp)), "seed": 0,
+           "sampler": r.get("sampler", DEFAULT_RENDER.sampler)}
+    if r.get("background_spp") is not None:
+        out["background_spp"] = int(r["background_spp"])
+    return out
 
 
 def sample_scene(spec: dict, rng: int | np.random.Generator | None, name: str,
@@ -225,6 +235,8 @@ def to_yaml(scene: Scene) -> str:
                        for o in scene.occluders],
          "render": {"spp": scene.render.spp, "seed": scene.render.seed,
                     "sampler": scene.render.sampler}}
+    if scene.render.background_spp is not None:
+        d["render"]["background_spp"] = scene.render.background_spp
     if len(scene.beacons) == 1:
         d["beacon"] = d.pop("beacons")[0]
     return yaml.safe_dump(d, sort_keys=False)

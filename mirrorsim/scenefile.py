@@ -140,11 +140,15 @@ def scene_from_dict(data: Any, source: str = "<scene>", default_name: str = "sce
     occluders = _occluders(r, top.get("occluders", []))
     rs = RenderSettings()
     if "render" in top:
-        rr = r.mapping(top["render"], "render", set(), {"spp", "seed", "sampler"})
+        rr = r.mapping(top["render"], "render", set(),
+                       {"spp", "seed", "sampler", "background_spp"})
+        spp = r.integer(rr.get("spp", rs.spp), "render.spp", low=1, high=MAX_SPP)
         rs = RenderSettings(
-            spp=r.integer(rr.get("spp", rs.spp), "render.spp", low=1, high=MAX_SPP),
+            spp=spp,
             seed=r.integer(rr.get("seed", rs.seed), "render.seed", low=0),
             sampler=r.choice(rr.get("sampler", rs.sampler), "render.sampler", SAMPLERS),
+            background_spp=None if rr.get("background_spp") is None else r.integer(
+                rr["background_spp"], "render.background_spp", low=1, high=spp),
         )
 
     on_board = _board_check(r, board)
