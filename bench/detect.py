@@ -5,8 +5,9 @@
     python bench/detect.py --offaxis [-25 -20 … 25] [--render multijitter:4]
                            [--plot docs/detect_offaxis.png]
 
-``--render``: the render settings compared, each SAMPLER:SPP, every one over all the
-frames (default: the scenes' own settings, i.e. mirrorsim's defaults).
+``--render``: the render settings compared, each SAMPLER:SPP (uniform) or
+SAMPLER:SPP:BACKGROUND_SPP (fewer samples outside the mirror's image), every one over
+all the frames (default: the scenes' own settings: the spec's, or mirrorsim's).
 
 ``--offaxis``: the default scene with the camera panned so that the target's image lies
 each given angle off the optical axis; the signed errors of α and d_total (target and
@@ -81,15 +82,18 @@ def random_scenes(n: int, rng: np.random.Generator) -> list:
 
 
 def with_render(scene, config: str | None):
-    """The scene with the render setting SAMPLER:SPP (None: as it is)."""
+    """The scene with the render setting SAMPLER:SPP (uniform) or
+    SAMPLER:SPP:BACKGROUND_SPP (None: as it is)."""
     if config is None:
         return scene
-    sampler, spp = config.split(":")
-    return replace(scene, render=replace(scene.render, sampler=sampler, spp=int(spp)))
+    sampler, spp, *bg = config.split(":")
+    return replace(scene, render=replace(scene.render, sampler=sampler, spp=int(spp),
+                                         background_spp=int(bg[0]) if bg else None))
 
 
 def label(scene) -> str:
-    return f"{scene.render.sampler}:{scene.render.spp}"
+    r = scene.render
+    return f"{r.sampler}:{r.spp}" + (f":{r.background_spp}" if r.background_spp else "")
 
 
 def measure(scene, tmp: Path) -> dict:
