@@ -88,12 +88,13 @@ def with_render(scene, config: str | None):
         return scene
     sampler, spp, *bg = config.split(":")
     return replace(scene, render=replace(scene.render, sampler=sampler, spp=int(spp),
-                                         background_spp=int(bg[0]) if bg else None))
+                                         background_spp=int(bg[0]) if bg else int(spp)))
 
 
 def label(scene) -> str:
     r = scene.render
-    return f"{r.sampler}:{r.spp}" + (f":{r.background_spp}" if r.background_spp else "")
+    return f"{r.sampler}:{r.spp}" + (f":{r.background_spp}" if r.background_spp < r.spp
+                                      else "")
 
 
 def measure(scene, tmp: Path) -> dict:

@@ -74,11 +74,8 @@ def process_one(i: int, seed: int, spec: dict, out: str, spp: int | None,
     try:
         rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(i,)))
         scene = sample_scene(spec, rng, name)
-        rs = scene.render
-        n = spp or rs.spp
-        scene = replace(scene, render=replace(
-            rs, spp=n, seed=i,
-            background_spp=None if rs.background_spp is None else min(rs.background_spp, n)))
+        scene = replace(scene, render=replace(scene.render, spp=spp or scene.render.spp,
+                                              seed=i))
         write_text(out_dir / "scenes" / f"{name}.yaml", to_yaml(scene))
         t1 = time.perf_counter()
         rep = evaluate_scene(scene, out_dir / "frames" / name, variant=variant, progress=False,
@@ -107,7 +104,7 @@ def _flatten(scene: Scene, rep: Report) -> dict:
         "mirror_width": mir.size[0], "mirror_height": mir.size[1],
         "target_x": scene.target.position[0], "target_y": scene.target.position[1],
         "variant": rep.render.variant, "spp": rep.render.spp, "sampler": rep.render.sampler,
-        "background_spp": scene.render.background_spp or scene.render.spp,
+        "background_spp": min(scene.render.background_spp, scene.render.spp),
         "render_seed": rep.render.seed,
     }
     b, frame = meas.beacons[0], rep.frames[0]

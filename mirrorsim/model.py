@@ -150,9 +150,10 @@ class RenderSettings:
     spp: int = 8
     seed: int = 0
     sampler: str = "multijitter"
-    # samples per pixel outside the mirror's image (None: spp).  Every measurement is
-    # made on the mirror's image, so a dataset spends its samples there
-    background_spp: int | None = None
+    # samples per pixel outside the mirror's image (renders use min(this, spp); set it
+    # to spp for a uniform frame).  Every measurement is made in the mirror's image, so
+    # the samples are spent there (README "Throughput")
+    background_spp: int = 2
 
 
 @dataclass(frozen=True)

@@ -90,7 +90,7 @@ def render_frame(scene: Scene, *, spp: int, seed: int, variant: str = "auto",
         raise ValueError(f"spp must be ≥ 1 and seed ≥ 0 (got spp={spp}, seed={seed})")
     chosen = choose_variant(variant)
     t0 = time.perf_counter()
-    background = min(scene.render.background_spp or spp, spp)
+    background = min(scene.render.background_spp, spp)
     box = optics.mirror_box(scene) if background < spp else None
     with variant_scope(chosen):
         mi_scene = mi.load_dict(build_scene_dict(scene, spp=spp, crop=box), optimize=False)

@@ -77,11 +77,10 @@ def load_spec(path: str | Path | None = None) -> dict:
     r.mapping(spec["occluder"], "occluder", {"at", "length", "height"})
     if "render" in spec:
         r.mapping(spec["render"], "render", set(), {"spp", "sampler", "background_spp"})
-        spp = r.integer(spec["render"].get("spp", DEFAULT_RENDER.spp), "render.spp", low=1,
-                        high=MAX_SPP)
-        if spec["render"].get("background_spp") is not None:
-            r.integer(spec["render"]["background_spp"], "render.background_spp", low=1,
-                      high=spp)
+        r.integer(spec["render"].get("spp", DEFAULT_RENDER.spp), "render.spp", low=1,
+                  high=MAX_SPP)
+        r.integer(spec["render"].get("background_spp", DEFAULT_RENDER.background_spp),
+                  "render.background_spp", low=1, high=MAX_SPP)
         r.choice(spec["render"].get("sampler", DEFAULT_RENDER.sampler), "render.sampler",
                  SAMPLERS)
     r.integer(spec.get("max_tries", 5000), "max_tries", low=1, high=MAX_TRIES)
@@ -178,11 +177,9 @@ def _draw(spec: dict, rng: np.random.Generator, where="<spec>") -> dict:
 
 def _render_block(r: dict) -> dict:
     """A drawn scene's ``render`` block from the spec's (seed set per scene later)."""
-    out = {"spp": int(r.get("spp", DEFAULT_RENDER.spp)), "seed": 0,
-           "sampler": r.get("sampler", DEFAULT_RENDER.sampler)}
-    if r.get("background_spp") is not None:
-        out["background_spp"] = int(r["background_spp"])
-    return out
+    return {"spp": int(r.get("spp", DEFAULT_RENDER.spp)), "seed": 0,
+            "sampler": r.get("sampler", DEFAULT_RENDER.sampler),
+            "background_spp": int(r.get("background_spp", DEFAULT_RENDER.background_spp))}
 
 
 def sample_scene(spec: dict, rng: int | np.random.Generator | None, name: str,
@@ -234,9 +231,8 @@ def to_yaml(scene: Scene) -> str:
          "occluders": [{"start": list(o.start), "end": list(o.end), "height": o.height}
                        for o in scene.occluders],
          "render": {"spp": scene.render.spp, "seed": scene.render.seed,
-                    "sampler": scene.render.sampler}}
-    if scene.render.background_spp is not None:
-        d["render"]["background_spp"] = scene.render.background_spp
+                    "sampler": scene.render.sampler,
+                    "background_spp": scene.render.background_spp}}
     if len(scene.beacons) == 1:
         d["beacon"] = d.pop("beacons")[0]
     return yaml.safe_dump(d, sort_keys=False)

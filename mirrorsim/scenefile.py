@@ -147,8 +147,8 @@ def scene_from_dict(data: Any, source: str = "<scene>", default_name: str = "sce
             spp=spp,
             seed=r.integer(rr.get("seed", rs.seed), "render.seed", low=0),
             sampler=r.choice(rr.get("sampler", rs.sampler), "render.sampler", SAMPLERS),
-            background_spp=None if rr.get("background_spp") is None else r.integer(
-                rr["background_spp"], "render.background_spp", low=1, high=spp),
+            background_spp=r.integer(rr.get("background_spp", rs.background_spp),
+                                     "render.background_spp", low=1, high=MAX_SPP),
         )
 
     on_board = _board_check(r, board)

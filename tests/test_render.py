@@ -213,8 +213,10 @@ def test_fewer_samples_outside_the_mirror(name, fast_variant):
     scene = small_scene(name, 480, 272)
     low = replace(scene, render=replace(scene.render, background_spp=1))
     mixed = render_frame(low, spp=16, seed=2, variant=fast_variant, progress=False)
-    plain1 = render_frame(scene, spp=1, seed=2, variant=fast_variant, progress=False)
-    plain16 = render_frame(scene, spp=16, seed=2, variant=fast_variant, progress=False)
+    uniform = replace(scene, render=replace(scene.render, background_spp=16))
+    plain1 = render_frame(uniform, spp=1, seed=2, variant=fast_variant, progress=False)
+    plain16 = render_frame(uniform, spp=16, seed=2, variant=fast_variant, progress=False)
+    assert plain16.background_spp is None  # uniform: no mirror box rendered apart
     u0, v0, u1, v1 = optics.mirror_box(scene)
     vs, us = np.nonzero(plain16.first == MIRROR_LABEL)
     assert u0 <= us.min() and us.max() < u1 and v0 <= vs.min() and vs.max() < v1
