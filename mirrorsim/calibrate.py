@@ -32,7 +32,7 @@ CALIBRATION_SPP = 64
 REFERENCE_PAN = 45.0  # the reference camera looks along the board's diagonal
 MARGIN_PX = 24  # rendered around the object's projected outline
 # bump whenever the measurement changes, so that no K measured the old way is reused
-METHOD = "foot-near-2"
+METHOD = "foot-near-2|seeds-ss"  # + the render seeds hashed by SeedSequence
 
 
 def calibration_key(camera: Camera, target_size, pencil_height: float) -> str:
