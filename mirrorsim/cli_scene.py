@@ -164,7 +164,7 @@ def _evaluate(args) -> int:
     from mirrorsim.tables import report_table
 
     scene = render_options(args, load(args.scene))
-    preload("mirrorsim.plot")  # matplotlib imports while the frame renders (~0.9 s saved)
+    preload("mirrorsim.plot")  # matplotlib imports while the frame renders
     out = args.out or Path("renders") / scene.name
     report = evaluate_scene(scene, out, spp=args.spp, seed=args.seed, variant=args.variant,
                             progress=not args.quiet)

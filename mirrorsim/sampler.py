@@ -8,6 +8,7 @@ reruns alone).
 from __future__ import annotations
 
 import copy
+import dataclasses
 import math
 from pathlib import Path
 from typing import Any
@@ -17,14 +18,20 @@ import yaml
 
 from mirrorsim import optics
 from mirrorsim.errors import RunFailed, SceneError
-from mirrorsim.model import PAN_WORDS, SAMPLERS, Camera, RenderSettings, Scene
-from mirrorsim.scenefile import MAX_SPP, read_yaml, scene_from_dict
+from mirrorsim.model import PAN_WORDS, Camera, Scene
+from mirrorsim.scenefile import (
+    DEFAULT_RESOLUTION,
+    read_camera_model,
+    read_render,
+    read_resolution,
+    read_yaml,
+    scene_from_dict,
+)
 from solver.reader import Reader, show
 
 DEFAULT_SPEC = Path(__file__).resolve().parents[1] / "scenes" / "dataset_spec.yaml"
 
 
-DEFAULT_RENDER = RenderSettings()
 MAX_TRIES = 100_000  # a documented bound on a spec's max_tries
 PROBE_TRIES = 300  # a spec that gives no valid scene in this many draws is refused at once
 
@@ -62,8 +69,12 @@ def load_spec(path: str | Path | None = None) -> dict:
             raise r.fail(f"camera.{sorted(extra)[0]}", "give it in each of camera.models, "
                          "not beside them")
         for k, m in enumerate(cam["models"]):
-            _check_model(r, m, f"camera.models[{k}]")
-    _check_model(r, cam, "camera", ranges=True)  # its resolution (the models' default)
+            r.mapping(m, f"camera.models[{k}]", {"height", "hfov"}, {"resolution"})
+    # the resolution (beside models: their default); heights and fields of view drawn
+    # from ranges are checked by _value as it draws
+    read_resolution(r, cam.get("resolution", DEFAULT_RESOLUTION), "camera.resolution")
+    if "models" in cam:
+        camera_models(spec, r)
     pan = spec["camera"].get("pan", "mirror")
     if not isinstance(pan, str):
         r.number(pan, "camera.pan")
@@ -75,14 +86,7 @@ def load_spec(path: str | Path | None = None) -> dict:
     r.pair(spec["target"]["size"], "target.size", positive=True)
     r.mapping(spec["beacon"], "beacon", {"depth", "along", "height"})
     r.mapping(spec["occluder"], "occluder", {"at", "length", "height"})
-    if "render" in spec:
-        r.mapping(spec["render"], "render", set(), {"spp", "sampler", "background_spp"})
-        r.integer(spec["render"].get("spp", DEFAULT_RENDER.spp), "render.spp", low=1,
-                  high=MAX_SPP)
-        r.integer(spec["render"].get("background_spp", DEFAULT_RENDER.background_spp),
-                  "render.background_spp", low=1, high=MAX_SPP)
-        r.choice(spec["render"].get("sampler", DEFAULT_RENDER.sampler), "render.sampler",
-                 SAMPLERS)
+    read_render(r, spec.get("render", {}), seed=False)
     r.integer(spec.get("max_tries", 5000), "max_tries", low=1, high=MAX_TRIES)
     # draws find range errors (wrong types, lo > hi) with their key, and a spec under
     # which no usable scene exists
@@ -94,30 +98,21 @@ def load_spec(path: str | Path | None = None) -> dict:
     return spec
 
 
-def _check_model(r: Reader, m: Any, key: str, ranges: bool = False) -> None:
-    """A camera model: mount height (cm), hfov (°), resolution; fixed numbers, or (for
-    the camera block) ranges, which _value checks when it draws."""
-    if not ranges:
-        r.mapping(m, key, {"height", "hfov"}, {"resolution"})
-        r.number(m["height"], f"{key}.height", positive=True)
-        r.number(m["hfov"], f"{key}.hfov", low=1.0, high=179.0)
-    res = m.get("resolution", [1920, 1088])
-    if not isinstance(res, list) or len(res) != 2:
-        raise r.fail(f"{key}.resolution", f"expected [width, height] in px, got {show(res)}")
-    r.integer(res[0], f"{key}.resolution[0]", low=2)
-    r.integer(res[1], f"{key}.resolution[1]", low=2)
-
-
-def camera_models(spec: dict) -> list[Camera] | None:
+def camera_models(spec: dict, r: Reader | None = None) -> list[Camera] | None:
     """The spec's camera models as cameras (position and pan irrelevant: what K depends
-    on), or None when the spec draws heights or fields of view from ranges."""
+    on), or None when the spec draws heights or fields of view from ranges.  A
+    resolution beside the models is their default."""
     models = spec["camera"].get("models")
     if models is None:
         return None
-    default = spec["camera"].get("resolution", [1920, 1088])
-    return [Camera(position=(0.0, 0.0), height=float(m["height"]), hfov=float(m["hfov"]),
-                   resolution=tuple(m.get("resolution", default)), pan=0.0, pan_deg=0.0)
-            for m in models]
+    r = r or Reader("<spec>", SceneError)
+    default = spec["camera"].get("resolution", DEFAULT_RESOLUTION)
+    cams = []
+    for k, m in enumerate(models):
+        height, hfov, res = read_camera_model(r, m, f"camera.models[{k}]", default)
+        cams.append(Camera(position=(0.0, 0.0), height=height, hfov=hfov, resolution=res,
+                           pan=0.0, pan_deg=0.0))
+    return cams
 
 
 def _value(spec: dict, block: str, key: str, rng: np.random.Generator, where) -> Any:
@@ -140,14 +135,13 @@ def _draw(spec: dict, rng: np.random.Generator, where="<spec>") -> dict:
     """One candidate scene dict (not yet validated)."""
     g = lambda block, key: _value(spec, block, key, rng, where)  # noqa: E731
     position = [g("camera", "x"), g("camera", "y")]
-    models = spec["camera"].get("models")
+    models = camera_models(spec)
     if models:  # a lab's few cameras, each on its mount: one calibration each
-        m = models[int(rng.integers(len(models)))]
-        height, hfov = float(m["height"]), float(m["hfov"])
-        res = m.get("resolution", spec["camera"].get("resolution", [1920, 1088]))
+        c = models[int(rng.integers(len(models)))]
+        height, hfov, res = c.height, c.hfov, c.resolution
     else:
         height, hfov = g("camera", "height"), g("camera", "hfov")
-        res = spec["camera"].get("resolution", [1920, 1088])
+        res = spec["camera"].get("resolution", DEFAULT_RESOLUTION)
     cam = {"position": position, "height": height, "hfov": hfov, "resolution": list(res),
            "pan": spec["camera"].get("pan", "mirror")}
     yaw = g("mirror", "yaw")
@@ -172,14 +166,8 @@ def _draw(spec: dict, rng: np.random.Generator, where="<spec>") -> dict:
            "height": g("occluder", "height")}
     return {"board": copy.deepcopy(spec["board"]), "camera": cam, "mirror": mirror,
             "target": target, "beacon": beacon, "occluders": [occ],
-            "render": _render_block(spec.get("render", {}))}
-
-
-def _render_block(r: dict) -> dict:
-    """A drawn scene's ``render`` block from the spec's (seed set per scene later)."""
-    return {"spp": int(r.get("spp", DEFAULT_RENDER.spp)), "seed": 0,
-            "sampler": r.get("sampler", DEFAULT_RENDER.sampler),
-            "background_spp": int(r.get("background_spp", DEFAULT_RENDER.background_spp))}
+            "render": dataclasses.asdict(read_render(Reader(where, SceneError),
+                                                     spec.get("render", {}), seed=False))}
 
 
 def sample_scene(spec: dict, rng: int | np.random.Generator | None, name: str,

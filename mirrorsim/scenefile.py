@@ -98,6 +98,39 @@ def load_scene(path: str | Path) -> Scene:
     return scene_from_dict(read_yaml(path), source=str(path), default_name=path.stem)
 
 
+def read_resolution(r: Reader, res: Any, key: str) -> tuple[int, int]:
+    """[width, height] in px."""
+    if not isinstance(res, list | tuple) or len(res) != 2:
+        raise r.fail(key, f"expected [width, height] in px, got {show(res)}")
+    return (r.integer(res[0], f"{key}[0]", low=2), r.integer(res[1], f"{key}[1]", low=2))
+
+
+def read_camera_model(r: Reader, cam: dict, key: str,
+                      default_resolution=DEFAULT_RESOLUTION) -> tuple[float, float,
+                                                                   tuple[int, int]]:
+    """A camera's model from its block (scene files and specs alike): mount height (cm),
+    hfov (°), resolution (px)."""
+    return (r.number(cam["height"], f"{key}.height", positive=True),
+            r.number(cam["hfov"], f"{key}.hfov", positive=True, high=170.0),
+            read_resolution(r, cam.get("resolution", default_resolution),
+                            f"{key}.resolution"))
+
+
+def read_render(r: Reader, block: Any, key: str = "render", seed: bool = True
+                ) -> RenderSettings:
+    """A ``render`` block (scene files and, with no ``seed``, specs), defaults for what
+    it omits."""
+    rr = r.mapping(block, key, set(),
+                   {"spp", "sampler", "background_spp"} | ({"seed"} if seed else set()))
+    d = RenderSettings()
+    return RenderSettings(
+        spp=r.integer(rr.get("spp", d.spp), f"{key}.spp", low=1, high=MAX_SPP),
+        seed=r.integer(rr.get("seed", d.seed), f"{key}.seed", low=0),
+        sampler=r.choice(rr.get("sampler", d.sampler), f"{key}.sampler", SAMPLERS),
+        background_spp=r.integer(rr.get("background_spp", d.background_spp),
+                                 f"{key}.background_spp", low=1, high=MAX_SPP))
+
+
 def scene_from_dict(data: Any, source: str = "<scene>", default_name: str = "scene") -> Scene:
     """Build and validate a :class:`Scene` from parsed YAML (see INTERFACE.md)."""
     r = Reader(source, SceneError)
@@ -120,14 +153,8 @@ def scene_from_dict(data: Any, source: str = "<scene>", default_name: str = "sce
                          f"{', '.join(PAN_WORDS)}")
     else:
         pan = r.number(pan, "camera.pan")
-    res = cam.get("resolution", list(DEFAULT_RESOLUTION))
-    if not isinstance(res, list) or len(res) != 2:
-        raise r.fail("camera.resolution", f"expected [width, height] in px, got {show(res)}")
     position = r.pair(cam["position"], "camera.position")
-    height = r.number(cam["height"], "camera.height", positive=True)
-    resolution = (r.integer(res[0], "camera.resolution[0]", low=2),
-                  r.integer(res[1], "camera.resolution[1]", low=2))
-    hfov = r.number(cam["hfov"], "camera.hfov", positive=True, high=170.0)
+    height, hfov, resolution = read_camera_model(r, cam, "camera")
 
     m = r.mapping(top["mirror"], "mirror", {"center", "yaw", "size"})
     mirror = Mirror(center=r.pair(m["center"], "mirror.center"),
@@ -138,18 +165,7 @@ def scene_from_dict(data: Any, source: str = "<scene>", default_name: str = "sce
     target_size = r.pair(t["size"], "target.size", positive=True)
     beacons, bkey = _beacons(r, top)
     occluders = _occluders(r, top.get("occluders", []))
-    rs = RenderSettings()
-    if "render" in top:
-        rr = r.mapping(top["render"], "render", set(),
-                       {"spp", "seed", "sampler", "background_spp"})
-        spp = r.integer(rr.get("spp", rs.spp), "render.spp", low=1, high=MAX_SPP)
-        rs = RenderSettings(
-            spp=spp,
-            seed=r.integer(rr.get("seed", rs.seed), "render.seed", low=0),
-            sampler=r.choice(rr.get("sampler", rs.sampler), "render.sampler", SAMPLERS),
-            background_spp=r.integer(rr.get("background_spp", rs.background_spp),
-                                     "render.background_spp", low=1, high=MAX_SPP),
-        )
+    rs = read_render(r, top.get("render", {}))
 
     on_board = _board_check(r, board)
     on_board(position, "camera.position", "the camera")
