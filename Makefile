@@ -49,6 +49,8 @@ bench: setup
 	$(BIN)/python bench/paper.py
 	$(BIN)/python bench/evaluate.py
 	$(BIN)/python bench/dataset.py
+	$(BIN)/python bench/pieces.py --rss 30
+	$(BIN)/python bench/edge_noise.py
 
 clean:
 	rm -rf $(VENV) renders/*/ .pytest_cache .ruff_cache .hypothesis

@@ -26,7 +26,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from mirrorsim import mitsuba_scene, render  # noqa: E402
+from mirrorsim import mitsuba_scene, optics, render  # noqa: E402
 from mirrorsim.calibrate import calibrate  # noqa: E402
 from mirrorsim.detect import detect_frame  # noqa: E402
 from mirrorsim.sampler import load_spec, sample_scene  # noqa: E402
@@ -68,18 +68,21 @@ def main() -> None:
         cap = CaptureRecord.from_scene(scene, frame="f.png")
         cal = calibrate(cap.camera, cap.target_size, cap.beacons[0].height)
         _, t_det = _timed(detect_frame, srgb, cap, cal)
+        box = optics.mirror_box(scene)
+        share = 0.0 if box is None else (
+            (box[2] - box[0]) * (box[3] - box[1]) / (scene.camera.width * scene.camera.height_px))
         if i == 0:
             continue  # warm-up: imports, kernels, calibration
         for k, v in (("draw a valid scene", t_draw), ("board texture (uncached)", t_tex),
                      ("render + id pass", frame.seconds_total),
                      ("render (path tracing)", frame.seconds_render),
                      ("linear → sRGB", t_srgb), ("PNG encode + write", t_png),
-                     ("detection", t_det)):
+                     ("detection", t_det), ("mirror's box, share of the frame", share)):
             times.setdefault(k, []).append(v)
     settings = f"{scene.render.sampler if hasattr(scene.render, 'sampler') else 'independent'}"
     print(f"pieces of a dataset scene, default spec ({settings}, {scene.render.spp} spp), "
           f"1920×1088, median of {a.scenes}; {platform.machine()}, {os.cpu_count()} cores\n")
-    print("| piece | seconds |\n|---|---|")
+    print("| piece | seconds (share: fraction) |\n|---|---|")
     for k, v in times.items():
         print(f"| {k} | {statistics.median(v):.3f} |")
     if a.rss:

@@ -104,9 +104,9 @@ def test_full_size_end_to_end(name, tmp_path, capsys):
     assert e["target_cm"] < e["target_ellipse95_major_cm"]
     # the detector's full-size bounds, fixed in advance (README, Throughput: p95 of 40
     # random scenes, rounded up), and what they allow through this scene's geometry.
-    # (Not a fixed 0.5 cm on the default scene: its pencil's d_total alone varies from
-    # 0.13 to 0.70 % over four render seeds at independent 16 spp, 0.18–0.39 % at the
-    # default multijitter 8; see README "Throughput")
+    # (Not a fixed 0.5 cm on the default scene: its pencil's d_total error alone went from
+    # 0.13 to 0.70 % over seeds 0–3 of `mirrorsim evaluate scenes/default.yaml --sampler
+    # independent --spp 16` with the whole frame at 16 spp; see README "Throughput")
     bounds = np.array([0.01, 0.01, 0.01, 0.002])  # beacon α, d/d, target α, d/d
     report = Report.from_json(rep)
     assert report.errors.beacon_alpha_deg[0] < bounds[0]
