@@ -101,7 +101,7 @@ def measure(scene, tmp: Path) -> dict:
     spp = label(scene)
     res = render_to_files(scene, tmp / scene.name, progress=False)
     cal = calibrate(scene.camera, scene.target.size, scene.beacons[0].height)
-    img = read_frame(res.png)
+    img = read_frame(res.image)
     t0 = time.perf_counter()
     try:
         out = detect_frame(img, res.capture, cal)
@@ -181,7 +181,7 @@ def measure_signed(scene, tmp: Path) -> dict:
     spp = label(scene)
     res = render_to_files(scene, tmp / scene.name, progress=False)
     cal = calibrate(scene.camera, scene.target.size, scene.beacons[0].height)
-    det = detect_frame(read_frame(res.png), res.capture, cal)
+    det = detect_frame(read_frame(res.image), res.capture, cal)
     t, b = res.truth.target, res.truth.beacons[0]
     mt, mb = det.target, det.beacons[0][1]
     return {"scene": scene.name, "spp": spp,

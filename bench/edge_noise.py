@@ -49,7 +49,7 @@ def main() -> None:
             for seed in range(a.seeds):
                 res = render_to_files(s, tmp / f"{spp}_{i}_{seed}", seed=seed, progress=False,
                                       ids=False)
-                mb = detect_frame(read_frame(res.png), res.capture, cal).beacons[0][1]
+                mb = detect_frame(read_frame(res.image), res.capture, cal).beacons[0][1]
                 d = res.truth.beacons[0].d_total
                 rows.append((mb.v_top, mb.v_bottom, mb.u_left, mb.u_right,
                              100 * (mb.d_total - d) / d))

@@ -51,7 +51,7 @@ def main() -> None:
     s = scene_from_dict(d, default_name="edges")
     with tempfile.TemporaryDirectory() as tmp:
         res = render_to_files(s, tmp, spp=a.spp, progress=False)
-        img = read_frame(res.png).astype(np.float32)
+        img = read_frame(res.image).astype(np.float32)
     t = s.target
     m = measure_object(img, "target", t.size[0] / t.size[1])
     front = np.asarray(t.position) + unit(t.facing_deg) * TARGET_THICKNESS / 2

@@ -35,11 +35,14 @@ MARGIN_PX = 24  # rendered around the object's projected outline
 METHOD = "foot-near-2|seeds-ss"  # + the render seeds hashed by SeedSequence
 
 
-def calibration_key(camera: Camera, target_size, pencil_height: float) -> str:
-    """What K depends on: the camera model, the objects' sizes and the method."""
-    return (f"{camera.width}x{camera.height_px}|hfov={camera.hfov:.9g}|h={camera.height:.9g}|"
-            f"target={target_size[0]:.9g}x{target_size[1]:.9g}|pencil={pencil_height:.9g}|"
-            f"spp={CALIBRATION_SPP}|{METHOD}")
+def calibration_key(camera: Camera, target_size, pencil_height: float,
+                    distance_error: float = 0.0) -> str:
+    """What K depends on: the camera model, the objects' sizes, the method, and where
+    the reference really stood (a bench's error; absent from the key when 0)."""
+    key = (f"{camera.width}x{camera.height_px}|hfov={camera.hfov:.9g}|h={camera.height:.9g}|"
+           f"target={target_size[0]:.9g}x{target_size[1]:.9g}|pencil={pencil_height:.9g}|"
+           f"spp={CALIBRATION_SPP}|{METHOD}")
+    return key + (f"|reference_error={distance_error:.9g}" if distance_error else "")
 
 
 def reference_camera(camera: Camera) -> Camera:
@@ -72,12 +75,13 @@ def reference_crop(camera: Camera, obj: Target | Beacon) -> tuple[int, int, int,
             int(min(camera.height_px, math.ceil(v.max()) + MARGIN_PX + 1)))
 
 
-def measure_reference(camera: Camera, kind: str, size, variant: str = "auto") -> float:
-    """Pixel height of the object at D_REF, as the detector measures it."""
+def measure_reference(camera: Camera, kind: str, size, variant: str = "auto",
+                      distance: float = D_REF) -> float:
+    """Pixel height of the object standing at ``distance``, as the detector measures it."""
     from mirrorsim.render import render_direct  # Mitsuba only when a render is needed
 
     cam = reference_camera(camera)
-    obj = reference_object(kind, size)
+    obj = reference_object(kind, size, distance)
     # a plain board: a hole under the reference object's foot would bias its calibration
     img = render_direct(Board(size=(80.0, 80.0), hole_pitch=0.0), cam, obj,
                         spp=CALIBRATION_SPP, crop=reference_crop(cam, obj), variant=variant)
@@ -92,16 +96,22 @@ def measure_reference(camera: Camera, kind: str, size, variant: str = "auto") ->
 
 
 def calibrate(camera: Camera, target_size, pencil_height: float, *, variant: str = "auto",
-              refresh: bool = False) -> Calibration:
-    """K for the target and the pencil with this camera (cached)."""
-    key = calibration_key(camera, target_size, pencil_height)
+              refresh: bool = False, distance_error: float = 0.0) -> Calibration:
+    """K for the target and the pencil with this camera (cached).
+
+    ``distance_error``: a bench's reference objects stood this much farther than the
+    D_REF that K assumes (INTERFACE.md ``calibration.distance_error``), so every K, and
+    every d_total measured with it, comes out too small by about that fraction.
+    """
+    key = calibration_key(camera, target_size, pencil_height, distance_error)
     path = _cache_file()
     cache = read_json_cache(path)
     if key in cache and not refresh:
         c = cache[key]
         return Calibration(target_k=c["target_k"], pencil_k=c["pencil_k"], key=key)
-    s_t = measure_reference(camera, "target", tuple(target_size), variant)
-    s_p = measure_reference(camera, "pencil", pencil_height, variant)
+    where = D_REF + distance_error
+    s_t = measure_reference(camera, "target", tuple(target_size), variant, where)
+    s_p = measure_reference(camera, "pencil", pencil_height, variant, where)
     cal = Calibration(target_k=s_t * (D_REF - FRONT_OFFSET["target"]),
                       pencil_k=s_p * (D_REF - FRONT_OFFSET["beacon"]), key=key)
     cache[key] = {"target_k": cal.target_k, "pencil_k": cal.pencil_k,

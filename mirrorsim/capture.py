@@ -34,14 +34,20 @@ class CaptureRecord:
     target_size: Point2
     frame: str = ""
     reference_distance: float = REFERENCE_DISTANCE
+    distortion: tuple[float, float] = (0.0, 0.0)  # the lens's k1, k2 as calibrated
 
     @classmethod
     def from_scene(cls, scene: Scene, frame: str = "") -> CaptureRecord:
-        """What an experimenter of this scene knows: its camera (the pan as a bearing, as a
-        mount reports it), beacons and target size."""
-        camera = replace(scene.camera, pan=scene.camera.pan_deg)
-        return cls(camera=camera, beacons=scene.beacons, target_size=scene.target.size,
-                   frame=frame)
+        """What an experimenter of this scene knows: its camera as the mount reports it
+        (the pan as a bearing, off by the bench's pan error; level), the lens distortion
+        if it was calibrated, where the beacons are believed to stand, the target's size."""
+        bench = scene.bench
+        reported = scene.camera.pan_deg + bench.pan_error
+        camera = replace(scene.camera, pan=reported, pan_deg=reported)
+        beacons = tuple(Beacon(b.believed, b.height) for b in scene.beacons)
+        return cls(camera=camera, beacons=beacons, target_size=scene.target.size,
+                   frame=frame,
+                   distortion=bench.distortion if bench.distortion_known else (0.0, 0.0))
 
     def to_json(self) -> dict:
         """The capture record document."""
@@ -50,7 +56,7 @@ class CaptureRecord:
                 "camera": {"position": list(c.position), "height": c.height,
                            "pan_deg": c.pan_deg, "resolution": list(c.resolution),
                            "fx": c.fx, "fy": c.fx, "cx": c.cx, "cy": c.cy,
-                           "hfov_deg": c.hfov, "distortion": [0.0, 0.0]},
+                           "hfov_deg": c.hfov, "distortion": list(self.distortion)},
                 "beacons": [{"position": list(b.position), "height": b.height}
                             for b in self.beacons],
                 "target": {"size": list(self.target_size)},
@@ -75,9 +81,13 @@ class CaptureRecord:
         if abs((resolution[0] / 2) / math.tan(math.radians(hfov) / 2) - fx) > 1e-6 * fx:
             raise r.fail("camera.fx", f"{fx:g} disagrees with hfov_deg {hfov:g} (square "
                          "pixels, the principal point at the centre)")
-        if "distortion" in c and any(r.number(v, f"camera.distortion[{i}]") != 0
-                                     for i, v in enumerate(c["distortion"])):
-            raise r.fail("camera.distortion", "only [0, 0] is supported so far")
+        distortion = (0.0, 0.0)
+        if "distortion" in c:
+            raw = c["distortion"]
+            if not isinstance(raw, list) or len(raw) != 2:
+                raise r.fail("camera.distortion", "expected [k1, k2]")
+            distortion = (r.number(raw[0], "camera.distortion[0]", low=-1.0, high=1.0),
+                          r.number(raw[1], "camera.distortion[1]", low=-1.0, high=1.0))
         pan = r.number(c["pan_deg"], "camera.pan_deg")
         camera = Camera(position=r.pair(c["position"], "camera.position"),
                         height=r.number(c["height"], "camera.height", positive=True),
@@ -93,7 +103,7 @@ class CaptureRecord:
         cal = r.mapping(top.get("calibration", {}), "calibration", (), ("reference_distance",))
         return cls(camera=camera, beacons=tuple(beacons),
                    target_size=r.pair(t["size"], "target.size", positive=True),
-                   frame=str(top.get("frame", "")),
+                   frame=str(top.get("frame", "")), distortion=distortion,
                    reference_distance=r.number(cal.get("reference_distance", REFERENCE_DISTANCE),
                                                "calibration.reference_distance",
                                                positive=True))

@@ -59,6 +59,7 @@ from mirrorsim.model import (
     Point2,
     pencil_paint_height,
 )
+from mirrorsim.sensor import undistort
 from solver.measurements import Measurements
 from solver.sltr import BeaconMeasurement
 
@@ -203,10 +204,13 @@ def detect_frame(image: np.ndarray, view: CaptureRecord, calibration: Calibratio
         If the target or a beacon's mirror image cannot be found.
     """
     cam = view.camera
-    img = np.asarray(image, dtype=np.float32)
+    img = np.asarray(image)
     if img.ndim != 3 or img.shape[:2] != (cam.height_px, cam.width):
         raise DetectionError(f"the frame is {img.shape[1::-1] if img.ndim >= 2 else img.shape} "
                              f"px but the camera is {cam.width}×{cam.height_px}")
+    if view.distortion != (0.0, 0.0):  # a calibrated lens: measure on the pinhole image
+        img = undistort(img, cam, view.distortion)
+    img = img.astype(np.float32)
     linear = to_linear(img)
     target = measure_object(img, "target", view.target_size[0] / view.target_size[1], linear)
     target_geometry(cam, target, view.target_size, calibration.target_k)
@@ -228,6 +232,8 @@ def detect_frame(image: np.ndarray, view: CaptureRecord, calibration: Calibratio
 
 
 FOOT_TOLERANCE = (3.0, 0.05)  # px, and a fraction of the image's height: the larger
+# plus what a camera pitched this much off level (a bench's mount) moves every row by
+PITCH_ALLOWANCE_DEG = 3.0
 
 
 def _check_stands_on_board(cam: Camera, m: ImageMeasurement, view: CaptureRecord) -> None:
@@ -240,7 +246,8 @@ def _check_stands_on_board(cam: Camera, m: ImageMeasurement, view: CaptureRecord
     height = (view.target_size[1] if m.kind == "target"
               else pencil_paint_height(view.beacons[0].height))
     expected = cam.cy + m.height_px * cam.height / height
-    tol = max(FOOT_TOLERANCE[0], FOOT_TOLERANCE[1] * m.height_px)
+    tol = (max(FOOT_TOLERANCE[0], FOOT_TOLERANCE[1] * m.height_px)
+           + cam.fx * np.tan(np.radians(PITCH_ALLOWANCE_DEG)))
     if abs(m.v_bottom - expected) > tol:
         raise DetectionError(
             f"the {m.kind} image at column {m.u_axis:.0f} does not stand on the board as seen "

@@ -56,16 +56,17 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, spp: int 
         files = render_to_files(sub, out, spp=spp, seed=seed, variant=variant,
                                 progress=progress, reuse=True, ids="ids" in keep)
         cal = calibrate(files.capture.camera, files.capture.target_size,
-                        files.capture.beacons[0].height, variant=variant)
-        image = read_frame(files.png)
+                        files.capture.beacons[0].height, variant=variant,
+                        distance_error=scene.bench.calibration_distance_error)
+        image = read_frame(files.image)
         try:
             det = detect_frame(image, files.capture, cal)  # the record, never the scene
         except DetectionError as exc:
-            raise DetectionError(f"{files.png}: {exc}") from None
+            raise DetectionError(f"{files.image}: {exc}") from None
         annotated = ""
         if "annotated" in keep:
             annotated = str(write_png(out / f"{sub.name}.annotated.png", annotate(image, det)))
-        frames.append(FrameRecord(str(files.png), annotated, files.reused,
+        frames.append(FrameRecord(str(files.image), annotated, files.reused,
                                   det.target.clipped, det.beacons[0][1].clipped))
         detections.append(det)
         truths.append(files.truth)

@@ -1,4 +1,4 @@
-"""A rendered frame's files: ``<name>.png``, the ground truth ``<name>.json`` and the
+"""A rendered frame's files: ``<name>.png`` (or ``.jpg``), the ground truth ``<name>.json`` and the
 object ids ``<name>.ids.png``; computed once, written atomically, reused by fingerprint.
 """
 
@@ -14,9 +14,9 @@ import numpy as np
 
 from mirrorsim import optics
 from mirrorsim.capture import CaptureRecord, load_capture
-from mirrorsim.io import atomic_path, dumps, encode_png
+from mirrorsim.io import atomic_path, dumps, encode_jpeg, encode_png
 from mirrorsim.mitsuba_scene import BACKGROUND_LABEL, BEACON_LABEL, MIRROR_LABEL, TARGET_LABEL
-from mirrorsim.model import Scene
+from mirrorsim.model import Bench, Scene
 from mirrorsim.render import (
     IN_MIRROR,
     MITSUBA_VERSION,
@@ -24,9 +24,9 @@ from mirrorsim.render import (
     RenderedFrame,
     encode_ids,
     render_frame,
-    to_srgb8,
 )
 from mirrorsim.report import GroundTruth, MirrorPixels, RenderInfo
+from mirrorsim.sensor import to_srgb8
 
 
 @dataclass(frozen=True)
@@ -34,7 +34,7 @@ class FrameFiles:
     """A frame on disk, its capture record (what the detector may know) and its ground
     truth (for scoring only)."""
 
-    png: Path
+    image: Path  # the frame: PNG, or JPEG for a bench that stores JPEG
     truth_json: Path
     ids_png: Path | None  # None: not kept (a dataset's --keep)
     capture_json: Path
@@ -58,6 +58,13 @@ def scene_fingerprint(scene: Scene, spp: int, seed: int) -> str:
     """What a render depends on: the scene's content (not its file name, with its
     sampler), spp, seed and the way frames are rendered."""
     d = asdict(replace(scene, source="", warnings=()))
+    # an ideal bench leaves the fingerprint as it was before benches existed, so that
+    # renders made then are still reused
+    if scene.bench == Bench():
+        del d["bench"]
+    for b in d["beacons"]:
+        if b["known_position"] is None:
+            del b["known_position"]
     text = json.dumps(d, sort_keys=True, default=str) + f"|{spp}|{seed}|{RENDER_METHOD}"
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
@@ -94,21 +101,25 @@ def write_frame(scene: Scene, frame: RenderedFrame, out: Path,
     truth = truth_of(scene, frame, fingerprint)
     png, ids_png, js, cap = _paths(scene, out)
     capture = CaptureRecord.from_scene(scene, frame=png.name)
-    files = {png: encode_png(to_srgb8(frame.linear)),
+    srgb = to_srgb8(frame.linear)
+    quality = scene.bench.jpeg_quality
+    files = {png: encode_png(srgb) if quality is None else encode_jpeg(srgb, quality),
              js: dumps(truth.to_json()).encode(), cap: dumps(capture.to_json()).encode()}
     if ids:
         files[ids_png] = encode_png(encode_ids(frame.first, frame.in_mirror))
     with contextlib.ExitStack() as stack:
         for path, data in files.items():
             stack.enter_context(atomic_path(path)).write_bytes(data)
-    return FrameFiles(png=png, truth_json=js, ids_png=ids_png if ids else None,
+    return FrameFiles(image=png, truth_json=js, ids_png=ids_png if ids else None,
                       capture_json=cap, capture=capture, truth=truth)
 
 
 def _paths(scene: Scene, out: Path) -> tuple[Path, Path, Path, Path]:
-    """The frame, its ids, its truth and its capture record."""
+    """The frame (PNG, or JPEG for a bench that stores JPEG), its ids, its truth and its
+    capture record."""
+    frame = ".png" if scene.bench.jpeg_quality is None else ".jpg"
     return tuple(out / f"{scene.name}{ext}"
-                 for ext in (".png", ".ids.png", ".json", ".capture.json"))
+                 for ext in (frame, ".ids.png", ".json", ".capture.json"))
 
 
 def render_to_files(scene: Scene, out: str | Path | None = None, *, spp: int | None = None,
@@ -140,7 +151,7 @@ def _reusable(scene: Scene, out: Path, fingerprint: str) -> FrameFiles | None:
         return None
     if truth.render is None or truth.render.fingerprint != fingerprint:
         return None
-    return FrameFiles(png=png, truth_json=js, ids_png=ids if ids.exists() else None,
+    return FrameFiles(image=png, truth_json=js, ids_png=ids if ids.exists() else None,
                       capture_json=cap, capture=capture, truth=truth, reused=True)
 
 

@@ -137,10 +137,24 @@ def encode_png(pixels: np.ndarray) -> bytes:
     """
     import cv2
 
+    return _encode(pixels, ".png", [cv2.IMWRITE_PNG_COMPRESSION, 1])
+
+
+def encode_jpeg(pixels: np.ndarray, quality: int) -> bytes:
+    """8-bit RGB pixels as JPEG bytes of ``quality`` (1–100; OpenCV's libjpeg, 4:2:0
+    chroma subsampling as cameras store them)."""
+    import cv2
+
+    return _encode(pixels, ".jpg", [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
+
+
+def _encode(pixels: np.ndarray, ext: str, params: list[int]) -> bytes:
+    import cv2
+
     px = np.ascontiguousarray(pixels[..., ::-1] if pixels.ndim == 3 else pixels)
-    ok, buf = cv2.imencode(".png", px, [cv2.IMWRITE_PNG_COMPRESSION, 1])
+    ok, buf = cv2.imencode(ext, px, params)
     if not ok:
-        raise ValueError(f"cannot encode an image of shape {pixels.shape} as PNG")
+        raise ValueError(f"cannot encode an image of shape {pixels.shape} as {ext}")
     return buf.tobytes()
 
 

@@ -13,6 +13,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from mirrorsim.sensor import LINEAR_OF_CODE
+
 
 @dataclass
 class ImageMeasurement:
@@ -139,9 +141,7 @@ def to_linear(srgb: np.ndarray) -> np.ndarray:
     return _LINEAR_LUT[np.asarray(srgb).astype(np.uint8)]
 
 
-_x = np.arange(256, dtype=np.float64) / 255.0
-_LINEAR_LUT = (255.0 * np.where(_x <= 0.04045, _x / 12.92, ((_x + 0.055) / 1.055) ** 2.4)
-               ).astype(np.float32)
+_LINEAR_LUT = (255.0 * LINEAR_OF_CODE).astype(np.float32)
 
 
 def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str

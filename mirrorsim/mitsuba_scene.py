@@ -178,7 +178,8 @@ def build_scene_dict(scene: Scene, *, spp: int,
     (u0, v0, u1, v1) adds a second sensor, ``sensor_crop``: the same camera rendering
     only that part of the film.
     """
-    d = _stage(scene.board, scene.camera, spp, scene.render.sampler)
+    d = _stage(scene.board, scene.camera, spp, scene.render.sampler, scene.bench.pitch,
+               scene.bench.roll)
     if crop is not None:
         d["sensor_crop"] = _cropped(d["sensor"], crop)
     d.update(_mirror_shapes(scene))
@@ -218,11 +219,13 @@ def _cropped(sensor: dict, crop: tuple[int, int, int, int]) -> dict:
 ZHAT = np.array([0.0, 0.0, 1.0])
 
 
-def _stage(board: Board, cam: Camera, spp: int, sampler: str) -> dict:
-    """Integrator, camera, room, light and the board: everything but the objects."""
+def _stage(board: Board, cam: Camera, spp: int, sampler: str, pitch: float = 0.0,
+           roll: float = 0.0) -> dict:
+    """Integrator, camera (as it stands: a bench's pitch and roll), room, light and the
+    board: everything but the objects."""
     sx, sy = board.size
     bc = _v3((sx / 2, sy / 2))
-    forward, _, _ = optics.camera_axes(cam)
+    forward, _, down = optics.camera_axes(cam, pitch, roll)
     return {
         "type": "scene",
         "integrator": {"type": "path", "max_depth": MAX_DEPTH},
@@ -233,7 +236,7 @@ def _stage(board: Board, cam: Camera, spp: int, sampler: str) -> dict:
             "near_clip": 0.1,
             "far_clip": 10000.0,
             "to_world": mi.ScalarTransform4f().look_at(
-                origin=list(cam.center3), target=list(cam.center3 + forward), up=[0, 0, 1]),
+                origin=list(cam.center3), target=list(cam.center3 + forward), up=list(-down)),
             "sampler": {"type": sampler, "sample_count": spp},
             "film": {"type": "hdrfilm", "width": cam.width, "height": cam.height_px,
                      "rfilter": {"type": "box"}, "pixel_format": "rgb"},
@@ -262,26 +265,73 @@ def _stage(board: Board, cam: Camera, spp: int, sampler: str) -> dict:
 
 
 def _mirror_shapes(scene: Scene) -> dict:
-    """The reflective rectangle facing the camera; behind it a dark backing, and a thin
-    dark frame on its sides and top (outside the reflective area)."""
-    m = scene.mirror
+    """The reflective surface facing the camera; behind it a dark backing, and a thin
+    dark frame on its sides and top (outside the reflective area).
+
+    A bench's mirror may lean back (``tilt``: the whole assembly turns about its bottom
+    edge) and be spherical (``curvature_radius``: the glass is a finely tessellated cap
+    with the sphere's normals at its vertices, see :func:`_spherical_glass`).
+    """
+    m, bench = scene.mirror, scene.bench
     w, h = m.size
-    n = _v3(m.normal_towards(scene.camera.position))
-    along = np.array([-n[1], n[0], 0.0])  # so that along × z = n (right-handed)
+    n0 = _v3(m.normal_towards(scene.camera.position))
+    along = np.array([-n0[1], n0[0], 0.0])  # so that along × z = n (right-handed)
+    t = math.radians(bench.tilt)  # the top leans away from the camera: up turns to −n
+    up, n = math.cos(t) * ZHAT - math.sin(t) * n0, math.cos(t) * n0 + math.sin(t) * ZHAT
     c = _v3(m.center)
-    d = {"mirror_glass": {"type": "rectangle", "bsdf": {"type": "conductor"},
-                          "to_world": _transform(along * w / 2, ZHAT * h / 2, n,
-                                                 c + ZHAT * h / 2)},
-         "mirror_back": _box(c + ZHAT * h / 2 - n * 0.21, n * 0.2, along * w / 2,
-                             ZHAT * h / 2, "mirror_back")}
-    fw, depth = MIRROR_FRAME, 0.275  # frame front stands 0.05 proud of the glass
+    fwd = back = 0.0  # how far the curved glass's rim stands before / behind its centre
+    if bench.curvature_radius is None:
+        glass = {"type": "rectangle", "bsdf": {"type": "conductor"},
+                 "to_world": _transform(along * w / 2, up * h / 2, n, c + up * h / 2)}
+    else:
+        glass, sag = _spherical_glass(c + up * h / 2, along, up, n, m.size,
+                                      bench.curvature_radius)
+        fwd, back = max(0.0, sag.max()), max(0.0, -sag.min())
+    d = {"mirror_glass": glass,
+         "mirror_back": _box(c + up * h / 2 - n * (0.21 + back), n * 0.2, along * w / 2,
+                             up * h / 2, "mirror_back")}
+    fw, depth = MIRROR_FRAME, 0.275  # frame front stands 0.05 proud of the glass('s rim)
     for k, s in enumerate((-1, 1)):
-        d[f"mirror_frame{k}"] = _box(c + along * s * (w + fw) / 2 + ZHAT * (h + fw) / 2
-                                     - n * 0.225, n * depth, along * fw / 2,
-                                     ZHAT * (h + fw) / 2, "frame")
-    d["mirror_frame_top"] = _box(c + ZHAT * (h + fw / 2) - n * 0.225, n * depth,
-                                 along * (w / 2 + fw), ZHAT * fw / 2, "frame")
+        d[f"mirror_frame{k}"] = _box(c + along * s * (w + fw) / 2 + up * (h + fw) / 2
+                                     - n * (0.225 - fwd + back), n * depth, along * fw / 2,
+                                     up * (h + fw) / 2, "frame")
+    d["mirror_frame_top"] = _box(c + up * (h + fw / 2) - n * (0.225 - fwd + back), n * depth,
+                                 along * (w / 2 + fw), up * fw / 2, "frame")
     return d
+
+
+GLASS_CELL_CM = 0.25  # tessellation of a curved mirror: chord error cell²/(8R) < 1e-5 cm
+
+
+def _spherical_glass(centre, along, up, n, size, radius: float) -> tuple[mi.Mesh, np.ndarray]:
+    """A spherical cap over the mirror's rectangle, tangent to its plane at ``centre``:
+    the centre of curvature at centre + radius·n (radius > 0: on the camera's side,
+    concave).  Vertex normals are the sphere's, which is exact under interpolation: a
+    sphere's normal (C − P)/R is linear in P.  Returns the mesh and each vertex's sag
+    (its offset along n, cm)."""
+    w, h = size
+    na, nb = (max(2, math.ceil(s / GLASS_CELL_CM) + 1) for s in (w, h))
+    a, b = np.meshgrid(np.linspace(-w / 2, w / 2, na), np.linspace(-h / 2, h / 2, nb))
+    a, b = a.ravel(), b.ravel()
+    sag = radius - math.copysign(1.0, radius) * np.sqrt(radius**2 - a**2 - b**2)
+    verts = centre + np.outer(a, along) + np.outer(b, up) + np.outer(sag, n)
+    normals = (np.outer(-a, along) + np.outer(-b, up) + np.outer(radius - sag, n)) / radius
+    faces = []
+    for j in range(nb - 1):
+        for i in range(na - 1):
+            k = j * na + i  # counter-clockwise seen from the camera: along × up = n
+            faces += [[k, k + 1, k + na + 1], [k, k + na + 1, k + na]]
+    props = mi.Properties()
+    props["bsdf"] = mi.load_dict({"type": "conductor"})
+    mesh = mi.Mesh("mirror_glass", len(verts), len(faces), props=props,
+                   has_vertex_normals=True)
+    params = mi.traverse(mesh)
+    for key, arr, dtype in (("vertex_positions", verts, np.float32),
+                            ("vertex_normals", normals, np.float32),
+                            ("faces", np.asarray(faces), np.uint32)):
+        params[key] = type(params[key])(arr.astype(dtype).ravel())
+    params.update()
+    return mesh, sag
 
 
 def _target_shapes(t: Target) -> dict:

@@ -126,10 +126,17 @@ def pencil_paint_height(height: float) -> float:
 
 @dataclass(frozen=True)
 class Beacon:
-    """An upright pencil: its axis over ``position``, ``height`` above the board."""
+    """An upright pencil: its axis over ``position``, ``height`` above the board;
+    ``known_position`` is where the experimenter believes it stands (None: where it is)."""
 
     position: Point2
     height: float
+    known_position: Point2 | None = None
+
+    @property
+    def believed(self) -> Point2:
+        """Where the experimenter believes the pencil stands."""
+        return self.position if self.known_position is None else self.known_position
 
 
 @dataclass(frozen=True)
@@ -157,6 +164,34 @@ class RenderSettings:
 
 
 @dataclass(frozen=True)
+class SensorNoise:
+    """Sensor noise in electrons: the exposure puts ``full_well`` electrons at linear
+    radiance 1; Poisson shot noise plus Gaussian read noise of ``read_noise`` rms."""
+
+    full_well: float
+    read_noise: float
+
+
+@dataclass(frozen=True)
+class Bench:
+    """The imperfections of a real bench (INTERFACE.md *Bench imperfections*); the
+    defaults are the ideal bench.  The beacons' believed positions live on
+    :class:`Beacon`.  None of this reaches :mod:`mirrorsim.optics`' truth: it changes
+    what is rendered, or what the capture record says, or the calibration."""
+
+    pan_error: float = 0.0  # deg: the mount reports pan + pan_error
+    pitch: float = 0.0  # deg: optical axis raised from level
+    roll: float = 0.0  # deg: clockwise as seen from behind the camera
+    distortion: tuple[float, float] = (0.0, 0.0)  # Brown–Conrady k1, k2
+    distortion_known: bool = True  # the capture record holds the coefficients
+    noise: SensorNoise | None = None
+    jpeg_quality: int | None = None  # None: lossless PNG
+    curvature_radius: float | None = None  # cm; > 0 concave, None: flat
+    tilt: float = 0.0  # deg: the mirror's top leans away from the camera
+    calibration_distance_error: float = 0.0  # cm: reference at 100 + this, 100 assumed
+
+
+@dataclass(frozen=True)
 class Scene:
     """A validated scene.  Build one with :func:`mirrorsim.scenefile.load_scene`."""
 
@@ -168,6 +203,7 @@ class Scene:
     beacons: tuple[Beacon, ...]
     occluders: tuple[Occluder, ...] = ()
     render: RenderSettings = field(default_factory=RenderSettings)
+    bench: Bench = field(default_factory=Bench)
     source: str = "<scene>"
     warnings: tuple[str, ...] = ()
 

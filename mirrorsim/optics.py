@@ -83,17 +83,30 @@ def resolve_pan(observer: Point2, pan: float | str, mirror: Mirror, target_posit
     return float(pan)
 
 
-def camera_axes(camera: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Forward, right and down unit vectors of the level camera (3-D)."""
+def camera_axes(camera: Camera, pitch: float = 0.0, roll: float = 0.0
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Forward, right and down unit vectors of the camera (3-D): level unless a bench's
+    ``pitch`` (deg, optical axis raised) or ``roll`` (deg, clockwise as seen from behind)
+    says otherwise."""
     f = unit(camera.pan_deg)
     forward = np.array([f[0], f[1], 0.0])
     right = np.array([f[1], -f[0], 0.0])
     down = np.array([0.0, 0.0, -1.0])
+    if pitch:
+        p = math.radians(pitch)
+        forward, down = (math.cos(p) * forward - math.sin(p) * down,
+                         math.cos(p) * down + math.sin(p) * forward)
+    if roll:
+        q = math.radians(roll)
+        right, down = (math.cos(q) * right + math.sin(q) * down,
+                       math.cos(q) * down - math.sin(q) * right)
     return forward, right, down
 
 
-def project(camera: Camera, points3) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Pinhole projection of 3-D points (OpenCV pixel convention: centres at integers).
+def project(camera: Camera, points3, pitch: float = 0.0, roll: float = 0.0
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pinhole projection of 3-D points (OpenCV pixel convention: centres at integers),
+    by the level camera or one pitched and rolled (:func:`camera_axes`).
 
     Returns
     -------
@@ -103,7 +116,7 @@ def project(camera: Camera, points3) -> tuple[np.ndarray, np.ndarray, np.ndarray
         Distance along the optical axis (negative behind the camera).
     """
     p = np.asarray(points3, float) - camera.center3
-    forward, right, down = camera_axes(camera)
+    forward, right, down = camera_axes(camera, pitch, roll)
     z = p @ forward
     with np.errstate(divide="ignore", invalid="ignore"):
         u = camera.cx + camera.fx * (p @ right) / z
@@ -269,12 +282,16 @@ def visibility(scene: Scene, obj: Target | Beacon) -> Visibility:
 def mirror_box(scene: Scene, margin_px: int = 8) -> tuple[int, int, int, int] | None:
     """The film region (u0, v0, u1, v1), end-exclusive, that holds the mirror and its
     frame, ``margin_px`` wider all round and clipped to the film; None if part of the
-    mirror lies behind the camera (no finite box)."""
-    cam, m = scene.camera, scene.mirror
+    mirror lies behind the camera (no finite box).  The camera as it stands (the bench's
+    pitch and roll); a tilted mirror's top is taken where it leans to (its corners in
+    front and behind the upright plane by the lean)."""
+    cam, m, bench = scene.camera, scene.mirror, scene.bench
     c, d = np.asarray(m.center, float), unit(m.yaw) * (m.size[0] / 2 + MIRROR_FRAME)
     top = m.size[1] + MIRROR_FRAME
-    pts = np.array([[*(c + s * d), z] for s in (-1, 1) for z in (0.0, top)])
-    u, v, depth = project(cam, pts)
+    lean = unit(m.yaw + 90.0) * top * math.sin(math.radians(abs(bench.tilt)))
+    pts = np.array([[*(c + s * d + e * lean), z] for s in (-1, 1) for z in (0.0, top)
+                    for e in (-1, 1)])
+    u, v, depth = project(cam, pts, bench.pitch, bench.roll)
     if (depth <= 0).any():
         return None
     u0 = int(max(0, math.floor(u.min()) - margin_px))

@@ -11,7 +11,7 @@ from __future__ import annotations
 import contextlib
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import drjit as dr
 import mitsuba as mi
@@ -28,6 +28,7 @@ from mirrorsim.mitsuba_scene import (
     label_of,
 )
 from mirrorsim.model import Beacon, Board, Camera, Scene, Target
+from mirrorsim.sensor import add_noise, distort, distortion_canvas, to_srgb8
 
 IN_MIRROR = 100  # ids.png: label + IN_MIRROR where the pixel sees it in the mirror
 # samples per render call: one progress step each.  A stratified sampler stratifies
@@ -90,10 +91,14 @@ def render_frame(scene: Scene, *, spp: int, seed: int, variant: str = "auto",
         raise ValueError(f"spp must be ≥ 1 and seed ≥ 0 (got spp={spp}, seed={seed})")
     chosen = choose_variant(variant)
     t0 = time.perf_counter()
+    bench, k = scene.bench, scene.bench.distortion
+    lens = k != (0.0, 0.0)
+    # a distorting lens: the pinhole render of a wider canvas, warped onto the sensor
+    pinhole = replace(scene, camera=distortion_canvas(scene.camera, k)[0]) if lens else scene
     background = min(scene.render.background_spp, spp)
-    box = optics.mirror_box(scene) if background < spp else None
+    box = optics.mirror_box(pinhole) if background < spp else None
     with variant_scope(chosen):
-        mi_scene = mi.load_dict(build_scene_dict(scene, spp=spp, crop=box), optimize=False)
+        mi_scene = mi.load_dict(build_scene_dict(pinhole, spp=spp, crop=box), optimize=False)
         full, *crop = mi_scene.sensors()
         with tqdm(total=spp if box is None else background + spp, unit="spp",
                   disable=not progress, leave=False,
@@ -105,7 +110,12 @@ def render_frame(scene: Scene, *, spp: int, seed: int, variant: str = "auto",
                 linear[v0:v1, u0:u1] = _accumulate(mi_scene, crop[0], spp, (seed, 1),
                                                    bar.update)
         t_render = time.perf_counter() - t0
-        first, in_mirror = id_pass(mi_scene, scene)
+        first, in_mirror = id_pass(mi_scene, pinhole)
+    if lens:
+        linear = distort(linear, scene.camera, k)
+        first, in_mirror = (distort(a, scene.camera, k, nearest=True) for a in (first, in_mirror))
+    if bench.noise is not None:
+        linear = add_noise(linear, bench.noise, seed)
     return RenderedFrame(linear=linear, first=first, in_mirror=in_mirror, variant=chosen,
                          spp=spp, seed=seed, sampler=scene.render.sampler,
                          background_spp=None if box is None else background,
@@ -171,7 +181,7 @@ def id_pass(mi_scene, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _reflected_ray(ray, si):
-    n = si.n
+    n = si.sh_frame.n  # the shading normal: a curved mirror's (its mesh's vertex normals)
     return si.spawn_ray(ray.d - 2.0 * dr.dot(ray.d, n) * n)
 
 
@@ -221,30 +231,3 @@ def encode_ids(first: np.ndarray, in_mirror: np.ndarray) -> np.ndarray:
     """One uint8 image of both id maps: the direct label, or IN_MIRROR + the label that
     the mirror shows on the glass (so IN_MIRROR alone is glass showing the room)."""
     return np.where(first == MIRROR_LABEL, IN_MIRROR + in_mirror, first).astype(np.uint8)
-
-
-def to_srgb8(linear: np.ndarray) -> np.ndarray:
-    """Linear RGB → 8-bit sRGB (IEC 61966-2-1 transfer curve), rounded.
-
-    By lookup of the linear value where each 8-bit step begins (the curve is
-    monotonic), compared as float32 bit patterns (ordered like the values for x ≥ 0;
-    negative values sort below all steps, so map to 0 as clipping would): the same
-    codes as evaluating the curve and rounding (tests/test_render.py checks random values
-    and both sides of every step's edge), in half the time (bench/pieces.py).
-    """
-    x = np.ascontiguousarray(linear, np.float32)
-    return np.searchsorted(_SRGB_STEP_BITS, x.view(np.int32).ravel(),
-                           side="right").astype(np.uint8).reshape(x.shape)
-
-
-def _srgb_steps() -> np.ndarray:
-    """Bit patterns of the smallest float32 at which the rounded sRGB code becomes k,
-    k = 1..255."""
-    s = (np.arange(1, 256) - 0.5) / 255.0
-    t = np.where(s <= 0.04045, s / 12.92, ((s + 0.055) / 1.055) ** 2.4)
-    f = t.astype(np.float32)
-    f = np.where(f.astype(np.float64) < t, np.nextafter(f, np.float32(np.inf)), f)
-    return f.view(np.int32)
-
-
-_SRGB_STEP_BITS = _srgb_steps()

@@ -24,12 +24,14 @@ from mirrorsim.model import (
     PAN_WORDS,
     SAMPLERS,
     Beacon,
+    Bench,
     Board,
     Camera,
     Mirror,
     Occluder,
     RenderSettings,
     Scene,
+    SensorNoise,
     Target,
     footprints,
 )
@@ -137,7 +139,7 @@ def scene_from_dict(data: Any, source: str = "<scene>", default_name: str = "sce
     top = r.mapping(
         data, "",
         required={"board", "camera", "mirror", "target"},
-        optional={"name", "beacon", "beacons", "occluders", "render"},
+        optional={"name", "beacon", "beacons", "occluders", "render", "calibration"},
     )
     name = top.get("name", default_name)
     if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}", name):
@@ -145,7 +147,7 @@ def scene_from_dict(data: Any, source: str = "<scene>", default_name: str = "sce
                      "(letters, digits, '.', '_', '-'; no path)")
     board = _board(r, top["board"])
     cam = r.mapping(top["camera"], "camera", {"position", "height", "hfov", "pan"},
-                    {"resolution"})
+                    {"resolution", *CAMERA_IMPERFECTIONS})
     pan = cam["pan"]
     if isinstance(pan, str):
         if pan not in PAN_WORDS:
@@ -156,7 +158,7 @@ def scene_from_dict(data: Any, source: str = "<scene>", default_name: str = "sce
     position = r.pair(cam["position"], "camera.position")
     height, hfov, resolution = read_camera_model(r, cam, "camera")
 
-    m = r.mapping(top["mirror"], "mirror", {"center", "yaw", "size"})
+    m = r.mapping(top["mirror"], "mirror", {"center", "yaw", "size"}, set(MIRROR_IMPERFECTIONS))
     mirror = Mirror(center=r.pair(m["center"], "mirror.center"),
                     yaw=r.number(m["yaw"], "mirror.yaw"),
                     size=r.pair(m["size"], "mirror.size", positive=True))
@@ -168,6 +170,7 @@ def scene_from_dict(data: Any, source: str = "<scene>", default_name: str = "sce
     rs = read_render(r, top.get("render", {}))
 
     on_board = _board_check(r, board)
+    bench = _bench(r, cam, m, top.get("calibration", {}), mirror, resolution, hfov)
     on_board(position, "camera.position", "the camera")
     on_board(mirror.center, "mirror.center", "the mirror")
     for end in mirror.ends():
@@ -175,6 +178,8 @@ def scene_from_dict(data: Any, source: str = "<scene>", default_name: str = "sce
     on_board(target_position, "target.position", "the target")
     for i, b in enumerate(beacons):
         on_board(b.position, f"{bkey(i)}.position", "the beacon")
+        if b.known_position is not None:
+            on_board(b.known_position, f"{bkey(i)}.known_position", "the believed position")
     for i, o in enumerate(occluders):
         on_board(o.start, f"occluders[{i}].start", "the wall's start")
         on_board(o.end, f"occluders[{i}].end", "the wall's end")
@@ -188,9 +193,77 @@ def scene_from_dict(data: Any, source: str = "<scene>", default_name: str = "sce
     pan_deg = optics.resolve_pan(position, pan, mirror, target_position, beacons[0].position)
     camera = Camera(position, height, resolution, hfov, pan, pan_deg)
     scene = Scene(name=name, board=board, camera=camera, mirror=mirror, target=target,
-                  beacons=beacons, occluders=occluders, render=rs, source=source)
+                  beacons=beacons, occluders=occluders, render=rs, bench=bench, source=source)
     _check_overlaps(scene, r, bkey)
     return replace(scene, warnings=_check_sight(scene, r, bkey))
+
+
+CAMERA_IMPERFECTIONS = ("pan_error", "pitch", "roll", "distortion", "distortion_known", "noise",
+                        "jpeg_quality")
+MIRROR_IMPERFECTIONS = ("curvature_radius", "tilt")
+# Bounds of the imperfections: beyond them a value is a typo, not a bench (degrees)
+MAX_PAN_ERROR, MAX_PITCH, MAX_ROLL, MAX_TILT = 10.0, 20.0, 30.0, 45.0
+
+
+def _bench(r: Reader, cam: dict, m: dict, cal: Any, mirror: Mirror,
+           resolution: tuple[int, int], hfov: float) -> Bench:
+    """The bench imperfections (INTERFACE.md); every key optional, absent = ideal."""
+    def angle(block: dict, key: str, bound: float) -> float:
+        value = r.number(block.get(key.split(".")[1], 0.0), key)
+        if abs(value) >= bound:
+            raise r.fail(key, f"{value:g}: |{key.split('.')[1]}| must stay below {bound:g}°")
+        return value
+
+    d = Bench()
+    distortion = d.distortion
+    if cam.get("distortion") is not None:
+        raw = cam["distortion"]
+        if not isinstance(raw, list) or len(raw) != 2:
+            raise r.fail("camera.distortion", f"expected [k1, k2], got {show(raw)}")
+        distortion = (r.number(raw[0], "camera.distortion[0]", low=-1.0, high=1.0),
+                      r.number(raw[1], "camera.distortion[1]", low=-1.0, high=1.0))
+        corner = math.hypot(*resolution) / 2 / ((resolution[0] / 2)
+                                                 / math.tan(math.radians(hfov) / 2))
+        if not distortion_monotonic(distortion, corner):
+            raise r.fail("camera.distortion", f"{list(distortion)}: the lens folds the image "
+                         "over before the frame's corner (r·(1 + k1 r² + k2 r⁴) must grow)")
+    known = cam.get("distortion_known", True)
+    if not isinstance(known, bool):
+        raise r.fail("camera.distortion_known", f"{show(known)}: expected true or false")
+    noise = None
+    if cam.get("noise") is not None:
+        n = r.mapping(cam["noise"], "camera.noise", {"full_well", "read_noise"})
+        noise = SensorNoise(r.number(n["full_well"], "camera.noise.full_well", positive=True),
+                            r.number(n["read_noise"], "camera.noise.read_noise", low=0.0))
+    jpeg = cam.get("jpeg_quality")
+    if jpeg is not None:
+        jpeg = r.integer(jpeg, "camera.jpeg_quality", low=1, high=100)
+    radius = m.get("curvature_radius")
+    if radius is not None:
+        radius = r.number(radius, "mirror.curvature_radius")
+        diagonal = math.hypot(*mirror.size)
+        if abs(radius) < diagonal:
+            raise r.fail("mirror.curvature_radius", f"{radius:g}: |radius| must be at least "
+                         f"the mirror's diagonal ({diagonal:.1f} cm)")
+    c = r.mapping(cal, "calibration", set(), {"distance_error"})
+    distance_error = r.number(c.get("distance_error", 0.0), "calibration.distance_error")
+    if not -50.0 < distance_error < 100.0:
+        raise r.fail("calibration.distance_error", f"{distance_error:g}: the reference must "
+                     "stand between 50 and 200 cm (error in (-50, 100) cm)")
+    return Bench(pan_error=angle(cam, "camera.pan_error", MAX_PAN_ERROR),
+                 pitch=angle(cam, "camera.pitch", MAX_PITCH),
+                 roll=angle(cam, "camera.roll", MAX_ROLL),
+                 distortion=distortion, distortion_known=known, noise=noise,
+                 jpeg_quality=jpeg, curvature_radius=radius,
+                 tilt=angle(m, "mirror.tilt", MAX_TILT),
+                 calibration_distance_error=distance_error)
+
+
+def distortion_monotonic(k: tuple[float, float], r_max: float) -> bool:
+    """Whether r·(1 + k1 r² + k2 r⁴) grows on [0, r_max] (normalized radius): a lens
+    that folds its image over is no lens."""
+    r = np.linspace(0.0, r_max, 512)
+    return bool((1 + 3 * k[0] * r**2 + 5 * k[1] * r**4 > 0).all())
 
 
 def _board(r: Reader, raw: Any) -> Board:
@@ -214,9 +287,12 @@ def _beacons(r: Reader, top: dict) -> tuple[tuple[Beacon, ...], Callable[[int], 
             raise r.fail("beacons", f"expected a non-empty list, got {show(raw_beacons)}")
     beacons = []
     for i, raw in enumerate(raw_beacons):
-        bb = r.mapping(raw, bkey(i), {"position", "height"})
+        bb = r.mapping(raw, bkey(i), {"position", "height"}, {"known_position"})
+        known = bb.get("known_position")
         beacons.append(Beacon(position=r.pair(bb["position"], f"{bkey(i)}.position"),
-                              height=r.number(bb["height"], f"{bkey(i)}.height", positive=True)))
+                              height=r.number(bb["height"], f"{bkey(i)}.height", positive=True),
+                              known_position=None if known is None else
+                              r.pair(known, f"{bkey(i)}.known_position")))
     return tuple(beacons), bkey
 
 

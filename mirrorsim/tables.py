@@ -47,7 +47,7 @@ def check_table(scene: Scene) -> str:
 def render_summary(scene: Scene, files: FrameFiles) -> str:
     """What ``mirrorsim render`` wrote and what the id pass saw."""
     t, r = files.truth, files.truth.render
-    lines = [f"{scene.name}: {files.png} ({scene.camera.width}×{scene.camera.height_px}, "
+    lines = [f"{scene.name}: {files.image} ({scene.camera.width}×{scene.camera.height_px}, "
              f"{r.spp} spp, {r.variant}, {files.seconds:.1f} s)",
              f"ground truth: {files.truth_json}"]
     for label, e in [("target", t.target)] + [(f"beacon {i}", b)

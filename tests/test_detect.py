@@ -39,7 +39,7 @@ def half_default(tmp_path_factory):
 
 def test_half_size_default_accuracy(half_default):
     scene, res, cal = half_default
-    out = detect_frame(read_frame(res.png), CaptureRecord.from_scene(scene), cal)
+    out = detect_frame(read_frame(res.image), CaptureRecord.from_scene(scene), cal)
     da_t, dd_t, da_b, dd_b = _truth_errors(out, res.truth)
     assert da_t < 0.02 and dd_t < 0.004
     assert da_b < 0.03 and dd_b < 0.015
@@ -48,7 +48,7 @@ def test_half_size_default_accuracy(half_default):
 def test_detector_ignores_target_and_mirror_pose(half_default):
     """Scrambling what the detector must not know changes nothing it reports."""
     scene, res, cal = half_default
-    img = read_frame(res.png)
+    img = read_frame(res.image)
     a = detect_frame(img, CaptureRecord.from_scene(scene), cal)
     scrambled = replace(scene, target=Target((5.0, 75.0), scene.target.size, 123.0),
                         mirror=Mirror((70.0, 10.0), 99.0, (30.0, 2.0)))
@@ -58,7 +58,7 @@ def test_detector_ignores_target_and_mirror_pose(half_default):
 
 def test_direct_and_mirror_images_of_the_beacon_told_apart(half_default):
     scene, res, cal = half_default
-    out = detect_frame(read_frame(res.png), CaptureRecord.from_scene(scene), cal)
+    out = detect_frame(read_frame(res.image), CaptureRecord.from_scene(scene), cal)
     sources = sorted(im.source for im in out.images)
     assert sources == ["direct", "mirror"]
     direct = next(im for im in out.images if im.source == "direct")
@@ -114,7 +114,7 @@ def test_full_size_frames(name, tmp_path):
     scene = load_scene(SCENES / f"{name}.yaml")
     res = render_to_files(scene, tmp_path, progress=False)
     cal = calibrate(scene.camera, scene.target.size, scene.beacons[0].height)
-    out = detect_frame(read_frame(res.png), CaptureRecord.from_scene(scene), cal)
+    out = detect_frame(read_frame(res.image), CaptureRecord.from_scene(scene), cal)
     da_t, dd_t, da_b, dd_b = _truth_errors(out, res.truth)
     assert da_t < 0.01 and da_b < 0.01
     assert dd_t < 0.002 and dd_b < 0.008
@@ -129,7 +129,7 @@ def test_beacon_image_near_the_mirror_edge_is_found(tmp_path):
     scene = load_scene(SCENES.parent / "tests" / "data" / "beacon_near_mirror_edge.yaml")
     res = render_to_files(scene, tmp_path, progress=False)
     cal = calibrate(scene.camera, scene.target.size, scene.beacons[0].height)
-    det = detect_frame(read_frame(res.png), res.capture, cal)
+    det = detect_frame(read_frame(res.image), res.capture, cal)
     m, t = det.beacons[0][1], res.truth.beacons[0]
     # half size: 0.076° a pixel; the axis from one edge and the hexagon's mean
     # half-width (0.35–0.40 cm with its turn) is good to a few tenths of a pixel
@@ -152,25 +152,25 @@ def test_detect_reads_only_the_capture_record(half_default, tmp_path, capsys):
 
     scene, res, _ = half_default
     record = json.loads(res.capture_json.read_text())
-    assert record["frame"] == res.png.name and "mirror" not in record
+    assert record["frame"] == res.image.name and "mirror" not in record
     assert "position" not in record["target"]
     assert load_capture(res.capture_json) == res.capture
     by_capture = tmp_path / "a.json"
-    assert main(["detect", str(res.png), "--capture", str(res.capture_json), "--json",
+    assert main(["detect", str(res.image), "--capture", str(res.capture_json), "--json",
                  str(by_capture)]) == 0
     d = scene_dict("default")
     d["camera"]["resolution"] = [960, 544]
     original = tmp_path / "s.yaml"
     original.write_text(yaml.safe_dump(d))
     by_scene = tmp_path / "b.json"
-    assert main(["detect", str(res.png), "--scene", str(original), "--json",
+    assert main(["detect", str(res.image), "--scene", str(original), "--json",
                  str(by_scene)]) == 0
     assert json.loads(by_scene.read_text()) == json.loads(by_capture.read_text())
     d["mirror"]["center"] = [40.0, 70.0]
     d["target"]["position"] = [60.0, 40.0]
     original.write_text(yaml.safe_dump(d))  # the scene moves; the frame and record do not
     again = tmp_path / "c.json"
-    assert main(["detect", str(res.png), "--capture", str(res.capture_json), "--json",
+    assert main(["detect", str(res.image), "--capture", str(res.capture_json), "--json",
                  str(again)]) == 0
     assert json.loads(again.read_text()) == json.loads(by_capture.read_text())
     capsys.readouterr()
@@ -190,7 +190,7 @@ def test_a_bad_capture_record_is_bad_input(half_default, tmp_path, capsys, edit,
     edit(record)
     path = tmp_path / "bad.capture.json"
     path.write_text(json.dumps(record))
-    assert main(["detect", str(res.png), "--capture", str(path)]) == 2
+    assert main(["detect", str(res.image), "--capture", str(path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and str(path) in err[0] and key in err[0]
 
@@ -214,7 +214,7 @@ def test_off_axis_target_has_no_bearing_bias_and_is_not_clipped(tmp_path, off_ax
     scene = scene_from_dict(d, default_name="offaxis")
     res = render_to_files(scene, tmp_path, spp=16, progress=False)
     cal = calibrate(scene.camera, scene.target.size, scene.beacons[0].height)
-    det = detect_frame(read_frame(res.png), res.capture, cal)
+    det = detect_frame(read_frame(res.image), res.capture, cal)
     assert det.target.clipped == "" and det.target.d_total is not None
     assert abs(det.target.alpha_deg - res.truth.target.alpha_deg) < 0.012
     assert abs(det.target.d_total - res.truth.target.d_total) / res.truth.target.d_total < 0.004

@@ -161,7 +161,7 @@ def test_errormodel_out_must_be_a_json_model(tmp_path, capsys):
     lambda t: ["plan", DEFAULT, "--json", str(t / "no" / "plan.json")],
     lambda t: ["solve", str(t / "m.json"), "--json", "/dev/null"],  # a device: never replaced
     lambda t: ["detect", str(t / "f.png"), "--scene", DEFAULT, "--annotate",
-               str(t / "no" / "a.png")],
+               str(t / "no" / "a.image")],
 ], ids=["json-missing-parent", "measurements-is-folder", "json-in-proc", "render-out-deep",
         "evaluate-out-is-file", "plot-missing-parent", "plan-json-missing", "solve-json-device",
         "detect-annotate-missing"])
@@ -325,7 +325,7 @@ def half_frames(tmp_path_factory):
         from mirrorsim.scenefile import load_scene
 
         files = render_to_files(load_scene(path), folder / name, spp=8, progress=False)
-        scenes[name] = (path, files.png)
+        scenes[name] = (path, files.image)
     return folder, scenes
 
 

@@ -30,7 +30,7 @@ def default_small(tmp_path_factory, fast_variant):
 
 def test_files_and_sizes(default_small):
     scene, res = default_small
-    img = _read_png(res.png)
+    img = _read_png(res.image)
     assert img.shape == (272, 480, 3) and img.dtype == np.uint8
     truth = json.loads(res.truth_json.read_text())
     assert truth["scene"] == "default" and truth["render"]["spp"] == 4
@@ -62,7 +62,7 @@ def test_id_pass_places_image_where_optics_projects_it(default_small, which):
 def test_mirror_really_reflects(default_small):
     scene, res = default_small
     ids = _read_png(res.ids_png)
-    img = _read_png(res.png).astype(float)
+    img = _read_png(res.image).astype(float)
     tgt, pencil = ids == IN_MIRROR + TARGET_LABEL, ids == IN_MIRROR + BEACON_LABEL
     # the target is seen only in the mirror, never directly (the wall hides it) ...
     assert tgt.sum() > 100 and (ids == TARGET_LABEL).sum() == 0
@@ -92,8 +92,8 @@ def test_same_seed_same_bytes_other_seed_differs(tmp_path, fast_variant):
     a = render_to_files(scene, tmp_path / "a", variant=fast_variant, progress=False)
     b = render_to_files(scene, tmp_path / "b", variant=fast_variant, progress=False)
     c = render_to_files(scene, tmp_path / "c", seed=7, variant=fast_variant, progress=False)
-    assert a.png.read_bytes() == b.png.read_bytes()
-    assert a.png.read_bytes() != c.png.read_bytes()
+    assert a.image.read_bytes() == b.image.read_bytes()
+    assert a.image.read_bytes() != c.image.read_bytes()
     assert a.ids_png.read_bytes() == c.ids_png.read_bytes()  # geometry, not sampling
 
 
@@ -107,7 +107,7 @@ def test_scalar_and_jit_id_passes_agree(tmp_path, jit_variant):
     assert (a == b).mean() > 0.995
     assert scalar.truth.target.visible_px > 0
     # and the frames look alike (same scene, different samplers)
-    fa, fb = _read_png(jit.png).astype(float), _read_png(scalar.png).astype(float)
+    fa, fb = _read_png(jit.image).astype(float), _read_png(scalar.image).astype(float)
     assert abs(fa.mean() - fb.mean()) < 0.05 * fa.mean()
 
 
@@ -123,7 +123,7 @@ def test_refuses_bad_spp(tmp_path):
 def test_full_size_frame(name, tmp_path, fast_variant):
     scene = load_scene(SCENES / f"{name}.yaml")
     res = render_to_files(scene, tmp_path, variant=fast_variant, progress=False)
-    img = _read_png(res.png)
+    img = _read_png(res.image)
     assert img.shape == (1088, 1920, 3)
     ids = _read_png(res.ids_png)
     for entry, obj, label in [(res.truth.target, scene.target, IN_MIRROR + TARGET_LABEL),
