@@ -17,8 +17,8 @@ from mirrorsim.cli_options import COMMANDS, check_outputs
 from mirrorsim.errors import SolverError, exit_status
 
 # the order of `mirrorsim --help`: the main job first
-ORDER = ("evaluate", "render", "check", "plot", "detect", "calibrate", "dataset", "errormodel",
-         "solve", "montecarlo", "plan")
+ORDER = ("evaluate", "render", "check", "plot", "detect", "calibrate", "budget", "dataset",
+         "errormodel", "solve", "montecarlo", "plan")
 
 
 def build_parser() -> argparse.ArgumentParser:

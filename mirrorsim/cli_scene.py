@@ -177,3 +177,46 @@ def _evaluate(args) -> int:
           + ", ".join(f.annotated for f in report.frames))
     emit_json(args.json, report.to_json())
     return 0
+
+
+def _budget_options(p):
+    common(p, out="output folder (default renders/<name>/budget/)", json="the budget", spp=True,
+           variant=True, quiet=True)
+
+
+@command("budget", "error budget of a bench: each imperfection alone, then all",
+         "Render, detect, solve and score SCENE on an ideal bench, with each of its bench "
+         "imperfections alone (camera.pan_error, camera.pitch, mirror.curvature_radius, "
+         "calibration.distance_error, beacons[i].known_position... see INTERFACE.md) and with "
+         "all of them.  Prints each source's measurement deltas and target error beside the "
+         "first-order prediction (the solver's Jacobian times the measured deltas); writes "
+         "DIR/budget.json and a tornado chart DIR/budget.png; each run's frames in its own "
+         "sub-folder.",
+         _budget_options)
+def _budget(args) -> int:
+    import sys
+
+    from mirrorsim.budget import run_budget
+    from mirrorsim.imperfections import sources
+    from mirrorsim.io import write_json
+    from mirrorsim.plot import plot_budget
+    from mirrorsim.tables import budget_table
+
+    scene = render_options(args, load(args.scene))
+    found = sources(scene)
+    if not found:
+        print(f"{scene.name}: no bench imperfections in {args.scene}: only the ideal bench "
+              "is evaluated (see INTERFACE.md, Bench imperfections)", file=sys.stderr)
+    out = args.out or Path("renders") / scene.name / "budget"
+    runs = 1 + len(found) + (len(found) > 1)
+    done = iter(range(1, runs + 1))
+    step = (None if args.quiet else
+            lambda label: print(f"[{next(done)}/{runs}] {label}", file=sys.stderr, flush=True))
+    budget = run_budget(scene, out, spp=args.spp, seed=args.seed, variant=args.variant,
+                        progress=not args.quiet, on_step=step)
+    print(budget_table(budget))
+    path = write_json(out / "budget.json", budget.to_json())
+    fig = plot_budget(budget, out / "budget.png")
+    print(f"budget: {path}\ntornado chart: {fig}")
+    emit_json(args.json, budget.to_json())
+    return 0

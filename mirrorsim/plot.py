@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import matplotlib
 
@@ -15,6 +16,9 @@ from mirrorsim.io import atomic_path  # noqa: E402
 from mirrorsim.model import Scene  # noqa: E402
 from mirrorsim.report import Report  # noqa: E402
 from solver.geometry import unit  # noqa: E402
+
+if TYPE_CHECKING:  # the budget runs renders: no Mitsuba import to draw one
+    from mirrorsim.budget import Budget
 
 
 def plot_top_view(scene: Scene, out: str | Path, *, dpi: int = 150) -> Path:
@@ -217,3 +221,26 @@ def plot_plan(scene: Scene, plan: dict, out: str | Path, *, dpi: int = 130) -> P
 
     fig.suptitle(f"{scene.name}: beacon placement", fontsize=11)
     return _save(fig, out, dpi)
+
+
+def plot_budget(budget: Budget, out: str | Path, *, dpi: int = 130) -> Path:
+    """Tornado chart of an error budget: how far each source alone moves the target's
+    estimate from the ideal bench's (bars, largest on top) with its first-order
+    prediction (ticks); the ideal bench's own error and all sources together as lines."""
+    rows = sorted(budget.sources, key=lambda c: c.shift_cm)
+    fig, ax = plt.subplots(figsize=(7.5, 1.4 + 0.45 * max(1, len(rows))))
+    y = np.arange(len(rows))
+    ax.barh(y, [c.shift_cm for c in rows], color="#4878a8",
+            label="rendered, detected, solved")
+    ax.scatter([c.predicted_shift_cm for c in rows], y, marker="|", s=300, color="#c03020",
+               zorder=3, label="first-order prediction")
+    ax.set_yticks(y, [c.source for c in rows])
+    ax.axvline(budget.ideal_cm, color="0.4", ls=":",
+               label=f"ideal bench's own error {budget.ideal_cm:.2f}")
+    if budget.all is not None:
+        ax.axvline(budget.all.shift_cm, color="#c03020", ls="--",
+                   label=f"all together {budget.all.shift_cm:.2f}")
+    ax.set_xlabel("target estimate moved from the ideal bench's (cm)")
+    ax.set_title(f"{budget.scene}: error budget of the bench")
+    ax.legend(loc="lower right", fontsize=8)
+    return _save(fig, Path(out), dpi)

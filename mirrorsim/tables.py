@@ -2,12 +2,17 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from mirrorsim import optics
 from mirrorsim.detect import Detection
 from mirrorsim.frames import FrameFiles
 from mirrorsim.model import Scene
 from mirrorsim.report import Report
 from solver.sltr import Solution
+
+if TYPE_CHECKING:  # the budget runs renders: no Mitsuba import to draw one
+    from mirrorsim.budget import Budget
 
 
 def _columns(rows: list[tuple[str, ...]]) -> list[str]:
@@ -117,6 +122,33 @@ def report_table(report: Report) -> str:
     if report.error_vs_beacons:
         lines.append("target error with the first k beacons: " + ", ".join(
             f"{k + 1}: {r.target_cm:.3f} cm" for k, r in enumerate(report.error_vs_beacons)))
+    return "\n".join(lines)
+
+
+def budget_table(budget: Budget) -> str:
+    """The table ``mirrorsim budget`` prints: each source's measured deltas, the target
+    error it leaves, and the first-order prediction."""
+    def signed(x: float, digits: int) -> str:
+        return f"{x:+.{digits}f}"
+
+    rows = [("source", "value", "Δα_t (°)", "Δd_t (%)", "Δα_b (°)", "Δd_b (%)", "moved (cm)",
+             "1st order", "target (cm)", "1st order")]
+    for c in (*budget.sources, *([budget.all] if budget.all else [])):
+        d = c.delta
+        value = "" if c.value is None else (
+            "[" + ", ".join(f"{v:g}" for v in c.value) + "]" if isinstance(c.value, list)
+            else ", ".join(f"{k} {v:g}" for k, v in c.value.items())
+            if isinstance(c.value, dict) else f"{c.value:g}")
+        rows.append((c.source, value, signed(d.target_alpha_deg, 4),
+                     signed(d.target_d_total_pct, 3),
+                     " ".join(signed(a, 4) for a in d.beacon_alpha_deg),
+                     " ".join(signed(p, 3) for p in d.beacon_d_total_pct),
+                     f"{c.shift_cm:.2f}", f"{c.predicted_shift_cm:.2f}",
+                     f"{c.target_cm:.2f}", f"{c.predicted_cm:.2f}"))
+    lines = _columns(rows)
+    lines.insert(1, "-" * len(lines[0]))
+    lines.insert(0, f"{budget.scene}: ideal bench {budget.ideal_cm:.2f} cm; each source alone"
+                 + (", then all together" if budget.all else ""))
     return "\n".join(lines)
 
 
