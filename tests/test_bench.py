@@ -1,0 +1,388 @@
+"""Bench imperfections: each rendered effect against an independent first-order (or
+exact closed-form) prediction on small renders; the capture record; bad values; the
+budget."""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+
+import numpy as np
+import pytest
+import yaml
+
+from mirrorsim import imperfections, optics
+from mirrorsim.calibrate import calibrate
+from mirrorsim.capture import CaptureRecord
+from mirrorsim.cli import main
+from mirrorsim.detect import FRONT_OFFSET, detect_frame, read_frame
+from mirrorsim.frames import render_to_files, scene_fingerprint
+from mirrorsim.mitsuba_scene import TARGET_LABEL
+from mirrorsim.model import Bench, SensorNoise
+from mirrorsim.render import IN_MIRROR
+from mirrorsim.scenefile import scene_from_dict
+from mirrorsim.sensor import add_noise, undistort_points
+
+from .conftest import scene_dict
+
+W, H = 960, 544  # half size
+
+
+def bench_dict(camera=None, mirror=None, calibration=None, beacon=None, spp=8) -> dict:
+    d = copy.deepcopy(scene_dict("default"))
+    d["camera"]["resolution"] = [W, H]
+    d["camera"].update(camera or {})
+    d["mirror"].update(mirror or {})
+    d["beacon"].update(beacon or {})
+    if calibration:
+        d["calibration"] = calibration
+    d["render"] = {"spp": spp}
+    return d
+
+
+def bench_scene(**kw):
+    return scene_from_dict(bench_dict(**kw), source="bench.yaml", default_name="default")
+
+
+def measure(scene, tmp, name):
+    """Render, calibrate (as the bench did) and detect: the frame's files and detection."""
+    files = render_to_files(scene, tmp / name, progress=False)
+    cal = calibrate(files.capture.camera, files.capture.target_size,
+                    files.capture.beacons[0].height,
+                    distance_error=scene.bench.calibration_distance_error)
+    return files, detect_frame(read_frame(files.image), files.capture, cal)
+
+
+@pytest.fixture(scope="module")
+def ideal(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("bench")
+    scene = bench_scene()
+    return scene, *measure(scene, tmp, "ideal"), tmp
+
+
+# ---------------------------------------------------------------- scene files
+
+
+@pytest.mark.parametrize("where,key,value,message", [
+    ("mirror", "curvature_radius", 15.0, "mirror.curvature_radius"),
+    ("mirror", "curvature_radius", 0, "mirror.curvature_radius"),
+    ("mirror", "tilt", 45, "mirror.tilt"),
+    ("mirror", "tilt", -50, "mirror.tilt"),
+    ("camera", "noise", {"full_well": 6000, "read_noise": -1}, "camera.noise.read_noise"),
+    ("camera", "noise", {"full_well": 0, "read_noise": 4}, "camera.noise.full_well"),
+    ("camera", "jpeg_quality", 0, "camera.jpeg_quality"),
+    ("camera", "jpeg_quality", 101, "camera.jpeg_quality"),
+    ("camera", "distortion", [-0.9, 0.0], "camera.distortion"),
+    ("camera", "distortion", [0.1], "camera.distortion"),
+    ("camera", "pitch", 25, "camera.pitch"),
+    ("camera", "distortion_known", "yes", "camera.distortion_known"),
+    ("beacon", "known_position", [95, 40], "beacon.known_position"),
+    ("calibration", "distance_error", -60, "calibration.distance_error"),
+])
+def test_bad_imperfections_refused(tmp_path, capsys, where, key, value, message):
+    d = bench_dict()
+    d.setdefault(where, {})[key] = value
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump(d))
+    assert main(["check", str(path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and str(path) in err and message in err
+
+
+def test_imperfections_read_and_listed():
+    s = bench_scene(camera={"pan_error": 0.5, "noise": {"full_well": 6000, "read_noise": 4},
+                            "distortion": [-0.05, 0.01], "distortion_known": False},
+                    mirror={"curvature_radius": 1500, "tilt": 0.5},
+                    calibration={"distance_error": 1.0}, beacon={"known_position": [36.3, 56]})
+    assert s.bench == Bench(pan_error=0.5, distortion=(-0.05, 0.01), distortion_known=False,
+                            noise=SensorNoise(6000.0, 4.0), curvature_radius=1500.0, tilt=0.5,
+                            calibration_distance_error=1.0)
+    keys = [src.key for src in imperfections.sources(s)]
+    assert keys == ["camera.pan_error", "camera.distortion", "camera.noise",
+                    "mirror.curvature_radius", "mirror.tilt", "calibration.distance_error",
+                    "beacons[0].known_position"]
+    only = imperfections.only(s, "camera.distortion")
+    assert only.bench == Bench(distortion=(-0.05, 0.01), distortion_known=False)
+    assert only.beacons[0].known_position is None
+    assert imperfections.only(s, "beacons[0].known_position").bench == Bench()
+    assert imperfections.sources(imperfections.ideal(s)) == []
+
+
+def test_capture_record_holds_what_the_experimenter_believes():
+    s = bench_scene(camera={"pan_error": -0.7, "distortion": [-0.05, 0.0]},
+                    beacon={"known_position": [36.3, 55.8]})
+    rec = CaptureRecord.from_scene(s)
+    assert rec.camera.pan_deg == pytest.approx(s.camera.pan_deg - 0.7, abs=1e-12)
+    assert rec.beacons[0].position == (36.3, 55.8)
+    assert rec.distortion == (-0.05, 0.0)
+    again = CaptureRecord.from_json(json.loads(json.dumps(rec.to_json())))
+    assert again.distortion == rec.distortion and again.beacons == rec.beacons
+    unknown = bench_scene(camera={"distortion": [-0.05, 0.0], "distortion_known": False})
+    assert CaptureRecord.from_scene(unknown).distortion == (0.0, 0.0)
+
+
+def test_ideal_keys_change_nothing():
+    """Zero-valued imperfections are the ideal bench: same model, same fingerprint."""
+    plain = bench_scene()
+    zeros = bench_scene(camera={"pan_error": 0, "pitch": 0, "roll": 0, "distortion": [0, 0]},
+                        mirror={"tilt": 0}, calibration={"distance_error": 0})
+    assert zeros == plain
+    assert scene_fingerprint(zeros, 8, 0) == scene_fingerprint(plain, 8, 0)
+
+
+# ---------------------------------------------------------------- the sensor
+
+
+def test_undistortion_inverts_the_lens():
+    rng = np.random.default_rng(1)
+    x, y = rng.uniform(-0.7, 0.7, 1000), rng.uniform(-0.4, 0.4, 1000)
+    k = (-0.08, 0.02)
+    f = 1 + k[0] * (x**2 + y**2) + k[1] * (x**2 + y**2) ** 2
+    xu, yu = undistort_points(x * f, y * f, k)
+    assert np.abs(xu - x).max() < 1e-9 and np.abs(yu - y).max() < 1e-9
+
+
+def test_noise_has_the_sensor_statistics():
+    """Shot noise: variance = mean electrons; read noise adds σ²; both in radiance units."""
+    lin = np.full((400, 400, 3), 0.2, np.float32)
+    noise = SensorNoise(full_well=5000.0, read_noise=10.0)
+    out = add_noise(lin, noise, seed=3)
+    var_expected = (0.2 * 5000 + 10.0**2) / 5000**2
+    assert out.mean() == pytest.approx(0.2, rel=2e-3)
+    assert out.var() == pytest.approx(var_expected, rel=0.03)
+    assert np.array_equal(out, add_noise(lin, noise, seed=3))
+    assert not np.array_equal(out, add_noise(lin, noise, seed=4))
+
+
+# ---------------------------------------------------------------- rendered effects
+
+
+def test_pan_error_shifts_every_alpha_by_itself(ideal):
+    scene0, files0, det0, tmp = ideal
+    scene = bench_scene(camera={"pan_error": 0.5})
+    files, det = measure(scene, tmp, "pan")
+    # the same photograph: only the mount's report differs
+    assert read_frame(files.image).tobytes() == read_frame(files0.image).tobytes()
+    assert det.target.alpha_deg - det0.target.alpha_deg == pytest.approx(0.5, abs=1e-9)
+    assert det.beacons[0][1].alpha_deg - det0.beacons[0][1].alpha_deg == pytest.approx(
+        0.5, abs=1e-9)
+    assert det.target.d_total == pytest.approx(det0.target.d_total, rel=1e-12)
+
+
+def test_known_position_reaches_the_record_not_the_frame(ideal):
+    _, files0, det0, tmp = ideal
+    scene = bench_scene(beacon={"known_position": [36.4, 55.7]})
+    files, det = measure(scene, tmp, "known")
+    assert read_frame(files.image).tobytes() == read_frame(files0.image).tobytes()
+    assert det.beacons[0][0].position == (36.4, 55.7)
+    assert files.truth.beacons[0].position == (36.0, 56.0)  # the truth: where it stands
+
+
+def _paths(scene, obj):
+    img = optics.mirror_image(scene.camera.position, scene.mirror, obj.position)
+    rp = img.reflection_point - np.asarray(scene.camera.position)
+    n = scene.mirror.normal_towards(scene.camera.position)
+    return img, abs(rp @ n) / np.linalg.norm(rp)
+
+
+@pytest.mark.parametrize("radius", [600.0, -600.0])
+def test_spherical_mirror_magnifies_as_its_focal_lengths_say(ideal, radius):
+    """A mirror of power P seen from d1, the object d2 behind it: the object's angular size
+    is that of a flat mirror's image at d1 + d2 − d1·d2·P.  Vertical (sagittal) power
+    2 cos i / R, horizontal (tangential) 2 / (R cos i): the size-constancy distance shrinks
+    by 2 cos i·d1·d2/R and the image's width/height ratio changes (astigmatism)."""
+    scene0, _, det0, tmp = ideal
+    scene = bench_scene(mirror={"curvature_radius": radius})
+    _, det = measure(scene, tmp, f"curved{radius:+.0f}")
+    img, cos_i = _paths(scene, scene.target)
+    d = img.d_total
+    sag = 2 * cos_i * img.d1 * img.d2 / radius
+    tan = 2 * img.d1 * img.d2 / (radius * cos_i)
+    predicted = -sag / d
+    measured = det.target.d_total / det0.target.d_total - 1
+    assert measured == pytest.approx(predicted, rel=0.15)
+    ratio = lambda m: m.width_px / m.height_px  # noqa: E731
+    assert ratio(det.target) / ratio(det0.target) == pytest.approx((d - sag) / (d - tan),
+                                                                   rel=0.01)
+
+
+def _reflect(p3, pivot3, normal3):
+    return p3 - 2 * ((p3 - pivot3) @ normal3) * normal3
+
+
+def test_tilted_mirror_moves_the_image_as_the_reflection_says(ideal):
+    """The target's foot and top rows move as the exact reflection across the tilted plane
+    (about the mirror's bottom edge) puts them, projected by the ideal pinhole."""
+    scene0, _, det0, tmp = ideal
+    tilt = 2.0
+    scene = bench_scene(mirror={"tilt": tilt})
+    _, det = measure(scene, tmp, "tilt")
+    m = scene.mirror
+    n0 = np.r_[m.normal_towards(scene.camera.position), 0.0]
+    t = math.radians(tilt)
+    n1 = math.cos(t) * n0 + math.sin(t) * np.array([0, 0, 1.0])
+    pivot = np.r_[m.center, 0.0]
+    p = np.asarray(scene.target.position)
+    pts = np.array([[*p, 0.0], [*p, scene.target.height]])
+    _, v_flat, _ = optics.project(scene.camera, [_reflect(q, pivot, n0) for q in pts])
+    _, v_tilt, _ = optics.project(scene.camera, [_reflect(q, pivot, n1) for q in pts])
+    assert v_tilt[0] - v_flat[0] > 8  # many pixels: a real test
+    # the top moves more than the foot: the tilted image leans away, its top farther
+    assert v_tilt[1] - v_flat[1] > v_tilt[0] - v_flat[0] + 0.5
+    assert det.target.v_bottom - det0.target.v_bottom == pytest.approx(
+        v_tilt[0] - v_flat[0], abs=0.3)
+    assert det.target.v_top - det0.target.v_top == pytest.approx(v_tilt[1] - v_flat[1],
+                                                                 abs=0.3)
+
+
+def test_pitch_moves_rows_as_a_rotated_pinhole(ideal):
+    """A camera pitched up by p sees the direction (x, y, 1) at
+    ((x, y cos p + sin p) / (cos p − y sin p)) (v down): closed form, no Mitsuba."""
+    scene0, _, det0, tmp = ideal
+    pitch = 3.0
+    scene = bench_scene(camera={"pitch": pitch})
+    _, det = measure(scene, tmp, "pitch")
+    cam, p = scene.camera, math.radians(pitch)
+    for v0, v1 in ((det0.target.v_bottom, det.target.v_bottom),
+                   (det0.target.v_top, det.target.v_top)):
+        x = (det0.target.u_axis - cam.cx) / cam.fx
+        y = (v0 - cam.cy) / cam.fx
+        z = math.cos(p) - y * math.sin(p)
+        assert abs(x) < 0.5  # the target stands near the middle column (x enters u only)
+        assert v1 - v0 == pytest.approx(cam.fx * (y * math.cos(p) + math.sin(p)) / z
+                                        + cam.cy - v0, abs=0.3)
+
+
+def test_roll_turns_the_image_about_the_principal_point(ideal):
+    """Rolled clockwise (seen from behind), the camera sees the image turned
+    counter-clockwise on screen about the principal point: the target's image (its
+    pixels in the id pass) turned by the roll, centroid and orientation alike."""
+    scene0, files0, _, tmp = ideal
+    roll = 4.0
+    scene = bench_scene(camera={"roll": roll})
+    files, _ = measure(scene, tmp, "roll")
+    cam = scene.camera
+    r = math.radians(roll)
+    turn = np.array([[math.cos(r), math.sin(r)], [-math.sin(r), math.cos(r)]])
+
+    def pixels(files):
+        ids = read_frame(files.ids_png)[..., 0]
+        vs, us = np.nonzero(ids == IN_MIRROR + TARGET_LABEL)
+        return np.column_stack([us - cam.cx, vs - cam.cy])
+
+    def orientation(cov):
+        return math.degrees(0.5 * math.atan2(2 * cov[0, 1], cov[0, 0] - cov[1, 1]))
+
+    p0, p1 = pixels(files0), pixels(files)
+    expect = turn @ p0.mean(axis=0)
+    assert p1.mean(axis=0) == pytest.approx(expect, abs=0.5)
+    cov_expect = turn @ np.cov(p0.T) @ turn.T
+    assert orientation(np.cov(p1.T)) == pytest.approx(orientation(cov_expect), abs=0.3)
+    assert abs(orientation(cov_expect) - orientation(np.cov(p0.T))) == pytest.approx(roll)
+
+
+@pytest.fixture(scope="module")
+def offaxis_ideal(ideal):
+    """The ideal bench panned 12° off the mirror: the target's image well off-centre,
+    where a lens distorts."""
+    scene0, _, _, tmp = ideal
+    pan = scene0.camera.pan_deg - 12.0
+    scene = bench_scene(camera={"pan": pan})
+    return pan, *measure(scene, tmp, "offaxis")[1:]
+
+
+@pytest.mark.parametrize("known", [True, False])
+def test_lens_distortion(offaxis_ideal, tmp_path, known):
+    """Known to the detector, a lens changes nothing but resampling; unknown, the target's
+    α (the mean bearing of its two side edges) is off by the Brown–Conrady shifts of
+    those edges: x_d = x·(1 + k1 r² + k2 r⁴)."""
+    pan, det0 = offaxis_ideal
+    k = (-0.1, 0.0)
+    scene = bench_scene(camera={"pan": pan, "distortion": list(k), "distortion_known": known})
+    _, det = measure(scene, tmp_path, "lens")
+    da = det.target.alpha_deg - det0.target.alpha_deg
+    if known:
+        assert abs(da) < 0.01
+        assert det.target.d_total == pytest.approx(det0.target.d_total, rel=0.003)
+    else:
+        cam = scene.camera
+        y = ((det0.target.v_top + det0.target.v_bottom) / 2 - cam.cy) / cam.fx
+        x = np.array([det0.target.u_left, det0.target.u_right]) - cam.cx
+        x = x / cam.fx
+        xd = x * (1 + k[0] * (x * x + y * y) + k[1] * (x * x + y * y) ** 2)
+        predicted = -math.degrees(np.mean(np.arctan(xd)) - np.mean(np.arctan(x)))
+        assert abs(predicted) > 0.05
+        assert da == pytest.approx(predicted, rel=0.1, abs=0.005)
+
+
+def test_calibration_distance_scales_every_d_total(ideal):
+    """The reference stood at 100 + e while 100 was assumed: every K, so every d_total,
+    shrinks by (100 − f)/(100 + e − f), f the measured face's offset."""
+    scene0, _, det0, tmp = ideal
+    e = 5.0
+    scene = bench_scene(calibration={"distance_error": e})
+    _, det = measure(scene, tmp, "caldist")
+    ft, fb = FRONT_OFFSET["target"], FRONT_OFFSET["beacon"]
+    # d_total = (K/s + f)/cos φ: the K part scales, the face offset does not
+    kt = det.target.d_total - ft / math.cos(math.radians(det.target.alpha_deg
+                                                          - scene.camera.pan_deg))
+    kt0 = det0.target.d_total - ft / math.cos(math.radians(det0.target.alpha_deg
+                                                            - scene.camera.pan_deg))
+    assert kt / kt0 == pytest.approx((100 - ft) / (100 + e - ft), rel=0.003)
+    b, b0 = det.beacons[0][1].d_total, det0.beacons[0][1].d_total
+    assert b / b0 == pytest.approx((100 - fb) / (100 + e - fb), rel=0.015)
+
+
+def test_noise_and_jpeg_frames_still_measure(ideal):
+    scene0, _, det0, tmp = ideal
+    scene = bench_scene(camera={"noise": {"full_well": 6000, "read_noise": 4},
+                                "jpeg_quality": 90})
+    with pytest.warns(RuntimeWarning, match="JPEG"):
+        files, det = measure(scene, tmp, "noisy")
+        img = read_frame(files.image).astype(float)
+    assert files.image.suffix == ".jpg" and files.image.read_bytes()[:3] == b"\xff\xd8\xff"
+    assert abs(det.target.alpha_deg - det0.target.alpha_deg) < 0.05
+    assert det.target.d_total == pytest.approx(det0.target.d_total, rel=0.01)
+    # the noise is there: the frame differs from the ideal one everywhere, not by a code
+    assert np.abs(img - read_frame(ideal[1].image).astype(float)).mean() > 1.0
+
+
+# ---------------------------------------------------------------- the budget
+
+
+def test_budget_measures_each_source_and_predicts_it(tmp_path, capsys):
+    d = bench_dict(camera={"pan_error": 0.5}, beacon={"known_position": [36.4, 56.0]},
+                   mirror={"curvature_radius": 1500})
+    path = tmp_path / "bench.yaml"
+    path.write_text(yaml.safe_dump(d))
+    out = tmp_path / "budget"
+    assert main(["budget", str(path), "--out", str(out), "--quiet",
+                 "--json", str(tmp_path / "b.json")]) == 0
+    printed = capsys.readouterr().out
+    assert "camera.pan_error" in printed and "mirror.curvature_radius" in printed
+    doc = json.loads((tmp_path / "b.json").read_text(), parse_constant=pytest.fail)
+    assert doc == json.loads((out / "budget.json").read_text())
+    assert (out / "budget.png").read_bytes()[:4] == b"\x89PNG"
+    by = {s["source"]: s for s in doc["sources"]}
+    assert list(by) == ["camera.pan_error", "mirror.curvature_radius",
+                        "beacons[0].known_position"]
+    pan = by["camera.pan_error"]["delta"]
+    assert pan["target_alpha_deg"] == pytest.approx(0.5, abs=1e-9)
+    assert pan["beacon_alpha_deg"] == [pytest.approx(0.5, abs=1e-9)]
+    assert by["beacons[0].known_position"]["delta"]["beacon_position_cm"] == [
+        pytest.approx(0.4, abs=1e-9)]
+    # sources that move the measurements by known amounts: the first-order prediction
+    # (Jacobian × delta) lands within 10 % of the solved estimate's shift
+    for key in ("camera.pan_error", "beacons[0].known_position"):
+        assert by[key]["predicted_shift_cm"] == pytest.approx(by[key]["shift_cm"], rel=0.1)
+        assert by[key]["shift_cm"] > 0.3
+    # the curved mirror shrinks the target's d_total by about 2 cos i d1 d2 / R
+    scene = bench_scene(mirror={"curvature_radius": 1500})
+    img, cos_i = _paths(scene, scene.target)
+    predicted = -100 * 2 * cos_i * img.d1 * img.d2 / 1500 / img.d_total
+    assert by["mirror.curvature_radius"]["delta"]["target_d_total_pct"] == pytest.approx(
+        predicted, rel=0.2)
+    assert doc["all"]["target_cm"] > 0 and doc["ideal"]["target_cm"] >= 0
+    for name in ("ideal", "camera.pan_error", "beacons0.known_position", "all"):
+        assert (out / name / "default.png").exists()
