@@ -50,21 +50,26 @@ class Delta:
 
 @dataclass(frozen=True)
 class Contribution:
-    """One imperfection alone (or all of them: ``source`` 'all'), measured and predicted."""
+    """One imperfection alone (or all of them: ``source`` 'all'), measured and predicted;
+    or, where its frames could not be measured or solved, why (``failed``; the numbers
+    are then None)."""
 
     source: str
     value: Any
-    target_cm: float  # the estimate's error against the truth
-    shift_cm: float  # how far the estimate moved from the ideal frame's
-    predicted_cm: float  # first order: |ideal error + J·delta|
-    predicted_shift_cm: float  # first order: |J·delta|
-    delta: Delta
+    target_cm: float | None  # the estimate's error against the truth
+    shift_cm: float | None  # how far the estimate moved from the ideal frame's
+    predicted_cm: float | None  # first order: |ideal error + J·delta|
+    predicted_shift_cm: float | None  # first order: |J·delta|
+    delta: Delta | None
+    failed: str = ""
 
     def to_json(self) -> dict:
         """One entry of ``sources``."""
-        return {"source": self.source, "value": self.value, "target_cm": self.target_cm,
-                "predicted_cm": self.predicted_cm, "shift_cm": self.shift_cm,
-                "predicted_shift_cm": self.predicted_shift_cm, "delta": self.delta.to_json()}
+        out = {"source": self.source, "value": self.value, "target_cm": self.target_cm,
+               "predicted_cm": self.predicted_cm, "shift_cm": self.shift_cm,
+               "predicted_shift_cm": self.predicted_shift_cm,
+               "delta": None if self.delta is None else self.delta.to_json()}
+        return out | ({"failed": self.failed} if self.failed else {})
 
 
 @dataclass(frozen=True)
@@ -81,10 +86,8 @@ class Budget:
         out = {"scene": self.scene, "ideal": {"target_cm": self.ideal_cm},
                "sources": [c.to_json() for c in self.sources]}
         if self.all is not None:
-            out["all"] = {"target_cm": self.all.target_cm,
-                          "predicted_cm": self.all.predicted_cm,
-                          "shift_cm": self.all.shift_cm,
-                          "predicted_shift_cm": self.all.predicted_shift_cm}
+            out["all"] = {k: v for k, v in self.all.to_json().items()
+                          if k not in ("source", "value", "delta")}
         return out
 
 
@@ -150,7 +153,7 @@ def run_budget(scene: Scene, out: str | Path, *, spp: int | None = None,
     DetectionError
         If a frame cannot be measured (the message names the source).
     """
-    from mirrorsim.errors import DetectionError
+    from mirrorsim.errors import DetectionError, SolverError
 
     out = Path(out)
     found = imperfections.sources(scene)
@@ -158,19 +161,25 @@ def run_budget(scene: Scene, out: str | Path, *, spp: int | None = None,
     def run(label: str, sub: Scene) -> Report:
         if on_step is not None:
             on_step(label)
-        try:
-            return evaluate_scene(sub, out / _folder(label), spp=spp, seed=seed,
-                                  variant=variant, progress=progress, keep=("annotated",))
-        except DetectionError as exc:
-            raise DetectionError(f"{label}: {exc}") from None
+        return evaluate_scene(sub, out / _folder(label), spp=spp, seed=seed, variant=variant,
+                              progress=progress, keep=("annotated",))
 
-    ideal = run("ideal", imperfections.ideal(scene))
+    def measured(label: str, value: Any, sub: Scene) -> Contribution:
+        # a bench error can make a frame unmeasurable (an image taken for the wrong one
+        # is refused) or unsolvable (no mirror fits): that is its effect, recorded
+        try:
+            return contribution(label, value, ideal, run(label, sub), J)
+        except (DetectionError, SolverError) as exc:
+            return Contribution(label, value, None, None, None, None, None, failed=str(exc))
+
+    try:
+        ideal = run("ideal", imperfections.ideal(scene))
+    except DetectionError as exc:
+        raise DetectionError(f"the ideal bench: {exc}") from None
     J = jacobian(ideal.measurements)
-    contributions = tuple(contribution(s.key, s.value, ideal,
-                                       run(s.key, imperfections.only(scene, s.key)), J)
+    contributions = tuple(measured(s.key, s.value, imperfections.only(scene, s.key))
                           for s in found)
-    everything = (contribution("all", None, ideal, run("all", scene), J)
-                  if len(found) > 1 else None)
+    everything = measured("all", None, scene) if len(found) > 1 else None
     return Budget(scene=scene.name, ideal_cm=ideal.errors.target_cm, all=everything,
                   sources=contributions)
 

@@ -227,7 +227,7 @@ def plot_budget(budget: Budget, out: str | Path, *, dpi: int = 130) -> Path:
     """Tornado chart of an error budget: how far each source alone moves the target's
     estimate from the ideal bench's (bars, largest on top) with its first-order
     prediction (ticks); the ideal bench's own error and all sources together as lines."""
-    rows = sorted(budget.sources, key=lambda c: c.shift_cm)
+    rows = sorted((c for c in budget.sources if not c.failed), key=lambda c: c.shift_cm)
     fig, ax = plt.subplots(figsize=(7.5, 1.4 + 0.45 * max(1, len(rows))))
     y = np.arange(len(rows))
     ax.barh(y, [c.shift_cm for c in rows], color="#4878a8",
@@ -237,10 +237,12 @@ def plot_budget(budget: Budget, out: str | Path, *, dpi: int = 130) -> Path:
     ax.set_yticks(y, [c.source for c in rows])
     ax.axvline(budget.ideal_cm, color="0.4", ls=":",
                label=f"ideal bench's own error {budget.ideal_cm:.2f}")
-    if budget.all is not None:
+    if budget.all is not None and not budget.all.failed:
         ax.axvline(budget.all.shift_cm, color="#c03020", ls="--",
                    label=f"all together {budget.all.shift_cm:.2f}")
-    ax.set_xlabel("target estimate moved from the ideal bench's (cm)")
+    failed = [c.source for c in budget.sources if c.failed]
+    ax.set_xlabel("target estimate moved from the ideal bench's (cm)"
+                  + (f"\nno estimate (frames refused): {', '.join(failed)}" if failed else ""))
     ax.set_title(f"{budget.scene}: error budget of the bench")
     ax.legend(loc="lower right", fontsize=8)
     return _save(fig, Path(out), dpi)

@@ -133,12 +133,17 @@ def budget_table(budget: Budget) -> str:
 
     rows = [("source", "value", "Δα_t (°)", "Δd_t (%)", "Δα_b (°)", "Δd_b (%)", "moved (cm)",
              "1st order", "target (cm)", "1st order")]
+    failures = []
     for c in (*budget.sources, *([budget.all] if budget.all else [])):
         d = c.delta
         value = "" if c.value is None else (
             "[" + ", ".join(f"{v:g}" for v in c.value) + "]" if isinstance(c.value, list)
             else ", ".join(f"{k} {v:g}" for k, v in c.value.items())
             if isinstance(c.value, dict) else f"{c.value:g}")
+        if c.failed:
+            rows.append((c.source, value, *["failed"] + [""] * 7))
+            failures.append(f"  {c.source}: {c.failed}")
+            continue
         rows.append((c.source, value, signed(d.target_alpha_deg, 4),
                      signed(d.target_d_total_pct, 3),
                      " ".join(signed(a, 4) for a in d.beacon_alpha_deg),
@@ -149,7 +154,7 @@ def budget_table(budget: Budget) -> str:
     lines.insert(1, "-" * len(lines[0]))
     lines.insert(0, f"{budget.scene}: ideal bench {budget.ideal_cm:.2f} cm; each source alone"
                  + (", then all together" if budget.all else ""))
-    return "\n".join(lines)
+    return "\n".join(lines + failures)
 
 
 def montecarlo_table(res: dict) -> str:
