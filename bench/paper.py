@@ -87,10 +87,11 @@ def main() -> None:
         b = run_budget(scene, args.out / "bench" / name, spp=args.spp, progress=False)
         top = sorted((c for c in b.sources if not c.failed), key=lambda c: -c.shift_cm)[:3]
         failed = [c.source for c in b.sources if c.failed]
-        bench = f"{b.all.target_cm:.2f}"
         if b.all.failed:
             bench = "no estimate (frame refused, below)"
             notes.append(f"{name.upper()}, all imperfections: {b.all.failed}")
+        else:
+            bench = f"{b.all.target_cm:.2f}"
         print(f"| {name.upper()} | {b.ideal_cm:.2f} | {bench} | {paper['rmse']:.2f} | "
               + ", ".join(f"{c.source} {c.shift_cm:.1f}" for c in top)
               + (f"; frames refused with {', '.join(failed)} alone" if failed else "") + " |")

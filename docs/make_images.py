@@ -4,7 +4,8 @@
 
 Evaluates the default scene (render, detect, solve), draws its top view and the
 placement analysis of exp3, and saves downscaled JPEG copies of the frame and of the
-annotated detections (the full PNGs stay in renders/).
+annotated detections (the full PNGs stay in renders/); renders the default scene's
+mirror flat, concave and convex side by side (bench imperfections).
 """
 
 from __future__ import annotations
@@ -40,6 +41,29 @@ def main() -> None:
     Image.fromarray(frame).resize((960, 544), Image.LANCZOS).save(DOCS / "default_frame.jpg",
                                                                   quality=88)
     Image.fromarray(frame[330:720, 760:1180]).save(DOCS / "default_mirror_crop.jpg", quality=92)
+    curved_mirrors()
+
+
+def curved_mirrors(radius: float = 300.0) -> None:
+    """The default scene's mirror flat, concave and convex (radius ±R cm): the same crop
+    of each full-size frame, side by side."""
+    import yaml
+
+    base = yaml.safe_load((ROOT / "scenes" / "default.yaml").read_text())
+    crops = []
+    for label, r in (("flat", None), ("concave", radius), ("convex", -radius)):
+        d = {**base, "name": f"default_{label}", "mirror": dict(base["mirror"])}
+        if r is not None:
+            d["mirror"]["curvature_radius"] = r
+        path = ROOT / "renders" / "docs" / f"default_{label}.yaml"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(yaml.safe_dump(d))
+        run("render", str(path), "--quiet", "--out", str(path.parent))
+        img = np.asarray(Image.open(path.with_suffix(".png")).convert("RGB"))
+        crops.append(img[360:700, 800:1120])
+    gap = np.full((crops[0].shape[0], 8, 3), 255, np.uint8)
+    Image.fromarray(np.hstack([crops[0], gap, crops[1], gap, crops[2]])).save(
+        DOCS / "curved_mirror.jpg", quality=90)
 
 
 if __name__ == "__main__":
