@@ -97,12 +97,16 @@ def _detect(args) -> int:
     from mirrorsim.detect import annotate, detect_frame, read_frame
     from mirrorsim.tables import detect_summary
 
+    reference_error = 0.0  # a capture record cannot know its bench's calibration error
     if args.capture:
         view, source = load_capture(args.capture), f"capture {args.capture}"
     else:
-        view, source = CaptureRecord.from_scene(load(args.scene)), f"scene {args.scene}"
+        scene = load(args.scene)
+        view, source = CaptureRecord.from_scene(scene), f"scene {args.scene}"
+        reference_error = scene.bench.calibration_distance_error  # the bench's calibration
     image = read_frame(args.frame)
-    cal = calibrate(view.camera, view.target_size, view.beacons[0].height, variant=args.variant)
+    cal = calibrate(view.camera, view.target_size, view.beacons[0].height, variant=args.variant,
+                    distance_error=reference_error)
     try:
         det = detect_frame(image, view, cal)
     except DetectionError as exc:
@@ -123,7 +127,8 @@ def _calibrate_options(p):
 @command("calibrate", "size-constancy constants for a scene's camera",
          "Render the target and the pencil in direct view at 100 cm, facing SCENE's camera on "
          "its optical axis, measure them as the detector does and cache K = s_px * d per "
-         "camera and object.",
+         "camera and object.  A scene's calibration.distance_error stands them that much "
+         "farther while 100 cm is assumed, as its bench did.",
          _calibrate_options)
 def _calibrate(args) -> int:
     from mirrorsim.calibrate import D_REF, calibrate
@@ -132,7 +137,8 @@ def _calibrate(args) -> int:
     scene = load(args.scene)
     cam = scene.camera
     cal = calibrate(cam, scene.target.size, scene.beacons[0].height, variant=args.variant,
-                    refresh=args.refresh)
+                    refresh=args.refresh,
+                    distance_error=scene.bench.calibration_distance_error)
     print(f"camera {cam.width}×{cam.height_px}, hfov {cam.hfov:g}°, height {cam.height:g} cm "
           f"(fx {cam.fx:.2f} px)")
     print(f"  target {scene.target.size[1]:g} cm high: K = {cal.target_k:.1f} px·cm "
