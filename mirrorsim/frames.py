@@ -1,5 +1,6 @@
-"""A rendered frame's files: ``<name>.png`` (or ``.jpg``), the ground truth ``<name>.json`` and the
-object ids ``<name>.ids.png``; computed once, written atomically, reused by fingerprint.
+"""A rendered frame's files: ``<name>.png`` (or ``.jpg``), the ground truth
+``<name>.json``, the capture record and the object ids ``<name>.ids.png``; computed
+once, written atomically, reused by fingerprint.
 """
 
 from __future__ import annotations
@@ -99,18 +100,18 @@ def write_frame(scene: Scene, frame: RenderedFrame, out: Path,
     ``out``; they appear together."""
     out.mkdir(parents=True, exist_ok=True)
     truth = truth_of(scene, frame, fingerprint)
-    png, ids_png, js, cap = _paths(scene, out)
-    capture = CaptureRecord.from_scene(scene, frame=png.name)
+    image, ids_png, js, cap = _paths(scene, out)
+    capture = CaptureRecord.from_scene(scene, frame=image.name)
     srgb = to_srgb8(frame.linear)
     quality = scene.bench.jpeg_quality
-    files = {png: encode_png(srgb) if quality is None else encode_jpeg(srgb, quality),
+    files = {image: encode_png(srgb) if quality is None else encode_jpeg(srgb, quality),
              js: dumps(truth.to_json()).encode(), cap: dumps(capture.to_json()).encode()}
     if ids:
         files[ids_png] = encode_png(encode_ids(frame.first, frame.in_mirror))
     with contextlib.ExitStack() as stack:
         for path, data in files.items():
             stack.enter_context(atomic_path(path)).write_bytes(data)
-    return FrameFiles(image=png, truth_json=js, ids_png=ids_png if ids else None,
+    return FrameFiles(image=image, truth_json=js, ids_png=ids_png if ids else None,
                       capture_json=cap, capture=capture, truth=truth)
 
 
@@ -141,8 +142,8 @@ def render_to_files(scene: Scene, out: str | Path | None = None, *, spp: int | N
 
 
 def _reusable(scene: Scene, out: Path, fingerprint: str) -> FrameFiles | None:
-    png, ids, js, cap = _paths(scene, out)
-    if not (png.exists() and js.exists() and cap.exists()):
+    image, ids, js, cap = _paths(scene, out)
+    if not (image.exists() and js.exists() and cap.exists()):
         return None
     try:
         truth = GroundTruth.from_json(json.loads(js.read_text()))
@@ -151,7 +152,7 @@ def _reusable(scene: Scene, out: Path, fingerprint: str) -> FrameFiles | None:
         return None
     if truth.render is None or truth.render.fingerprint != fingerprint:
         return None
-    return FrameFiles(image=png, truth_json=js, ids_png=ids if ids.exists() else None,
+    return FrameFiles(image=image, truth_json=js, ids_png=ids if ids.exists() else None,
                       capture_json=cap, capture=capture, truth=truth, reused=True)
 
 

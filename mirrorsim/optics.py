@@ -336,7 +336,18 @@ def ground_truth(scene: Scene) -> GroundTruth:
                      facing_deg=_r(scene.target.facing_deg)),
         beacons=tuple(entry(b, height=b.height) for b in scene.beacons),
         occluders=scene.occluders,
-        direct_view_fraction=_r(direct_view_fraction(scene, scene.target)))
+        direct_view_fraction=_r(direct_view_fraction(scene, scene.target)),
+        bench=_bench_of(scene))
+
+
+def _bench_of(scene: Scene) -> dict | None:
+    """The scene's imperfections by key path, for the truth (None: an ideal bench)."""
+    from mirrorsim.imperfections import sources
+
+    found = {s.key: s.value for s in sources(scene)}
+    if "camera.distortion" in found and not scene.bench.distortion_known:
+        found["camera.distortion_known"] = False
+    return found or None
 
 
 def _r(x: float) -> float:

@@ -7,6 +7,7 @@ Every consumer (the CLI's tables, the plots, the dataset's rows) reads attribute
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -136,6 +137,9 @@ class GroundTruth:
     mirror_pixels: MirrorPixels | None = None
     id_labels: dict[str, int] | None = None
     render: RenderInfo | None = None
+    # the bench's imperfections by key path (None: an ideal bench), so that a frame's
+    # truth says what it was rendered with
+    bench: dict[str, Any] | None = None
 
     @property
     def mirror_yaw_deg(self) -> float:
@@ -169,6 +173,8 @@ class GroundTruth:
             out["id_labels"] = dict(self.id_labels)
         if self.render is not None:
             out["render"] = self.render.to_json()
+        if self.bench:
+            out["bench"] = dict(self.bench)
         return out
 
     @classmethod
@@ -190,7 +196,8 @@ class GroundTruth:
                                    for o in d["occluders"]),
                    direct_view_fraction=d["direct_view_fraction"], mirror_pixels=pixels,
                    id_labels=d.get("id_labels"),
-                   render=RenderInfo.from_json(d["render"]) if "render" in d else None)
+                   render=RenderInfo.from_json(d["render"]) if "render" in d else None,
+                   bench=d.get("bench"))
 
     def exact_measurements(self) -> Measurements:
         """The noise-free measurements of this truth (what a perfect detector reports)."""

@@ -386,3 +386,15 @@ def test_budget_measures_each_source_and_predicts_it(tmp_path, capsys):
     assert doc["all"]["target_cm"] > 0 and doc["ideal"]["target_cm"] >= 0
     for name in ("ideal", "camera.pan_error", "beacons0.known_position", "all"):
         assert (out / name / "default.png").exists()
+
+
+def test_truth_names_the_bench_it_was_rendered_with(ideal):
+    scene0, files0, _, tmp = ideal
+    assert "bench" not in files0.truth.to_json()  # the ideal bench's truth as before
+    scene = bench_scene(camera={"pan_error": 0.5, "distortion": [-0.05, 0.0],
+                                "distortion_known": False})
+    truth = optics.ground_truth(scene).to_json()
+    assert truth["bench"] == {"camera.pan_error": 0.5, "camera.distortion": [-0.05, 0.0],
+                              "camera.distortion_known": False}
+    # and the truth is the ideal geometry: the pan error is not in it
+    assert truth["camera"]["pan_deg"] == files0.truth.to_json()["camera"]["pan_deg"]
