@@ -398,3 +398,18 @@ def test_truth_names_the_bench_it_was_rendered_with(ideal):
                               "camera.distortion_known": False}
     # and the truth is the ideal geometry: the pan error is not in it
     assert truth["camera"]["pan_deg"] == files0.truth.to_json()["camera"]["pan_deg"]
+
+
+def test_a_bench_scene_written_as_a_file_reads_back_the_same():
+    """`to_yaml` (the dataset's scene files) keeps every imperfection."""
+    from mirrorsim.sampler import to_yaml
+
+    s = bench_scene(camera={"pan_error": 0.5, "pitch": 1.0, "roll": -0.5,
+                            "distortion": [-0.05, 0.01], "distortion_known": False,
+                            "noise": {"full_well": 6000, "read_noise": 4},
+                            "jpeg_quality": 85},
+                    mirror={"curvature_radius": -1500, "tilt": 0.5},
+                    calibration={"distance_error": 1.0}, beacon={"known_position": [36.3, 56]})
+    again = scene_from_dict(yaml.safe_load(to_yaml(s)), source="again.yaml")
+    assert again.bench == s.bench and again.beacons == s.beacons
+    assert yaml.safe_load(to_yaml(bench_scene())).get("calibration") is None
