@@ -23,9 +23,7 @@ def assign_beacons(pencils: list[ImageMeasurement], view: CaptureRecord
     mirror_cands = []
     for p in pencils:
         for i, b in enumerate(view.beacons):
-            bearing = float(bearing_deg(cam.position, b.position))
-            dist = float(np.hypot(b.position[0] - cam.position[0],
-                                  b.position[1] - cam.position[1]))
+            bearing, dist = _direct(cam, b)
             off, far = abs(wrap_bearing(p.alpha_deg - bearing)), abs(p.d_total - dist)
             if (off < 0.3 and far < 0.05 * dist) or (off < BENCH_BEARING_DEG
                                                      and far < MISPLACED_DISTANCE * dist):
@@ -70,10 +68,9 @@ def _refuse_a_misplaced_direct_view(cands: list[ImageMeasurement], view: Capture
     cam = view.camera
     for p in cands:
         for i, b in enumerate(view.beacons):
-            dist = float(np.hypot(b.position[0] - cam.position[0],
-                                  b.position[1] - cam.position[1]))
+            bearing, dist = _direct(cam, b)
             if abs(p.d_total - dist) < MISPLACED_DISTANCE * dist:
-                off = float(wrap_bearing(p.alpha_deg - bearing_deg(cam.position, b.position)))
+                off = float(wrap_bearing(p.alpha_deg - bearing))
                 raise DetectionError(
                     f"a pencil image at beacon {i}'s own distance ({p.d_total:.1f} cm) lies "
                     f"{off:+.2f}° off its bearing: a mirrored frame, a wrong pan, or a beacon "
@@ -86,9 +83,7 @@ def _the_mirror_image(cands: list[ImageMeasurement], view: CaptureRecord
     beacon stands can be its reflection (d_total ≥ |OB|); of those, one that sits within
     1° and 10 % of the beacon's own bearing and distance is its direct view taken for a
     mirror image.  More than one left is ambiguous: an error, not a guess."""
-    cam, b = view.camera, view.beacons[0]
-    bearing = float(bearing_deg(cam.position, b.position))
-    dist = float(np.hypot(b.position[0] - cam.position[0], b.position[1] - cam.position[1]))
+    bearing, dist = _direct(view.camera, view.beacons[0])
     possible = [p for p in cands if p.d_total > dist * (1 + 1e-3)]
     if not possible:
         raise DetectionError(f"no pencil image lies farther than the beacon stands ({dist:.1f} "
@@ -103,6 +98,13 @@ def _the_mirror_image(cands: list[ImageMeasurement], view: CaptureRecord
                              f"reflection ({found}): ambiguous, none is used")
     possible[0].beacon_index = 0
     return possible[0]
+
+
+def _direct(cam: Camera, beacon: Beacon) -> tuple[float, float]:
+    """Bearing (°) and distance (cm) at which the camera would see the beacon directly."""
+    return (float(bearing_deg(cam.position, beacon.position)),
+            float(np.hypot(beacon.position[0] - cam.position[0],
+                           beacon.position[1] - cam.position[1])))
 
 
 def _bisector(cam: Camera, beacon: Beacon, m: ImageMeasurement) -> tuple[float, float]:

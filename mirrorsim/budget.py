@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from mirrorsim import imperfections
+from mirrorsim.errors import DetectionError, SolverError
 from mirrorsim.evaluate import evaluate_scene
 from mirrorsim.model import Scene
 from mirrorsim.report import Report
@@ -93,8 +94,7 @@ class Budget:
 
 def _vector(m: Measurements) -> np.ndarray:
     """The solver's inputs as one vector: target α, d; per beacon α, d, x, y."""
-    (a, d), = [tuple(np.mean(m.targets, axis=0))]
-    v = [a, d]
+    v = list(np.mean(m.targets, axis=0))
     for b in m.beacons:
         v += [b.alpha_deg, b.d_total, *b.position]
     return np.array(v, float)
@@ -153,8 +153,6 @@ def run_budget(scene: Scene, out: str | Path, *, spp: int | None = None,
     DetectionError
         If a frame cannot be measured (the message names the source).
     """
-    from mirrorsim.errors import DetectionError, SolverError
-
     out = Path(out)
     found = imperfections.sources(scene)
 

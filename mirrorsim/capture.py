@@ -16,6 +16,7 @@ from typing import Any
 
 from mirrorsim.errors import InputError
 from mirrorsim.model import Beacon, Camera, Point2, Scene
+from mirrorsim.scenefile import read_distortion
 from solver.reader import Reader, read_json
 
 REFERENCE_DISTANCE = 100.0  # cm: where calibration stands its reference objects
@@ -81,13 +82,8 @@ class CaptureRecord:
         if abs((resolution[0] / 2) / math.tan(math.radians(hfov) / 2) - fx) > 1e-6 * fx:
             raise r.fail("camera.fx", f"{fx:g} disagrees with hfov_deg {hfov:g} (square "
                          "pixels, the principal point at the centre)")
-        distortion = (0.0, 0.0)
-        if "distortion" in c:
-            raw = c["distortion"]
-            if not isinstance(raw, list) or len(raw) != 2:
-                raise r.fail("camera.distortion", "expected [k1, k2]")
-            distortion = (r.number(raw[0], "camera.distortion[0]", low=-1.0, high=1.0),
-                          r.number(raw[1], "camera.distortion[1]", low=-1.0, high=1.0))
+        distortion = (read_distortion(r, c["distortion"], "camera.distortion")
+                      if "distortion" in c else (0.0, 0.0))
         pan = r.number(c["pan_deg"], "camera.pan_deg")
         camera = Camera(position=r.pair(c["position"], "camera.position"),
                         height=r.number(c["height"], "camera.height", positive=True),

@@ -1,7 +1,8 @@
 """The detector: α and d_total of the target and the beacons, from a rendered frame.
 
-With :mod:`mirrorsim.measure`, the detector; the only module that imports OpenCV
-(besides the image effects to come).  What it may use: the image and its capture record
+With :mod:`mirrorsim.measure`, the detector; with :mod:`mirrorsim.sensor` (the lens
+model) and the image encoders, the only code that imports OpenCV.  What it may use:
+the image and its capture record
 (:class:`~mirrorsim.capture.CaptureRecord`: the camera as its mount reports it, the
 beacons' believed positions and heights, the target's size), the objects' appearance,
 and the calibration.  Never the target's or the mirror's pose, nor the ground truth.

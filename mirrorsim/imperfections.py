@@ -47,6 +47,15 @@ def sources(scene: Scene) -> list[Source]:
     return out
 
 
+def as_keys(scene: Scene) -> dict[str, Any]:
+    """The scene's imperfections as a scene file writes them, by key path (with
+    ``camera.distortion_known`` where it is false); empty for an ideal bench."""
+    found = {s.key: s.value for s in sources(scene)}
+    if "camera.distortion" in found and not scene.bench.distortion_known:
+        found["camera.distortion_known"] = False
+    return found
+
+
 def ideal(scene: Scene) -> Scene:
     """The same scene on an ideal bench."""
     return replace(scene, bench=Bench(),

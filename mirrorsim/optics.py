@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mirrorsim.imperfections import as_keys
 from mirrorsim.model import (
     MIRROR_FRAME,
     OCCLUDER_THICKNESS,
@@ -337,17 +338,7 @@ def ground_truth(scene: Scene) -> GroundTruth:
         beacons=tuple(entry(b, height=b.height) for b in scene.beacons),
         occluders=scene.occluders,
         direct_view_fraction=_r(direct_view_fraction(scene, scene.target)),
-        bench=_bench_of(scene))
-
-
-def _bench_of(scene: Scene) -> dict | None:
-    """The scene's imperfections by key path, for the truth (None: an ideal bench)."""
-    from mirrorsim.imperfections import sources
-
-    found = {s.key: s.value for s in sources(scene)}
-    if "camera.distortion" in found and not scene.bench.distortion_known:
-        found["camera.distortion_known"] = False
-    return found or None
+        bench=as_keys(scene) or None)
 
 
 def _r(x: float) -> float:

@@ -18,7 +18,8 @@ import yaml
 
 from mirrorsim import optics
 from mirrorsim.errors import RunFailed, SceneError
-from mirrorsim.model import PAN_WORDS, Bench, Camera, Scene
+from mirrorsim.imperfections import as_keys
+from mirrorsim.model import PAN_WORDS, Camera, Scene
 from mirrorsim.scenefile import (
     DEFAULT_RESOLUTION,
     read_camera_model,
@@ -221,22 +222,12 @@ def to_yaml(scene: Scene) -> str:
          "render": {"spp": scene.render.spp, "seed": scene.render.seed,
                     "sampler": scene.render.sampler,
                     "background_spp": scene.render.background_spp}}
-    for b, entry in zip(scene.beacons, d["beacons"], strict=True):
-        if b.known_position is not None:
-            entry["known_position"] = list(b.known_position)
-    bench, ideal = scene.bench, Bench()
-    for key in ("pan_error", "pitch", "roll", "distortion", "distortion_known",
-                "jpeg_quality"):
-        if getattr(bench, key) != getattr(ideal, key):
-            value = getattr(bench, key)
-            d["camera"][key] = list(value) if isinstance(value, tuple) else value
-    if bench.noise is not None:
-        d["camera"]["noise"] = dataclasses.asdict(bench.noise)
-    for key in ("curvature_radius", "tilt"):
-        if getattr(bench, key) != getattr(ideal, key):
-            d["mirror"][key] = getattr(bench, key)
-    if bench.calibration_distance_error:
-        d["calibration"] = {"distance_error": bench.calibration_distance_error}
+    for path, value in as_keys(scene).items():  # the bench's imperfections
+        block, key = path.split(".")
+        if block.startswith("beacons["):
+            d["beacons"][int(block[len("beacons["):-1])][key] = value
+        else:
+            d.setdefault(block, {})[key] = value
     if len(scene.beacons) == 1:
         d["beacon"] = d.pop("beacons")[0]
     return yaml.safe_dump(d, sort_keys=False)

@@ -20,6 +20,7 @@ import yaml
 
 from mirrorsim import optics
 from mirrorsim.errors import SceneError
+from mirrorsim.imperfections import KEYS
 from mirrorsim.model import (
     PAN_WORDS,
     SAMPLERS,
@@ -198,9 +199,9 @@ def scene_from_dict(data: Any, source: str = "<scene>", default_name: str = "sce
     return replace(scene, warnings=_check_sight(scene, r, bkey))
 
 
-CAMERA_IMPERFECTIONS = ("pan_error", "pitch", "roll", "distortion", "distortion_known", "noise",
-                        "jpeg_quality")
-MIRROR_IMPERFECTIONS = ("curvature_radius", "tilt")
+CAMERA_IMPERFECTIONS = (*(k.split(".")[1] for k in KEYS.values() if k.startswith("camera.")),
+                        "distortion_known")
+MIRROR_IMPERFECTIONS = tuple(k.split(".")[1] for k in KEYS.values() if k.startswith("mirror."))
 # Bounds of the imperfections: beyond them a value is a typo, not a bench (degrees)
 MAX_PAN_ERROR, MAX_PITCH, MAX_ROLL, MAX_TILT = 10.0, 20.0, 30.0, 45.0
 
@@ -217,11 +218,7 @@ def _bench(r: Reader, cam: dict, m: dict, cal: Any, mirror: Mirror,
     d = Bench()
     distortion = d.distortion
     if cam.get("distortion") is not None:
-        raw = cam["distortion"]
-        if not isinstance(raw, list) or len(raw) != 2:
-            raise r.fail("camera.distortion", f"expected [k1, k2], got {show(raw)}")
-        distortion = (r.number(raw[0], "camera.distortion[0]", low=-1.0, high=1.0),
-                      r.number(raw[1], "camera.distortion[1]", low=-1.0, high=1.0))
+        distortion = read_distortion(r, cam["distortion"], "camera.distortion")
         corner = math.hypot(*resolution) / 2 / ((resolution[0] / 2)
                                                  / math.tan(math.radians(hfov) / 2))
         if not distortion_monotonic(distortion, corner):
@@ -257,6 +254,14 @@ def _bench(r: Reader, cam: dict, m: dict, cal: Any, mirror: Mirror,
                  jpeg_quality=jpeg, curvature_radius=radius,
                  tilt=angle(m, "mirror.tilt", MAX_TILT),
                  calibration_distance_error=distance_error)
+
+
+def read_distortion(r: Reader, raw: Any, key: str) -> tuple[float, float]:
+    """A lens's [k1, k2] (scene files and capture records alike)."""
+    if not isinstance(raw, list) or len(raw) != 2:
+        raise r.fail(key, f"expected [k1, k2], got {show(raw)}")
+    return (r.number(raw[0], f"{key}[0]", low=-1.0, high=1.0),
+            r.number(raw[1], f"{key}[1]", low=-1.0, high=1.0))
 
 
 def distortion_monotonic(k: tuple[float, float], r_max: float) -> bool:

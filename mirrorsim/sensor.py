@@ -76,14 +76,20 @@ def distort(canvas: np.ndarray, camera: Camera, k: tuple[float, float],
     return cv2.remap(canvas, mu, mv, cv2.INTER_NEAREST if nearest else cv2.INTER_LINEAR)
 
 
+@functools.lru_cache(maxsize=4)  # one lens per camera: built once, not per frame
+def _undistort_maps(camera: Camera, k: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+    """For each pixel of the ideal pinhole frame, where the lens imaged it (closed form)."""
+    xu, yu = _grid(camera)
+    f = _radial(xu, yu, k)
+    return ((camera.cx + camera.fx * xu * f).astype(np.float32),
+            (camera.cy + camera.fx * yu * f).astype(np.float32))
+
+
 def undistort(image: np.ndarray, camera: Camera, k: tuple[float, float]) -> np.ndarray:
     """The ideal pinhole frame from a distorted 8-bit sRGB one (the detector's first
     step for a calibrated lens): resampled bilinearly in linear radiance, so that edges
     keep their place."""
-    xu, yu = _grid(camera)
-    f = _radial(xu, yu, k)
-    mu = (camera.cx + camera.fx * xu * f).astype(np.float32)
-    mv = (camera.cy + camera.fx * yu * f).astype(np.float32)
+    mu, mv = _undistort_maps(camera, k)
     linear = srgb8_to_linear(image)
     out = cv2.remap(linear, mu, mv, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
     return to_srgb8(out)

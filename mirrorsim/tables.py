@@ -125,6 +125,17 @@ def report_table(report: Report) -> str:
     return "\n".join(lines)
 
 
+def _show_value(value) -> str:
+    """An imperfection's value as written: a number, a list, a mapping; '' for none."""
+    if value is None:
+        return ""
+    if isinstance(value, list):
+        return "[" + ", ".join(f"{v:g}" for v in value) + "]"
+    if isinstance(value, dict):
+        return ", ".join(f"{k} {v:g}" for k, v in value.items())
+    return f"{value:g}"
+
+
 def budget_table(budget: Budget) -> str:
     """The table ``mirrorsim budget`` prints: each source's measured deltas, the target
     error it leaves, and the first-order prediction."""
@@ -136,10 +147,7 @@ def budget_table(budget: Budget) -> str:
     failures = []
     for c in (*budget.sources, *([budget.all] if budget.all else [])):
         d = c.delta
-        value = "" if c.value is None else (
-            "[" + ", ".join(f"{v:g}" for v in c.value) + "]" if isinstance(c.value, list)
-            else ", ".join(f"{k} {v:g}" for k, v in c.value.items())
-            if isinstance(c.value, dict) else f"{c.value:g}")
+        value = _show_value(c.value)
         if c.failed:
             rows.append((c.source, value, *["failed"] + [""] * 7))
             failures.append(f"  {c.source}: {c.failed}")

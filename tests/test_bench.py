@@ -279,7 +279,8 @@ def test_roll_turns_the_image_about_the_principal_point(ideal):
     assert p1.mean(axis=0) == pytest.approx(expect, abs=0.5)
     cov_expect = turn @ np.cov(p0.T) @ turn.T
     assert orientation(np.cov(p1.T)) == pytest.approx(orientation(cov_expect), abs=0.3)
-    assert abs(orientation(cov_expect) - orientation(np.cov(p0.T))) == pytest.approx(roll)
+    # the roll is really there: the image's orientation moved by several degrees
+    assert abs(orientation(np.cov(p1.T)) - orientation(np.cov(p0.T))) > 3.0
 
 
 @pytest.fixture(scope="module")
