@@ -7,8 +7,12 @@ incidence, 1/image height in px]: the bias by a robust fit (Huber loss, scipy's
 absolute residuals (× √(π/2), so it estimates a Gaussian σ) of the rows within
 ``GROSS`` robust σ's; the rows beyond are counted as gross errors.  The off-axis bearing is
 signed (α − pan: + = left of the axis): a bias that changes sign across the axis is a line
-through zero, which |off-axis| cannot represent.  The model file also holds the
-typical σ's that `solve`, `montecarlo` and `plan` take (``--error-model FILE``).
+through zero, which |off-axis| cannot represent.  A dataset drawn with bench
+imperfections (the spec's ``bench:`` block) adds a feature for each imperfection that
+varies in it (:data:`BENCH_FEATURES`), so the bias and spread are fitted against the
+pan error, the calibration error, the mirror's curvature…  The model file also holds the
+typical σ's that `solve`, `montecarlo` and `plan` take (``--error-model FILE``): the
+RMS over the rows of bias and spread together, so a bench's imperfections enter them.
 """
 
 from __future__ import annotations
@@ -24,16 +28,70 @@ from solver.reader import Reader, read_json
 from solver.sltr import Sigma
 
 FEATURES = ("1", "d_total_cm", "off_axis_deg", "incidence_deg", "inv_height_px")
+# A bench's imperfections (a dataset's bench_* columns) as features, each in the form its
+# first-order effect is linear in: an unknown lens's k1 moves an image at off-axis angle φ
+# by ∝ k1·tan³φ and scales it by ∝ k1·tan²φ; a mirror of curvature 1/R changes d_total
+# by −2·cos i·d1·d2/(R·d_total) (`mirror_power`, so its d coefficient should be −1); shot
+# noise goes as 1/√full_well.  A feature enters a model only where its column varies.
+BENCH_FEATURES = ("pan_error_deg", "pitch_deg", "roll_deg", "k1_tan3", "k1_tan2",
+                  "shot_noise", "read_noise_rel", "jpeg_loss", "mirror_power", "tilt_deg",
+                  "calibration_error_cm")
 QUANTITIES = {"alpha": "alpha_err", "d_rel": "d_rel_err"}
 GROSS = 6.0  # residuals beyond this many robust σ's are gross errors, counted apart
 
 
-def _design(cols: dict, kind: str) -> np.ndarray:
-    d = np.asarray(cols[f"{kind}_d_true"], float)
-    return np.column_stack([np.ones_like(d), d,
-                            np.asarray(cols[f"{kind}_off_axis_deg"], float),
-                            np.asarray(cols[f"{kind}_incidence_deg"], float),
-                            1.0 / np.asarray(cols[f"{kind}_height_px_true"], float)])
+def _feature(cols: dict, kind: str, name: str) -> np.ndarray:
+    """One feature column for ``kind`` (target or beacon)."""
+    col = lambda k: np.asarray(cols[k], float)  # noqa: E731
+    if name == "1":
+        return np.ones(len(cols[f"{kind}_d_true"]))
+    if name in ("d_total_cm", "off_axis_deg", "incidence_deg"):
+        return col({"d_total_cm": f"{kind}_d_true"}.get(name, f"{kind}_{name}"))
+    if name == "inv_height_px":
+        return 1.0 / col(f"{kind}_height_px_true")
+    if f"bench_{name}" in cols:  # pan_error_deg, pitch_deg, roll_deg, tilt_deg
+        return col(f"bench_{name}")
+    if name == "calibration_error_cm":
+        return col("bench_calibration_error_cm")
+    if name in ("k1_tan3", "k1_tan2"):
+        unknown = ~np.asarray(cols["bench_distortion_known"], bool)
+        t = np.tan(np.radians(col(f"{kind}_off_axis_deg")))
+        return col("bench_k1") * unknown * t ** (3 if name == "k1_tan3" else 2)
+    if name in ("shot_noise", "read_noise_rel"):
+        fw = col("bench_full_well")
+        with np.errstate(divide="ignore", invalid="ignore"):
+            v = 1.0 / np.sqrt(fw) if name == "shot_noise" else col("bench_read_noise") / fw
+        return np.where(fw > 0, v, 0.0)
+    if name == "jpeg_loss":
+        q = col("bench_jpeg_quality")
+        return np.where(q > 0, (100.0 - q) / 100.0, 0.0)
+    if name == "mirror_power":
+        cos_i = np.cos(np.radians(col(f"{kind}_incidence_deg")))
+        return (2 * cos_i * col(f"{kind}_d1") * col(f"{kind}_d2")
+                * col("bench_curvature_per_cm") / col(f"{kind}_d_true"))
+    raise KeyError(name)
+
+
+def features_of(cols: dict) -> list[str]:
+    """The model's features for these columns: FEATURES, then each bench feature whose
+    column varies (for either object)."""
+    names = list(FEATURES)
+    if "bench_pan_error_deg" not in cols:
+        return names
+    ok = np.array([not e for e in cols.get("error", [""] * len(cols["index"]))])
+    for name in BENCH_FEATURES:
+        for kind in ("target", "beacon"):
+            v = _feature(cols, kind, name)[ok]
+            v = v[np.isfinite(v)]
+            if v.size and np.ptp(v) > 0:
+                names.append(name)
+                break
+    return names
+
+
+def _design(cols: dict, kind: str, names: list[str] | tuple[str, ...] = FEATURES
+            ) -> np.ndarray:
+    return np.column_stack([_feature(cols, kind, n) for n in names])
 
 
 def _robust_fit(X: np.ndarray, y: np.ndarray, cut: float = 1.345) -> np.ndarray:
@@ -64,16 +122,17 @@ def _robust_fit(X: np.ndarray, y: np.ndarray, cut: float = 1.345) -> np.ndarray:
 def fit(cols: dict) -> dict:
     """Fit the model to dataset columns (name → sequence); rows with errors or missing
     values are left out."""
-    model = {"features": list(FEATURES), "objects": {}}
+    names = features_of(cols)
+    model = {"features": names, "objects": {}}
     ok = np.array([not e for e in cols.get("error", [""] * len(cols["index"]))])
     for kind in ("target", "beacon"):
-        X_all = _design(cols, kind)
+        X_all = _design(cols, kind, names)
         model["objects"][kind] = {}
         for q, col in QUANTITIES.items():
             y = np.asarray(cols[f"{kind}_{col}"], float)
             m = ok & np.isfinite(y) & np.isfinite(X_all).all(axis=1)
             X, yy = X_all[m], y[m]
-            if len(yy) < len(FEATURES) + 2:
+            if len(yy) < len(names) + 2:
                 raise ValueError(f"too few usable rows ({len(yy)}) to fit {kind} {q}")
             bias = _robust_fit(X, yy)
             resid = yy - X @ bias
@@ -100,7 +159,8 @@ def fit(cols: dict) -> dict:
 
 def predict(model: dict, kind: str, quantity: str, features: np.ndarray
             ) -> tuple[np.ndarray, np.ndarray]:
-    """(bias, σ) of a quantity for feature rows (k, 5) in FEATURES order."""
+    """(bias, σ) of a quantity for feature rows (k, len(model["features"])), in the
+    order of ``model["features"]``."""
     m = model["objects"][kind][quantity]
     X = np.atleast_2d(features)
     return X @ np.asarray(m["bias"]), np.maximum(X @ np.asarray(m["spread"]), 0.0)
@@ -129,9 +189,11 @@ def summary(model: dict) -> str:
     for kind, qs in model["objects"].items():
         for q, m in qs.items():
             unit = "°" if q == "alpha" else " (relative)"
+            coef = ", ".join(f"{n} {c:.4g}"
+                             for n, c in zip(model["features"], m["bias"], strict=True))
             lines.append(f"  {kind:6s} {q:5s}: n={m['n']} ({m.get('gross_errors', 0)} gross), "
                          f"RMS {m['rms']:.5f}{unit}, typical σ "
-                         f"{m['typical_sigma']:.5f}; bias coef {np.round(m['bias'], 6).tolist()}")
+                         f"{m['typical_sigma']:.5f}; bias: {coef}")
     s = model["sigma"]
     lines.append(f"  σ for the solver: α {s['alpha_deg']:.5f}°, "
                  f"d_total {100 * s['d_total_rel']:.3f} %")
@@ -151,7 +213,7 @@ def plot(cols: dict, model: dict, out: str | Path) -> Path:
                                                 ("d_rel", "d_rel_err", 100.0, "%"))):
         for kind, colour in (("target", "#c0392b"), ("beacon", "#d4a017")):
             y = np.asarray(cols[f"{kind}_{col}"], float) * scale
-            X = _design(cols, kind)
+            X = _design(cols, kind, model["features"])
             m = ok & np.isfinite(y)
             for c, (fi, name) in enumerate(((1, "d_total (cm)"), (3, "incidence (°)"))):
                 ax = axes[r, c]

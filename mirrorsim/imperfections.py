@@ -76,3 +76,27 @@ def only(scene: Scene, key: str) -> Scene:
     if name == "distortion":
         kept["distortion_known"] = scene.bench.distortion_known
     return replace(base, bench=replace(Bench(), **kept))
+
+
+# a dataset row's imperfection columns (every row has all of them, ideal values on an
+# ideal bench, so that tables of different specs share a schema)
+ROW_COLUMNS = ("bench_pan_error_deg", "bench_pitch_deg", "bench_roll_deg", "bench_k1",
+               "bench_k2", "bench_distortion_known", "bench_full_well", "bench_read_noise",
+               "bench_jpeg_quality", "bench_curvature_per_cm", "bench_tilt_deg",
+               "bench_calibration_error_cm", "bench_beacon_dx_cm", "bench_beacon_dy_cm")
+
+
+def row_values(scene: Scene) -> dict[str, Any]:
+    """The scene's imperfections as a dataset row's columns (:data:`ROW_COLUMNS`):
+    ``bench_full_well`` 0 means no sensor noise, ``bench_jpeg_quality`` 0 a lossless PNG,
+    ``bench_curvature_per_cm`` 0 a flat mirror; the beacon offsets are believed − true."""
+    b = scene.bench
+    beacon = scene.beacons[0]
+    believed = beacon.known_position if beacon.known_position is not None else beacon.position
+    values = (b.pan_error, b.pitch, b.roll, b.distortion[0], b.distortion[1],
+              b.distortion_known, b.noise.full_well if b.noise else 0.0,
+              b.noise.read_noise if b.noise else 0.0, b.jpeg_quality or 0,
+              1.0 / b.curvature_radius if b.curvature_radius else 0.0, b.tilt,
+              b.calibration_distance_error, believed[0] - beacon.position[0],
+              believed[1] - beacon.position[1])
+    return dict(zip(ROW_COLUMNS, values, strict=True))

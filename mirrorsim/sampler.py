@@ -56,7 +56,7 @@ def load_spec(path: str | Path | None = None) -> dict:
     spec = read_yaml(path)
     r = Reader(path, SceneError)
     r.mapping(spec, "", {"board", "camera", "mirror", "target", "beacon", "occluder"},
-              {"render", "max_tries"})
+              {"render", "max_tries", "bench"})
     r.mapping(spec["board"], "board", {"size"}, {"hole_pitch"})
     r.pair(spec["board"]["size"], "board.size", positive=True)
     cam = r.mapping(spec["camera"], "camera", {"x", "y"},
@@ -89,6 +89,7 @@ def load_spec(path: str | Path | None = None) -> dict:
     r.mapping(spec["occluder"], "occluder", {"at", "length", "height"})
     read_render(r, spec.get("render", {}), seed=False)
     r.integer(spec.get("max_tries", 5000), "max_tries", low=1, high=MAX_TRIES)
+    _check_bench_keys(spec, r)
     # draws find range errors (wrong types, lo > hi) with their key, and a spec under
     # which no usable scene exists
     _draw(spec, np.random.default_rng(0), path)
@@ -96,6 +97,7 @@ def load_spec(path: str | Path | None = None) -> dict:
         sample_scene(spec, 0, "probe", tries=min(PROBE_TRIES, spec.get("max_tries", 5000)))
     except NoValidScene as exc:
         raise r.fail("", str(exc)) from None
+    _check_bench_ends(spec, r)
     return spec
 
 
@@ -132,8 +134,10 @@ def _value(spec: dict, block: str, key: str, rng: np.random.Generator, where) ->
     return r.number(v, f"{block}.{key}")
 
 
-def _draw(spec: dict, rng: np.random.Generator, where="<spec>") -> dict:
-    """One candidate scene dict (not yet validated)."""
+def _draw(spec: dict, rng: np.random.Generator, where="<spec>",
+          bench_rng: np.random.Generator | None = None) -> dict:
+    """One candidate scene dict (not yet validated); the bench imperfections drawn from
+    ``bench_rng`` (default: ``rng``)."""
     g = lambda block, key: _value(spec, block, key, rng, where)  # noqa: E731
     position = [g("camera", "x"), g("camera", "y")]
     models = camera_models(spec)
@@ -165,10 +169,133 @@ def _draw(spec: dict, rng: np.random.Generator, where="<spec>") -> dict:
     half = g("occluder", "length") / 2 * np.array([-u[1], u[0]])
     occ = {"start": (mid - half).tolist(), "end": (mid + half).tolist(),
            "height": g("occluder", "height")}
-    return {"board": copy.deepcopy(spec["board"]), "camera": cam, "mirror": mirror,
-            "target": target, "beacon": beacon, "occluders": [occ],
-            "render": dataclasses.asdict(read_render(Reader(where, SceneError),
-                                                     spec.get("render", {}), seed=False))}
+    d = {"board": copy.deepcopy(spec["board"]), "camera": cam, "mirror": mirror,
+         "target": target, "beacon": beacon, "occluders": [occ],
+         "render": dataclasses.asdict(read_render(Reader(where, SceneError),
+                                                  spec.get("render", {}), seed=False))}
+    # from their own stream, so that a bench block leaves the geometry drawn as without it
+    for path, value in _draw_bench(spec.get("bench") or {}, bench_rng or rng,
+                                   where).items():
+        _set_key(d, path, value)
+    return d
+
+
+# ------------------------------------------------------------- bench imperfections
+# The spec's optional `bench:` block: scene-file key paths (INTERFACE.md *Bench
+# imperfections*), each a value or a [lo, hi] range drawn per scene, with two drawn in
+# another form: the mirror's `curvature` (1/cm, 0 = flat) instead of its radius, since
+# the effect is linear in 1/R and a range of radii would pass through infinity; and the
+# beacon's `known_position_offset` (cm, drawn for x and y alike) instead of a position.
+BENCH_SPEC_KEYS = {
+    "camera": {"pan_error", "pitch", "roll", "distortion", "distortion_known", "noise",
+               "jpeg_quality"},
+    "mirror": {"curvature", "tilt"},
+    "calibration": {"distance_error"},
+    "beacon": {"known_position_offset"},
+}
+
+
+def _bench_value(raw: Any, key: str, rng: np.random.Generator, where,
+                 integer: bool = False) -> float:
+    """A value, or a uniform draw from [lo, hi] (integers for an integer key)."""
+    r = Reader(where, SceneError)
+    if isinstance(raw, list) and len(raw) == 2:
+        lo, hi = r.number(raw[0], f"{key}[0]"), r.number(raw[1], f"{key}[1]")
+        if lo > hi:
+            raise r.fail(key, f"{raw}: the range's low end exceeds its high end")
+        if integer:
+            return int(rng.integers(math.ceil(lo), math.floor(hi) + 1))
+        return float(rng.uniform(lo, hi))
+    return int(r.integer(raw, key, low=-2**31, high=2**31)) if integer else r.number(raw, key)
+
+
+def _draw_bench(bench: dict, rng: np.random.Generator, where="<spec>") -> dict[str, Any]:
+    """One draw of the spec's bench block, as scene-file key paths → values."""
+    out: dict[str, Any] = {}
+    for block in BENCH_SPEC_KEYS:  # a fixed order: same seed, same draws
+        raw = bench.get(block) or {}
+        for key in sorted(raw):
+            path, v = f"bench.{block}.{key}", raw[key]
+            if key == "distortion":
+                if not isinstance(v, list) or len(v) != 2:
+                    raise Reader(where, SceneError).fail(path, f"expected [k1, k2] (each a "
+                                                         f"value or [lo, hi]), got {show(v)}")
+                out["camera.distortion"] = [_bench_value(v[j], f"{path}[{j}]", rng, where)
+                                            for j in (0, 1)]
+            elif key == "distortion_known":
+                out["camera.distortion_known"] = v  # the scene reader checks the bool
+            elif key == "noise":
+                n = Reader(where, SceneError).mapping(v, path, {"full_well", "read_noise"})
+                out["camera.noise"] = {k: _bench_value(n[k], f"{path}.{k}", rng, where)
+                                       for k in ("full_well", "read_noise")}
+            elif key == "curvature":
+                c = _bench_value(v, path, rng, where)
+                if c != 0.0:
+                    out["mirror.curvature_radius"] = 1.0 / c
+            elif key == "known_position_offset":
+                out["beacon.known_position_offset"] = [
+                    _bench_value(v, path, rng, where) for _ in (0, 1)]
+            else:
+                out[f"{block}.{key}"] = _bench_value(v, path, rng, where,
+                                                     integer=key == "jpeg_quality")
+    return out
+
+
+def _set_key(d: dict, path: str, value: Any) -> None:
+    block, key = path.split(".")
+    if key == "known_position_offset":
+        d["beacon"]["known_position"] = [p + o for p, o in
+                                         zip(d["beacon"]["position"], value, strict=True)]
+    else:
+        d.setdefault(block, {})[key] = value
+
+
+def _check_bench_keys(spec: dict, r: Reader) -> None:
+    """The bench block's keys (its values are checked as they are drawn)."""
+    bench = spec.get("bench")
+    if bench is None:
+        return
+    r.mapping(bench, "bench", set(), set(BENCH_SPEC_KEYS))
+    for block, keys in BENCH_SPEC_KEYS.items():
+        if block in bench:
+            r.mapping(bench[block], f"bench.{block}", set(), keys)
+
+
+def _check_bench_ends(spec: dict, r: Reader) -> None:
+    """Each of the bench block's ranges at both ends, as a scene file would take it (a
+    tilt range reaching 45° is refused here, not thinned out silently by the draws)."""
+    bench = spec.get("bench")
+    if bench is None:
+        return
+    ideal = sample_scene({**spec, "bench": None}, 0, "probe",
+                         tries=min(PROBE_TRIES, spec.get("max_tries", 5000)))
+    base = yaml.safe_load(to_yaml(ideal))
+    for block in BENCH_SPEC_KEYS:
+        for key, raw in (bench.get(block) or {}).items():
+            for end in (0, 1):  # each range's low end, then its high end
+                pick = ([_range_end(x, end) for x in raw] if key == "distortion"
+                        and isinstance(raw, list) else _range_end(raw, end))
+                d = copy.deepcopy(base)
+                for path, value in _draw_bench({block: {key: pick}},
+                                               np.random.default_rng(0), r.source).items():
+                    _set_key(d, path, value)
+                try:
+                    scene_from_dict(d, source=str(r.source), default_name="probe")
+                except SceneError as exc:  # named by the spec's key, with the reason
+                    raise r.fail(f"bench.{block}.{key}", f"{show(raw)}: {exc.key}: "
+                                 f"{exc.message}") from None
+
+
+def _range_end(raw: Any, end: int) -> Any:
+    """A spec value with each [lo, hi] range replaced by its low (0) or high (1) end."""
+    if isinstance(raw, dict):
+        return {k: _range_end(v, end) for k, v in raw.items()}
+    if isinstance(raw, list) and len(raw) == 2 and all(
+            isinstance(x, (int, float)) and not isinstance(x, bool) for x in raw):
+        return raw[end]
+    if isinstance(raw, list):
+        return [_range_end(v, end) for v in raw]
+    return raw
 
 
 def sample_scene(spec: dict, rng: int | np.random.Generator | None, name: str,
@@ -182,10 +309,11 @@ def sample_scene(spec: dict, rng: int | np.random.Generator | None, name: str,
         draws were refused most often.
     """
     rng = np.random.default_rng(rng)
+    bench_rng = rng.spawn(1)[0]  # spawning leaves rng's own stream as it was
     tries = int(spec.get("max_tries", 5000)) if tries is None else tries
     reasons: dict[str, int] = {}
     for _ in range(tries):
-        d = _draw(spec, rng)
+        d = _draw(spec, rng, bench_rng=bench_rng)
         d["name"] = name
         try:
             s = scene_from_dict(d, source=name, default_name=name)

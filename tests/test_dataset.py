@@ -256,3 +256,120 @@ def test_camera_models_are_calibrated_once_before_the_workers(tmp_path):
     for i in range(3):
         cam = load_scene(tmp_path / "d" / "scenes" / f"scene{i:06d}.yaml").camera
         assert (cam.height, cam.hfov) in {(5.5, 65.2), (7.5, 62.0)}
+
+
+# ------------------------------------------------------------- bench imperfections
+
+def _bench_spec(tmp_path, bench: dict) -> Path:
+    import yaml
+
+    spec = yaml.safe_load(SPEC.read_text())
+    spec["bench"] = bench
+    path = tmp_path / "bench_spec.yaml"
+    path.write_text(yaml.safe_dump(spec))
+    return path
+
+
+def test_a_dataset_draws_bench_imperfections_and_its_rows_carry_them(one_worker, tmp_path):
+    """Pan error and calibration distance error drawn per scene, on the ideal dataset's
+    scenes (same seed: the bench block is drawn from a stream of its own, and neither changes
+    the photograph).  Against the same scene's ideal row: the α error moves by the pan
+    error (the mount's report is off by it), and the d_total error by the calibration's
+    scale, −(d − f)/d · e/(100 + e − f) (K measured at 100 + e while 100 is assumed; f
+    the face offset), within the calibration's own measurement error at half size (a
+    pencil 100 cm off is a few dozen px: its K varies by ~0.5 % with the distance)."""
+    from mirrorsim.detect import FRONT_OFFSET
+
+    ideal = collect_rows(one_worker[0], 3)
+    spec = _bench_spec(tmp_path, {"camera": {"pan_error": [-0.5, 0.5]},
+                                  "calibration": {"distance_error": [-2, 2]}})
+    out = tmp_path / "d"
+    res = run_dataset(3, 3, out, workers=1, spec_path=spec, progress=False)
+    assert res["failed"] == 0
+    rows = collect_rows(out, 3)
+    pans = [r["bench_pan_error_deg"] for r in rows]
+    assert len(set(pans)) == 3 and all(-0.5 <= p <= 0.5 for p in pans)
+    for r, r0 in zip(rows, ideal, strict=True):
+        assert r0["bench_pan_error_deg"] == 0.0 and r0["bench_calibration_error_cm"] == 0.0
+        assert r["bench_pitch_deg"] == 0.0 and r["bench_curvature_per_cm"] == 0.0
+        assert r["target_d_true"] == r0["target_d_true"]  # the same scene
+        for kind in ("target", "beacon"):
+            assert r[f"{kind}_alpha_err"] - r0[f"{kind}_alpha_err"] == pytest.approx(
+                r["bench_pan_error_deg"], abs=1e-6)
+            e, d, f = r["bench_calibration_error_cm"], r[f"{kind}_d_true"], FRONT_OFFSET[kind]
+            assert r[f"{kind}_d_rel_err"] - r0[f"{kind}_d_rel_err"] == pytest.approx(
+                -(d - f) / d * e / (100 + e - f), abs=0.002 if kind == "target" else 0.008)
+        # the scene file keeps what was drawn
+        s = load_scene(out / "scenes" / f"{r['scene']}.yaml")
+        assert s.bench.pan_error == r["bench_pan_error_deg"]
+        assert s.bench.calibration_distance_error == r["bench_calibration_error_cm"]
+    assert "bench_pan_error_deg" in (out / "README.md").read_text()
+
+
+def test_a_spec_without_a_bench_draws_the_same_scenes_as_before(tmp_path):
+    """The bench block is drawn from its own stream: adding it keeps every scene's geometry."""
+    from mirrorsim.sampler import load_spec, sample_scene
+
+    plain = load_spec(SPEC)
+    bench = load_spec(_bench_spec(tmp_path, {"mirror": {"tilt": [-1, 1]}}))
+    for i in range(3):
+        a, b = sample_scene(plain, i, "s"), sample_scene(bench, i, "s")
+        assert a.mirror == b.mirror and a.target == b.target and a.camera == b.camera
+        assert a.bench.tilt == 0.0 and -1 <= b.bench.tilt <= 1 and b.bench.tilt != 0.0
+
+
+@pytest.mark.parametrize("bench, key", [
+    ({"mirror": {"tilt": [0, 50]}}, "bench.mirror.tilt"),
+    ({"mirror": {"curvature": [0, 0.1]}}, "bench.mirror.curvature"),  # R = 10 cm < the mirror
+    ({"camera": {"jpeg_quality": [0, 90]}}, "bench.camera.jpeg_quality"),
+    ({"camera": {"noise": {"full_well": 5000, "read_noise": [-1, 3]}}}, "bench.camera.noise"),
+    ({"camera": {"pan_eror": 0.5}}, "bench.camera.pan_eror"),
+    ({"beacon": {"known_position_offset": [0, 200]}}, "bench.beacon.known_position_offset"),
+    ({"calibration": {"distance_error": [1, -1]}}, "bench.calibration.distance_error"),
+])
+def test_bad_bench_ranges_are_refused_with_their_key(tmp_path, capsys, bench, key):
+    spec = _bench_spec(tmp_path, bench)
+    assert main(["dataset", "--n", "1", "--seed", "0", "--out", str(tmp_path / "o"),
+                 "--spec", str(spec), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert key in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "o").exists()
+
+
+def test_error_model_fits_bias_against_bench_imperfections():
+    """Synthetic rows on a bench: α error = pan error + N(0, 0.003°); d_total error =
+    −0.0102·(calibration error) − mirror power + N(0, 0.002).  The fit recovers the
+    coefficients 1, −0.0102 and −1 by the features' names, and the solver's σ's grow to
+    the bench's (pan error uniform in ±0.5°: σ ≈ 0.29°)."""
+    rng = np.random.default_rng(2)
+    n = 3000
+    cols = {"index": list(range(n)), "error": [""] * n}
+    zeros = np.zeros(n)
+    cols.update({"bench_pan_error_deg": rng.uniform(-0.5, 0.5, n),
+                 "bench_calibration_error_cm": rng.uniform(-2, 2, n),
+                 "bench_curvature_per_cm": rng.uniform(-1e-3, 1e-3, n),
+                 "bench_distortion_known": np.ones(n, bool)})
+    for c in ("bench_pitch_deg", "bench_roll_deg", "bench_k1", "bench_k2", "bench_full_well",
+              "bench_read_noise", "bench_jpeg_quality", "bench_tilt_deg"):
+        cols[c] = zeros
+    for kind in ("target", "beacon"):
+        d1, d2 = rng.uniform(30, 70, n), rng.uniform(10, 50, n)
+        inc = rng.uniform(0, 60, n)
+        power = 2 * np.cos(np.radians(inc)) * d1 * d2 * cols["bench_curvature_per_cm"] / (d1 + d2)
+        cols.update({f"{kind}_d_true": d1 + d2, f"{kind}_d1": d1, f"{kind}_d2": d2,
+                     f"{kind}_off_axis_deg": rng.uniform(-20, 20, n),
+                     f"{kind}_incidence_deg": inc,
+                     f"{kind}_height_px_true": 15000 / (d1 + d2),
+                     f"{kind}_alpha_err": cols["bench_pan_error_deg"] + rng.normal(0, 0.003, n),
+                     f"{kind}_d_rel_err": (-0.0102 * cols["bench_calibration_error_cm"] - power
+                                           + rng.normal(0, 0.002, n))})
+    model = errormodel.fit(cols)
+    names = model["features"]
+    assert set(names) - set(errormodel.FEATURES) == {"pan_error_deg", "calibration_error_cm",
+                                                      "mirror_power"}
+    for kind in ("target", "beacon"):
+        a, d = model["objects"][kind]["alpha"], model["objects"][kind]["d_rel"]
+        assert a["bias"][names.index("pan_error_deg")] == pytest.approx(1.0, abs=0.01)
+        assert d["bias"][names.index("calibration_error_cm")] == pytest.approx(-0.0102, abs=5e-4)
+        assert d["bias"][names.index("mirror_power")] == pytest.approx(-1.0, abs=0.1)
+    assert model["sigma"]["alpha_deg"] == pytest.approx(0.5 / 3**0.5, rel=0.1)
