@@ -274,11 +274,8 @@ def _mirror_shapes(scene: Scene) -> dict:
     """
     m, bench = scene.mirror, scene.bench
     w, h = m.size
-    n0 = _v3(m.normal_towards(scene.camera.position))
-    along = np.array([-n0[1], n0[0], 0.0])  # so that along × z = n (right-handed)
-    t = math.radians(bench.tilt)  # the top leans away from the camera: up turns to −n
-    up, n = math.cos(t) * ZHAT - math.sin(t) * n0, math.cos(t) * n0 + math.sin(t) * ZHAT
-    c = _v3(m.center)
+    g, along, up, n = optics.glass_frame(scene)
+    c = g - up * h / 2  # the middle of its bottom edge
     fwd = back = 0.0  # how far the curved glass's rim stands before / behind its centre
     if bench.curvature_radius is None:
         glass = {"type": "rectangle", "bsdf": {"type": "conductor"},

@@ -208,6 +208,61 @@ def _sample_columns(scene: Scene, obj) -> list[np.ndarray]:
     return [p, p - side, p + side]
 
 
+def glass_frame(scene: Scene) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The glass as the bench stands it: its centre, and unit vectors along its width,
+    up its face and its normal towards the camera (3-D).  A tilted mirror turns about its
+    bottom edge, its top away from the camera (``up`` turns towards −normal)."""
+    m = scene.mirror
+    n0 = np.r_[m.normal_towards(scene.camera.position), 0.0]
+    along = np.array([-n0[1], n0[0], 0.0])  # so that along × z = n (right-handed)
+    t = math.radians(scene.bench.tilt)
+    z = np.array([0.0, 0.0, 1.0])
+    up, n = math.cos(t) * z - math.sin(t) * n0, math.cos(t) * n0 + math.sin(t) * z
+    return np.r_[m.center, 0.0] + up * m.size[1] / 2, along, up, n
+
+
+def glass_hits(scene: Scene, points3: np.ndarray, iterations: int = 6
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where the camera sees each 3-D point in the bench's real mirror (tilted, curved).
+
+    Returns (a, b, apparent): the reflection point's coordinates on the glass from its
+    centre (along its width, up its face; the glass spans |a| ≤ w/2, |b| ≤ h/2), and the
+    point's apparent position (along the camera's ray, at the path's length).  A curved
+    glass is solved by reflecting in the tangent plane at the current estimate and
+    returning to the sphere; for radii beyond the mirror's diagonal the normal turns by
+    under a degree over the glass and six rounds agree to 1e-9 cm.
+    """
+    g, along, up, n = glass_frame(scene)
+    cam = scene.camera.center3
+    P = np.atleast_2d(np.asarray(points3, float))
+    R = scene.bench.curvature_radius
+
+    def mirror_in(origin, normal):  # reflect the camera in a plane, meet it
+        c_img = cam - 2.0 * ((cam - origin) @ normal) * normal
+        s = ((origin - c_img) @ normal) / ((P - c_img) @ normal)
+        return c_img + s[:, None] * (P - c_img)
+
+    X = mirror_in(g, n)
+    if R is not None:
+        centre = g + R * n
+        for _ in range(iterations):
+            X = centre + (X - centre) * (abs(R) / np.linalg.norm(X - centre, axis=1))[:, None]
+            normals = (centre - X) / R
+            c_img = cam - 2.0 * np.einsum("ij,ij->i", cam - X, normals)[:, None] * normals
+            s = (np.einsum("ij,ij->i", X - c_img, normals)
+                 / np.einsum("ij,ij->i", P - c_img, normals))
+            X = c_img + s[:, None] * (P - c_img)
+        X = centre + (X - centre) * (abs(R) / np.linalg.norm(X - centre, axis=1))[:, None]
+    ray = X - cam
+    d1 = np.linalg.norm(ray, axis=1)
+    apparent = cam + ray * ((d1 + np.linalg.norm(P - X, axis=1)) / d1)[:, None]
+    return (X - g) @ along, (X - g) @ up, apparent
+
+
+def _flat_upright(scene: Scene) -> bool:
+    return scene.bench.tilt == 0.0 and scene.bench.curvature_radius is None
+
+
 def _column_failures(scene: Scene, walls, point, heights: np.ndarray) -> list[str]:
     """Why the image of each 3-D point (point, z), z in ``heights``, does not reach the
     camera ('' where it does).  What depends on the board point alone (the mirror's
@@ -221,13 +276,24 @@ def _column_failures(scene: Scene, walls, point, heights: np.ndarray) -> list[st
         return ["it stands behind the mirror's line"] * n
     img = mirror_image(cam.position, mir, point)
     half_w = mir.size[0] / 2.0
-    if abs(img.mirror_offset) > half_w:
-        return [f"its reflection point falls {abs(img.mirror_offset) - half_w:.2f} cm beyond "
-                f"the mirror's {'end at +yaw' if img.mirror_offset > 0 else 'end at -yaw'}"] * n
     t = img.d1 / img.d_total
-    zc = cam.height + t * (heights - cam.height)
-    u, v, depth = project(cam, np.column_stack([np.full(n, img.virtual[0]),
-                                                np.full(n, img.virtual[1]), heights]))
+    zc = cam.height + t * (heights - cam.height)  # in plan, for the walls
+    if _flat_upright(scene):
+        if abs(img.mirror_offset) > half_w:
+            return [f"its reflection point falls {abs(img.mirror_offset) - half_w:.2f} cm "
+                    f"beyond the mirror's "
+                    f"{'end at +yaw' if img.mirror_offset > 0 else 'end at -yaw'}"] * n
+        offset, up_glass = np.full(n, img.mirror_offset), zc
+        apparent = np.column_stack([np.full(n, img.virtual[0]), np.full(n, img.virtual[1]),
+                                    heights])
+    else:  # the bench's tilted or curved glass decides what it shows
+        pts = np.column_stack([np.full(n, float(point[0])), np.full(n, float(point[1])),
+                               heights])
+        a, b, apparent = glass_hits(scene, pts)
+        # the mirror line's +yaw direction against the glass's `along`
+        sign = 1.0 if glass_frame(scene)[1][:2] @ unit(mir.yaw) > 0 else -1.0
+        offset, up_glass = sign * a, b + mir.size[1] / 2
+    u, v, depth = project(cam, apparent, scene.bench.pitch, scene.bench.roll)
     outside = (depth <= 0) | (u < -0.5) | (u > cam.width - 0.5) | (v < -0.5) | (
         v > cam.height_px - 0.5)
     # the first wall (in the walls' order) under each path: camera → mirror, then
@@ -243,11 +309,14 @@ def _column_failures(scene: Scene, walls, point, heights: np.ndarray) -> list[st
                 blocker[hit] = name
     out = []
     for k in range(n):
-        if zc[k] > mir.size[1]:
-            out.append(f"the ray meets the mirror plane {zc[k] - mir.size[1]:.2f} cm above "
-                       "its top edge")
-        elif zc[k] < 0.0:
-            out.append(f"the ray meets the mirror plane {-zc[k]:.2f} cm below the board")
+        if abs(offset[k]) > half_w:
+            out.append(f"its reflection point falls {abs(offset[k]) - half_w:.2f} cm beyond "
+                       f"the mirror's {'end at +yaw' if offset[k] > 0 else 'end at -yaw'}")
+        elif up_glass[k] > mir.size[1]:
+            out.append(f"the ray meets the mirror plane {up_glass[k] - mir.size[1]:.2f} cm "
+                       "above its top edge")
+        elif up_glass[k] < 0.0:
+            out.append(f"the ray meets the mirror plane {-up_glass[k]:.2f} cm below the board")
         elif outside[k]:
             out.append(f"it lies outside the camera's field of view (pan {cam.pan_deg:.2f}°, "
                        f"pixel ({float(u[k]):.0f}, {float(v[k]):.0f}))")

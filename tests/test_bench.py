@@ -236,6 +236,42 @@ def test_tilted_mirror_moves_the_image_as_the_reflection_says(ideal):
                                                                  abs=0.3)
 
 
+def test_visibility_reflects_in_the_tilted_glass_as_the_closed_form():
+    """The visibility checks' reflection (optics.glass_hits) in a tilted glass: the
+    apparent point is the point reflected across the tilted plane (closed form), and the
+    reflection point lies on that plane."""
+    scene = bench_scene(mirror={"tilt": 3.0})
+    m = scene.mirror
+    n0 = np.r_[m.normal_towards(scene.camera.position), 0.0]
+    t = math.radians(3.0)
+    n1 = math.cos(t) * n0 + math.sin(t) * np.array([0, 0, 1.0])
+    pivot = np.r_[m.center, 0.0]
+    pts = np.array([[*scene.target.position, z] for z in (0.0, 7.0, scene.target.height)])
+    a, b, apparent = optics.glass_hits(scene, pts)
+    for q, app in zip(pts, apparent, strict=True):
+        assert app == pytest.approx(_reflect(q, pivot, n1), abs=1e-9)
+    g, along, up, n = optics.glass_frame(scene)
+    assert n == pytest.approx(n1) and (g - pivot) @ n1 == pytest.approx(0.0, abs=1e-12)
+
+
+def test_visibility_sees_the_curved_glass_where_the_render_does(ideal):
+    """The image of the target's axis through a concave glass (R = 600): where
+    optics.glass_hits puts its foot and top and the column of its axis, against the
+    detector's measurement on the render, both as shifts from the flat mirror."""
+    scene0, _, det0, tmp = ideal
+    scene = bench_scene(mirror={"curvature_radius": 600.0})
+    _, det = measure(scene, tmp, "curved_for_visibility")
+    pts = np.array([[*scene.target.position, 0.0], [*scene.target.position,
+                                                     scene.target.height]])
+    u0, v0, _ = optics.project(scene0.camera, optics.glass_hits(scene0, pts)[2])
+    u1, v1, _ = optics.project(scene.camera, optics.glass_hits(scene, pts)[2])
+    assert abs(u1[0] - u0[0]) + abs(v1[1] - v0[1]) > 2  # the glass moves it: a real test
+    assert det.target.u_axis - det0.target.u_axis == pytest.approx(u1[0] - u0[0], abs=0.5)
+    assert det.target.v_bottom - det0.target.v_bottom == pytest.approx(v1[0] - v0[0],
+                                                                       abs=0.5)
+    assert det.target.v_top - det0.target.v_top == pytest.approx(v1[1] - v0[1], abs=0.5)
+
+
 def test_pitch_moves_rows_as_a_rotated_pinhole(ideal):
     """A camera pitched up by p sees the direction (x, y, 1) at
     ((x, y cos p + sin p) / (cos p − y sin p)) (v down): closed form, no Mitsuba."""
