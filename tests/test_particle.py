@@ -45,4 +45,47 @@ def test_pure_step_and_class_agree():
     for c, z in zip(controls, obs, strict=True):
         f.step(c, z)
         p, w = pf_step(p, w, c, z, OBS, params, rng)
-        assert np.array_equal(p, f.particles) and np.array_equal(w, f.weights)
+        for a, b in ((p.mirror, f.particles.mirror), (p.beacon, f.particles.beacon),
+                     (p.cov, f.particles.cov), (w, f.weights)):
+            assert np.array_equal(a, b)
+
+
+def test_an_unseen_pose_only_moves_the_beacon():
+    """No observation: the beacon's Gaussians move by the command and widen by σ_trs²;
+    the mirror hypotheses and their weights stay."""
+    path, controls, obs, _, params = _run()
+    rho = line_normal(YAW) @ M
+    f = MovingBeaconFilter(OBS, path[0], (YAW - 15, YAW + 15), (rho - 8, rho + 8), n=300,
+                           params=params, rng=4)
+    f.step(controls[0], obs[0])
+    before = f.particles
+    w = f.weights.copy()
+    f.step(controls[1], None)
+    assert np.array_equal(f.particles.mirror, before.mirror) and np.array_equal(f.weights, w)
+    assert np.allclose(f.particles.beacon, before.beacon + controls[1])
+    assert np.allclose(f.particles.cov, before.cov + params.sigma_trs**2 * np.eye(2))
+
+
+def test_filter_is_as_good_as_the_batch_smoother():
+    """The Rao-Blackwellized filter against the least-squares smoother over the same data
+    (the best estimate of the mirror these poses allow; started at the truth): over 8
+    runs of 16 steps, the filter's median final yaw error within 0.1° of the smoother's
+    (the former 4-D filter's p90 stuck at 0.77° while the smoother's fell to 0.39°)."""
+    import importlib.util
+    from pathlib import Path
+
+    spec = importlib.util.spec_from_file_location(
+        "bench_particle", Path(__file__).parents[1] / "bench" / "particle.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    params = PFParams()
+    path = path_points("rectangular", (30.0, 60.0), 66.7, 4.0, 1.0, 8)
+    rho = line_normal(YAW) @ M
+    pf, batch = [], []
+    for seed in range(8):
+        controls, obs, true = simulate_run(OBS, M, YAW, path, params, seed)
+        est = track(OBS, path[0], controls, obs, (YAW - 15, YAW + 15), (rho - 8, rho + 8),
+                    n=2000, params=params, rng=100 + seed)
+        pf.append(abs(mirror_errors(est, M, YAW)[0][-1]))
+        batch.append(bench.batch_yaw_error(path[0], controls, obs, true, params))
+    assert np.median(pf) <= np.median(batch) + 0.1
