@@ -17,8 +17,9 @@ from mirrorsim.model import Scene  # noqa: E402
 from mirrorsim.report import Report  # noqa: E402
 from solver.geometry import unit  # noqa: E402
 
-if TYPE_CHECKING:  # the budget runs renders: no Mitsuba import to draw one
+if TYPE_CHECKING:  # the budget and the track run renders: no Mitsuba import to draw one
     from mirrorsim.budget import Budget
+    from mirrorsim.track import TrackReport
 
 
 def plot_top_view(scene: Scene, out: str | Path, *, dpi: int = 150) -> Path:
@@ -246,3 +247,78 @@ def plot_budget(budget: Budget, out: str | Path, *, dpi: int = 130) -> Path:
     ax.set_title(f"{budget.scene}: error budget of the bench")
     ax.legend(loc="lower right", fontsize=8)
     return _save(fig, Path(out), dpi)
+
+
+def plot_track(report: TrackReport, out: str | Path, *, dpi: int = 120) -> Path:
+    """The track's errors against the step: mirror yaw and offset with the particles'
+    spread, and the target; unseen poses marked."""
+    steps = np.array([s.step for s in report.steps])
+    seen = np.array([s.seen for s in report.steps])
+    fig, axes = plt.subplots(1, 3, figsize=(14, 4.2))
+    for ax, (value, spread, label) in zip(axes, (
+            ("mirror_yaw_error_deg", "yaw_spread_deg", "mirror yaw error (°)"),
+            ("mirror_offset_error_cm", "offset_spread_cm", "mirror offset error (cm)"),
+            ("target_error_cm", None, "target error (cm)")), strict=True):
+        y = np.array([getattr(s, value) for s in report.steps])
+        ax.plot(steps, y, "o-", color="#c0392b", ms=4, label="error")
+        if spread:
+            ax.plot(steps, [getattr(s, spread) for s in report.steps], "--", color="0.4",
+                    label="particles' SD")
+        if (~seen).any():
+            ax.plot(steps[~seen], y[~seen], "x", color="k", ms=9, label="beacon unseen")
+        ax.set_xlabel("step")
+        ax.set_ylabel(label)
+        ax.set_yscale("log")
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=8)
+    fig.suptitle(f"{report.scene}: moving beacon, {report.path} path, odometry σ "
+                 f"{report.odometry_sigma:g} cm")
+    return _save(fig, Path(out), dpi)
+
+
+def animate_track(scene: Scene, report: TrackReport, out: str | Path, *, fps: float = 3.0
+                  ) -> Path:
+    """A GIF of the top view over the steps: the beacon's true and commanded positions,
+    a sample of the filter's mirror lines, and the target estimate."""
+    from matplotlib.animation import FuncAnimation, PillowWriter
+
+    from solver.geometry import line_normal
+
+    fig, ax = plt.subplots(figsize=(6.5, 6.5))
+    _draw_top_view(ax, scene)
+    xlim, ylim = ax.get_xlim(), ax.get_ylim()
+    m = np.asarray(scene.mirror.center, float)
+    half = np.array([-1.2, 1.2]) * scene.mirror.size[0]
+    lines = [ax.plot([], [], color="#2e86c1", lw=0.5, alpha=0.08)[0] for _ in range(60)]
+    walked, = ax.plot([], [], "-", color="#d4a017", lw=1.2, label="beacon (true)")
+    told, = ax.plot([], [], ":", color="k", lw=1.0, label="beacon (commanded)")
+    est, = ax.plot([], [], "*", color="#c0392b", ms=14, label="target estimate")
+    title = ax.set_title("")
+    ax.legend(loc="upper left", fontsize=7)
+
+    def frame(k: int):
+        s = report.steps[k]
+        for line, (yaw, rho) in zip(lines, report.snapshots[k][: len(lines)], strict=False):
+            n = line_normal(yaw)
+            foot = n * rho + (m - n * (n @ m))  # the point of the line nearest the mirror
+            d = np.array([-n[1], n[0]])
+            line.set_data(*(foot[:, None] + d[:, None] * half[None]))
+        upto = report.steps[: k + 1]
+        walked.set_data(*np.array([u.beacon_position for u in upto]).T)
+        told.set_data(*np.array([u.commanded for u in upto]).T)
+        est.set_data([s.target[0]], [s.target[1]])
+        title.set_text(f"step {s.step}: yaw error {s.mirror_yaw_error_deg:.2f}°, target "
+                       f"error {s.target_error_cm:.2f} cm{'' if s.seen else ' (unseen)'}")
+        ax.set_xlim(xlim)
+        ax.set_ylim(ylim)
+        return [*lines, walked, told, est, title]
+
+    anim = FuncAnimation(fig, frame, frames=len(report.steps), blit=False)
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        with atomic_path(out) as tmp:
+            anim.save(tmp, writer=PillowWriter(fps=fps), dpi=70)
+    finally:
+        plt.close(fig)
+    return out

@@ -11,8 +11,9 @@ from mirrorsim.model import Scene
 from mirrorsim.report import Report
 from solver.sltr import Solution
 
-if TYPE_CHECKING:  # the budget runs renders: no Mitsuba import to draw one
+if TYPE_CHECKING:  # the budget and the track run renders: no Mitsuba import to draw one
     from mirrorsim.budget import Budget
+    from mirrorsim.track import TrackReport
 
 
 def _columns(rows: list[tuple[str, ...]]) -> list[str]:
@@ -206,3 +207,22 @@ def plan_text(scene: Scene, summ: dict) -> str:
         f"(seen under {100 * sb['seen_fraction']:.0f}% of poses)",
         f"    best position ({bb['position'][0]:.1f}, {bb['position'][1]:.1f}): "
         f"{bb['rmse']:.3f} cm"])
+
+
+def track_table(report: TrackReport) -> str:
+    """The track step by step, then its final estimate."""
+    rows = [("step", "beacon (true)", "seen", "yaw err °", "offset err cm", "target err cm",
+             "spread yaw °", "spread cm")]
+    for s in report.steps:
+        rows.append((str(s.step), f"({s.beacon_position[0]:.2f}, {s.beacon_position[1]:.2f})",
+                     "yes" if s.seen else "no", f"{s.mirror_yaw_error_deg:.3f}",
+                     f"{s.mirror_offset_error_cm:.3f}", f"{s.target_error_cm:.2f}",
+                     f"{s.yaw_spread_deg:.3f}", f"{s.offset_spread_cm:.3f}"))
+    f = report.final
+    seen = sum(s.seen for s in report.steps)
+    return "\n".join([f"{report.scene}: {report.path} path, {len(report.steps)} poses "
+                      f"({seen} seen), odometry σ {report.odometry_sigma:g} cm", *_columns(rows),
+                      f"final: target ({f.target[0]:.2f}, {f.target[1]:.2f}), error "
+                      f"{f.target_error_cm:.2f} cm; mirror yaw error "
+                      f"{f.mirror_yaw_error_deg:.3f}°, offset error "
+                      f"{f.mirror_offset_error_cm:.3f} cm"])

@@ -1,0 +1,224 @@
+"""The moving beacon of the paper's Section 4 on rendered frames (`mirrorsim track`).
+
+The scene's first beacon follows a path (eqs 19–21: ``linear``, ``rectangular`` or
+``sawtooth``; step b along the camera's line to the beacon, side a across it) from its
+start.  The experimenter commands each move; the beacon's believed position is the start
+plus the commanded moves, its true position also carries odometry noise (N(0, σ) per
+axis per move, seeded).  Each pose is rendered, detected from its capture record (which
+holds the believed position), and fed to the Rao-Blackwellized particle filter
+(:mod:`solver.particle`); a pose where the detector finds no usable mirror image of the
+beacon is recorded as unseen and the filter only predicts, as a real robot would.  The
+first pose's closed-form solve (one beacon, one target) centres the filter's prior
+(yaw ± 15°, offset ± 8 cm).  The target, which does not move, is measured in every frame;
+its estimate is its mean measurement reflected in the filter's mirror.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from mirrorsim.calibrate import calibrate
+from mirrorsim.detect import detect_frame, read_frame
+from mirrorsim.errors import BadArgument, DetectionError
+from mirrorsim.evaluate import DETECTOR_SIGMA
+from mirrorsim.frames import render_to_files
+from mirrorsim.model import Scene
+from solver.errors import SolverError
+from solver.geometry import bearing_deg, line_normal
+from solver.particle import MovingBeaconFilter, PFParams, mirror_errors
+from solver.placement import path_points
+from solver.sltr import locate, solve_measurements
+
+PATHS = ("rectangular", "linear", "sawtooth")
+PRIOR_YAW_DEG, PRIOR_OFFSET_CM = 15.0, 8.0
+MAX_STEPS = 500
+
+
+@dataclass(frozen=True)
+class TrackStep:
+    """One pose: where the beacon was and what the filter made of it."""
+
+    step: int  # 0: the start
+    commanded: tuple[float, float]  # the believed position
+    beacon_position: tuple[float, float]  # the true one
+    seen: bool
+    why_unseen: str
+    mirror_yaw_error_deg: float
+    mirror_offset_error_cm: float
+    target: tuple[float, float]
+    target_error_cm: float
+    yaw_spread_deg: float
+    offset_spread_cm: float
+
+    def to_json(self) -> dict:
+        """The step as INTERFACE.md's track report writes it."""
+        return {"step": self.step, "beacon_position": list(self.beacon_position),
+                "commanded_position": list(self.commanded), "seen": self.seen,
+                **({"why_unseen": self.why_unseen} if not self.seen else {}),
+                "mirror_yaw_error_deg": self.mirror_yaw_error_deg,
+                "mirror_offset_error_cm": self.mirror_offset_error_cm,
+                "target": list(self.target), "target_error_cm": self.target_error_cm,
+                "particle_spread": {"yaw_deg": self.yaw_spread_deg,
+                                    "offset_cm": self.offset_spread_cm}}
+
+
+@dataclass(frozen=True)
+class TrackReport:
+    """A whole track; ``snapshots`` (particles' mirror lines per step) feed the animation."""
+
+    scene: str
+    path: str
+    odometry_sigma: float
+    seed: int
+    steps: tuple[TrackStep, ...]
+    snapshots: tuple[np.ndarray, ...] = field(default=(), repr=False)
+
+    @property
+    def final(self) -> TrackStep:
+        """The last step."""
+        return self.steps[-1]
+
+    def to_json(self) -> dict:
+        """INTERFACE.md's track report."""
+        f = self.final
+        return {"scene": self.scene, "path": self.path, "odometry_sigma_cm": self.odometry_sigma,
+                "seed": self.seed, "steps": [s.to_json() for s in self.steps],
+                "final": {"target": list(f.target),
+                          "mirror_yaw_error_deg": f.mirror_yaw_error_deg,
+                          "mirror_offset_error_cm": f.mirror_offset_error_cm,
+                          "target_error_cm": f.target_error_cm,
+                          "seen_poses": sum(s.seen for s in self.steps),
+                          "poses": len(self.steps)}}
+
+
+def beacon_path(scene: Scene, kind: str, steps: int, side: float, step: float) -> np.ndarray:
+    """The commanded positions, start first: ``steps`` moves along the path ``kind``."""
+    b = scene.beacons[0]
+    start = np.asarray(b.known_position if b.known_position is not None else b.position, float)
+    alpha = float(bearing_deg(scene.camera.position, start))
+    pts = path_points(kind, start, alpha, side, step, steps // 2 + 2)
+    pts = pts - pts[0] + start  # from the beacon's start
+    return pts[: steps + 1]
+
+
+def check_options(kind: str, steps: int, sigma: float, side: float, step: float) -> None:
+    """Refuse bad options as bad input."""
+    if kind not in PATHS:
+        raise BadArgument("--path", f"{kind!r}: expected one of {', '.join(PATHS)}")
+    if not 1 <= steps <= MAX_STEPS:
+        raise BadArgument("--steps", f"{steps} must be within 1..{MAX_STEPS}")
+    if not (np.isfinite(sigma) and sigma >= 0):
+        raise BadArgument("--odometry-sigma", f"{sigma} must be a number ≥ 0 (cm)")
+    for flag, v in (("--side", side), ("--step", step)):
+        if not (np.isfinite(v) and v > 0):
+            raise BadArgument(flag, f"{v} must be a positive length (cm)")
+
+
+def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps: int = 20,
+              odometry_sigma: float = 0.1, seed: int = 0, side: float = 4.0,
+              step: float = 1.0, spp: int | None = None, variant: str = "auto",
+              particles: int = 4000,
+              on_pose: Callable[[int, int], None] | None = None) -> TrackReport:
+    """Render, detect and filter every pose of the path; return the report.
+
+    Raises
+    ------
+    BadArgument
+        For bad options.
+    DetectionError
+        If the beacon or the target is not measured at the start pose (no prior).
+    """
+    check_options(kind, steps, odometry_sigma, side, step)
+    out = Path(out)
+    rng = np.random.default_rng(seed)
+    commanded = beacon_path(scene, kind, steps, side, step)
+    moves = np.diff(commanded, axis=0)
+    b0 = scene.beacons[0]
+    true = [np.asarray(b0.position, float)]
+    for mv in moves:
+        true.append(true[-1] + mv + rng.normal(0.0, odometry_sigma, 2))
+    cam = scene.camera
+    mirror_point, mirror_yaw = np.asarray(scene.mirror.center, float), scene.mirror.yaw
+    target_true = np.asarray(scene.target.position, float)
+    params = PFParams(sigma=DETECTOR_SIGMA, sigma_trs=max(odometry_sigma, 1e-3))
+    pf: MovingBeaconFilter | None = None
+    targets: list[tuple[float, float]] = []
+    records: list[TrackStep] = []
+    snapshots: list[np.ndarray] = []
+    for k in range(steps + 1):
+        if on_pose:
+            on_pose(k, steps + 1)
+        pose = replace(scene, name=f"{scene.name}_pose{k:03d}",
+                       beacons=(replace(b0, position=tuple(true[k]),
+                                        known_position=tuple(commanded[k])),),
+                       render=replace(scene.render, seed=seed * 1000 + k))
+        obs, why = _measure(pose, out, spp, variant, targets)
+        if pf is None:
+            if obs is None or not targets:
+                raise DetectionError(f"{scene.name}: the start pose gives the filter no "
+                                     f"prior: {why or 'the target was not measured'}")
+            pf = _start_filter(cam.position, commanded[0], obs, targets[0], params, particles,
+                               seed)
+        pf.step(np.zeros(2) if k == 0 else moves[k - 1], obs)
+        est = pf.estimate()
+        yaw_err, off_err = mirror_errors([est], mirror_point, mirror_yaw)
+        target = (locate(cam.position, est["rho"] * line_normal(est["yaw_deg"]), est["yaw_deg"],
+                         *np.mean(targets, axis=0)) if targets else np.full(2, np.nan))
+        records.append(TrackStep(
+            step=k, commanded=tuple(map(float, commanded[k])),
+            beacon_position=tuple(map(float, true[k])), seen=obs is not None, why_unseen=why,
+            mirror_yaw_error_deg=float(abs(yaw_err[0])), mirror_offset_error_cm=float(off_err[0]),
+            target=tuple(map(float, target)),
+            target_error_cm=float(np.linalg.norm(target - target_true)),
+            yaw_spread_deg=est["yaw_sd_deg"], offset_spread_cm=est["rho_sd"]))
+        snapshots.append(_snapshot(pf, rng))
+    return TrackReport(scene=scene.name, path=kind, odometry_sigma=odometry_sigma, seed=seed,
+                       steps=tuple(records), snapshots=tuple(snapshots))
+
+
+def _measure(pose: Scene, out: Path, spp: int | None, variant: str,
+             targets: list[tuple[float, float]]) -> tuple[tuple[float, float] | None, str]:
+    """Render and detect one pose: the beacon's (α, d_total), or None and why; the
+    target's measurement, when it has one, is appended to ``targets``."""
+    files = render_to_files(pose, out / "poses", spp=spp, variant=variant, progress=False,
+                            reuse=True, ids=False)
+    cal = calibrate(files.capture.camera, files.capture.target_size,
+                    files.capture.beacons[0].height, variant=variant,
+                    distance_error=pose.bench.calibration_distance_error)
+    try:
+        det = detect_frame(read_frame(files.image), files.capture, cal)
+    except DetectionError as exc:
+        return None, str(exc)
+    if det.target.d_total is not None:
+        targets.append((det.target.alpha_deg, det.target.d_total))
+    m = det.beacon_measurements()[0]
+    if m.d_total is None:
+        return None, "the beacon's mirror image is clipped"
+    return (m.alpha_deg, m.d_total), ""
+
+
+def _start_filter(observer, start, obs, target, params: PFParams, n: int, seed: int
+                  ) -> MovingBeaconFilter:
+    """The filter with its prior centred on the first pose's closed-form solve."""
+    from solver.sltr import BeaconMeasurement
+
+    try:
+        sol = solve_measurements(observer, [BeaconMeasurement(tuple(start), *obs)], [target])
+        yaw, rho = sol.mirror.yaw_deg, sol.mirror.rho
+    except SolverError as exc:
+        raise DetectionError(f"the start pose's measurements give no mirror ({exc})") from None
+    return MovingBeaconFilter(observer, start, (yaw - PRIOR_YAW_DEG, yaw + PRIOR_YAW_DEG),
+                              (rho - PRIOR_OFFSET_CM, rho + PRIOR_OFFSET_CM), n=n,
+                              params=params, rng=seed)
+
+
+def _snapshot(pf: MovingBeaconFilter, rng: np.random.Generator, keep: int = 400) -> np.ndarray:
+    """A few hundred of the filter's mirror hypotheses (yaw, ρ), drawn by weight, for the
+    animation (from the track's generator, after its odometry draws: the filter's own
+    stream is untouched)."""
+    idx = rng.choice(len(pf.weights), size=min(keep, len(pf.weights)), p=pf.weights)
+    return pf.particles.mirror[idx].copy()

@@ -1,0 +1,94 @@
+"""`mirrorsim track`: the moving beacon on rendered frames (half-size renders)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from mirrorsim.cli import main
+from mirrorsim.track import run_track
+
+from .conftest import SCENES, small_scene
+
+
+@pytest.fixture(scope="module")
+def exp1_track(tmp_path_factory):
+    out = tmp_path_factory.mktemp("track")
+    scene = small_scene("exp1", 960, 544, spp=8)
+    return scene, run_track(scene, out, steps=6, seed=3), out
+
+
+def test_a_short_track_converges(exp1_track):
+    """The filter's mirror and target errors fall along the path: after 6 moves the yaw
+    error is below the start's closed-form prior centre's, and the target within 1 cm."""
+    _, rep, _ = exp1_track
+    seen = [s for s in rep.steps if s.seen]
+    assert len(seen) >= 4
+    first, final = rep.steps[0], rep.final
+    assert final.mirror_yaw_error_deg < first.mirror_yaw_error_deg
+    assert final.yaw_spread_deg < first.yaw_spread_deg
+    assert final.target_error_cm < 1.0
+    # the capture record held the commanded position, the frame the true one
+    assert rep.steps[3].commanded != rep.steps[3].beacon_position
+
+
+def test_unseen_poses_are_skipped(tmp_path):
+    """A path that walks the beacon out of the mirror's view (2 cm steps towards the
+    camera): those poses are recorded unseen with the detector's reason, and the
+    filter's mirror estimate does not change on them (prediction only)."""
+    scene = small_scene("exp1", 960, 544, spp=8)
+    rep = run_track(scene, tmp_path, steps=8, step=2.5, side=2.0, seed=1)
+    unseen = [s for s in rep.steps if not s.seen]
+    assert unseen and all(s.why_unseen for s in unseen)
+    for prev, s in zip(rep.steps, rep.steps[1:], strict=False):
+        if not s.seen:
+            assert s.mirror_yaw_error_deg == prev.mirror_yaw_error_deg
+            assert s.target == prev.target
+    doc = rep.to_json()
+    assert doc["final"]["seen_poses"] == len(rep.steps) - len(unseen)
+
+
+def test_same_seed_same_report(exp1_track, tmp_path):
+    """Rendered again in a fresh folder with the same seed: the same report."""
+    scene, rep, _ = exp1_track
+    again = run_track(scene, tmp_path, steps=6, seed=3)
+    assert again.to_json() == rep.to_json()
+
+
+@pytest.mark.parametrize("args, flag", [
+    (["--steps", "0"], "--steps"),
+    (["--odometry-sigma", "-1"], "--odometry-sigma"),
+    (["--path", "zigzag"], "--path"),
+    (["--side", "0"], "--side"),
+])
+def test_bad_options_are_refused(tmp_path, capsys, args, flag):
+    assert main(["track", str(SCENES / "exp1.yaml"), "--out", str(tmp_path / "t"),
+                 *args]) == 2
+    err = capsys.readouterr().err
+    assert flag in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "t").exists()
+
+
+def test_track_command_writes_report_plot_and_animation(tmp_path, capsys):
+    """The command on a half-size scene file: table, JSON (INTERFACE.md's keys), PNG, GIF."""
+    import yaml
+
+    d = yaml.safe_load((SCENES / "exp1.yaml").read_text())
+    d["camera"]["resolution"] = [960, 544]
+    d["render"] = {"spp": 8}
+    path = tmp_path / "exp1.yaml"
+    path.write_text(yaml.safe_dump(d))
+    out = tmp_path / "t"
+    assert main(["track", str(path), "--steps", "2", "--out", str(out), "--quiet",
+                 "--json", "-"]) == 0
+    printed = capsys.readouterr().out
+    doc = json.loads(printed[printed.index("{"):])
+    assert doc["path"] == "rectangular" and len(doc["steps"]) == 3
+    for key in ("step", "beacon_position", "mirror_yaw_error_deg", "mirror_offset_error_cm",
+                "target_error_cm"):
+        assert key in doc["steps"][0]
+    assert {"target", "mirror_yaw_error_deg", "target_error_cm"} <= set(doc["final"])
+    for name in ("track.json", "track.png", "track.gif"):
+        assert (out / name).stat().st_size > 0
+    assert (out / "track.gif").read_bytes()[:6] in (b"GIF89a", b"GIF87a")
