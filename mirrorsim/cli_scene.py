@@ -265,6 +265,7 @@ def _track(args) -> int:
     from mirrorsim.tables import track_table
     from mirrorsim.track import check_options, run_track
 
+    # before the scene is read (run_track checks again, for callers other than the CLI)
     check_options(args.path, args.steps, args.odometry_sigma, args.side, args.step)
     at_least(("--spp", args.spp, 1), ("--seed", args.seed, 0))
     scene = load(args.scene)

@@ -49,10 +49,8 @@ def _feature(cols: dict, kind: str, name: str) -> np.ndarray:
         return col({"d_total_cm": f"{kind}_d_true"}.get(name, f"{kind}_{name}"))
     if name == "inv_height_px":
         return 1.0 / col(f"{kind}_height_px_true")
-    if f"bench_{name}" in cols:  # pan_error_deg, pitch_deg, roll_deg, tilt_deg
+    if f"bench_{name}" in cols:  # pan error, pitch, roll, tilt, calibration error
         return col(f"bench_{name}")
-    if name == "calibration_error_cm":
-        return col("bench_calibration_error_cm")
     if name in ("k1_tan3", "k1_tan2"):
         unknown = ~np.asarray(cols["bench_distortion_known"], bool)
         t = np.tan(np.radians(col(f"{kind}_off_axis_deg")))

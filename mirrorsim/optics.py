@@ -237,26 +237,31 @@ def glass_hits(scene: Scene, points3: np.ndarray, iterations: int = 6
     P = np.atleast_2d(np.asarray(points3, float))
     R = scene.bench.curvature_radius
 
-    def mirror_in(origin, normal):  # reflect the camera in a plane, meet it
-        c_img = cam - 2.0 * ((cam - origin) @ normal) * normal
-        s = ((origin - c_img) @ normal) / ((P - c_img) @ normal)
+    def meet(origin, normals):  # reflect the camera in each point's plane, meet it there
+        c_img = cam - 2.0 * np.einsum("ij,ij->i", cam - origin, normals)[:, None] * normals
+        s = (np.einsum("ij,ij->i", origin - c_img, normals)
+             / np.einsum("ij,ij->i", P - c_img, normals))
         return c_img + s[:, None] * (P - c_img)
 
-    X = mirror_in(g, n)
+    X = meet(np.broadcast_to(g, P.shape), np.broadcast_to(n, P.shape))
     if R is not None:
         centre = g + R * n
-        for _ in range(iterations):
-            X = centre + (X - centre) * (abs(R) / np.linalg.norm(X - centre, axis=1))[:, None]
-            normals = (centre - X) / R
-            c_img = cam - 2.0 * np.einsum("ij,ij->i", cam - X, normals)[:, None] * normals
-            s = (np.einsum("ij,ij->i", X - c_img, normals)
-                 / np.einsum("ij,ij->i", P - c_img, normals))
-            X = c_img + s[:, None] * (P - c_img)
-        X = centre + (X - centre) * (abs(R) / np.linalg.norm(X - centre, axis=1))[:, None]
+
+        def on_sphere(Y):
+            return centre + (Y - centre) * (abs(R) / np.linalg.norm(Y - centre, axis=1))[:, None]
+
+        X = on_sphere(X)
+        for _ in range(iterations):  # the tangent plane there, back onto the sphere
+            X = on_sphere(meet(X, (centre - X) / R))
     ray = X - cam
     d1 = np.linalg.norm(ray, axis=1)
     apparent = cam + ray * ((d1 + np.linalg.norm(P - X, axis=1)) / d1)[:, None]
     return (X - g) @ along, (X - g) @ up, apparent
+
+
+def _past_end(offset: float, half_w: float) -> str:
+    return (f"its reflection point falls {abs(offset) - half_w:.2f} cm beyond the mirror's "
+            f"{'end at +yaw' if offset > 0 else 'end at -yaw'}")
 
 
 def _flat_upright(scene: Scene) -> bool:
@@ -279,10 +284,8 @@ def _column_failures(scene: Scene, walls, point, heights: np.ndarray) -> list[st
     t = img.d1 / img.d_total
     zc = cam.height + t * (heights - cam.height)  # in plan, for the walls
     if _flat_upright(scene):
-        if abs(img.mirror_offset) > half_w:
-            return [f"its reflection point falls {abs(img.mirror_offset) - half_w:.2f} cm "
-                    f"beyond the mirror's "
-                    f"{'end at +yaw' if img.mirror_offset > 0 else 'end at -yaw'}"] * n
+        if abs(img.mirror_offset) > half_w:  # the whole column: no need to look further
+            return [_past_end(img.mirror_offset, half_w)] * n
         offset, up_glass = np.full(n, img.mirror_offset), zc
         apparent = np.column_stack([np.full(n, img.virtual[0]), np.full(n, img.virtual[1]),
                                     heights])
@@ -310,8 +313,7 @@ def _column_failures(scene: Scene, walls, point, heights: np.ndarray) -> list[st
     out = []
     for k in range(n):
         if abs(offset[k]) > half_w:
-            out.append(f"its reflection point falls {abs(offset[k]) - half_w:.2f} cm beyond "
-                       f"the mirror's {'end at +yaw' if offset[k] > 0 else 'end at -yaw'}")
+            out.append(_past_end(offset[k], half_w))
         elif up_glass[k] > mir.size[1]:
             out.append(f"the ray meets the mirror plane {up_glass[k] - mir.size[1]:.2f} cm "
                        "above its top edge")

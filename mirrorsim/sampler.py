@@ -123,15 +123,9 @@ def _value(spec: dict, block: str, key: str, rng: np.random.Generator, where) ->
     if not isinstance(spec[block], dict):
         raise r.fail(block, f"expected a mapping, got {show(spec[block])}")
     v = spec[block].get(key)
-    if isinstance(v, list) and len(v) == 2:
-        lo = r.number(v[0], f"{block}.{key}[0]")
-        hi = r.number(v[1], f"{block}.{key}[1]")
-        if lo > hi:
-            raise r.fail(f"{block}.{key}", f"{v}: the range's low end exceeds its high end")
-        return float(rng.uniform(lo, hi))
     if v is None:
         raise r.fail(f"{block}.{key}", "missing required key (a number or [lo, hi])")
-    return r.number(v, f"{block}.{key}")
+    return _draw_number(v, f"{block}.{key}", rng, where)
 
 
 def _draw(spec: dict, rng: np.random.Generator, where="<spec>",
@@ -195,9 +189,9 @@ BENCH_SPEC_KEYS = {
 }
 
 
-def _bench_value(raw: Any, key: str, rng: np.random.Generator, where,
+def _draw_number(raw: Any, key: str, rng: np.random.Generator, where,
                  integer: bool = False) -> float:
-    """A value, or a uniform draw from [lo, hi] (integers for an integer key)."""
+    """A spec's value, or a uniform draw from its [lo, hi] (integers for an integer key)."""
     r = Reader(where, SceneError)
     if isinstance(raw, list) and len(raw) == 2:
         lo, hi = r.number(raw[0], f"{key}[0]"), r.number(raw[1], f"{key}[1]")
@@ -220,23 +214,23 @@ def _draw_bench(bench: dict, rng: np.random.Generator, where="<spec>") -> dict[s
                 if not isinstance(v, list) or len(v) != 2:
                     raise Reader(where, SceneError).fail(path, f"expected [k1, k2] (each a "
                                                          f"value or [lo, hi]), got {show(v)}")
-                out["camera.distortion"] = [_bench_value(v[j], f"{path}[{j}]", rng, where)
+                out["camera.distortion"] = [_draw_number(v[j], f"{path}[{j}]", rng, where)
                                             for j in (0, 1)]
             elif key == "distortion_known":
                 out["camera.distortion_known"] = v  # the scene reader checks the bool
             elif key == "noise":
                 n = Reader(where, SceneError).mapping(v, path, {"full_well", "read_noise"})
-                out["camera.noise"] = {k: _bench_value(n[k], f"{path}.{k}", rng, where)
+                out["camera.noise"] = {k: _draw_number(n[k], f"{path}.{k}", rng, where)
                                        for k in ("full_well", "read_noise")}
             elif key == "curvature":
-                c = _bench_value(v, path, rng, where)
+                c = _draw_number(v, path, rng, where)
                 if c != 0.0:
                     out["mirror.curvature_radius"] = 1.0 / c
             elif key == "known_position_offset":
                 out["beacon.known_position_offset"] = [
-                    _bench_value(v, path, rng, where) for _ in (0, 1)]
+                    _draw_number(v, path, rng, where) for _ in (0, 1)]
             else:
-                out[f"{block}.{key}"] = _bench_value(v, path, rng, where,
+                out[f"{block}.{key}"] = _draw_number(v, path, rng, where,
                                                      integer=key == "jpeg_quality")
     return out
 

@@ -22,10 +22,10 @@ from pathlib import Path
 import numpy as np
 
 from mirrorsim.calibrate import calibrate
-from mirrorsim.detect import detect_frame, read_frame
+from mirrorsim.detect import Calibration, detect_frame, read_frame
 from mirrorsim.errors import BadArgument, DetectionError
 from mirrorsim.evaluate import DETECTOR_SIGMA
-from mirrorsim.frames import render_to_files
+from mirrorsim.frames import FrameFiles, render_to_files
 from mirrorsim.model import Scene
 from solver.errors import SolverError
 from solver.geometry import bearing_deg, line_normal
@@ -146,6 +146,7 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
     target_true = np.asarray(scene.target.position, float)
     params = PFParams(sigma=DETECTOR_SIGMA, sigma_trs=max(odometry_sigma, 1e-3))
     pf: MovingBeaconFilter | None = None
+    cal = None  # one camera, one calibration: made at the first pose
     targets: list[tuple[float, float]] = []
     records: list[TrackStep] = []
     snapshots: list[np.ndarray] = []
@@ -156,7 +157,14 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
                        beacons=(replace(b0, position=tuple(true[k]),
                                         known_position=tuple(commanded[k])),),
                        render=replace(scene.render, seed=seed * 1000 + k))
-        obs, why = _measure(pose, out, spp, variant, targets)
+        files = render_to_files(pose, out / "poses", spp=spp, variant=variant,
+                                progress=False, reuse=True, ids=False)
+        cal = cal or calibrate(files.capture.camera, files.capture.target_size,
+                               files.capture.beacons[0].height, variant=variant,
+                               distance_error=scene.bench.calibration_distance_error)
+        obs, target_obs, why = _measure(files, cal)
+        if target_obs is not None:
+            targets.append(target_obs)
         if pf is None:
             if obs is None or not targets:
                 raise DetectionError(f"{scene.name}: the start pose gives the filter no "
@@ -180,25 +188,20 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
                        steps=tuple(records), snapshots=tuple(snapshots))
 
 
-def _measure(pose: Scene, out: Path, spp: int | None, variant: str,
-             targets: list[tuple[float, float]]) -> tuple[tuple[float, float] | None, str]:
-    """Render and detect one pose: the beacon's (α, d_total), or None and why; the
-    target's measurement, when it has one, is appended to ``targets``."""
-    files = render_to_files(pose, out / "poses", spp=spp, variant=variant, progress=False,
-                            reuse=True, ids=False)
-    cal = calibrate(files.capture.camera, files.capture.target_size,
-                    files.capture.beacons[0].height, variant=variant,
-                    distance_error=pose.bench.calibration_distance_error)
+def _measure(files: FrameFiles, cal: Calibration
+             ) -> tuple[tuple[float, float] | None, tuple[float, float] | None, str]:
+    """Detect one pose from its capture record: the beacon's (α, d_total), or None and
+    why; and the target's, or None where its d_total is not measured."""
     try:
         det = detect_frame(read_frame(files.image), files.capture, cal)
     except DetectionError as exc:
-        return None, str(exc)
-    if det.target.d_total is not None:
-        targets.append((det.target.alpha_deg, det.target.d_total))
+        return None, None, str(exc)
+    t = det.target
+    target = (t.alpha_deg, t.d_total) if t.d_total is not None else None
     m = det.beacon_measurements()[0]
     if m.d_total is None:
-        return None, "the beacon's mirror image is clipped"
-    return (m.alpha_deg, m.d_total), ""
+        return None, target, "the beacon's mirror image is clipped"
+    return (m.alpha_deg, m.d_total), target, ""
 
 
 def _start_filter(observer, start, obs, target, params: PFParams, n: int, seed: int

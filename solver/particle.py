@@ -12,8 +12,9 @@ Why (``python bench/particle.py``, 20 runs on EXP1's mirror): the former filter 
 the beacon too, in four dimensions with 4000 particles.  Each resampling kept few
 distinct mirrors (its static parameters were only roughened by 0.02° / 0.02 cm), so a
 run whose surviving cloud had locked onto a wrong yaw stayed there: the p90 of the yaw
-error stopped at 0.77° from step 8 on, and 20000 particles lowered it to 0.51° (sample
-impoverishment, not a wrong likelihood).  Here the beacon is integrated out, and after
+error stopped at 0.77° from step 8 on, and 20000 particles lowered it to 0.51° at step 23
+(``bench/particle.py --particles 20000`` at commit 6e07002): sample impoverishment, not a
+wrong likelihood.  Here the beacon is integrated out, and after
 resampling the mirror is regularized by Liu and West's shrinkage kernel (bandwidth h
 from the cloud's own covariance), which keeps the posterior's mean and spread while
 giving the duplicates new, distinct values.
@@ -29,9 +30,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from solver.geometry import line_normal, unit
-from solver.sltr import Sigma
+from solver.sltr import Sigma, virtual_image
 
-SHRINK = 0.98  # Liu-West: a = (3δ − 1)/(2δ) with discount δ = 0.99 → a = 0.985; h² = 1 − a²
+SHRINK = 0.98  # Liu-West's a (discount δ ≈ 0.96 in a = (3δ − 1)/(2δ)); kernel h² = 1 − a²
 
 
 @dataclass(frozen=True)
@@ -59,7 +60,7 @@ def _virtual_image(observation, observer, sigma: Sigma) -> tuple[np.ndarray, np.
     """Where (α, d_total) puts the beacon's virtual image, and its covariance."""
     a, d = float(observation[0]), float(observation[1])
     u = unit(a)
-    v = np.asarray(observer, float) + d * u
+    v = virtual_image(observer, a, d)
     du = np.array([-u[1], u[0]])
     s_a, s_d = np.radians(sigma.alpha_deg) * d, sigma.d_total_rel * d
     return v, s_a**2 * np.outer(du, du) + s_d**2 * np.outer(u, u)
