@@ -229,21 +229,27 @@ def _budget(args) -> int:
 
 
 def _track_options(p):
-    from mirrorsim.track import PATHS
+    from mirrorsim.track import HEADINGS, PATHS
 
     common(p, out="output folder (default renders/<name>/track/)", json="the track report",
            variant=True, quiet=True)
     p.add_argument("--path", default="rectangular", metavar="|".join(PATHS),
                    help="the beacon's path (paper eqs 19-21; default rectangular)")
+    p.add_argument("--heading", default="view", metavar="|".join(HEADINGS),
+                   help="where the steps of b run: view (default), along the beacon's "
+                        "reflected line of sight away from the glass, as the start pose's "
+                        "measurement shows it; camera, along the camera's line to the "
+                        "beacon, towards the camera.  Side a goes to the side that keeps "
+                        "the path farther in front of the mirror")
     p.add_argument("--steps", type=int, default=20, help="moves after the start (default 20)")
     p.add_argument("--odometry-sigma", type=float, default=0.1, metavar="CM",
                    help="the beacon's motion error per move and axis, cm (default 0.1)")
     p.add_argument("--seed", type=int, default=0,
                    help="seeds the odometry noise, the filter and the renders (default 0)")
     p.add_argument("--side", type=float, default=4.0, metavar="CM",
-                   help="a: the path's width across the camera's line (default 4)")
+                   help="a: the path's width across its heading (default 4)")
     p.add_argument("--step", type=float, default=1.0, metavar="CM",
-                   help="b: the path's step along the camera's line (default 1)")
+                   help="b: the path's step along its heading (default 1)")
     p.add_argument("--spp", type=int, help="samples per pixel (default: the scene's)")
 
 
@@ -266,7 +272,8 @@ def _track(args) -> int:
     from mirrorsim.track import check_options, run_track
 
     # before the scene is read (run_track checks again, for callers other than the CLI)
-    check_options(args.path, args.steps, args.odometry_sigma, args.side, args.step)
+    check_options(args.path, args.steps, args.odometry_sigma, args.side, args.step,
+                  args.heading)
     at_least(("--spp", args.spp, 1), ("--seed", args.seed, 0))
     scene = load(args.scene)
     out = args.out or Path("renders") / scene.name / "track"
@@ -274,7 +281,8 @@ def _track(args) -> int:
                                                         file=sys.stderr, flush=True))
     report = run_track(scene, out, kind=args.path, steps=args.steps,
                        odometry_sigma=args.odometry_sigma, seed=args.seed, side=args.side,
-                       step=args.step, spp=args.spp, variant=args.variant, on_pose=step)
+                       step=args.step, heading=args.heading, spp=args.spp,
+                       variant=args.variant, on_pose=step)
     if not args.quiet:
         print(file=sys.stderr)
     print(track_table(report))

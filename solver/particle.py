@@ -44,6 +44,22 @@ class PFParams:
 
 
 @dataclass(frozen=True)
+class MirrorEstimate:
+    """The filter's estimate after a step: weighted means and spreads."""
+
+    beacon: np.ndarray  # (2,) the beacon's mean position
+    yaw_deg: float  # the mirror line's mean angle (mod 180)
+    rho: float  # its offset along the mean yaw's normal (cm)
+    yaw_sd_deg: float  # weighted SD of the hypotheses' yaw
+    rho_sd: float  # weighted SD of their offset
+
+    @property
+    def point(self) -> np.ndarray:
+        """The mirror line's foot point, ρ·n(θ)."""
+        return self.rho * line_normal(self.yaw_deg)
+
+
+@dataclass(frozen=True)
 class Particles:
     """N mirror hypotheses, each with its beacon's Gaussian (mean, covariance)."""
 
@@ -153,7 +169,7 @@ class MovingBeaconFilter:
                                                observation, self.observer, self.params,
                                                self.rng)
 
-    def estimate(self) -> dict[str, np.ndarray | float]:
+    def estimate(self) -> MirrorEstimate:
         """Weighted means of the beacon and the mirror (yaw averaged as a line angle), and
         the spread of the mirror hypotheses (weighted SD of yaw and offset)."""
         w = self.weights
@@ -166,9 +182,9 @@ class MovingBeaconFilter:
         rhos = foot @ n_mean
         rho = float(w @ rhos)
         dyaw = (self.particles.mirror[:, 0] - yaw + 90.0) % 180.0 - 90.0
-        return {"beacon": w @ self.particles.beacon, "yaw_deg": float(yaw % 180.0),
-                "rho": rho, "yaw_sd_deg": float(np.sqrt(w @ dyaw**2)),
-                "rho_sd": float(np.sqrt(w @ (rhos - rho) ** 2))}
+        return MirrorEstimate(beacon=w @ self.particles.beacon, yaw_deg=float(yaw % 180.0),
+                              rho=rho, yaw_sd_deg=float(np.sqrt(w @ dyaw**2)),
+                              rho_sd=float(np.sqrt(w @ (rhos - rho) ** 2)))
 
 
 def simulate_run(observer, mirror_point, mirror_yaw_deg: float, path: np.ndarray,
@@ -194,7 +210,7 @@ def simulate_run(observer, mirror_point, mirror_yaw_deg: float, path: np.ndarray
 
 
 def track(observer, beacon_start, controls, observations, yaw_range, rho_range,
-          n: int = 4000, params: PFParams | None = None, rng=0) -> list[dict]:
+          n: int = 4000, params: PFParams | None = None, rng=0) -> list[MirrorEstimate]:
     """Run the filter over a whole run; the estimate after each step."""
     f = MovingBeaconFilter(observer, beacon_start, yaw_range, rho_range, n, params, rng)
     out = []
@@ -204,15 +220,15 @@ def track(observer, beacon_start, controls, observations, yaw_range, rho_range,
     return out
 
 
-def mirror_errors(estimates: list[dict], mirror_point, mirror_yaw_deg: float
+def mirror_errors(estimates: list[MirrorEstimate], mirror_point, mirror_yaw_deg: float
                   ) -> tuple[np.ndarray, np.ndarray]:
     """Yaw error (deg) and offset error (distance of the true mirror point from each
     estimated line) per step."""
     p = np.asarray(mirror_point, float)
-    yaw_err = np.array([(e["yaw_deg"] - mirror_yaw_deg + 90.0) % 180.0 - 90.0 for e in estimates])
-    off = np.array([abs(line_normal(e["yaw_deg"]) @ p - e["rho"]) for e in estimates])
+    yaw_err = np.array([(e.yaw_deg - mirror_yaw_deg + 90.0) % 180.0 - 90.0 for e in estimates])
+    off = np.array([abs(line_normal(e.yaw_deg) @ p - e.rho) for e in estimates])
     return yaw_err, off
 
 
-__all__ = ["PFParams", "pf_step", "MovingBeaconFilter", "simulate_run", "track",
+__all__ = ["PFParams", "MirrorEstimate", "pf_step", "MovingBeaconFilter", "simulate_run", "track",
            "mirror_errors", "initial_particles"]

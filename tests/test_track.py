@@ -38,7 +38,7 @@ def test_unseen_poses_are_skipped(tmp_path):
     camera): those poses are recorded unseen with the detector's reason, and the
     filter's mirror estimate does not change on them (prediction only)."""
     scene = small_scene("exp1", 960, 544, spp=8)
-    rep = run_track(scene, tmp_path, steps=8, step=2.5, side=2.0, seed=1)
+    rep = run_track(scene, tmp_path, steps=8, step=2.5, side=2.0, seed=1, heading="camera")
     unseen = [s for s in rep.steps if not s.seen]
     assert unseen and all(s.why_unseen for s in unseen)
     for prev, s in zip(rep.steps, rep.steps[1:], strict=False):
@@ -61,6 +61,7 @@ def test_same_seed_same_report(exp1_track, tmp_path):
     (["--odometry-sigma", "-1"], "--odometry-sigma"),
     (["--path", "zigzag"], "--path"),
     (["--side", "0"], "--side"),
+    (["--heading", "north"], "--heading"),
 ])
 def test_bad_options_are_refused(tmp_path, capsys, args, flag):
     assert main(["track", str(SCENES / "exp1.yaml"), "--out", str(tmp_path / "t"),
