@@ -1,7 +1,8 @@
 """The moving beacon of the paper's Section 4 on rendered frames (`mirrorsim track`).
 
 The scene's first beacon follows a path (eqs 19–21: ``linear``, ``rectangular`` or
-``sawtooth``; steps of b along a heading, side a across it) from its start.  The start
+``sawtooth``; steps of b along a heading, side a across it) from its start, or stands
+still (``fixed``: the baseline of one fixed beacon seen in as many frames).  The start
 pose is rendered and measured first: its beacon's (α, d_total) give a mirror line (the
 perpendicular bisector of the beacon and its image), which centres the filter's prior
 (yaw ± 15°, offset ± 8 cm) and lays out the path (:func:`beacon_path`) — from what the
@@ -37,7 +38,7 @@ from solver.particle import MovingBeaconFilter, PFParams, mirror_errors
 from solver.placement import path_points
 from solver.sltr import locate, mirror_from_beacon, observe
 
-PATHS = ("rectangular", "linear", "sawtooth")
+PATHS = ("rectangular", "linear", "sawtooth", "fixed")  # fixed: the baseline, standing still
 HEADINGS = ("view", "camera")
 PRIOR_YAW_DEG, PRIOR_OFFSET_CM = 15.0, 8.0
 MAX_STEPS = 500
@@ -50,6 +51,7 @@ class TrackStep:
 
     step: int  # 0: the start
     commanded: tuple[float, float]  # the believed position
+    path_length_cm: float  # commanded distance travelled so far
     beacon_position: tuple[float, float]  # the true one
     seen: bool
     why_unseen: str
@@ -63,7 +65,8 @@ class TrackStep:
     def to_json(self) -> dict:
         """The step as INTERFACE.md's track report writes it."""
         return {"step": self.step, "beacon_position": list(self.beacon_position),
-                "commanded_position": list(self.commanded), "seen": self.seen,
+                "commanded_position": list(self.commanded),
+                "path_length_cm": self.path_length_cm, "seen": self.seen,
                 **({"why_unseen": self.why_unseen} if not self.seen else {}),
                 "mirror_yaw_error_deg": self.mirror_yaw_error_deg,
                 "mirror_offset_error_cm": self.mirror_offset_error_cm,
@@ -128,8 +131,9 @@ def beacon_path(scene: Scene, first_obs: tuple[float, float], target_alpha_deg: 
     """
     b0 = scene.beacons[0]
     o = np.asarray(scene.camera.position, float)
-    s0 = np.asarray(b0.known_position if b0.known_position is not None else b0.position,
-                    float)
+    s0 = np.asarray(b0.believed, float)
+    if kind == "fixed":
+        return np.tile(s0, (steps + 1, 1))
     yaw, mid, hit = mirror_from_beacon(o, s0, *first_obs)
     yaw = float(yaw)
     front = line_normal(yaw)
@@ -194,11 +198,11 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
     out = Path(out)
     rng = np.random.default_rng(seed)
     b0, cam = scene.beacons[0], scene.camera
-    start = np.asarray(b0.known_position if b0.known_position is not None else b0.position,
-                       float)
+    start = np.asarray(b0.believed, float)
     mirror_point, mirror_yaw = np.asarray(scene.mirror.center, float), scene.mirror.yaw
     target_true = np.asarray(scene.target.position, float)
-    params = PFParams(sigma=DETECTOR_SIGMA, sigma_trs=max(odometry_sigma, 1e-3))
+    params = PFParams(sigma=DETECTOR_SIGMA,
+                      sigma_trs=max(odometry_sigma if kind != "fixed" else 0.0, 1e-3))
     cal = None  # one camera, one calibration: made at the first pose
 
     def pose(k: int, believed: np.ndarray, true: np.ndarray):
@@ -228,8 +232,8 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
                              f"({exc})") from None
     moves = np.diff(commanded, axis=0)
     true = [np.asarray(b0.position, float)]
-    for mv in moves:
-        true.append(true[-1] + mv + rng.normal(0.0, odometry_sigma, 2))
+    for mv in moves:  # a beacon that stands still does not drift
+        true.append(true[-1] + mv + (rng.normal(0.0, odometry_sigma, 2) if mv.any() else 0.0))
     targets = [target_obs]
     records: list[TrackStep] = []
     snapshots: list[np.ndarray] = []
@@ -244,6 +248,7 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
         target = locate(cam.position, est.point, est.yaw_deg, *np.mean(targets, axis=0))
         records.append(TrackStep(
             step=k, commanded=tuple(map(float, commanded[k])),
+            path_length_cm=float(np.sum(np.linalg.norm(moves[:k], axis=1))),
             beacon_position=tuple(map(float, true[k])), seen=obs is not None, why_unseen=why,
             mirror_yaw_error_deg=float(abs(yaw_err[0])), mirror_offset_error_cm=float(off_err[0]),
             target=tuple(map(float, target)),
