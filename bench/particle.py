@@ -1,6 +1,7 @@
 """Particle filter convergence on a simulated moving-beacon run (EXP1's mirror).
 
-    python bench/particle.py [--seeds 20] [--particles 4000]
+    python bench/particle.py [--seeds 20] [--particles 4000] [--sigma-trs 0.1]
+                             [--sigma-alpha 0.05] [--sigma-d 0.005]
 
 A pencil follows the rectangular path (paper eq 20) in front of the mirror; commands
 are corrupted by σ_trs = 0.1 cm per step, observations by σ = (0.05°, 0.5 %).  The filter
@@ -24,7 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from solver.geometry import line_normal, wrap_bearing  # noqa: E402
 from solver.particle import PFParams, mirror_errors, simulate_run, track  # noqa: E402
 from solver.placement import path_points  # noqa: E402
-from solver.sltr import observe  # noqa: E402
+from solver.sltr import Sigma, observe  # noqa: E402
 
 OBSERVER, MIRROR, YAW = np.zeros(2), np.array([27.5, 65.0]), 38.0
 
@@ -53,8 +54,11 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=20)
     ap.add_argument("--particles", type=int, default=4000)
+    ap.add_argument("--sigma-trs", type=float, default=0.1, help="odometry σ per move, cm")
+    ap.add_argument("--sigma-alpha", type=float, default=0.05, help="σ of α, degrees")
+    ap.add_argument("--sigma-d", type=float, default=0.005, help="relative σ of d_total")
     args = ap.parse_args()
-    params = PFParams()
+    params = PFParams(Sigma(args.sigma_alpha, args.sigma_d), args.sigma_trs)
     path = path_points("rectangular", (30.0, 60.0), 66.7, 4.0, 1.0, 12)
     rho = line_normal(YAW) @ MIRROR
     yaw_errs, off_errs, batch = [], [], []
@@ -68,7 +72,8 @@ def main() -> None:
         batch.append([batch_yaw_error(path[0], controls[:k], obs[:k], true, params)
                       for k in range(1, len(controls) + 1)])
     y, o, b = np.array(yaw_errs), np.array(off_errs), np.array(batch)
-    print(f"{args.seeds} runs, {args.particles} particles, {y.shape[1]} steps\n")
+    print(f"{args.seeds} runs, {args.particles} particles, {y.shape[1]} steps, σ_trs "
+          f"{args.sigma_trs:g} cm, σ = ({args.sigma_alpha:g}°, {100 * args.sigma_d:g} %)\n")
     print("| step | yaw error median (°) | p90 (°) | offset error median (cm) | p90 (cm) "
           "| batch smoother's yaw error median (°) | p90 (°) |")
     print("|---|---|---|---|---|---|---|")

@@ -220,7 +220,8 @@ def track_table(report: TrackReport) -> str:
                      f"{s.yaw_spread_deg:.3f}", f"{s.offset_spread_cm:.3f}"))
     f = report.final
     seen = sum(s.seen for s in report.steps)
-    return "\n".join([f"{report.scene}: {report.path} path (heading {report.heading}), {len(report.steps)} poses "
+    return "\n".join([f"{report.scene}: {report.path} path (heading {report.heading}), "
+                      f"{len(report.steps)} poses "
                       f"({seen} seen), odometry σ {report.odometry_sigma:g} cm", *_columns(rows),
                       f"final: target ({f.target[0]:.2f}, {f.target[1]:.2f}), error "
                       f"{f.target_error_cm:.2f} cm; mirror yaw error "

@@ -32,8 +32,7 @@ from mirrorsim.frames import FrameFiles, render_to_files
 from mirrorsim.model import Bench, Scene
 from mirrorsim.optics import visibility
 from solver.errors import SolverError
-from solver.geometry import (bearing_deg, line_normal, ray_line_intersection, unit,
-                             wrap_bearing)
+from solver.geometry import bearing_deg, line_normal, ray_line_intersection, unit, wrap_bearing
 from solver.particle import MovingBeaconFilter, PFParams, mirror_errors
 from solver.placement import path_points
 from solver.sltr import locate, mirror_from_beacon, observe
