@@ -30,7 +30,7 @@ from mirrorsim.errors import BadArgument, DetectionError
 from mirrorsim.evaluate import DETECTOR_SIGMA
 from mirrorsim.frames import FrameFiles, render_to_files
 from mirrorsim.model import Bench, Scene
-from mirrorsim.optics import visibility
+from mirrorsim.optics import target_facing, visibility
 from solver.errors import SolverError
 from solver.geometry import bearing_deg, line_normal, ray_line_intersection, unit, wrap_bearing
 from solver.particle import MovingBeaconFilter, PFParams, mirror_errors
@@ -105,16 +105,17 @@ class TrackReport:
                           "poses": len(self.steps)}}
 
 
-def beacon_path(scene: Scene, first_obs: tuple[float, float], target_alpha_deg: float,
-                kind: str, steps: int, side: float, step: float, heading: str = "view"
-                ) -> np.ndarray:
+def beacon_path(scene: Scene, first_obs: tuple[float, float],
+                target_obs: tuple[float, float], kind: str, steps: int, side: float,
+                step: float, heading: str = "view") -> np.ndarray:
     """The commanded positions, start first: ``steps`` moves along the path ``kind``.
 
     The path is laid out from what the experimenter knows at the start pose, never from
-    the scene's mirror: the bench (board, occluders, camera, the mirror's size) and the
-    start pose's measurements.  The beacon's (α, d_total) give a mirror line (the
-    perpendicular bisector of the beacon and its image); the glass is placed on it
-    between the beacon's and the target's reflection points.  ``heading`` sets the line
+    the scene's mirror or target: the bench (board, occluders, camera, the mirror's and
+    the target's sizes) and the start pose's measurements.  The beacon's (α, d_total)
+    give a mirror line (the perpendicular bisector of the beacon and its image); the
+    glass is placed on it between the beacon's and the target's reflection points, and
+    the target panel (a wall for the beacon's image) where that mirror puts it.  ``heading`` sets the line
     the steps of b run on: ``view``, the beacon's reflected line of sight (its image stays
     on the same part of the glass); ``camera``, the camera's line to the beacon.  Of the
     four ways to walk it (b forwards or back, side a left or right), the path kept is the
@@ -137,10 +138,13 @@ def beacon_path(scene: Scene, first_obs: tuple[float, float], target_alpha_deg: 
     yaw = float(yaw)
     front = line_normal(yaw)
     front = front if front @ (s0 - mid) > 0 else -front
+    target_alpha_deg = target_obs[0]
     t, target_hit = ray_line_intersection(o, unit(target_alpha_deg), mid, yaw)
     centre = (hit + target_hit) / 2 if np.isfinite(t) and t > 0 else hit
-    believed = replace(scene, mirror=replace(scene.mirror, yaw=yaw, center=tuple(centre)),
-                       bench=Bench())
+    mirror = replace(scene.mirror, yaw=yaw, center=tuple(map(float, centre)))
+    target = tuple(map(float, locate(o, mid, yaw, *target_obs)))
+    believed = replace(scene, mirror=mirror, bench=Bench(), target=replace(
+        scene.target, position=target, facing_deg=target_facing(o, mirror, target)))
     h = float(bearing_deg(hit, s0) if heading == "view" else bearing_deg(s0, o))
     size = np.asarray(scene.board.size, float)
     best: tuple[tuple, np.ndarray] | None = None
@@ -224,7 +228,7 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
         raise DetectionError(f"{scene.name}: the start pose gives the filter no prior and "
                              f"the path no heading: {why or 'the target was not measured'}")
     try:
-        commanded = beacon_path(scene, obs, target_obs[0], kind, steps, side, step, heading)
+        commanded = beacon_path(scene, obs, target_obs, kind, steps, side, step, heading)
         pf = _start_filter(cam.position, start, obs, params, particles, seed)
     except SolverError as exc:
         raise DetectionError(f"{scene.name}: the start pose's measurements give no mirror "

@@ -100,7 +100,7 @@ def test_track_command_writes_report_plot_and_animation(tmp_path, capsys):
 def test_paths_stay_on_the_board_and_in_front_of_the_glass(name, kind):
     """Laid out from the start pose's exact measurement, every commanded pose stands on
     the board and at least CLEARANCE_CM in front of the scene's true mirror line (the
-    planner never saw it: it reads the beacon's (α, d_total) only)."""
+    planner never saw it: it reads the measurements only)."""
     import numpy as np
 
     from mirrorsim.optics import ground_truth
@@ -111,8 +111,8 @@ def test_paths_stay_on_the_board_and_in_front_of_the_glass(name, kind):
     scene = load_scene(SCENES / f"{name}.yaml")
     gt = ground_truth(scene)
     b = gt.beacons[0]
-    pts = beacon_path(scene, (b.alpha_deg, b.d_total), gt.target.alpha_deg, kind, 20, 4.0,
-                      1.0)
+    pts = beacon_path(scene, (b.alpha_deg, b.d_total), (gt.target.alpha_deg, gt.target.d_total),
+                      kind, 20, 4.0, 1.0)
     assert pts.shape == (21, 2) and np.allclose(pts[0], scene.beacons[0].position)
     assert np.all(pts >= 0) and np.all(pts <= np.asarray(scene.board.size))
     side = np.sign(signed_distance(pts[0], scene.mirror.center, scene.mirror.yaw))
@@ -138,8 +138,9 @@ def test_the_view_heading_keeps_the_beacon_in_the_mirror(name):
     b, b0 = gt.beacons[0], scene.beacons[0]
 
     def seen(heading):
-        pts = beacon_path(scene, (b.alpha_deg, b.d_total), gt.target.alpha_deg,
-                          "rectangular", 20, 4.0, 1.0, heading)
+        pts = beacon_path(scene, (b.alpha_deg, b.d_total),
+                          (gt.target.alpha_deg, gt.target.d_total), "rectangular", 20, 4.0,
+                          1.0, heading)
         return sum(visibility(replace(scene, beacons=(replace(b0, position=tuple(p)),)),
                               replace(b0, position=tuple(p))).fraction == 1.0 for p in pts)
 
@@ -158,3 +159,23 @@ def test_a_fixed_beacon_stands_still(tmp_path):
     assert all(s.path_length_cm == 0.0 for s in rep.steps)
     assert all(s.seen for s in rep.steps)
     assert rep.final.yaw_spread_deg < rep.steps[0].yaw_spread_deg
+
+
+def test_the_path_does_not_read_the_scene_s_mirror_or_target():
+    """The same measurements with the scene's mirror and target moved: the same path."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    from mirrorsim.optics import ground_truth
+    from mirrorsim.scenefile import load_scene
+    from mirrorsim.track import beacon_path
+
+    scene = load_scene(SCENES / "exp1.yaml")
+    gt = ground_truth(scene)
+    obs = (gt.beacons[0].alpha_deg, gt.beacons[0].d_total)
+    tobs = (gt.target.alpha_deg, gt.target.d_total)
+    moved = replace(scene, mirror=replace(scene.mirror, center=(20.0, 70.0), yaw=50.0),
+                    target=replace(scene.target, position=(60.0, 40.0), facing_deg=10.0))
+    assert np.array_equal(beacon_path(scene, obs, tobs, "rectangular", 12, 4.0, 1.0),
+                          beacon_path(moved, obs, tobs, "rectangular", 12, 4.0, 1.0))
