@@ -115,9 +115,10 @@ def beacon_path(scene: Scene, first_obs: tuple[float, float],
     the target's sizes) and the start pose's measurements.  The beacon's (α, d_total)
     give a mirror line (the perpendicular bisector of the beacon and its image); the
     glass is placed on it between the beacon's and the target's reflection points, and
-    the target panel (a wall for the beacon's image) where that mirror puts it.  ``heading`` sets the line
-    the steps of b run on: ``view``, the beacon's reflected line of sight (its image stays
-    on the same part of the glass); ``camera``, the camera's line to the beacon.  Of the
+    the target panel (a wall for the beacon's image) where that mirror puts it.
+    ``heading`` sets the line the steps of b run on: ``view``, the beacon's reflected
+    line of sight (its image stays on the same part of the glass); ``camera``, the
+    camera's line to the beacon.  Of the
     four ways to walk it (b forwards or back, side a left or right), the path kept is the
     first by: on the board and ``CLEARANCE_CM`` in front of the mirror line (no robot
     drives off the board or into the glass); most poses predicted seen in that glass;
