@@ -118,12 +118,11 @@ def beacon_path(scene: Scene, first_obs: tuple[float, float],
     the target panel (a wall for the beacon's image) where that mirror puts it.
     ``heading`` sets the line the steps of b run on: ``view``, the beacon's reflected
     line of sight (its image stays on the same part of the glass); ``camera``, the
-    camera's line to the beacon.  Of the
-    four ways to walk it (b forwards or back, side a left or right), the path kept is the
-    first by: on the board and ``CLEARANCE_CM`` in front of the mirror line (no robot
-    drives off the board or into the glass); most poses predicted seen in that glass;
-    b forwards (``view``: away from the glass; ``camera``: towards the camera); images
-    nearest the target's in α.
+    camera's line to the beacon.  Of the four ways to walk it (b forwards or back, side a
+    left or right), the path kept is the first by: on the board and ``CLEARANCE_CM`` in
+    front of the mirror line (no robot drives off the board or into the glass); most
+    poses predicted seen in that glass; b forwards (``view``: away from the glass;
+    ``camera``: towards the camera); images nearest the target's in α.
 
     Raises
     ------
@@ -157,15 +156,18 @@ def beacon_path(scene: Scene, first_obs: tuple[float, float],
             pts = (pts - pts[0] + s0)[: steps + 1]
             allowed = (bool(np.all((pts >= 0) & (pts <= size)))
                        and float(np.min((pts - mid) @ front)) >= CLEARANCE_CM)
-            seen = sum(visibility(replace(believed, beacons=(replace(b0, position=tuple(p)),)),
-                                  replace(b0, position=tuple(p))).fraction == 1.0
-                       for p in pts)
+            seen = sum(_seen_in(believed, replace(b0, position=tuple(p))) for p in pts)
             alphas = observe(o, mid, yaw, pts, strict=False).alpha_deg
             spread = float(np.mean(np.abs(wrap_bearing(alphas - target_alpha_deg))))
             score = (allowed, seen, forwards, -spread)
             if best is None or score > best[0]:
                 best = (score, pts)
     return best[1]
+
+
+def _seen_in(scene: Scene, beacon) -> bool:
+    """Whether ``beacon``, standing alone in ``scene``, is seen whole in its mirror."""
+    return visibility(replace(scene, beacons=(beacon,)), beacon).fraction == 1.0
 
 
 def check_options(kind: str, steps: int, sigma: float, side: float, step: float,

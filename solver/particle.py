@@ -16,9 +16,10 @@ error stopped at 0.77° from step 8 on, and 20000 particles lowered it to 0.51°
 (``bench/particle.py --particles 20000`` at commit 6e07002): sample impoverishment, not a
 wrong likelihood.  Here the beacon is integrated out.  After resampling, the mirror
 hypotheses are moved by Metropolis–Hastings (resample-move, Gilks and Berzuini 2001):
-each proposes a random-walk step scaled by the cloud's own covariance and accepts it by
-the marginal likelihood of the whole history so far (its Kalman filter replayed from
-the start), so the duplicates become distinct draws of the exact posterior.  This
+each proposes a random-walk step scaled by the cloud's own covariance, or a draw from
+the Laplace approximation at the posterior's mode, and accepts it by the marginal
+likelihood of the whole history so far (its Kalman filter replayed from the start), so
+the duplicates become distinct draws of the exact posterior.  This
 replaced Liu and West's shrinkage kernel, which works from the cloud alone: where the
 likelihood is much narrower than the cloud (the detector's 0.005° in α, a beacon that
 does not drift or stands still) a collapsed cloud kept no spread to move by; a
@@ -129,6 +130,17 @@ def _update(mirror: np.ndarray, mean: np.ndarray, cov: np.ndarray, observation,
     return mean + np.einsum("nij,nj->ni", K, y), cov - K @ cov, logl
 
 
+def _advance(mirror: np.ndarray, mean: np.ndarray, cov: np.ndarray, control, observation,
+             observer, params: PFParams) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """One step of each hypothesis' Kalman filter: predict by the command, then update by
+    the observation; the observation's log likelihood, or None where it was unseen."""
+    mean = mean + np.asarray(control, float)
+    cov = cov + params.sigma_trs**2 * np.eye(2)
+    if observation is None:
+        return mean, cov, None
+    return _update(mirror, mean, cov, observation, observer, params.sigma)
+
+
 def replay(mirror: np.ndarray, prior: Prior, history, observer, params: PFParams
            ) -> Particles:
     """The hypotheses ``mirror`` (N, 2) run through ``history`` ((control, observation or
@@ -138,10 +150,8 @@ def replay(mirror: np.ndarray, prior: Prior, history, observer, params: PFParams
     cov = np.tile(params.sigma_trs**2 * np.eye(2), (n, 1, 1))
     loglik = np.zeros(n)
     for control, observation in history:
-        mean = mean + np.asarray(control, float)
-        cov = cov + params.sigma_trs**2 * np.eye(2)
-        if observation is not None:
-            mean, cov, logl = _update(mirror, mean, cov, observation, observer, params.sigma)
+        mean, cov, logl = _advance(mirror, mean, cov, control, observation, observer, params)
+        if logl is not None:
             loglik = loglik + logl
     return Particles(mirror, mean, cov, loglik)
 
@@ -163,12 +173,10 @@ def pf_step(particles: Particles, weights: np.ndarray, control: np.ndarray,
         step replays
     """
     n = len(weights)
-    mean = particles.beacon + np.asarray(control, float)
-    cov = particles.cov + params.sigma_trs**2 * np.eye(2)
-    if observation is None:
+    mean, cov, logl = _advance(particles.mirror, particles.beacon, particles.cov, control,
+                               observation, observer, params)
+    if logl is None:
         return Particles(particles.mirror, mean, cov, particles.loglik), weights
-    mean, cov, logl = _update(particles.mirror, mean, cov, observation, observer,
-                              params.sigma)
     logw = np.log(np.maximum(weights, 1e-300)) + logl
     if not np.isfinite(logw).any():
         logw = np.zeros(n)
@@ -232,6 +240,9 @@ def _move(p: Particles, prior: Prior, history, observer, params: PFParams,
     (twice as wide; its density enters the acceptance ratio)."""
     n = len(p.mirror)
     laplace = _laplace(p, prior, history, observer, params)
+    if laplace is not None:
+        mode, cov = laplace[0], 4.0 * laplace[1]
+        inv = np.linalg.inv(cov)
     for _ in range(MOVE_SWEEPS):
         dev = p.mirror - p.mirror.mean(axis=0)
         # the cloud's covariance, floored: a collapsed cloud still proposes moves
@@ -239,12 +250,9 @@ def _move(p: Particles, prior: Prior, history, observer, params: PFParams,
         proposal = p.mirror + MOVE_SCALE * rng.multivariate_normal(np.zeros(2), spread, n)
         log_q = np.zeros(n)  # log q(x) − log q(x′): 0 for the symmetric random walk
         if laplace is not None:
-            mode, cov = laplace
-            cov = 4.0 * cov
             jump = rng.random(n) < 0.5
             drawn = rng.multivariate_normal(mode, cov, n)
             proposal[jump] = drawn[jump]
-            inv = np.linalg.inv(cov)
             log_q[jump] = (_log_gauss(p.mirror, mode, inv) - _log_gauss(proposal, mode, inv)
                            )[jump]
         q = replay(proposal, prior, history, observer, params)
