@@ -25,7 +25,6 @@ sys.path.insert(0, str(ROOT))
 from mirrorsim import optics  # noqa: E402
 from mirrorsim.detect import (  # noqa: E402
     FRONT_OFFSET,
-    _pencil_channel,
     find_pencils,
     measure_object,
     read_frame,
@@ -68,7 +67,7 @@ def main() -> None:
     fb = vb - ray * FRONT_OFFSET["beacon"]
     ub, vvb, _ = optics.project(s.camera, np.array([[*fb, 0.0],
                                                     [*fb, pencil_paint_height(b.height)]]))
-    lin = _pencil_channel(to_linear(img))
+    lin = to_linear(img)
     pencils = [measure_region(lin, box, "beacon") for box in find_pencils(img)]
     p = min(pencils, key=lambda q: abs(np.nanmean([q.u_left or np.nan, q.u_right or np.nan])
                                        - ub[0]))

@@ -109,6 +109,7 @@ def _flatten(scene: Scene, rep: Report) -> dict:
         "target_x": scene.target.position[0], "target_y": scene.target.position[1],
         "variant": rep.render.variant, "spp": rep.render.spp, "sampler": rep.render.sampler,
         "background_spp": min(scene.render.background_spp, scene.render.spp),
+        "beacon_spp": max(scene.render.beacon_spp, scene.render.spp),
         "render_seed": rep.render.seed,
         **row_values(scene),
     }
@@ -316,7 +317,7 @@ Each row is one random scene (`scenes/<scene>.yaml`, a normal scene file: rerun 
 `dataset.parquet`:
 
 - `index`, `scene`, `seed`, `render_seed`, `variant`, `spp` (in the mirror's image),
-  `background_spp`, `sampler`, `error` (empty if fine);
+  `background_spp`, `beacon_spp`, `sampler`, `error` (empty if fine);
 - scene parameters: `camera_x`, `camera_y`, `camera_height`, `camera_pan_deg`,
   `hfov_deg`, `mirror_x`, `mirror_y`, `mirror_yaw_deg`, `mirror_width`,
   `mirror_height`, `target_x`, `target_y` (cm, degrees);

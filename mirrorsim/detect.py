@@ -187,13 +187,7 @@ def measure_object(img: np.ndarray, kind: str, target_ratio: float | None = None
     if not boxes:
         raise DetectionError("no pencil (yellow upright band) found in the frame")
     box = max(boxes, key=lambda b: (b[2] - b[0]) * (b[3] - b[1]))
-    return measure_region(_pencil_channel(linear), box, "beacon")
-
-
-def _pencil_channel(linear: np.ndarray) -> np.ndarray:
-    # the paint's blue is ~0 on lit and shadowed faces alike: its blue channel alone
-    # gives coverages that the hexagon's shading does not disturb
-    return np.ascontiguousarray(linear[..., 2:3])
+    return measure_region(linear, box, "beacon")
 
 
 def detect_frame(image: np.ndarray, view: CaptureRecord, calibration: Calibration) -> Detection:
@@ -215,8 +209,7 @@ def detect_frame(image: np.ndarray, view: CaptureRecord, calibration: Calibratio
     linear = to_linear(img)
     target = measure_object(img, "target", view.target_size[0] / view.target_size[1], linear)
     target_geometry(cam, target, view.target_size, calibration.target_k)
-    blue = _pencil_channel(linear)
-    pencils = [measure_region(blue, b, "beacon") for b in find_pencils(img)]
+    pencils = [measure_region(linear, b, "beacon") for b in find_pencils(img)]
     pencils = [p for p in pencils if p.height_px and (p.u_left, p.u_right) != (None, None)]
     paint = pencil_paint_height(view.beacons[0].height)
     for p in pencils:

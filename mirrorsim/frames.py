@@ -89,6 +89,7 @@ def truth_of(scene: Scene, frame: RenderedFrame, fingerprint: str | None) -> Gro
                    "seen_in_mirror_offset": IN_MIRROR},
         render=RenderInfo(variant=frame.variant, spp=frame.spp, seed=frame.seed,
                           sampler=frame.sampler, background_spp=frame.background_spp,
+                          beacon_spp=frame.beacon_spp,
                           seconds_render=round(frame.seconds_render, 3),
                           seconds_total=round(frame.seconds_total, 3),
                           mitsuba=MITSUBA_VERSION, fingerprint=fingerprint))

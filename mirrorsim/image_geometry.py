@@ -15,10 +15,16 @@ from mirrorsim.model import PENCIL_RADIUS, TARGET_THICKNESS, Camera, Point2
 from solver.geometry import wrap_bearing
 
 # The measured edges belong to the face nearest the camera: the panel's front (half its
-# thickness before its centre), the pencil's near side (between a flat, 0.346 cm, and a
-# corner, 0.4 cm, of the hexagon).  Size constancy holds for that face's depth.
-FRONT_OFFSET = {"target": TARGET_THICKNESS / 2,
-                "beacon": PENCIL_RADIUS * (1 + math.cos(math.pi / 6)) / 2}
+# thickness before its centre), the pencil's near side.  Size constancy holds for that
+# face's depth.  The pencil's top and foot are measured on the middle 60 % of its
+# silhouette's columns, where the hexagon's near side lies 0.336–0.341 cm before the
+# axis whatever the pencil's turn (0.338 on average: numerically, over turns 0–60°); a
+# flat's 0.346 and a corner's 0.4 bound it, and their mean, 0.373, which was used
+# before, put every pencil 0.035 cm too near (0.05 % at 70 cm, not cancelled by the
+# calibration at 1 m).
+FRONT_OFFSET = {"target": TARGET_THICKNESS / 2, "beacon": 0.338 * PENCIL_RADIUS / 0.4}
+# the hexagon's silhouette half-width averaged over its turn: R·sin 30°/(π/6)
+PENCIL_HALF_WIDTH = PENCIL_RADIUS * 3 / math.pi
 
 
 @dataclass
@@ -74,7 +80,7 @@ def pencil_geometry(cam: Camera, m: ImageMeasurement, paint_height: float) -> No
         return
     edge = m.u_left if m.u_left is not None else m.u_right
     phi_edge = _off_axis(cam, edge)
-    beta = math.atan(FRONT_OFFSET["beacon"] * m.height_px * math.cos(phi_edge)
+    beta = math.atan(PENCIL_HALF_WIDTH * m.height_px * math.cos(phi_edge)
                      / (cam.fx * paint_height))
     missing = "right" if m.u_left is not None else "left"
     m.u_axis = _column(cam, phi_edge + beta if m.u_left is not None else phi_edge - beta)

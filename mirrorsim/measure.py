@@ -46,20 +46,34 @@ class ImageMeasurement:
 def _edge_by_area(profile: np.ndarray, start: int, inside: np.ndarray, outside: np.ndarray,
                   inside_first: bool) -> float | None:
     """Sub-pixel edge position in a 1-D colour profile (rows of ``profile``: positions
-    start, start+1, …) by summing pixel coverages; ``None`` if there is no contrast."""
+    start, start+1, …) by summing pixel coverages; ``None`` if there is no contrast.
+    ``inside`` and ``outside``: one colour each, or one per row of ``profile``."""
     d = inside - outside
-    dd = float(d @ d)
-    if dd < 5.0**2:  # linear 0–255 scale
+    dd = np.sum(d * d, axis=-1)
+    if float(np.mean(dd)) < 5.0**2:  # linear 0–255 scale
         return None
     # not clipped to [0, 1]: clipping noise on the flat parts would bias the sum inwards
-    c = ((profile - outside) @ d) / dd
+    c = np.sum((profile - outside) * d, axis=-1) / dd
     if inside_first:
         return start - 0.5 + float(c.sum())
     return start - 0.5 + float((1.0 - c).sum())
 
 
+def _level(rows: np.ndarray, offsets: np.ndarray, at: np.ndarray, slope: bool) -> np.ndarray:
+    """A side's colour at the window's rows ``at`` (offsets from the edge's pixel) from
+    its rows at ``offsets``: their median, or (``slope``) their straight-line fit."""
+    if not slope:
+        return np.median(rows, axis=0)
+    coef = np.polyfit(offsets, rows, 1)  # (2, channels)
+    return coef[0] * at[:, None] + coef[1]
+
+
+SLOPE_ROWS = 8  # pixels each side for a sloped level: a longer line, less noise
+
+
 def _local_edge(img: np.ndarray, band, axis: int, guess: float, inside_first: bool,
-                reach: int = 6, half: int = 1, near: bool = False):
+                reach: int = 6, half: int = 1, near: bool = False, chroma: bool = False,
+                slope: bool = False):
     """An edge near ``guess`` in the mean profile of ``band`` (the columns, or rows,
     across it): coverages of the 2·half + 1 pixels about it, against the median colours
     of the next 4 pixels either side (inside: no further than ``reach``).  Local levels
@@ -72,6 +86,12 @@ def _local_edge(img: np.ndarray, band, axis: int, guess: float, inside_first: bo
     full-size frames).  Here the level is the first pixel past the edge's own, and the
     window ends at the edge's pixel.
 
+    ``chroma``: only the colour across the outside's counts (see :func:`measure_region`).
+    ``slope``: each side's level is its straight-line fit over those 4 pixels, carried
+    to each pixel of the window (a side that brightens or darkens towards the edge, such
+    as a pencil's paint in its contact shadow, or its wood cone below its first facets);
+    the line is fitted to the mean profile, so a hole still moves it.
+
     Returns (edge or None, outside colour).
     """
     n = img.shape[axis]
@@ -81,10 +101,14 @@ def _local_edge(img: np.ndarray, band, axis: int, guess: float, inside_first: bo
         i = min(max(i, 0), n - 1)
         return (img[i, band] if axis == 0 else img[band, i]).mean(axis=0)
 
-    k_out = range(half + 1, half + 5)
-    k_in = range(half + 1, max(half + 2, min(half + 5, reach)))
-    before = np.median([line(c - k) for k in (k_in if inside_first else k_out)], axis=0)
-    after = np.median([line(c + k) for k in (k_out if inside_first else k_in)], axis=0)
+    rows = SLOPE_ROWS if slope else 4
+    k_out = range(half + 1, half + 1 + rows)
+    k_in = range(half + 1, max(half + 2, min(half + 1 + rows, reach)))
+    at = np.arange(-half, half + 1, dtype=float)
+    k_b = np.array(k_in if inside_first else k_out, float)
+    k_a = np.array(k_out if inside_first else k_in, float)
+    before = _level(np.array([line(c - int(k)) for k in k_b]), -k_b, at, slope)
+    after = _level(np.array([line(c + int(k)) for k in k_a]), k_a, at, slope)
     inside, outside = (before, after) if inside_first else (after, before)
     if near:
         # the outside darkens towards the edge (a contact shadow on the board): its level
@@ -95,12 +119,29 @@ def _local_edge(img: np.ndarray, band, axis: int, guess: float, inside_first: bo
         window = np.array([line(i) for i in range(lo, lo + half + 1)])
         return _edge_by_area(window, lo, inside, level, inside_first), outside
     window = np.array([line(i) for i in range(c - half, c + half + 1)])
-    return _edge_by_area(window, c - half, inside, outside, inside_first), outside
+    if chroma:
+        # only the colour across the outside's: the outside's shading (a contact shadow,
+        # a hole, a facet turned from the light) scales its colour and drops out
+        k_o = np.array(k_out, float) * (1 if inside_first else -1)
+        o = np.median([line(c + int(k)) for k in k_o], axis=0)  # holes: a median
+        o /= max(float(np.linalg.norm(o)), 1e-9)
+        flat = lambda x: x - (x @ o)[..., None] * o  # noqa: E731
+        return _edge_by_area(flat(window), c - half, flat(inside), np.zeros_like(o),
+                             inside_first), _mean_level(outside)
+    return _edge_by_area(window, c - half, inside, outside, inside_first), _mean_level(outside)
 
 
-def _median_edges(img, lo, hi, cross_lo, cross_hi, axis, band_px=3):
+def _mean_level(level: np.ndarray) -> np.ndarray:
+    """One colour for a side's level (one per window row with ``slope``)."""
+    return np.atleast_2d(level).mean(axis=0)
+
+
+def _median_edges(imgs, lo, hi, cross_lo, cross_hi, axis, band_px=3,
+                  chroma=(False, False), slope=(False, False)):
     """Edges at both ends of an object spanning [lo, hi] along ``axis`` (0: top and
-    bottom, 1: left and right), robust and precise.
+    bottom, 1: left and right), robust and precise; ``imgs`` and ``chroma``: the image
+    each end is measured in, and whether on its colour across the outside's; ``slope``:
+    whether its levels are straight-line fits (see :func:`_local_edge`).
 
     Bands of ``band_px`` across the object's middle 60 % each give an edge near the
     region's boundary (±2 px); bands more than 1 px from their median (partly occluded
@@ -114,7 +155,8 @@ def _median_edges(img, lo, hi, cross_lo, cross_hi, axis, band_px=3):
     reach = max(2, (hi - lo) // 2)
     final, outs = [], []
     for end, guess in ((0, lo), (1, hi)):
-        coarse = [_local_edge(img, band, axis, guess, end == 1, reach, half=2)
+        img, flat = imgs[end], chroma[end]
+        coarse = [_local_edge(img, band, axis, guess, end == 1, reach, half=2, chroma=flat)
                   for band in bands]
         vals = [e for e, _ in coarse if e is not None]
         if not vals:
@@ -126,7 +168,9 @@ def _median_edges(img, lo, hi, cross_lo, cross_hi, axis, band_px=3):
                 if e is not None and abs(e - m) < 1.0]
         keep = np.concatenate(near) if near else np.concatenate(bands)
         # round(m) is the pixel the edge crosses: the window is centred on it
-        e, out = _local_edge(img, keep, axis, m, end == 1, reach, near=axis == 0 and end == 1)
+        e, out = _local_edge(img, keep, axis, m, end == 1, reach,
+                             near=axis == 0 and end == 1 and not (flat or slope[end]),
+                             chroma=flat, slope=slope[end])
         final.append(e)
         outs.append(out)
     return final[0], final[1], outs[0], outs[1]
@@ -150,11 +194,25 @@ def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str
     with the radiance just outside each (pixels only: :mod:`mirrorsim.detect` turns them
     into a bearing and a distance with the camera's geometry).
 
-    ``img`` holds linear radiance (see :func:`to_linear`).
+    ``img`` holds linear RGB radiance (see :func:`to_linear`).  The target's edges are
+    measured on its colour against the outside's.  A pencil's (``kind="beacon"``) sides
+    and top on the blue channel: the paint's blue is ~0 on lit and shadowed faces
+    alike, so the hexagon's shading does not disturb the coverages.  Its foot on the
+    colour across the board's: the board's contact shadow and the pegboard's dark holes
+    in front of the foot only scale the board's colour, and drop out (in the blue
+    channel a hole is as dark as the paint: the foot moved by −0.3…+0.5 px with the
+    holes in front of it, at 128 spp).
     """
     u0, v0, u1, v1 = box
-    top, bottom, out_top, out_bottom = _median_edges(img, v0, v1, u0, u1, axis=0)
-    left, right, out_left, out_right = _median_edges(img, u0, u1, v0, v1, axis=1)
+    if kind == "beacon":
+        blue = np.ascontiguousarray(img[..., 2:3])
+        top, bottom, out_top, out_bottom = _median_edges((blue, img), v0, v1, u0, u1, axis=0,
+                                                         chroma=(False, True),
+                                                         slope=(True, True))
+        left, right, out_left, out_right = _median_edges((blue, blue), u0, u1, v0, v1, axis=1)
+    else:
+        top, bottom, out_top, out_bottom = _median_edges((img, img), v0, v1, u0, u1, axis=0)
+        left, right, out_left, out_right = _median_edges((img, img), u0, u1, v0, v1, axis=1)
     core = img[v0 + (v1 - v0) // 4: v1 - (v1 - v0) // 4 + 1,
                u0 + (u1 - u0) // 4: u1 - (u1 - u0) // 4 + 1]
     m = ImageMeasurement(

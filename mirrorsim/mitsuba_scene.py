@@ -170,18 +170,19 @@ def _pencil_meshes(position, height: float) -> dict[str, mi.Mesh]:
     return meshes
 
 def build_scene_dict(scene: Scene, *, spp: int,
-                     crop: tuple[int, int, int, int] | None = None) -> dict:
+                     crops: tuple[tuple[int, int, int, int], ...] = ()) -> dict:
     """The Mitsuba scene description (the variant must already be set).
 
     Shape keys are prefixed with the object they belong to (``mirror``, ``target``,
-    ``beacon0``, ``occluder0``…), which is how the id pass labels pixels.  ``crop`` =
-    (u0, v0, u1, v1) adds a second sensor, ``sensor_crop``: the same camera rendering
-    only that part of the film.
+    ``beacon0``, ``occluder0``…), which is how the id pass labels pixels.  Each of
+    ``crops`` (u0, v0, u1, v1) adds a sensor, ``sensor_crop<k>``: the same camera
+    rendering only that part of the film (``mi.Scene.sensors()`` lists the full film
+    first, then the crops in this order).
     """
     d = _stage(scene.board, scene.camera, spp, scene.render.sampler, scene.bench.pitch,
                scene.bench.roll)
-    if crop is not None:
-        d["sensor_crop"] = _cropped(d["sensor"], crop)
+    for k, crop in enumerate(crops):
+        d[f"sensor_crop{k}"] = _cropped(d["sensor"], crop)
     d.update(_mirror_shapes(scene))
     d.update(_target_shapes(scene.target))
     for i, b in enumerate(scene.beacons):

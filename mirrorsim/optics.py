@@ -363,7 +363,13 @@ def mirror_box(scene: Scene, margin_px: int = 8) -> tuple[int, int, int, int] | 
     lean = unit(m.yaw + 90.0) * top * math.sin(math.radians(abs(bench.tilt)))
     pts = np.array([[*(c + s * d + e * lean), z] for s in (-1, 1) for z in (0.0, top)
                     for e in (-1, 1)])
-    u, v, depth = project(cam, pts, bench.pitch, bench.roll)
+    return _film_box(cam, *project(cam, pts, bench.pitch, bench.roll), margin_px)
+
+
+def _film_box(cam: Camera, u: np.ndarray, v: np.ndarray, depth: np.ndarray, margin_px: int
+              ) -> tuple[int, int, int, int] | None:
+    """The film region (end-exclusive) around projected points, ``margin_px`` wider and
+    clipped to the film; None if a point lies behind the camera or none on the film."""
     if (depth <= 0).any():
         return None
     u0 = int(max(0, math.floor(u.min()) - margin_px))
@@ -371,6 +377,21 @@ def mirror_box(scene: Scene, margin_px: int = 8) -> tuple[int, int, int, int] | 
     u1 = int(min(cam.width, math.ceil(u.max()) + margin_px + 1))
     v1 = int(min(cam.height_px, math.ceil(v.max()) + margin_px + 1))
     return (u0, v0, u1, v1) if u1 > u0 and v1 > v0 else None
+
+
+def beacon_boxes(scene: Scene, margin_px: int = 16) -> list[tuple[int, int, int, int] | None]:
+    """Per beacon, the film region (u0, v0, u1, v1), end-exclusive, around its image in
+    the mirror: its virtual image's outline (the pencil's circumscribed cylinder, board to
+    tip) ``margin_px`` wider all round (the detector's edge levels reach 9 px past an
+    edge) and clipped to the film; None if it lies behind the camera or off the film."""
+    cam, bench = scene.camera, scene.bench
+    out = []
+    for b in scene.beacons:
+        v = mirror_image(cam.position, scene.mirror, b.position).virtual
+        pts = np.array([[v[0] + dx, v[1] + dy, z] for dx in (-PENCIL_RADIUS, PENCIL_RADIUS)
+                        for dy in (-PENCIL_RADIUS, PENCIL_RADIUS) for z in (0.0, b.height)])
+        out.append(_film_box(cam, *project(cam, pts, bench.pitch, bench.roll), margin_px))
+    return out
 
 
 def direct_view_fraction(scene: Scene, obj: Target | Beacon) -> float:

@@ -54,6 +54,7 @@ class RenderedFrame:
     seed: int
     sampler: str
     background_spp: int | None  # outside the mirror's image (None: spp everywhere)
+    beacon_spp: int | None  # in the beacons' images (None: no more than spp)
     seconds_render: float
     seconds_total: float
 
@@ -97,17 +98,27 @@ def render_frame(scene: Scene, *, spp: int, seed: int, variant: str = "auto",
     pinhole = replace(scene, camera=distortion_canvas(scene.camera, k)[0]) if lens else scene
     background = min(scene.render.background_spp, spp)
     box = optics.mirror_box(pinhole) if background < spp else None
+    beacon_spp = max(scene.render.beacon_spp, spp)
+    boxes = [b for b in optics.beacon_boxes(pinhole) if b is not None] \
+        if beacon_spp > spp else []
+    # the mirror's region at the full spp, then each beacon's image at beacon_spp
+    # (inside the mirror's region: pasted after it), each with its own seeds
+    passes = ([(box, spp, 1)] if box is not None else []) \
+        + [(b, beacon_spp, 2 + i) for i, b in enumerate(boxes)]
     with variant_scope(chosen):
-        mi_scene = mi.load_dict(build_scene_dict(pinhole, spp=spp, crop=box), optimize=False)
-        full, *crop = mi_scene.sensors()
-        with tqdm(total=spp if box is None else background + spp, unit="spp",
-                  disable=not progress, leave=False,
+        crops = tuple(c for c, _, _ in passes)
+        mi_scene = mi.load_dict(build_scene_dict(pinhole, spp=spp, crops=crops),
+                                optimize=False)
+        full, *crop_sensors = mi_scene.sensors()
+        with tqdm(total=(spp if box is None else background) + sum(n for _, n, _ in passes),
+                  unit="spp", disable=not progress, leave=False,
                   desc=f"rendering {scene.name} ({chosen})") as bar:
             linear = _accumulate(mi_scene, full, spp if box is None else background,
                                  (seed, 0), bar.update)
-            if box is not None:  # the mirror's region at the full spp, its own seeds
-                u0, v0, u1, v1 = box
-                linear[v0:v1, u0:u1] = _accumulate(mi_scene, crop[0], spp, (seed, 1),
+            for sensor, ((u0, v0, u1, v1), n, stream) in zip(crop_sensors, passes,
+                                                             strict=True):
+                assert tuple(sensor.film().crop_offset()) == (u0, v0), "sensor order"
+                linear[v0:v1, u0:u1] = _accumulate(mi_scene, sensor, n, (seed, stream),
                                                    bar.update)
         t_render = time.perf_counter() - t0
         first, in_mirror = id_pass(mi_scene, pinhole)
@@ -119,6 +130,7 @@ def render_frame(scene: Scene, *, spp: int, seed: int, variant: str = "auto",
     return RenderedFrame(linear=linear, first=first, in_mirror=in_mirror, variant=chosen,
                          spp=spp, seed=seed, sampler=scene.render.sampler,
                          background_spp=None if box is None else background,
+                         beacon_spp=beacon_spp if boxes else None,
                          seconds_render=t_render,
                          seconds_total=time.perf_counter() - t0)
 
@@ -175,7 +187,7 @@ def id_pass(mi_scene, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
     """
     cam = scene.camera
     shapes = [(s, label_of(s.id(), len(scene.beacons))) for s in mi_scene.shapes()]
-    sensor = mi_scene.sensors()[0]  # the full film (a crop sensor comes second)
+    sensor = mi_scene.sensors()[0]  # the full film (crop sensors come after it)
     cast = _id_pass_jit if dr.is_jit_v(mi.Float) else _id_pass_scalar
     return cast(mi_scene, sensor, shapes, cam.width, cam.height_px)
 

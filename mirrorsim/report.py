@@ -95,6 +95,7 @@ class RenderInfo:
     seed: int
     sampler: str = "independent"
     background_spp: int | None = None  # outside the mirror's image (None: spp)
+    beacon_spp: int | None = None  # in the beacons' images (None: spp)
     seconds_render: float | None = None
     seconds_total: float | None = None
     mitsuba: str | None = None
@@ -104,13 +105,14 @@ class RenderInfo:
         """The truth's ``render`` block."""
         return {"variant": self.variant, "spp": self.spp, "seed": self.seed,
                 "sampler": self.sampler, "background_spp": self.background_spp,
+                "beacon_spp": self.beacon_spp,
                 "seconds_render": self.seconds_render, "seconds_total": self.seconds_total,
                 "mitsuba": self.mitsuba, "fingerprint": self.fingerprint}
 
     @classmethod
     def from_json(cls, d: dict) -> RenderInfo:
         """Inverse of :meth:`to_json`."""
-        fields = ("variant", "spp", "seed", "background_spp", "seconds_render",
+        fields = ("variant", "spp", "seed", "background_spp", "beacon_spp", "seconds_render",
                   "seconds_total", "mitsuba", "fingerprint")
         return cls(**{k: d.get(k) for k in fields}, sampler=d.get("sampler", "independent"))
 

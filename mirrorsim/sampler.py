@@ -343,7 +343,8 @@ def to_yaml(scene: Scene) -> str:
                        for o in scene.occluders],
          "render": {"spp": scene.render.spp, "seed": scene.render.seed,
                     "sampler": scene.render.sampler,
-                    "background_spp": scene.render.background_spp}}
+                    "background_spp": scene.render.background_spp,
+                    "beacon_spp": scene.render.beacon_spp}}
     for path, value in as_keys(scene).items():  # the bench's imperfections
         block, key = path.split(".")
         if block.startswith("beacons["):

@@ -124,14 +124,17 @@ def read_render(r: Reader, block: Any, key: str = "render", seed: bool = True
     """A ``render`` block (scene files and, with no ``seed``, specs), defaults for what
     it omits."""
     rr = r.mapping(block, key, set(),
-                   {"spp", "sampler", "background_spp"} | ({"seed"} if seed else set()))
+                   {"spp", "sampler", "background_spp", "beacon_spp"}
+                   | ({"seed"} if seed else set()))
     d = RenderSettings()
     return RenderSettings(
         spp=r.integer(rr.get("spp", d.spp), f"{key}.spp", low=1, high=MAX_SPP),
         seed=r.integer(rr.get("seed", d.seed), f"{key}.seed", low=0),
         sampler=r.choice(rr.get("sampler", d.sampler), f"{key}.sampler", SAMPLERS),
         background_spp=r.integer(rr.get("background_spp", d.background_spp),
-                                 f"{key}.background_spp", low=1, high=MAX_SPP))
+                                 f"{key}.background_spp", low=1, high=MAX_SPP),
+        beacon_spp=r.integer(rr.get("beacon_spp", d.beacon_spp), f"{key}.beacon_spp",
+                             low=1, high=MAX_SPP))
 
 
 def scene_from_dict(data: Any, source: str = "<scene>", default_name: str = "scene") -> Scene:

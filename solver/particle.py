@@ -183,18 +183,20 @@ def pf_step(particles: Particles, weights: np.ndarray, control: np.ndarray,
     w = np.exp(logw - logw.max())
     w /= w.sum()
     out = Particles(particles.mirror, mean, cov, particles.loglik + logl)
-    if 1.0 / np.sum(w**2) < n / 2:
+    ess = 1.0 / np.sum(w**2)
+    if ess < n / 2:
         out = _move(_resample(out, w, rng), prior, (*history, (control, observation)),
-                    observer, params, rng)
+                    observer, params, rng, ess)
         w = np.full(n, 1.0 / n)
     return out, w
 
 
-def _resample(p: Particles, w: np.ndarray, rng: np.random.Generator) -> Particles:
-    """Systematic resampling (the weights become equal)."""
-    n = len(w)
+def _resample(p: Particles, w: np.ndarray, rng: np.random.Generator,
+              n: int | None = None) -> Particles:
+    """Systematic resampling to ``n`` particles (default: as many), of equal weight."""
+    n = len(w) if n is None else n
     positions = (rng.random() + np.arange(n)) / n
-    return p.take(np.minimum(np.searchsorted(np.cumsum(w), positions), n - 1))
+    return p.take(np.minimum(np.searchsorted(np.cumsum(w), positions), len(w) - 1))
 
 
 def _laplace(p: Particles, prior: Prior, history, observer, params: PFParams
@@ -231,9 +233,40 @@ def _log_gauss(x: np.ndarray, mean: np.ndarray, inv: np.ndarray) -> np.ndarray:
     return -0.5 * np.einsum("ni,ij,nj->n", d, inv, d)
 
 
+def _mix_in_laplace(p: Particles, ess: float, mode: np.ndarray, cov: np.ndarray,
+                    prior: Prior, history, observer, params: PFParams,
+                    rng: np.random.Generator) -> Particles:
+    """The cloud pooled with an importance sample of the posterior drawn from the Laplace
+    Gaussian, each share weighted by its effective size, resampled to the cloud's size.
+
+    Where the likelihood is a thin curved ridge (one fixed beacon: a ±3° banana a few
+    thousandths wide), the uniform first cloud leaves one or two hypotheses on it, at
+    random places; the independence moves cannot leave such a place (the Gaussian gives
+    it no density, so no move is accepted), and the cloud stayed there, 5° from the mode,
+    reporting a spread of 0.004°.  A second sample of the same posterior, drawn where
+    the Gaussian fits it, and pooled by effective size, corrects that; where the cloud
+    is healthy (ESS ≥ the draws'), it keeps at least half the weight."""
+    n = len(p.mirror)
+    x = rng.multivariate_normal(mode, cov, n)
+    q = replay(x, prior, history, observer, params)
+    logw = np.where(prior.contains(x), q.loglik - _log_gauss(x, mode, np.linalg.inv(cov)),
+                    -np.inf)
+    if not np.isfinite(logw).any():
+        return p
+    w = np.exp(logw - logw[np.isfinite(logw)].max())
+    w /= w.sum()
+    share = ess / (ess + 1.0 / np.sum(w**2))
+    pool = Particles(*(np.concatenate([a, b]) for a, b in
+                       ((p.mirror, q.mirror), (p.beacon, q.beacon), (p.cov, q.cov),
+                        (p.loglik, q.loglik))))
+    return _resample(pool, np.concatenate([np.full(n, share / n), (1 - share) * w]), rng, n)
+
+
 def _move(p: Particles, prior: Prior, history, observer, params: PFParams,
-          rng: np.random.Generator) -> Particles:
-    """Metropolis–Hastings moves of the equally weighted mirror hypotheses, each accepted
+          rng: np.random.Generator, ess: float | None = None) -> Particles:
+    """Metropolis–Hastings moves of the equally weighted mirror hypotheses (with ``ess``,
+    the effective size they had before resampling, first pooled with a Laplace sample:
+    :func:`_mix_in_laplace`), each accepted
     by the likelihood of the whole history (uniform prior: none leaves the box).  Each
     hypothesis, each sweep, proposes either a random-walk step scaled by the cloud's
     covariance, or an independent draw from the Laplace approximation at the mode
@@ -243,6 +276,8 @@ def _move(p: Particles, prior: Prior, history, observer, params: PFParams,
     if laplace is not None:
         mode, cov = laplace[0], 4.0 * laplace[1]
         inv = np.linalg.inv(cov)
+        if ess is not None:
+            p = _mix_in_laplace(p, ess, mode, cov, prior, history, observer, params, rng)
     for _ in range(MOVE_SWEEPS):
         dev = p.mirror - p.mirror.mean(axis=0)
         # the cloud's covariance, floored: a collapsed cloud still proposes moves

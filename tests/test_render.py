@@ -211,6 +211,7 @@ def test_fewer_samples_outside_the_mirror(name, fast_variant):
     from mirrorsim.render import render_frame
 
     scene = small_scene(name, 480, 272)
+    scene = replace(scene, render=replace(scene.render, beacon_spp=1))  # not tested here
     low = replace(scene, render=replace(scene.render, background_spp=1))
     mixed = render_frame(low, spp=16, seed=2, variant=fast_variant, progress=False)
     uniform = replace(scene, render=replace(scene.render, background_spp=16))
@@ -230,3 +231,31 @@ def test_fewer_samples_outside_the_mirror(name, fast_variant):
     assert (np.abs(box_mixed - box16).mean()
             < 0.6 * np.abs(plain1.linear[inside] - box16).mean())
     assert mixed.background_spp == 1 and np.array_equal(mixed.first, plain16.first)
+
+
+def test_more_samples_in_the_beacons_image(fast_variant):
+    """beacon_spp: the beacon's image box is rendered at beacon_spp (its own seed
+    stream), the rest of the frame exactly as without it; the box holds every pixel of
+    the beacon's mirror image (its id pass), and inside it the frame is closer to a
+    64-spp frame than the 4-spp render is."""
+    from dataclasses import replace
+
+    from mirrorsim.mitsuba_scene import BEACON_LABEL
+    from mirrorsim.render import render_frame
+
+    scene = small_scene("default", 480, 272)
+    with_box = replace(scene, render=replace(scene.render, background_spp=4, beacon_spp=64))
+    without = replace(with_box, render=replace(with_box.render, beacon_spp=1))
+    boxed = render_frame(with_box, spp=4, seed=3, variant=fast_variant, progress=False)
+    plain = render_frame(without, spp=4, seed=3, variant=fast_variant, progress=False)
+    ref = render_frame(without, spp=64, seed=9, variant=fast_variant, progress=False)
+    (u0, v0, u1, v1), = optics.beacon_boxes(scene)
+    vs, us = np.nonzero(plain.in_mirror == BEACON_LABEL)
+    assert len(us) > 20
+    assert u0 <= us.min() and us.max() < u1 and v0 <= vs.min() and vs.max() < v1
+    inside = np.zeros(plain.first.shape, bool)
+    inside[v0:v1, u0:u1] = True
+    assert np.array_equal(boxed.linear[~inside], plain.linear[~inside])
+    err = lambda f: np.abs(f.linear[inside] - ref.linear[inside]).mean()  # noqa: E731
+    assert err(boxed) < 0.5 * err(plain)
+    assert boxed.beacon_spp == 64 and plain.beacon_spp is None
