@@ -29,8 +29,8 @@ from solver.geometry import unit
 
 D_REF = 100.0
 # per reference object: the pencil's 45 px band rests on two edges of a few columns, whose
-# noise at 64 spp (0.05–0.09 px) made K err by 0.1–0.25 % for every frame of a camera;
-# the target's 230 px panel averages over ~90 columns and is well measured at 64
+# render noise at 64 spp erred K for every frame of a camera alike; the target's 230 px
+# panel averages over ~90 columns and is well measured at 64
 CALIBRATION_SPP = {"target": 64, "pencil": 1024}
 REFERENCE_PAN = 45.0  # the reference camera looks along the board's diagonal
 MARGIN_PX = 24  # rendered around the object's projected outline

@@ -200,8 +200,8 @@ def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str
     alike, so the hexagon's shading does not disturb the coverages.  Its foot on the
     colour across the board's: the board's contact shadow and the pegboard's dark holes
     in front of the foot only scale the board's colour, and drop out (in the blue
-    channel a hole is as dark as the paint: the foot moved by −0.3…+0.5 px with the
-    holes in front of it, at 128 spp).
+    channel a hole is as dark as the paint, and the foot moved with the holes in front
+    of it).
     """
     u0, v0, u1, v1 = box
     if kind == "beacon":

@@ -163,8 +163,8 @@ class RenderSettings:
     background_spp: int = 2
     # samples per pixel in each beacon's image (renders use max(this, spp)): its painted
     # band is 45–95 px tall and its d_total rests on two of its edges, whose render noise
-    # at 8 spp was 0.14–0.19 px (0.3 % of d_total); the box costs ~4 % of a frame's
-    # samples at 128 (README "Accuracy")
+    # at 8 spp was the largest part of its error; the box adds 13–33 % to a frame's
+    # samples at 128 on the bundled scenes (README "Scenes", "Accuracy")
     beacon_spp: int = 128
 
 

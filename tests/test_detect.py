@@ -248,3 +248,64 @@ def test_assignment_refuses_what_no_mirror_gives_and_ambiguity():
     # the true direct view (within 0.3° and 5 %) is told apart and never used
     direct = _image(53.2, 50.5)
     assert assign_beacons([direct, mirror], view) == [mirror] and direct.source == "direct"
+
+
+def _pencil_on_board(top: float, foot: float, hole_rows=(), shadow: float = 1.0):
+    """A synthetic linear frame: a yellow band (columns 20–39) from row ``top`` to
+    ``foot`` over a brown board, area-weighted at both ends; the board's rows in
+    ``hole_rows`` are the pegboard's dark holes and the 4 rows under the foot are
+    darkened by ``shadow`` (a contact shadow)."""
+    board = 255 * np.array([0.40, 0.27, 0.15]) * 0.9
+    wood = 255 * np.array([0.60, 0.38, 0.20]) * 0.9
+    paint = 255 * np.array([0.80, 0.50, 0.02]) * 0.9
+    img = np.tile(board, (100, 60, 1)).astype(np.float64)
+    img[: int(top) + 1, 20:40] = wood  # the sharpened cone above the paint
+    under = int(foot)
+    for k in range(1, 5):
+        img[under + k, 20:40] = board * shadow
+    for r in hole_rows:
+        img[r, :] = 255 * np.array([0.015, 0.012, 0.01])
+    for r in range(100):
+        cover = np.clip(min(r + 0.5, foot) - max(r - 0.5, top), 0.0, 1.0)
+        if cover > 0:
+            outside = wood if r - 0.5 < top else img[r, 20]
+            img[r, 20:40] = cover * paint + (1 - cover) * outside
+    return img.astype(np.float32)
+
+
+@pytest.mark.parametrize("holes,shadow", [((), 1.0), ((61, 62), 1.0), ((62,), 0.6),
+                                          ((), 0.5)])
+def test_pencil_foot_ignores_holes_and_contact_shadow(holes, shadow):
+    """The pencil's foot is measured on the colour across the board's: a dark hole or a
+    contact shadow just under it (which only scale the board's colour) does not move
+    it (in the blue channel a hole reads as paint: the foot moved by up to a pixel)."""
+    from mirrorsim.measure import measure_region
+
+    top, foot = 20.3, 60.6  # rows: pixel r spans r − 0.5 … r + 0.5
+    img = _pencil_on_board(top, foot, holes, shadow)
+    m = measure_region(img, (20, 20, 39, 60), "beacon")
+    # a hole is not exactly of the board's colour: 0.03 px with two hole rows under it
+    assert m.v_bottom == pytest.approx(foot, abs=0.05)
+    assert m.v_top == pytest.approx(top, abs=0.03)
+
+
+def test_pencil_front_depth_is_the_mean_near_side_of_the_measured_columns():
+    """FRONT_OFFSET['beacon'] is where the hexagon's near side lies, averaged over the
+    middle 60 % of its silhouette's columns and over its turn (computed here afresh by
+    sampling the polygon)."""
+    from mirrorsim.image_geometry import FRONT_OFFSET, PENCIL_HALF_WIDTH
+    from mirrorsim.model import PENCIL_RADIUS
+
+    depths, widths = [], []
+    for turn in np.linspace(0.0, 60.0, 121)[:-1]:
+        ang = np.radians(turn + 60.0 * np.arange(7))
+        x, y = PENCIL_RADIUS * np.sin(ang), PENCIL_RADIUS * np.cos(ang)  # y: to the camera
+        half = x.max()
+        cols = np.linspace(-0.6 * half, 0.6 * half, 401)
+        near = [max(y[k] + (c - x[k]) * (y[k + 1] - y[k]) / (x[k + 1] - x[k])
+                    for k in range(6) if (x[k] - c) * (x[k + 1] - c) <= 0 and x[k] != x[k + 1])
+                for c in cols]
+        depths.append(np.mean(near))
+        widths.append(half)
+    assert FRONT_OFFSET["beacon"] == pytest.approx(np.mean(depths), abs=0.002)
+    assert PENCIL_HALF_WIDTH == pytest.approx(np.mean(widths), abs=0.002)
