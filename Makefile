@@ -51,7 +51,7 @@ bench: setup
 	$(BIN)/python bench/dataset.py
 	$(BIN)/python bench/pieces.py --rss 30
 	$(BIN)/python bench/edge_noise.py
-	$(BIN)/python bench/pencil_edges.py
+	$(BIN)/python bench/pencil_edges.py --spp 1024
 
 clean:
 	rm -rf $(VENV) renders/*/ .pytest_cache .ruff_cache .hypothesis

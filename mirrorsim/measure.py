@@ -87,9 +87,10 @@ def _local_edge(img: np.ndarray, band, axis: int, guess: float, inside_first: bo
     window ends at the edge's pixel.
 
     ``chroma``: only the colour across the outside's counts (see :func:`measure_region`).
-    ``slope``: each side's level is its straight-line fit over those 4 pixels, carried
-    to each pixel of the window (a side that brightens or darkens towards the edge, such
-    as a pencil's paint in its contact shadow, or its wood cone below its first facets);
+    ``slope``: each side's level is its straight-line fit over the next SLOPE_ROWS pixels
+    (not 4), carried to each pixel of the window (a side that brightens or darkens
+    towards the edge, such as a pencil's paint in its contact shadow, or its wood cone
+    below its first facets);
     the line is fitted to the mean profile, so a hole still moves it.
 
     Returns (edge or None, outside colour).
@@ -107,8 +108,9 @@ def _local_edge(img: np.ndarray, band, axis: int, guess: float, inside_first: bo
     at = np.arange(-half, half + 1, dtype=float)
     k_b = np.array(k_in if inside_first else k_out, float)
     k_a = np.array(k_out if inside_first else k_in, float)
-    before = _level(np.array([line(c - int(k)) for k in k_b]), -k_b, at, slope)
-    after = _level(np.array([line(c + int(k)) for k in k_a]), k_a, at, slope)
+    rows_b = np.array([line(c - int(k)) for k in k_b])
+    rows_a = np.array([line(c + int(k)) for k in k_a])
+    before, after = _level(rows_b, -k_b, at, slope), _level(rows_a, k_a, at, slope)
     inside, outside = (before, after) if inside_first else (after, before)
     if near:
         # the outside darkens towards the edge (a contact shadow on the board): its level
@@ -122,8 +124,7 @@ def _local_edge(img: np.ndarray, band, axis: int, guess: float, inside_first: bo
     if chroma:
         # only the colour across the outside's: the outside's shading (a contact shadow,
         # a hole, a facet turned from the light) scales its colour and drops out
-        k_o = np.array(k_out, float) * (1 if inside_first else -1)
-        o = np.median([line(c + int(k)) for k in k_o], axis=0)  # holes: a median
+        o = np.median(rows_a if inside_first else rows_b, axis=0)  # holes: a median
         o /= max(float(np.linalg.norm(o)), 1e-9)
         flat = lambda x: x - (x @ o)[..., None] * o  # noqa: E731
         return _edge_by_area(flat(window), c - half, flat(inside), np.zeros_like(o),

@@ -163,8 +163,8 @@ class RenderSettings:
     background_spp: int = 2
     # samples per pixel in each beacon's image (renders use max(this, spp)): its painted
     # band is 45–95 px tall and its d_total rests on two of its edges, whose render noise
-    # at 8 spp was the largest part of its error; the box adds 13–33 % to a frame's
-    # samples at 128 on the bundled scenes (README "Scenes", "Accuracy")
+    # at 8 spp was the largest part of its error; the box costs 15 % of a dataset's
+    # throughput (README "Accuracy", "Throughput")
     beacon_spp: int = 128
 
 

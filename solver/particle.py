@@ -234,10 +234,11 @@ def _log_gauss(x: np.ndarray, mean: np.ndarray, inv: np.ndarray) -> np.ndarray:
 
 
 def _mix_in_laplace(p: Particles, ess: float, mode: np.ndarray, cov: np.ndarray,
-                    prior: Prior, history, observer, params: PFParams,
+                    inv: np.ndarray, prior: Prior, history, observer, params: PFParams,
                     rng: np.random.Generator) -> Particles:
     """The cloud pooled with an importance sample of the posterior drawn from the Laplace
-    Gaussian, each share weighted by its effective size, resampled to the cloud's size.
+    Gaussian (``cov``, its inverse ``inv``), each share weighted by its effective size,
+    resampled to the cloud's size.
 
     Where the likelihood is a thin curved ridge (one fixed beacon: a ±3° banana a few
     thousandths wide), the uniform first cloud leaves one or two hypotheses on it, at
@@ -249,8 +250,7 @@ def _mix_in_laplace(p: Particles, ess: float, mode: np.ndarray, cov: np.ndarray,
     n = len(p.mirror)
     x = rng.multivariate_normal(mode, cov, n)
     q = replay(x, prior, history, observer, params)
-    logw = np.where(prior.contains(x), q.loglik - _log_gauss(x, mode, np.linalg.inv(cov)),
-                    -np.inf)
+    logw = np.where(prior.contains(x), q.loglik - _log_gauss(x, mode, inv), -np.inf)
     if not np.isfinite(logw).any():
         return p
     w = np.exp(logw - logw[np.isfinite(logw)].max())
@@ -263,9 +263,9 @@ def _mix_in_laplace(p: Particles, ess: float, mode: np.ndarray, cov: np.ndarray,
 
 
 def _move(p: Particles, prior: Prior, history, observer, params: PFParams,
-          rng: np.random.Generator, ess: float | None = None) -> Particles:
-    """Metropolis–Hastings moves of the equally weighted mirror hypotheses (with ``ess``,
-    the effective size they had before resampling, first pooled with a Laplace sample:
+          rng: np.random.Generator, ess: float) -> Particles:
+    """Metropolis–Hastings moves of the equally weighted mirror hypotheses (first pooled
+    with a Laplace sample by ``ess``, the effective size they had before resampling:
     :func:`_mix_in_laplace`), each accepted
     by the likelihood of the whole history (uniform prior: none leaves the box).  Each
     hypothesis, each sweep, proposes either a random-walk step scaled by the cloud's
@@ -276,8 +276,7 @@ def _move(p: Particles, prior: Prior, history, observer, params: PFParams,
     if laplace is not None:
         mode, cov = laplace[0], 4.0 * laplace[1]
         inv = np.linalg.inv(cov)
-        if ess is not None:
-            p = _mix_in_laplace(p, ess, mode, cov, prior, history, observer, params, rng)
+        p = _mix_in_laplace(p, ess, mode, cov, inv, prior, history, observer, params, rng)
     for _ in range(MOVE_SWEEPS):
         dev = p.mirror - p.mirror.mean(axis=0)
         # the cloud's covariance, floored: a collapsed cloud still proposes moves
