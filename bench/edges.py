@@ -32,7 +32,11 @@ from mirrorsim.detect import (  # noqa: E402
 )
 from mirrorsim.frames import render_to_files  # noqa: E402
 from mirrorsim.measure import measure_region  # noqa: E402
-from mirrorsim.model import TARGET_THICKNESS, pencil_paint_height  # noqa: E402
+from mirrorsim.model import (  # noqa: E402
+    PENCIL_RADIUS,
+    TARGET_THICKNESS,
+    pencil_paint_height,
+)
 from mirrorsim.scenefile import scene_from_dict  # noqa: E402
 from solver.geometry import reflect, unit  # noqa: E402
 
@@ -71,7 +75,15 @@ def main() -> None:
     pencils = [measure_region(lin, box, "beacon") for box in find_pencils(img)]
     p = min(pencils, key=lambda q: abs(np.nanmean([q.u_left or np.nan, q.u_right or np.nan])
                                        - ub[0]))
-    rows += [("pencil paint top", vvb[1], p.v_top), ("pencil foot", vvb[0], p.v_bottom)]
+    # the hexagon's corners (mirrorsim.mitsuba_scene._pencil_meshes) at mid-paint height,
+    # reflected: its silhouette's columns
+    ang = np.deg2rad(np.arange(6) * 60.0 + 30.0)
+    ring = np.asarray(b.position) + PENCIL_RADIUS * np.stack([np.cos(ang), np.sin(ang)], 1)
+    zc = pencil_paint_height(b.height) / 2
+    uh, _, _ = optics.project(s.camera, np.array(
+        [[*reflect(q, s.mirror.center, s.mirror.yaw), zc] for q in ring]))
+    rows += [("pencil left", uh.min(), p.u_left), ("pencil right", uh.max(), p.u_right),
+             ("pencil paint top", vvb[1], p.v_top), ("pencil foot", vvb[0], p.v_bottom)]
     print(f"{a.scene}, {a.offaxis:+g}° off axis, {a.spp} spp, {s.camera.width}×"
           f"{s.camera.height_px}\n\n| edge | exact px | measured px | difference px |\n"
           "|---|---|---|---|")

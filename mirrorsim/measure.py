@@ -213,7 +213,8 @@ def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str
         left, right, out_left, out_right = _median_edges((blue, blue), u0, u1, v0, v1, axis=1)
     else:
         top, bottom, out_top, out_bottom = _median_edges((img, img), v0, v1, u0, u1, axis=0)
-        left, right, out_left, out_right = _median_edges((img, img), u0, u1, v0, v1, axis=1)
+        left, right, out_left, out_right = _median_edges((img, img), u0, u1, v0, v1, axis=1,
+                                                         slope=(True, True))
     core = img[v0 + (v1 - v0) // 4: v1 - (v1 - v0) // 4 + 1,
                u0 + (u1 - u0) // 4: u1 - (u1 - u0) // 4 + 1]
     m = ImageMeasurement(

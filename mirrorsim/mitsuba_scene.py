@@ -5,7 +5,8 @@ here; :mod:`mirrorsim.render` loads the description and renders it.  The Mitsuba
 variant must be set by the caller (:func:`mirrorsim.render.variant_scope`).
 
 World units are the scene's centimetres; the Mitsuba world frame is the board frame
-(x right, y away from the front edge, z up).
+(x right, y away from the front edge, z up) moved so that a scene's glass centre is the
+origin (see :func:`_recentred`).
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import numpy as np
 from mirrorsim import optics
 from mirrorsim.model import (
     MIRROR_FRAME,
+    MIRROR_LIP,
     OCCLUDER_THICKNESS,
     PENCIL_RADIUS,
     TARGET_THICKNESS,
@@ -193,7 +195,31 @@ def build_scene_dict(scene: Scene, *, spp: int,
         nn = _v3(line_normal(math.degrees(math.atan2(u[1], u[0])))) * OCCLUDER_THICKNESS / 2
         d[f"occluder{i}_wall"] = _box(_v3((p0 + p1) / 2, o.height / 2), u, nn,
                                       ZHAT * o.height / 2, "occluder")
-    return d
+    return _recentred(d, optics.glass_frame(scene)[0])
+
+
+# Mitsuba spawns each reflected ray (1 + max|p|)·2⁻²⁴·1500 off the surface along its
+# normal (Interaction::offset_p; p in world units).  In the board frame the glass stands
+# 30–70 cm from the origin, so every mirror image was drawn as if 0.005 cm nearer the
+# camera: 0.04–0.07 px sideways at the default scene's angles (a steady target α error of
+# −0.0015°).  With the glass's centre at the world origin the offset is at most
+# (1 + half the glass's diagonal)·8.9e-5 cm, and ~0 near its centre.
+def _recentred(d: dict, origin: np.ndarray) -> dict:
+    """The scene description ``d`` moved by −``origin`` (sensors, shapes and meshes;
+    the environment map, which is directions only, stays)."""
+    shift = mi.ScalarTransform4f().translate([-float(c) for c in origin])
+    out = {}
+    for key, item in d.items():
+        if isinstance(item, mi.Mesh):
+            params = mi.traverse(item)
+            pos = np.array(params["vertex_positions"]).reshape(-1, 3) - origin
+            params["vertex_positions"] = type(params["vertex_positions"])(
+                pos.astype(np.float32).ravel())
+            params.update()
+        elif isinstance(item, dict) and "to_world" in item and item.get("type") != "envmap":
+            item = {**item, "to_world": shift @ item["to_world"]}
+        out[key] = item
+    return out
 
 
 def build_direct_dict(board: Board, camera: Camera, obj: Target | Beacon, *, spp: int,
@@ -288,12 +314,13 @@ def _mirror_shapes(scene: Scene) -> dict:
     d = {"mirror_glass": glass,
          "mirror_back": _box(c + up * h / 2 - n * (0.21 + back), n * 0.2, along * w / 2,
                              up * h / 2, "mirror_back")}
-    fw, depth = MIRROR_FRAME, 0.275  # frame front stands 0.05 proud of the glass('s rim)
+    # the frame runs from 0.5 behind the glass's rim to MIRROR_LIP before it
+    fw, depth, mid = MIRROR_FRAME, (0.5 + MIRROR_LIP) / 2, (MIRROR_LIP - 0.5) / 2
     for k, s in enumerate((-1, 1)):
         d[f"mirror_frame{k}"] = _box(c + along * s * (w + fw) / 2 + up * (h + fw) / 2
-                                     - n * (0.225 - fwd + back), n * depth, along * fw / 2,
+                                     + n * (mid + fwd - back), n * depth, along * fw / 2,
                                      up * (h + fw) / 2, "frame")
-    d["mirror_frame_top"] = _box(c + up * (h + fw / 2) - n * (0.225 - fwd + back), n * depth,
+    d["mirror_frame_top"] = _box(c + up * (h + fw / 2) + n * (mid + fwd - back), n * depth,
                                  along * (w / 2 + fw), up * fw / 2, "frame")
     return d
 
@@ -311,7 +338,7 @@ def _spherical_glass(centre, along, up, n, size, radius: float) -> tuple[mi.Mesh
     na, nb = (max(2, math.ceil(s / GLASS_CELL_CM) + 1) for s in (w, h))
     a, b = np.meshgrid(np.linspace(-w / 2, w / 2, na), np.linspace(-h / 2, h / 2, nb))
     a, b = a.ravel(), b.ravel()
-    sag = radius - math.copysign(1.0, radius) * np.sqrt(radius**2 - a**2 - b**2)
+    sag = optics.sag(a, b, radius)
     verts = centre + np.outer(a, along) + np.outer(b, up) + np.outer(sag, n)
     normals = (np.outer(-a, along) + np.outer(-b, up) + np.outer(radius - sag, n)) / radius
     faces = []

@@ -18,6 +18,7 @@ import numpy as np
 from mirrorsim.imperfections import as_keys
 from mirrorsim.model import (
     MIRROR_FRAME,
+    MIRROR_LIP,
     OCCLUDER_THICKNESS,
     PENCIL_RADIUS,
     TARGET_THICKNESS,
@@ -221,6 +222,37 @@ def glass_frame(scene: Scene) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.nd
     return np.r_[m.center, 0.0] + up * m.size[1] / 2, along, up, n
 
 
+def sag(a, b, radius: float | None):
+    """How far a spherical glass of ``radius`` (> 0: concave) stands before its tangent
+    plane at (a, b) from the centre (cm; 0 for a flat one)."""
+    if radius is None:
+        return np.zeros_like(np.asarray(a, float) + np.asarray(b, float))
+    return radius - math.copysign(1.0, radius) * np.sqrt(radius**2 - np.square(a)
+                                                         - np.square(b))
+
+
+def _frame_lip(scene: Scene, x3: np.ndarray, p3: np.ndarray) -> np.ndarray:
+    """For each path camera → glass point ``x3`` → object point ``p3``: which of its two
+    legs runs into the frame's inner side before clearing the frame's front
+    (MIRROR_LIP before the glass's corners) as 'camera side' or 'object top' (the leg and
+    the frame's part), '' where neither does."""
+    g, along, up, n = glass_frame(scene)
+    w, h = scene.mirror.size
+    R = scene.bench.curvature_radius
+    rel = x3 - g
+    a, b = rel @ along, rel @ up
+    rise = MIRROR_LIP + sag(w / 2, h / 2, R) - sag(a, b, R)  # glass point → frame front
+    out = np.full(len(x3), "", dtype=object)
+    for leg, d in (("camera", scene.camera.center3 - x3), ("object", p3 - x3)):
+        dn = d @ n
+        with np.errstate(divide="ignore", invalid="ignore"):
+            a_f, b_f = a + rise * (d @ along) / dn, b + rise * (d @ up) / dn
+        for part, hit in (("side", np.abs(a_f) > w / 2), ("top", b_f > h / 2)):
+            hit &= (dn > 0) & (out == "")
+            out[hit] = f"{leg} {part}"
+    return out
+
+
 def glass_hits(scene: Scene, points3: np.ndarray, iterations: int = 6
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Where the camera sees each 3-D point in the bench's real mirror (tilted, curved).
@@ -289,13 +321,19 @@ def _column_failures(scene: Scene, walls, point, heights: np.ndarray) -> list[st
         offset, up_glass = np.full(n, img.mirror_offset), zc
         apparent = np.column_stack([np.full(n, img.virtual[0]), np.full(n, img.virtual[1]),
                                     heights])
+        hits = np.column_stack([np.broadcast_to(img.reflection_point, (n, 2)), zc])
     else:  # the bench's tilted or curved glass decides what it shows
         pts = np.column_stack([np.full(n, float(point[0])), np.full(n, float(point[1])),
                                heights])
         a, b, apparent = glass_hits(scene, pts)
+        g, along_g, up_g, n_g = glass_frame(scene)
         # the mirror line's +yaw direction against the glass's `along`
-        sign = 1.0 if glass_frame(scene)[1][:2] @ unit(mir.yaw) > 0 else -1.0
+        sign = 1.0 if along_g[:2] @ unit(mir.yaw) > 0 else -1.0
         offset, up_glass = sign * a, b + mir.size[1] / 2
+        hits = (g + np.outer(a, along_g) + np.outer(b, up_g)
+                + np.outer(sag(a, b, scene.bench.curvature_radius), n_g))
+    lip = _frame_lip(scene, hits, np.column_stack(
+        [np.full(n, float(point[0])), np.full(n, float(point[1])), heights]))
     u, v, depth = project(cam, apparent, scene.bench.pitch, scene.bench.roll)
     outside = (depth <= 0) | (u < -0.5) | (u > cam.width - 0.5) | (v < -0.5) | (
         v > cam.height_px - 0.5)
@@ -319,6 +357,12 @@ def _column_failures(scene: Scene, walls, point, heights: np.ndarray) -> list[st
                        "above its top edge")
         elif up_glass[k] < 0.0:
             out.append(f"the ray meets the mirror plane {-up_glass[k]:.2f} cm below the board")
+        elif lip[k]:
+            leg, part = lip[k].split()
+            gap = half_w - abs(offset[k]) if part == "side" else mir.size[1] - up_glass[k]
+            out.append(f"its path to the {leg} leaves the glass {gap:.2f} cm from its "
+                       f"{part} edge and meets the frame there ({MIRROR_LIP} cm proud of "
+                       "the glass)")
         elif outside[k]:
             out.append(f"it lies outside the camera's field of view (pan {cam.pan_deg:.2f}°, "
                        f"pixel ({float(u[k]):.0f}, {float(v[k]):.0f}))")

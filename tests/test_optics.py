@@ -7,7 +7,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from mirrorsim import optics
-from mirrorsim.model import Camera, Mirror
+from mirrorsim.model import MIRROR_LIP, Camera, Mirror
 from mirrorsim.scenefile import scene_from_dict
 from solver.geometry import signed_distance, unit
 
@@ -113,3 +113,27 @@ def test_bundled_scenes_are_nlos():
         assert optics.direct_view_fraction(s, s.target) == 0.0, name
         for b in s.beacons:
             assert optics.visibility(s, b).fraction == 1.0, name
+
+
+@pytest.mark.parametrize("end", [-1.0, 1.0])
+def test_the_frame_hides_the_strip_of_glass_beside_it(end):
+    """The frame's front stands MIRROR_LIP before the glass, so a path leaving the glass
+    within MIRROR_LIP·tan(incidence) of a side edge meets the frame's inner side: at one
+    end the path to the object, at the other the path to the camera (independent plan
+    geometry: incidence from the camera's bearing to the reflection point)."""
+    s = scene_from_dict(scene_dict("default"))
+    m, cam = s.mirror, s.camera
+    n = np.asarray(m.normal_towards(cam.position))
+    half = m.size[0] / 2
+    z = 5.0
+    for factor, lost in ((0.5, True), (2.0, False)):
+        # a point on the glass a little inside its end, and the incidence there
+        r0 = np.asarray(m.center) + end * half * unit(m.yaw)
+        d_in = r0 - np.asarray(cam.position)
+        tan_i = abs(d_in @ unit(m.yaw)) / abs(d_in @ n)
+        r = np.asarray(m.center) + end * (half - factor * MIRROR_LIP * tan_i) * unit(m.yaw)
+        d_in = (r - np.asarray(cam.position)) / np.linalg.norm(r - cam.position)
+        d_out = d_in - 2 * (d_in @ n) * n
+        point = r + 25.0 * d_out  # 25 cm on along the reflected ray
+        why = optics._column_failures(s, [], point, np.array([z]))[0]
+        assert ("meets the frame" in why) == lost, (factor, why)
