@@ -112,21 +112,25 @@ def _local_edge(img: np.ndarray, band, axis: int, guess: float, inside_first: bo
     rows_a = np.array([line(c + int(k)) for k in k_a])
     before, after = _level(rows_b, -k_b, at, slope), _level(rows_a, k_a, at, slope)
     inside, outside = (before, after) if inside_first else (after, before)
-    if near:
-        # the outside darkens towards the edge (a contact shadow on the board): its level
-        # is the first pixel past the edge's, and the window stops at the edge's pixel
-        step = 1 if inside_first else -1
-        level = line(c + step)
-        lo = c - half if inside_first else c
-        window = np.array([line(i) for i in range(lo, lo + half + 1)])
-        return _edge_by_area(window, lo, inside, level, inside_first), outside
-    window = np.array([line(i) for i in range(c - half, c + half + 1)])
     if chroma:
         # only the colour across the outside's: the outside's shading (a contact shadow,
         # a hole, a facet turned from the light) scales its colour and drops out
         o = np.median(rows_a if inside_first else rows_b, axis=0)  # holes: a median
         o /= max(float(np.linalg.norm(o)), 1e-9)
         flat = lambda x: x - (x @ o)[..., None] * o  # noqa: E731
+    else:
+        flat = lambda x: x  # noqa: E731
+    if near:
+        # the outside changes towards the edge (a contact shadow on the board): its level
+        # is the first pixel past the edge's, and the window stops at the edge's pixel
+        step = 1 if inside_first else -1
+        level = line(c + step)
+        lo = c - half if inside_first else c
+        window = np.array([line(i) for i in range(lo, lo + half + 1)])
+        return (_edge_by_area(flat(window), lo, flat(inside), flat(level), inside_first),
+                _mean_level(outside))
+    window = np.array([line(i) for i in range(c - half, c + half + 1)])
+    if chroma:
         return _edge_by_area(flat(window), c - half, flat(inside), np.zeros_like(o),
                              inside_first), _mean_level(outside)
     return _edge_by_area(window, c - half, inside, outside, inside_first), _mean_level(outside)
@@ -165,13 +169,22 @@ def _median_edges(imgs, lo, hi, cross_lo, cross_hi, axis, band_px=3,
             outs.append(np.median([o for _, o in coarse], axis=0))
             continue
         m = float(np.median(vals))
-        near = [band for band, (e, _) in zip(bands, coarse, strict=True)
+        kept = [(band, e) for band, (e, _) in zip(bands, coarse, strict=True)
                 if e is not None and abs(e - m) < 1.0]
-        keep = np.concatenate(near) if near else np.concatenate(bands)
+        if axis == 0 and end == 1 and not slope[end]:
+            # a foot, whose level is the first pixel past it: per band, at the band's own
+            # row (in perspective the foot slants by up to a pixel across the object, and
+            # on their mean profile the next row is partly inside)
+            per = [_local_edge(img, band, axis, e0, True, reach, near=True, chroma=flat)
+                   for band, e0 in (kept or [(bd, m) for bd in bands])]
+            got = [e for e, _ in per if e is not None]
+            final.append(float(np.mean(got)) if got else None)
+            outs.append(np.mean([o for _, o in per], axis=0))
+            continue
+        keep = np.concatenate([band for band, _ in kept]) if kept else np.concatenate(bands)
         # round(m) is the pixel the edge crosses: the window is centred on it
-        e, out = _local_edge(img, keep, axis, m, end == 1, reach,
-                             near=axis == 0 and end == 1 and not (flat or slope[end]),
-                             chroma=flat, slope=slope[end])
+        e, out = _local_edge(img, keep, axis, m, end == 1, reach, chroma=flat,
+                             slope=slope[end])
         final.append(e)
         outs.append(out)
     return final[0], final[1], outs[0], outs[1]
@@ -212,7 +225,8 @@ def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str
                                                          slope=(True, True))
         left, right, out_left, out_right = _median_edges((blue, blue), u0, u1, v0, v1, axis=1)
     else:
-        top, bottom, out_top, out_bottom = _median_edges((img, img), v0, v1, u0, u1, axis=0)
+        top, bottom, out_top, out_bottom = _median_edges((img, img), v0, v1, u0, u1, axis=0,
+                                                         chroma=(False, True))
         left, right, out_left, out_right = _median_edges((img, img), u0, u1, v0, v1, axis=1,
                                                          slope=(True, True))
     core = img[v0 + (v1 - v0) // 4: v1 - (v1 - v0) // 4 + 1,
