@@ -142,7 +142,7 @@ def _mean_level(level: np.ndarray) -> np.ndarray:
 
 
 def _median_edges(imgs, lo, hi, cross_lo, cross_hi, axis, band_px=3,
-                  chroma=(False, False), slope=(False, False)):
+                  chroma=(False, False), slope=(False, False), near=(False, False)):
     """Edges at both ends of an object spanning [lo, hi] along ``axis`` (0: top and
     bottom, 1: left and right), robust and precise; ``imgs`` and ``chroma``: the image
     each end is measured in, and whether on its colour across the outside's; ``slope``:
@@ -171,11 +171,11 @@ def _median_edges(imgs, lo, hi, cross_lo, cross_hi, axis, band_px=3,
         m = float(np.median(vals))
         kept = [(band, e) for band, (e, _) in zip(bands, coarse, strict=True)
                 if e is not None and abs(e - m) < 1.0]
-        if axis == 0 and end == 1 and not slope[end]:
-            # a foot, whose level is the first pixel past it: per band, at the band's own
-            # row (in perspective the foot slants by up to a pixel across the object, and
-            # on their mean profile the next row is partly inside)
-            per = [_local_edge(img, band, axis, e0, True, reach, near=True, chroma=flat)
+        if near[end]:
+            # the level is the first pixel past the edge: per band, at the band's own
+            # position (in perspective a foot slants by up to a pixel across the object,
+            # and on their mean profile the next row is partly inside)
+            per = [_local_edge(img, band, axis, e0, end == 1, reach, near=True, chroma=flat)
                    for band, e0 in (kept or [(bd, m) for bd in bands])]
             got = [e for e, _ in per if e is not None]
             final.append(float(np.mean(got)) if got else None)
@@ -223,10 +223,11 @@ def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str
         top, bottom, out_top, out_bottom = _median_edges((blue, img), v0, v1, u0, u1, axis=0,
                                                          chroma=(False, True),
                                                          slope=(True, True))
-        left, right, out_left, out_right = _median_edges((blue, blue), u0, u1, v0, v1, axis=1)
+        left, right, out_left, out_right = _median_edges((blue, blue), u0, u1, v0, v1, axis=1,
+                                                         near=(True, True))
     else:
         top, bottom, out_top, out_bottom = _median_edges((img, img), v0, v1, u0, u1, axis=0,
-                                                         chroma=(False, True))
+                                                         chroma=(False, True), near=(False, True))
         left, right, out_left, out_right = _median_edges((img, img), u0, u1, v0, v1, axis=1,
                                                          slope=(True, True))
     core = img[v0 + (v1 - v0) // 4: v1 - (v1 - v0) // 4 + 1,
