@@ -35,7 +35,8 @@ CALIBRATION_SPP = {"target": 64, "pencil": 1024}
 REFERENCE_PAN = 45.0  # the reference camera looks along the board's diagonal
 MARGIN_PX = 24  # rendered around the object's projected outline
 # bump whenever the measurement changes, so that no K measured the old way is reused
-METHOD = "foot-chroma|target-foot-chroma|front-0.338|slope8|seeds-ss"  # + the render seeds hashed by SeedSequence
+# (seeds-ss: the render seeds hashed by SeedSequence)
+METHOD = "foot-chroma|target-foot-chroma|front-0.338|slope8|seeds-ss"
 
 
 def calibration_key(camera: Camera, target_size, pencil_height: float,
