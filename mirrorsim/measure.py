@@ -80,11 +80,12 @@ def _local_edge(img: np.ndarray, band, axis: int, guess: float, inside_first: bo
     keep a shadow or a neighbour a few pixels away (a contact shadow at a foot, another
     object beside a thin pencil) out of it; medians drop the pegboard's holes.
 
-    ``near``: for an object's foot.  The board in its contact shadow brightens over the
-    first pixels away from the foot, so an outside level taken 2–5 px away counts the
-    darker pixels next to the edge as partly inside (the foot measured 0.3–0.6 px low on
-    full-size frames).  Here the level is the first pixel past the edge's own, and the
-    window ends at the edge's pixel.
+    ``near``: for an outside that changes towards the edge.  The board in an object's
+    contact shadow brightens over the first pixels away from its foot, so an outside
+    level taken 2–5 px away counts the darker pixels next to the edge as partly inside
+    (the foot measured 0.3–0.6 px low on full-size frames); beside a pencil the board
+    brightens or darkens towards it.  Here the level is the first pixel past the edge's
+    own, and the window ends at the edge's pixel.
 
     ``chroma``: only the colour across the outside's counts (see :func:`measure_region`).
     ``slope``: each side's level is its straight-line fit over the next SLOPE_ROWS pixels
@@ -208,14 +209,15 @@ def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str
     with the radiance just outside each (pixels only: :mod:`mirrorsim.detect` turns them
     into a bearing and a distance with the camera's geometry).
 
-    ``img`` holds linear RGB radiance (see :func:`to_linear`).  The target's edges are
-    measured on its colour against the outside's.  A pencil's (``kind="beacon"``) sides
-    and top on the blue channel: the paint's blue is ~0 on lit and shadowed faces
-    alike, so the hexagon's shading does not disturb the coverages.  Its foot on the
-    colour across the board's: the board's contact shadow and the pegboard's dark holes
-    in front of the foot only scale the board's colour, and drop out (in the blue
-    channel a hole is as dark as the paint, and the foot moved with the holes in front
-    of it).
+    ``img`` holds linear RGB radiance (see :func:`to_linear`).  The target's top and
+    sides are measured on its colour against the outside's (the sides with sloped
+    levels: the glass beside the panel brightens towards it).  A pencil's
+    (``kind="beacon"``) sides and top on the blue channel: the paint's blue is ~0 on lit
+    and shadowed faces alike, so the hexagon's shading does not disturb the coverages;
+    its sides against the first pixel past each edge.  Both feet on the colour across
+    the board's: the board's contact shadow and the pegboard's dark holes in front of
+    the foot only scale the board's colour, and drop out (in the blue channel a hole is
+    as dark as the paint, and the pencil's foot moved with the holes in front of it).
     """
     u0, v0, u1, v1 = box
     if kind == "beacon":
