@@ -34,7 +34,7 @@ IN_MIRROR = 100  # ids.png: label + IN_MIRROR where the pixel sees it in the mir
 # samples per render call: one progress step each.  A stratified sampler stratifies
 # within a call, so the passes are large; a dataset's few-spp frame is one call.
 PASS_SPP = 16
-RENDER_METHOD = "passes16-ss"  # part of a frame's fingerprint: bump when renders change
+RENDER_METHOD = "passes16-ss-glass0"  # part of a frame's fingerprint: bump when renders change
 MITSUBA_VERSION = mi.__version__
 
 
