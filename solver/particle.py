@@ -336,14 +336,16 @@ class MovingBeaconFilter:
         w = self.weights
         th = np.radians(self.particles.mirror[:, 0])
         # line angles are modulo 180°: average the doubled angle
-        yaw = np.degrees(0.5 * np.arctan2(w @ np.sin(2 * th), w @ np.cos(2 * th)))
+        # (in [0, 180) before ρ is taken along its normal: a mean yaw of −0.005° returned
+        # as 179.995° turned the normal round, and the line stood 2ρ away)
+        yaw = np.degrees(0.5 * np.arctan2(w @ np.sin(2 * th), w @ np.cos(2 * th))) % 180.0
         # express ρ in the mean yaw's normal
         n_mean = line_normal(yaw)
         foot = self.particles.mirror[:, 1, None] * line_normal(self.particles.mirror[:, 0])
         rhos = foot @ n_mean
         rho = float(w @ rhos)
         dyaw = (self.particles.mirror[:, 0] - yaw + 90.0) % 180.0 - 90.0
-        return MirrorEstimate(beacon=w @ self.particles.beacon, yaw_deg=float(yaw % 180.0),
+        return MirrorEstimate(beacon=w @ self.particles.beacon, yaw_deg=float(yaw),
                               rho=rho, yaw_sd_deg=float(np.sqrt(w @ dyaw**2)),
                               rho_sd=float(np.sqrt(w @ (rhos - rho) ** 2)))
 

@@ -139,3 +139,16 @@ def test_replay_gives_the_filter_s_own_beacon_and_likelihood():
     assert np.allclose(again.beacon, f.particles.beacon)
     assert np.allclose(again.cov, f.particles.cov)
     assert np.allclose(again.loglik, f.particles.loglik)
+
+
+def test_a_mean_yaw_just_below_zero_keeps_the_line_where_it_is():
+    """Hypotheses of the line y = 68 at yaw −0.02° and +0.01° (exp2's mirror, yaw 0):
+    their mean yaw, −0.005°, is reported as 179.995°, and the offset must be taken along
+    that yaw's normal, or the estimated line stands 2·68 cm away (it did: target errors
+    of 136 cm in `track` on exp2)."""
+    f = MovingBeaconFilter(OBS, (20.0, 0.0), (-15.0, 15.0), (60.0, 76.0), n=2, rng=0)
+    f.particles.mirror[:] = [[-0.02, 68.0], [0.01, 68.0]]
+    f.weights = np.array([0.5, 0.5])
+    est = f.estimate()
+    assert abs(est.yaw_deg - 179.995) < 1e-6
+    assert np.allclose(est.point, [0.0, 68.0], atol=0.01)
