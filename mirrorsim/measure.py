@@ -147,11 +147,13 @@ def _median_edges(imgs, lo, hi, cross_lo, cross_hi, axis, band_px=3,
     """Edges at both ends of an object spanning [lo, hi] along ``axis`` (0: top and
     bottom, 1: left and right), robust and precise; ``imgs`` and ``chroma``: the image
     each end is measured in, and whether on its colour across the outside's; ``slope``:
-    whether its levels are straight-line fits (see :func:`_local_edge`).
+    whether its levels are straight-line fits; ``near``: whether its outside level is the
+    first pixel past it (see :func:`_local_edge`).
 
     Bands of ``band_px`` across the object's middle 60 % each give an edge near the
     region's boundary (±2 px); bands more than 1 px from their median (partly occluded
-    ones) are dropped; the final edge is measured on the mean profile of the rest.
+    ones) are dropped; the final edge is measured on the mean profile of the rest (with
+    ``near``: on each of them, and averaged).
     Returns (edge_lo, edge_hi, outside_lo, outside_hi).
     """
     span = cross_hi - cross_lo + 1

@@ -303,24 +303,25 @@ def _mirror_shapes(scene: Scene) -> dict:
     w, h = m.size
     g, along, up, n = optics.glass_frame(scene)
     c = g - up * h / 2  # the middle of its bottom edge
-    fwd = back = 0.0  # how far the curved glass's rim stands before / behind its centre
+    back = 0.0  # how far the curved glass's rim stands behind its centre
     if bench.curvature_radius is None:
         glass = {"type": "rectangle", "bsdf": {"type": "conductor"},
                  "to_world": _transform(along * w / 2, up * h / 2, n, c + up * h / 2)}
     else:
         glass, sag = _spherical_glass(c + up * h / 2, along, up, n, m.size,
                                       bench.curvature_radius)
-        fwd, back = max(0.0, sag.max()), max(0.0, -sag.min())
+        back = max(0.0, -sag.min())
     d = {"mirror_glass": glass,
          "mirror_back": _box(c + up * h / 2 - n * (0.21 + back), n * 0.2, along * w / 2,
                              up * h / 2, "mirror_back")}
     # the frame runs from 0.5 behind the glass's rim to MIRROR_LIP before it
-    fw, depth, mid = MIRROR_FRAME, (0.5 + MIRROR_LIP) / 2, (MIRROR_LIP - 0.5) / 2
+    fw, depth = MIRROR_FRAME, (0.5 + MIRROR_LIP) / 2
+    mid = optics.frame_front(scene) - depth
     for k, s in enumerate((-1, 1)):
         d[f"mirror_frame{k}"] = _box(c + along * s * (w + fw) / 2 + up * (h + fw) / 2
-                                     + n * (mid + fwd - back), n * depth, along * fw / 2,
+                                     + n * mid, n * depth, along * fw / 2,
                                      up * (h + fw) / 2, "frame")
-    d["mirror_frame_top"] = _box(c + up * (h + fw / 2) + n * (mid + fwd - back), n * depth,
+    d["mirror_frame_top"] = _box(c + up * (h + fw / 2) + n * mid, n * depth,
                                  along * (w / 2 + fw), up * fw / 2, "frame")
     return d
 

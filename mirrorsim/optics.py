@@ -231,17 +231,26 @@ def sag(a, b, radius: float | None):
                                                          - np.square(b))
 
 
-def _frame_lip(scene: Scene, x3: np.ndarray, p3: np.ndarray) -> np.ndarray:
-    """For each path camera → glass point ``x3`` → object point ``p3``: which of its two
-    legs runs into the frame's inner side before clearing the frame's front
-    (MIRROR_LIP before the glass's corners) as 'camera side' or 'object top' (the leg and
-    the frame's part), '' where neither does."""
-    g, along, up, n = glass_frame(scene)
+def frame_front(scene: Scene) -> float:
+    """How far the mirror frame's front stands before the glass's tangent plane at its
+    centre (cm): MIRROR_LIP before the glass's corners (the renderer's frame and the
+    visibility checks' lip)."""
     w, h = scene.mirror.size
-    R = scene.bench.curvature_radius
-    rel = x3 - g
-    a, b = rel @ along, rel @ up
-    rise = MIRROR_LIP + sag(w / 2, h / 2, R) - sag(a, b, R)  # glass point → frame front
+    return MIRROR_LIP + float(sag(w / 2, h / 2, scene.bench.curvature_radius))
+
+
+def _frame_lip(scene: Scene, frame, a: np.ndarray, b: np.ndarray, p3: np.ndarray
+               ) -> np.ndarray:
+    """For each path camera → glass point (``a`` along, ``b`` up from the centre of the
+    glass ``frame``, :func:`glass_frame`) → object point ``p3``: which of its two legs
+    runs into the frame's inner side before clearing the frame's front
+    (:func:`frame_front`), as 'camera side' or 'object top' (the leg and the frame's
+    part), '' where neither does."""
+    g, along, up, n = frame
+    w, h = scene.mirror.size
+    depth = sag(a, b, scene.bench.curvature_radius)
+    x3 = g + np.outer(a, along) + np.outer(b, up) + np.outer(depth, n)
+    rise = frame_front(scene) - depth  # glass point → frame front
     out = np.full(len(x3), "", dtype=object)
     for leg, d in (("camera", scene.camera.center3 - x3), ("object", p3 - x3)):
         dn = d @ n
@@ -315,25 +324,22 @@ def _column_failures(scene: Scene, walls, point, heights: np.ndarray) -> list[st
     half_w = mir.size[0] / 2.0
     t = img.d1 / img.d_total
     zc = cam.height + t * (heights - cam.height)  # in plan, for the walls
+    pts = np.column_stack([np.full(n, float(point[0])), np.full(n, float(point[1])),
+                           heights])
+    frame = glass_frame(scene)
+    # the mirror line's +yaw direction against the glass's `along`
+    sign = 1.0 if frame[1][:2] @ unit(mir.yaw) > 0 else -1.0
     if _flat_upright(scene):
         if abs(img.mirror_offset) > half_w:  # the whole column: no need to look further
             return [_past_end(img.mirror_offset, half_w)] * n
         offset, up_glass = np.full(n, img.mirror_offset), zc
         apparent = np.column_stack([np.full(n, img.virtual[0]), np.full(n, img.virtual[1]),
                                     heights])
-        hits = np.column_stack([np.broadcast_to(img.reflection_point, (n, 2)), zc])
+        a, b = sign * offset, zc - mir.size[1] / 2
     else:  # the bench's tilted or curved glass decides what it shows
-        pts = np.column_stack([np.full(n, float(point[0])), np.full(n, float(point[1])),
-                               heights])
         a, b, apparent = glass_hits(scene, pts)
-        g, along_g, up_g, n_g = glass_frame(scene)
-        # the mirror line's +yaw direction against the glass's `along`
-        sign = 1.0 if along_g[:2] @ unit(mir.yaw) > 0 else -1.0
         offset, up_glass = sign * a, b + mir.size[1] / 2
-        hits = (g + np.outer(a, along_g) + np.outer(b, up_g)
-                + np.outer(sag(a, b, scene.bench.curvature_radius), n_g))
-    lip = _frame_lip(scene, hits, np.column_stack(
-        [np.full(n, float(point[0])), np.full(n, float(point[1])), heights]))
+    lip = _frame_lip(scene, frame, a, b, pts)
     u, v, depth = project(cam, apparent, scene.bench.pitch, scene.bench.roll)
     outside = (depth <= 0) | (u < -0.5) | (u > cam.width - 0.5) | (v < -0.5) | (
         v > cam.height_px - 0.5)
