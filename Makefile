@@ -41,17 +41,17 @@ lint: setup
 	$(BIN)/ruff check .
 
 bench: setup
-	$(BIN)/python bench/render.py
-	$(BIN)/python bench/detect.py
-	$(BIN)/python bench/detect.py --offaxis --plot docs/detect_offaxis.png
-	$(BIN)/python bench/edges.py
-	$(BIN)/python bench/particle.py
-	$(BIN)/python bench/paper.py
-	$(BIN)/python bench/evaluate.py
-	$(BIN)/python bench/dataset.py
-	$(BIN)/python bench/pieces.py --rss 30
-	$(BIN)/python bench/edge_noise.py
-	$(BIN)/python bench/pencil_edges.py --spp 1024
+	$(BIN)/python benchmarks/render.py
+	$(BIN)/python benchmarks/detect.py
+	$(BIN)/python benchmarks/detect.py --offaxis --plot docs/detect_offaxis.png
+	$(BIN)/python benchmarks/edges.py
+	$(BIN)/python benchmarks/particle.py
+	$(BIN)/python benchmarks/paper.py
+	$(BIN)/python benchmarks/evaluate.py
+	$(BIN)/python benchmarks/dataset.py
+	$(BIN)/python benchmarks/pieces.py --rss 30
+	$(BIN)/python benchmarks/edge_noise.py
+	$(BIN)/python benchmarks/pencil_edges.py --spp 1024
 
 clean:
 	rm -rf $(VENV) renders/*/ .pytest_cache .ruff_cache .hypothesis

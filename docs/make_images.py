@@ -23,7 +23,7 @@ DOCS = ROOT / "docs"
 
 def run(*args: str) -> None:
     """Run a mirrorsim command."""
-    subprocess.run([sys.executable, "-m", "mirrorsim.cli", *args], cwd=ROOT, check=True)
+    subprocess.run([sys.executable, "-m", "mirrorsim.cli.main", *args], cwd=ROOT, check=True)
 
 
 def main() -> None:

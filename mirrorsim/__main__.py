@@ -2,6 +2,6 @@
 
 import sys
 
-from mirrorsim.cli import main
+from mirrorsim.cli.main import main
 
 sys.exit(main())

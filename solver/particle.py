@@ -8,12 +8,12 @@ and the mirror's reflection maps it affinely onto the beacon.  So each particle 
 mirror hypothesis carrying an exact Kalman filter of the beacon (mean, 2×2 covariance),
 weighted by the marginal likelihood of each observation; only the mirror is sampled.
 
-Why (``python bench/particle.py``, 20 runs on EXP1's mirror): the former filter sampled
+Why (``python benchmarks/particle.py``, 20 runs on EXP1's mirror): the former filter sampled
 the beacon too, in four dimensions with 4000 particles.  Each resampling kept few
 distinct mirrors (its static parameters were only roughened by 0.02° / 0.02 cm), so a
 run whose surviving cloud had locked onto a wrong yaw stayed there: the p90 of the yaw
 error stopped at 0.77° from step 8 on, and 20000 particles lowered it to 0.51° at step 23
-(``bench/particle.py --particles 20000`` at commit 6e07002): sample impoverishment, not a
+(``benchmarks/particle.py --particles 20000`` at commit 6e07002): sample impoverishment, not a
 wrong likelihood.  Here the beacon is integrated out.  After resampling, the mirror
 hypotheses are moved by Metropolis–Hastings (resample-move, Gilks and Berzuini 2001):
 each proposes a random-walk step scaled by the cloud's own covariance, or a draw from

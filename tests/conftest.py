@@ -8,8 +8,8 @@ from pathlib import Path
 import pytest
 import yaml
 
-from mirrorsim.model import Scene
-from mirrorsim.scenefile import scene_from_dict
+from mirrorsim.formats.scenefile import scene_from_dict
+from mirrorsim.scene.model import Scene
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENES = ROOT / "scenes"
@@ -41,7 +41,7 @@ def _private_cache(tmp_path_factory):
 def fast_variant() -> str:
     """The Mitsuba variant the renderer's tests run on: the fastest that works here
     (``cuda_ad_rgb``, else ``llvm_ad_rgb``, else ``scalar_rgb``), named in their output."""
-    from mirrorsim.backend import choose_variant
+    from mirrorsim.rendering.backend import choose_variant
 
     return choose_variant("auto")
 
@@ -56,6 +56,6 @@ def jit_variant(fast_variant) -> str:
 
 def pytest_report_header(config) -> str:  # noqa: ARG001
     """Say which Mitsuba backend the rendering tests run on."""
-    from mirrorsim.backend import choose_variant
+    from mirrorsim.rendering.backend import choose_variant
 
     return f"mirrorsim rendering tests run on: {choose_variant('auto')} (fast_variant fixture)"

@@ -4,7 +4,7 @@ import glob
 
 import pytest
 
-from mirrorsim import backend
+from mirrorsim.rendering import backend
 
 
 def test_probe_answer_is_cached(monkeypatch):

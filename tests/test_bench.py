@@ -12,17 +12,18 @@ import numpy as np
 import pytest
 import yaml
 
-from mirrorsim import imperfections, optics
-from mirrorsim.calibrate import calibrate
-from mirrorsim.capture import CaptureRecord
-from mirrorsim.cli import main
-from mirrorsim.detect import FRONT_OFFSET, detect_frame, read_frame
-from mirrorsim.frames import render_to_files, scene_fingerprint
-from mirrorsim.mitsuba_scene import TARGET_LABEL
-from mirrorsim.model import Bench, SensorNoise
-from mirrorsim.render import IN_MIRROR
-from mirrorsim.scenefile import scene_from_dict
-from mirrorsim.sensor import add_noise, undistort_points
+from mirrorsim.cli.main import main
+from mirrorsim.detection.detector import FRONT_OFFSET, detect_frame, read_frame
+from mirrorsim.formats.capture import CaptureRecord
+from mirrorsim.formats.scenefile import scene_from_dict
+from mirrorsim.pipelines.calibrate import calibrate
+from mirrorsim.rendering.frames import render_to_files, scene_fingerprint
+from mirrorsim.rendering.mitsuba_scene import TARGET_LABEL
+from mirrorsim.rendering.passes import IN_MIRROR
+from mirrorsim.rendering.sensor import add_noise, undistort_points
+from mirrorsim.scene import imperfections
+from mirrorsim.scene.model import Bench, SensorNoise
+from mirrorsim.truth import optics
 
 from .conftest import scene_dict
 
@@ -443,7 +444,7 @@ def test_truth_names_the_bench_it_was_rendered_with(ideal):
 
 def test_a_bench_scene_written_as_a_file_reads_back_the_same():
     """`to_yaml` (the dataset's scene files) keeps every imperfection."""
-    from mirrorsim.sampler import to_yaml
+    from mirrorsim.pipelines.random_scenes import to_yaml
 
     s = bench_scene(camera={"pan_error": 0.5, "pitch": 1.0, "roll": -0.5,
                             "distortion": [-0.05, 0.01], "distortion_known": False,

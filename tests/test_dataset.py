@@ -12,10 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mirrorsim import errormodel
-from mirrorsim.cli import main
-from mirrorsim.dataset import collect_rows, run_dataset
-from mirrorsim.scenefile import load_scene
+from mirrorsim.cli.main import main
+from mirrorsim.formats.scenefile import load_scene
+from mirrorsim.pipelines import errormodel
+from mirrorsim.pipelines.dataset import collect_rows, run_dataset
 
 SPEC = Path(__file__).parent / "data" / "tiny_spec.yaml"
 VOLATILE = ("seconds_total", "seconds_sample", "traceback")
@@ -237,8 +237,8 @@ def test_camera_models_are_calibrated_once_before_the_workers(tmp_path):
     scene's camera is one of the models."""
     import yaml
 
-    from mirrorsim.calibrate import _cache_file, calibration_key
-    from mirrorsim.sampler import camera_models, load_spec
+    from mirrorsim.pipelines.calibrate import _cache_file, calibration_key
+    from mirrorsim.pipelines.random_scenes import camera_models, load_spec
 
     spec = yaml.safe_load(SPEC.read_text())
     for k in ("height", "hfov"):
@@ -278,7 +278,7 @@ def test_a_dataset_draws_bench_imperfections_and_its_rows_carry_them(one_worker,
     scale, −(d − f)/d · e/(100 + e − f) (K measured at 100 + e while 100 is assumed; f
     the face offset), within the calibration's own measurement error at half size (a
     pencil 100 cm off is a few dozen px: its K varies by ~0.5 % with the distance)."""
-    from mirrorsim.detect import FRONT_OFFSET
+    from mirrorsim.detection.detector import FRONT_OFFSET
 
     ideal = collect_rows(one_worker[0], 3)
     spec = _bench_spec(tmp_path, {"camera": {"pan_error": [-0.5, 0.5]},
@@ -308,7 +308,7 @@ def test_a_dataset_draws_bench_imperfections_and_its_rows_carry_them(one_worker,
 
 def test_a_spec_without_a_bench_draws_the_same_scenes_as_before(tmp_path):
     """The bench block is drawn from its own stream: adding it keeps every scene's geometry."""
-    from mirrorsim.sampler import load_spec, sample_scene
+    from mirrorsim.pipelines.random_scenes import load_spec, sample_scene
 
     plain = load_spec(SPEC)
     bench = load_spec(_bench_spec(tmp_path, {"mirror": {"tilt": [-1, 1]}}))

@@ -5,18 +5,18 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from mirrorsim.calibrate import calibrate
-from mirrorsim.capture import CaptureRecord
-from mirrorsim.cli import main
-from mirrorsim.detect import detect_frame, read_frame
+from mirrorsim.cli.main import main
+from mirrorsim.detection.detector import detect_frame, read_frame
 from mirrorsim.errors import DetectionError
-from mirrorsim.frames import render_to_files
-from mirrorsim.model import Mirror, Target
-from mirrorsim.scenefile import load_scene
+from mirrorsim.formats.capture import CaptureRecord
+from mirrorsim.formats.scenefile import load_scene
+from mirrorsim.pipelines.calibrate import calibrate
+from mirrorsim.rendering.frames import render_to_files
+from mirrorsim.scene.model import Mirror, Target
 
 from .conftest import SCENES, small_scene
 
-# Bounds for frames at 16 spp: bench/detect.py measures |Δα| ≤ 0.01° and |Δd|/d ≤ 0.2 %
+# Bounds for frames at 16 spp: benchmarks/detect.py measures |Δα| ≤ 0.01° and |Δd|/d ≤ 0.2 %
 # (target) and ≤ 0.7 % (pencil) on full-size frames; half-size frames have half the
 # pixels per cm, so the bounds are doubled there.
 
@@ -74,7 +74,7 @@ def test_empty_frame_is_a_clear_error(half_default, tmp_path, capsys):
     blank = np.full((544, 960, 3), 180, np.uint8)
     with pytest.raises(DetectionError, match="no target"):
         detect_frame(blank, CaptureRecord.from_scene(scene), cal)
-    from mirrorsim.io import write_png
+    from mirrorsim.formats.files import write_png
 
     f = tmp_path / "blank.png"
     write_png(f, blank)
@@ -101,7 +101,7 @@ def test_calibration_matches_the_pinhole():
     """The target's height at 1 m, measured on its reference render, is the pinhole's
     fy·15.25/(100 − 0.2) (the panel's front face) within 0.5 px: the paper's 229 px."""
     scene = load_scene(SCENES / "default.yaml")
-    from mirrorsim.calibrate import measure_reference
+    from mirrorsim.pipelines.calibrate import measure_reference
 
     s = measure_reference(scene.camera, "target", scene.target.size)
     assert s == pytest.approx(scene.camera.fx * 15.25 / 99.8, abs=0.5)
@@ -146,7 +146,7 @@ def test_detect_reads_only_the_capture_record(half_default, tmp_path, capsys):
 
     import yaml
 
-    from mirrorsim.capture import load_capture
+    from mirrorsim.formats.capture import load_capture
 
     from .conftest import scene_dict
 
@@ -202,8 +202,8 @@ def test_off_axis_target_has_no_bearing_bias_and_is_not_clipped(tmp_path, off_ax
     perspective widens the image by 1/cos φ, which must not read as a clip."""
     import copy
 
-    from mirrorsim import optics
-    from mirrorsim.scenefile import scene_from_dict
+    from mirrorsim.formats.scenefile import scene_from_dict
+    from mirrorsim.truth import optics
 
     from .conftest import scene_dict
 
@@ -221,7 +221,7 @@ def test_off_axis_target_has_no_bearing_bias_and_is_not_clipped(tmp_path, off_ax
 
 
 def _image(alpha, d):
-    from mirrorsim.measure import ImageMeasurement
+    from mirrorsim.detection.edges import ImageMeasurement
 
     return ImageMeasurement(kind="beacon", source="mirror", bbox_px=[0, 0, 1, 1], u_axis=0.0,
                             v_top=0.0, v_bottom=10.0, height_px=10.0, width_px=2.0,
@@ -232,9 +232,9 @@ def test_assignment_refuses_what_no_mirror_gives_and_ambiguity():
     """The beacon stands 50 cm away at 53.13°.  An image nearer than that cannot be its
     reflection; one at its own bearing and distance is its direct view misread; two
     images that could both be the reflection are an error, not a guess."""
-    from mirrorsim.assign import assign_beacons
-    from mirrorsim.capture import CaptureRecord
-    from mirrorsim.model import Beacon, Camera
+    from mirrorsim.detection.assign import assign_beacons
+    from mirrorsim.formats.capture import CaptureRecord
+    from mirrorsim.scene.model import Beacon, Camera
 
     cam = Camera((0.0, 0.0), 6.0, (1920, 1088), 65.2, 53.0, 53.0)
     view = CaptureRecord(camera=cam, beacons=(Beacon((30.0, 40.0), 4.2),),
@@ -279,7 +279,7 @@ def test_pencil_foot_ignores_holes_and_contact_shadow(holes, shadow):
     """The pencil's foot is measured on the colour across the board's: a dark hole or a
     contact shadow just under it (which only scale the board's colour) does not move
     it (in the blue channel a hole reads as paint: the foot moved by up to a pixel)."""
-    from mirrorsim.measure import measure_region
+    from mirrorsim.detection.edges import measure_region
 
     top, foot = 20.3, 60.6  # rows: pixel r spans r − 0.5 … r + 0.5
     img = _pencil_on_board(top, foot, holes, shadow)
@@ -293,8 +293,8 @@ def test_pencil_front_depth_is_the_mean_near_side_of_the_measured_columns():
     """FRONT_OFFSET['beacon'] is where the hexagon's near side lies, averaged over the
     middle 60 % of its silhouette's columns and over its turn (computed here afresh by
     sampling the polygon)."""
-    from mirrorsim.image_geometry import FRONT_OFFSET, PENCIL_HALF_WIDTH
-    from mirrorsim.model import PENCIL_RADIUS
+    from mirrorsim.detection.image_geometry import FRONT_OFFSET, PENCIL_HALF_WIDTH
+    from mirrorsim.scene.model import PENCIL_RADIUS
 
     depths, widths = [], []
     for turn in np.linspace(0.0, 60.0, 121)[:-1]:

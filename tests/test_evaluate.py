@@ -6,17 +6,17 @@ import json
 import numpy as np
 import pytest
 
-from mirrorsim.cli import main
-from mirrorsim.evaluate import evaluate_scene
-from mirrorsim.report import Report
-from mirrorsim.scenefile import load_scene, scene_from_dict
-from mirrorsim.tables import report_table
+from mirrorsim.cli.main import main
+from mirrorsim.cli.tables import report_table
+from mirrorsim.formats.scenefile import load_scene, scene_from_dict
+from mirrorsim.pipelines.evaluate import evaluate_scene
+from mirrorsim.pipelines.score import Report
 from solver.geometry import yaw_difference
 from solver.sltr import solve_single
 
 from .conftest import SCENES, scene_dict
 
-# Variations of the default scene (mirror pose, target, beacon), as bench/detect.py draws
+# Variations of the default scene (mirror pose, target, beacon), as benchmarks/detect.py draws
 # them; each validates with both images whole in the mirror.
 VARIANTS = [
     {"mirror": {"center": [35.73, 68.18], "yaw": 19.82},
@@ -125,8 +125,8 @@ def test_full_size_end_to_end(name, tmp_path, capsys):
 
 def test_bundled_scenes_evaluate_contract_fields():
     """The report's error keys are INTERFACE.md's (checked on the score function)."""
-    from mirrorsim import optics
-    from mirrorsim.report import score
+    from mirrorsim.pipelines.score import score
+    from mirrorsim.truth import optics
     from solver.sltr import solve_measurements
 
     s = load_scene(SCENES / "exp3.yaml")

@@ -6,9 +6,9 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from mirrorsim import optics
-from mirrorsim.model import MIRROR_LIP, Camera, Mirror
-from mirrorsim.scenefile import scene_from_dict
+from mirrorsim.formats.scenefile import scene_from_dict
+from mirrorsim.scene.model import MIRROR_LIP, Camera, Mirror
+from mirrorsim.truth import optics
 from solver.geometry import signed_distance, unit
 
 from .conftest import scene_dict

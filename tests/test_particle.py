@@ -95,7 +95,7 @@ def _bench_particle():
     from pathlib import Path
 
     spec = importlib.util.spec_from_file_location(
-        "bench_particle", Path(__file__).parents[1] / "bench" / "particle.py")
+        "bench_particle", Path(__file__).parents[1] / "benchmarks" / "particle.py")
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
     return bench

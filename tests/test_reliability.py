@@ -19,8 +19,8 @@ import numpy as np
 import pytest
 import yaml
 
-from mirrorsim import io
-from mirrorsim.cli import main
+from mirrorsim.cli.main import main
+from mirrorsim.formats import files as io
 
 from .conftest import ROOT, SCENES, scene_dict
 
@@ -97,9 +97,9 @@ def test_ctrl_c_during_dataset_stops_at_once_and_resume_is_exact(tmp_path):
     ("detection", True),  # the scene's own: a row with its error
 ])
 def test_only_the_scenes_own_failures_become_rows(tmp_path, monkeypatch, exc, recorded):
-    from mirrorsim import dataset, evaluate
     from mirrorsim.errors import DetectionError
-    from mirrorsim.sampler import load_spec
+    from mirrorsim.pipelines import dataset, evaluate
+    from mirrorsim.pipelines.random_scenes import load_spec
 
     def failing(*_args, **_kwargs):
         raise DetectionError("nothing found") if exc == "detection" else exc
@@ -316,7 +316,7 @@ def test_measurement_files_refused_as_bad_input(tmp_path, capsys, edit, key):
 @pytest.fixture(scope="module")
 def half_frames(tmp_path_factory):
     """The default scene and EXP3 at half size, rendered once."""
-    from mirrorsim.frames import render_to_files
+    from mirrorsim.rendering.frames import render_to_files
 
     folder = tmp_path_factory.mktemp("frames")
     scenes = {}
@@ -325,7 +325,7 @@ def half_frames(tmp_path_factory):
         d["camera"]["resolution"] = [960, 544]
         path = folder / f"{name}.yaml"
         path.write_text(yaml.safe_dump(d))
-        from mirrorsim.scenefile import load_scene
+        from mirrorsim.formats.scenefile import load_scene
 
         files = render_to_files(load_scene(path), folder / name, spp=8, progress=False)
         scenes[name] = (path, files.image)
@@ -384,7 +384,7 @@ def test_a_jpeg_frame_is_measured_with_a_warning(half_frames):
 
 def test_an_unwritable_cache_only_costs_a_redo(tmp_path, monkeypatch):
     """The backend probe and calibration caches: a failed write is not an error."""
-    from mirrorsim.io import read_json_cache, write_json_cache
+    from mirrorsim.formats.files import read_json_cache, write_json_cache
 
     monkeypatch.setattr(io.os, "replace", lambda *_a: (_ for _ in ()).throw(OSError(28, "full")))
     write_json_cache(tmp_path / "cache.json", {"k": 1})  # no exception

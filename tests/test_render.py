@@ -5,11 +5,11 @@ import json
 import numpy as np
 import pytest
 
-from mirrorsim import optics
-from mirrorsim.frames import render_to_files
-from mirrorsim.mitsuba_scene import BEACON_LABEL, MIRROR_LABEL, TARGET_LABEL
-from mirrorsim.render import IN_MIRROR
-from mirrorsim.scenefile import load_scene, scene_from_dict
+from mirrorsim.formats.scenefile import load_scene, scene_from_dict
+from mirrorsim.rendering.frames import render_to_files
+from mirrorsim.rendering.mitsuba_scene import BEACON_LABEL, MIRROR_LABEL, TARGET_LABEL
+from mirrorsim.rendering.passes import IN_MIRROR
+from mirrorsim.truth import optics
 
 from .conftest import SCENES, small_scene
 
@@ -170,7 +170,7 @@ def test_several_beacons_each_get_their_label(tmp_path, fast_variant):
 
 def test_truth_read_back_from_its_file_is_the_truth(default_small):
     """A reused render scores exactly as a fresh one: the truth survives its JSON."""
-    from mirrorsim.report import GroundTruth
+    from mirrorsim.truth.groundtruth import GroundTruth
 
     _, res = default_small
     back = GroundTruth.from_json(json.loads(res.truth_json.read_text()))
@@ -182,7 +182,7 @@ def test_truth_read_back_from_its_file_is_the_truth(default_small):
 def test_srgb_encoding_matches_the_transfer_curve():
     """to_srgb8's lookup against IEC 61966-2-1 evaluated and rounded directly, on random
     values and just either side of every code's edge."""
-    from mirrorsim.render import to_srgb8
+    from mirrorsim.rendering.passes import to_srgb8
 
     def curve(x):
         x = np.clip(np.asarray(x, np.float64), 0.0, 1.0)
@@ -208,7 +208,7 @@ def test_fewer_samples_outside_the_mirror(name, fast_variant):
     the box holds every pixel of the mirror (its id pass, not the box's geometry)."""
     from dataclasses import replace
 
-    from mirrorsim.render import render_frame
+    from mirrorsim.rendering.passes import render_frame
 
     scene = small_scene(name, 480, 272)
     scene = replace(scene, render=replace(scene.render, beacon_spp=1))  # not tested here
@@ -240,8 +240,8 @@ def test_more_samples_in_the_beacons_image(fast_variant):
     64-spp frame than the 4-spp render is."""
     from dataclasses import replace
 
-    from mirrorsim.mitsuba_scene import BEACON_LABEL
-    from mirrorsim.render import render_frame
+    from mirrorsim.rendering.mitsuba_scene import BEACON_LABEL
+    from mirrorsim.rendering.passes import render_frame
 
     scene = small_scene("default", 480, 272)
     with_box = replace(scene, render=replace(scene.render, background_spp=4, beacon_spp=64))
@@ -269,8 +269,8 @@ def test_mirror_image_lies_where_the_mirror_puts_it(tmp_path, fast_variant):
     the glass).  At 64 spp the edges' noise is ~0.005 px."""
     import copy
 
-    from mirrorsim.detect import measure_object, read_frame
-    from mirrorsim.model import TARGET_THICKNESS
+    from mirrorsim.detection.detector import measure_object, read_frame
+    from mirrorsim.scene.model import TARGET_THICKNESS
     from solver.geometry import reflect, unit
 
     from .conftest import scene_dict

@@ -5,10 +5,10 @@ from pathlib import Path
 
 import pytest
 
-from mirrorsim import optics
-from mirrorsim.cli import main
+from mirrorsim.cli.main import main
 from mirrorsim.errors import SceneError
-from mirrorsim.scenefile import load_scene
+from mirrorsim.formats.scenefile import load_scene
+from mirrorsim.truth import optics
 
 from .conftest import SCENES
 

@@ -7,7 +7,7 @@ import sys
 import numpy as np
 import pytest
 
-from mirrorsim.cli import main
+from mirrorsim.cli.main import main
 from solver.montecarlo import PAPER_TABLE1, Table1Geometry, run_row, table1
 from solver.sltr import closed_form_unchecked, solve_single
 

@@ -6,8 +6,8 @@ import json
 
 import pytest
 
-from mirrorsim.cli import main
-from mirrorsim.track import run_track
+from mirrorsim.cli.main import main
+from mirrorsim.pipelines.track import run_track
 
 from .conftest import SCENES, small_scene
 
@@ -103,9 +103,9 @@ def test_paths_stay_on_the_board_and_in_front_of_the_glass(name, kind):
     planner never saw it: it reads the measurements only)."""
     import numpy as np
 
-    from mirrorsim.optics import ground_truth
-    from mirrorsim.scenefile import load_scene
-    from mirrorsim.track import CLEARANCE_CM, beacon_path
+    from mirrorsim.formats.scenefile import load_scene
+    from mirrorsim.pipelines.track import CLEARANCE_CM, beacon_path
+    from mirrorsim.truth.optics import ground_truth
     from solver.geometry import signed_distance
 
     scene = load_scene(SCENES / f"{name}.yaml")
@@ -129,9 +129,9 @@ def test_the_view_heading_keeps_the_beacon_in_the_mirror(name):
     camera's line (the former default) fewer are seen on exp1 and exp3."""
     from dataclasses import replace
 
-    from mirrorsim.optics import ground_truth, visibility
-    from mirrorsim.scenefile import load_scene
-    from mirrorsim.track import beacon_path
+    from mirrorsim.formats.scenefile import load_scene
+    from mirrorsim.pipelines.track import beacon_path
+    from mirrorsim.truth.optics import ground_truth, visibility
 
     scene = load_scene(SCENES / f"{name}.yaml")
     gt = ground_truth(scene)
@@ -167,9 +167,9 @@ def test_the_path_does_not_read_the_scene_s_mirror_or_target():
 
     import numpy as np
 
-    from mirrorsim.optics import ground_truth
-    from mirrorsim.scenefile import load_scene
-    from mirrorsim.track import beacon_path
+    from mirrorsim.formats.scenefile import load_scene
+    from mirrorsim.pipelines.track import beacon_path
+    from mirrorsim.truth.optics import ground_truth
 
     scene = load_scene(SCENES / "exp1.yaml")
     gt = ground_truth(scene)

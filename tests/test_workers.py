@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mirrorsim.workers import rss_mb, run_local
+from mirrorsim.pipelines.workers import rss_mb, run_local
 from tests.conftest import small_scene
 
 _HELD: list[bytearray] = []
@@ -74,7 +74,7 @@ def test_an_exception_in_a_job_reaches_the_caller():
 
 
 def _render_digest(i: int, name: str, variant: str) -> tuple[int, str, int]:
-    from mirrorsim.render import render_frame
+    from mirrorsim.rendering.passes import render_frame
 
     scene = small_scene(name, 160, 91, spp=4, sampler="multijitter")
     f = render_frame(scene, spp=4, seed=i, variant=variant, progress=False)

@@ -1,0 +1,104 @@
+"""Benchmark: what one dataset scene's pieces cost, in one warm process.
+
+    python benchmarks/pieces.py [--scenes 8] [--rss 0]
+
+Times (median over ``--scenes`` scenes of the default spec, after one warm-up scene):
+drawing a valid scene, the board texture, the render at the spec's settings, the id
+pass, linear → sRGB, PNG encoding, detection; then (``--rss N``) the process's resident
+memory after each of N whole dataset scenes.  Runs on older checkouts too (it looks up
+what each has), so that before/after figures come from the same script.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import statistics
+import sys
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from mirrorsim.detection.detector import detect_frame  # noqa: E402
+from mirrorsim.pipelines.calibrate import calibrate  # noqa: E402
+from mirrorsim.pipelines.random_scenes import load_spec, sample_scene  # noqa: E402
+from mirrorsim.rendering import mitsuba_scene  # noqa: E402
+from mirrorsim.rendering import passes as render  # noqa: E402
+from mirrorsim.truth import optics  # noqa: E402
+
+
+def _png_writer():
+    try:
+        from mirrorsim.formats.files import encode_png
+        return lambda px, path: Path(path).write_bytes(encode_png(px))
+    except ImportError:  # before the OpenCV encoder
+        return lambda px, path: render.write_png(path, px)
+
+
+def _timed(fn, *args):
+    t = time.perf_counter()
+    out = fn(*args)
+    return out, time.perf_counter() - t
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenes", type=int, default=8)
+    ap.add_argument("--rss", type=int, default=0)
+    a = ap.parse_args()
+    spec = load_spec(None)
+    write_png = _png_writer()
+    times: dict[str, list[float]] = {}
+    tmp = Path(tempfile.mkdtemp())
+    for i in range(a.scenes + 1):
+        scene, t_draw = _timed(sample_scene, spec, np.random.SeedSequence(0, spawn_key=(i,)),
+                               f"s{i}")
+        board = replace(scene.board)  # a new object: a cache keyed by value still hits
+        fn = getattr(mitsuba_scene._board_texture, "__wrapped__", mitsuba_scene._board_texture)
+        _, t_tex = _timed(fn, board)
+        frame = render.render_frame(scene, spp=scene.render.spp, seed=i, progress=False)
+        srgb, t_srgb = _timed(render.to_srgb8, frame.linear)
+        _, t_png = _timed(write_png, srgb, tmp / "f.png")
+        from mirrorsim.formats.capture import CaptureRecord
+        cap = CaptureRecord.from_scene(scene, frame="f.png")
+        cal = calibrate(cap.camera, cap.target_size, cap.beacons[0].height)
+        _, t_det = _timed(detect_frame, srgb, cap, cal)
+        box = optics.mirror_box(scene)
+        share = 0.0 if box is None else (
+            (box[2] - box[0]) * (box[3] - box[1]) / (scene.camera.width * scene.camera.height_px))
+        if i == 0:
+            continue  # warm-up: imports, kernels, calibration
+        for k, v in (("draw a valid scene", t_draw), ("board texture (uncached)", t_tex),
+                     ("render + id pass", frame.seconds_total),
+                     ("render (path tracing)", frame.seconds_render),
+                     ("linear → sRGB", t_srgb), ("PNG encode + write", t_png),
+                     ("detection", t_det), ("mirror's box, share of the frame", share)):
+            times.setdefault(k, []).append(v)
+    settings = f"{scene.render.sampler if hasattr(scene.render, 'sampler') else 'independent'}"
+    print(f"pieces of a dataset scene, default spec ({settings}, {scene.render.spp} spp), "
+          f"1920×1088, median of {a.scenes}; {platform.machine()}, {os.cpu_count()} cores\n")
+    print("| piece | seconds (share: fraction) |\n|---|---|")
+    for k, v in times.items():
+        print(f"| {k} | {statistics.median(v):.3f} |")
+    if a.rss:
+        from mirrorsim.pipelines.dataset import process_one
+        for d in ("rows", "scenes", "frames"):
+            (tmp / "ds" / d).mkdir(parents=True)
+        print("\n| dataset scenes done in this process | resident memory (MiB) |\n|---|---|")
+        for i in range(a.rss):
+            process_one(i, 0, spec, str(tmp / "ds"), None, "auto")
+            with open("/proc/self/statm") as f:
+                mib = int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+            if i in (0, 1, 4, 9) or i == a.rss - 1 or (i + 1) % 10 == 0:
+                print(f"| {i + 1} | {mib:.0f} |")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,109 @@
+"""The moving beacon against fixed beacons, on rendered frames (issue 14's comparisons).
+
+    python benchmarks/track.py [--scenes default exp1 exp2 exp3] [--steps 20] [--spp N]
+                          [--odometry-sigma CM] [--out renders/bench_track]
+                          [--plot docs/track_paths.png]
+
+For each scene, `mirrorsim track` is run (full size, seed 0, default odometry noise)
+with the beacon on each of the paper's three paths (eqs 19–21), then standing still at
+its start (one fixed beacon, seen in as many frames), then standing still where `plan`
+puts the best fixed beacon.  Every run has the same number of frames and the same
+filter, so the only difference is where the beacon stands.  Prints, per scene and run:
+the poses seen, and after 5, 10 and the last step the commanded path length, the mirror
+yaw error and the target error; the wall time of each run; and plots the target error
+against the step (one panel per scene).  Frames are kept in --out, so a second call
+only re-detects.
+"""
+
+from __future__ import annotations
+
+import argparse
+import platform
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from mirrorsim.formats.scenefile import load_scene  # noqa: E402
+from mirrorsim.pipelines.planning import plan_scene  # noqa: E402
+from mirrorsim.pipelines.track import TrackReport, run_track  # noqa: E402
+from mirrorsim.scene.model import Beacon  # noqa: E402
+
+RUNS = ("rectangular", "linear", "sawtooth", "fixed", "plan's best")
+
+
+def one_run(name: str, run: str, steps: int, spp: int | None, sigma: float, out: Path
+            ) -> tuple[TrackReport, float]:
+    """One track of ``scene`` with the beacon on ``run``; its report and wall time."""
+    scene = load_scene(Path("scenes") / f"{name}.yaml")
+    kind = run
+    if run == "plan's best":
+        best = plan_scene(scene)["best"]["position"]
+        scene = replace(scene, beacons=(Beacon((float(best[0]), float(best[1])),
+                                               scene.beacons[0].height),))
+        kind = "fixed"
+    t0 = time.perf_counter()
+    rep = run_track(scene, out / name / run.replace("'", "").replace(" ", "_"), kind=kind,
+                    steps=steps, spp=spp, odometry_sigma=sigma)
+    return rep, time.perf_counter() - t0
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenes", nargs="+", default=["default", "exp1", "exp2", "exp3"])
+    ap.add_argument("--steps", type=int, default=20)
+    ap.add_argument("--spp", type=int)
+    ap.add_argument("--odometry-sigma", type=float, default=0.1)
+    ap.add_argument("--out", type=Path, default=Path("renders/bench_track"))
+    ap.add_argument("--plot", type=Path, default=Path("docs/track_paths.png"))
+    args = ap.parse_args()
+    marks = sorted({min(5, args.steps), min(10, args.steps), args.steps})
+    print(f"machine: {platform.machine()}, {platform.system()}; {args.steps} moves, "
+          f"seed 0, odometry σ {args.odometry_sigma:g} cm\n")
+    head = " | ".join(f"after {m}: length cm / yaw ° / target cm" for m in marks)
+    print(f"| scene | beacon | poses seen | {head} | wall s |")
+    print("|---|---|---|" + "---|" * len(marks) + "---|")
+    reports: dict[str, dict[str, TrackReport]] = {}
+    for name in args.scenes:
+        for run in RUNS:
+            rep, wall = one_run(name, run, args.steps, args.spp, args.odometry_sigma,
+                                args.out)
+            reports.setdefault(name, {})[run] = rep
+            seen = sum(s.seen for s in rep.steps)
+            cells = " | ".join(f"{rep.steps[m].path_length_cm:.0f} / "
+                               f"{rep.steps[m].mirror_yaw_error_deg:.3f} / "
+                               f"{rep.steps[m].target_error_cm:.2f}" for m in marks)
+            print(f"| {name} | {run} | {seen}/{len(rep.steps)} | {cells} | {wall:.0f} |",
+                  flush=True)
+    plot(reports, args.plot)
+    print(f"\nplot: {args.plot}")
+
+
+def plot(reports: dict[str, dict[str, TrackReport]], out: Path) -> None:
+    """Target error against the step, one panel per scene, one line per run."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(reports), figsize=(4.2 * len(reports), 3.6),
+                             squeeze=False, sharey=True)
+    for ax, (name, runs) in zip(axes[0], reports.items(), strict=True):
+        for run, rep in runs.items():
+            ax.plot([s.step for s in rep.steps], [s.target_error_cm for s in rep.steps],
+                    "-" if run in RUNS[:3] else "--", marker=".", label=run)
+        ax.set_yscale("log")
+        ax.set_title(name)
+        ax.set_xlabel("step")
+        ax.grid(alpha=0.3)
+    axes[0][0].set_ylabel("target error (cm)")
+    axes[0][-1].legend(fontsize=8)
+    fig.tight_layout()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,3 @@
+"""The command line: parser, the command registry, commands, printed tables, plots.
+
+The only place that knows a ``--flag``."""

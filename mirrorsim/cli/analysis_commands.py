@@ -1,0 +1,213 @@
+"""The commands on measurements and many scenes: solve, montecarlo, plan, dataset,
+errormodel."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from mirrorsim.cli.registry import (
+    at_least,
+    command,
+    common,
+    default_workers,
+    error_model_sigma,
+    finite,
+    load,
+    output,
+    sampler_option,
+)
+from mirrorsim.errors import BadArgument
+from mirrorsim.formats.files import emit_json
+from mirrorsim.pipelines.score import EXTRA_FILES
+from solver.measurements import SIGMA_ALPHA_MAX_DEG
+
+MAX_ITERATIONS = 1_000_000  # draws per Monte Carlo row: about a second a row at the most
+
+
+def _solve_options(p):
+    p.add_argument("measurements", type=Path)
+    common(p, scene=False, json="the solution",
+           error_model="where the measurements give no sigma, take")
+
+
+@command("solve", "localize the mirror and the target from measurements",
+         "Read MEASUREMENTS.json (INTERFACE.md: observer, target alpha/d_total, beacons with "
+         "positions) and estimate the mirror line and the target.  One beacon and no sigma: the "
+         "exact closed form; otherwise weighted least squares, with the target's covariance and "
+         "95 % error ellipse when `sigma` is given.", _solve_options)
+def _solve(args) -> int:
+    from mirrorsim.cli.tables import solution_summary
+    from mirrorsim.formats.measurements import load_measurements
+    from solver.sltr import solve_measurements
+
+    m = load_measurements(args.measurements)
+    sigma = m.sigma or error_model_sigma(args)
+    sol = solve_measurements(m.observer, m.beacons, m.targets, sigma)
+    print(solution_summary(str(args.measurements), sol))
+    emit_json(args.json, sol.to_json())
+    return 0
+
+
+def _montecarlo_options(p):
+    p.add_argument("--iterations", type=int, default=200, help="draws per row (default 200)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--alpha", type=float, default=70.0, help="target's alpha (deg)")
+    p.add_argument("--d-total", type=float, default=5.0, help="target's d_total")
+    p.add_argument("--d1", type=float, default=3.0, help="observer → mirror along the ray")
+    p.add_argument("--incidence", type=float, default=30.0,
+                   help="mirror's turn from facing the ray square-on (deg)")
+    p.add_argument("--beacon-depth", type=float, default=0.5,
+                   help="beacon's distance in front of the mirror")
+    p.add_argument("--beacon-along", type=float, default=0.3,
+                   help="beacon's offset along the mirror from the reflection point")
+    p.add_argument("--sigma", nargs=2, type=float, action="append", metavar=("ALPHA", "D"),
+                   help="a row of your own (deg, distance units); repeatable")
+    common(p, scene=False, json="the table", error_model="add a row with")
+
+
+@command("montecarlo", "the paper's Table 1 protocol",
+         "Table 1 of the paper: d_total = 5, alpha = 70 deg, Gaussian noise with the table's "
+         "sigmas, ITERATIONS draws per row; RMSE of the reflector (the target's reflection "
+         "point) and of the target, next to the paper's.  The paper does not say where the "
+         "mirror and beacon stand: the options below set them.", _montecarlo_options)
+def _montecarlo(args) -> int:
+    from mirrorsim.cli.tables import montecarlo_table
+    from solver.montecarlo import Table1Geometry, table1, table_rows
+    from solver.sltr import SolverError
+
+    at_least(("--iterations", args.iterations, 2))
+    if args.iterations > MAX_ITERATIONS:
+        raise BadArgument("--iterations", f"{args.iterations} must be ≤ {MAX_ITERATIONS}")
+    finite(args, "alpha", "d_total", "d1", "incidence", "beacon_depth", "beacon_along", "sigma")
+    for a, d in args.sigma or []:
+        if not (0 <= a <= SIGMA_ALPHA_MAX_DEG and 0 <= d <= args.d_total):
+            raise BadArgument("--sigma", f"{a:g} {d:g}: need 0 ≤ σ_α ≤ "
+                              f"{SIGMA_ALPHA_MAX_DEG:g}° and 0 ≤ σ_d ≤ d_total")
+    try:
+        geometry = Table1Geometry(args.alpha, args.d_total, args.d1, args.incidence,
+                                  args.beacon_depth, args.beacon_along)
+        geometry.layout()
+    except (ValueError, SolverError) as exc:
+        raise BadArgument("geometry", str(exc)) from None
+    rows = table_rows(args.sigma, error_model_sigma(args), args.d_total)
+    res = table1(args.iterations, geometry, args.seed, rows)
+    print(montecarlo_table(res))
+    emit_json(args.json, res)
+    return 0
+
+
+def _plan_options(p):
+    common(p, out="PNG (default renders/<name>/<name>.plan.png)", out_kind="file",
+           json="the analysis")
+    p.add_argument("--sigma-alpha", type=float, default=0.01, help="deg (default 0.01)")
+    p.add_argument("--sigma-d", type=float, default=0.002, help="relative (default 0.002)")
+    p.add_argument("--eps", type=float, default=5.0, help="orientation range ±eps (deg)")
+    p.add_argument("--yaw-spread", type=float, default=3.0, help="prior yaw ± (deg)")
+    p.add_argument("--d1-spread", type=float, default=2.0, help="prior mirror distance ± (cm)")
+    p.add_argument("--step", type=float, default=1.0, help="grid step of the search (cm)")
+    common(p, scene=False, error_model="instead of --sigma-alpha/--sigma-d, take")
+
+
+@command("plan", "beacon placement analysis and the best beacon position",
+         "For SCENE's camera and target measurement: the paper's placement numbers (eqs 7-21: "
+         "step b, half-width a/2, N_bea, the three paths), the exact region where a beacon is "
+         "seen for every mirror orientation within +-eps, and the beacon position on the board "
+         "with the least expected target error over a prior of mirror poses around the scene's "
+         "mirror, with a heat map.", _plan_options)
+def _plan(args) -> int:
+    from mirrorsim.cli.plots import plot_plan
+    from mirrorsim.cli.tables import plan_text
+    from mirrorsim.pipelines.planning import plan_scene, plan_summary
+    from solver.sltr import Sigma
+
+    finite(args, "sigma_alpha", "sigma_d", "eps", "yaw_spread", "d1_spread", "step")
+    scene = load(args.scene)
+    sigma = error_model_sigma(args) or Sigma(args.sigma_alpha, args.sigma_d)
+    plan = plan_scene(scene, sigma, args.eps, args.yaw_spread, args.d1_spread, args.step)
+    summ = plan_summary(plan)
+    print(plan_text(scene, summ))
+    out = args.out or Path("renders") / scene.name / f"{scene.name}.plan.png"
+    print(f"  figure: {plot_plan(scene, plan, out)}")
+    emit_json(args.json, summ)
+    return 0
+
+
+def _dataset_options(p):
+    p.add_argument("--n", type=int, required=True, help="number of scenes")
+    p.add_argument("--seed", type=int, required=True)
+    output(p, "--out", "dir", type=Path, required=True,
+           help="a new or empty folder, or (with --resume) one of its datasets")
+    p.add_argument("--workers", type=int, default=default_workers(),
+                   help="worker processes (default: half the cores)")
+    p.add_argument("--spec", type=Path, help="ranges of the random scenes (YAML)")
+    p.add_argument("--spp", type=int, help="samples per pixel (default: the spec's)")
+    sampler_option(p)
+    p.add_argument("--keep", nargs="*", default=[], choices=EXTRA_FILES,
+                   help="files to write beside each frame besides its PNG, capture record "
+                   "and truth: ids (the id labels), annotated (the detections drawn); "
+                   "default none")
+    common(p, scene=False, variant=True, quiet=True)
+    p.add_argument("--resume", action="store_true", help="finish an interrupted run")
+    p.add_argument("--executor", default="local", choices=["local", "dask"])
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="Dask scheduler (tcp://host:8786); default: a local cluster")
+
+
+@command("dataset", "many random scenes, rendered, detected and scored",
+         "Draw N random valid scenes from a spec (default scenes/dataset_spec.yaml), render, "
+         "detect, solve and score each, in parallel worker processes (or on a Dask cluster), "
+         "and write DIR/dataset.parquet (a row per scene), DIR/scenes/*.yaml, DIR/frames/ and a "
+         "dataset card DIR/README.md.  Interrupted runs resume with --resume; the same seed "
+         "gives the same rows whatever the number of workers.", _dataset_options)
+def _dataset(args) -> int:
+    from mirrorsim.pipelines.dataset import run_dataset
+
+    at_least(("--n", args.n, 1), ("--seed", args.seed, 0), ("--workers", args.workers, 1),
+             ("--spp", args.spp, 1))
+    res = run_dataset(args.n, args.seed, args.out, workers=args.workers, spec_path=args.spec,
+                      spp=args.spp, sampler=args.sampler, variant=args.variant,
+                      keep=tuple(args.keep), resume=args.resume,
+                      executor=args.executor, scheduler=args.scheduler,
+                      progress=not args.quiet)
+    print(f"{args.out}: {res['rows']} rows ({res['computed']} computed now in "
+          f"{res['seconds']:.0f} s, {res['per_minute']:.1f} scenes/min; "
+          f"{res['already_done']} already done; {res['failed']} failed) → {res['parquet']}")
+    if res["retry"]:
+        i, why = next(iter(res["retry"].items()))
+        print(f"error: {len(res['retry'])} scene(s) failed for a reason outside the scene "
+              f"(scene {i}: {why}); they have no row: rerun with --resume", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _errormodel_options(p):
+    p.add_argument("dataset", type=Path)
+    output(p, "--out", "file", type=Path,
+           help="model file, *.json (default DIR/error_model.json; the plots go beside it, "
+           "*.png)")
+
+
+@command("errormodel", "fit the detector's error model to a dataset",
+         "Fit bias and spread of alpha and d_total/d against distance, off-axis bearing, mirror "
+         "incidence and image size; write DIR/error_model.json (give it to solve, montecarlo or "
+         "plan with --error-model) and DIR/error_model.png.", _errormodel_options)
+def _errormodel(args) -> int:
+    from mirrorsim.pipelines import errormodel
+
+    if args.out is not None and args.out.suffix != ".json":
+        raise BadArgument("--out", f"{args.out}: the model is JSON: give a *.json path (its "
+                          "plots go beside it as *.png)")
+    if not (args.dataset / "dataset.parquet").exists():
+        raise BadArgument(str(args.dataset), "no dataset.parquet here (run `mirrorsim dataset`)")
+    cols = errormodel.read_columns(args.dataset)
+    try:
+        model = errormodel.fit(cols)
+    except ValueError as exc:
+        raise BadArgument(str(args.dataset), str(exc)) from None
+    out = args.out or args.dataset / "error_model.json"
+    errormodel.write_model(model, out)
+    png = errormodel.plot(cols, model, out.with_suffix(".png"))
+    print(errormodel.summary(model))
+    print(f"model: {out}\nplots: {png}")
+    return 0

@@ -1,0 +1,70 @@
+"""The ``mirrorsim`` command: argument parsing and printing only.
+
+The commands live in :mod:`mirrorsim.cli.scene_commands` and :mod:`mirrorsim.cli.analysis_commands`,
+each handler declared beside its options.  Errors are told apart by class
+(:mod:`mirrorsim.errors`): bad input exits 2, a failed run 1, each with one line on
+stderr.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import warnings
+
+from mirrorsim import __version__
+from mirrorsim.cli import analysis_commands, scene_commands  # noqa: F401 (they register)
+from mirrorsim.cli.registry import COMMANDS, check_outputs
+from mirrorsim.errors import SolverError, exit_status
+
+# the order of `mirrorsim --help`: the main job first
+ORDER = ("evaluate", "render", "check", "plot", "detect", "calibrate", "budget", "dataset",
+         "errormodel", "solve", "montecarlo", "plan")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser with every registered command."""
+    parser = argparse.ArgumentParser(
+        prog="mirrorsim",
+        description="Physically rendered mirror space for NLOS localization (SLTR): render "
+                    "scenes with exact ground truth, detect, solve and score them; datasets, "
+                    "error models and beacon placement.")
+    parser.add_argument("--version", action="version", version=f"mirrorsim {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for name in sorted(COMMANDS, key=lambda n: ORDER.index(n) if n in ORDER else len(ORDER)):
+        summary, description, options, handler = COMMANDS[name]
+        p = sub.add_parser(name, help=summary, description=description)
+        options(p)
+        p.set_defaults(handler=handler)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run one command; return its exit status."""
+    args = build_parser().parse_args(argv)
+    warnings.showwarning = _one_line_warning
+    try:
+        check_outputs(args)
+        return args.handler(args)
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:  # output piped into `head` and the like
+        sys.stderr.close()
+        return 0
+    except Exception as exc:
+        status = exit_status(exc)
+        if status is None:
+            raise
+        what = "cannot solve: " if isinstance(exc, SolverError) else ""
+        print(f"error: {what}{exc}", file=sys.stderr)
+        return status
+
+
+def _one_line_warning(message, category, filename, lineno, file=None,  # noqa: ARG001
+                      line=None) -> None:  # noqa: ARG001
+    print(f"warning: {message}", file=sys.stderr)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,139 @@
+"""The command registry and the options several commands share (one wording each)."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+from collections.abc import Callable
+from dataclasses import replace
+from pathlib import Path
+
+from mirrorsim.errors import BadArgument
+from mirrorsim.formats.files import check_output_dir, check_output_file
+from mirrorsim.formats.scenefile import MAX_SPP, load_scene
+from mirrorsim.scene.model import SAMPLERS, RenderSettings, Scene
+
+VARIANT_CHOICES = ["auto", "cuda", "llvm", "scalar"]
+
+Options = Callable[[argparse.ArgumentParser], None]
+Handler = Callable[[argparse.Namespace], int]
+COMMANDS: dict[str, tuple[str, str, Options, Handler]] = {}
+
+
+def command(name: str, summary: str, description: str, options: Options):
+    """Register the decorated handler as subcommand ``name``, with its ``options``."""
+    def register(handler: Handler) -> Handler:
+        COMMANDS[name] = (summary, description, options, handler)
+        return handler
+    return register
+
+
+def output(p: argparse.ArgumentParser, flag: str, kind: str, **kwargs) -> None:
+    """Add an output option; ``kind`` "file" or "dir" says how :func:`check_outputs`
+    checks it before the command does any work."""
+    action = p.add_argument(flag, **kwargs)
+    p.set_defaults(outputs=[*(p.get_default("outputs") or []), (action.dest, flag, kind)])
+
+
+def check_outputs(args: argparse.Namespace) -> None:
+    """Refuse unwritable output paths (exit 2) before any work is done."""
+    for dest, flag, kind in getattr(args, "outputs", None) or []:
+        value = getattr(args, dest)
+        if kind == "dir":
+            check_output_dir(value, flag)
+        else:
+            check_output_file(value, flag)
+
+
+def common(p: argparse.ArgumentParser, *, scene: bool = True, out: str | None = None,
+           out_kind: str = "dir", json: str | None = None, spp: bool = False,
+           variant: bool = False, quiet: bool = False, error_model: str | None = None) -> None:
+    """Add the shared options: SCENE, --out, --json, --spp/--seed, --variant, --quiet,
+    --error-model."""
+    if scene:
+        p.add_argument("scene", type=Path, help="scene file (YAML, see INTERFACE.md)")
+    if out:
+        output(p, "--out", out_kind, type=Path, help=out)
+    if json:
+        output(p, "--json", "file", metavar="FILE", help=f"write {json} here (- = stdout)")
+    if spp:
+        p.add_argument("--spp", type=int, help=f"samples per pixel in the mirror's image, "
+                       f"1..{MAX_SPP} (default: the scene's, else {RenderSettings().spp})")
+        p.add_argument("--seed", type=int, help="sampler seed ≥ 0 (default: the scene's, else 0)")
+        sampler_option(p)
+    if variant:
+        p.add_argument("--variant", default="auto", choices=VARIANT_CHOICES,
+                       help="Mitsuba backend; auto = cuda if a GPU works, else llvm if its "
+                       "probe renders, else scalar (default: auto)")
+    if quiet:
+        p.add_argument("--quiet", action="store_true", help="no progress display")
+    if error_model:
+        p.add_argument("--error-model", type=Path, metavar="FILE",
+                       help=f"{error_model} the σ's of an error model (`mirrorsim errormodel`)")
+
+
+def error_model_sigma(args: argparse.Namespace):
+    """The σ's of ``--error-model``, or None where it is not given."""
+    if not args.error_model:
+        return None
+    from mirrorsim.pipelines.errormodel import load_sigma
+
+    return load_sigma(args.error_model)
+
+
+def at_least(*checks: tuple[str, int | None, int]) -> None:
+    """Refuse (exit 2) an option given below its least value; None means not given."""
+    for flag, value, low in checks:
+        if value is not None and value < low:
+            raise BadArgument(flag, f"{value} must be ≥ {low}")
+
+
+def finite(args: argparse.Namespace, *dests: str) -> None:
+    """Refuse NaN or infinite values of float options (argparse's float takes "nan")."""
+    for dest in dests:
+        values = getattr(args, dest)
+        for v in (values if isinstance(values, list) else [values]):
+            for x in (v if isinstance(v, list) else [v]):
+                if x is not None and not math.isfinite(x):
+                    raise BadArgument("--" + dest.replace("_", "-"), f"{x} is not a finite number")
+
+
+def sampler_option(p: argparse.ArgumentParser) -> None:
+    """--sampler, for commands that render."""
+    p.add_argument("--sampler", choices=SAMPLERS,
+                   help="Mitsuba sampler (default: the scene's render.sampler, else "
+                   f"{RenderSettings().sampler}); see README, Throughput")
+
+
+def render_options(args: argparse.Namespace, scene: Scene) -> Scene:
+    """Refuse --spp outside 1..MAX_SPP and a negative --seed; the scene with --sampler."""
+    at_least(("--spp", args.spp, 1), ("--seed", args.seed, 0))
+    if args.spp is not None and args.spp > MAX_SPP:
+        raise BadArgument("--spp", f"{args.spp} must be ≤ {MAX_SPP}")
+    if args.sampler is None:
+        return scene
+    return replace(scene, render=replace(scene.render, sampler=args.sampler))
+
+
+def load(path: Path) -> Scene:
+    """Load a scene and print its warnings on stderr."""
+    scene = load_scene(path)
+    for w in scene.warnings:
+        print(f"warning: {path}: {w}", file=sys.stderr)
+    return scene
+
+
+def preload(module: str) -> None:
+    """Import ``module`` in a background thread: a command that will need it later
+    (matplotlib for a plot) imports it while Mitsuba renders, which releases the GIL."""
+    import importlib
+    import threading
+
+    threading.Thread(target=importlib.import_module, args=(module,), daemon=True).start()
+
+
+def default_workers() -> int:
+    """Half the cores (a render uses several threads per worker)."""
+    return max(1, (os.cpu_count() or 2) // 2)

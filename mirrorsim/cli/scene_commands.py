@@ -1,0 +1,294 @@
+"""The commands on one scene: render, check, plot, detect, calibrate, evaluate."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from mirrorsim.cli.registry import command, common, load, output, preload, render_options
+from mirrorsim.errors import DetectionError
+from mirrorsim.formats.files import emit_json, write_png
+
+
+def _render_options(p):
+    common(p, out="output folder (default renders/<name>/)", json="the ground truth",
+            spp=True, variant=True, quiet=True)
+
+
+@command("render", "render the frame and write its ground truth",
+         "Render SCENE with Mitsuba 3 and write DIR/<name>.png (sRGB, 8-bit), DIR/<name>.json "
+         "(exact ground truth, with each object's bbox_px and visible_px in the mirror from an "
+         "object-id pass) and DIR/<name>.ids.png (the id labels).",
+         _render_options)
+def _render(args) -> int:
+    from mirrorsim.cli.tables import render_summary
+    from mirrorsim.rendering.frames import render_to_files
+
+    scene = render_options(args, load(args.scene))
+    files = render_to_files(scene, args.out, spp=args.spp, seed=args.seed,
+                            variant=args.variant, progress=not args.quiet)
+    print(render_summary(scene, files))
+    emit_json(args.json, files.truth.to_json())
+    return 0
+
+
+def _check_options(p):
+    common(p, json="the exact ground truth")
+    output(p, "--measurements", "file", metavar="FILE",
+           help="write the exact (noise-free) measurements for `mirrorsim solve`")
+
+
+@command("check", "validate a scene and say what the camera sees",
+         "Validate SCENE and print, for the target and each beacon, its virtual image, alpha, "
+         "d_total, reflection point and how much of its image reaches the camera through the "
+         "mirror. No rendering.",
+         _check_options)
+def _check(args) -> int:
+    from mirrorsim.cli.tables import check_table
+    from mirrorsim.truth import optics
+
+    scene = load(args.scene)
+    print(check_table(scene))
+    truth = optics.ground_truth(scene)
+    emit_json(args.json, truth.to_json())
+    if args.measurements:
+        emit_json(args.measurements, {**truth.exact_measurements().to_json(),
+                                      "source": "exact geometry (mirrorsim check)"})
+    return 0
+
+
+def _plot_options(p):
+    common(p, out="PNG to write (default renders/<name>/<name>.top.png)", out_kind="file")
+
+
+@command("plot", "top view of a scene (board, camera, mirror, rays)",
+         "Draw the top view: board, camera and its field of view, occluders, mirror, target, "
+         "beacons, virtual images and rays.",
+         _plot_options)
+def _plot(args) -> int:
+    from mirrorsim.cli.plots import plot_top_view
+
+    scene = load(args.scene)
+    print(plot_top_view(scene, args.out or Path("renders") / scene.name / f"{scene.name}.top.png"))
+    return 0
+
+
+def _detect_options(p):
+    p.add_argument("frame", type=Path, help="the frame (PNG, or JPEG)")
+    source = p.add_mutually_exclusive_group(required=True)
+    source.add_argument("--capture", type=Path, metavar="FILE.capture.json",
+                        help="the frame's capture record (`render` writes it beside the frame)")
+    source.add_argument("--scene", type=Path,
+                        help="a scene file: its capture record is made from it")
+    common(p, scene=False, json="the measurements", variant=True)
+    output(p, "--annotate", "file", type=Path, metavar="OUT.png",
+           help="draw the detections on the frame")
+
+
+@command("detect", "measure alpha and d_total from a rendered frame",
+         "Find the target's and the beacons' images in FRAME and measure each one's angle of "
+         "arrival and, by size constancy, its d_total.  Uses only the image and its capture "
+         "record (the camera as its mount reports it, the beacons' believed positions and "
+         "heights, the target's size: never the mirror or where the target stands) and the "
+         "calibration (`mirrorsim calibrate`, made and cached on first use).",
+         _detect_options)
+def _detect(args) -> int:
+    from mirrorsim.cli.tables import detect_summary
+    from mirrorsim.detection.detector import annotate, detect_frame, read_frame
+    from mirrorsim.formats.capture import CaptureRecord, load_capture
+    from mirrorsim.pipelines.calibrate import calibrate
+
+    reference_error = 0.0  # a capture record cannot know its bench's calibration error
+    if args.capture:
+        view, source = load_capture(args.capture), f"capture {args.capture}"
+    else:
+        scene = load(args.scene)
+        view, source = CaptureRecord.from_scene(scene), f"scene {args.scene}"
+        reference_error = scene.bench.calibration_distance_error  # the bench's calibration
+    image = read_frame(args.frame)
+    cal = calibrate(view.camera, view.target_size, view.beacons[0].height, variant=args.variant,
+                    distance_error=reference_error)
+    try:
+        det = detect_frame(image, view, cal)
+    except DetectionError as exc:
+        raise DetectionError(f"{args.frame} ({source}): {exc}") from None
+    print(detect_summary(str(args.frame), det))
+    if args.annotate:
+        write_png(args.annotate, annotate(image, det))
+        print(f"  annotated: {args.annotate}")
+    emit_json(args.json, det.to_json())
+    return 0
+
+
+def _calibrate_options(p):
+    common(p, json="the constants", variant=True)
+    p.add_argument("--refresh", action="store_true", help="re-render even if cached")
+
+
+@command("calibrate", "size-constancy constants for a scene's camera",
+         "Render the target and the pencil in direct view at 100 cm, facing SCENE's camera on "
+         "its optical axis, measure them as the detector does and cache K = s_px * d per "
+         "camera and object.  A scene's calibration.distance_error stands them that much "
+         "farther while 100 cm is assumed, as its bench did.",
+         _calibrate_options)
+def _calibrate(args) -> int:
+    from mirrorsim.detection.detector import FRONT_OFFSET
+    from mirrorsim.pipelines.calibrate import D_REF, calibrate
+
+    scene = load(args.scene)
+    cam = scene.camera
+    cal = calibrate(cam, scene.target.size, scene.beacons[0].height, variant=args.variant,
+                    refresh=args.refresh,
+                    distance_error=scene.bench.calibration_distance_error)
+    print(f"camera {cam.width}×{cam.height_px}, hfov {cam.hfov:g}°, height {cam.height:g} cm "
+          f"(fx {cam.fx:.2f} px)")
+    print(f"  target {scene.target.size[1]:g} cm high: K = {cal.target_k:.1f} px·cm "
+          f"({cal.target_k / (D_REF - FRONT_OFFSET['target']):.2f} px at 1 m; the paper's "
+          "camera: 229 px)")
+    print(f"  pencil's painted band: K = {cal.pencil_k:.1f} px·cm "
+          f"({cal.pencil_k / (D_REF - FRONT_OFFSET['beacon']):.2f} px at 1 m)")
+    emit_json(args.json, {"key": cal.key, "target_k": cal.target_k, "pencil_k": cal.pencil_k})
+    return 0
+
+
+def _evaluate_options(p):
+    common(p, out="output folder (default renders/<name>/)", json="the report", spp=True,
+            variant=True, quiet=True)
+
+
+@command("evaluate", "render, detect, solve and score against ground truth",
+         "The main job: render SCENE (or reuse a render of the same scene, spp and seed), detect "
+         "the target and beacons, localize mirror and target, and score everything against the "
+         "exact ground truth.  Prints a table; writes DIR/<name>.report.json, DIR/<name>.eval.png "
+         "(truth vs estimate with the 95 %% error ellipse) and the annotated frame(s).  A scene "
+         "with several beacons renders one frame per beacon and reports the error as beacons "
+         "are added.  Exit 0 whenever it ran.",
+         _evaluate_options)
+def _evaluate(args) -> int:
+    from mirrorsim.cli.plots import plot_evaluation
+    from mirrorsim.cli.tables import report_table
+    from mirrorsim.formats.files import write_json
+    from mirrorsim.pipelines.evaluate import evaluate_scene
+
+    scene = render_options(args, load(args.scene))
+    preload("mirrorsim.cli.plots")  # matplotlib imports while the frame renders
+    out = args.out or Path("renders") / scene.name
+    report = evaluate_scene(scene, out, spp=args.spp, seed=args.seed, variant=args.variant,
+                            progress=not args.quiet)
+    print(f"{scene.name}: {len(report.frames)} frame(s), {report.render.spp} spp, "
+          f"{report.render.variant}{' (reused)' if report.reused else ''}")
+    print(report_table(report))
+    path = write_json(out / f"{scene.name}.report.json", report.to_json())
+    fig = plot_evaluation(scene, report, out / f"{scene.name}.eval.png")
+    print(f"report: {path}\ntop view: {fig}\nannotated: "
+          + ", ".join(f.annotated for f in report.frames))
+    emit_json(args.json, report.to_json())
+    return 0
+
+
+def _budget_options(p):
+    common(p, out="output folder (default renders/<name>/budget/)", json="the budget", spp=True,
+           variant=True, quiet=True)
+
+
+@command("budget", "error budget of a bench: each imperfection alone, then all",
+         "Render, detect, solve and score SCENE on an ideal bench, with each of its bench "
+         "imperfections alone (camera.pan_error, camera.pitch, mirror.curvature_radius, "
+         "calibration.distance_error, beacons[i].known_position... see INTERFACE.md) and with "
+         "all of them.  Prints each source's measurement deltas and target error beside the "
+         "first-order prediction (the solver's Jacobian times the measured deltas); writes "
+         "DIR/budget.json and a tornado chart DIR/budget.png; each run's frames in its own "
+         "sub-folder.",
+         _budget_options)
+def _budget(args) -> int:
+    import sys
+
+    from mirrorsim.cli.plots import plot_budget
+    from mirrorsim.cli.tables import budget_table
+    from mirrorsim.formats.files import write_json
+    from mirrorsim.pipelines.budget import run_budget
+    from mirrorsim.scene.imperfections import sources
+
+    scene = render_options(args, load(args.scene))
+    found = sources(scene)
+    if not found:
+        print(f"{scene.name}: no bench imperfections in {args.scene}: only the ideal bench "
+              "is evaluated (see INTERFACE.md, Bench imperfections)", file=sys.stderr)
+    out = args.out or Path("renders") / scene.name / "budget"
+    runs = 1 + len(found) + (len(found) > 1)
+    done = iter(range(1, runs + 1))
+    step = (None if args.quiet else
+            lambda label: print(f"[{next(done)}/{runs}] {label}", file=sys.stderr, flush=True))
+    budget = run_budget(scene, out, spp=args.spp, seed=args.seed, variant=args.variant,
+                        progress=not args.quiet, on_step=step)
+    print(budget_table(budget))
+    path = write_json(out / "budget.json", budget.to_json())
+    fig = plot_budget(budget, out / "budget.png")
+    print(f"budget: {path}\ntornado chart: {fig}")
+    emit_json(args.json, budget.to_json())
+    return 0
+
+
+def _track_options(p):
+    from mirrorsim.pipelines.track import HEADINGS, PATHS
+
+    common(p, out="output folder (default renders/<name>/track/)", json="the track report",
+           variant=True, quiet=True)
+    p.add_argument("--path", default="rectangular", metavar="|".join(PATHS),
+                   help="the beacon's path (paper eqs 19-21; default rectangular)")
+    p.add_argument("--heading", default="view", metavar="|".join(HEADINGS),
+                   help="where the steps of b run: view (default), along the beacon's "
+                        "reflected line of sight away from the glass, as the start pose's "
+                        "measurement shows it; camera, along the camera's line to the "
+                        "beacon, towards the camera.  Side a goes to the side that keeps "
+                        "the path farther in front of the mirror")
+    p.add_argument("--steps", type=int, default=20, help="moves after the start (default 20)")
+    p.add_argument("--odometry-sigma", type=float, default=0.1, metavar="CM",
+                   help="the beacon's motion error per move and axis, cm (default 0.1)")
+    p.add_argument("--seed", type=int, default=0,
+                   help="seeds the odometry noise, the filter and the renders (default 0)")
+    p.add_argument("--side", type=float, default=4.0, metavar="CM",
+                   help="a: the path's width across its heading (default 4)")
+    p.add_argument("--step", type=float, default=1.0, metavar="CM",
+                   help="b: the path's step along its heading (default 1)")
+    p.add_argument("--spp", type=int, help="samples per pixel (default: the scene's)")
+
+
+@command("track", "the moving beacon of the paper's Section 4 on rendered frames",
+         "The scene's first beacon follows the path from its start; every pose is rendered "
+         "and detected from its capture record (the believed position: start plus the "
+         "commanded moves; the true one also carries --odometry-sigma of noise per move), "
+         "and a particle filter estimates the mirror, then the target, step by step.  Poses "
+         "where the beacon's mirror image is not found are recorded as unseen and skipped.  "
+         "Prints a table per step; writes DIR/track.json, DIR/track.png (errors against the "
+         "step) and DIR/track.gif (the top view with the filter's mirror lines), the frames "
+         "in DIR/poses/.", _track_options)
+def _track(args) -> int:
+    import sys
+
+    from mirrorsim.cli.plots import animate_track, plot_track
+    from mirrorsim.cli.registry import at_least
+    from mirrorsim.cli.tables import track_table
+    from mirrorsim.formats.files import write_json
+    from mirrorsim.pipelines.track import check_options, run_track
+
+    # before the scene is read (run_track checks again, for callers other than the CLI)
+    check_options(args.path, args.steps, args.odometry_sigma, args.side, args.step,
+                  args.heading)
+    at_least(("--spp", args.spp, 1), ("--seed", args.seed, 0))
+    scene = load(args.scene)
+    out = args.out or Path("renders") / scene.name / "track"
+    step = (None if args.quiet else lambda k, n: print(f"\rpose {k + 1}/{n}", end="",
+                                                        file=sys.stderr, flush=True))
+    report = run_track(scene, out, kind=args.path, steps=args.steps,
+                       odometry_sigma=args.odometry_sigma, seed=args.seed, side=args.side,
+                       step=args.step, heading=args.heading, spp=args.spp,
+                       variant=args.variant, on_pose=step)
+    if not args.quiet:
+        print(file=sys.stderr)
+    print(track_table(report))
+    path = write_json(out / "track.json", report.to_json())
+    png = plot_track(report, out / "track.png")
+    gif = animate_track(scene, report, out / "track.gif")
+    print(f"report: {path}\nplot: {png}\nanimation: {gif}")
+    emit_json(args.json, report.to_json())
+    return 0

@@ -1,0 +1,229 @@
+"""The short human summaries that the commands print (the JSON carries the full data)."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from mirrorsim.detection.detector import Detection
+from mirrorsim.pipelines.score import Report
+from mirrorsim.rendering.frames import FrameFiles
+from mirrorsim.scene.model import Scene
+from mirrorsim.truth import optics
+from solver.sltr import Solution
+
+if TYPE_CHECKING:  # the budget and the track run renders: no Mitsuba import to draw one
+    from mirrorsim.pipelines.budget import Budget
+    from mirrorsim.pipelines.track import TrackReport
+
+
+def _columns(rows: list[tuple[str, ...]]) -> list[str]:
+    """Rows as text: the first column left-aligned, the rest right-aligned."""
+    widths = [max(len(r[k]) for r in rows) for k in range(len(rows[0]))]
+    return ["  ".join(c.ljust(w) if k == 0 else c.rjust(w)
+                      for k, (c, w) in enumerate(zip(r, widths, strict=True))) for r in rows]
+
+
+def check_table(scene: Scene) -> str:
+    """What the camera sees through the mirror, per object (``mirrorsim check``)."""
+    cam, mir = scene.camera, scene.mirror
+    lines = [f"{scene.name}: valid.  camera at {list(cam.position)}, height {cam.height:g} cm, "
+             f"pan {cam.pan_deg:.3f}°, hfov {cam.hfov:g}°, {cam.width}×{cam.height_px} px, "
+             f"fx {cam.fx:.2f} px",
+             f"mirror: centre {list(mir.center)}, yaw {mir.yaw % 180:g}°, "
+             f"{mir.size[0]:g} × {mir.size[1]:g} cm",
+             f"{'object':<9} {'alpha°':>9} {'d_total':>8} {'d1':>7} {'d2':>7} "
+             f"{'reflection pt':>16} {'on mirror':>9} {'u px':>7} {'h px':>6} {'seen':>5}"]
+    objs = [("target", scene.target)] + [(f"beacon {i}", b) for i, b in enumerate(scene.beacons)]
+    for label, obj in objs:
+        img = optics.mirror_image(cam.position, mir, obj.position)
+        ext = optics.image_extent(scene, obj)
+        vis = optics.visibility(scene, obj)
+        rp = f"({img.reflection_point[0]:.2f}, {img.reflection_point[1]:.2f})"
+        lines.append(f"{label:<9} {img.alpha_deg:9.3f} {img.d_total:8.3f} {img.d1:7.2f} "
+                     f"{img.d2:7.2f} {rp:>16} {img.mirror_offset:+9.2f} {ext.u_axis:7.1f} "
+                     f"{ext.height_px:6.1f} {100 * vis.fraction:4.0f}%")
+        if vis.reason:
+            lines.append(f"          {vis.reason}")
+    direct = optics.direct_view_fraction(scene, scene.target)
+    lines.append("target is hidden from the camera's direct view (NLOS)" if direct == 0.0 else
+                 f"target is {100 * direct:.0f}% directly visible: not NLOS")
+    return "\n".join(lines)
+
+
+def render_summary(scene: Scene, files: FrameFiles) -> str:
+    """What ``mirrorsim render`` wrote and what the id pass saw."""
+    t, r = files.truth, files.truth.render
+    lines = [f"{scene.name}: {files.image} ({scene.camera.width}×{scene.camera.height_px}, "
+             f"{r.spp} spp, {r.variant}, {files.seconds:.1f} s)",
+             f"ground truth: {files.truth_json}"]
+    for label, e in [("target", t.target)] + [(f"beacon {i}", b)
+                                               for i, b in enumerate(t.beacons)]:
+        bbox = None if e.bbox_px is None else list(e.bbox_px)
+        lines.append(f"  {label:<9} α {e.alpha_deg:9.4f}°  d_total {e.d_total:8.3f} cm  "
+                     f"in mirror: {e.visible_px} px, bbox {bbox}")
+    return "\n".join(lines)
+
+
+def detect_summary(frame: str, det: Detection) -> str:
+    """The detector's measurements of one frame."""
+    t = det.target
+    d = "not measured (clipped)" if t.d_total is None else f"{t.d_total:.3f} cm"
+    lines = [f"{frame}: target α {t.alpha_deg:.4f}°  d_total {d}"
+             + ("  [clipped]" if t.clipped else "")]
+    for i, (b, m) in enumerate(det.beacons):
+        lines.append(f"  beacon {i} at {list(b.position)}: α {m.alpha_deg:.4f}°  d_total "
+                     f"{m.d_total:.3f} cm (mirror image)")
+    for im in det.images:
+        if im.source == "direct":
+            lines.append(f"  beacon {im.beacon_index} also seen directly at u = "
+                         f"{im.u_axis:.1f} px (not used)")
+    return "\n".join(lines)
+
+
+def solution_summary(source: str, sol: Solution) -> str:
+    """The mirror line and the target as ``mirrorsim solve`` prints them."""
+    lines = [f"{source}: {sol.method}",
+             f"  mirror  yaw {sol.mirror.yaw_deg:.4f}°  through ({sol.mirror.point[0]:.3f}, "
+             f"{sol.mirror.point[1]:.3f})",
+             f"  target  ({sol.target[0]:.4f}, {sol.target[1]:.4f})  reflection point "
+             f"({sol.target_reflection_point[0]:.3f}, {sol.target_reflection_point[1]:.3f})"]
+    if sol.covariance is not None:
+        major, minor, angle = sol.ellipse95()
+        lines.append(f"  95 % ellipse of the target: {major:.3f} × {minor:.3f} cm, major axis "
+                     f"at {angle:.1f}°")
+    return "\n".join(lines)
+
+
+def report_table(report: Report) -> str:
+    """The compact table ``mirrorsim evaluate`` prints."""
+    t, m, s, e = report.truth, report.measurements, report.solution, report.errors
+    alpha_t, d_t = m.targets[0]
+    rows = [("", "truth", "measured", "estimate", "error"),
+            ("target α (°)", f"{t.target.alpha_deg:.4f}", f"{alpha_t:.4f}", "",
+             f"{e.target_alpha_deg:.4f}"),
+            ("target d_total (cm)", f"{t.target.d_total:.3f}", f"{d_t:.3f}", "",
+             f"{e.target_d_total_pct:.3f} %")]
+    for i, (tb, mb) in enumerate(zip(t.beacons, m.beacons, strict=True)):
+        rows.append((f"beacon {i} α (°)", f"{tb.alpha_deg:.4f}", f"{mb.alpha_deg:.4f}", "",
+                     f"{e.beacon_alpha_deg[i]:.4f}"))
+        rows.append((f"beacon {i} d_total (cm)", f"{tb.d_total:.3f}", f"{mb.d_total:.3f}",
+                     "", f"{e.beacon_d_total_pct[i]:.3f} %"))
+    rp_t, rp_e = t.target.reflection_point, s.target_reflection_point
+    tp, te = t.target.position, s.target
+    bound = e.target_ellipse95_major_cm
+    rows += [("mirror yaw (°)", f"{t.mirror_yaw_deg:.3f}", "", f"{s.mirror.yaw_deg:.3f}",
+              f"{e.mirror_yaw_deg:.3f}"),
+             ("mirror line offset (cm)", "0", "", "", f"{e.mirror_offset_cm:.3f}"),
+             ("reflection point (cm)", f"({rp_t[0]:.2f}, {rp_t[1]:.2f})", "",
+              f"({rp_e[0]:.2f}, {rp_e[1]:.2f})", f"{e.reflection_point_cm:.3f}"),
+             ("target (cm)", f"({tp[0]:.2f}, {tp[1]:.2f})", "", f"({te[0]:.2f}, {te[1]:.2f})",
+              f"{e.target_cm:.3f}" + ("" if bound is None else f"  (95 %: {bound:.3f})"))]
+    lines = _columns(rows)
+    lines.insert(1, "-" * len(lines[0]))
+    if report.error_vs_beacons:
+        lines.append("target error with the first k beacons: " + ", ".join(
+            f"{k + 1}: {r.target_cm:.3f} cm" for k, r in enumerate(report.error_vs_beacons)))
+    return "\n".join(lines)
+
+
+def _show_value(value) -> str:
+    """An imperfection's value as written: a number, a list, a mapping; '' for none."""
+    if value is None:
+        return ""
+    if isinstance(value, list):
+        return "[" + ", ".join(f"{v:g}" for v in value) + "]"
+    if isinstance(value, dict):
+        return ", ".join(f"{k} {v:g}" for k, v in value.items())
+    return f"{value:g}"
+
+
+def budget_table(budget: Budget) -> str:
+    """The table ``mirrorsim budget`` prints: each source's measured deltas, the target
+    error it leaves, and the first-order prediction."""
+    def signed(x: float, digits: int) -> str:
+        return f"{x:+.{digits}f}"
+
+    rows = [("source", "value", "Δα_t (°)", "Δd_t (%)", "Δα_b (°)", "Δd_b (%)", "moved (cm)",
+             "1st order", "target (cm)", "1st order")]
+    failures = []
+    for c in (*budget.sources, *([budget.all] if budget.all else [])):
+        d = c.delta
+        value = _show_value(c.value)
+        if c.failed:
+            rows.append((c.source, value, *["failed"] + [""] * 7))
+            failures.append(f"  {c.source}: {c.failed}")
+            continue
+        rows.append((c.source, value, signed(d.target_alpha_deg, 4),
+                     signed(d.target_d_total_pct, 3),
+                     " ".join(signed(a, 4) for a in d.beacon_alpha_deg),
+                     " ".join(signed(p, 3) for p in d.beacon_d_total_pct),
+                     f"{c.shift_cm:.2f}", f"{c.predicted_shift_cm:.2f}",
+                     f"{c.target_cm:.2f}", f"{c.predicted_cm:.2f}"))
+    lines = _columns(rows)
+    lines.insert(1, "-" * len(lines[0]))
+    lines.insert(0, f"{budget.scene}: ideal bench {budget.ideal_cm:.2f} cm; each source alone"
+                 + (", then all together" if budget.all else ""))
+    return "\n".join(lines + failures)
+
+
+def montecarlo_table(res: dict) -> str:
+    """Table 1 of the paper beside ours (``mirrorsim montecarlo``)."""
+    g = res["geometry"]
+    lines = [f"Table 1 protocol: {res['iterations']} draws per row; target at alpha "
+             f"{g['alpha_deg']:g}°, d_total {g['d_total']:g}; mirror through "
+             f"({g['mirror_point'][0]:.3f}, {g['mirror_point'][1]:.3f}) at yaw "
+             f"{g['mirror_yaw_deg']:.1f}°; beacon at ({g['beacon'][0]:.3f}, "
+             f"{g['beacon'][1]:.3f})",
+             f"{'v(alpha)':>9} {'v(d)':>6} | {'paper ref':>9} {'paper tar':>9} | "
+             f"{'ours ref':>9} {'ours tar':>9} {'yaw (deg)':>9}"]
+    for r in res["rows"]:
+        lines.append(f"{r['sigma_alpha_deg']:9.2f} {r['sigma_d']:6.2f} | "
+                     f"{r['paper_rmse_ref']:9.3f} {r['paper_rmse_tar']:9.3f} | "
+                     f"{r['rmse_ref']:9.3f} {r['rmse_tar']:9.3f} {r['rmse_yaw_deg']:9.2f}")
+    return "\n".join(lines)
+
+
+def plan_text(scene: Scene, summ: dict) -> str:
+    """The placement analysis as ``mirrorsim plan`` prints it."""
+    p, q, L = summ["paper"], summ["paper_eq15_perpendicular"], summ["path_lengths"]
+    sb, bb, sig = summ["scene_beacon"], summ["best_beacon"], summ["sigma"]
+    return "\n".join([
+        f"{scene.name}: target alpha {summ['target']['alpha_deg']:.3f}°, d_total "
+        f"{summ['target']['d_total']:.2f} cm, mirror {scene.mirror.size[0]:g} cm wide, "
+        f"eps ±{summ['eps_deg']:g}°",
+        f"  paper (eqs 9-18): step b = {p['b']:.3f} cm, a/2 = {p['half_a']:.3f} cm, "
+        f"triangle {p['area']:.2f} cm², N_bea = 2·d_total/b = {p['n_beacons']:.1f}",
+        f"  eq 15 with the line perpendicular to the observation line (as its text says): "
+        f"a/2 = {q['half_a']:.3f} cm",
+        f"  exact region seen for every orientation: {summ['exact_region_area']:.0f} cm²; "
+        "area vs d_total (paper / exact): " + ", ".join(
+            f"{a['d_total']:g}: {a['paper']:.2f}/{a['exact']:.0f}"
+            for a in summ["area_vs_d_total"]),
+        f"  paths over {summ['n_steps']} steps: linear {L['linear']:.1f}, rectangular "
+        f"{L['rectangular']:.1f}, saw-tooth {L['sawtooth']:.1f} cm",
+        f"  expected target RMSE at sigma ({sig['alpha_deg']:g}°, "
+        f"{100 * sig['d_total_rel']:g} %) over {summ['mirror_poses']} mirror poses:",
+        f"    scene's beacon {list(scene.beacons[0].position)}: {sb['rmse']:.3f} cm "
+        f"(seen under {100 * sb['seen_fraction']:.0f}% of poses)",
+        f"    best position ({bb['position'][0]:.1f}, {bb['position'][1]:.1f}): "
+        f"{bb['rmse']:.3f} cm"])
+
+
+def track_table(report: TrackReport) -> str:
+    """The track step by step, then its final estimate."""
+    rows = [("step", "beacon (true)", "seen", "yaw err °", "offset err cm", "target err cm",
+             "spread yaw °", "spread cm")]
+    for s in report.steps:
+        rows.append((str(s.step), f"({s.beacon_position[0]:.2f}, {s.beacon_position[1]:.2f})",
+                     "yes" if s.seen else "no", f"{s.mirror_yaw_error_deg:.3f}",
+                     f"{s.mirror_offset_error_cm:.3f}", f"{s.target_error_cm:.2f}",
+                     f"{s.yaw_spread_deg:.3f}", f"{s.offset_spread_cm:.3f}"))
+    f = report.final
+    seen = sum(s.seen for s in report.steps)
+    return "\n".join([f"{report.scene}: {report.path} path (heading {report.heading}), "
+                      f"{len(report.steps)} poses "
+                      f"({seen} seen), odometry σ {report.odometry_sigma:g} cm", *_columns(rows),
+                      f"final: target ({f.target[0]:.2f}, {f.target[1]:.2f}), error "
+                      f"{f.target_error_cm:.2f} cm; mirror yaw error "
+                      f"{f.mirror_yaw_error_deg:.3f}°, offset error "
+                      f"{f.mirror_offset_error_cm:.3f} cm"])

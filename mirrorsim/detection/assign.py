@@ -1,0 +1,120 @@
+"""Which pencil image is which beacon's reflection: direct views told apart, images no
+mirror could give refused, ambiguity an error rather than a guess."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+
+from mirrorsim.detection.edges import ImageMeasurement
+from mirrorsim.errors import DetectionError
+from mirrorsim.formats.capture import CaptureRecord
+from mirrorsim.scene.model import Beacon, Camera
+from solver.geometry import bearing_deg, wrap_bearing
+
+
+def assign_beacons(pencils: list[ImageMeasurement], view: CaptureRecord
+                    ) -> list[ImageMeasurement]:
+    """Tell direct images (where the known beacon itself would appear) from mirror images,
+    and give each beacon its mirror image."""
+    cam = view.camera
+    mirror_cands = []
+    for p in pencils:
+        for i, b in enumerate(view.beacons):
+            bearing, dist = _direct(cam, b)
+            off, far = abs(wrap_bearing(p.alpha_deg - bearing)), abs(p.d_total - dist)
+            if (off < 0.3 and far < 0.05 * dist) or (off < BENCH_BEARING_DEG
+                                                     and far < MISPLACED_DISTANCE * dist):
+                p.source, p.beacon_index = "direct", i
+                p.notes.append(f"direct view of beacon {i} (bearing and distance agree with "
+                               "its known position)")
+                break
+        else:
+            mirror_cands.append(p)
+    _refuse_a_misplaced_direct_view(mirror_cands, view)
+    n = len(view.beacons)
+    if len(mirror_cands) < n:
+        raise DetectionError(f"found {len(mirror_cands)} pencil image(s) in the mirror for "
+                             f"{n} beacon(s) ({len(pencils) - len(mirror_cands)} direct)")
+    if n == 1:
+        return [_the_mirror_image(mirror_cands, view)]
+    # several beacons: the assignment under which all imply the same mirror line
+    best_perm, best_spread = None, math.inf
+    for perm in itertools.permutations(mirror_cands, n):
+        lines = [_bisector(cam, b, p) for b, p in zip(view.beacons, perm, strict=True)]
+        spread = float(np.var([ln[0] for ln in lines]) + np.var([ln[1] for ln in lines]))
+        if spread < best_spread:
+            best_perm, best_spread = perm, spread
+    for i, p in enumerate(best_perm):
+        p.beacon_index = i
+    return list(best_perm)
+
+
+MISPLACED_DISTANCE = 0.02  # a reflection is ≥ 5 % farther than its beacon in our scenes
+# how far off its believed bearing a real bench shows a beacon's direct view: a mount's
+# pan reading and a pencil placed by hand (INTERFACE.md Bench imperfections)
+BENCH_BEARING_DEG = 2.0
+
+
+def _refuse_a_misplaced_direct_view(cands: list[ImageMeasurement], view: CaptureRecord
+                                    ) -> None:
+    """An image at a beacon's own distance (within 2 %) but more than BENCH_BEARING_DEG
+    off its bearing is its direct view where the camera does not see it: a mirrored
+    frame, a wrong pan, or a beacon not where it is believed.  (A reflection lies
+    2·depth·cos i farther: 5 % and more for beacons 4 cm or more in front of the
+    mirror.)"""
+    cam = view.camera
+    for p in cands:
+        for i, b in enumerate(view.beacons):
+            bearing, dist = _direct(cam, b)
+            if abs(p.d_total - dist) < MISPLACED_DISTANCE * dist:
+                off = float(wrap_bearing(p.alpha_deg - bearing))
+                raise DetectionError(
+                    f"a pencil image at beacon {i}'s own distance ({p.d_total:.1f} cm) lies "
+                    f"{off:+.2f}° off its bearing: a mirrored frame, a wrong pan, or a beacon "
+                    "not where it is believed?")
+
+
+def _the_mirror_image(cands: list[ImageMeasurement], view: CaptureRecord
+                      ) -> ImageMeasurement:
+    """One beacon's mirror image among the candidates: only an image farther than the
+    beacon stands can be its reflection (d_total ≥ |OB|); of those, one that sits within
+    1° and 10 % of the beacon's own bearing and distance is its direct view taken for a
+    mirror image.  More than one left is ambiguous: an error, not a guess."""
+    bearing, dist = _direct(view.camera, view.beacons[0])
+    possible = [p for p in cands if p.d_total > dist * (1 + 1e-3)]
+    if not possible:
+        raise DetectionError(f"no pencil image lies farther than the beacon stands ({dist:.1f} "
+                             "cm): none can be its reflection")
+    if len(possible) > 1:
+        possible = [p for p in possible if not (abs(wrap_bearing(p.alpha_deg - bearing)) < 1.0
+                                                and abs(p.d_total - dist) < 0.1 * dist)] \
+            or possible
+    if len(possible) > 1:
+        found = ", ".join(f"α {p.alpha_deg:.2f}° d {p.d_total:.1f} cm" for p in possible)
+        raise DetectionError(f"{len(possible)} pencil images could each be the beacon's "
+                             f"reflection ({found}): ambiguous, none is used")
+    possible[0].beacon_index = 0
+    return possible[0]
+
+
+def _direct(cam: Camera, beacon: Beacon) -> tuple[float, float]:
+    """Bearing (°) and distance (cm) at which the camera would see the beacon directly."""
+    return (float(bearing_deg(cam.position, beacon.position)),
+            float(np.hypot(beacon.position[0] - cam.position[0],
+                           beacon.position[1] - cam.position[1])))
+
+
+def _bisector(cam: Camera, beacon: Beacon, m: ImageMeasurement) -> tuple[float, float]:
+    """The mirror line this beacon/image pair implies, as comparable numbers: cos 2·yaw
+    (a line's direction is modulo 180°) and its offset in metres (so that a 1 cm
+    disagreement weighs like a ~1° one)."""
+    a = math.radians(m.alpha_deg)
+    v = np.array(cam.position) + m.d_total * np.array([math.cos(a), math.sin(a)])
+    b = np.asarray(beacon.position, float)
+    sep = v - b
+    yaw = math.degrees(math.atan2(sep[1], sep[0])) + 90.0
+    n = np.array([-math.sin(math.radians(yaw)), math.cos(math.radians(yaw))])
+    return math.cos(2 * math.radians(yaw)), float(n @ ((b + v) / 2)) * 0.01

@@ -1,0 +1,329 @@
+"""The detector: α and d_total of the target and the beacons, from a rendered frame.
+
+With :mod:`mirrorsim.detection.edges`, the detector; with
+:mod:`mirrorsim.rendering.sensor` (the lens model) and the image encoders, the only
+code that imports OpenCV.  What it may use: the image and its capture record
+(:class:`~mirrorsim.formats.capture.CaptureRecord`: the camera as its mount reports it, the
+beacons' believed positions and heights, the target's size), the objects' appearance,
+and the calibration.  Never the target's or the mirror's pose, nor the ground truth.
+
+Model
+-----
+* **Finding.** The target is a neutral mid-grey panel: pixels of low chroma and mid
+  value, opened with a disc wider than the mirror's frame bars (so the frame and the
+  pegboard's holes drop out), kept where the connected region is a filled upright
+  rectangle; then re-grown around its own median colour so a neighbour of another grey
+  does not merge into it.  The pencil is the only strongly saturated yellow (its paint):
+  saturation > 0.55 and (R+G)/2 − B > 30.
+* **Edges, sub-pixel.** Along a band of columns (or rows) an edge is located by the
+  *area* method: with the inside and outside colours taken a few pixels either side,
+  each pixel's coverage c = ((x − out)·(in − out))/|in − out|² is summed over a window
+  spanning the edge; for a box-filtered render (area-weighted pixels) this is exact up to
+  noise.  Bands give independent estimates; their median resists partial occlusion.
+* **α** = pan − atan((u_axis − cx)/fx): the bearing of the image's upright axis
+  (+u is to the right, i.e. clockwise).
+* **d_total.** A level pinhole images an upright segment of height H at depth Z with
+  fy·H/Z pixels, so s_px · Z = K (size constancy along the optical axis) and
+  d_total = Z / cos φ with φ = atan((u_axis − cx)/fx).  K is calibrated per object and
+  camera by :mod:`mirrorsim.pipelines.calibrate` with exactly this measurement; the target's s_px
+  is its panel's height, the pencil's is its painted band (the sharpened tip is thinner
+  than a pixel at its point and is not measured).
+* **Clipping.** The panel is seen square-on, so its width is 9.9/15.25 of its height: a
+  narrower image is clipped at a side (the side whose outside is darker: the mirror's
+  frame), the axis then comes from the other edge and the known half-width; a shorter
+  one is clipped at the top and its d_total is not reported.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from mirrorsim.detection.assign import assign_beacons
+from mirrorsim.detection.edges import ImageMeasurement, measure_region, to_linear
+from mirrorsim.detection.image_geometry import (
+    FRONT_OFFSET,
+    Calibration,
+    distance_of,
+    pencil_geometry,
+    target_geometry,
+)
+from mirrorsim.errors import DetectionError, InputError
+from mirrorsim.formats.capture import CaptureRecord
+from mirrorsim.rendering.sensor import undistort
+from mirrorsim.scene.model import (
+    Beacon,
+    Camera,
+    Point2,
+    pencil_paint_height,
+)
+from solver.measurements import Measurements
+from solver.sltr import BeaconMeasurement
+
+FRAME_OPEN_PX = 13  # wider than the mirror frame's bars at the distances of our scenes
+MERGED_MIN_AREA = 2000  # px: a grey region this large that is no panel may hold one
+
+
+# ------------------------------------------------------------------ segmentation
+
+
+def _components(mask: np.ndarray, min_area: int):
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), 8)
+    out = []
+    for k in range(1, n):
+        x, y, w, h, area = stats[k]
+        if area >= min_area:
+            out.append((k, int(x), int(y), int(w), int(h), int(area)))
+    return labels, out
+
+
+def find_target(img: np.ndarray, ratio: float) -> tuple[int, int, int, int] | None:
+    """Bounding box (u0, v0, u1, v1) of the grey panel's image, or None."""
+    blur = cv2.GaussianBlur(img, (5, 5), 0)
+    vmax, vmin = cv2.max(cv2.max(blur[..., 0], blur[..., 1]), blur[..., 2]), \
+        cv2.min(cv2.min(blur[..., 0], blur[..., 1]), blur[..., 2])
+    neutral = (vmax - vmin) < 0.12 * vmax + 6
+    mask = neutral & (vmax > 20) & (vmax < 135)
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (FRAME_OPEN_PX, FRAME_OPEN_PX))
+    mask = cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_OPEN, kernel).astype(bool)
+    labels, comps = _components(mask, 300)
+    best = None
+    for k, x, y, w, h, area in comps:
+        whole = area / (w * h) >= 0.75 and 0.8 / ratio <= h / w <= 4.0
+        if not whole and area < MERGED_MIN_AREA:
+            continue
+        # re-grow around the region's own colour: separates a differently grey neighbour,
+        # also one that merged with the panel into a region no panel could be
+        core = blur[labels == k]
+        med = np.median(core, axis=0)
+        similar = (np.abs(blur - med).max(axis=2) < 22) & neutral
+        similar = cv2.morphologyEx(similar.astype(np.uint8), cv2.MORPH_OPEN, kernel)
+        lab2, comps2 = _components(similar, 300)
+        seed = lab2[y + h // 2, x + w // 2]
+        for kk, x2, y2, w2, h2, area2 in comps2:
+            if area2 / (w2 * h2) < 0.75 or not 0.8 / ratio <= h2 / w2 <= 4.0:
+                continue
+            if whole and kk != seed:
+                continue
+            if not whole and np.count_nonzero((lab2 == kk) & (labels == k)) < 0.5 * area2:
+                continue
+            if best is None or area2 > best[4]:
+                best = (x2, y2, x2 + w2 - 1, y2 + h2 - 1, area2)
+    return None if best is None else best[:4]
+
+
+def find_pencils(img: np.ndarray) -> list[tuple[int, int, int, int]]:
+    """Bounding boxes of painted (yellow) pencil bands."""
+    blur = cv2.GaussianBlur(img, (3, 3), 0)
+    r, g, b = blur[..., 0], blur[..., 1], blur[..., 2]
+    vmax, vmin = cv2.max(cv2.max(r, g), b), cv2.min(cv2.min(r, g), b)
+    sat = (vmax - vmin) / np.maximum(vmax, 1.0)
+    yellow = (r + g) / 2 - b
+    mask = (sat > 0.55) & (yellow > 30) & (vmax > 40)
+    mask = cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
+    _, comps = _components(mask, 30)
+    return [(x, y, x + w - 1, y + h - 1) for _, x, y, w, h, _ in comps if h >= 2 * w * 0.8]
+
+@dataclass
+class Detection:
+    """What the detector measured in one frame."""
+
+    observer: Point2
+    target: ImageMeasurement
+    beacons: list[tuple[Beacon, ImageMeasurement]]  # each beacon and its mirror image
+    images: list[ImageMeasurement]  # every pencil image found (mirror and direct)
+
+    def measurements(self) -> Measurements:
+        """The solver's inputs (raises DetectionError if the target's d_total is missing)."""
+        if self.target.d_total is None:
+            raise DetectionError("the target's d_total could not be measured (its image is "
+                                 "clipped at the top)")
+        return Measurements(observer=self.observer,
+                            targets=[(self.target.alpha_deg, self.target.d_total)],
+                            beacons=self.beacon_measurements())
+
+    def beacon_measurements(self) -> list[BeaconMeasurement]:
+        """Each beacon's known position with its mirror image's α and d_total."""
+        return [BeaconMeasurement(tuple(b.position), m.alpha_deg, m.d_total)
+                for b, m in self.beacons]
+
+    def to_json(self) -> dict:
+        """The measurements of INTERFACE.md plus a ``detector`` block with each image's
+        pixels (axis column, edges, bbox, clipping, direct or mirror)."""
+        t = self.target
+        out = Measurements(observer=self.observer, targets=[(t.alpha_deg, t.d_total)],
+                           beacons=self.beacon_measurements()).to_json()
+        out["target"]["clipped"] = bool(t.clipped)
+        for entry, (_, m) in zip(out["beacons"], self.beacons, strict=True):
+            entry.update(clipped=bool(m.clipped), source="mirror")
+        out["detector"] = {"target": _public(t), "images": [_public(p) for p in self.images]}
+        return out
+
+
+def measure_object(img: np.ndarray, kind: str, target_ratio: float | None = None,
+                   linear: np.ndarray | None = None) -> ImageMeasurement:
+    """Find and measure the largest image of the target (``kind="target"``, with its
+    width/height ``target_ratio``) or of a pencil in an 8-bit RGB image, exactly as
+    :func:`detect_frame` measures it (calibration uses this on its reference renders).
+    ``linear``: the image already converted by :func:`to_linear`, if the caller has it.
+
+    Raises
+    ------
+    DetectionError
+        If no such object is found.
+    """
+    img = np.asarray(img, dtype=np.float32)
+    linear = to_linear(img) if linear is None else linear
+    if kind == "target":
+        box = find_target(img, target_ratio)
+        if box is None:
+            raise DetectionError("no target (grey upright panel) found in the frame")
+        return measure_region(linear, box, "target")
+    boxes = find_pencils(img)
+    if not boxes:
+        raise DetectionError("no pencil (yellow upright band) found in the frame")
+    box = max(boxes, key=lambda b: (b[2] - b[0]) * (b[3] - b[1]))
+    return measure_region(linear, box, "beacon")
+
+
+def detect_frame(image: np.ndarray, view: CaptureRecord, calibration: Calibration) -> Detection:
+    """Measure the target and each beacon in an RGB uint8 frame.
+
+    Raises
+    ------
+    DetectionError
+        If the target or a beacon's mirror image cannot be found.
+    """
+    cam = view.camera
+    img = np.asarray(image)
+    if img.ndim != 3 or img.shape[:2] != (cam.height_px, cam.width):
+        raise DetectionError(f"the frame is {img.shape[1::-1] if img.ndim >= 2 else img.shape} "
+                             f"px but the camera is {cam.width}×{cam.height_px}")
+    if view.distortion != (0.0, 0.0):  # a calibrated lens: measure on the pinhole image
+        img = undistort(img, cam, view.distortion)
+    img = img.astype(np.float32)
+    linear = to_linear(img)
+    target = measure_object(img, "target", view.target_size[0] / view.target_size[1], linear)
+    target_geometry(cam, target, view.target_size, calibration.target_k)
+    pencils = [measure_region(linear, b, "beacon") for b in find_pencils(img)]
+    pencils = [p for p in pencils if p.height_px and (p.u_left, p.u_right) != (None, None)]
+    paint = pencil_paint_height(view.beacons[0].height)
+    for p in pencils:
+        pencil_geometry(cam, p, paint)
+        p.d_total = distance_of(cam, p.u_axis, p.height_px, calibration.pencil_k,
+                                FRONT_OFFSET["beacon"])
+    for m in (target, *pencils):
+        _check_stands_on_board(cam, m, view)
+    mirror_imgs = assign_beacons(pencils, view)
+    det = Detection(observer=tuple(cam.position), target=target,
+                    beacons=list(zip(view.beacons, mirror_imgs, strict=True)), images=pencils)
+    _check_a_mirror_fits(det)
+    return det
+
+
+FOOT_TOLERANCE = (3.0, 0.05)  # px, and a fraction of the image's height: the larger
+# plus what a camera pitched this much off level (a bench's mount) moves every row by
+PITCH_ALLOWANCE_DEG = 3.0
+
+
+def _check_stands_on_board(cam: Camera, m: ImageMeasurement, view: CaptureRecord) -> None:
+    """An upright object on the board, seen by a level camera h cm high, has its foot
+    h/H of its image height s below the principal row: v_foot = cy + s·h/H (for a mirror
+    image too: a vertical mirror keeps heights).  A frame that is flipped, of another
+    camera or of another scene breaks this."""
+    if m.height_px is None or m.v_bottom is None:
+        return
+    height = (view.target_size[1] if m.kind == "target"
+              else pencil_paint_height(view.beacons[0].height))
+    expected = cam.cy + m.height_px * cam.height / height
+    tol = (max(FOOT_TOLERANCE[0], FOOT_TOLERANCE[1] * m.height_px)
+           + cam.fx * np.tan(np.radians(PITCH_ALLOWANCE_DEG)))
+    if abs(m.v_bottom - expected) > tol:
+        raise DetectionError(
+            f"the {m.kind} image at column {m.u_axis:.0f} does not stand on the board as seen "
+            f"from {cam.height:g} cm: its foot is at row {m.v_bottom:.1f}, its height puts it "
+            f"at row {expected:.1f} (a flipped frame, or another camera's or scene's?)")
+
+
+def _check_a_mirror_fits(det: Detection) -> None:
+    """Each beacon's mirror image must imply a mirror (its image farther than the beacon
+    stands) behind which the target's image leads to a point in front of it."""
+    from solver.sltr import SolverError, solve_single
+
+    for b, m in det.beacons:
+        try:
+            if det.target.d_total is not None:
+                solve_single(det.observer, b.position, m.alpha_deg, m.d_total,
+                             det.target.alpha_deg, det.target.d_total)
+        except SolverError as exc:
+            raise DetectionError(f"no mirror fits these images ({exc}): a frame of another "
+                                 "scene, a mirrored frame, or a beacon not where it is "
+                                 "believed?") from None
+
+
+def _public(m: ImageMeasurement) -> dict:
+    d = asdict(m)
+    return {k: (round(v, 4) if isinstance(v, float) else v) for k, v in d.items()}
+
+# -------------------------------------------------------------------- drawing
+
+
+def annotate(image: np.ndarray, detection: Detection) -> np.ndarray:
+    """Draw the detections (boxes, axis columns, edges, α and d) on a copy of the frame."""
+    out = np.ascontiguousarray(image[..., ::-1].copy())  # OpenCV draws in BGR
+    for m in [detection.target, *detection.images]:
+        colour = (0, 0, 255) if m.kind == "target" else (
+            (255, 128, 0) if m.source == "mirror" else (160, 160, 160))
+        u0, v0, u1, v1 = m.bbox_px
+        cv2.rectangle(out, (u0 - 2, v0 - 2), (u1 + 2, v1 + 2), colour, 1)
+        if np.isfinite(m.u_axis):
+            x = int(round(m.u_axis))
+            cv2.line(out, (x, v0 - 12), (x, v1 + 12), colour, 1)
+        for v in (m.v_top, m.v_bottom):
+            if v is not None:
+                y = int(round(v))
+                cv2.line(out, (u0 - 8, y), (u1 + 8, y), (0, 255, 0), 1)
+        d = "—" if m.d_total is None else f"{m.d_total:.2f} cm"
+        label = f"{m.kind} ({m.source}): a {m.alpha_deg:.3f} deg, d {d}"
+        if m.clipped:
+            label += f", clipped {m.clipped}"
+        y = max(14, v0 - 8)
+        cv2.putText(out, label, (max(0, u0 - 40), y), cv2.FONT_HERSHEY_SIMPLEX, 0.45, colour,
+                    1, cv2.LINE_AA)
+    return out[..., ::-1]
+
+
+def read_frame(path) -> np.ndarray:
+    """An 8-bit RGB frame from a PNG or JPEG file.
+
+    Raises
+    ------
+    InputError
+        If the file is missing, not a PNG or JPEG, or damaged (one line, no library
+        noise).  A JPEG gives a warning: compression blurs the edges that are measured.
+    """
+    try:
+        data = np.frombuffer(Path(path).read_bytes(), np.uint8)
+    except FileNotFoundError:
+        raise InputError(path, "", "no such file") from None
+    except OSError as exc:
+        raise InputError(path, "", f"cannot read: {exc.strerror or exc}") from None
+    head = data[:8].tobytes()
+    if not (head.startswith(b"\x89PNG\r\n\x1a\n") or head.startswith(b"\xff\xd8\xff")):
+        raise InputError(path, "", "not a PNG or JPEG image")
+    level = cv2.utils.logging.getLogLevel()
+    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
+    try:
+        bgr = cv2.imdecode(data, cv2.IMREAD_COLOR)
+    finally:
+        cv2.utils.logging.setLogLevel(level)
+    if bgr is None:
+        raise InputError(path, "", "a damaged image that cannot be decoded")
+    if head.startswith(b"\xff\xd8\xff"):
+        warnings.warn(f"{path}: a JPEG frame: compression blurs the edges the detector "
+                      "measures; expect larger errors", RuntimeWarning, stacklevel=2)
+    return bgr[..., ::-1]

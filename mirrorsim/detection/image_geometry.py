@@ -1,0 +1,149 @@
+"""Where an object's image puts it: bearing, distance and clipping from its pixel edges.
+
+Pure geometry of a level pinhole camera (no OpenCV): :mod:`mirrorsim.detection.edges` finds the
+edges, this turns them into the angle of arrival α and the path length d_total.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from mirrorsim.detection.edges import ImageMeasurement
+from mirrorsim.errors import DetectionError
+from mirrorsim.scene.model import PENCIL_RADIUS, TARGET_THICKNESS, Camera, Point2
+from solver.geometry import wrap_bearing
+
+# The measured edges belong to the face nearest the camera: the panel's front (half its
+# thickness before its centre), the pencil's near side.  Size constancy holds for that
+# face's depth.  The pencil's top and foot are measured on the middle 60 % of its
+# silhouette's columns, where the hexagon's near side lies 0.336–0.341 cm before the
+# axis whatever the pencil's turn (0.338 on average: numerically, over turns 0–60°); a
+# flat's 0.346 and a corner's 0.4 bound it, and their mean, 0.373, which was used
+# before, put every pencil 0.035 cm too near (0.05 % at 70 cm, not cancelled by the
+# calibration at 1 m).
+FRONT_OFFSET = {"target": TARGET_THICKNESS / 2, "beacon": 0.338 * PENCIL_RADIUS / 0.4}
+# the hexagon's silhouette half-width averaged over its turn: R·sin 30°/(π/6)
+PENCIL_HALF_WIDTH = PENCIL_RADIUS * 3 / math.pi
+
+
+@dataclass
+class Calibration:
+    """Size-constancy constants K = s_px · (d − front offset) (px·cm), target and pencil."""
+
+    target_k: float
+    pencil_k: float
+    key: str = ""
+
+
+RATIO_TOLERANCE = 0.004  # relative: the panel's angular width/height ratio is exact unclipped
+
+
+def alpha_of(camera: Camera, u: float) -> float:
+    """Bearing of the image column u (sub-pixel)."""
+    return float(wrap_bearing(camera.pan_deg - math.degrees(_off_axis(camera, u))))
+
+
+def _off_axis(camera: Camera, u: float) -> float:
+    """Angle (rad) of column u right of the optical axis."""
+    return math.atan2(u - camera.cx, camera.fx)
+
+
+def _column(camera: Camera, phi: float) -> float:
+    return camera.cx + camera.fx * math.tan(phi)
+
+
+def _axis_between(camera: Camera, u_left: float, u_right: float) -> tuple[float, float]:
+    """The bearing of an upright object's axis from its two silhouette edges, and its
+    column.  The object (a panel square-on to the line of sight, a pencil) subtends
+    equal angles either side of its axis, so the axis lies at the *mean angle* of the
+    edges, not at their mean column (that is off by about (w/2d)²·tan φ)."""
+    phi = (_off_axis(camera, u_left) + _off_axis(camera, u_right)) / 2
+    return float(wrap_bearing(camera.pan_deg - math.degrees(phi))), _column(camera, phi)
+
+
+def distance_of(camera: Camera, u: float, height_px: float, k: float,
+                front_offset: float = 0.0) -> float:
+    """d_total from size constancy: the measured face's depth K/s along the optical axis,
+    over cos φ, is its distance along the line of sight; plus the face's offset before
+    the object's centre (along the line of sight too)."""
+    return k / height_px / math.cos(_off_axis(camera, u)) + front_offset
+
+
+def pencil_geometry(cam: Camera, m: ImageMeasurement, paint_height: float) -> None:
+    """A pencil's bearing from its edges; with one edge (the other side runs into
+    something of the paint's blue, such as the mirror's dark frame) from that edge and
+    the pencil's angular half-width, tan β = r·s·cos φ/(f·H) (r its mean silhouette
+    half-width, H its painted height)."""
+    if m.u_left is not None and m.u_right is not None:
+        m.alpha_deg, m.u_axis = _axis_between(cam, m.u_left, m.u_right)
+        return
+    edge = m.u_left if m.u_left is not None else m.u_right
+    phi_edge = _off_axis(cam, edge)
+    beta = math.atan(PENCIL_HALF_WIDTH * m.height_px * math.cos(phi_edge)
+                     / (cam.fx * paint_height))
+    missing = "right" if m.u_left is not None else "left"
+    m.u_axis = _column(cam, phi_edge + beta if m.u_left is not None else phi_edge - beta)
+    m.alpha_deg = alpha_of(cam, m.u_axis)
+    m.notes.append(f"no edge on the {missing} (no contrast there): axis from the other edge "
+                   "and the pencil's half-width")
+
+
+def target_geometry(cam: Camera, m: ImageMeasurement, size: Point2, k: float) -> None:
+    """The panel's bearing, clipping and distance from its edges.
+
+    Seen square-on at distance D (front face), the panel's half-width subtends
+    β = atan((w/2)/D) and its height s = f·H/(D·cos φ) pixels, so tan β = w·s·cos φ/(2fH):
+    its angular width follows from its height, exactly, at any angle off the axis.  An
+    image narrower than that, whose missing side runs into something dark (the mirror's
+    frame), is clipped there and its axis is β from the other edge; one wider than its
+    height allows, under something dark, is clipped at the top and its height is not used.
+    """
+    w, h = size
+    edges = {"left": m.u_left, "right": m.u_right}
+    present = [k_ for k_, u in edges.items() if u is not None]
+    dark = {side: m.outside.get(side, math.inf) < 0.5 * m.inside
+            for side in ("left", "right", "top")}
+    if m.height_px is not None and present:
+        phi0 = (sum(_off_axis(cam, edges[s_]) for s_ in present) / len(present))
+        beta = math.atan(w * m.height_px * math.cos(phi0) / (2 * cam.fx * h))
+        if len(present) == 2:
+            half = (_off_axis(cam, m.u_right) - _off_axis(cam, m.u_left)) / 2
+            r = half / beta
+            tol = max(RATIO_TOLERANCE, 0.3 / max(m.width_px, 1.0))
+            if r > 1 + tol and dark["top"]:
+                m.clipped = "top"
+                m.notes.append(f"image {100 * (r - 1):.1f}% shorter than its width implies, "
+                               "under a dark edge: clipped at the top, height not used")
+                m.height_px = None
+            elif r < 1 - tol and (dark["left"] or dark["right"]):
+                side = "left" if m.outside["left"] <= m.outside["right"] else "right"
+                m.clipped = side
+                present = ["right" if side == "left" else "left"]
+                m.notes.append(f"image {100 * (1 - r):.1f}% narrower than its height implies, "
+                               f"beside a dark edge: clipped on the {side}, axis from the "
+                               "other edge")
+            elif abs(r - 1) > tol:
+                m.notes.append(f"angular width {100 * (r - 1):+.1f}% off what its height "
+                               "implies, with no dark edge to clip it: not treated as clipped")
+        else:
+            # no contrast on one side: a clip there or a background as dark as the panel;
+            # which, the pixels cannot say, so it is noted, not flagged
+            missing = "right" if present == ["left"] else "left"
+            m.notes.append(f"no edge on the {missing} (no contrast there): axis from the "
+                           "other edge and the width the height implies")
+        if len(present) == 1:
+            side = present[0]
+            phi_edge = _off_axis(cam, edges[side])
+            phi = phi_edge + beta if side == "left" else phi_edge - beta
+            m.u_axis = _column(cam, phi)
+            m.alpha_deg = alpha_of(cam, m.u_axis)
+        else:
+            m.alpha_deg, m.u_axis = _axis_between(cam, m.u_left, m.u_right)
+    elif len(present) == 2:
+        m.alpha_deg, m.u_axis = _axis_between(cam, m.u_left, m.u_right)
+    else:
+        raise DetectionError("the target's image has neither a measurable height nor two "
+                             "side edges")
+    if m.height_px is not None:
+        m.d_total = distance_of(cam, m.u_axis, m.height_px, k, FRONT_OFFSET["target"])

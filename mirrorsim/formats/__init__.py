@@ -1,0 +1,1 @@
+"""Every reader and writer of a file: scene YAML, capture record, measurements, JSON/PNG."""

@@ -1,0 +1,110 @@
+"""The capture record: what the experimenter knows about a frame (INTERFACE.md).
+
+``render`` writes ``<name>.capture.json`` beside each frame; the detector reads only it
+and the pixels.  It holds the camera as its mount reports it (position, height, pan,
+intrinsics), where the beacons are believed to stand and how tall they are, the
+target's size, and the calibration's reference distance; never the mirror or where the
+target stands.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from mirrorsim.errors import InputError
+from mirrorsim.formats.reader import Reader, read_json
+from mirrorsim.formats.scenefile import read_distortion
+from mirrorsim.scene.model import Beacon, Camera, Point2, Scene
+
+REFERENCE_DISTANCE = 100.0  # cm: where calibration stands its reference objects
+
+
+class CaptureError(InputError):
+    """A bad capture record."""
+
+
+@dataclass(frozen=True)
+class CaptureRecord:
+    """All the detector may know about a frame."""
+
+    camera: Camera
+    beacons: tuple[Beacon, ...]
+    target_size: Point2
+    frame: str = ""
+    reference_distance: float = REFERENCE_DISTANCE
+    distortion: tuple[float, float] = (0.0, 0.0)  # the lens's k1, k2 as calibrated
+
+    @classmethod
+    def from_scene(cls, scene: Scene, frame: str = "") -> CaptureRecord:
+        """What an experimenter of this scene knows: its camera as the mount reports it
+        (the pan as a bearing, off by the bench's pan error; level), the lens distortion
+        if it was calibrated, where the beacons are believed to stand, the target's size."""
+        bench = scene.bench
+        reported = scene.camera.pan_deg + bench.pan_error
+        camera = replace(scene.camera, pan=reported, pan_deg=reported)
+        beacons = tuple(Beacon(b.believed, b.height) for b in scene.beacons)
+        return cls(camera=camera, beacons=beacons, target_size=scene.target.size,
+                   frame=frame,
+                   distortion=bench.distortion if bench.distortion_known else (0.0, 0.0))
+
+    def to_json(self) -> dict:
+        """The capture record document."""
+        c = self.camera
+        return {"frame": self.frame,
+                "camera": {"position": list(c.position), "height": c.height,
+                           "pan_deg": c.pan_deg, "resolution": list(c.resolution),
+                           "fx": c.fx, "fy": c.fx, "cx": c.cx, "cy": c.cy,
+                           "hfov_deg": c.hfov, "distortion": list(self.distortion)},
+                "beacons": [{"position": list(b.position), "height": b.height}
+                            for b in self.beacons],
+                "target": {"size": list(self.target_size)},
+                "calibration": {"reference_distance": self.reference_distance}}
+
+    @classmethod
+    def from_json(cls, data: Any, source: str | Path = "<capture>") -> CaptureRecord:
+        """Parse and check a record (raises :class:`CaptureError` naming file and key)."""
+        r = Reader(source, CaptureError)
+        top = r.mapping(data, "", ("camera", "beacons", "target"), ("frame", "calibration"))
+        c = r.mapping(top["camera"], "camera", ("position", "height", "pan_deg", "resolution",
+                                                "fx"),
+                      ("fy", "cx", "cy", "hfov_deg", "distortion"))
+        res = c["resolution"]
+        if not isinstance(res, list) or len(res) != 2:
+            raise r.fail("camera.resolution", "expected [width, height] in px")
+        resolution = (r.integer(res[0], "camera.resolution[0]", low=2),
+                      r.integer(res[1], "camera.resolution[1]", low=2))
+        fx = r.number(c["fx"], "camera.fx", positive=True)
+        hfov = (r.number(c["hfov_deg"], "camera.hfov_deg", positive=True, high=170.0)
+                if "hfov_deg" in c else math.degrees(2 * math.atan(resolution[0] / 2 / fx)))
+        if abs((resolution[0] / 2) / math.tan(math.radians(hfov) / 2) - fx) > 1e-6 * fx:
+            raise r.fail("camera.fx", f"{fx:g} disagrees with hfov_deg {hfov:g} (square "
+                         "pixels, the principal point at the centre)")
+        distortion = (read_distortion(r, c["distortion"], "camera.distortion")
+                      if "distortion" in c else (0.0, 0.0))
+        pan = r.number(c["pan_deg"], "camera.pan_deg")
+        camera = Camera(position=r.pair(c["position"], "camera.position"),
+                        height=r.number(c["height"], "camera.height", positive=True),
+                        resolution=resolution, hfov=hfov, pan=pan, pan_deg=pan)
+        if not isinstance(top["beacons"], list) or not top["beacons"]:
+            raise r.fail("beacons", "expected a non-empty list")
+        beacons = []
+        for i, b in enumerate(top["beacons"]):
+            b = r.mapping(b, f"beacons[{i}]", ("position", "height"))
+            beacons.append(Beacon(r.pair(b["position"], f"beacons[{i}].position"),
+                                  r.number(b["height"], f"beacons[{i}].height", positive=True)))
+        t = r.mapping(top["target"], "target", ("size",))
+        cal = r.mapping(top.get("calibration", {}), "calibration", (), ("reference_distance",))
+        return cls(camera=camera, beacons=tuple(beacons),
+                   target_size=r.pair(t["size"], "target.size", positive=True),
+                   frame=str(top.get("frame", "")), distortion=distortion,
+                   reference_distance=r.number(cal.get("reference_distance", REFERENCE_DISTANCE),
+                                               "calibration.reference_distance",
+                                               positive=True))
+
+
+def load_capture(path: str | Path) -> CaptureRecord:
+    """Read a ``<name>.capture.json`` (raises CaptureError)."""
+    return CaptureRecord.from_json(read_json(path, CaptureError), path)

@@ -1,0 +1,199 @@
+"""Writing files safely: atomic replacement and strict JSON.
+
+Every output appears atomically: it is written under a temporary name beside its
+destination and renamed once complete, so a reader never sees half a file and an
+interrupted run leaves the old file (or none).  JSON is strict: NaN and infinities
+become ``null``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import json
+import math
+import os
+import sys
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mirrorsim.errors import OutputError
+
+PROBE_BYTES = 64 * 1024  # written and synced where outputs will go: a full disk says so
+
+
+def jsonable(value: Any) -> Any:
+    """``value`` with numpy scalars and arrays made plain, and NaN/±inf made ``None``."""
+    if isinstance(value, dict):
+        return {str(k): jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return jsonable(value.tolist())
+    if isinstance(value, np.bool_):
+        return bool(value)
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, float | np.floating):
+        v = float(value)
+        return v if math.isfinite(v) else None
+    if isinstance(value, Path):
+        return str(value)
+    return value
+
+
+def dumps(data: Any, indent: int | None = 2) -> str:
+    """Strict JSON text of ``data`` (see :func:`jsonable`), with a final newline."""
+    return json.dumps(jsonable(data), indent=indent, allow_nan=False) + "\n"
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | Path) -> Iterator[Path]:
+    """A temporary path beside ``path``; renamed onto it when the block ends cleanly.
+
+    The temporary name keeps the destination's suffix, so writers that choose a format
+    by suffix (matplotlib, OpenCV, Mitsuba) write the right one.  A failing write (a full
+    disk, no permission) leaves nothing behind and raises :class:`OutputError`.
+    """
+    path = Path(path)
+    tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}{path.suffix}")
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    except OSError as exc:
+        raise OutputError(path, f"cannot write: {_why(exc)}") from None
+    finally:
+        with contextlib.suppress(OSError):
+            tmp.unlink(missing_ok=True)
+
+
+def _why(exc: OSError) -> str:
+    if exc.errno == errno.ENOSPC:
+        return "no space left on the device"
+    return exc.strerror or str(exc)
+
+
+def check_output_file(path: str | Path | None, option: str) -> None:
+    """Refuse (OutputError, exit 2) a file output that cannot be written, before any work:
+    a missing parent folder, a folder in its place, no permission, a full disk."""
+    if path is None or str(path) == "-":
+        return
+    path = Path(path)
+    if path.is_dir():
+        raise OutputError(path, f"{option}: is a folder; a file is wanted here")
+    if path.exists() and not path.is_file():
+        raise OutputError(path, f"{option}: not a regular file (a device, pipe or socket)")
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.is_dir():
+        raise OutputError(path, f"{option}: no such folder {str(parent)!r}")
+    _probe(parent, path, option)
+
+
+def check_output_dir(path: str | Path | None, option: str) -> None:
+    """Refuse a folder output that cannot be made or written (its parent must exist)."""
+    if path is None:
+        return
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise OutputError(path, f"{option}: is a file; a folder is wanted here")
+    if path.is_dir():
+        _probe(path, path, option)
+        return
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.is_dir():
+        raise OutputError(path, f"{option}: no such folder {str(parent)!r} (make it first)")
+    _probe(parent, path, option)
+
+
+def _probe(folder: Path, path: Path, option: str) -> None:
+    """Create, fill and remove a small file in ``folder``: the only sure test that it
+    can be written (root ignores permission bits; a full disk fails only on writing)."""
+    try:
+        with tempfile.NamedTemporaryFile(dir=folder, prefix=".mirrorsim-probe") as f:
+            f.write(b"\0" * PROBE_BYTES)
+            f.flush()
+            os.fsync(f.fileno())
+    except OSError as exc:
+        raise OutputError(path, f"{option}: cannot write in {str(folder)!r}: {_why(exc)}"
+                          ) from None
+
+
+def write_text(path: str | Path, text: str) -> Path:
+    """Write ``text`` to ``path`` atomically."""
+    with atomic_path(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+    return Path(path)
+
+
+def encode_png(pixels: np.ndarray) -> bytes:
+    """8-bit pixels (H, W, 3) RGB or (H, W) grey as PNG bytes.
+
+    zlib level 1: a full-size frame in about half the time of Mitsuba's writer
+    (benchmarks/pieces.py; README "Throughput").
+    """
+    import cv2
+
+    return _encode(pixels, ".png", [cv2.IMWRITE_PNG_COMPRESSION, 1])
+
+
+def encode_jpeg(pixels: np.ndarray, quality: int) -> bytes:
+    """8-bit RGB pixels as JPEG bytes of ``quality`` (1–100; OpenCV's libjpeg, 4:2:0
+    chroma subsampling as cameras store them)."""
+    import cv2
+
+    return _encode(pixels, ".jpg", [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
+
+
+def _encode(pixels: np.ndarray, ext: str, params: list[int]) -> bytes:
+    import cv2
+
+    px = np.ascontiguousarray(pixels[..., ::-1] if pixels.ndim == 3 else pixels)
+    ok, buf = cv2.imencode(ext, px, params)
+    if not ok:
+        raise ValueError(f"cannot encode an image of shape {pixels.shape} as {ext}")
+    return buf.tobytes()
+
+
+def write_png(path: str | Path, pixels: np.ndarray) -> Path:
+    """Write 8-bit pixels (RGB or grey) as a PNG atomically."""
+    data = encode_png(pixels)
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(data)
+    return Path(path)
+
+
+def write_json(path: str | Path, data: Any) -> Path:
+    """Write strict JSON atomically."""
+    return write_text(path, dumps(data))
+
+
+def emit_json(dest: str | Path | None, data: Any) -> None:
+    """Write strict JSON to a file, to stdout for ``"-"``, or nowhere for None."""
+    if dest is None:
+        return
+    if str(dest) == "-":
+        sys.stdout.write(dumps(data))
+    else:
+        write_json(dest, data)
+
+
+def read_json_cache(path: Path) -> dict:
+    """A JSON cache file's contents ({} if missing or unreadable)."""
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return {}
+    return data if isinstance(data, dict) else {}
+
+
+def write_json_cache(path: Path, data: dict) -> None:
+    """Replace a JSON cache file atomically; an unwritable cache only costs a redo."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_json(path, data)
+    except (OSError, OutputError):  # atomic writes report a failure as OutputError
+        pass

@@ -1,0 +1,63 @@
+"""The measurement JSON of INTERFACE.md (``detect`` writes it, ``solve`` reads it);
+usable for real measurements as well as simulated ones."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from mirrorsim.formats.reader import Reader, read_json
+from solver.errors import InputError
+from solver.measurements import SIGMA_ALPHA_MAX_DEG, SIGMA_D_REL_MAX, Measurements
+from solver.sltr import BeaconMeasurement, Sigma
+
+# what detect adds beside the solver's inputs; the solver ignores it
+_DETECTOR_KEYS = ("bbox_px", "height_px", "u_axis", "clipped", "source")
+
+
+class MeasurementError(InputError):
+    """A bad measurement file."""
+
+
+def load_measurements(path: str | Path) -> Measurements:
+    """Parse and validate a measurements file (raises :class:`MeasurementError`)."""
+    return measurements_from_dict(read_json(path, MeasurementError), path)
+
+
+def measurements_from_dict(data: Any, source: str | Path = "<measurements>") -> Measurements:
+    """Validate parsed measurement JSON (see :meth:`Measurements.from_json`)."""
+    r = Reader(source, MeasurementError)
+    top = r.mapping(data, "", ("observer", "target", "beacons"),
+                    ("sigma", "scene", "detector", "source"))
+    observer = r.pair(top["observer"], "observer")
+    raw_t = top["target"]
+    listed = isinstance(raw_t, list)
+    if listed and not raw_t:
+        raise r.fail("target", "expected an observation or a non-empty list of them")
+    targets = []
+    for i, t in enumerate(raw_t if listed else [raw_t]):
+        key = f"target[{i}]" if listed else "target"
+        t = r.mapping(t, key, ("alpha_deg", "d_total"), _DETECTOR_KEYS)
+        targets.append((r.number(t["alpha_deg"], f"{key}.alpha_deg"),
+                        r.number(t["d_total"], f"{key}.d_total", positive=True)))
+    if not isinstance(top["beacons"], list) or not top["beacons"]:
+        raise r.fail("beacons", "expected a non-empty list")
+    beacons = []
+    for i, b in enumerate(top["beacons"]):
+        key = f"beacons[{i}]"
+        b = r.mapping(b, key, ("position", "alpha_deg", "d_total"), _DETECTOR_KEYS)
+        beacons.append(BeaconMeasurement(
+            r.pair(b["position"], f"{key}.position"),
+            r.number(b["alpha_deg"], f"{key}.alpha_deg"),
+            r.number(b["d_total"], f"{key}.d_total", positive=True)))
+    sigma = read_sigma(r, top["sigma"]) if "sigma" in top else None
+    return Measurements(observer, targets, beacons, sigma)
+
+
+def read_sigma(r: Reader, value: Any, key: str = "sigma") -> Sigma:
+    """A ``sigma`` block: α in degrees and d_total relative, each > 0 and sensible."""
+    s = r.mapping(value, key, ("alpha_deg", "d_total_rel"))
+    return Sigma(r.number(s["alpha_deg"], f"{key}.alpha_deg", positive=True,
+                          high=SIGMA_ALPHA_MAX_DEG),
+                 r.number(s["d_total_rel"], f"{key}.d_total_rel", positive=True,
+                          high=SIGMA_D_REL_MAX))

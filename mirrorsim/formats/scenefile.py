@@ -1,0 +1,393 @@
+"""Scene files: YAML → :class:`mirrorsim.scene.model.Scene`, with every check.
+
+:func:`load_scene` turns a file into a complete scene or raises
+:class:`~mirrorsim.errors.SceneError`, whose one-line message names the file, the key
+path and the bad value.  The geometric checks (edge-on mirror, objects behind it,
+images that do not reach the camera) use :mod:`mirrorsim.truth.optics`.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Callable
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from mirrorsim.errors import SceneError
+from mirrorsim.formats.reader import Reader, show
+from mirrorsim.scene.imperfections import KEYS
+from mirrorsim.scene.model import (
+    PAN_WORDS,
+    SAMPLERS,
+    Beacon,
+    Bench,
+    Board,
+    Camera,
+    Mirror,
+    Occluder,
+    RenderSettings,
+    Scene,
+    SensorNoise,
+    Target,
+    footprints,
+)
+from mirrorsim.truth import optics
+from solver.geometry import segment_distance, signed_distance
+
+EDGE_ON_LIMIT_DEG = 5.0  # a mirror seen at a more grazing angle than this is edge-on
+DEFAULT_RESOLUTION = (1920, 1088)
+MAX_SPP = 1 << 16  # a documented bound: more samples than this is a typo, not a render
+
+
+class _StrictLoader(yaml.SafeLoader):
+    """Safe loading that also refuses duplicate keys (a silent override otherwise)."""
+
+
+def _construct_mapping(loader: _StrictLoader, node: yaml.MappingNode, deep: bool = False):
+    seen: set[Any] = set()
+    for key_node, _ in node.value:
+        key = loader.construct_object(key_node, deep=deep)
+        if key in seen:
+            raise yaml.constructor.ConstructorError(
+                None, None, f"duplicate key {key!r}", key_node.start_mark
+            )
+        seen.add(key)
+    return loader.construct_mapping(node, deep)
+
+
+_StrictLoader.add_constructor(
+    yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping
+)
+
+
+def read_yaml(path: str | Path) -> Any:
+    """Parse a YAML file strictly (safe tags only, no duplicate keys).
+
+    Raises
+    ------
+    SceneError
+        If the file is missing, unreadable or malformed.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise SceneError(path, "", "no such file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SceneError(path, "", f"cannot read: {exc}") from None
+    try:
+        return yaml.load(text, Loader=_StrictLoader)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
+        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        raise SceneError(path, "", f"malformed YAML: {where}{problem}") from None
+
+
+def load_scene(path: str | Path) -> Scene:
+    """Read and validate a scene file.
+
+    Raises
+    ------
+    SceneError
+        For any bad input, with the file, the key path and what is wrong.
+    """
+    path = Path(path)
+    return scene_from_dict(read_yaml(path), source=str(path), default_name=path.stem)
+
+
+def read_resolution(r: Reader, res: Any, key: str) -> tuple[int, int]:
+    """[width, height] in px."""
+    if not isinstance(res, list | tuple) or len(res) != 2:
+        raise r.fail(key, f"expected [width, height] in px, got {show(res)}")
+    return (r.integer(res[0], f"{key}[0]", low=2), r.integer(res[1], f"{key}[1]", low=2))
+
+
+def read_camera_model(r: Reader, cam: dict, key: str,
+                      default_resolution=DEFAULT_RESOLUTION) -> tuple[float, float,
+                                                                   tuple[int, int]]:
+    """A camera's model from its block (scene files and specs alike): mount height (cm),
+    hfov (°), resolution (px)."""
+    return (r.number(cam["height"], f"{key}.height", positive=True),
+            r.number(cam["hfov"], f"{key}.hfov", positive=True, high=170.0),
+            read_resolution(r, cam.get("resolution", default_resolution),
+                            f"{key}.resolution"))
+
+
+def read_render(r: Reader, block: Any, key: str = "render", seed: bool = True
+                ) -> RenderSettings:
+    """A ``render`` block (scene files and, with no ``seed``, specs), defaults for what
+    it omits."""
+    rr = r.mapping(block, key, set(),
+                   {"spp", "sampler", "background_spp", "beacon_spp"}
+                   | ({"seed"} if seed else set()))
+    d = RenderSettings()
+    return RenderSettings(
+        spp=r.integer(rr.get("spp", d.spp), f"{key}.spp", low=1, high=MAX_SPP),
+        seed=r.integer(rr.get("seed", d.seed), f"{key}.seed", low=0),
+        sampler=r.choice(rr.get("sampler", d.sampler), f"{key}.sampler", SAMPLERS),
+        background_spp=r.integer(rr.get("background_spp", d.background_spp),
+                                 f"{key}.background_spp", low=1, high=MAX_SPP),
+        beacon_spp=r.integer(rr.get("beacon_spp", d.beacon_spp), f"{key}.beacon_spp",
+                             low=1, high=MAX_SPP))
+
+
+def scene_from_dict(data: Any, source: str = "<scene>", default_name: str = "scene") -> Scene:
+    """Build and validate a :class:`Scene` from parsed YAML (see INTERFACE.md)."""
+    r = Reader(source, SceneError)
+    top = r.mapping(
+        data, "",
+        required={"board", "camera", "mirror", "target"},
+        optional={"name", "beacon", "beacons", "occluders", "render", "calibration"},
+    )
+    name = top.get("name", default_name)
+    if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}", name):
+        raise r.fail("name", f"{show(name)} is not a plain file name "
+                     "(letters, digits, '.', '_', '-'; no path)")
+    board = _board(r, top["board"])
+    cam = r.mapping(top["camera"], "camera", {"position", "height", "hfov", "pan"},
+                    {"resolution", *CAMERA_IMPERFECTIONS})
+    pan = cam["pan"]
+    if isinstance(pan, str):
+        if pan not in PAN_WORDS:
+            raise r.fail("camera.pan", f"{show(pan)}: expected a bearing in degrees or one of "
+                         f"{', '.join(PAN_WORDS)}")
+    else:
+        pan = r.number(pan, "camera.pan")
+    position = r.pair(cam["position"], "camera.position")
+    height, hfov, resolution = read_camera_model(r, cam, "camera")
+
+    m = r.mapping(top["mirror"], "mirror", {"center", "yaw", "size"}, set(MIRROR_IMPERFECTIONS))
+    mirror = Mirror(center=r.pair(m["center"], "mirror.center"),
+                    yaw=r.number(m["yaw"], "mirror.yaw"),
+                    size=r.pair(m["size"], "mirror.size", positive=True))
+    t = r.mapping(top["target"], "target", {"position", "size"})
+    target_position = r.pair(t["position"], "target.position")
+    target_size = r.pair(t["size"], "target.size", positive=True)
+    beacons, bkey = _beacons(r, top)
+    occluders = _occluders(r, top.get("occluders", []))
+    rs = read_render(r, top.get("render", {}))
+
+    on_board = _board_check(r, board)
+    bench = _bench(r, cam, m, top.get("calibration", {}), mirror, resolution, hfov)
+    on_board(position, "camera.position", "the camera")
+    on_board(mirror.center, "mirror.center", "the mirror")
+    for end in mirror.ends():
+        on_board(end, "mirror.center", f"the mirror's end {_fmt(end)}")
+    on_board(target_position, "target.position", "the target")
+    for i, b in enumerate(beacons):
+        on_board(b.position, f"{bkey(i)}.position", "the beacon")
+        if b.known_position is not None:
+            on_board(b.known_position, f"{bkey(i)}.known_position", "the believed position")
+    for i, o in enumerate(occluders):
+        on_board(o.start, f"occluders[{i}].start", "the wall's start")
+        on_board(o.end, f"occluders[{i}].end", "the wall's end")
+    _check_mirror_faces(r, position, mirror, target_position, beacons, bkey)
+
+    # derived values, computed once here: the panel faces the camera's virtual image
+    target = Target(target_position, target_size,
+                    optics.target_facing(position, mirror, target_position))
+    for end in target.ends():
+        on_board(end, "target.position", f"the target panel's edge {_fmt(end)}")
+    pan_deg = optics.resolve_pan(position, pan, mirror, target_position, beacons[0].position)
+    camera = Camera(position, height, resolution, hfov, pan, pan_deg)
+    scene = Scene(name=name, board=board, camera=camera, mirror=mirror, target=target,
+                  beacons=beacons, occluders=occluders, render=rs, bench=bench, source=source)
+    _check_overlaps(scene, r, bkey)
+    return replace(scene, warnings=_check_sight(scene, r, bkey))
+
+
+CAMERA_IMPERFECTIONS = (*(k.split(".")[1] for k in KEYS.values() if k.startswith("camera.")),
+                        "distortion_known")
+MIRROR_IMPERFECTIONS = tuple(k.split(".")[1] for k in KEYS.values() if k.startswith("mirror."))
+# Bounds of the imperfections: beyond them a value is a typo, not a bench (degrees)
+MAX_PAN_ERROR, MAX_PITCH, MAX_ROLL, MAX_TILT = 10.0, 20.0, 30.0, 45.0
+
+
+def _bench(r: Reader, cam: dict, m: dict, cal: Any, mirror: Mirror,
+           resolution: tuple[int, int], hfov: float) -> Bench:
+    """The bench imperfections (INTERFACE.md); every key optional, absent = ideal."""
+    def angle(block: dict, key: str, bound: float) -> float:
+        value = r.number(block.get(key.split(".")[1], 0.0), key)
+        if abs(value) >= bound:
+            raise r.fail(key, f"{value:g}: |{key.split('.')[1]}| must stay below {bound:g}°")
+        return value
+
+    d = Bench()
+    distortion = d.distortion
+    if cam.get("distortion") is not None:
+        distortion = read_distortion(r, cam["distortion"], "camera.distortion")
+        corner = math.hypot(*resolution) / 2 / ((resolution[0] / 2)
+                                                 / math.tan(math.radians(hfov) / 2))
+        if not distortion_monotonic(distortion, corner):
+            raise r.fail("camera.distortion", f"{list(distortion)}: the lens folds the image "
+                         "over before the frame's corner (r·(1 + k1 r² + k2 r⁴) must grow)")
+    known = cam.get("distortion_known", True)
+    if not isinstance(known, bool):
+        raise r.fail("camera.distortion_known", f"{show(known)}: expected true or false")
+    noise = None
+    if cam.get("noise") is not None:
+        n = r.mapping(cam["noise"], "camera.noise", {"full_well", "read_noise"})
+        noise = SensorNoise(r.number(n["full_well"], "camera.noise.full_well", positive=True),
+                            r.number(n["read_noise"], "camera.noise.read_noise", low=0.0))
+    jpeg = cam.get("jpeg_quality")
+    if jpeg is not None:
+        jpeg = r.integer(jpeg, "camera.jpeg_quality", low=1, high=100)
+    radius = m.get("curvature_radius")
+    if radius is not None:
+        radius = r.number(radius, "mirror.curvature_radius")
+        diagonal = math.hypot(*mirror.size)
+        if abs(radius) < diagonal:
+            raise r.fail("mirror.curvature_radius", f"{radius:g}: |radius| must be at least "
+                         f"the mirror's diagonal ({diagonal:.1f} cm)")
+    c = r.mapping(cal, "calibration", set(), {"distance_error"})
+    distance_error = r.number(c.get("distance_error", 0.0), "calibration.distance_error")
+    if not -50.0 < distance_error < 100.0:
+        raise r.fail("calibration.distance_error", f"{distance_error:g}: the reference must "
+                     "stand between 50 and 200 cm (error in (-50, 100) cm)")
+    return Bench(pan_error=angle(cam, "camera.pan_error", MAX_PAN_ERROR),
+                 pitch=angle(cam, "camera.pitch", MAX_PITCH),
+                 roll=angle(cam, "camera.roll", MAX_ROLL),
+                 distortion=distortion, distortion_known=known, noise=noise,
+                 jpeg_quality=jpeg, curvature_radius=radius,
+                 tilt=angle(m, "mirror.tilt", MAX_TILT),
+                 calibration_distance_error=distance_error)
+
+
+def read_distortion(r: Reader, raw: Any, key: str) -> tuple[float, float]:
+    """A lens's [k1, k2] (scene files and capture records alike)."""
+    if not isinstance(raw, list) or len(raw) != 2:
+        raise r.fail(key, f"expected [k1, k2], got {show(raw)}")
+    return (r.number(raw[0], f"{key}[0]", low=-1.0, high=1.0),
+            r.number(raw[1], f"{key}[1]", low=-1.0, high=1.0))
+
+
+def distortion_monotonic(k: tuple[float, float], r_max: float) -> bool:
+    """Whether r·(1 + k1 r² + k2 r⁴) grows on [0, r_max] (normalized radius): a lens
+    that folds its image over is no lens."""
+    r = np.linspace(0.0, r_max, 512)
+    return bool((1 + 3 * k[0] * r**2 + 5 * k[1] * r**4 > 0).all())
+
+
+def _board(r: Reader, raw: Any) -> Board:
+    b = r.mapping(raw, "board", {"size"}, {"hole_pitch"})
+    board = Board(size=r.pair(b["size"], "board.size", positive=True),
+                  hole_pitch=r.number(b.get("hole_pitch", 2.5), "board.hole_pitch", low=0.0))
+    if 0.0 < board.hole_pitch <= board.hole_diameter:
+        raise r.fail("board.hole_pitch", f"{board.hole_pitch:g} must exceed the hole diameter "
+                     f"{board.hole_diameter:g} cm (or be 0 for a plain board)")
+    return board
+
+
+def _beacons(r: Reader, top: dict) -> tuple[tuple[Beacon, ...], Callable[[int], str]]:
+    if ("beacon" in top) == ("beacons" in top):
+        raise r.fail("beacon", "give exactly one of `beacon:` or `beacons:`")
+    if "beacon" in top:
+        raw_beacons, bkey = [top["beacon"]], lambda _i: "beacon"
+    else:
+        raw_beacons, bkey = top["beacons"], lambda i: f"beacons[{i}]"
+        if not isinstance(raw_beacons, list) or not raw_beacons:
+            raise r.fail("beacons", f"expected a non-empty list, got {show(raw_beacons)}")
+    beacons = []
+    for i, raw in enumerate(raw_beacons):
+        bb = r.mapping(raw, bkey(i), {"position", "height"}, {"known_position"})
+        known = bb.get("known_position")
+        beacons.append(Beacon(position=r.pair(bb["position"], f"{bkey(i)}.position"),
+                              height=r.number(bb["height"], f"{bkey(i)}.height", positive=True),
+                              known_position=None if known is None else
+                              r.pair(known, f"{bkey(i)}.known_position")))
+    return tuple(beacons), bkey
+
+
+def _occluders(r: Reader, raw_occ: Any) -> tuple[Occluder, ...]:
+    if not isinstance(raw_occ, list):
+        raise r.fail("occluders", f"expected a list, got {show(raw_occ)}")
+    occluders = []
+    for i, raw in enumerate(raw_occ):
+        o = r.mapping(raw, f"occluders[{i}]", {"start", "end", "height"})
+        occ = Occluder(start=r.pair(o["start"], f"occluders[{i}].start"),
+                       end=r.pair(o["end"], f"occluders[{i}].end"),
+                       height=r.number(o["height"], f"occluders[{i}].height", positive=True))
+        if np.hypot(occ.end[0] - occ.start[0], occ.end[1] - occ.start[1]) < 0.1:
+            raise r.fail(f"occluders[{i}].end", f"{list(occ.end)}: the wall has no length")
+        occluders.append(occ)
+    return tuple(occluders)
+
+
+def _board_check(r: Reader, board: Board):
+    W, H = board.size
+
+    def on_board(p, key: str, what: str) -> None:
+        tol = 1e-9
+        if not (-tol <= p[0] <= W + tol and -tol <= p[1] <= H + tol):
+            raise r.fail(key, f"{_fmt(p)}: {what} lies off the board [0, {W:g}] × [0, {H:g}]")
+
+    return on_board
+
+
+def _check_mirror_faces(r: Reader, camera_position, mirror: Mirror, target_position,
+                        beacons, bkey) -> None:
+    """The camera must see the mirror's face, and the objects stand in front of it."""
+    # The reflective face is the one turned towards the camera; a camera on the line
+    # (or nearly so) sees the mirror edge-on.
+    cam = np.asarray(camera_position, float)
+    cam_side = float(signed_distance(cam, mirror.center, mirror.yaw))
+    dist = float(np.hypot(*(np.asarray(mirror.center, float) - cam)))
+    graze = math.degrees(math.asin(min(1.0, abs(cam_side) / dist))) if dist > 0 else 0.0
+    if graze < EDGE_ON_LIMIT_DEG:
+        raise r.fail("mirror.yaw", f"{mirror.yaw:g}: the camera sees the mirror edge-on "
+                     f"(line of sight {graze:.2f}° off its surface; need ≥ {EDGE_ON_LIMIT_DEG:g}°)")
+
+    def in_front(p, key: str, what: str) -> None:
+        s = float(signed_distance(p, mirror.center, mirror.yaw))
+        if s * cam_side <= 0.0:
+            raise r.fail(key, f"{_fmt(p)}: the {what} stands behind the mirror (on its back, "
+                         f"{abs(s):.2f} cm from its surface line), so the mirror cannot show it")
+
+    in_front(target_position, "target.position", "target")
+    for i, b in enumerate(beacons):
+        in_front(b.position, f"{bkey(i)}.position", "beacon")
+
+
+def _check_sight(scene: Scene, r: Reader, bkey) -> tuple[str, ...]:
+    """Refuse images that do not reach the camera; warn of clipped or direct views."""
+    sighted = [("target.position", scene.target, "target")] + [
+        (f"{bkey(i)}.position", b, "beacon") for i, b in enumerate(scene.beacons)]
+    warnings = []
+    for key, obj, what in sighted:
+        vis = optics.visibility(scene, obj)
+        if vis.axis_fraction == 0.0:
+            raise r.fail(key, f"{_fmt(obj.position)}: the {what}'s image does not reach the "
+                         f"camera through the mirror: {vis.reason}")
+        if vis.clipped:
+            warnings.append(f"{key}: the {what}'s image is clipped ({vis.reason})")
+    direct = optics.direct_view_fraction(scene, scene.target)
+    if direct > 0.0:
+        warnings.append(f"target.position: the camera also sees the target directly "
+                        f"({100 * direct:.0f}% of its axis unobstructed): not an NLOS set-up")
+    return tuple(warnings)
+
+
+def _check_overlaps(scene: Scene, r: Reader, bkey) -> None:
+    fps = footprints(scene, bkey)
+    for j in range(len(fps)):
+        for i in range(j):
+            ki, a0, a1, ra = fps[i]
+            kj, b0, b1, rb = fps[j]
+            gap = segment_distance(a0, a1, b0, b1) - ra - rb
+            if gap < 0.0:
+                what_i = ki.split(".")[0]
+                raise r.fail(kj, f"overlaps {what_i} (footprints intersect by {-gap:.2f} cm)")
+    cam = np.asarray(scene.camera.position, float)
+    for k, a0, a1, ra in fps:
+        if segment_distance(cam, cam, a0, a1) < ra:
+            raise r.fail("camera.position", f"{_fmt(cam)}: the camera stands inside {k}")
+
+
+def _fmt(p) -> str:
+    return "[" + ", ".join(f"{float(v):g}" for v in p) + "]"

@@ -1,0 +1,189 @@
+"""The error budget of a bench (``mirrorsim budget``): the scene ideal, with each
+imperfection alone, and with all; each rendered, detected, solved and scored.
+
+Beside each measured contribution stands its first-order prediction: the solver's
+Jacobian (the target estimate's derivatives with respect to every measurement and
+every believed beacon position, by central differences at the ideal frame's
+measurements) times the measured deltas.  Where the prediction and the measurement
+part, the effect is not first order (or the solver's conditioning amplifies noise).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mirrorsim.errors import DetectionError, SolverError
+from mirrorsim.pipelines.evaluate import evaluate_scene
+from mirrorsim.pipelines.score import Report
+from mirrorsim.scene import imperfections
+from mirrorsim.scene.model import Scene
+from solver.measurements import Measurements
+from solver.sltr import BeaconMeasurement, solve_measurements
+
+# central-difference steps: α (deg), d_total (cm), beacon position (cm); the solver is
+# smooth on these scales and far from them its rounding noise (1e-12) is negligible
+STEPS = (1e-4, 1e-3, 1e-3)
+
+
+@dataclass(frozen=True)
+class Delta:
+    """A source's measurements minus the ideal frame's (INTERFACE.md ``delta``)."""
+
+    target_alpha_deg: float
+    target_d_total_pct: float
+    beacon_alpha_deg: tuple[float, ...]
+    beacon_d_total_pct: tuple[float, ...]
+    beacon_position_cm: tuple[float, ...]  # |believed − ideal| per beacon
+
+    def to_json(self) -> dict:
+        """The ``delta`` block."""
+        return {"target_alpha_deg": self.target_alpha_deg,
+                "target_d_total_pct": self.target_d_total_pct,
+                "beacon_alpha_deg": list(self.beacon_alpha_deg),
+                "beacon_d_total_pct": list(self.beacon_d_total_pct),
+                "beacon_position_cm": list(self.beacon_position_cm)}
+
+
+@dataclass(frozen=True)
+class Contribution:
+    """One imperfection alone (or all of them: ``source`` 'all'), measured and predicted;
+    or, where its frames could not be measured or solved, why (``failed``; the numbers
+    are then None)."""
+
+    source: str
+    value: Any
+    target_cm: float | None  # the estimate's error against the truth
+    shift_cm: float | None  # how far the estimate moved from the ideal frame's
+    predicted_cm: float | None  # first order: |ideal error + J·delta|
+    predicted_shift_cm: float | None  # first order: |J·delta|
+    delta: Delta | None
+    failed: str = ""
+
+    def to_json(self) -> dict:
+        """One entry of ``sources``."""
+        out = {"source": self.source, "value": self.value, "target_cm": self.target_cm,
+               "predicted_cm": self.predicted_cm, "shift_cm": self.shift_cm,
+               "predicted_shift_cm": self.predicted_shift_cm,
+               "delta": None if self.delta is None else self.delta.to_json()}
+        return out | ({"failed": self.failed} if self.failed else {})
+
+
+@dataclass(frozen=True)
+class Budget:
+    """``mirrorsim budget``'s result (INTERFACE.md *Error budget*)."""
+
+    scene: str
+    ideal_cm: float
+    all: Contribution | None  # None when the scene has a single source (or none)
+    sources: tuple[Contribution, ...]
+
+    def to_json(self) -> dict:
+        """The budget document."""
+        out = {"scene": self.scene, "ideal": {"target_cm": self.ideal_cm},
+               "sources": [c.to_json() for c in self.sources]}
+        if self.all is not None:
+            out["all"] = {k: v for k, v in self.all.to_json().items()
+                          if k not in ("source", "value", "delta")}
+        return out
+
+
+def _vector(m: Measurements) -> np.ndarray:
+    """The solver's inputs as one vector: target α, d; per beacon α, d, x, y."""
+    v = list(np.mean(m.targets, axis=0))
+    for b in m.beacons:
+        v += [b.alpha_deg, b.d_total, *b.position]
+    return np.array(v, float)
+
+
+def _estimate(observer, v: np.ndarray, sigma) -> np.ndarray:
+    beacons = [BeaconMeasurement((float(v[k + 2]), float(v[k + 3])), float(v[k]),
+                                 float(v[k + 1])) for k in range(2, len(v), 4)]
+    return solve_measurements(observer, beacons, [(float(v[0]), float(v[1]))], sigma).target
+
+
+def jacobian(m: Measurements) -> np.ndarray:
+    """∂(target estimate)/∂(measurement vector) at ``m``, (2, n) by central differences."""
+    v0 = _vector(m)
+    steps = np.array([STEPS[0], STEPS[1]] + [STEPS[0], STEPS[1], STEPS[2], STEPS[2]]
+                     * len(m.beacons))
+    cols = []
+    for k, h in enumerate(steps):
+        e = np.zeros_like(v0)
+        e[k] = h
+        cols.append((_estimate(m.observer, v0 + e, m.sigma)
+                     - _estimate(m.observer, v0 - e, m.sigma)) / (2 * h))
+    return np.column_stack(cols)
+
+
+def contribution(source: str, value: Any, ideal: Report, report: Report,
+                 J: np.ndarray) -> Contribution:
+    """Compare a source's report with the ideal one; predict its effect to first order."""
+    v0, v1 = _vector(ideal.measurements), _vector(report.measurements)
+    dv = v1 - v0
+    truth = np.asarray(ideal.truth.target.position, float)
+    est0, est1 = ideal.solution.target, report.solution.target
+    pred = J @ dv
+    nb = len(report.measurements.beacons)
+    pct = lambda k: float(100 * dv[k] / v0[k])  # noqa: E731
+    delta = Delta(target_alpha_deg=float(dv[0]), target_d_total_pct=pct(1),
+                  beacon_alpha_deg=tuple(float(dv[2 + 4 * i]) for i in range(nb)),
+                  beacon_d_total_pct=tuple(pct(3 + 4 * i) for i in range(nb)),
+                  beacon_position_cm=tuple(float(np.hypot(*dv[4 + 4 * i:6 + 4 * i]))
+                                           for i in range(nb)))
+    return Contribution(source=source, value=value,
+                        target_cm=float(np.linalg.norm(est1 - truth)),
+                        shift_cm=float(np.linalg.norm(est1 - est0)),
+                        predicted_cm=float(np.linalg.norm(est0 - truth + pred)),
+                        predicted_shift_cm=float(np.linalg.norm(pred)), delta=delta)
+
+
+def run_budget(scene: Scene, out: str | Path, *, spp: int | None = None,
+               seed: int | None = None, variant: str = "auto", progress: bool = True,
+               on_step: Callable[[str], None] | None = None) -> Budget:
+    """Evaluate ``scene`` ideal, with each imperfection alone and with all; frames and
+    reports go to ``out/<ideal|source key|all>/``.
+
+    Raises
+    ------
+    DetectionError
+        If a frame cannot be measured (the message names the source).
+    """
+    out = Path(out)
+    found = imperfections.sources(scene)
+
+    def run(label: str, sub: Scene) -> Report:
+        if on_step is not None:
+            on_step(label)
+        return evaluate_scene(sub, out / _folder(label), spp=spp, seed=seed, variant=variant,
+                              progress=progress, keep=("annotated",))
+
+    def measured(label: str, value: Any, sub: Scene) -> Contribution:
+        # a bench error can make a frame unmeasurable (an image taken for the wrong one
+        # is refused) or unsolvable (no mirror fits): that is its effect, recorded
+        try:
+            return contribution(label, value, ideal, run(label, sub), J)
+        except (DetectionError, SolverError) as exc:
+            return Contribution(label, value, None, None, None, None, None, failed=str(exc))
+
+    try:
+        ideal = run("ideal", imperfections.ideal(scene))
+    except DetectionError as exc:
+        raise DetectionError(f"the ideal bench: {exc}") from None
+    J = jacobian(ideal.measurements)
+    contributions = tuple(measured(s.key, s.value, imperfections.only(scene, s.key))
+                          for s in found)
+    everything = measured("all", None, scene) if len(found) > 1 else None
+    return Budget(scene=scene.name, ideal_cm=ideal.errors.target_cm, all=everything,
+                  sources=contributions)
+
+
+def _folder(label: str) -> str:
+    """A source's key as a folder name: ``beacons[0].known_position`` →
+    ``beacons0.known_position``."""
+    return label.replace("[", "").replace("]", "")
+

@@ -1,0 +1,128 @@
+"""Size-constancy calibration: K = s_px · d_ref per object and camera (paper eq 5).
+
+(Precisely, K = s_px · (d_ref − f) with f the measured face's offset before the object's
+centre, :data:`mirrorsim.detection.detector.FRONT_OFFSET`: the panel's half-thickness, the
+pencil's mean near-side radius.)
+
+Like the paper (229 px at 1 m for its target), each object is rendered in direct view
+at d_ref = 100 cm, facing the camera on its optical axis, on a plain board, and measured
+exactly as the detector measures images in the mirror
+(:func:`mirrorsim.detection.detector.measure_object`), so a bias common to both cancels.  Results
+are cached per camera and object in ``<cache>/calibration.json`` (``MIRRORSIM_CACHE_DIR``
+or ``~/.cache/mirrorsim``).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from mirrorsim.detection.detector import FRONT_OFFSET, Calibration, measure_object
+from mirrorsim.errors import DetectionError
+from mirrorsim.formats.files import read_json_cache, write_json_cache
+from mirrorsim.rendering.backend import cache_path
+from mirrorsim.scene.model import PENCIL_RADIUS, Beacon, Board, Camera, Target
+from mirrorsim.truth import optics
+from solver.geometry import unit
+
+D_REF = 100.0
+# per reference object: the pencil's 45 px band rests on two edges of a few columns, whose
+# render noise at 64 spp erred K for every frame of a camera alike; the target's 230 px
+# panel averages over ~90 columns and is well measured at 64
+CALIBRATION_SPP = {"target": 64, "pencil": 1024}
+REFERENCE_PAN = 45.0  # the reference camera looks along the board's diagonal
+MARGIN_PX = 24  # rendered around the object's projected outline
+# bump whenever the measurement changes, so that no K measured the old way is reused
+# (seeds-ss: the render seeds hashed by SeedSequence)
+METHOD = "foot-chroma|target-foot-chroma|front-0.338|slope8|seeds-ss"
+
+
+def calibration_key(camera: Camera, target_size, pencil_height: float,
+                    distance_error: float = 0.0) -> str:
+    """What K depends on: the camera model, the objects' sizes, the method, and where
+    the reference really stood (a bench's error; absent from the key when 0)."""
+    key = (f"{camera.width}x{camera.height_px}|hfov={camera.hfov:.9g}|h={camera.height:.9g}|"
+           f"target={target_size[0]:.9g}x{target_size[1]:.9g}|pencil={pencil_height:.9g}|"
+           f"spp={CALIBRATION_SPP['target']},{CALIBRATION_SPP['pencil']}|{METHOD}")
+    return key + (f"|reference_error={distance_error:.9g}" if distance_error else "")
+
+
+def reference_camera(camera: Camera) -> Camera:
+    """The scene's camera model at the board's corner, looking along REFERENCE_PAN."""
+    return Camera(position=(0.0, 0.0), height=camera.height, resolution=camera.resolution,
+                  hfov=camera.hfov, pan=REFERENCE_PAN, pan_deg=REFERENCE_PAN)
+
+
+def reference_object(kind: str, size, distance: float = D_REF) -> Target | Beacon:
+    """The object on the reference camera's optical axis at ``distance``, facing it."""
+    p = tuple(float(v) for v in distance * unit(REFERENCE_PAN))
+    if kind == "target":
+        return Target(position=p, size=tuple(size), facing_deg=REFERENCE_PAN + 180.0)
+    if kind == "pencil":
+        return Beacon(position=p, height=float(size))
+    raise ValueError(f"unknown reference object {kind!r}")
+
+
+def reference_crop(camera: Camera, obj: Target | Beacon) -> tuple[int, int, int, int]:
+    """The film region (u0, v0, u1, v1) around the object's projected outline."""
+    half_w = obj.size[0] / 2 if isinstance(obj, Target) else PENCIL_RADIUS
+    top = obj.size[1] if isinstance(obj, Target) else obj.height
+    across = unit(REFERENCE_PAN + 90)
+    pts = np.array([[*(np.asarray(obj.position) + s * half_w * across), z]
+                    for s in (-1, 1) for z in (0.0, top)])
+    u, v, _ = optics.project(camera, pts)
+    return (int(max(0, math.floor(u.min()) - MARGIN_PX)),
+            int(max(0, math.floor(v.min()) - MARGIN_PX)),
+            int(min(camera.width, math.ceil(u.max()) + MARGIN_PX + 1)),
+            int(min(camera.height_px, math.ceil(v.max()) + MARGIN_PX + 1)))
+
+
+def measure_reference(camera: Camera, kind: str, size, variant: str = "auto",
+                      distance: float = D_REF) -> float:
+    """Pixel height of the object standing at ``distance``, as the detector measures it."""
+    from mirrorsim.rendering.passes import render_direct  # Mitsuba only when a render is needed
+
+    cam = reference_camera(camera)
+    obj = reference_object(kind, size, distance)
+    # a plain board: a hole under the reference object's foot would bias its calibration
+    img = render_direct(Board(size=(80.0, 80.0), hole_pitch=0.0), cam, obj,
+                        spp=CALIBRATION_SPP[kind], crop=reference_crop(cam, obj), variant=variant)
+    ratio = size[0] / size[1] if kind == "target" else None
+    try:
+        m = measure_object(img, kind, ratio)
+    except DetectionError as exc:
+        raise DetectionError(f"calibration: {exc} (the {kind}'s reference render)") from None
+    if m.height_px is None:
+        raise DetectionError(f"calibration: the {kind}'s height could not be measured")
+    return m.height_px
+
+
+def calibrate(camera: Camera, target_size, pencil_height: float, *, variant: str = "auto",
+              refresh: bool = False, distance_error: float = 0.0) -> Calibration:
+    """K for the target and the pencil with this camera (cached).
+
+    ``distance_error``: a bench's reference objects stood this much farther than the
+    D_REF that K assumes (INTERFACE.md ``calibration.distance_error``), so every K, and
+    every d_total measured with it, comes out too small by about that fraction.
+    """
+    key = calibration_key(camera, target_size, pencil_height, distance_error)
+    path = _cache_file()
+    cache = read_json_cache(path)
+    if key in cache and not refresh:
+        c = cache[key]
+        return Calibration(target_k=c["target_k"], pencil_k=c["pencil_k"], key=key)
+    where = D_REF + distance_error
+    s_t = measure_reference(camera, "target", tuple(target_size), variant, where)
+    s_p = measure_reference(camera, "pencil", pencil_height, variant, where)
+    cal = Calibration(target_k=s_t * (D_REF - FRONT_OFFSET["target"]),
+                      pencil_k=s_p * (D_REF - FRONT_OFFSET["beacon"]), key=key)
+    cache[key] = {"target_k": cal.target_k, "pencil_k": cal.pencil_k,
+                  "target_px_at_100cm": s_t, "pencil_paint_px_at_100cm": s_p}
+    write_json_cache(path, cache)
+    return cal
+
+
+def _cache_file() -> Path:
+    return cache_path().with_name("calibration.json")

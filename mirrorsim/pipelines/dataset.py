@@ -1,0 +1,350 @@
+"""Datasets for error modelling: many random scenes rendered, detected, solved and scored.
+
+Layout of a dataset folder::
+
+    DIR/scenes/<name>.yaml    each scene as a normal scene file (rerun one alone with
+                              `mirrorsim evaluate`)
+    DIR/frames/<name>/…       its frame, capture record and ground truth (with --keep
+                              ids, annotated: its id labels, the annotated frame)
+    DIR/rows/<name>.json      its finished row (written last, atomically: a row file
+                              exists only for a complete scene)
+    DIR/dataset.parquet       all rows, one per scene, in index order
+    DIR/README.md             the dataset card
+    DIR/dataset.json          how it was made (seed, n, spec, spp): --resume checks it
+
+Scene i is drawn from ``SeedSequence(seed, spawn_key=(i,))`` (the same as
+``SeedSequence(seed).spawn(n)[i]``) and rendered with seed i, so a row depends on
+(seed, i) alone: the same seed gives the same rows whatever the number of workers or
+interruptions.  A scene that fails for its own reason (no valid draw, nothing detected,
+unsolvable) is a row with ``error``; one that fails for a reason outside it (an
+interrupt, a dead worker, memory, disk) leaves no row and is redone on ``--resume``.
+Work runs in worker processes (:mod:`mirrorsim.pipelines.workers`) or on a Dask cluster.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+import traceback
+import warnings
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from mirrorsim.errors import BadArgument, DetectionError, InputError, SolverError
+from mirrorsim.formats.files import atomic_path, write_json, write_text
+from mirrorsim.pipelines.random_scenes import NoValidScene
+from mirrorsim.pipelines.score import Report
+from mirrorsim.pipelines.workers import run_dask, run_local
+from mirrorsim.scene.imperfections import row_values
+from mirrorsim.scene.model import Scene
+from mirrorsim.truth.groundtruth import ObjectTruth
+from solver.geometry import yaw_difference
+
+ROW_SCHEMA_VERSION = 1
+# a worker retires past this resident memory; measured on llvm_ad_rgb, a warm worker
+# holds ~500 MiB after its first full-size scene and no more after 30 (README
+# "Throughput"), so this only stops a leak that another Mitsuba might bring
+MAX_WORKER_RSS_MB = 3072
+MAX_SCENES = 1_000_000  # a documented bound on --n
+DATASET_FORMAT = "mirrorsim-dataset"
+# failures that belong to the scene (recorded as its row); all else is redone on resume
+SCENE_FAILURES = (InputError, DetectionError, SolverError, NoValidScene)
+
+
+def scene_name(i: int) -> str:
+    """File name of scene i."""
+    return f"scene{i:06d}"
+
+
+def process_one(i: int, seed: int, spec: dict, out: str, spp: int | None,
+                variant: str, keep: tuple[str, ...] = ()) -> dict:
+    """Draw, render, detect, solve and score scene i; write its files and its row.
+
+    Returns the row; a failure of the scene itself is recorded in it (``error``).  A
+    failure from outside the scene writes no row and returns ``{"index": i, "retry": why}``.
+    """
+    from mirrorsim.pipelines.evaluate import evaluate_scene
+    from mirrorsim.pipelines.random_scenes import sample_scene, to_yaml
+
+    out_dir = Path(out)
+    name = scene_name(i)
+    t0 = time.perf_counter()
+    row: dict = {"index": i, "scene": name, "seed": seed, "schema": ROW_SCHEMA_VERSION}
+    try:
+        rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(i,)))
+        scene = sample_scene(spec, rng, name)
+        scene = replace(scene, render=replace(scene.render, spp=spp or scene.render.spp,
+                                              seed=i))
+        write_text(out_dir / "scenes" / f"{name}.yaml", to_yaml(scene))
+        t1 = time.perf_counter()
+        with warnings.catch_warnings():  # a spec that draws JPEG frames knows it does
+            warnings.filterwarnings("ignore", message=".*a JPEG frame")
+            rep = evaluate_scene(scene, out_dir / "frames" / name, variant=variant,
+                                 progress=False, keep=keep)
+        row.update(_flatten(scene, rep))
+        row["seconds_sample"] = t1 - t0
+        row["error"] = ""
+    except SCENE_FAILURES as exc:  # the scene's own: recorded, one bad scene must not stop a run
+        row["error"] = f"{type(exc).__name__}: {exc}"
+        row["traceback"] = traceback.format_exc(limit=3)
+    except Exception as exc:  # outside the scene: no row, so --resume redoes it
+        return {"index": i, "retry": f"{type(exc).__name__}: {exc}"}
+    row["seconds_total"] = time.perf_counter() - t0
+    write_json(out_dir / "rows" / f"{name}.json", row)
+    return row
+
+
+def _flatten(scene: Scene, rep: Report) -> dict:
+    """The row's columns: scene parameters, truth, measurements, solution, errors."""
+    cam, mir, t = scene.camera, scene.mirror, rep.truth
+    meas, sol, err = rep.measurements, rep.solution, rep.errors
+    row = {
+        "camera_x": cam.position[0], "camera_y": cam.position[1], "camera_height": cam.height,
+        "camera_pan_deg": cam.pan_deg, "hfov_deg": cam.hfov,
+        "mirror_x": mir.center[0], "mirror_y": mir.center[1], "mirror_yaw_deg": mir.yaw % 180,
+        "mirror_width": mir.size[0], "mirror_height": mir.size[1],
+        "target_x": scene.target.position[0], "target_y": scene.target.position[1],
+        "variant": rep.render.variant, "spp": rep.render.spp, "sampler": rep.render.sampler,
+        "background_spp": min(scene.render.background_spp, scene.render.spp),
+        "beacon_spp": max(scene.render.beacon_spp, scene.render.spp),
+        "render_seed": rep.render.seed,
+        **row_values(scene),
+    }
+    b, frame = meas.beacons[0], rep.frames[0]
+    for kind, truth, (alpha, d), clipped in (
+            ("target", t.target, meas.targets[0], frame.target_clipped),
+            ("beacon", t.beacons[0], (b.alpha_deg, b.d_total), frame.beacon_clipped)):
+        row.update({
+            f"{kind}_pos_x": truth.position[0], f"{kind}_pos_y": truth.position[1],
+            f"{kind}_alpha_true": truth.alpha_deg, f"{kind}_d_true": truth.d_total,
+            f"{kind}_d1": truth.d1, f"{kind}_d2": truth.d2,
+            f"{kind}_off_axis_deg": (truth.alpha_deg - cam.pan_deg + 180.0) % 360.0 - 180.0,
+            f"{kind}_incidence_deg": _incidence_deg(scene, truth),
+            f"{kind}_height_px_true": truth.image_px.height,
+            f"{kind}_alpha_meas": alpha, f"{kind}_d_meas": d,
+            f"{kind}_alpha_err": alpha - truth.alpha_deg,
+            f"{kind}_d_rel_err": (d - truth.d_total) / truth.d_total,
+            f"{kind}_clipped": bool(clipped),
+        })
+    row.update({
+        "est_target_x": float(sol.target[0]), "est_target_y": float(sol.target[1]),
+        "est_mirror_yaw_deg": sol.mirror.yaw_deg,
+        "err_target_cm": err.target_cm, "err_mirror_yaw_deg": err.mirror_yaw_deg,
+        "err_mirror_offset_cm": err.mirror_offset_cm,
+        "err_reflection_point_cm": err.reflection_point_cm,
+        "target_ellipse95_major_cm": (math.nan if err.target_ellipse95_major_cm is None
+                                      else err.target_ellipse95_major_cm),
+    })
+    return row
+
+
+def _calibrate_models(spec: dict, variant: str, progress: bool) -> None:
+    """Calibrate each of the spec's camera models once, before the workers start, so
+    that they all find K in the cache (with ranges instead of models, or a drawn pencil
+    height, each scene calibrates its own camera as it comes)."""
+    from mirrorsim.pipelines.calibrate import calibrate
+    from mirrorsim.pipelines.random_scenes import camera_models
+
+    cams, height = camera_models(spec), spec["beacon"]["height"]
+    # a calibration distance error drawn per scene: each scene calibrates as it comes
+    error = ((spec.get("bench") or {}).get("calibration") or {}).get("distance_error", 0.0)
+    if cams is None or isinstance(height, list) or isinstance(error, list):
+        return
+    for cam in tqdm(cams, desc="calibrating camera models", unit="model",
+                    disable=not progress, leave=False):
+        calibrate(cam, tuple(spec["target"]["size"]), float(height), variant=variant,
+                  distance_error=float(error))
+
+
+def _incidence_deg(scene: Scene, truth: ObjectTruth) -> float:
+    """Angle between the camera's ray to the mirror and the mirror's normal."""
+    ray = np.asarray(truth.reflection_point) - np.asarray(scene.camera.position, float)
+    ray_bearing = math.degrees(math.atan2(ray[1], ray[0]))
+    return 90.0 - float(yaw_difference(ray_bearing, scene.mirror.yaw))
+
+
+# ------------------------------------------------------------------- the run
+
+
+class DatasetError(InputError):
+    """A run that cannot start (e.g. a folder holding another dataset): bad input."""
+
+    def __init__(self, folder: str | Path, message: str):
+        super().__init__(folder, "", message)
+
+
+def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
+                spec_path: str | Path | None = None, spp: int | None = None,
+                sampler: str | None = None, variant: str = "auto", resume: bool = False,
+                keep: tuple[str, ...] = (),
+                executor: str = "local",
+                scheduler: str | None = None, progress: bool = True,
+                max_rss_mb: float = MAX_WORKER_RSS_MB) -> dict:
+    """Make (or finish) a dataset of ``n`` scenes; return a summary.
+
+    Raises
+    ------
+    DatasetError
+        If ``out`` is not a new or empty folder, or (with ``resume``) one of this
+        command's datasets made with the same settings.
+    BadArgument
+        For ``n`` outside 1..MAX_SCENES.
+    """
+    from mirrorsim.pipelines.random_scenes import load_spec
+    from mirrorsim.rendering.backend import choose_variant
+
+    if not 1 <= n <= MAX_SCENES:
+        raise BadArgument("--n", f"{n} must be within 1..{MAX_SCENES}")
+    out = Path(out)
+    spec = load_spec(spec_path)
+    if sampler is not None:  # part of the spec, so that --resume checks it
+        spec = {**spec, "render": {**spec.get("render", {}), "sampler": sampler}}
+    meta = {"format": DATASET_FORMAT, "n": n, "seed": seed, "spp": spp, "spec": spec}
+    _claim_folder(out, meta, resume)
+    for sub in ("scenes", "frames", "rows"):
+        (out / sub).mkdir(parents=True, exist_ok=True)
+    if not (out / "dataset.json").exists():
+        write_json(out / "dataset.json", meta)
+    chosen = choose_variant(variant)  # the probe runs once here rather than in every worker
+    _calibrate_models(spec, chosen, progress)
+    retry: dict[int, str] = {}
+
+    def is_done(i: int) -> bool:
+        return i in retry or (out / "rows" / f"{scene_name(i)}.json").exists()
+
+    done = {p.stem for p in (out / "rows").glob("scene*.json")}
+    todo = [i for i in range(n) if scene_name(i) not in done]
+    t_start = time.perf_counter()
+    bar = tqdm(total=len(todo), unit="scene", disable=not progress, desc="dataset")
+
+    def on_result(row: dict) -> None:
+        if "retry" in row:
+            retry[row["index"]] = row["retry"]
+        bar.update()
+
+    jobs = [(i, seed, spec, str(out), spp, chosen, tuple(keep)) for i in todo]
+    try:
+        if executor == "dask":
+            run_dask(process_one, jobs, scheduler, on_result)
+        elif workers <= 1:
+            for job in jobs:
+                on_result(process_one(*job))
+        else:
+            run_local(process_one, jobs, workers, is_done, on_result, max_rss_mb)
+    finally:
+        bar.close()
+    wall = time.perf_counter() - t_start
+    rows = collect_rows(out, n)
+    write_table(out, rows)
+    write_card(out, meta, rows, chosen)
+    return {"rows": len(rows), "computed": len(todo) - len(retry),
+            "already_done": n - len(todo), "failed": sum(bool(r.get("error")) for r in rows),
+            "retry": retry, "parquet": str(out / "dataset.parquet"), "seconds": wall,
+            "per_minute": len(todo) / wall * 60 if todo and wall else 0.0}
+
+
+def _claim_folder(out: Path, meta: dict, resume: bool) -> None:
+    """``out`` must be new or empty, or hold this command's dataset (with --resume)."""
+    if out.exists() and not out.is_dir():
+        raise DatasetError(out, "is a file; --out wants a new or empty folder")
+    meta_path = out / "dataset.json"
+    if not meta_path.exists():
+        if out.is_dir() and any(out.iterdir()):
+            shown = ", ".join(sorted(p.name for p in out.iterdir())[:3])
+            raise DatasetError(out, f"holds other files ({shown}, …), not a dataset: use a new "
+                               "or empty folder")
+        if resume:
+            raise DatasetError(out, "--resume: there is no dataset here to resume")
+        return
+    try:
+        old = json.loads(meta_path.read_text())
+    except (OSError, ValueError) as exc:
+        raise DatasetError(meta_path, f"not a readable dataset description ({exc})") from None
+    keys = ("n", "seed", "spp", "spec")
+    if not isinstance(old, dict) or not all(k in old for k in keys) or old.get(
+            "format", DATASET_FORMAT) != DATASET_FORMAT:
+        raise DatasetError(out, "holds a dataset.json that is not a mirrorsim dataset's")
+    if not resume:
+        raise DatasetError(out, "already holds a dataset: pass --resume to finish it, "
+                           "or choose another --out")
+    if {k: old[k] for k in keys} != {k: meta[k] for k in keys}:
+        raise DatasetError(out, f"holds a dataset made with other settings "
+                           f"(n={old['n']}, seed={old['seed']}, spp={old['spp']})")
+
+
+def collect_rows(out: Path, n: int) -> list[dict]:
+    """The finished rows of scenes 0..n-1, in index order."""
+    rows = []
+    for i in range(n):
+        p = Path(out) / "rows" / f"{scene_name(i)}.json"
+        if p.exists():
+            rows.append(json.loads(p.read_text()))
+    return rows
+
+
+def write_table(out: Path, rows: list[dict]) -> Path:
+    """All rows as one Parquet table (pyarrow), written atomically."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    cols: dict[str, list] = {}
+    keys = sorted({k for r in rows for k in r if k != "traceback"},
+                  key=lambda k: (k not in ("index", "scene", "error"), k))
+    for k in keys:
+        cols[k] = [r.get(k) for r in rows]
+    table = pa.table(cols) if rows else pa.table({"index": pa.array([], pa.int64())})
+    path = Path(out) / "dataset.parquet"
+    with atomic_path(path) as tmp:
+        pq.write_table(table, tmp)
+    return path
+
+
+def write_card(out: Path, meta: dict, rows: list[dict], variant: str) -> None:
+    """Write the dataset card DIR/README.md."""
+    ok = [r for r in rows if not r.get("error")]
+    med = lambda k: float(np.nanmedian([abs(r[k]) for r in ok])) if ok else math.nan  # noqa: E731
+    text = f"""# mirrorsim dataset
+
+Made with `mirrorsim dataset --n {meta['n']} --seed {meta['seed']}`
+({'scene spp' if meta['spp'] is None else f"--spp {meta['spp']}"}; backend {variant}).
+{len(rows)} rows, {len(rows) - len(ok)} failed (their `error` column says why).
+
+Each row is one random scene (`scenes/<scene>.yaml`, a normal scene file: rerun it with
+`mirrorsim evaluate`), its frame (`frames/<scene>/`), and these columns of
+`dataset.parquet`:
+
+- `index`, `scene`, `seed`, `render_seed`, `variant`, `spp` (in the mirror's image),
+  `background_spp`, `beacon_spp`, `sampler`, `error` (empty if fine);
+- scene parameters: `camera_x`, `camera_y`, `camera_height`, `camera_pan_deg`,
+  `hfov_deg`, `mirror_x`, `mirror_y`, `mirror_yaw_deg`, `mirror_width`,
+  `mirror_height`, `target_x`, `target_y` (cm, degrees);
+- for `target_*` and `beacon_*`: position `pos_x`, `pos_y`; ground truth `alpha_true`,
+  `d_true`, `d1`, `d2`; geometry `off_axis_deg` (bearing of the image off the optical
+  axis), `incidence_deg` (camera ray against the mirror's normal), `height_px_true`
+  (exact image height of the upright axis); measurements `alpha_meas`, `d_meas`; errors
+  `alpha_err` (deg, measured − true) and `d_rel_err` (relative); `clipped`;
+- solution: `est_target_x`, `est_target_y`, `est_mirror_yaw_deg`; errors
+  `err_target_cm`, `err_mirror_yaw_deg`, `err_mirror_offset_cm`,
+  `err_reflection_point_cm`; the solver's own bound `target_ellipse95_major_cm`
+  (semi-major axis of its 95 % error ellipse);
+- bench imperfections (the spec's `bench:` block; ideal values when absent):
+  `bench_pan_error_deg`, `bench_pitch_deg`, `bench_roll_deg`, `bench_k1`, `bench_k2`,
+  `bench_distortion_known`, `bench_full_well` (0: no sensor noise), `bench_read_noise`,
+  `bench_jpeg_quality` (0: PNG), `bench_curvature_per_cm` (1/radius, 0: flat),
+  `bench_tilt_deg`, `bench_calibration_error_cm`, `bench_beacon_dx_cm`,
+  `bench_beacon_dy_cm` (believed − true position);
+- timings: `seconds_sample`, `seconds_total`.
+
+Median |errors| here: target α {med('target_alpha_err'):.4f}°, target d
+{100 * med('target_d_rel_err'):.3f} %, beacon α {med('beacon_alpha_err'):.4f}°, beacon d
+{100 * med('beacon_d_rel_err'):.3f} %, target {med('err_target_cm'):.3f} cm.
+
+Scene i is drawn from `SeedSequence({meta['seed']}).spawn({meta['n']})[i]` with the spec in
+`dataset.json` and rendered with seed i.  `mirrorsim errormodel DIR` fits the error
+model.
+"""
+    write_text(Path(out) / "README.md", text)

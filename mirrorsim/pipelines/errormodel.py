@@ -1,0 +1,244 @@
+"""The error model: bias and spread of the detector's α and d_total/d against geometry.
+
+For each object (target, beacon) and quantity (α error in degrees, relative d_total
+error), a linear model in the features [1, d_total, signed off-axis bearing, mirror
+incidence, 1/image height in px]: the bias by a robust fit (Huber loss, scipy's
+``least_squares``: a few gross errors do not drag it), the spread by the same on the
+absolute residuals (× √(π/2), so it estimates a Gaussian σ) of the rows within
+``GROSS`` robust σ's; the rows beyond are counted as gross errors.  The off-axis bearing is
+signed (α − pan: + = left of the axis): a bias that changes sign across the axis is a line
+through zero, which |off-axis| cannot represent.  A dataset drawn with bench
+imperfections (the spec's ``bench:`` block) adds a feature for each imperfection that
+varies in it (:data:`BENCH_FEATURES`), so the bias and spread are fitted against the
+pan error, the calibration error, the mirror's curvature…  The model file also holds the
+typical σ's that `solve`, `montecarlo` and `plan` take (``--error-model FILE``): the
+RMS over the rows of bias and spread together, so a bench's imperfections enter them.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from mirrorsim.formats.files import atomic_path, write_json
+from mirrorsim.formats.measurements import read_sigma
+from mirrorsim.formats.reader import Reader, read_json
+from solver.sltr import Sigma
+
+FEATURES = ("1", "d_total_cm", "off_axis_deg", "incidence_deg", "inv_height_px")
+# A bench's imperfections (a dataset's bench_* columns) as features, each in the form its
+# first-order effect is linear in: an unknown lens's k1 moves an image at off-axis angle φ
+# by ∝ k1·tan³φ and scales it by ∝ k1·tan²φ; a mirror of curvature 1/R changes d_total
+# by −2·cos i·d1·d2/(R·d_total) (`mirror_power`, so its d coefficient should be −1); shot
+# noise goes as 1/√full_well.  A feature enters a model only where its column varies.
+BENCH_FEATURES = ("pan_error_deg", "pitch_deg", "roll_deg", "k1_tan3", "k1_tan2",
+                  "shot_noise", "read_noise_rel", "jpeg_loss", "mirror_power", "tilt_deg",
+                  "calibration_error_cm")
+QUANTITIES = {"alpha": "alpha_err", "d_rel": "d_rel_err"}
+GROSS = 6.0  # residuals beyond this many robust σ's are gross errors, counted apart
+
+
+def _feature(cols: dict, kind: str, name: str) -> np.ndarray:
+    """One feature column for ``kind`` (target or beacon)."""
+    col = lambda k: np.asarray(cols[k], float)  # noqa: E731
+    if name == "1":
+        return np.ones(len(cols[f"{kind}_d_true"]))
+    if name in ("d_total_cm", "off_axis_deg", "incidence_deg"):
+        return col({"d_total_cm": f"{kind}_d_true"}.get(name, f"{kind}_{name}"))
+    if name == "inv_height_px":
+        return 1.0 / col(f"{kind}_height_px_true")
+    if f"bench_{name}" in cols:  # pan error, pitch, roll, tilt, calibration error
+        return col(f"bench_{name}")
+    if name in ("k1_tan3", "k1_tan2"):
+        unknown = ~np.asarray(cols["bench_distortion_known"], bool)
+        t = np.tan(np.radians(col(f"{kind}_off_axis_deg")))
+        return col("bench_k1") * unknown * t ** (3 if name == "k1_tan3" else 2)
+    if name in ("shot_noise", "read_noise_rel"):
+        fw = col("bench_full_well")
+        with np.errstate(divide="ignore", invalid="ignore"):
+            v = 1.0 / np.sqrt(fw) if name == "shot_noise" else col("bench_read_noise") / fw
+        return np.where(fw > 0, v, 0.0)
+    if name == "jpeg_loss":
+        q = col("bench_jpeg_quality")
+        return np.where(q > 0, (100.0 - q) / 100.0, 0.0)
+    if name == "mirror_power":
+        cos_i = np.cos(np.radians(col(f"{kind}_incidence_deg")))
+        return (2 * cos_i * col(f"{kind}_d1") * col(f"{kind}_d2")
+                * col("bench_curvature_per_cm") / col(f"{kind}_d_true"))
+    raise KeyError(name)
+
+
+def features_of(cols: dict) -> list[str]:
+    """The model's features for these columns: FEATURES, then each bench feature whose
+    column varies (for either object)."""
+    names = list(FEATURES)
+    if "bench_pan_error_deg" not in cols:
+        return names
+    ok = np.array([not e for e in cols.get("error", [""] * len(cols["index"]))])
+    for name in BENCH_FEATURES:
+        for kind in ("target", "beacon"):
+            v = _feature(cols, kind, name)[ok]
+            v = v[np.isfinite(v)]
+            if v.size and np.ptp(v) > 0:
+                names.append(name)
+                break
+    return names
+
+
+def _design(cols: dict, kind: str, names: list[str] | tuple[str, ...] = FEATURES
+            ) -> np.ndarray:
+    return np.column_stack([_feature(cols, kind, n) for n in names])
+
+
+def _robust_fit(X: np.ndarray, y: np.ndarray, cut: float = 1.345) -> np.ndarray:
+    """A Huber-loss linear fit on standardized features, dropping directions the data do
+    not determine: for one object the image height is ∝ 1/d_total, so those two features
+    are nearly collinear and a plain fit would trade huge opposite coefficients.
+
+    ``cut``: where the loss turns linear, in robust σ's of the first residuals (1.345:
+    95 % efficient for Gaussian errors).
+    """
+    from scipy.optimize import least_squares
+
+    mu = X[:, 1:].mean(axis=0)
+    sd = X[:, 1:].std(axis=0)
+    sd[sd == 0] = 1.0
+    Z = (X[:, 1:] - mu) / sd
+    _, sv, vt = np.linalg.svd(Z, full_matrices=False)
+    basis = vt[sv > 2e-2 * sv[0]].T  # the determined directions
+    A = np.column_stack([np.ones(len(X)), Z @ basis])
+    w0, *_ = np.linalg.lstsq(A, y, rcond=None)
+    r0 = y - A @ w0
+    scale = 1.4826 * float(np.median(np.abs(r0 - np.median(r0)))) or float(np.std(r0)) or 1.0
+    w = least_squares(lambda w: A @ w - y, w0, loss="huber", f_scale=cut * scale).x
+    bz = basis @ w[1:]
+    return np.r_[w[0] - np.sum(bz * mu / sd), bz / sd]
+
+
+def fit(cols: dict) -> dict:
+    """Fit the model to dataset columns (name → sequence); rows with errors or missing
+    values are left out."""
+    names = features_of(cols)
+    model = {"features": names, "objects": {}}
+    ok = np.array([not e for e in cols.get("error", [""] * len(cols["index"]))])
+    for kind in ("target", "beacon"):
+        X_all = _design(cols, kind, names)
+        model["objects"][kind] = {}
+        for q, col in QUANTITIES.items():
+            y = np.asarray(cols[f"{kind}_{col}"], float)
+            m = ok & np.isfinite(y) & np.isfinite(X_all).all(axis=1)
+            X, yy = X_all[m], y[m]
+            if len(yy) < len(names) + 2:
+                raise ValueError(f"too few usable rows ({len(yy)}) to fit {kind} {q}")
+            bias = _robust_fit(X, yy)
+            resid = yy - X @ bias
+            # gross errors (beyond GROSS robust σ's) are counted, not fitted: the spread
+            # is the Gaussian part's
+            sigma0 = 1.4826 * float(np.median(np.abs(resid - np.median(resid))))
+            keep = np.abs(resid) <= GROSS * sigma0 if sigma0 > 0 else np.ones(len(yy), bool)
+            spread = _robust_fit(X[keep], np.abs(resid[keep]) * math.sqrt(math.pi / 2),
+                                 cut=GROSS)
+            sd = np.maximum(X @ spread, 0.0)
+            model["objects"][kind][q] = {
+                "bias": bias.tolist(), "spread": spread.tolist(), "n": int(len(yy)),
+                "gross_errors": int((~keep).sum()),
+                "rms": float(np.sqrt(np.mean(yy**2))),
+                "typical_sigma": float(np.sqrt(np.mean(sd**2 + (X @ bias) ** 2))),
+            }
+    obj = model["objects"]
+    model["sigma"] = {  # the larger of target's and beacon's: one σ pair for the solver
+        "alpha_deg": max(obj[k]["alpha"]["typical_sigma"] for k in obj),
+        "d_total_rel": max(obj[k]["d_rel"]["typical_sigma"] for k in obj),
+    }
+    return model
+
+
+def predict(model: dict, kind: str, quantity: str, features: np.ndarray
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """(bias, σ) of a quantity for feature rows (k, len(model["features"])), in the
+    order of ``model["features"]``."""
+    m = model["objects"][kind][quantity]
+    X = np.atleast_2d(features)
+    return X @ np.asarray(m["bias"]), np.maximum(X @ np.asarray(m["spread"]), 0.0)
+
+
+def load_sigma(path: str | Path) -> Sigma:
+    """The typical σ's of a model file, as the solver takes them (checked as a
+    measurement file's ``sigma`` is)."""
+    model = read_json(path)
+    r = Reader(path)
+    if not isinstance(model, dict) or "sigma" not in model:
+        raise r.fail("sigma", "missing: not an error model file (`mirrorsim errormodel`)")
+    return read_sigma(r, model["sigma"])
+
+
+def read_columns(dataset_dir: str | Path) -> dict:
+    """The dataset table as columns (name → list)."""
+    import pyarrow.parquet as pq
+
+    return pq.read_table(Path(dataset_dir) / "dataset.parquet").to_pydict()
+
+
+def summary(model: dict) -> str:
+    """The model in a few printed lines."""
+    lines = [f"error model: features {', '.join(model['features'])}"]
+    for kind, qs in model["objects"].items():
+        for q, m in qs.items():
+            unit = "°" if q == "alpha" else " (relative)"
+            coef = ", ".join(f"{n} {c:.4g}"
+                             for n, c in zip(model["features"], m["bias"], strict=True))
+            lines.append(f"  {kind:6s} {q:5s}: n={m['n']} ({m.get('gross_errors', 0)} gross), "
+                         f"RMS {m['rms']:.5f}{unit}, typical σ "
+                         f"{m['typical_sigma']:.5f}; bias: {coef}")
+    s = model["sigma"]
+    lines.append(f"  σ for the solver: α {s['alpha_deg']:.5f}°, "
+                 f"d_total {100 * s['d_total_rel']:.3f} %")
+    return "\n".join(lines)
+
+
+def plot(cols: dict, model: dict, out: str | Path) -> Path:
+    """Errors against distance and incidence, with the fitted bias ± σ, and histograms."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(2, 4, figsize=(18, 8))
+    ok = np.array([not e for e in cols.get("error", [""] * len(cols["index"]))])
+    for r, (q, col, scale, unit) in enumerate((("alpha", "alpha_err", 1.0, "°"),
+                                                ("d_rel", "d_rel_err", 100.0, "%"))):
+        for kind, colour in (("target", "#c0392b"), ("beacon", "#d4a017")):
+            y = np.asarray(cols[f"{kind}_{col}"], float) * scale
+            X = _design(cols, kind, model["features"])
+            m = ok & np.isfinite(y)
+            for c, (fi, name) in enumerate(((1, "d_total (cm)"), (3, "incidence (°)"))):
+                ax = axes[r, c]
+                ax.scatter(X[m, fi], y[m], s=8, color=colour, alpha=0.6, label=kind)
+                xs = np.linspace(X[m, fi].min(), X[m, fi].max(), 50)
+                F = np.tile(X[m].mean(axis=0), (50, 1))
+                F[:, fi] = xs
+                b, sd = predict(model, kind, q, F)
+                ax.plot(xs, b * scale, color=colour)
+                ax.fill_between(xs, (b - sd) * scale, (b + sd) * scale, color=colour, alpha=0.15)
+                ax.set_xlabel(name)
+                ax.set_ylabel(f"{q} error ({unit})")
+            axes[r, 2 if kind == "target" else 3].hist(y[m], bins=30, color=colour, alpha=0.8)
+            axes[r, 2 if kind == "target" else 3].set_title(f"{kind}: {q} error ({unit})")
+        axes[r, 0].legend(fontsize=8)
+    fig.suptitle("detector error against geometry (lines: fitted bias, bands: ±σ at mean "
+                 "features)")
+    fig.tight_layout()
+    out = Path(out)
+    try:
+        with atomic_path(out) as tmp:
+            fig.savefig(tmp, dpi=110)
+    finally:
+        plt.close(fig)
+    return out
+
+
+def write_model(model: dict, path: str | Path) -> None:
+    """Write the model file (strict JSON, atomically)."""
+    write_json(path, model)

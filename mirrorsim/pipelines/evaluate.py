@@ -1,0 +1,99 @@
+"""End to end: render → detect → solve → score against the exact ground truth.
+
+One frame per beacon (a scene with ``beacons:`` renders each beacon alone, as a moving
+beacon would be photographed at each pose); the target is measured in every frame.
+The solver sees only the measurements; the score compares its estimate with the
+ground truth.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from mirrorsim.detection.detector import annotate, detect_frame, read_frame
+from mirrorsim.errors import DetectionError
+from mirrorsim.formats.files import write_png
+from mirrorsim.pipelines.calibrate import calibrate
+from mirrorsim.pipelines.score import EXTRA_FILES, FrameRecord, Report, score
+from mirrorsim.rendering.frames import default_out, render_to_files
+from mirrorsim.scene.model import Scene
+from mirrorsim.truth.groundtruth import RenderInfo
+from solver.measurements import Measurements
+from solver.sltr import Sigma, solve_measurements
+
+# Measurement σ's the solver weights with: the detector's accuracy on full-size frames
+# at the default render settings (benchmarks/detect.py; README): α to ~0.005° (p95), the
+# target's d_total to ~0.1 %, the pencil's to ~0.6 % (mean).  One σ_d serves both.
+DETECTOR_SIGMA = Sigma(alpha_deg=0.005, d_total_rel=0.006)
+
+
+def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, spp: int | None = None,
+                   seed: int | None = None, variant: str = "auto", progress: bool = True,
+                   sigma: Sigma = DETECTOR_SIGMA, keep: tuple[str, ...] = EXTRA_FILES
+                   ) -> Report:
+    """Render (or reuse), detect, solve and score ``scene``; return the report.
+
+    ``keep``: which of EXTRA_FILES to write beside each frame (the id labels, the
+    annotated frame).
+
+    Raises
+    ------
+    DetectionError
+        If an object is not found, or the target's d_total in no frame.
+    """
+    spp = scene.render.spp if spp is None else spp
+    seed = scene.render.seed if seed is None else seed
+    out = Path(out_dir) if out_dir is not None else default_out(scene)
+    cam = scene.camera
+
+    per_beacon = [scene] if len(scene.beacons) == 1 else [
+        replace(scene, name=f"{scene.name}_b{i}", beacons=(b,))
+        for i, b in enumerate(scene.beacons)]
+    frames, detections, truths = [], [], []
+    for sub in per_beacon:
+        files = render_to_files(sub, out, spp=spp, seed=seed, variant=variant,
+                                progress=progress, reuse=True, ids="ids" in keep)
+        cal = calibrate(files.capture.camera, files.capture.target_size,
+                        files.capture.beacons[0].height, variant=variant,
+                        distance_error=scene.bench.calibration_distance_error)
+        image = read_frame(files.image)
+        try:
+            det = detect_frame(image, files.capture, cal)  # the record, never the scene
+        except DetectionError as exc:
+            raise DetectionError(f"{files.image}: {exc}") from None
+        annotated = ""
+        if "annotated" in keep:
+            annotated = str(write_png(out / f"{sub.name}.annotated.png", annotate(image, det)))
+        frames.append(FrameRecord(str(files.image), annotated, files.reused,
+                                  det.target.clipped, det.beacons[0][1].clipped))
+        detections.append(det)
+        truths.append(files.truth)
+
+    # the scene's truth, computed once per frame: the target from the first, each beacon
+    # from its own
+    truth = replace(truths[0], scene=scene.name, id_labels=None, render=None,
+                    beacons=tuple(t.beacons[0] for t in truths))
+    beacons = [b for det in detections for b in det.beacon_measurements()]
+    targets = [(d.target.alpha_deg, d.target.d_total) for d in detections
+               if d.target.d_total is not None]
+    if not targets:
+        raise DetectionError("the target's d_total could not be measured in any frame "
+                             "(its image is clipped at the top)")
+    mean_target = tuple(float(v) for v in np.mean(targets, axis=0))
+    measurements = Measurements(observer=cam.position, targets=[mean_target], beacons=beacons,
+                                sigma=sigma)
+    sol = solve_measurements(cam.position, beacons, targets, sigma)
+    by_count = ()
+    if len(beacons) > 1:
+        by_count = tuple(score(truth, measurements,
+                               solve_measurements(cam.position, beacons[:k], targets, sigma))
+                         for k in range(1, len(beacons) + 1))
+    return Report(scene=scene.name, truth=truth, measurements=measurements, solution=sol,
+                  errors=score(truth, measurements, sol), frames=tuple(frames),
+                  render=RenderInfo(variant=truths[0].render.variant, spp=spp, seed=seed,
+                                    sampler=scene.render.sampler),
+                  calibration={"target_k": cal.target_k, "pencil_k": cal.pencil_k},
+                  error_vs_beacons=by_count)

@@ -1,0 +1,142 @@
+"""Beacon-placement analysis of a scene: the solver's placement tools applied to the
+scene's camera, board, walls and mirror size (``mirrorsim plan``)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from mirrorsim.errors import BadArgument
+from mirrorsim.scene.model import (
+    MIRROR_DEPTH,
+    OCCLUDER_THICKNESS,
+    PENCIL_RADIUS,
+    TARGET_THICKNESS,
+    Beacon,
+    Scene,
+)
+from mirrorsim.truth import optics
+from solver.measurements import SIGMA_ALPHA_MAX_DEG, SIGMA_D_REL_MAX
+from solver.placement import (
+    MirrorPrior,
+    best_beacon,
+    expected_target_error,
+    paper_placement,
+    path_lengths,
+    path_points,
+    polyline_length,
+    region_area,
+    visible_region,
+)
+from solver.sltr import Sigma
+
+AREA_DISTANCES = (25.0, 50.0, 100.0, 200.0, 400.0, 1000.0)
+# cm: finer grids take long without news (exp1 here: 1 cm 7 s, 0.5 cm 11 s, 0.25 cm 26 s)
+MIN_STEP = 0.5
+
+
+def plan_scene(scene: Scene, sigma: Sigma | None = None, eps_deg: float = 5.0,
+               yaw_spread_deg: float = 3.0, d1_spread: float = 2.0, step: float = 1.0,
+               n_poses: int = 5) -> dict:
+    """Placement numbers, paths, the exact beacon region and the best beacon position.
+
+    The target's α and d_total are taken as measured without error; the mirror prior is
+    centred on the scene's mirror (its reflection point along the target's ray, its yaw)
+    with the given spreads.
+
+    Raises
+    ------
+    BadArgument
+        For a σ, ε or step that is not > 0, ε ≥ 45° or a negative spread.
+    """
+    sigma = sigma or Sigma()
+    for flag, v, hi in (("--sigma-alpha", sigma.alpha_deg, SIGMA_ALPHA_MAX_DEG),
+                        ("--sigma-d", sigma.d_total_rel, SIGMA_D_REL_MAX), ("--eps", eps_deg, 45)):
+        if not 0 < v < hi or (flag != "--eps" and v == hi):
+            raise BadArgument(flag, f"{v} must be > 0 and {'<' if flag == '--eps' else '≤'} "
+                              f"{hi:g}")
+    if not MIN_STEP <= step <= 20:
+        raise BadArgument("--step", f"{step} must be within [{MIN_STEP:g}, 20] cm")
+    for flag, v in (("--yaw-spread", yaw_spread_deg), ("--d1-spread", d1_spread)):
+        if not 0 <= v <= 30:
+            raise BadArgument(flag, f"{v} must be within [0, 30]")
+    cam, mir = scene.camera, scene.mirror
+    img = optics.mirror_image(cam.position, mir, scene.target.position)
+    o = np.asarray(cam.position, float)
+    s = mir.size[0]
+    geo = paper_placement(img.alpha_deg, img.d_total, s, eps_deg)
+    geo_corrected = paper_placement(img.alpha_deg, img.d_total, s, eps_deg, literal=False)
+    n_steps = max(1, math.ceil(img.d_total / geo.b))
+    R = o + geo.R
+    paths = {k: path_points(k, R, img.alpha_deg, 2 * geo.half_a, geo.b, n_steps)
+             for k in ("linear", "rectangular", "sawtooth")}
+
+    span = 1.5 * (s / 2) / math.tan(math.radians(2 * eps_deg)) + s
+    xs = np.linspace(R[0] - span, R[0] + span, 241)
+    ys = np.linspace(R[1] - span, R[1] + span, 241)
+    gx, gy = np.meshgrid(xs, ys)
+    mask = visible_region(o, img.alpha_deg, img.d_total, s, eps_deg,
+                          np.column_stack([gx.ravel(), gy.ravel()])).reshape(gx.shape)
+    area_lit = [paper_placement(img.alpha_deg, d, s, eps_deg).area for d in AREA_DISTANCES]
+    area_exact = [region_area(o, img.alpha_deg, d, s, eps_deg)
+                  for d in AREA_DISTANCES]
+
+    prior = MirrorPrior(d1=img.d1, yaw_deg=mir.yaw, d1_spread=d1_spread,
+                        yaw_spread_deg=yaw_spread_deg, size=s, n=n_poses)
+    poses = prior.poses(o, img.alpha_deg)
+    keep_out = [(occ.start, occ.end, OCCLUDER_THICKNESS / 2 + PENCIL_RADIUS)
+                for occ in scene.occluders]
+    keep_out.append((*mir.ends(), MIRROR_DEPTH + PENCIL_RADIUS))
+    keep_out.append((*scene.target.ends(), TARGET_THICKNESS / 2 + PENCIL_RADIUS))
+    height = scene.beacons[0].height
+
+    def unobstructed(p) -> bool:
+        # the true mirror's rectangle, walls and the target panel must let its image through
+        moved = replace(scene, beacons=(Beacon((float(p[0]), float(p[1])), height),))
+        return optics.visibility(moved, moved.beacons[0]).fraction == 1.0
+
+    best = best_beacon(o, img.alpha_deg, img.d_total, poses, sigma, s, scene.board.size,
+                       step=step, keep_out=keep_out, accept=unobstructed)
+    scene_err, scene_seen = expected_target_error(
+        o, img.alpha_deg, img.d_total, np.array([b.position for b in scene.beacons]), poses,
+        sigma, s, min_depth=0.0)
+    return {
+        "target_alpha_deg": img.alpha_deg, "target_d_total": img.d_total, "eps_deg": eps_deg,
+        "sigma": sigma, "geometry": geo, "geometry_corrected": geo_corrected,
+        "n_steps": n_steps, "paths": paths,
+        "path_lengths": path_lengths(2 * geo.half_a, geo.b, n_steps),
+        "path_polyline_lengths": {k: polyline_length(v) for k, v in paths.items()},
+        "region": {"xs": xs, "ys": ys, "mask": mask,
+                   "area": float(mask.sum() * (xs[1] - xs[0]) * (ys[1] - ys[0]))},
+        "area_vs_d": (list(AREA_DISTANCES), area_lit, area_exact),
+        "n_poses": len(poses), "best": best,
+        "scene_beacon_rmse": float(scene_err[0]), "scene_beacon_seen": float(scene_seen[0]),
+    }
+
+
+def plan_summary(plan: dict) -> dict:
+    """The JSON-ready part of a plan."""
+    g, gc = plan["geometry"], plan["geometry_corrected"]
+    ds, lit, exact = plan["area_vs_d"]
+    return {
+        "target": {"alpha_deg": plan["target_alpha_deg"], "d_total": plan["target_d_total"]},
+        "eps_deg": plan["eps_deg"],
+        "paper": {"b": g.b, "half_a": g.half_a, "n_beacons": g.n_beacons, "area": g.area},
+        "paper_eq15_perpendicular": {"b": gc.b, "half_a": gc.half_a, "area": gc.area},
+        "n_steps": plan["n_steps"],
+        "path_lengths": plan["path_lengths"],
+        "path_polyline_lengths": plan["path_polyline_lengths"],
+        "exact_region_area": plan["region"]["area"],
+        "area_vs_d_total": [{"d_total": d, "paper": a, "exact": e}
+                            for d, a, e in zip(ds, lit, exact, strict=True)],
+        "sigma": {"alpha_deg": plan["sigma"].alpha_deg,
+                  "d_total_rel": plan["sigma"].d_total_rel},
+        "mirror_poses": plan["n_poses"],
+        "scene_beacon": {"rmse": plan["scene_beacon_rmse"],
+                         "seen_fraction": plan["scene_beacon_seen"]},
+        "best_beacon": {"position": plan["best"]["position"].tolist(),
+                        "rmse": plan["best"]["rmse"],
+                        "seen_fraction": plan["best"]["seen_fraction"]},
+    }

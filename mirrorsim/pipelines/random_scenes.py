@@ -1,0 +1,356 @@
+"""Random valid scenes for datasets, drawn from the ranges of a spec file.
+
+Seeded with the ``int | numpy.random.Generator`` convention; each drawn scene is a normal
+scene (it validates, and `to_yaml` writes it as a scene file that `mirrorsim evaluate`
+reruns alone).
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from mirrorsim.errors import RunFailed, SceneError
+from mirrorsim.formats.reader import Reader, show
+from mirrorsim.formats.scenefile import (
+    DEFAULT_RESOLUTION,
+    read_camera_model,
+    read_render,
+    read_resolution,
+    read_yaml,
+    scene_from_dict,
+)
+from mirrorsim.scene.imperfections import as_keys
+from mirrorsim.scene.model import PAN_WORDS, Camera, Scene
+from mirrorsim.truth import optics
+
+DEFAULT_SPEC = Path(__file__).resolve().parents[2] / "scenes" / "dataset_spec.yaml"
+
+
+MAX_TRIES = 100_000  # a documented bound on a spec's max_tries
+PROBE_TRIES = 300  # a spec that gives no valid scene in this many draws is refused at once
+
+
+class NoValidScene(RunFailed):
+    """No draw of a spec gave a usable scene (the scene's own failure in a dataset)."""
+
+
+def load_spec(path: str | Path | None = None) -> dict:
+    """Read and check a spec file (default: the bundled one).
+
+    Every fixed value is checked as a scene file's would be, every range as a range, and
+    a few draws must give a usable scene.
+
+    Raises
+    ------
+    SceneError
+        Naming the file, the key path (``mirror.yaw``) and the value.
+    """
+    path = Path(path) if path else DEFAULT_SPEC
+    spec = read_yaml(path)
+    r = Reader(path, SceneError)
+    r.mapping(spec, "", {"board", "camera", "mirror", "target", "beacon", "occluder"},
+              {"render", "max_tries", "bench"})
+    r.mapping(spec["board"], "board", {"size"}, {"hole_pitch"})
+    r.pair(spec["board"]["size"], "board.size", positive=True)
+    cam = r.mapping(spec["camera"], "camera", {"x", "y"},
+                    {"height", "hfov", "resolution", "pan", "models"})
+    if "models" in cam:
+        if not isinstance(cam["models"], list) or not cam["models"]:
+            raise r.fail("camera.models", f"expected a list of camera models, got "
+                         f"{show(cam['models'])}")
+        extra = {"height", "hfov"} & set(cam)  # a resolution beside them is their default
+        if extra:
+            raise r.fail(f"camera.{sorted(extra)[0]}", "give it in each of camera.models, "
+                         "not beside them")
+        for k, m in enumerate(cam["models"]):
+            r.mapping(m, f"camera.models[{k}]", {"height", "hfov"}, {"resolution"})
+    # the resolution (beside models: their default); heights and fields of view drawn
+    # from ranges are checked by _value as it draws
+    read_resolution(r, cam.get("resolution", DEFAULT_RESOLUTION), "camera.resolution")
+    if "models" in cam:
+        camera_models(spec, r)
+    pan = spec["camera"].get("pan", "mirror")
+    if not isinstance(pan, str):
+        r.number(pan, "camera.pan")
+    elif pan not in PAN_WORDS:
+        raise r.fail("camera.pan", f"{show(pan)}: expected a bearing in degrees or one of "
+                     f"{', '.join(PAN_WORDS)}")
+    r.mapping(spec["mirror"], "mirror", {"x", "y", "yaw", "width", "height"})
+    r.mapping(spec["target"], "target", {"x", "y", "size"})
+    r.pair(spec["target"]["size"], "target.size", positive=True)
+    r.mapping(spec["beacon"], "beacon", {"depth", "along", "height"})
+    r.mapping(spec["occluder"], "occluder", {"at", "length", "height"})
+    read_render(r, spec.get("render", {}), seed=False)
+    r.integer(spec.get("max_tries", 5000), "max_tries", low=1, high=MAX_TRIES)
+    _check_bench_keys(spec, r)
+    # draws find range errors (wrong types, lo > hi) with their key, and a spec under
+    # which no usable scene exists
+    _draw(spec, np.random.default_rng(0), path)
+    try:
+        sample_scene(spec, 0, "probe", tries=min(PROBE_TRIES, spec.get("max_tries", 5000)))
+    except NoValidScene as exc:
+        raise r.fail("", str(exc)) from None
+    _check_bench_ends(spec, r)
+    return spec
+
+
+def camera_models(spec: dict, r: Reader | None = None) -> list[Camera] | None:
+    """The spec's camera models as cameras (position and pan irrelevant: what K depends
+    on), or None when the spec draws heights or fields of view from ranges.  A
+    resolution beside the models is their default."""
+    models = spec["camera"].get("models")
+    if models is None:
+        return None
+    r = r or Reader("<spec>", SceneError)
+    default = spec["camera"].get("resolution", DEFAULT_RESOLUTION)
+    cams = []
+    for k, m in enumerate(models):
+        height, hfov, res = read_camera_model(r, m, f"camera.models[{k}]", default)
+        cams.append(Camera(position=(0.0, 0.0), height=height, hfov=hfov, resolution=res,
+                           pan=0.0, pan_deg=0.0))
+    return cams
+
+
+def _value(spec: dict, block: str, key: str, rng: np.random.Generator, where) -> Any:
+    r = Reader(where, SceneError)
+    if not isinstance(spec[block], dict):
+        raise r.fail(block, f"expected a mapping, got {show(spec[block])}")
+    v = spec[block].get(key)
+    if v is None:
+        raise r.fail(f"{block}.{key}", "missing required key (a number or [lo, hi])")
+    return _draw_number(v, f"{block}.{key}", rng, where)
+
+
+def _draw(spec: dict, rng: np.random.Generator, where="<spec>",
+          bench_rng: np.random.Generator | None = None) -> dict:
+    """One candidate scene dict (not yet validated); the bench imperfections drawn from
+    ``bench_rng`` (default: ``rng``)."""
+    g = lambda block, key: _value(spec, block, key, rng, where)  # noqa: E731
+    position = [g("camera", "x"), g("camera", "y")]
+    models = camera_models(spec)
+    if models:  # a lab's few cameras, each on its mount: one calibration each
+        c = models[int(rng.integers(len(models)))]
+        height, hfov, res = c.height, c.hfov, c.resolution
+    else:
+        height, hfov = g("camera", "height"), g("camera", "hfov")
+        res = spec["camera"].get("resolution", DEFAULT_RESOLUTION)
+    cam = {"position": position, "height": height, "hfov": hfov, "resolution": list(res),
+           "pan": spec["camera"].get("pan", "mirror")}
+    yaw = g("mirror", "yaw")
+    centre = np.array([g("mirror", "x"), g("mirror", "y")])
+    mirror = {"center": centre.tolist(), "yaw": yaw,
+              "size": [g("mirror", "width"), g("mirror", "height")]}
+    target = {"position": [g("target", "x"), g("target", "y")],
+              "size": list(spec["target"]["size"])}
+    # the beacon in front of the mirror (on the camera's side)
+    n = np.array([-math.sin(math.radians(yaw)), math.cos(math.radians(yaw))])
+    if n @ (np.asarray(cam["position"]) - centre) < 0:
+        n = -n
+    along = np.array([math.cos(math.radians(yaw)), math.sin(math.radians(yaw))])
+    b = centre + g("beacon", "depth") * n + g("beacon", "along") * along
+    beacon = {"position": b.tolist(), "height": g("beacon", "height")}
+    # a wall across the direct line camera → target, perpendicular to it
+    c, t = np.asarray(cam["position"]), np.asarray(target["position"])
+    mid = c + g("occluder", "at") * (t - c)
+    u = (t - c) / max(np.linalg.norm(t - c), 1e-9)
+    half = g("occluder", "length") / 2 * np.array([-u[1], u[0]])
+    occ = {"start": (mid - half).tolist(), "end": (mid + half).tolist(),
+           "height": g("occluder", "height")}
+    d = {"board": copy.deepcopy(spec["board"]), "camera": cam, "mirror": mirror,
+         "target": target, "beacon": beacon, "occluders": [occ],
+         "render": dataclasses.asdict(read_render(Reader(where, SceneError),
+                                                  spec.get("render", {}), seed=False))}
+    # from their own stream, so that a bench block leaves the geometry drawn as without it
+    for path, value in _draw_bench(spec.get("bench") or {}, bench_rng or rng,
+                                   where).items():
+        _set_key(d, path, value)
+    return d
+
+
+# ------------------------------------------------------------- bench imperfections
+# The spec's optional `bench:` block: scene-file key paths (INTERFACE.md *Bench
+# imperfections*), each a value or a [lo, hi] range drawn per scene, with two drawn in
+# another form: the mirror's `curvature` (1/cm, 0 = flat) instead of its radius, since
+# the effect is linear in 1/R and a range of radii would pass through infinity; and the
+# beacon's `known_position_offset` (cm, drawn for x and y alike) instead of a position.
+BENCH_SPEC_KEYS = {
+    "camera": {"pan_error", "pitch", "roll", "distortion", "distortion_known", "noise",
+               "jpeg_quality"},
+    "mirror": {"curvature", "tilt"},
+    "calibration": {"distance_error"},
+    "beacon": {"known_position_offset"},
+}
+
+
+def _draw_number(raw: Any, key: str, rng: np.random.Generator, where,
+                 integer: bool = False) -> float:
+    """A spec's value, or a uniform draw from its [lo, hi] (integers for an integer key)."""
+    r = Reader(where, SceneError)
+    if isinstance(raw, list) and len(raw) == 2:
+        lo, hi = r.number(raw[0], f"{key}[0]"), r.number(raw[1], f"{key}[1]")
+        if lo > hi:
+            raise r.fail(key, f"{raw}: the range's low end exceeds its high end")
+        if integer:
+            return int(rng.integers(math.ceil(lo), math.floor(hi) + 1))
+        return float(rng.uniform(lo, hi))
+    return int(r.integer(raw, key, low=-2**31, high=2**31)) if integer else r.number(raw, key)
+
+
+def _draw_bench(bench: dict, rng: np.random.Generator, where="<spec>") -> dict[str, Any]:
+    """One draw of the spec's bench block, as scene-file key paths → values."""
+    out: dict[str, Any] = {}
+    for block in BENCH_SPEC_KEYS:  # a fixed order: same seed, same draws
+        raw = bench.get(block) or {}
+        for key in sorted(raw):
+            path, v = f"bench.{block}.{key}", raw[key]
+            if key == "distortion":
+                if not isinstance(v, list) or len(v) != 2:
+                    raise Reader(where, SceneError).fail(path, f"expected [k1, k2] (each a "
+                                                         f"value or [lo, hi]), got {show(v)}")
+                out["camera.distortion"] = [_draw_number(v[j], f"{path}[{j}]", rng, where)
+                                            for j in (0, 1)]
+            elif key == "distortion_known":
+                out["camera.distortion_known"] = v  # the scene reader checks the bool
+            elif key == "noise":
+                n = Reader(where, SceneError).mapping(v, path, {"full_well", "read_noise"})
+                out["camera.noise"] = {k: _draw_number(n[k], f"{path}.{k}", rng, where)
+                                       for k in ("full_well", "read_noise")}
+            elif key == "curvature":
+                c = _draw_number(v, path, rng, where)
+                if c != 0.0:
+                    out["mirror.curvature_radius"] = 1.0 / c
+            elif key == "known_position_offset":
+                out["beacon.known_position_offset"] = [
+                    _draw_number(v, path, rng, where) for _ in (0, 1)]
+            else:
+                out[f"{block}.{key}"] = _draw_number(v, path, rng, where,
+                                                     integer=key == "jpeg_quality")
+    return out
+
+
+def _set_key(d: dict, path: str, value: Any) -> None:
+    block, key = path.split(".")
+    if key == "known_position_offset":
+        d["beacon"]["known_position"] = [p + o for p, o in
+                                         zip(d["beacon"]["position"], value, strict=True)]
+    else:
+        d.setdefault(block, {})[key] = value
+
+
+def _check_bench_keys(spec: dict, r: Reader) -> None:
+    """The bench block's keys (its values are checked as they are drawn)."""
+    bench = spec.get("bench")
+    if bench is None:
+        return
+    r.mapping(bench, "bench", set(), set(BENCH_SPEC_KEYS))
+    for block, keys in BENCH_SPEC_KEYS.items():
+        if block in bench:
+            r.mapping(bench[block], f"bench.{block}", set(), keys)
+
+
+def _check_bench_ends(spec: dict, r: Reader) -> None:
+    """Each of the bench block's ranges at both ends, as a scene file would take it (a
+    tilt range reaching 45° is refused here, not thinned out silently by the draws)."""
+    bench = spec.get("bench")
+    if bench is None:
+        return
+    ideal = sample_scene({**spec, "bench": None}, 0, "probe",
+                         tries=min(PROBE_TRIES, spec.get("max_tries", 5000)))
+    base = yaml.safe_load(to_yaml(ideal))
+    for block in BENCH_SPEC_KEYS:
+        for key, raw in (bench.get(block) or {}).items():
+            for end in (0, 1):  # each range's low end, then its high end
+                pick = ([_range_end(x, end) for x in raw] if key == "distortion"
+                        and isinstance(raw, list) else _range_end(raw, end))
+                d = copy.deepcopy(base)
+                for path, value in _draw_bench({block: {key: pick}},
+                                               np.random.default_rng(0), r.source).items():
+                    _set_key(d, path, value)
+                try:
+                    scene_from_dict(d, source=str(r.source), default_name="probe")
+                except SceneError as exc:  # named by the spec's key, with the reason
+                    raise r.fail(f"bench.{block}.{key}", f"{show(raw)}: {exc.key}: "
+                                 f"{exc.message}") from None
+
+
+def _range_end(raw: Any, end: int) -> Any:
+    """A spec value with each [lo, hi] range replaced by its low (0) or high (1) end."""
+    if isinstance(raw, dict):
+        return {k: _range_end(v, end) for k, v in raw.items()}
+    if isinstance(raw, list) and len(raw) == 2 and all(
+            isinstance(x, (int, float)) and not isinstance(x, bool) for x in raw):
+        return raw[end]
+    if isinstance(raw, list):
+        return [_range_end(v, end) for v in raw]
+    return raw
+
+
+def sample_scene(spec: dict, rng: int | np.random.Generator | None, name: str,
+                 tries: int | None = None) -> Scene:
+    """Draw until a usable scene comes: valid, NLOS, both images whole in the mirror.
+
+    Raises
+    ------
+    NoValidScene
+        If ``tries`` (default: the spec's ``max_tries``) draws give none, saying why the
+        draws were refused most often.
+    """
+    rng = np.random.default_rng(rng)
+    bench_rng = rng.spawn(1)[0]  # spawning leaves rng's own stream as it was
+    tries = int(spec.get("max_tries", 5000)) if tries is None else tries
+    reasons: dict[str, int] = {}
+    for _ in range(tries):
+        d = _draw(spec, rng, bench_rng=bench_rng)
+        d["name"] = name
+        try:
+            s = scene_from_dict(d, source=name, default_name=name)
+        except SceneError as exc:
+            why = f"the scene's {exc.key or 'file'}"
+            reasons[why] = reasons.get(why, 0) + 1
+            continue
+        if s.warnings:
+            why = "an image clipped or the target seen directly"
+            reasons[why] = reasons.get(why, 0) + 1
+            continue
+        if all(optics.visibility(s, o).fraction == 1.0 for o in (s.target, *s.beacons)):
+            return s
+        why = "an image not whole in the mirror"
+        reasons[why] = reasons.get(why, 0) + 1
+    common = max(reasons, key=reasons.get) if reasons else "nothing"
+    raise NoValidScene(f"no usable scene in {tries} draws (refused most often for "
+                       f"{common}: {reasons.get(common, 0)} times); widen the spec's ranges")
+
+
+def to_yaml(scene: Scene) -> str:
+    """The scene as a scene file (INTERFACE.md's format)."""
+    c, m, t = scene.camera, scene.mirror, scene.target
+    d = {"name": scene.name,
+         "board": {"size": list(scene.board.size), "hole_pitch": scene.board.hole_pitch},
+         "camera": {"position": list(c.position), "height": c.height,
+                    "resolution": list(c.resolution), "hfov": c.hfov, "pan": c.pan},
+         "mirror": {"center": list(m.center), "yaw": m.yaw, "size": list(m.size)},
+         "target": {"position": list(t.position), "size": list(t.size)},
+         "beacons": [{"position": list(b.position), "height": b.height}
+                     for b in scene.beacons],
+         "occluders": [{"start": list(o.start), "end": list(o.end), "height": o.height}
+                       for o in scene.occluders],
+         "render": {"spp": scene.render.spp, "seed": scene.render.seed,
+                    "sampler": scene.render.sampler,
+                    "background_spp": scene.render.background_spp,
+                    "beacon_spp": scene.render.beacon_spp}}
+    for path, value in as_keys(scene).items():  # the bench's imperfections
+        block, key = path.split(".")
+        if block.startswith("beacons["):
+            d["beacons"][int(block[len("beacons["):-1])][key] = value
+        else:
+            d.setdefault(block, {})[key] = value
+    if len(scene.beacons) == 1:
+        d["beacon"] = d.pop("beacons")[0]
+    return yaml.safe_dump(d, sort_keys=False)

@@ -1,0 +1,141 @@
+"""Scores against the ground truth and the evaluation report, with their JSON.
+
+Each class has one ``to_json`` (the documents of INTERFACE.md) and one ``from_json``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from mirrorsim.formats.measurements import measurements_from_dict
+from mirrorsim.truth.groundtruth import GroundTruth, RenderInfo
+from solver.geometry import line_normal, yaw_difference
+from solver.measurements import Measurements
+from solver.sltr import Solution
+
+
+@dataclass(frozen=True)
+class Score:
+    """Errors of the measurements and of the estimate against the ground truth."""
+
+    target_cm: float
+    mirror_yaw_deg: float
+    mirror_offset_cm: float  # how far the estimated line passes from the true reflection point
+    reflection_point_cm: float
+    target_alpha_deg: float
+    target_d_total_pct: float
+    beacon_alpha_deg: tuple[float, ...]
+    beacon_d_total_pct: tuple[float, ...]
+    target_ellipse95_major_cm: float | None  # the solver's own bound: the ellipse's semi-major
+
+    def to_json(self) -> dict:
+        """INTERFACE.md's ``errors`` block."""
+        return {"target_cm": self.target_cm, "mirror_yaw_deg": self.mirror_yaw_deg,
+                "mirror_offset_cm": self.mirror_offset_cm,
+                "reflection_point_cm": self.reflection_point_cm,
+                "target_alpha_deg": self.target_alpha_deg,
+                "target_d_total_pct": self.target_d_total_pct,
+                "beacon_alpha_deg": list(self.beacon_alpha_deg),
+                "beacon_d_total_pct": list(self.beacon_d_total_pct),
+                "target_ellipse95_major_cm": self.target_ellipse95_major_cm}
+
+    @classmethod
+    def from_json(cls, d: dict) -> Score:
+        """Inverse of :meth:`to_json`."""
+        return cls(**{**d, "beacon_alpha_deg": tuple(d["beacon_alpha_deg"]),
+                      "beacon_d_total_pct": tuple(d["beacon_d_total_pct"])})
+
+
+def score(truth: GroundTruth, measurements: Measurements, sol: Solution) -> Score:
+    """Errors of measurements and estimate against the ground truth (INTERFACE.md)."""
+    t_true = np.asarray(truth.target.position, float)
+    rp_true = np.asarray(truth.target.reflection_point, float)
+    n = line_normal(sol.mirror.yaw_deg)
+    alpha_t, d_t = measurements.targets[0] if len(measurements.targets) == 1 else np.mean(
+        measurements.targets, axis=0)
+    ellipse = sol.ellipse95()
+
+    def pct(d: float, true: float) -> float:
+        return float(100 * abs(d - true) / true)
+
+    return Score(
+        target_cm=float(np.linalg.norm(sol.target - t_true)),
+        mirror_yaw_deg=float(yaw_difference(sol.mirror.yaw_deg, truth.mirror_yaw_deg)),
+        mirror_offset_cm=float(abs(n @ (rp_true - sol.mirror.point))),
+        reflection_point_cm=float(np.linalg.norm(sol.target_reflection_point - rp_true)),
+        target_alpha_deg=float(abs(alpha_t - truth.target.alpha_deg)),
+        target_d_total_pct=pct(d_t, truth.target.d_total),
+        beacon_alpha_deg=tuple(float(abs(m.alpha_deg - t.alpha_deg)) for m, t in
+                               zip(measurements.beacons, truth.beacons, strict=True)),
+        beacon_d_total_pct=tuple(pct(m.d_total, t.d_total) for m, t in
+                                 zip(measurements.beacons, truth.beacons, strict=True)),
+        target_ellipse95_major_cm=None if ellipse is None else float(ellipse[0]),
+    )
+
+
+# optional files beside each frame (its PNG, truth and capture record are always written)
+EXTRA_FILES = ("ids", "annotated")
+
+
+@dataclass(frozen=True)
+class FrameRecord:
+    """One frame of an evaluation: its files, whether it was reused, and where the
+    detector found an image clipped ('' if not; else 'top', 'left' or 'right')."""
+
+    png: str
+    annotated: str
+    reused: bool
+    target_clipped: str = ""
+    beacon_clipped: str = ""
+
+
+@dataclass(frozen=True)
+class Report:
+    """What ``mirrorsim evaluate`` makes of a scene (``evaluate --json``)."""
+
+    scene: str
+    truth: GroundTruth
+    measurements: Measurements
+    solution: Solution
+    errors: Score
+    frames: tuple[FrameRecord, ...]
+    render: RenderInfo
+    calibration: dict[str, float]
+    error_vs_beacons: tuple[Score, ...] = field(default=())
+
+    @property
+    def reused(self) -> bool:
+        """Whether every frame was a reused render."""
+        return all(f.reused for f in self.frames)
+
+    def to_json(self) -> dict:
+        """The evaluation report of INTERFACE.md (plus frames, render, calibration)."""
+        out = {"scene": self.scene, "truth": self.truth.to_json(),
+               "measurements": self.measurements.to_json(),
+               "solution": self.solution.to_json(), "errors": self.errors.to_json(),
+               "frames": [asdict(f) for f in self.frames],
+               "render": {"spp": self.render.spp, "seed": self.render.seed,
+                          "sampler": self.render.sampler, "variant": self.render.variant},
+               "calibration": dict(self.calibration)}
+        if self.error_vs_beacons:
+            out["error_vs_beacons"] = [{"beacons": k + 1, **s.to_json()}
+                                       for k, s in enumerate(self.error_vs_beacons)]
+        return out
+
+    @classmethod
+    def from_json(cls, d: dict) -> Report:
+        """Inverse of :meth:`to_json`."""
+        return cls(scene=d["scene"], truth=GroundTruth.from_json(d["truth"]),
+                   measurements=measurements_from_dict(d["measurements"]),
+                   solution=Solution.from_json(d["solution"]),
+                   errors=Score.from_json(d["errors"]),
+                   frames=tuple(FrameRecord(**f) for f in d["frames"]),
+                   render=RenderInfo(d["render"]["variant"], d["render"]["spp"],
+                                     d["render"]["seed"],
+                                     d["render"].get("sampler", "independent")),
+                   calibration=dict(d["calibration"]),
+                   error_vs_beacons=tuple(
+                       Score.from_json({k: v for k, v in e.items() if k != "beacons"})
+                       for e in d.get("error_vs_beacons", [])))

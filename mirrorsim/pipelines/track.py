@@ -1,0 +1,302 @@
+"""The moving beacon of the paper's Section 4 on rendered frames (`mirrorsim track`).
+
+The scene's first beacon follows a path (eqs 19–21: ``linear``, ``rectangular`` or
+``sawtooth``; steps of b along a heading, side a across it) from its start, or stands
+still (``fixed``: the baseline of one fixed beacon seen in as many frames).  The start
+pose is rendered and measured first: its beacon's (α, d_total) give a mirror line (the
+perpendicular bisector of the beacon and its image), which centres the filter's prior
+(yaw ± 15°, offset ± 8 cm) and lays out the path (:func:`beacon_path`) — from what the
+experimenter saw, never from the scene's mirror.  The experimenter commands each move;
+the beacon's believed position is the start plus the commanded moves, its true position
+also carries odometry noise (N(0, σ) per axis per move, seeded).  Each pose is rendered,
+detected from its capture record (which holds the believed position), and fed to the
+Rao-Blackwellized particle filter (:mod:`solver.particle`); a pose where the detector
+finds no usable mirror image of the beacon is recorded as unseen and the filter only
+predicts, as a real robot would.  The target, which does not move, is measured in every
+frame; its estimate is its mean measurement reflected in the filter's mirror.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from mirrorsim.detection.detector import Calibration, detect_frame, read_frame
+from mirrorsim.errors import BadArgument, DetectionError
+from mirrorsim.pipelines.calibrate import calibrate
+from mirrorsim.pipelines.evaluate import DETECTOR_SIGMA
+from mirrorsim.rendering.frames import FrameFiles, render_to_files
+from mirrorsim.scene.model import Bench, Scene
+from mirrorsim.truth.optics import target_facing, visibility
+from solver.errors import SolverError
+from solver.geometry import bearing_deg, line_normal, ray_line_intersection, unit, wrap_bearing
+from solver.particle import MovingBeaconFilter, PFParams, mirror_errors
+from solver.placement import path_points
+from solver.sltr import locate, mirror_from_beacon, observe
+
+PATHS = ("rectangular", "linear", "sawtooth", "fixed")  # fixed: the baseline, standing still
+HEADINGS = ("view", "camera")
+PRIOR_YAW_DEG, PRIOR_OFFSET_CM = 15.0, 8.0
+MAX_STEPS = 500
+CLEARANCE_CM = 1.0  # the path's least distance in front of the start's mirror line
+
+
+@dataclass(frozen=True)
+class TrackStep:
+    """One pose: where the beacon was and what the filter made of it."""
+
+    step: int  # 0: the start
+    commanded: tuple[float, float]  # the believed position
+    path_length_cm: float  # commanded distance travelled so far
+    beacon_position: tuple[float, float]  # the true one
+    seen: bool
+    why_unseen: str
+    mirror_yaw_error_deg: float
+    mirror_offset_error_cm: float
+    target: tuple[float, float]
+    target_error_cm: float
+    yaw_spread_deg: float
+    offset_spread_cm: float
+
+    def to_json(self) -> dict:
+        """The step as INTERFACE.md's track report writes it."""
+        return {"step": self.step, "beacon_position": list(self.beacon_position),
+                "commanded_position": list(self.commanded),
+                "path_length_cm": self.path_length_cm, "seen": self.seen,
+                **({"why_unseen": self.why_unseen} if not self.seen else {}),
+                "mirror_yaw_error_deg": self.mirror_yaw_error_deg,
+                "mirror_offset_error_cm": self.mirror_offset_error_cm,
+                "target": list(self.target), "target_error_cm": self.target_error_cm,
+                "particle_spread": {"yaw_deg": self.yaw_spread_deg,
+                                    "offset_cm": self.offset_spread_cm}}
+
+
+@dataclass(frozen=True)
+class TrackReport:
+    """A whole track; ``snapshots`` (particles' mirror lines per step) feed the animation."""
+
+    scene: str
+    path: str
+    heading: str
+    odometry_sigma: float
+    seed: int
+    steps: tuple[TrackStep, ...]
+    snapshots: tuple[np.ndarray, ...] = field(default=(), repr=False)
+
+    @property
+    def final(self) -> TrackStep:
+        """The last step."""
+        return self.steps[-1]
+
+    def to_json(self) -> dict:
+        """INTERFACE.md's track report."""
+        f = self.final
+        return {"scene": self.scene, "path": self.path, "heading": self.heading,
+                "odometry_sigma_cm": self.odometry_sigma,
+                "seed": self.seed, "steps": [s.to_json() for s in self.steps],
+                "final": {"target": list(f.target),
+                          "mirror_yaw_error_deg": f.mirror_yaw_error_deg,
+                          "mirror_offset_error_cm": f.mirror_offset_error_cm,
+                          "target_error_cm": f.target_error_cm,
+                          "seen_poses": sum(s.seen for s in self.steps),
+                          "poses": len(self.steps)}}
+
+
+def beacon_path(scene: Scene, first_obs: tuple[float, float],
+                target_obs: tuple[float, float], kind: str, steps: int, side: float,
+                step: float, heading: str = "view") -> np.ndarray:
+    """The commanded positions, start first: ``steps`` moves along the path ``kind``.
+
+    The path is laid out from what the experimenter knows at the start pose, never from
+    the scene's mirror or target: the bench (board, occluders, camera, the mirror's and
+    the target's sizes) and the start pose's measurements.  The beacon's (α, d_total)
+    give a mirror line (the perpendicular bisector of the beacon and its image); the
+    glass is placed on it between the beacon's and the target's reflection points, and
+    the target panel (a wall for the beacon's image) where that mirror puts it.
+    ``heading`` sets the line the steps of b run on: ``view``, the beacon's reflected
+    line of sight (its image stays on the same part of the glass); ``camera``, the
+    camera's line to the beacon.  Of the four ways to walk it (b forwards or back, side a
+    left or right), the path kept is the first by: on the board and ``CLEARANCE_CM`` in
+    front of the mirror line (no robot drives off the board or into the glass); most
+    poses predicted seen in that glass; b forwards (``view``: away from the glass;
+    ``camera``: towards the camera); images nearest the target's in α.
+
+    Raises
+    ------
+    SolverError
+        If the start pose's measurement gives no mirror.
+    """
+    b0 = scene.beacons[0]
+    o = np.asarray(scene.camera.position, float)
+    s0 = np.asarray(b0.believed, float)
+    if kind == "fixed":
+        return np.tile(s0, (steps + 1, 1))
+    yaw, mid, hit = mirror_from_beacon(o, s0, *first_obs)
+    yaw = float(yaw)
+    front = line_normal(yaw)
+    front = front if front @ (s0 - mid) > 0 else -front
+    target_alpha_deg = target_obs[0]
+    t, target_hit = ray_line_intersection(o, unit(target_alpha_deg), mid, yaw)
+    centre = (hit + target_hit) / 2 if np.isfinite(t) and t > 0 else hit
+    mirror = replace(scene.mirror, yaw=yaw, center=tuple(map(float, centre)))
+    target = tuple(map(float, locate(o, mid, yaw, *target_obs)))
+    believed = replace(scene, mirror=mirror, bench=Bench(), target=replace(
+        scene.target, position=target, facing_deg=target_facing(o, mirror, target)))
+    h = float(bearing_deg(hit, s0) if heading == "view" else bearing_deg(s0, o))
+    size = np.asarray(scene.board.size, float)
+    best: tuple[tuple, np.ndarray] | None = None
+    for forwards in (True, False):
+        for a in (side, -side):
+            # path_points steps towards its ``alpha`` origin: alpha = heading + 180°
+            pts = path_points(kind, s0, h + (180.0 if forwards else 0.0), a, step,
+                              steps // 2 + 2)
+            pts = (pts - pts[0] + s0)[: steps + 1]
+            allowed = (bool(np.all((pts >= 0) & (pts <= size)))
+                       and float(np.min((pts - mid) @ front)) >= CLEARANCE_CM)
+            seen = sum(_seen_in(believed, replace(b0, position=tuple(p))) for p in pts)
+            alphas = observe(o, mid, yaw, pts, strict=False).alpha_deg
+            spread = float(np.mean(np.abs(wrap_bearing(alphas - target_alpha_deg))))
+            score = (allowed, seen, forwards, -spread)
+            if best is None or score > best[0]:
+                best = (score, pts)
+    return best[1]
+
+
+def _seen_in(scene: Scene, beacon) -> bool:
+    """Whether ``beacon``, standing alone in ``scene``, is seen whole in its mirror."""
+    return visibility(replace(scene, beacons=(beacon,)), beacon).fraction == 1.0
+
+
+def check_options(kind: str, steps: int, sigma: float, side: float, step: float,
+                  heading: str = "view") -> None:
+    """Refuse bad options as bad input."""
+    if kind not in PATHS:
+        raise BadArgument("--path", f"{kind!r}: expected one of {', '.join(PATHS)}")
+    if heading not in HEADINGS:
+        raise BadArgument("--heading", f"{heading!r}: expected one of {', '.join(HEADINGS)}")
+    if not 1 <= steps <= MAX_STEPS:
+        raise BadArgument("--steps", f"{steps} must be within 1..{MAX_STEPS}")
+    if not (np.isfinite(sigma) and sigma >= 0):
+        raise BadArgument("--odometry-sigma", f"{sigma} must be a number ≥ 0 (cm)")
+    for flag, v in (("--side", side), ("--step", step)):
+        if not (np.isfinite(v) and v > 0):
+            raise BadArgument(flag, f"{v} must be a positive length (cm)")
+
+
+def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps: int = 20,
+              odometry_sigma: float = 0.1, seed: int = 0, side: float = 4.0,
+              step: float = 1.0, heading: str = "view", spp: int | None = None,
+              variant: str = "auto", particles: int = 4000,
+              on_pose: Callable[[int, int], None] | None = None) -> TrackReport:
+    """Render, detect and filter every pose of the path; return the report.
+
+    Raises
+    ------
+    BadArgument
+        For bad options.
+    DetectionError
+        If the beacon or the target is not measured at the start pose (no prior, no path).
+    """
+    check_options(kind, steps, odometry_sigma, side, step, heading)
+    out = Path(out)
+    rng = np.random.default_rng(seed)
+    b0, cam = scene.beacons[0], scene.camera
+    start = np.asarray(b0.believed, float)
+    mirror_point, mirror_yaw = np.asarray(scene.mirror.center, float), scene.mirror.yaw
+    target_true = np.asarray(scene.target.position, float)
+    params = PFParams(sigma=DETECTOR_SIGMA,
+                      sigma_trs=max(odometry_sigma if kind != "fixed" else 0.0, 1e-3))
+    cal = None  # one camera, one calibration: made at the first pose
+
+    def pose(k: int, believed: np.ndarray, true: np.ndarray):
+        nonlocal cal
+        if on_pose:
+            on_pose(k, steps + 1)
+        posed = replace(scene, name=f"{scene.name}_pose{k:03d}",
+                        beacons=(replace(b0, position=tuple(true),
+                                         known_position=tuple(believed)),),
+                        render=replace(scene.render, seed=seed * 1000 + k))
+        files = render_to_files(posed, out / "poses", spp=spp, variant=variant,
+                                progress=False, reuse=True, ids=False)
+        cal = cal or calibrate(files.capture.camera, files.capture.target_size,
+                               files.capture.beacons[0].height, variant=variant,
+                               distance_error=scene.bench.calibration_distance_error)
+        return _measure(files, cal)
+
+    obs, target_obs, why = pose(0, start, np.asarray(b0.position, float))
+    if obs is None or target_obs is None:
+        raise DetectionError(f"{scene.name}: the start pose gives the filter no prior and "
+                             f"the path no heading: {why or 'the target was not measured'}")
+    try:
+        commanded = beacon_path(scene, obs, target_obs, kind, steps, side, step, heading)
+        pf = _start_filter(cam.position, start, obs, params, particles, seed)
+    except SolverError as exc:
+        raise DetectionError(f"{scene.name}: the start pose's measurements give no mirror "
+                             f"({exc})") from None
+    moves = np.diff(commanded, axis=0)
+    true = [np.asarray(b0.position, float)]
+    for mv in moves:  # a beacon that stands still does not drift
+        true.append(true[-1] + mv + (rng.normal(0.0, odometry_sigma, 2) if mv.any() else 0.0))
+    targets = [target_obs]
+    records: list[TrackStep] = []
+    snapshots: list[np.ndarray] = []
+    for k in range(steps + 1):
+        if k:
+            obs, target_obs, why = pose(k, commanded[k], true[k])
+            if target_obs is not None:
+                targets.append(target_obs)
+        pf.step(np.zeros(2) if k == 0 else moves[k - 1], obs)
+        est = pf.estimate()
+        yaw_err, off_err = mirror_errors([est], mirror_point, mirror_yaw)
+        target = locate(cam.position, est.point, est.yaw_deg, *np.mean(targets, axis=0))
+        records.append(TrackStep(
+            step=k, commanded=tuple(map(float, commanded[k])),
+            path_length_cm=float(np.sum(np.linalg.norm(moves[:k], axis=1))),
+            beacon_position=tuple(map(float, true[k])), seen=obs is not None, why_unseen=why,
+            mirror_yaw_error_deg=float(abs(yaw_err[0])), mirror_offset_error_cm=float(off_err[0]),
+            target=tuple(map(float, target)),
+            target_error_cm=float(np.linalg.norm(target - target_true)),
+            yaw_spread_deg=est.yaw_sd_deg, offset_spread_cm=est.rho_sd))
+        snapshots.append(_snapshot(pf, rng))
+    return TrackReport(scene=scene.name, path=kind, heading=heading,
+                       odometry_sigma=odometry_sigma, seed=seed, steps=tuple(records),
+                       snapshots=tuple(snapshots))
+
+
+def _measure(files: FrameFiles, cal: Calibration
+             ) -> tuple[tuple[float, float] | None, tuple[float, float] | None, str]:
+    """Detect one pose from its capture record: the beacon's (α, d_total), or None and
+    why; and the target's, or None where its d_total is not measured."""
+    try:
+        det = detect_frame(read_frame(files.image), files.capture, cal)
+    except DetectionError as exc:
+        return None, None, str(exc)
+    t = det.target
+    target = (t.alpha_deg, t.d_total) if t.d_total is not None else None
+    m = det.beacon_measurements()[0]
+    if m.d_total is None:
+        return None, target, "the beacon's mirror image is clipped"
+    return (m.alpha_deg, m.d_total), target, ""
+
+
+def _start_filter(observer, start, obs, params: PFParams, n: int, seed: int
+                  ) -> MovingBeaconFilter:
+    """The filter with its prior centred on the mirror the first pose's beacon gives
+    (the perpendicular bisector of the beacon and its image)."""
+    yaw, mid, _ = mirror_from_beacon(observer, start, *obs)
+    yaw = float(yaw)
+    rho = float(line_normal(yaw) @ mid)
+    return MovingBeaconFilter(observer, start, (yaw - PRIOR_YAW_DEG, yaw + PRIOR_YAW_DEG),
+                              (rho - PRIOR_OFFSET_CM, rho + PRIOR_OFFSET_CM), n=n,
+                              params=params, rng=seed)
+
+
+def _snapshot(pf: MovingBeaconFilter, rng: np.random.Generator, keep: int = 400) -> np.ndarray:
+    """A few hundred of the filter's mirror hypotheses (yaw, ρ), drawn by weight, for the
+    animation (from the track's generator, after its odometry draws: the filter's own
+    stream is untouched)."""
+    idx = rng.choice(len(pf.weights), size=min(keep, len(pf.weights)), p=pf.weights)
+    return pf.particles.mirror[idx].copy()

@@ -1,0 +1,1 @@
+"""Mitsuba: a scene as a Mitsuba scene, backends, passes, camera effects, frame files."""

@@ -1,0 +1,169 @@
+"""A rendered frame's files: ``<name>.png`` (or ``.jpg``), the ground truth
+``<name>.json``, the capture record and the object ids ``<name>.ids.png``; computed
+once, written atomically, reused by fingerprint.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from mirrorsim.formats.capture import CaptureRecord, load_capture
+from mirrorsim.formats.files import atomic_path, dumps, encode_jpeg, encode_png
+from mirrorsim.rendering.mitsuba_scene import (
+    BACKGROUND_LABEL,
+    BEACON_LABEL,
+    MIRROR_LABEL,
+    TARGET_LABEL,
+)
+from mirrorsim.rendering.passes import (
+    IN_MIRROR,
+    MITSUBA_VERSION,
+    RENDER_METHOD,
+    RenderedFrame,
+    encode_ids,
+    render_frame,
+)
+from mirrorsim.rendering.sensor import to_srgb8
+from mirrorsim.scene.model import Bench, Scene
+from mirrorsim.truth import optics
+from mirrorsim.truth.groundtruth import GroundTruth, MirrorPixels, RenderInfo
+
+
+@dataclass(frozen=True)
+class FrameFiles:
+    """A frame on disk, its capture record (what the detector may know) and its ground
+    truth (for scoring only)."""
+
+    image: Path  # the frame: PNG, or JPEG for a bench that stores JPEG
+    truth_json: Path
+    ids_png: Path | None  # None: not kept (a dataset's --keep)
+    capture_json: Path
+    capture: CaptureRecord
+    truth: GroundTruth
+    reused: bool = False
+
+    @property
+    def seconds(self) -> float:
+        """Wall time of the render (0 if reused)."""
+        r = self.truth.render
+        return 0.0 if self.reused or r is None or r.seconds_total is None else r.seconds_total
+
+
+def default_out(scene: Scene) -> Path:
+    """Where a scene's files go unless told otherwise: ``renders/<name>/``."""
+    return Path("renders") / scene.name
+
+
+def scene_fingerprint(scene: Scene, spp: int, seed: int) -> str:
+    """What a render depends on: the scene's content (not its file name, with its
+    sampler), spp, seed and the way frames are rendered."""
+    d = asdict(replace(scene, source="", warnings=()))
+    # an ideal bench leaves the fingerprint as it was before benches existed, so that
+    # renders made then are still reused
+    if scene.bench == Bench():
+        del d["bench"]
+    for b in d["beacons"]:
+        if b["known_position"] is None:
+            del b["known_position"]
+    text = json.dumps(d, sort_keys=True, default=str) + f"|{spp}|{seed}|{RENDER_METHOD}"
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def truth_of(scene: Scene, frame: RenderedFrame, fingerprint: str | None) -> GroundTruth:
+    """The exact ground truth with what the id pass saw of each object."""
+    truth = optics.ground_truth(scene)
+
+    def seen(obj, label: int):
+        bbox, n = _mask_stats(frame.in_mirror == label)
+        return replace(obj, bbox_px=bbox, visible_px=n)
+
+    return replace(
+        truth,
+        target=seen(truth.target, TARGET_LABEL),
+        beacons=tuple(seen(b, BEACON_LABEL + i) for i, b in enumerate(truth.beacons)),
+        mirror_pixels=MirrorPixels(*_mask_stats(frame.first == MIRROR_LABEL)),
+        id_labels={"background": BACKGROUND_LABEL, "mirror": MIRROR_LABEL,
+                   "target": TARGET_LABEL, "beacons": BEACON_LABEL,
+                   "occluders": BEACON_LABEL + len(scene.beacons),
+                   "seen_in_mirror_offset": IN_MIRROR},
+        render=RenderInfo(variant=frame.variant, spp=frame.spp, seed=frame.seed,
+                          sampler=frame.sampler, background_spp=frame.background_spp,
+                          beacon_spp=frame.beacon_spp,
+                          seconds_render=round(frame.seconds_render, 3),
+                          seconds_total=round(frame.seconds_total, 3),
+                          mitsuba=MITSUBA_VERSION, fingerprint=fingerprint))
+
+
+def write_frame(scene: Scene, frame: RenderedFrame, out: Path,
+                fingerprint: str | None = None, ids: bool = True) -> FrameFiles:
+    """Write the frame, its capture record, its truth and (``ids``) its id labels into
+    ``out``; they appear together."""
+    out.mkdir(parents=True, exist_ok=True)
+    truth = truth_of(scene, frame, fingerprint)
+    image, ids_png, js, cap = _paths(scene, out)
+    capture = CaptureRecord.from_scene(scene, frame=image.name)
+    srgb = to_srgb8(frame.linear)
+    quality = scene.bench.jpeg_quality
+    files = {image: encode_png(srgb) if quality is None else encode_jpeg(srgb, quality),
+             js: dumps(truth.to_json()).encode(), cap: dumps(capture.to_json()).encode()}
+    if ids:
+        files[ids_png] = encode_png(encode_ids(frame.first, frame.in_mirror))
+    with contextlib.ExitStack() as stack:
+        for path, data in files.items():
+            stack.enter_context(atomic_path(path)).write_bytes(data)
+    return FrameFiles(image=image, truth_json=js, ids_png=ids_png if ids else None,
+                      capture_json=cap, capture=capture, truth=truth)
+
+
+def _paths(scene: Scene, out: Path) -> tuple[Path, Path, Path, Path]:
+    """The frame (PNG, or JPEG for a bench that stores JPEG), its ids, its truth and its
+    capture record."""
+    frame = ".png" if scene.bench.jpeg_quality is None else ".jpg"
+    return tuple(out / f"{scene.name}{ext}"
+                 for ext in (frame, ".ids.png", ".json", ".capture.json"))
+
+
+def render_to_files(scene: Scene, out: str | Path | None = None, *, spp: int | None = None,
+                    seed: int | None = None, variant: str = "auto", progress: bool = True,
+                    reuse: bool = False, ids: bool = True) -> FrameFiles:
+    """Render ``scene`` (or, with ``reuse``, take a render of exactly this scene, spp and
+    seed already in ``out``) and write its files (default folder ``renders/<name>/``;
+    the id labels only with ``ids``)."""
+    spp = scene.render.spp if spp is None else spp
+    seed = scene.render.seed if seed is None else seed
+    out = Path(out) if out is not None else default_out(scene)
+    fp = scene_fingerprint(scene, spp, seed)
+    if reuse:
+        found = _reusable(scene, out, fp)
+        if found is not None:
+            return found
+    frame = render_frame(scene, spp=spp, seed=seed, variant=variant, progress=progress)
+    return write_frame(scene, frame, out, fp, ids)
+
+
+def _reusable(scene: Scene, out: Path, fingerprint: str) -> FrameFiles | None:
+    image, ids, js, cap = _paths(scene, out)
+    if not (image.exists() and js.exists() and cap.exists()):
+        return None
+    try:
+        truth = GroundTruth.from_json(json.loads(js.read_text()))
+        capture = load_capture(cap)
+    except (OSError, ValueError, KeyError, TypeError):  # CaptureError is a ValueError
+        return None
+    if truth.render is None or truth.render.fingerprint != fingerprint:
+        return None
+    return FrameFiles(image=image, truth_json=js, ids_png=ids if ids.exists() else None,
+                      capture_json=cap, capture=capture, truth=truth, reused=True)
+
+
+def _mask_stats(mask: np.ndarray) -> tuple[tuple[int, int, int, int] | None, int]:
+    vs, us = np.nonzero(mask)
+    if len(us) == 0:
+        return None, 0
+    return (int(us.min()), int(vs.min()), int(us.max()), int(vs.max())), int(len(us))

@@ -1,0 +1,246 @@
+"""Rendering with Mitsuba 3: the frame and an object-id pass through the mirror, as arrays.
+
+With :mod:`mirrorsim.rendering.mitsuba_scene` and :mod:`mirrorsim.rendering.backend`, the
+only code that touches Mitsuba.  The variant is chosen by
+:func:`mirrorsim.rendering.backend.choose_variant` and set only inside
+:func:`variant_scope`, never at import.  Writing the frame's files and its ground truth
+is :mod:`mirrorsim.rendering.frames`' job.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, replace
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+from tqdm import tqdm
+
+from mirrorsim.rendering.backend import choose_variant
+from mirrorsim.rendering.mitsuba_scene import (
+    BACKGROUND_LABEL,
+    MIRROR_LABEL,
+    build_direct_dict,
+    build_scene_dict,
+    label_of,
+)
+from mirrorsim.rendering.sensor import add_noise, distort, distortion_canvas, to_srgb8
+from mirrorsim.scene.model import Beacon, Board, Camera, Scene, Target
+from mirrorsim.truth import optics
+
+IN_MIRROR = 100  # ids.png: label + IN_MIRROR where the pixel sees it in the mirror
+# samples per render call: one progress step each.  A stratified sampler stratifies
+# within a call, so the passes are large; a dataset's few-spp frame is one call.
+PASS_SPP = 16
+RENDER_METHOD = "passes16-ss-glass0"  # part of a frame's fingerprint: bump when renders change
+MITSUBA_VERSION = mi.__version__
+
+
+@dataclass(frozen=True)
+class RenderedFrame:
+    """A rendered frame as arrays.
+
+    ``linear`` is linear RGB (H, W, 3) float32; ``first`` and ``in_mirror`` are the id
+    pass's labels (see :func:`id_pass`).
+    """
+
+    linear: np.ndarray
+    first: np.ndarray
+    in_mirror: np.ndarray
+    variant: str
+    spp: int
+    seed: int
+    sampler: str
+    background_spp: int | None  # outside the mirror's image (None: spp everywhere)
+    beacon_spp: int | None  # in the beacons' images (None: no more than spp)
+    seconds_render: float
+    seconds_total: float
+
+
+@contextlib.contextmanager
+def variant_scope(name: str) -> Iterator[None]:
+    """Scope the process-global Mitsuba variant (variant_context needs a previous one)."""
+    if mi.variant() is None:
+        mi.set_variant(name)
+        yield
+    else:
+        with mi.variant_context(name):
+            yield
+
+
+def render_frame(scene: Scene, *, spp: int, seed: int, variant: str = "auto",
+                 progress: bool = True) -> RenderedFrame:
+    """Render ``scene``'s frame and its id pass.
+
+    Parameters
+    ----------
+    scene : Scene
+    spp, seed : int
+        Samples per pixel (≥ 1) and the sampler's seed (≥ 0).
+    variant : {'auto', 'cuda', 'llvm', 'scalar'} or a Mitsuba variant name
+    progress : bool
+        Show a progress bar on stderr.
+
+    Raises
+    ------
+    ValueError
+        For spp < 1 or seed < 0.
+    """
+    if spp < 1 or seed < 0:
+        raise ValueError(f"spp must be ≥ 1 and seed ≥ 0 (got spp={spp}, seed={seed})")
+    chosen = choose_variant(variant)
+    t0 = time.perf_counter()
+    bench, k = scene.bench, scene.bench.distortion
+    lens = k != (0.0, 0.0)
+    # a distorting lens: the pinhole render of a wider canvas, warped onto the sensor
+    pinhole = replace(scene, camera=distortion_canvas(scene.camera, k)[0]) if lens else scene
+    background = min(scene.render.background_spp, spp)
+    box = optics.mirror_box(pinhole) if background < spp else None
+    beacon_spp = max(scene.render.beacon_spp, spp)
+    boxes = [b for b in optics.beacon_boxes(pinhole) if b is not None] \
+        if beacon_spp > spp else []
+    # the mirror's region at the full spp, then each beacon's image at beacon_spp
+    # (inside the mirror's region: pasted after it), each with its own seeds
+    passes = ([(box, spp, 1)] if box is not None else []) \
+        + [(b, beacon_spp, 2 + i) for i, b in enumerate(boxes)]
+    with variant_scope(chosen):
+        crops = tuple(c for c, _, _ in passes)
+        mi_scene = mi.load_dict(build_scene_dict(pinhole, spp=spp, crops=crops),
+                                optimize=False)
+        full, *crop_sensors = mi_scene.sensors()
+        with tqdm(total=(spp if box is None else background) + sum(n for _, n, _ in passes),
+                  unit="spp", disable=not progress, leave=False,
+                  desc=f"rendering {scene.name} ({chosen})") as bar:
+            linear = _accumulate(mi_scene, full, spp if box is None else background,
+                                 (seed, 0), bar.update)
+            for sensor, ((u0, v0, u1, v1), n, stream) in zip(crop_sensors, passes,
+                                                             strict=True):
+                assert tuple(sensor.film().crop_offset()) == (u0, v0), "sensor order"
+                linear[v0:v1, u0:u1] = _accumulate(mi_scene, sensor, n, (seed, stream),
+                                                   bar.update)
+        t_render = time.perf_counter() - t0
+        first, in_mirror = id_pass(mi_scene, pinhole)
+    if lens:
+        linear = distort(linear, scene.camera, k)
+        first, in_mirror = (distort(a, scene.camera, k, nearest=True) for a in (first, in_mirror))
+    if bench.noise is not None:
+        linear = add_noise(linear, bench.noise, seed)
+    return RenderedFrame(linear=linear, first=first, in_mirror=in_mirror, variant=chosen,
+                         spp=spp, seed=seed, sampler=scene.render.sampler,
+                         background_spp=None if box is None else background,
+                         beacon_spp=beacon_spp if boxes else None,
+                         seconds_render=t_render,
+                         seconds_total=time.perf_counter() - t0)
+
+
+def render_direct(board: Board, camera: Camera, obj: Target | Beacon, *, spp: int,
+                  crop: tuple[int, int, int, int], variant: str = "auto") -> np.ndarray:
+    """One object on the board seen directly, only the film's ``crop`` (u0, v0, u1, v1);
+    returns it as 8-bit sRGB (calibration's reference, :mod:`mirrorsim.pipelines.calibrate`)."""
+    with variant_scope(choose_variant(variant)):
+        d = build_direct_dict(board, camera, obj, spp=spp, crop=crop)
+        mi_scene = mi.load_dict(d, optimize=False)
+        return to_srgb8(_accumulate(mi_scene, mi_scene.sensors()[0], spp, (0, 0),
+                                    lambda _n: None))
+
+
+def _pass_seed(seed: tuple[int, int], k: int) -> int:
+    """Mitsuba's 32-bit seed of pass k of a render (seed, stream): hashed by a
+    SeedSequence, so that any seed ≥ 0 works (Mitsuba refuses seeds ≥ 2³²) and passes
+    of different renders or streams do not share one."""
+    return int(np.random.SeedSequence([*seed, k]).generate_state(1)[0])
+
+
+def _accumulate(mi_scene, sensor, spp: int, seed: tuple[int, int],
+                step: Callable[[int], object]) -> np.ndarray:
+    """Linear RGB, averaged over passes of PASS_SPP samples (one progress step each);
+    ``seed`` is (the render's seed, a stream number)."""
+    passes = [PASS_SPP] * (spp // PASS_SPP) + ([spp % PASS_SPP] if spp % PASS_SPP else [])
+    if len(passes) == 1:  # the common case in datasets: no float64 sum to make
+        img = np.array(mi.render(mi_scene, sensor=sensor, spp=spp, seed=_pass_seed(seed, 0)),
+                       dtype=np.float32)
+        step(spp)
+        return img
+    acc = None
+    for k, n in enumerate(passes):
+        img = np.asarray(mi.render(mi_scene, sensor=sensor, spp=n, seed=_pass_seed(seed, k)),
+                         dtype=np.float64)
+        acc = img * n if acc is None else acc + img * n
+        step(n)
+    return (acc / spp).astype(np.float32)
+
+
+def id_pass(mi_scene, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
+    """Object ids at pixel centres: the first surface hit, and what the mirror shows.
+
+    The ``aov`` integrator's ``shape_index`` only records the first hit, which for
+    every pixel of the mirror is the mirror itself; so the id pass casts the camera
+    ray, and where it meets the glass, the specularly reflected ray.
+
+    Returns
+    -------
+    first, in_mirror : ndarray of uint8, shape (H, W)
+        Labels (MIRROR_LABEL, TARGET_LABEL, BEACON_LABEL + i, …; 0 for anything else).
+        ``in_mirror`` is 0 off the glass.
+    """
+    cam = scene.camera
+    shapes = [(s, label_of(s.id(), len(scene.beacons))) for s in mi_scene.shapes()]
+    sensor = mi_scene.sensors()[0]  # the full film (crop sensors come after it)
+    cast = _id_pass_jit if dr.is_jit_v(mi.Float) else _id_pass_scalar
+    return cast(mi_scene, sensor, shapes, cam.width, cam.height_px)
+
+
+def _reflected_ray(ray, si):
+    n = si.sh_frame.n  # the shading normal: a curved mirror's (its mesh's vertex normals)
+    return si.spawn_ray(ray.d - 2.0 * dr.dot(ray.d, n) * n)
+
+
+def _id_pass_jit(mi_scene, sensor, shapes, W, H):
+    idx = dr.arange(mi.UInt32, W * H)
+    px = mi.Float(idx % W) + 0.5
+    py = mi.Float(idx // W) + 0.5
+    ray, _ = sensor.sample_ray(0.0, 0.5, mi.Point2f(px / W, py / H), mi.Point2f(0.5, 0.5))
+
+    def labels(si):
+        lab = mi.UInt32(BACKGROUND_LABEL)
+        for shape, label in shapes:
+            if label != BACKGROUND_LABEL:
+                lab = dr.select(si.is_valid() & (si.shape == mi.ShapePtr(shape)), label, lab)
+        return lab
+
+    si = mi_scene.ray_intersect(ray)
+    first = labels(si)
+    on_glass = first == MIRROR_LABEL
+    si2 = mi_scene.ray_intersect(_reflected_ray(ray, si), on_glass)
+    second = dr.select(on_glass, labels(si2), BACKGROUND_LABEL)
+    to_np = lambda a: np.asarray(a, dtype=np.uint8).reshape(H, W)  # noqa: E731
+    return to_np(first), to_np(second)
+
+
+def _id_pass_scalar(mi_scene, sensor, shapes, W, H):
+    by_id = {s.id(): label for s, label in shapes}
+    first = np.zeros((H, W), np.uint8)
+    second = np.zeros_like(first)
+    for j in range(H):
+        for i in range(W):
+            ray, _ = sensor.sample_ray(0.0, 0.5, mi.Point2f((i + 0.5) / W, (j + 0.5) / H),
+                                       mi.Point2f(0.5, 0.5))
+            si = mi_scene.ray_intersect(ray)
+            if not si.is_valid():
+                continue
+            lab = by_id.get(si.shape.id(), BACKGROUND_LABEL)
+            first[j, i] = lab
+            if lab == MIRROR_LABEL:
+                si2 = mi_scene.ray_intersect(_reflected_ray(ray, si))
+                if si2.is_valid():
+                    second[j, i] = by_id.get(si2.shape.id(), BACKGROUND_LABEL)
+    return first, second
+
+
+def encode_ids(first: np.ndarray, in_mirror: np.ndarray) -> np.ndarray:
+    """One uint8 image of both id maps: the direct label, or IN_MIRROR + the label that
+    the mirror shows on the glass (so IN_MIRROR alone is glass showing the room)."""
+    return np.where(first == MIRROR_LABEL, IN_MIRROR + in_mirror, first).astype(np.uint8)

@@ -1,0 +1,235 @@
+"""The scene as data: complete, immutable, no I/O.
+
+Every field is known when a :class:`Scene` is made: the camera's resolved pan and the
+target's facing are computed from the geometry by :mod:`mirrorsim.truth.optics` when
+:mod:`mirrorsim.formats.scenefile` builds the model, never left as placeholders.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from solver.geometry import line_normal, signed_distance, unit
+
+# Physical dimensions of the rendered objects that the scene file does not set (cm).
+# They enter the overlap checks, so they live with the model rather than the renderer.
+MIRROR_DEPTH = 0.6  # glass + dark backing + frame, behind the reflective plane
+MIRROR_FRAME = 0.5  # frame width on the sides and top, outside the reflective area
+# how far the frame's front stands before the glass's rim: a ray leaving the glass at a
+# slant meets the frame's inner side within MIRROR_LIP·tan(incidence) of the edge, so
+# the frame hides that strip of the reflection (optics.visibility counts it)
+MIRROR_LIP = 0.05
+TARGET_THICKNESS = 0.4
+# Mitsuba samplers a scene may name: plain random, or stratified in every dimension
+# (any sample count; edges converge faster, see README "Throughput")
+SAMPLERS = ("independent", "multijitter")
+PENCIL_RADIUS = 0.4  # circumradius of the hexagonal pencil (0.69 cm across flats)
+OCCLUDER_THICKNESS = 1.0
+
+PAN_WORDS = ("mirror", "target", "beacon")
+
+Point2 = tuple[float, float]
+
+
+@dataclass(frozen=True)
+class Board:
+    """The pegboard: ``size`` (cm) and its hole grid (``hole_pitch`` 0 = plain)."""
+
+    size: Point2
+    hole_pitch: float = 2.5
+    hole_diameter: float = 0.6
+
+
+@dataclass(frozen=True)
+class Camera:
+    """A level pinhole camera; ``pan`` as written, ``pan_deg`` the resolved bearing."""
+
+    position: Point2
+    height: float
+    resolution: tuple[int, int]
+    hfov: float
+    pan: float | str
+    pan_deg: float
+
+    @property
+    def width(self) -> int:
+        """Image width in px."""
+        return self.resolution[0]
+
+    @property
+    def height_px(self) -> int:
+        """Image height in px."""
+        return self.resolution[1]
+
+    @property
+    def fx(self) -> float:
+        """Focal length in px: (W/2)/tan(hfov/2); square pixels, so fy = fx."""
+        return (self.width / 2.0) / math.tan(math.radians(self.hfov) / 2.0)
+
+    @property
+    def cx(self) -> float:
+        """Principal point's column, OpenCV convention (pixel centres at integers)."""
+        return self.width / 2.0 - 0.5
+
+    @property
+    def cy(self) -> float:
+        """Principal point's row."""
+        return self.height_px / 2.0 - 0.5
+
+    @property
+    def center3(self) -> np.ndarray:
+        """Optical centre in 3-D."""
+        return np.array([self.position[0], self.position[1], self.height])
+
+
+@dataclass(frozen=True)
+class Mirror:
+    """A vertical rectangle standing on the board, its bottom edge along ``yaw``."""
+
+    center: Point2
+    yaw: float
+    size: Point2  # width along the surface line, height
+
+    def ends(self) -> tuple[np.ndarray, np.ndarray]:
+        """The two ends of the reflective bottom edge."""
+        c, d = np.asarray(self.center, float), unit(self.yaw) * self.size[0] / 2.0
+        return c - d, c + d
+
+    def normal_towards(self, point) -> np.ndarray:
+        """Unit normal of the mirror's line on the side of ``point`` (2-D)."""
+        n = line_normal(self.yaw)
+        return n if signed_distance(point, self.center, self.yaw) >= 0 else -n
+
+
+@dataclass(frozen=True)
+class Target:
+    """An upright panel (width, height) whose face turns to ``facing_deg``."""
+
+    position: Point2
+    size: Point2
+    facing_deg: float
+
+    @property
+    def height(self) -> float:
+        """Panel height (cm)."""
+        return self.size[1]
+
+    def ends(self) -> tuple[np.ndarray, np.ndarray]:
+        """Ends of the panel's footprint (its width runs across the facing direction)."""
+        p, d = np.asarray(self.position, float), unit(self.facing_deg + 90.0) * self.size[0] / 2
+        return p - d, p + d
+
+
+def pencil_paint_height(height: float) -> float:
+    """Height of a pencil's painted band, below its sharpened cone (cm)."""
+    return height - min(1.2, 0.35 * height)
+
+
+@dataclass(frozen=True)
+class Beacon:
+    """An upright pencil: its axis over ``position``, ``height`` above the board;
+    ``known_position`` is where the experimenter believes it stands (None: where it is)."""
+
+    position: Point2
+    height: float
+    known_position: Point2 | None = None
+
+    @property
+    def believed(self) -> Point2:
+        """Where the experimenter believes the pencil stands."""
+        return self.position if self.known_position is None else self.known_position
+
+
+@dataclass(frozen=True)
+class Occluder:
+    """An upright wall from ``start`` to ``end``."""
+
+    start: Point2
+    end: Point2
+    height: float
+
+
+@dataclass(frozen=True)
+class RenderSettings:
+    """Samples per pixel, the sampler and its seed."""
+
+    # chosen by benchmarks/detect.py over 40 random scenes (README "Throughput"): multijitter
+    # at 8 spp measures as well as independent sampling at 16, in half the time
+    spp: int = 8
+    seed: int = 0
+    sampler: str = "multijitter"
+    # samples per pixel outside the mirror's image (renders use min(this, spp); set it
+    # to spp for a uniform frame).  Every measurement is made in the mirror's image, so
+    # the samples are spent there (README "Throughput")
+    background_spp: int = 2
+    # samples per pixel in each beacon's image (renders use max(this, spp)): its painted
+    # band is 45–95 px tall and its d_total rests on two of its edges, whose render noise
+    # at 8 spp was the largest part of its error; the box costs 15 % of a dataset's
+    # throughput (README "Accuracy", "Throughput")
+    beacon_spp: int = 128
+
+
+@dataclass(frozen=True)
+class SensorNoise:
+    """Sensor noise in electrons: the exposure puts ``full_well`` electrons at linear
+    radiance 1; Poisson shot noise plus Gaussian read noise of ``read_noise`` rms."""
+
+    full_well: float
+    read_noise: float
+
+
+@dataclass(frozen=True)
+class Bench:
+    """The imperfections of a real bench (INTERFACE.md *Bench imperfections*); the
+    defaults are the ideal bench.  The beacons' believed positions live on
+    :class:`Beacon`.  None of this reaches :mod:`mirrorsim.truth.optics`' truth: it changes
+    what is rendered, or what the capture record says, or the calibration."""
+
+    pan_error: float = 0.0  # deg: the mount reports pan + pan_error
+    pitch: float = 0.0  # deg: optical axis raised from level
+    roll: float = 0.0  # deg: clockwise as seen from behind the camera
+    distortion: tuple[float, float] = (0.0, 0.0)  # Brown–Conrady k1, k2
+    distortion_known: bool = True  # the capture record holds the coefficients
+    noise: SensorNoise | None = None
+    jpeg_quality: int | None = None  # None: lossless PNG
+    curvature_radius: float | None = None  # cm; > 0 concave, None: flat
+    tilt: float = 0.0  # deg: the mirror's top leans away from the camera
+    calibration_distance_error: float = 0.0  # cm: reference at 100 + this, 100 assumed
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A validated scene.  Build one with :func:`mirrorsim.formats.scenefile.load_scene`."""
+
+    name: str
+    board: Board
+    camera: Camera
+    mirror: Mirror
+    target: Target
+    beacons: tuple[Beacon, ...]
+    occluders: tuple[Occluder, ...] = ()
+    render: RenderSettings = field(default_factory=RenderSettings)
+    bench: Bench = field(default_factory=Bench)
+    source: str = "<scene>"
+    warnings: tuple[str, ...] = ()
+
+
+def footprints(scene: Scene, bkey=None) -> list[tuple[str, np.ndarray, np.ndarray, float]]:
+    """Each object's footprint as a capsule: (key, segment start, segment end, radius).
+
+    ``bkey(i)`` names beacon i's key as the file wrote it (``beacon`` or ``beacons[i]``).
+    """
+    if bkey is None:
+        bkey = (lambda i: f"beacons[{i}]") if len(scene.beacons) > 1 else (lambda _i: "beacon")
+    out = [("mirror.center", *scene.mirror.ends(), MIRROR_DEPTH),
+           ("target.position", *scene.target.ends(), TARGET_THICKNESS / 2)]
+    for i, b in enumerate(scene.beacons):
+        p = np.asarray(b.position, float)
+        out.append((f"{bkey(i)}.position", p, p, PENCIL_RADIUS))
+    for i, o in enumerate(scene.occluders):
+        out.append((f"occluders[{i}]", np.asarray(o.start, float), np.asarray(o.end, float),
+                    OCCLUDER_THICKNESS / 2))
+    return out

@@ -1,0 +1,208 @@
+"""The exact ground truth of a scene and its JSON (``render``'s ``<name>.json``).
+
+Each class has one ``to_json`` (the documents of INTERFACE.md) and one ``from_json``.
+Every consumer (the CLI's tables, the plots, the dataset's rows) reads attributes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from mirrorsim.scene.model import Camera, Mirror, Occluder, Point2
+from solver.geometry import wrap_yaw
+from solver.measurements import Measurements
+from solver.sltr import BeaconMeasurement
+
+
+def _pt(v) -> Point2:
+    return (float(v[0]), float(v[1]))
+
+
+@dataclass(frozen=True)
+class ImagePx:
+    """Exact pinhole projection of an object's upright axis (px)."""
+
+    u_axis: float
+    v_top: float
+    v_bottom: float
+    height: float
+
+
+@dataclass(frozen=True)
+class ObjectTruth:
+    """The exact image of the target or a beacon; ``bbox_px``/``visible_px`` come from the
+    renderer's id pass (``visible_px`` None: not rendered)."""
+
+    position: Point2
+    virtual: Point2
+    alpha_deg: float
+    d_total: float
+    d1: float
+    d2: float
+    reflection_point: Point2
+    mirror_offset: float
+    image_px: ImagePx
+    visible_fraction: float
+    clipped: bool
+    size: Point2 | None = None  # the target's (width, height)
+    facing_deg: float | None = None  # the target's
+    height: float | None = None  # a beacon's
+    bbox_px: tuple[int, int, int, int] | None = None
+    visible_px: int | None = None
+
+    def to_json(self) -> dict:
+        """INTERFACE.md's ``target`` / ``beacons[i]`` entry."""
+        out = {"position": list(self.position), "virtual": list(self.virtual),
+               "alpha_deg": self.alpha_deg, "d_total": self.d_total, "d1": self.d1,
+               "d2": self.d2, "reflection_point": list(self.reflection_point),
+               "mirror_offset": self.mirror_offset,
+               "image_px": {"u_axis": self.image_px.u_axis, "v_top": self.image_px.v_top,
+                            "v_bottom": self.image_px.v_bottom,
+                            "height": self.image_px.height},
+               "visible_fraction": self.visible_fraction, "clipped": self.clipped}
+        for key in ("size", "facing_deg", "height"):
+            value = getattr(self, key)
+            if value is not None:
+                out[key] = list(value) if isinstance(value, tuple) else value
+        if self.visible_px is not None:
+            out["bbox_px"] = None if self.bbox_px is None else list(self.bbox_px)
+            out["visible_px"] = self.visible_px
+        return out
+
+    @classmethod
+    def from_json(cls, d: dict) -> ObjectTruth:
+        """Inverse of :meth:`to_json`."""
+        return cls(position=_pt(d["position"]), virtual=_pt(d["virtual"]),
+                   alpha_deg=d["alpha_deg"], d_total=d["d_total"], d1=d["d1"], d2=d["d2"],
+                   reflection_point=_pt(d["reflection_point"]),
+                   mirror_offset=d["mirror_offset"], image_px=ImagePx(**d["image_px"]),
+                   visible_fraction=d["visible_fraction"], clipped=d["clipped"],
+                   size=_pt(d["size"]) if "size" in d else None,
+                   facing_deg=d.get("facing_deg"), height=d.get("height"),
+                   bbox_px=tuple(d["bbox_px"]) if d.get("bbox_px") else None,
+                   visible_px=d.get("visible_px"))
+
+
+@dataclass(frozen=True)
+class RenderInfo:
+    """How a frame was rendered."""
+
+    variant: str
+    spp: int
+    seed: int
+    sampler: str = "independent"
+    background_spp: int | None = None  # outside the mirror's image (None: spp)
+    beacon_spp: int | None = None  # in the beacons' images (None: spp)
+    seconds_render: float | None = None
+    seconds_total: float | None = None
+    mitsuba: str | None = None
+    fingerprint: str | None = None
+
+    def to_json(self) -> dict:
+        """The truth's ``render`` block."""
+        return {"variant": self.variant, "spp": self.spp, "seed": self.seed,
+                "sampler": self.sampler, "background_spp": self.background_spp,
+                "beacon_spp": self.beacon_spp,
+                "seconds_render": self.seconds_render, "seconds_total": self.seconds_total,
+                "mitsuba": self.mitsuba, "fingerprint": self.fingerprint}
+
+    @classmethod
+    def from_json(cls, d: dict) -> RenderInfo:
+        """Inverse of :meth:`to_json`."""
+        fields = ("variant", "spp", "seed", "background_spp", "beacon_spp", "seconds_render",
+                  "seconds_total", "mitsuba", "fingerprint")
+        return cls(**{k: d.get(k) for k in fields}, sampler=d.get("sampler", "independent"))
+
+
+@dataclass(frozen=True)
+class MirrorPixels:
+    """Where the mirror's glass is seen in the frame (from the id pass)."""
+
+    bbox_px: tuple[int, int, int, int] | None
+    visible_px: int
+
+
+@dataclass(frozen=True)
+class GroundTruth:
+    """The exact ground truth of a scene (``render``'s ``<name>.json``)."""
+
+    scene: str
+    camera: Camera
+    mirror: Mirror
+    target: ObjectTruth
+    beacons: tuple[ObjectTruth, ...]
+    occluders: tuple[Occluder, ...]
+    direct_view_fraction: float
+    mirror_pixels: MirrorPixels | None = None
+    id_labels: dict[str, int] | None = None
+    render: RenderInfo | None = None
+    # the bench's imperfections by key path (None: an ideal bench), so that a frame's
+    # truth says what it was rendered with
+    bench: dict[str, Any] | None = None
+
+    @property
+    def mirror_yaw_deg(self) -> float:
+        """The mirror's yaw in [0, 180), rounded as its JSON is (so a truth read back from
+        its file scores exactly as the one computed)."""
+        return round(float(wrap_yaw(self.mirror.yaw)), 9)
+
+    def to_json(self) -> dict:
+        """The ground-truth document of INTERFACE.md."""
+        cam, mir = self.camera, self.mirror
+        mirror = {"center": list(mir.center), "yaw_deg": self.mirror_yaw_deg,
+                  "size": list(mir.size)}
+        if self.mirror_pixels is not None:
+            mirror["bbox_px"] = (None if self.mirror_pixels.bbox_px is None
+                                 else list(self.mirror_pixels.bbox_px))
+            mirror["visible_px"] = self.mirror_pixels.visible_px
+        out = {
+            "scene": self.scene,
+            "camera": {"position": list(cam.position), "height": cam.height,
+                       "pan_deg": round(cam.pan_deg, 9), "hfov_deg": cam.hfov,
+                       "resolution": list(cam.resolution), "fx": round(cam.fx, 9),
+                       "fy": round(cam.fx, 9), "cx": cam.cx, "cy": cam.cy},
+            "mirror": mirror,
+            "target": self.target.to_json(),
+            "beacons": [b.to_json() for b in self.beacons],
+            "occluders": [{"start": list(o.start), "end": list(o.end), "height": o.height}
+                          for o in self.occluders],
+            "direct_view_fraction": self.direct_view_fraction,
+        }
+        if self.id_labels is not None:
+            out["id_labels"] = dict(self.id_labels)
+        if self.render is not None:
+            out["render"] = self.render.to_json()
+        if self.bench:
+            out["bench"] = dict(self.bench)
+        return out
+
+    @classmethod
+    def from_json(cls, d: dict) -> GroundTruth:
+        """Inverse of :meth:`to_json` (the camera's pan is its resolved bearing)."""
+        c, m = d["camera"], d["mirror"]
+        camera = Camera(position=_pt(c["position"]), height=c["height"],
+                        resolution=tuple(c["resolution"]), hfov=c["hfov_deg"],
+                        pan=c["pan_deg"], pan_deg=c["pan_deg"])
+        pixels = None
+        if "visible_px" in m:
+            pixels = MirrorPixels(tuple(m["bbox_px"]) if m["bbox_px"] else None,
+                                  m["visible_px"])
+        return cls(scene=d["scene"], camera=camera,
+                   mirror=Mirror(_pt(m["center"]), m["yaw_deg"], _pt(m["size"])),
+                   target=ObjectTruth.from_json(d["target"]),
+                   beacons=tuple(ObjectTruth.from_json(b) for b in d["beacons"]),
+                   occluders=tuple(Occluder(_pt(o["start"]), _pt(o["end"]), o["height"])
+                                   for o in d["occluders"]),
+                   direct_view_fraction=d["direct_view_fraction"], mirror_pixels=pixels,
+                   id_labels=d.get("id_labels"),
+                   render=RenderInfo.from_json(d["render"]) if "render" in d else None,
+                   bench=d.get("bench"))
+
+    def exact_measurements(self) -> Measurements:
+        """The noise-free measurements of this truth (what a perfect detector reports)."""
+        return Measurements(
+            observer=self.camera.position,
+            targets=[(self.target.alpha_deg, self.target.d_total)],
+            beacons=[BeaconMeasurement(b.position, b.alpha_deg, b.d_total)
+                     for b in self.beacons])
