@@ -1,7 +1,7 @@
 """Benchmark: the detector's accuracy on rendered full-size frames, by sampler and spp.
 
-    python benchmarks/detect.py [--frames 20] [--spec SPEC] [--render independent:16 multijitter:4 …]
-                           [--seed 0] [--out FILE]
+    python benchmarks/detect.py [--frames 20] [--spec SPEC]
+                                [--render independent:16 multijitter:4 …] [--seed 0] [--out FILE]
     python benchmarks/detect.py --offaxis [-25 -20 … 25] [--render multijitter:4]
                            [--plot docs/detect_offaxis.png]
 

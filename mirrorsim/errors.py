@@ -13,7 +13,8 @@ from solver.errors import InputError, SolverError
 EXIT_BAD_INPUT = 2
 EXIT_FAILED = 1
 
-__all__ = ["InputError", "SolverError", "SceneError", "BadArgument", "OutputError", "RunFailed",
+__all__ = ["InputError", "SolverError", "SceneError", "BadParameter", "BadArgument", "OutputError",
+           "RunFailed",
            "DetectionError", "BackendError", "EXIT_BAD_INPUT", "EXIT_FAILED", "exit_status"]
 
 
@@ -21,8 +22,19 @@ class SceneError(InputError):
     """A bad scene or dataset-spec file."""
 
 
+class BadParameter(InputError):
+    """A library function's parameter out of range, named as the function names it:
+    ``BadParameter("steps", "0 must be within 1..200")``.  The command line turns it into
+    a :class:`BadArgument` naming the flag; the library knows no flags."""
+
+    def __init__(self, parameter: str, message: str):
+        self.parameter = parameter
+        super().__init__(parameter, "", message)
+
+
 class BadArgument(InputError):
-    """A command-line option out of range: ``BadArgument("--spp", "0 must be ≥ 1")``."""
+    """A command-line option out of range: ``BadArgument("--spp", "0 must be ≥ 1")``
+    (raised by :mod:`mirrorsim.cli` only)."""
 
     def __init__(self, option: str, message: str):
         super().__init__(option, "", message)

@@ -6,13 +6,12 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 
 class InputError(ValueError):
     """Bad input: ``str(err)`` is one line naming the file, the key path and the value."""
 
-    def __init__(self, file: str | Path, key: str, message: str):
+    def __init__(self, file: object, key: str, message: str):
+        # ``file``: a path or a name such as ``<measurements>``, shown as str(file)
         self.file, self.key, self.message = str(file), key, message
         super().__init__(f"{file}: {key}: {message}" if key else f"{file}: {message}")
 

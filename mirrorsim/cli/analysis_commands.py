@@ -161,15 +161,21 @@ def _dataset_options(p):
          "dataset card DIR/README.md.  Interrupted runs resume with --resume; the same seed "
          "gives the same rows whatever the number of workers.", _dataset_options)
 def _dataset(args) -> int:
-    from mirrorsim.pipelines.dataset import run_dataset
+    from mirrorsim.pipelines.dataset import DatasetError, run_dataset
 
     at_least(("--n", args.n, 1), ("--seed", args.seed, 0), ("--workers", args.workers, 1),
              ("--spp", args.spp, 1))
-    res = run_dataset(args.n, args.seed, args.out, workers=args.workers, spec_path=args.spec,
-                      spp=args.spp, sampler=args.sampler, variant=args.variant,
-                      keep=tuple(args.keep), resume=args.resume,
-                      executor=args.executor, scheduler=args.scheduler,
-                      progress=not args.quiet)
+    try:
+        res = run_dataset(args.n, args.seed, args.out, workers=args.workers,
+                          spec_path=args.spec, spp=args.spp, sampler=args.sampler,
+                          variant=args.variant, keep=tuple(args.keep), resume=args.resume,
+                          executor=args.executor, scheduler=args.scheduler,
+                          progress=not args.quiet)
+    except DatasetError as exc:
+        if not exc.resumable:
+            raise
+        raise DatasetError(args.out, "already holds a dataset: pass --resume to finish it, "
+                           "or choose another --out") from None
     print(f"{args.out}: {res['rows']} rows ({res['computed']} computed now in "
           f"{res['seconds']:.0f} s, {res['per_minute']:.1f} scenes/min; "
           f"{res['already_done']} already done; {res['failed']} failed) → {res['parquet']}")

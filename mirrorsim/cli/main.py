@@ -15,7 +15,11 @@ import warnings
 from mirrorsim import __version__
 from mirrorsim.cli import analysis_commands, scene_commands  # noqa: F401 (they register)
 from mirrorsim.cli.registry import COMMANDS, check_outputs
-from mirrorsim.errors import SolverError, exit_status
+from mirrorsim.errors import BadArgument, BadParameter, SolverError, exit_status
+
+# a library parameter whose flag is not "--" + its name with "-" for "_"
+FLAG_OF = {"kind": "--path", "eps_deg": "--eps", "yaw_spread_deg": "--yaw-spread",
+           "sigma.alpha_deg": "--sigma-alpha", "sigma.d_total_rel": "--sigma-d"}
 
 # the order of `mirrorsim --help`: the main job first
 ORDER = ("evaluate", "render", "check", "plot", "detect", "calibrate", "budget", "dataset",
@@ -53,12 +57,19 @@ def main(argv: list[str] | None = None) -> int:
         sys.stderr.close()
         return 0
     except Exception as exc:
+        if isinstance(exc, BadParameter):  # the library names parameters, the user flags
+            exc = BadArgument(flag_of(exc.parameter), exc.message)
         status = exit_status(exc)
         if status is None:
             raise
         what = "cannot solve: " if isinstance(exc, SolverError) else ""
         print(f"error: {what}{exc}", file=sys.stderr)
         return status
+
+
+def flag_of(parameter: str) -> str:
+    """The command-line flag of a library parameter (``odometry_sigma`` → ``--odometry-sigma``)."""
+    return FLAG_OF.get(parameter, "--" + parameter.replace("_", "-"))
 
 
 def _one_line_warning(message, category, filename, lineno, file=None,  # noqa: ARG001

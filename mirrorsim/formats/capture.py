@@ -15,11 +15,18 @@ from pathlib import Path
 from typing import Any
 
 from mirrorsim.errors import InputError
-from mirrorsim.formats.reader import Reader, read_json
-from mirrorsim.formats.scenefile import read_distortion
+from mirrorsim.formats.reader import Reader, read_json, show
 from mirrorsim.scene.model import Beacon, Camera, Point2, Scene
 
 REFERENCE_DISTANCE = 100.0  # cm: where calibration stands its reference objects
+
+
+def read_distortion(r: Reader, raw: Any, key: str) -> tuple[float, float]:
+    """A lens's [k1, k2] (scene files and capture records alike)."""
+    if not isinstance(raw, list) or len(raw) != 2:
+        raise r.fail(key, f"expected [k1, k2], got {show(raw)}")
+    return (r.number(raw[0], f"{key}[0]", low=-1.0, high=1.0),
+            r.number(raw[1], f"{key}[1]", low=-1.0, high=1.0))
 
 
 class CaptureError(InputError):

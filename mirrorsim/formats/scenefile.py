@@ -19,8 +19,9 @@ import numpy as np
 import yaml
 
 from mirrorsim.errors import SceneError
+from mirrorsim.formats.capture import read_distortion
 from mirrorsim.formats.reader import Reader, show
-from mirrorsim.scene.imperfections import KEYS
+from mirrorsim.scene.imperfections import REGISTRY, Imperfection, check_bounds, radius_bound
 from mirrorsim.scene.model import (
     PAN_WORDS,
     SAMPLERS,
@@ -202,69 +203,65 @@ def scene_from_dict(data: Any, source: str = "<scene>", default_name: str = "sce
     return replace(scene, warnings=_check_sight(scene, r, bkey))
 
 
-CAMERA_IMPERFECTIONS = (*(k.split(".")[1] for k in KEYS.values() if k.startswith("camera.")),
-                        "distortion_known")
-MIRROR_IMPERFECTIONS = tuple(k.split(".")[1] for k in KEYS.values() if k.startswith("mirror."))
-# Bounds of the imperfections: beyond them a value is a typo, not a bench (degrees)
-MAX_PAN_ERROR, MAX_PITCH, MAX_ROLL, MAX_TILT = 10.0, 20.0, 30.0, 45.0
+def _leaves(block: str) -> tuple[str, ...]:
+    """The imperfection keys a scene file's ``block`` may hold (the registry's)."""
+    return tuple(imp.leaf for imp in REGISTRY if imp.block == block)
+
+
+CAMERA_IMPERFECTIONS = _leaves("camera")
+MIRROR_IMPERFECTIONS = _leaves("mirror")
 
 
 def _bench(r: Reader, cam: dict, m: dict, cal: Any, mirror: Mirror,
            resolution: tuple[int, int], hfov: float) -> Bench:
-    """The bench imperfections (INTERFACE.md); every key optional, absent = ideal."""
-    def angle(block: dict, key: str, bound: float) -> float:
-        value = r.number(block.get(key.split(".")[1], 0.0), key)
-        if abs(value) >= bound:
-            raise r.fail(key, f"{value:g}: |{key.split('.')[1]}| must stay below {bound:g}°")
-        return value
+    """The bench imperfections (INTERFACE.md), each read in its registry form; every key
+    optional, absent = ideal."""
+    blocks = {"camera": cam, "mirror": m,
+              "calibration": r.mapping(cal, "calibration", set(), set(_leaves("calibration")))}
+    values = {}
+    for imp in REGISTRY:
+        if imp.block in blocks and blocks[imp.block].get(imp.leaf) is not None:
+            values[imp.field] = _imperfection(r, imp, blocks[imp.block][imp.leaf], mirror,
+                                              resolution, hfov)
+    return Bench(**values)
 
-    d = Bench()
-    distortion = d.distortion
-    if cam.get("distortion") is not None:
-        distortion = read_distortion(r, cam["distortion"], "camera.distortion")
+
+def _imperfection(r: Reader, imp: Imperfection, raw: Any, mirror: Mirror,
+                  resolution: tuple[int, int], hfov: float) -> Any:
+    """One imperfection's value as its ``form`` reads it, bounds checked."""
+    key = imp.key
+    if imp.form in ("angle", "number"):
+        value = r.number(raw, key)
+        why = check_bounds(imp, value)
+        if why:
+            raise r.fail(key, why)
+        return value
+    if imp.form == "flag":
+        if not isinstance(raw, bool):
+            raise r.fail(key, f"{show(raw)}: expected true or false")
+        return raw
+    if imp.form == "quality":
+        return r.integer(raw, key, low=int(imp.low), high=int(imp.high))
+    if imp.form == "lens":
+        k = read_distortion(r, raw, key)
         corner = math.hypot(*resolution) / 2 / ((resolution[0] / 2)
                                                  / math.tan(math.radians(hfov) / 2))
-        if not distortion_monotonic(distortion, corner):
-            raise r.fail("camera.distortion", f"{list(distortion)}: the lens folds the image "
-                         "over before the frame's corner (r·(1 + k1 r² + k2 r⁴) must grow)")
-    known = cam.get("distortion_known", True)
-    if not isinstance(known, bool):
-        raise r.fail("camera.distortion_known", f"{show(known)}: expected true or false")
-    noise = None
-    if cam.get("noise") is not None:
-        n = r.mapping(cam["noise"], "camera.noise", {"full_well", "read_noise"})
-        noise = SensorNoise(r.number(n["full_well"], "camera.noise.full_well", positive=True),
-                            r.number(n["read_noise"], "camera.noise.read_noise", low=0.0))
-    jpeg = cam.get("jpeg_quality")
-    if jpeg is not None:
-        jpeg = r.integer(jpeg, "camera.jpeg_quality", low=1, high=100)
-    radius = m.get("curvature_radius")
-    if radius is not None:
-        radius = r.number(radius, "mirror.curvature_radius")
-        diagonal = math.hypot(*mirror.size)
+        if not distortion_monotonic(k, corner):
+            raise r.fail(key, f"{list(k)}: the lens folds the image over before the "
+                         "frame's corner (r·(1 + k1 r² + k2 r⁴) must grow)")
+        return k
+    if imp.form == "noise":
+        n = r.mapping(raw, key, {"full_well", "read_noise"})
+        return SensorNoise(r.number(n["full_well"], f"{key}.full_well", positive=True),
+                           r.number(n["read_noise"], f"{key}.read_noise", low=0.0))
+    if imp.form == "radius":
+        radius = r.number(raw, key)
+        diagonal = radius_bound(mirror.size)
         if abs(radius) < diagonal:
-            raise r.fail("mirror.curvature_radius", f"{radius:g}: |radius| must be at least "
-                         f"the mirror's diagonal ({diagonal:.1f} cm)")
-    c = r.mapping(cal, "calibration", set(), {"distance_error"})
-    distance_error = r.number(c.get("distance_error", 0.0), "calibration.distance_error")
-    if not -50.0 < distance_error < 100.0:
-        raise r.fail("calibration.distance_error", f"{distance_error:g}: the reference must "
-                     "stand between 50 and 200 cm (error in (-50, 100) cm)")
-    return Bench(pan_error=angle(cam, "camera.pan_error", MAX_PAN_ERROR),
-                 pitch=angle(cam, "camera.pitch", MAX_PITCH),
-                 roll=angle(cam, "camera.roll", MAX_ROLL),
-                 distortion=distortion, distortion_known=known, noise=noise,
-                 jpeg_quality=jpeg, curvature_radius=radius,
-                 tilt=angle(m, "mirror.tilt", MAX_TILT),
-                 calibration_distance_error=distance_error)
-
-
-def read_distortion(r: Reader, raw: Any, key: str) -> tuple[float, float]:
-    """A lens's [k1, k2] (scene files and capture records alike)."""
-    if not isinstance(raw, list) or len(raw) != 2:
-        raise r.fail(key, f"expected [k1, k2], got {show(raw)}")
-    return (r.number(raw[0], f"{key}[0]", low=-1.0, high=1.0),
-            r.number(raw[1], f"{key}[1]", low=-1.0, high=1.0))
+            raise r.fail(key, f"{radius:g}: |radius| must be at least the mirror's diagonal "
+                         f"({diagonal:.1f} cm)")
+        return radius
+    raise AssertionError(f"{imp.key}: no scene-file reader for form {imp.form!r}")
 
 
 def distortion_monotonic(k: tuple[float, float], r_max: float) -> bool:

@@ -34,12 +34,12 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from mirrorsim.errors import BadArgument, DetectionError, InputError, SolverError
+from mirrorsim.errors import BadParameter, DetectionError, InputError, SolverError
 from mirrorsim.formats.files import atomic_path, write_json, write_text
 from mirrorsim.pipelines.random_scenes import NoValidScene
 from mirrorsim.pipelines.score import Report
 from mirrorsim.pipelines.workers import run_dask, run_local
-from mirrorsim.scene.imperfections import row_values
+from mirrorsim.scene import imperfections
 from mirrorsim.scene.model import Scene
 from mirrorsim.truth.groundtruth import ObjectTruth
 from solver.geometry import yaw_difference
@@ -112,7 +112,7 @@ def _flatten(scene: Scene, rep: Report) -> dict:
         "background_spp": min(scene.render.background_spp, scene.render.spp),
         "beacon_spp": max(scene.render.beacon_spp, scene.render.spp),
         "render_seed": rep.render.seed,
-        **row_values(scene),
+        **imperfections.row_values(scene),
     }
     b, frame = meas.beacons[0], rep.frames[0]
     for kind, truth, (alpha, d), clipped in (
@@ -171,9 +171,11 @@ def _incidence_deg(scene: Scene, truth: ObjectTruth) -> float:
 
 
 class DatasetError(InputError):
-    """A run that cannot start (e.g. a folder holding another dataset): bad input."""
+    """A run that cannot start (e.g. a folder holding another dataset): bad input;
+    ``resumable``: the folder holds this very dataset, unfinished or not."""
 
-    def __init__(self, folder: str | Path, message: str):
+    def __init__(self, folder: str | Path, message: str, resumable: bool = False):
+        self.resumable = resumable
         super().__init__(folder, "", message)
 
 
@@ -191,14 +193,14 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
     DatasetError
         If ``out`` is not a new or empty folder, or (with ``resume``) one of this
         command's datasets made with the same settings.
-    BadArgument
+    BadParameter
         For ``n`` outside 1..MAX_SCENES.
     """
     from mirrorsim.pipelines.random_scenes import load_spec
     from mirrorsim.rendering.backend import choose_variant
 
     if not 1 <= n <= MAX_SCENES:
-        raise BadArgument("--n", f"{n} must be within 1..{MAX_SCENES}")
+        raise BadParameter("n", f"{n} must be within 1..{MAX_SCENES}")
     out = Path(out)
     spec = load_spec(spec_path)
     if sampler is not None:  # part of the spec, so that --resume checks it
@@ -250,7 +252,7 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
 def _claim_folder(out: Path, meta: dict, resume: bool) -> None:
     """``out`` must be new or empty, or hold this command's dataset (with --resume)."""
     if out.exists() and not out.is_dir():
-        raise DatasetError(out, "is a file; --out wants a new or empty folder")
+        raise DatasetError(out, "is a file, not a new or empty folder")
     meta_path = out / "dataset.json"
     if not meta_path.exists():
         if out.is_dir() and any(out.iterdir()):
@@ -258,7 +260,7 @@ def _claim_folder(out: Path, meta: dict, resume: bool) -> None:
             raise DatasetError(out, f"holds other files ({shown}, …), not a dataset: use a new "
                                "or empty folder")
         if resume:
-            raise DatasetError(out, "--resume: there is no dataset here to resume")
+            raise DatasetError(out, "there is no dataset here to resume")
         return
     try:
         old = json.loads(meta_path.read_text())
@@ -269,8 +271,8 @@ def _claim_folder(out: Path, meta: dict, resume: bool) -> None:
             "format", DATASET_FORMAT) != DATASET_FORMAT:
         raise DatasetError(out, "holds a dataset.json that is not a mirrorsim dataset's")
     if not resume:
-        raise DatasetError(out, "already holds a dataset: pass --resume to finish it, "
-                           "or choose another --out")
+        raise DatasetError(out, "already holds a dataset: resume it, or choose another "
+                           "folder", resumable=True)
     if {k: old[k] for k in keys} != {k: meta[k] for k in keys}:
         raise DatasetError(out, f"holds a dataset made with other settings "
                            f"(n={old['n']}, seed={old['seed']}, spp={old['spp']})")
@@ -307,6 +309,7 @@ def write_card(out: Path, meta: dict, rows: list[dict], variant: str) -> None:
     """Write the dataset card DIR/README.md."""
     ok = [r for r in rows if not r.get("error")]
     med = lambda k: float(np.nanmedian([abs(r[k]) for r in ok])) if ok else math.nan  # noqa: E731
+    bench_columns = ";\n".join(f"  {line}" for line in imperfections.card_lines())
     text = f"""# mirrorsim dataset
 
 Made with `mirrorsim dataset --n {meta['n']} --seed {meta['seed']}`
@@ -332,11 +335,7 @@ Each row is one random scene (`scenes/<scene>.yaml`, a normal scene file: rerun 
   `err_reflection_point_cm`; the solver's own bound `target_ellipse95_major_cm`
   (semi-major axis of its 95 % error ellipse);
 - bench imperfections (the spec's `bench:` block; ideal values when absent):
-  `bench_pan_error_deg`, `bench_pitch_deg`, `bench_roll_deg`, `bench_k1`, `bench_k2`,
-  `bench_distortion_known`, `bench_full_well` (0: no sensor noise), `bench_read_noise`,
-  `bench_jpeg_quality` (0: PNG), `bench_curvature_per_cm` (1/radius, 0: flat),
-  `bench_tilt_deg`, `bench_calibration_error_cm`, `bench_beacon_dx_cm`,
-  `bench_beacon_dy_cm` (believed − true position);
+{bench_columns};
 - timings: `seconds_sample`, `seconds_total`.
 
 Median |errors| here: target α {med('target_alpha_err'):.4f}°, target d

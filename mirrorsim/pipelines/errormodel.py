@@ -25,17 +25,14 @@ import numpy as np
 from mirrorsim.formats.files import atomic_path, write_json
 from mirrorsim.formats.measurements import read_sigma
 from mirrorsim.formats.reader import Reader, read_json
+from mirrorsim.scene import imperfections
 from solver.sltr import Sigma
 
 FEATURES = ("1", "d_total_cm", "off_axis_deg", "incidence_deg", "inv_height_px")
 # A bench's imperfections (a dataset's bench_* columns) as features, each in the form its
-# first-order effect is linear in: an unknown lens's k1 moves an image at off-axis angle φ
-# by ∝ k1·tan³φ and scales it by ∝ k1·tan²φ; a mirror of curvature 1/R changes d_total
-# by −2·cos i·d1·d2/(R·d_total) (`mirror_power`, so its d coefficient should be −1); shot
-# noise goes as 1/√full_well.  A feature enters a model only where its column varies.
-BENCH_FEATURES = ("pan_error_deg", "pitch_deg", "roll_deg", "k1_tan3", "k1_tan2",
-                  "shot_noise", "read_noise_rel", "jpeg_loss", "mirror_power", "tilt_deg",
-                  "calibration_error_cm")
+# first-order effect is linear in (declared with its imperfection in the registry).  A
+# feature enters a model only where its column varies.
+BENCH_FEATURES = {f.name: f for f in imperfections.FEATURES}
 QUANTITIES = {"alpha": "alpha_err", "d_rel": "d_rel_err"}
 GROSS = 6.0  # residuals beyond this many robust σ's are gross errors, counted apart
 
@@ -49,24 +46,8 @@ def _feature(cols: dict, kind: str, name: str) -> np.ndarray:
         return col({"d_total_cm": f"{kind}_d_true"}.get(name, f"{kind}_{name}"))
     if name == "inv_height_px":
         return 1.0 / col(f"{kind}_height_px_true")
-    if f"bench_{name}" in cols:  # pan error, pitch, roll, tilt, calibration error
-        return col(f"bench_{name}")
-    if name in ("k1_tan3", "k1_tan2"):
-        unknown = ~np.asarray(cols["bench_distortion_known"], bool)
-        t = np.tan(np.radians(col(f"{kind}_off_axis_deg")))
-        return col("bench_k1") * unknown * t ** (3 if name == "k1_tan3" else 2)
-    if name in ("shot_noise", "read_noise_rel"):
-        fw = col("bench_full_well")
-        with np.errstate(divide="ignore", invalid="ignore"):
-            v = 1.0 / np.sqrt(fw) if name == "shot_noise" else col("bench_read_noise") / fw
-        return np.where(fw > 0, v, 0.0)
-    if name == "jpeg_loss":
-        q = col("bench_jpeg_quality")
-        return np.where(q > 0, (100.0 - q) / 100.0, 0.0)
-    if name == "mirror_power":
-        cos_i = np.cos(np.radians(col(f"{kind}_incidence_deg")))
-        return (2 * cos_i * col(f"{kind}_d1") * col(f"{kind}_d2")
-                * col("bench_curvature_per_cm") / col(f"{kind}_d_true"))
+    if name in BENCH_FEATURES:
+        return BENCH_FEATURES[name].of(col, kind)
     raise KeyError(name)
 
 
@@ -74,7 +55,7 @@ def features_of(cols: dict) -> list[str]:
     """The model's features for these columns: FEATURES, then each bench feature whose
     column varies (for either object)."""
     names = list(FEATURES)
-    if "bench_pan_error_deg" not in cols:
+    if imperfections.ROW_COLUMNS[0] not in cols:  # a dataset from before the bench
         return names
     ok = np.array([not e for e in cols.get("error", [""] * len(cols["index"]))])
     for name in BENCH_FEATURES:

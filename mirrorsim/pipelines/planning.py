@@ -8,7 +8,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from mirrorsim.errors import BadArgument
+from mirrorsim.errors import BadParameter
 from mirrorsim.scene.model import (
     MIRROR_DEPTH,
     OCCLUDER_THICKNESS,
@@ -48,20 +48,21 @@ def plan_scene(scene: Scene, sigma: Sigma | None = None, eps_deg: float = 5.0,
 
     Raises
     ------
-    BadArgument
+    BadParameter
         For a σ, ε or step that is not > 0, ε ≥ 45° or a negative spread.
     """
     sigma = sigma or Sigma()
-    for flag, v, hi in (("--sigma-alpha", sigma.alpha_deg, SIGMA_ALPHA_MAX_DEG),
-                        ("--sigma-d", sigma.d_total_rel, SIGMA_D_REL_MAX), ("--eps", eps_deg, 45)):
-        if not 0 < v < hi or (flag != "--eps" and v == hi):
-            raise BadArgument(flag, f"{v} must be > 0 and {'<' if flag == '--eps' else '≤'} "
-                              f"{hi:g}")
+    for name, v, hi in (("sigma.alpha_deg", sigma.alpha_deg, SIGMA_ALPHA_MAX_DEG),
+                        ("sigma.d_total_rel", sigma.d_total_rel, SIGMA_D_REL_MAX),
+                        ("eps_deg", eps_deg, 45)):
+        if not 0 < v < hi or (name != "eps_deg" and v == hi):
+            raise BadParameter(name, f"{v} must be > 0 and {'<' if name == 'eps_deg' else '≤'} "
+                               f"{hi:g}")
     if not MIN_STEP <= step <= 20:
-        raise BadArgument("--step", f"{step} must be within [{MIN_STEP:g}, 20] cm")
-    for flag, v in (("--yaw-spread", yaw_spread_deg), ("--d1-spread", d1_spread)):
+        raise BadParameter("step", f"{step} must be within [{MIN_STEP:g}, 20] cm")
+    for name, v in (("yaw_spread_deg", yaw_spread_deg), ("d1_spread", d1_spread)):
         if not 0 <= v <= 30:
-            raise BadArgument(flag, f"{v} must be within [0, 30]")
+            raise BadParameter(name, f"{v} must be within [0, 30]")
     cam, mir = scene.camera, scene.mirror
     img = optics.mirror_image(cam.position, mir, scene.target.position)
     o = np.asarray(cam.position, float)

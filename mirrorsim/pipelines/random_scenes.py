@@ -26,7 +26,7 @@ from mirrorsim.formats.scenefile import (
     read_yaml,
     scene_from_dict,
 )
-from mirrorsim.scene.imperfections import as_keys
+from mirrorsim.scene.imperfections import REGISTRY, as_keys
 from mirrorsim.scene.model import PAN_WORDS, Camera, Scene
 from mirrorsim.truth import optics
 
@@ -175,18 +175,16 @@ def _draw(spec: dict, rng: np.random.Generator, where="<spec>",
 
 
 # ------------------------------------------------------------- bench imperfections
-# The spec's optional `bench:` block: scene-file key paths (INTERFACE.md *Bench
-# imperfections*), each a value or a [lo, hi] range drawn per scene, with two drawn in
-# another form: the mirror's `curvature` (1/cm, 0 = flat) instead of its radius, since
-# the effect is linear in 1/R and a range of radii would pass through infinity; and the
-# beacon's `known_position_offset` (cm, drawn for x and y alike) instead of a position.
-BENCH_SPEC_KEYS = {
-    "camera": {"pan_error", "pitch", "roll", "distortion", "distortion_known", "noise",
-               "jpeg_quality"},
-    "mirror": {"curvature", "tilt"},
-    "calibration": {"distance_error"},
-    "beacon": {"known_position_offset"},
-}
+# The spec's optional `bench:` block: each imperfection of the registry under its spec key
+# path, a value or a [lo, hi] range drawn per scene.  Two are drawn in another form: the
+# mirror's `curvature` (1/cm, 0 = flat) instead of its radius, since the effect is linear
+# in 1/R and a range of radii would pass through infinity; and the beacon's
+# `known_position_offset` (cm, drawn for x and y alike) instead of a position.
+BENCH_SPEC_KEYS: dict[str, set[str]] = {}
+for _imp in REGISTRY:
+    _block, _leaf = _imp.spec_path.split(".")
+    BENCH_SPEC_KEYS.setdefault(_block, set()).add(_leaf)
+_BY_SPEC_PATH = {imp.spec_path: imp for imp in REGISTRY}
 
 
 def _draw_number(raw: Any, key: str, rng: np.random.Generator, where,
@@ -209,35 +207,35 @@ def _draw_bench(bench: dict, rng: np.random.Generator, where="<spec>") -> dict[s
     for block in BENCH_SPEC_KEYS:  # a fixed order: same seed, same draws
         raw = bench.get(block) or {}
         for key in sorted(raw):
+            imp = _BY_SPEC_PATH[f"{block}.{key}"]
             path, v = f"bench.{block}.{key}", raw[key]
-            if key == "distortion":
+            if imp.form == "lens":
                 if not isinstance(v, list) or len(v) != 2:
                     raise Reader(where, SceneError).fail(path, f"expected [k1, k2] (each a "
                                                          f"value or [lo, hi]), got {show(v)}")
-                out["camera.distortion"] = [_draw_number(v[j], f"{path}[{j}]", rng, where)
-                                            for j in (0, 1)]
-            elif key == "distortion_known":
-                out["camera.distortion_known"] = v  # the scene reader checks the bool
-            elif key == "noise":
+                out[imp.key] = [_draw_number(v[j], f"{path}[{j}]", rng, where) for j in (0, 1)]
+            elif imp.form == "flag":
+                out[imp.key] = v  # the scene reader checks the bool
+            elif imp.form == "noise":
                 n = Reader(where, SceneError).mapping(v, path, {"full_well", "read_noise"})
-                out["camera.noise"] = {k: _draw_number(n[k], f"{path}.{k}", rng, where)
-                                       for k in ("full_well", "read_noise")}
-            elif key == "curvature":
+                out[imp.key] = {k: _draw_number(n[k], f"{path}.{k}", rng, where)
+                                for k in ("full_well", "read_noise")}
+            elif imp.form == "radius":  # drawn as the curvature 1/R
                 c = _draw_number(v, path, rng, where)
                 if c != 0.0:
-                    out["mirror.curvature_radius"] = 1.0 / c
-            elif key == "known_position_offset":
-                out["beacon.known_position_offset"] = [
-                    _draw_number(v, path, rng, where) for _ in (0, 1)]
+                    out[imp.key] = 1.0 / c
+            elif imp.form == "offset":
+                out[imp.spec_path] = [_draw_number(v, path, rng, where) for _ in (0, 1)]
             else:
-                out[f"{block}.{key}"] = _draw_number(v, path, rng, where,
-                                                     integer=key == "jpeg_quality")
+                out[imp.key] = _draw_number(v, path, rng, where,
+                                            integer=imp.form == "quality")
     return out
 
 
 def _set_key(d: dict, path: str, value: Any) -> None:
     block, key = path.split(".")
-    if key == "known_position_offset":
+    imp = _BY_SPEC_PATH.get(path)
+    if imp is not None and imp.form == "offset":
         d["beacon"]["known_position"] = [p + o for p, o in
                                          zip(d["beacon"]["position"], value, strict=True)]
     else:

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from mirrorsim.detection.detector import Calibration, detect_frame, read_frame
-from mirrorsim.errors import BadArgument, DetectionError
+from mirrorsim.errors import BadParameter, DetectionError
 from mirrorsim.pipelines.calibrate import calibrate
 from mirrorsim.pipelines.evaluate import DETECTOR_SIGMA
 from mirrorsim.rendering.frames import FrameFiles, render_to_files
@@ -174,16 +174,16 @@ def check_options(kind: str, steps: int, sigma: float, side: float, step: float,
                   heading: str = "view") -> None:
     """Refuse bad options as bad input."""
     if kind not in PATHS:
-        raise BadArgument("--path", f"{kind!r}: expected one of {', '.join(PATHS)}")
+        raise BadParameter("kind", f"{kind!r}: expected one of {', '.join(PATHS)}")
     if heading not in HEADINGS:
-        raise BadArgument("--heading", f"{heading!r}: expected one of {', '.join(HEADINGS)}")
+        raise BadParameter("heading", f"{heading!r}: expected one of {', '.join(HEADINGS)}")
     if not 1 <= steps <= MAX_STEPS:
-        raise BadArgument("--steps", f"{steps} must be within 1..{MAX_STEPS}")
+        raise BadParameter("steps", f"{steps} must be within 1..{MAX_STEPS}")
     if not (np.isfinite(sigma) and sigma >= 0):
-        raise BadArgument("--odometry-sigma", f"{sigma} must be a number ≥ 0 (cm)")
-    for flag, v in (("--side", side), ("--step", step)):
+        raise BadParameter("odometry_sigma", f"{sigma} must be a number ≥ 0 (cm)")
+    for name, v in (("side", side), ("step", step)):
         if not (np.isfinite(v) and v > 0):
-            raise BadArgument(flag, f"{v} must be a positive length (cm)")
+            raise BadParameter(name, f"{v} must be a positive length (cm)")
 
 
 def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps: int = 20,
@@ -195,7 +195,7 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
 
     Raises
     ------
-    BadArgument
+    BadParameter
         For bad options.
     DetectionError
         If the beacon or the target is not measured at the start pose (no prior, no path).

@@ -1,23 +1,239 @@
-"""A scene's bench imperfections as named sources: list them, keep one, drop all.
+"""The bench imperfections, each declared once; a scene's imperfections as named sources.
 
-The error budget (:mod:`mirrorsim.pipelines.budget`) renders a scene ideal, with each source
-alone, and with all; a source is named by its scene-file key path
-(``camera.pan_error``, ``mirror.curvature_radius``, ``beacons[0].known_position``…).
+:data:`REGISTRY` holds one :class:`Imperfection` per imperfection: the field that holds
+it (on :class:`~mirrorsim.scene.model.Bench`, or each beacon's believed position), its
+scene-file key path, units and bounds, the form a dataset spec draws it in, its dataset
+columns and its error-model features.  The scene reader, the spec's scene drawer, the
+dataset rows and card and the error model all read it; none lists imperfections of its
+own.  Adding one is an entry here, the field on ``Bench``, its rendering hook and its test.
+
+The error budget (:mod:`mirrorsim.pipelines.budget`) renders a scene ideal, with each
+source alone, and with all; a source is named by its key path (``camera.pan_error``,
+``mirror.curvature_radius``, ``beacons[0].known_position``…).
 """
 
 from __future__ import annotations
 
+import math
+from collections.abc import Callable
 from dataclasses import dataclass, fields, replace
 from typing import Any
 
+import numpy as np
+
 from mirrorsim.scene.model import Bench, Scene
 
-# Bench field → the key path a scene file writes it under (INTERFACE.md)
-KEYS = {"pan_error": "camera.pan_error", "pitch": "camera.pitch", "roll": "camera.roll",
-        "distortion": "camera.distortion", "noise": "camera.noise",
-        "jpeg_quality": "camera.jpeg_quality", "curvature_radius": "mirror.curvature_radius",
-        "tilt": "mirror.tilt", "calibration_distance_error": "calibration.distance_error"}
+# a dataset's columns as the error model reads them: col(name) -> float array
+Columns = Callable[[str], np.ndarray]
+
+
+@dataclass(frozen=True)
+class Column:
+    """One dataset column an imperfection fills: ``of(scene)`` is its value (the ideal
+    bench's value when the imperfection is absent, so that every row has every column)."""
+
+    name: str
+    units: str
+    doc: str
+    of: Callable[[Scene], Any]
+
+
+@dataclass(frozen=True)
+class Feature:
+    """One error-model feature: ``of(col, kind)`` for ``kind`` target or beacon, in the
+    form the imperfection's first-order effect is linear in."""
+
+    name: str
+    doc: str
+    of: Callable[[Columns, str], np.ndarray]
+
+
+@dataclass(frozen=True)
+class Imperfection:
+    """One bench imperfection, declared once.
+
+    ``form`` says how a scene file writes it and a spec draws it: ``angle`` (degrees,
+    |value| < ``bound``), ``number`` (``low`` < value < ``high``), ``quality`` (an integer
+    in [``low``, ``high``]), ``lens`` ([k1, k2]), ``flag`` (true/false), ``noise``
+    ({full_well, read_noise}), ``radius`` (cm; a spec draws its reciprocal, the
+    curvature, under ``spec_key``) or ``offset`` (a believed position; a spec draws the
+    offset).  ``source``: whether the error budget renders it alone.
+    """
+
+    field: str
+    key: str
+    units: str
+    doc: str
+    form: str
+    columns: tuple[Column, ...]
+    features: tuple[Feature, ...] = ()
+    bound: float | None = None
+    low: float | None = None
+    high: float | None = None
+    spec_key: str = ""  # the spec's bench-block key path when it differs from ``key``
+    source: bool = True
+    why: str = ""  # what the bounds mean, for the error message
+
+    @property
+    def block(self) -> str:
+        """The scene file's block (``camera``, ``mirror``, ``calibration``, ``beacons``)."""
+        return self.key.split(".")[0]
+
+    @property
+    def leaf(self) -> str:
+        """The key inside its block."""
+        return self.key.split(".")[1]
+
+    @property
+    def spec_path(self) -> str:
+        """The key path under a spec's ``bench:`` block."""
+        return self.spec_key or self.key
+
+
+def _beacon_offset(scene: Scene, axis: int) -> float:
+    b = scene.beacons[0]
+    return b.believed[axis] - b.position[axis]
+
+
+def _off_axis_tan(col: Columns, kind: str) -> np.ndarray:
+    return np.tan(np.radians(col(f"{kind}_off_axis_deg")))
+
+
+def _unknown_k1(col: Columns) -> np.ndarray:
+    return col("bench_k1") * (col("bench_distortion_known") == 0)
+
+
+def _where_noise(col: Columns, value: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+    fw = col("bench_full_well")
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(fw > 0, value(fw), 0.0)
+
+
+def _mirror_power(col: Columns, kind: str) -> np.ndarray:
+    # a mirror of curvature 1/R changes d_total by −2·cos i·d1·d2/(R·d_total): this
+    # feature's d coefficient should come out −1
+    cos_i = np.cos(np.radians(col(f"{kind}_incidence_deg")))
+    return (2 * cos_i * col(f"{kind}_d1") * col(f"{kind}_d2") * col("bench_curvature_per_cm")
+            / col(f"{kind}_d_true"))
+
+
+def _plain(name: str, column: str, units: str, doc: str) -> tuple[Column, ...]:
+    return (Column(column, units, doc, lambda s: getattr(s.bench, name)),)
+
+
+def _linear(name: str, column: str, doc: str) -> tuple[Feature, ...]:
+    return (Feature(name, doc, lambda col, _kind: col(column)),)
+
+
+# In INTERFACE.md's order, which is also the dataset's column order and the order a spec's
+# bench block is drawn in (so the same seed draws the same scenes).
+REGISTRY: tuple[Imperfection, ...] = (
+    Imperfection(
+        "pan_error", "camera.pan_error", "deg", "the mount reports pan + pan_error",
+        "angle", bound=10.0,
+        columns=_plain("pan_error", "bench_pan_error_deg", "deg", "pan error"),
+        features=_linear("pan_error_deg", "bench_pan_error_deg", "pan error (deg)")),
+    Imperfection(
+        "pitch", "camera.pitch", "deg", "the optical axis raised from level", "angle",
+        bound=20.0, columns=_plain("pitch", "bench_pitch_deg", "deg", "camera pitch"),
+        features=_linear("pitch_deg", "bench_pitch_deg", "camera pitch (deg)")),
+    Imperfection(
+        "roll", "camera.roll", "deg", "clockwise as seen from behind the camera", "angle",
+        bound=30.0, columns=_plain("roll", "bench_roll_deg", "deg", "camera roll"),
+        features=_linear("roll_deg", "bench_roll_deg", "camera roll (deg)")),
+    Imperfection(
+        "distortion", "camera.distortion", "1", "Brown–Conrady lens distortion [k1, k2]",
+        "lens", low=-1.0, high=1.0,
+        columns=(Column("bench_k1", "1", "lens k1", lambda s: s.bench.distortion[0]),
+                 Column("bench_k2", "1", "lens k2", lambda s: s.bench.distortion[1])),
+        # an unknown lens's k1 moves an image at off-axis angle φ by ∝ k1·tan³φ and scales
+        # it by ∝ k1·tan²φ
+        features=(Feature("k1_tan3", "k1·tan³(off-axis) of an uncorrected lens",
+                          lambda col, kind: _unknown_k1(col) * _off_axis_tan(col, kind) ** 3),
+                  Feature("k1_tan2", "k1·tan²(off-axis) of an uncorrected lens",
+                          lambda col, kind: _unknown_k1(col) * _off_axis_tan(col, kind) ** 2))),
+    Imperfection(
+        "distortion_known", "camera.distortion_known", "bool",
+        "the capture record holds the lens's coefficients (the detector undistorts)", "flag",
+        source=False,
+        columns=_plain("distortion_known", "bench_distortion_known", "bool",
+                       "lens coefficients in the capture record")),
+    Imperfection(
+        "noise", "camera.noise", "electrons", "Poisson shot noise (full_well electrons at "
+        "radiance 1) plus Gaussian read noise", "noise",
+        columns=(Column("bench_full_well", "e-", "full well (0: no sensor noise)",
+                        lambda s: s.bench.noise.full_well if s.bench.noise else 0.0),
+                 Column("bench_read_noise", "e-", "read noise rms",
+                        lambda s: s.bench.noise.read_noise if s.bench.noise else 0.0)),
+        # shot noise goes as 1/√full_well
+        features=(Feature("shot_noise", "1/√full_well",
+                          lambda col, _k: _where_noise(col, lambda fw: 1.0 / np.sqrt(fw))),
+                  Feature("read_noise_rel", "read noise / full well",
+                          lambda col, _k: _where_noise(
+                              col, lambda fw: col("bench_read_noise") / fw)))),
+    Imperfection(
+        "jpeg_quality", "camera.jpeg_quality", "1", "the frame stored as JPEG at this quality",
+        "quality", low=1, high=100,
+        columns=(Column("bench_jpeg_quality", "1", "JPEG quality (0: lossless PNG)",
+                        lambda s: s.bench.jpeg_quality or 0),),
+        features=(Feature("jpeg_loss", "(100 − quality)/100",
+                          lambda col, _k: np.where(col("bench_jpeg_quality") > 0,
+                                                   (100.0 - col("bench_jpeg_quality")) / 100,
+                                                   0.0)),)),
+    Imperfection(
+        "curvature_radius", "mirror.curvature_radius", "cm",
+        "a spherical mirror of this radius (> 0 concave); |radius| ≥ the mirror's diagonal",
+        "radius", spec_key="mirror.curvature",
+        columns=(Column("bench_curvature_per_cm", "1/cm", "1/radius (0: flat)",
+                        lambda s: 1.0 / s.bench.curvature_radius
+                        if s.bench.curvature_radius else 0.0),),
+        features=(Feature("mirror_power", "2·cos i·d1·d2/(R·d_total)", _mirror_power),)),
+    Imperfection(
+        "tilt", "mirror.tilt", "deg", "the mirror's top leans away from the camera", "angle",
+        bound=45.0, columns=_plain("tilt", "bench_tilt_deg", "deg", "mirror tilt"),
+        features=_linear("tilt_deg", "bench_tilt_deg", "mirror tilt (deg)")),
+    Imperfection(
+        "calibration_distance_error", "calibration.distance_error", "cm",
+        "the calibration's reference stands at 100 + this, 100 assumed", "number",
+        low=-50.0, high=100.0, why="the reference must stand between 50 and 200 cm",
+        columns=_plain("calibration_distance_error", "bench_calibration_error_cm", "cm",
+                       "calibration reference's distance error"),
+        features=_linear("calibration_error_cm", "bench_calibration_error_cm",
+                         "calibration distance error (cm)")),
+    Imperfection(
+        "known_position", "beacons.known_position", "cm",
+        "where the experimenter believes a beacon stands", "offset",
+        spec_key="beacon.known_position_offset",
+        columns=(Column("bench_beacon_dx_cm", "cm", "believed − true x of beacon 0",
+                        lambda s: _beacon_offset(s, 0)),
+                 Column("bench_beacon_dy_cm", "cm", "believed − true y of beacon 0",
+                        lambda s: _beacon_offset(s, 1)))),
+)
+BY_FIELD = {imp.field: imp for imp in REGISTRY}
+# Bench field → the key path a scene file writes it under (the budget's sources)
+KEYS = {imp.field: imp.key for imp in REGISTRY if imp.source and imp.block != "beacons"}
+# a dataset row's imperfection columns (every row has all of them, ideal values on an
+# ideal bench, so that tables of different specs share a schema)
+ROW_COLUMNS = tuple(c.name for imp in REGISTRY for c in imp.columns)
+# the error model's bench features, each linear in its imperfection's first-order effect
+FEATURES = tuple(f for imp in REGISTRY for f in imp.features)
 _IDEAL = Bench()
+
+
+def check_bounds(imp: Imperfection, value: float) -> str | None:
+    """Why ``value`` is out of ``imp``'s bounds (beyond them a value is a typo, not a
+    bench), or None."""
+    if imp.form == "angle" and abs(value) >= imp.bound:
+        return f"{value:g}: |{imp.leaf}| must stay below {imp.bound:g}°"
+    if imp.form == "number" and not imp.low < value < imp.high:
+        return (f"{value:g}: {imp.why or 'out of range'} (error in ({imp.low:g}, "
+                f"{imp.high:g}) {imp.units})")
+    return None
+
+
+def radius_bound(size: tuple[float, float]) -> float:
+    """The smallest |curvature radius| of a mirror of this size: its diagonal."""
+    return math.hypot(*size)
 
 
 @dataclass(frozen=True)
@@ -78,25 +294,11 @@ def only(scene: Scene, key: str) -> Scene:
     return replace(base, bench=replace(Bench(), **kept))
 
 
-# a dataset row's imperfection columns (every row has all of them, ideal values on an
-# ideal bench, so that tables of different specs share a schema)
-ROW_COLUMNS = ("bench_pan_error_deg", "bench_pitch_deg", "bench_roll_deg", "bench_k1",
-               "bench_k2", "bench_distortion_known", "bench_full_well", "bench_read_noise",
-               "bench_jpeg_quality", "bench_curvature_per_cm", "bench_tilt_deg",
-               "bench_calibration_error_cm", "bench_beacon_dx_cm", "bench_beacon_dy_cm")
-
-
 def row_values(scene: Scene) -> dict[str, Any]:
-    """The scene's imperfections as a dataset row's columns (:data:`ROW_COLUMNS`):
-    ``bench_full_well`` 0 means no sensor noise, ``bench_jpeg_quality`` 0 a lossless PNG,
-    ``bench_curvature_per_cm`` 0 a flat mirror; the beacon offsets are believed − true."""
-    b = scene.bench
-    beacon = scene.beacons[0]
-    believed = beacon.known_position if beacon.known_position is not None else beacon.position
-    values = (b.pan_error, b.pitch, b.roll, b.distortion[0], b.distortion[1],
-              b.distortion_known, b.noise.full_well if b.noise else 0.0,
-              b.noise.read_noise if b.noise else 0.0, b.jpeg_quality or 0,
-              1.0 / b.curvature_radius if b.curvature_radius else 0.0, b.tilt,
-              b.calibration_distance_error, believed[0] - beacon.position[0],
-              believed[1] - beacon.position[1])
-    return dict(zip(ROW_COLUMNS, values, strict=True))
+    """The scene's imperfections as a dataset row's columns (:data:`ROW_COLUMNS`)."""
+    return {c.name: c.of(scene) for imp in REGISTRY for c in imp.columns}
+
+
+def card_lines() -> list[str]:
+    """The dataset card's description of the imperfection columns, one line each."""
+    return [f"`{c.name}` ({c.units}): {c.doc}" for imp in REGISTRY for c in imp.columns]

@@ -1,0 +1,165 @@
+"""The house's boundaries, one test per wing (the rules of the README's *Architecture*).
+
+Each test reads the code's own imports (``ast``, so lazy imports inside functions count
+too) or imports a wing in a fresh interpreter and lists what it loaded.
+"""
+
+import ast
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGE = ROOT / "mirrorsim"
+# the wings in the order data flows through them: a wing imports only wings before it
+WINGS = ("scene", "truth", "formats", "rendering", "detection", "pipelines", "cli")
+SHARED = {"errors", "__init__"}  # mirrorsim/errors.py and the package's face: for every wing
+
+
+def _modules(folder: Path) -> list[Path]:
+    return sorted(folder.rglob("*.py"))
+
+
+def _imports(path: Path) -> set[str]:
+    """Every module ``path`` imports, at the top or inside a function."""
+    out = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            out |= {a.name for a in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.module:
+            out.add(node.module)
+            # `from mirrorsim.truth import optics` imports the module mirrorsim.truth.optics
+            out |= {f"{node.module}.{a.name}" for a in node.names}
+    return out
+
+
+def _loaded_by(module: str) -> set[str]:
+    """The modules a fresh interpreter holds after importing ``module``."""
+    code = f"import sys, json; import {module}; print(json.dumps(sorted(sys.modules)))"
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          cwd=ROOT, check=True)
+    return set(json.loads(done.stdout))
+
+
+def test_every_module_sits_in_a_wing():
+    loose = [p.name for p in PACKAGE.glob("*.py") if p.stem not in SHARED | {"__main__"}]
+    assert loose == []
+    assert {p.name for p in PACKAGE.iterdir() if p.is_dir() and p.name != "__pycache__"} \
+        == set(WINGS)
+
+
+@pytest.mark.parametrize("wing", WINGS)
+def test_a_wing_imports_only_the_wings_before_it(wing):
+    later = WINGS[WINGS.index(wing) + 1:]
+    bad = [(p.relative_to(ROOT).as_posix(), m) for p in _modules(PACKAGE / wing)
+           for m in _imports(p) if m.split(".")[0] == "mirrorsim" and len(m.split(".")) > 1
+           and m.split(".")[1] in later]
+    assert bad == []
+
+
+def test_the_detector_never_loads_the_truth():
+    # the detector's whole import closure: no optics, no ground truth, no scene-file
+    # reader (so it cannot read a scene's mirror or target), no Mitsuba
+    loaded = _loaded_by("mirrorsim.detection.detector")
+    forbidden = [m for m in loaded if m.startswith((
+        "mirrorsim.truth", "mirrorsim.formats.scenefile", "mirrorsim.pipelines", "mitsuba",
+        "drjit"))]
+    assert "mirrorsim.detection.detector" in loaded
+    assert forbidden == []
+
+
+def test_the_detection_wing_names_no_truth_even_lazily():
+    bad = [(p.name, m) for p in _modules(PACKAGE / "detection") for m in _imports(p)
+           if m.startswith(("mirrorsim.truth", "mirrorsim.formats.scenefile"))]
+    assert bad == []
+
+
+def test_the_solver_is_pure_mathematics():
+    allowed_roots = {"__future__", "dataclasses", "math", "typing", "collections", "functools",
+                     "itertools", "enum", "numpy", "scipy", "solver"}
+    for p in _modules(ROOT / "solver"):
+        roots = {m.split(".")[0] for m in _imports(p)}
+        assert roots <= allowed_roots, (p.name, roots - allowed_roots)
+        # no file I/O: no open(), no pathlib, no reading or writing text
+        names = {n.id for n in ast.walk(ast.parse(p.read_text())) if isinstance(n, ast.Name)}
+        attrs = {n.attr for n in ast.walk(ast.parse(p.read_text()))
+                 if isinstance(n, ast.Attribute)}
+        assert not names & {"open", "Path"}, p.name
+        assert not attrs & {"read_text", "write_text", "read_bytes", "write_bytes", "load",
+                            "dump"}, p.name
+    loaded = _loaded_by("solver.sltr, solver.particle, solver.placement, solver.montecarlo")
+    assert [m for m in loaded if m.startswith(("mirrorsim", "mitsuba", "drjit", "cv2"))] == []
+
+
+def test_rendering_imports_no_detection():
+    bad = [(p.name, m) for p in _modules(PACKAGE / "rendering") for m in _imports(p)
+           if m.startswith(("mirrorsim.detection", "cv2.aruco"))]
+    assert bad == []
+    loaded = _loaded_by("mirrorsim.rendering.frames")
+    assert [m for m in loaded if m.startswith("mirrorsim.detection")] == []
+
+
+def test_only_rendering_touches_mitsuba():
+    bad = [(p.relative_to(ROOT).as_posix(), m) for p in _modules(PACKAGE)
+           if p.parent.name != "rendering" for m in _imports(p)
+           if m.split(".")[0] in ("mitsuba", "drjit")]
+    assert bad == []
+
+
+FLAG = re.compile(r"(?<![\w-])--[a-z]")
+
+
+def test_the_library_raises_no_error_naming_a_flag():
+    # only the command line knows flags: library errors name parameters
+    # (errors.BadParameter), and cli.main maps them to flags
+    bad = []
+    for p in _modules(PACKAGE):
+        if p.parent.name == "cli":
+            continue
+        for node in ast.walk(ast.parse(p.read_text())):
+            if isinstance(node, ast.Raise) and node.exc is not None:
+                for c in ast.walk(node.exc):
+                    if isinstance(c, ast.Constant) and isinstance(c.value, str) \
+                            and FLAG.search(c.value):
+                        bad.append((p.relative_to(ROOT).as_posix(), node.lineno, c.value))
+    assert bad == []
+
+
+def test_no_import_circle():
+    graph = {}
+    for p in _modules(PACKAGE) + _modules(ROOT / "solver"):
+        rel = p.relative_to(ROOT).with_suffix("")
+        name = ".".join(rel.parts[:-1] if rel.name == "__init__" else rel.parts)
+        graph[name] = {m for m in _imports(p) if m.split(".")[0] in ("mirrorsim", "solver")}
+    # an import of a package counts as an import of its face (__init__), which imports
+    # nothing here; keep only edges to modules that exist
+    graph = {k: {m for m in v if m in graph and m != k} for k, v in graph.items()}
+    state: dict[str, int] = {}
+
+    def visit(node: str, path: list[str]) -> None:
+        state[node] = 1
+        for nxt in graph[node]:
+            if state.get(nxt) == 1:
+                raise AssertionError(" -> ".join([*path, node, nxt]))
+            if nxt not in state:
+                visit(nxt, [*path, node])
+        state[node] = 2
+
+    for node in sorted(graph):
+        if node not in state:
+            visit(node, [])
+
+
+def test_the_checks_above_can_fail(tmp_path):
+    # the import reader sees a lazy import, and the flag pattern a flag in an f-string
+    f = tmp_path / "m.py"
+    f.write_text("def g():\n    from mirrorsim.truth import optics\n"
+                 "    raise ValueError(f'--steps {1}')\n")
+    assert "mirrorsim.truth.optics" in _imports(f)
+    consts = [c.value for c in ast.walk(ast.parse(f.read_text()))
+              if isinstance(c, ast.Constant) and isinstance(c.value, str)]
+    assert any(FLAG.search(c) for c in consts)

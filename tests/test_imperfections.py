@@ -1,0 +1,108 @@
+"""The registry of bench imperfections: each declared once, and every reader obeys it."""
+
+import copy
+from dataclasses import fields
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from mirrorsim.errors import SceneError
+from mirrorsim.formats.scenefile import scene_from_dict
+from mirrorsim.pipelines import errormodel, random_scenes
+from mirrorsim.scene import imperfections
+from mirrorsim.scene.imperfections import REGISTRY
+from mirrorsim.scene.model import Bench
+
+ROOT = Path(__file__).resolve().parents[1]
+BASE = yaml.safe_load((ROOT / "scenes" / "default.yaml").read_text())
+
+
+def _with(key: str, value) -> dict:
+    d = copy.deepcopy(BASE)
+    block, leaf = key.split(".")
+    d.setdefault(block, {})[leaf] = value
+    return d
+
+
+def test_every_bench_field_is_declared_once():
+    declared = [imp.field for imp in REGISTRY if imp.block != "beacons"]
+    assert sorted(declared) == sorted(f.name for f in fields(Bench))
+    assert len({imp.key for imp in REGISTRY}) == len(REGISTRY)
+    columns = [c.name for imp in REGISTRY for c in imp.columns]
+    assert len(set(columns)) == len(columns)
+    assert all(c.startswith("bench_") for c in columns)
+
+
+# bounds fixed here, apart from the registry: beyond them a value is a typo, not a bench
+BOUNDS = {"camera.pan_error": (10.0, "°"), "camera.pitch": (20.0, "°"),
+          "camera.roll": (30.0, "°"), "mirror.tilt": (45.0, "°")}
+
+
+@pytest.mark.parametrize("key", sorted(BOUNDS))
+def test_angles_are_read_within_their_bounds(key):
+    bound = BOUNDS[key][0]
+    field = next(imp.field for imp in REGISTRY if imp.key == key)
+    inside = scene_from_dict(_with(key, 0.05 * bound))
+    assert getattr(inside.bench, field) == pytest.approx(0.05 * bound)
+    with pytest.raises(SceneError) as err:
+        scene_from_dict(_with(key, -bound))
+    assert err.value.key == key and "must stay below" in err.value.message
+
+
+def test_other_forms_are_read_and_bounded():
+    s = scene_from_dict(_with("calibration.distance_error", 2.5))
+    assert s.bench.calibration_distance_error == 2.5
+    with pytest.raises(SceneError, match="calibration.distance_error"):
+        scene_from_dict(_with("calibration.distance_error", -50))
+    assert scene_from_dict(_with("camera.jpeg_quality", 80)).bench.jpeg_quality == 80
+    with pytest.raises(SceneError, match="camera.jpeg_quality"):
+        scene_from_dict(_with("camera.jpeg_quality", 101))
+    with pytest.raises(SceneError, match="camera.distortion_known"):
+        scene_from_dict(_with("camera.distortion_known", "no"))
+    # the mirror of default.yaml is 18.2 × 13.25 cm: its diagonal is 22.51 cm
+    with pytest.raises(SceneError, match=r"diagonal \(22.5 cm\)"):
+        scene_from_dict(_with("mirror.curvature_radius", -22.4))
+
+
+def test_a_row_holds_each_imperfection_as_declared():
+    d = _with("mirror.curvature_radius", 250.0)
+    d["camera"].update(jpeg_quality=70, noise={"full_well": 4000, "read_noise": 3})
+    d["beacon"]["known_position"] = [d["beacon"]["position"][0] + 0.5,
+                                     d["beacon"]["position"][1] - 0.25]
+    row = imperfections.row_values(scene_from_dict(d))
+    assert tuple(row) == imperfections.ROW_COLUMNS
+    assert row["bench_curvature_per_cm"] == pytest.approx(1 / 250)
+    assert row["bench_jpeg_quality"] == 70
+    assert (row["bench_full_well"], row["bench_read_noise"]) == (4000, 3)
+    assert row["bench_beacon_dx_cm"] == pytest.approx(0.5)
+    assert row["bench_beacon_dy_cm"] == pytest.approx(-0.25)
+    ideal = imperfections.row_values(scene_from_dict(BASE))
+    assert ideal["bench_full_well"] == 0 and ideal["bench_jpeg_quality"] == 0
+    assert ideal["bench_curvature_per_cm"] == 0 and ideal["bench_distortion_known"] is True
+
+
+def test_the_spec_and_the_error_model_know_every_imperfection():
+    spec_paths = {f"{b}.{k}" for b, keys in random_scenes.BENCH_SPEC_KEYS.items() for k in keys}
+    assert spec_paths == {imp.spec_path for imp in REGISTRY}
+    assert set(errormodel.BENCH_FEATURES) == {f.name for f in imperfections.FEATURES}
+
+
+def test_features_against_their_first_order_forms():
+    # two rows: a flat mirror and R = 200 cm; an uncorrected lens k1 = 0.1 at 20° off axis
+    cols = {"target_incidence_deg": [30.0, 30.0], "target_d1": [40.0, 40.0],
+            "target_d2": [60.0, 60.0], "target_d_true": [100.0, 100.0],
+            "bench_curvature_per_cm": [0.0, 1 / 200], "bench_k1": [0.1, 0.1],
+            "bench_distortion_known": [False, True], "target_off_axis_deg": [20.0, 20.0],
+            "bench_full_well": [0.0, 10000.0], "bench_read_noise": [0.0, 5.0],
+            "bench_jpeg_quality": [0, 90]}
+    f = {name: errormodel._feature(cols, "target", name) for name in errormodel.BENCH_FEATURES
+         if name not in ("pan_error_deg", "pitch_deg", "roll_deg", "tilt_deg",
+                         "calibration_error_cm")}
+    power = 2 * np.cos(np.radians(30)) * 40 * 60 / (200 * 100)
+    np.testing.assert_allclose(f["mirror_power"], [0.0, power])
+    np.testing.assert_allclose(f["k1_tan3"], [0.1 * np.tan(np.radians(20)) ** 3, 0.0])
+    np.testing.assert_allclose(f["shot_noise"], [0.0, 0.01])
+    np.testing.assert_allclose(f["read_noise_rel"], [0.0, 5e-4])
+    np.testing.assert_allclose(f["jpeg_loss"], [0.0, 0.1])
