@@ -44,6 +44,7 @@ from mirrorsim.errors import DetectionError, SceneError  # noqa: E402
 from mirrorsim.formats.scenefile import load_scene, scene_from_dict  # noqa: E402
 from mirrorsim.pipelines.calibrate import calibrate  # noqa: E402
 from mirrorsim.pipelines.evaluate import DETECTOR_SIGMA  # noqa: E402
+from mirrorsim.pipelines.frame import render_and_measure  # noqa: E402
 from mirrorsim.pipelines.random_scenes import load_spec, sample_scene  # noqa: E402
 from mirrorsim.rendering.frames import render_to_files  # noqa: E402
 from mirrorsim.truth import optics  # noqa: E402
@@ -98,6 +99,8 @@ def label(scene) -> str:
 
 
 def measure(scene, tmp: Path) -> dict:
+    # render, calibrate and detect written out (not pipelines.frame): the detector alone
+    # is timed
     spp = label(scene)
     res = render_to_files(scene, tmp / scene.name, progress=False)
     cal = calibrate(scene.camera, scene.target.size, scene.beacons[0].height)
@@ -179,9 +182,8 @@ def offaxis_scenes(angles: list[float]) -> list:
 def measure_signed(scene, tmp: Path) -> dict:
     """Signed errors of one frame (target and beacon), with the target's off-axis angle."""
     spp = label(scene)
-    res = render_to_files(scene, tmp / scene.name, progress=False)
-    cal = calibrate(scene.camera, scene.target.size, scene.beacons[0].height)
-    det = detect_frame(read_frame(res.image), res.capture, cal)
+    m = render_and_measure(scene, tmp / scene.name, progress=False)
+    res, det = m.files, m.detection
     t, b = res.truth.target, res.truth.beacons[0]
     mt, mb = det.target, det.beacons[0][1]
     return {"scene": scene.name, "spp": spp,

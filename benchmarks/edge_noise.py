@@ -22,10 +22,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from mirrorsim.detection.detector import detect_frame, read_frame  # noqa: E402
 from mirrorsim.pipelines.calibrate import calibrate  # noqa: E402
+from mirrorsim.pipelines.frame import render_and_measure  # noqa: E402
 from mirrorsim.pipelines.random_scenes import load_spec, sample_scene  # noqa: E402
-from mirrorsim.rendering.frames import render_to_files  # noqa: E402
 
 
 def main() -> None:
@@ -47,9 +46,9 @@ def main() -> None:
             cal = calibrate(s.camera, s.target.size, s.beacons[0].height)
             rows = []
             for seed in range(a.seeds):
-                res = render_to_files(s, tmp / f"{spp}_{i}_{seed}", seed=seed, progress=False,
-                                      ids=False)
-                mb = detect_frame(read_frame(res.image), res.capture, cal).beacons[0][1]
+                m = render_and_measure(s, tmp / f"{spp}_{i}_{seed}", seed=seed,
+                                       progress=False, ids=False, calibration=cal)
+                res, mb = m.files, m.detection.beacons[0][1]
                 d = res.truth.beacons[0].d_total
                 rows.append((mb.v_top, mb.v_bottom, mb.u_left, mb.u_right,
                              100 * (mb.d_total - d) / d))

@@ -13,11 +13,11 @@ import pytest
 import yaml
 
 from mirrorsim.cli.main import main
-from mirrorsim.detection.detector import FRONT_OFFSET, detect_frame, read_frame
+from mirrorsim.detection.detector import FRONT_OFFSET, read_frame
 from mirrorsim.formats.capture import CaptureRecord
 from mirrorsim.formats.scenefile import scene_from_dict
-from mirrorsim.pipelines.calibrate import calibrate
-from mirrorsim.rendering.frames import render_to_files, scene_fingerprint
+from mirrorsim.pipelines.frame import render_and_measure
+from mirrorsim.rendering.frames import scene_fingerprint
 from mirrorsim.rendering.mitsuba_scene import TARGET_LABEL
 from mirrorsim.rendering.passes import IN_MIRROR
 from mirrorsim.rendering.sensor import add_noise, undistort_points
@@ -48,11 +48,8 @@ def bench_scene(**kw):
 
 def measure(scene, tmp, name):
     """Render, calibrate (as the bench did) and detect: the frame's files and detection."""
-    files = render_to_files(scene, tmp / name, progress=False)
-    cal = calibrate(files.capture.camera, files.capture.target_size,
-                    files.capture.beacons[0].height,
-                    distance_error=scene.bench.calibration_distance_error)
-    return files, detect_frame(read_frame(files.image), files.capture, cal)
+    m = render_and_measure(scene, tmp / name, progress=False)
+    return m.files, m.detection
 
 
 @pytest.fixture(scope="module")

@@ -5,7 +5,6 @@ from __future__ import annotations
 from pathlib import Path
 
 from mirrorsim.cli.registry import command, common, load, output, preload, render_options
-from mirrorsim.errors import DetectionError
 from mirrorsim.formats.files import emit_json, write_png
 
 
@@ -93,9 +92,9 @@ def _detect_options(p):
          _detect_options)
 def _detect(args) -> int:
     from mirrorsim.cli.tables import detect_summary
-    from mirrorsim.detection.detector import annotate, detect_frame, read_frame
+    from mirrorsim.detection.detector import annotate
     from mirrorsim.formats.capture import CaptureRecord, load_capture
-    from mirrorsim.pipelines.calibrate import calibrate
+    from mirrorsim.pipelines.frame import measure_frame
 
     reference_error = 0.0  # a capture record cannot know its bench's calibration error
     if args.capture:
@@ -104,18 +103,13 @@ def _detect(args) -> int:
         scene = load(args.scene)
         view, source = CaptureRecord.from_scene(scene), f"scene {args.scene}"
         reference_error = scene.bench.calibration_distance_error  # the bench's calibration
-    image = read_frame(args.frame)
-    cal = calibrate(view.camera, view.target_size, view.beacons[0].height, variant=args.variant,
-                    distance_error=reference_error)
-    try:
-        det = detect_frame(image, view, cal)
-    except DetectionError as exc:
-        raise DetectionError(f"{args.frame} ({source}): {exc}") from None
-    print(detect_summary(str(args.frame), det))
+    m = measure_frame(args.frame, view, variant=args.variant, distance_error=reference_error,
+                      source=source)
+    print(detect_summary(str(args.frame), m.detection))
     if args.annotate:
-        write_png(args.annotate, annotate(image, det))
+        write_png(args.annotate, annotate(m.image, m.detection))
         print(f"  annotated: {args.annotate}")
-    emit_json(args.json, det.to_json())
+    emit_json(args.json, m.detection.to_json())
     return 0
 
 

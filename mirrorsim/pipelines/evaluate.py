@@ -13,12 +13,12 @@ from pathlib import Path
 
 import numpy as np
 
-from mirrorsim.detection.detector import annotate, detect_frame, read_frame
+from mirrorsim.detection.detector import annotate
 from mirrorsim.errors import DetectionError
 from mirrorsim.formats.files import write_png
-from mirrorsim.pipelines.calibrate import calibrate
+from mirrorsim.pipelines.frame import render_and_measure
 from mirrorsim.pipelines.score import EXTRA_FILES, FrameRecord, Report, score
-from mirrorsim.rendering.frames import default_out, render_to_files
+from mirrorsim.rendering.frames import default_out
 from mirrorsim.scene.model import Scene
 from mirrorsim.truth.groundtruth import RenderInfo
 from solver.measurements import Measurements
@@ -54,19 +54,13 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, spp: int 
         for i, b in enumerate(scene.beacons)]
     frames, detections, truths = [], [], []
     for sub in per_beacon:
-        files = render_to_files(sub, out, spp=spp, seed=seed, variant=variant,
-                                progress=progress, reuse=True, ids="ids" in keep)
-        cal = calibrate(files.capture.camera, files.capture.target_size,
-                        files.capture.beacons[0].height, variant=variant,
-                        distance_error=scene.bench.calibration_distance_error)
-        image = read_frame(files.image)
-        try:
-            det = detect_frame(image, files.capture, cal)  # the record, never the scene
-        except DetectionError as exc:
-            raise DetectionError(f"{files.image}: {exc}") from None
+        m = render_and_measure(sub, out, spp=spp, seed=seed, variant=variant,
+                               progress=progress, reuse=True, ids="ids" in keep)
+        files, det, cal = m.files, m.detection, m.calibration
         annotated = ""
         if "annotated" in keep:
-            annotated = str(write_png(out / f"{sub.name}.annotated.png", annotate(image, det)))
+            annotated = str(write_png(out / f"{sub.name}.annotated.png",
+                                      annotate(m.image, det)))
         frames.append(FrameRecord(str(files.image), annotated, files.reused,
                                   det.target.clipped, det.beacons[0][1].clipped))
         detections.append(det)

@@ -24,11 +24,10 @@ from pathlib import Path
 
 import numpy as np
 
-from mirrorsim.detection.detector import Calibration, detect_frame, read_frame
+from mirrorsim.detection.detector import Detection
 from mirrorsim.errors import BadParameter, DetectionError
-from mirrorsim.pipelines.calibrate import calibrate
 from mirrorsim.pipelines.evaluate import DETECTOR_SIGMA
-from mirrorsim.rendering.frames import FrameFiles, render_to_files
+from mirrorsim.pipelines.frame import FrameNotMeasured, render_and_measure
 from mirrorsim.scene.model import Bench, Scene
 from mirrorsim.truth.optics import target_facing, visibility
 from solver.errors import SolverError
@@ -219,12 +218,13 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
                         beacons=(replace(b0, position=tuple(true),
                                          known_position=tuple(believed)),),
                         render=replace(scene.render, seed=seed * 1000 + k))
-        files = render_to_files(posed, out / "poses", spp=spp, variant=variant,
-                                progress=False, reuse=True, ids=False)
-        cal = cal or calibrate(files.capture.camera, files.capture.target_size,
-                               files.capture.beacons[0].height, variant=variant,
-                               distance_error=scene.bench.calibration_distance_error)
-        return _measure(files, cal)
+        try:
+            m = render_and_measure(posed, out / "poses", spp=spp, variant=variant,
+                                   progress=False, reuse=True, ids=False, calibration=cal)
+        except FrameNotMeasured as exc:
+            return None, None, exc.reason
+        cal = m.calibration
+        return _observations(m.detection)
 
     obs, target_obs, why = pose(0, start, np.asarray(b0.position, float))
     if obs is None or target_obs is None:
@@ -266,14 +266,10 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
                        snapshots=tuple(snapshots))
 
 
-def _measure(files: FrameFiles, cal: Calibration
-             ) -> tuple[tuple[float, float] | None, tuple[float, float] | None, str]:
-    """Detect one pose from its capture record: the beacon's (α, d_total), or None and
-    why; and the target's, or None where its d_total is not measured."""
-    try:
-        det = detect_frame(read_frame(files.image), files.capture, cal)
-    except DetectionError as exc:
-        return None, None, str(exc)
+def _observations(det: Detection
+                  ) -> tuple[tuple[float, float] | None, tuple[float, float] | None, str]:
+    """One pose's detection as the filter takes it: the beacon's (α, d_total), or None
+    and why; and the target's, or None where its d_total is not measured."""
     t = det.target
     target = (t.alpha_deg, t.d_total) if t.d_total is not None else None
     m = det.beacon_measurements()[0]

@@ -1,0 +1,86 @@
+"""One frame through the pipeline, written once: render → calibrate → detect.
+
+Every command and benchmark that measures a frame goes through here: :func:`measure_frame`
+for a frame on disk and its capture record, :func:`render_and_measure` for a scene.  The
+detector is handed the capture record (what the experimenter knows), never the scene.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from mirrorsim.detection.detector import Calibration, Detection, detect_frame, read_frame
+from mirrorsim.errors import DetectionError
+from mirrorsim.formats.capture import CaptureRecord
+from mirrorsim.pipelines.calibrate import calibrate
+from mirrorsim.rendering.frames import FrameFiles, render_to_files
+from mirrorsim.scene.model import Scene
+
+
+class FrameNotMeasured(DetectionError):
+    """The detector found nothing usable in a frame: the message names the frame,
+    ``reason`` is the detector's own words."""
+
+    def __init__(self, where: str, reason: str):
+        self.reason = reason
+        super().__init__(f"{where}: {reason}")
+
+
+@dataclass(frozen=True)
+class MeasuredFrame:
+    """A frame's pixels, the calibration it was measured with and what the detector found;
+    ``files`` where the frame was rendered here."""
+
+    image: np.ndarray
+    calibration: Calibration
+    detection: Detection
+    files: FrameFiles | None = None
+
+
+def calibration_for(capture: CaptureRecord, *, variant: str = "auto",
+                    distance_error: float = 0.0) -> Calibration:
+    """The size-constancy constants for the camera and objects a capture record names.
+
+    ``distance_error``: the bench's calibration error (cm), which a capture record cannot
+    know; the simulator renders its calibration with it.
+    """
+    return calibrate(capture.camera, capture.target_size, capture.beacons[0].height,
+                     variant=variant, distance_error=distance_error)
+
+
+def measure_frame(image_path: str | Path, capture: CaptureRecord, *,
+                  calibration: Calibration | None = None, variant: str = "auto",
+                  distance_error: float = 0.0, source: str = "") -> MeasuredFrame:
+    """Calibrate (unless given) and detect one frame from its pixels and capture record.
+
+    Raises
+    ------
+    FrameNotMeasured
+        Naming the frame (and ``source``, where given) when nothing usable is found.
+    DetectionError
+        When the calibration's own references cannot be measured.
+    """
+    image = read_frame(image_path)
+    cal = calibration or calibration_for(capture, variant=variant,
+                                         distance_error=distance_error)
+    try:
+        det = detect_frame(image, capture, cal)  # the record, never the scene
+    except DetectionError as exc:
+        where = f"{image_path} ({source})" if source else str(image_path)
+        raise FrameNotMeasured(where, str(exc)) from None
+    return MeasuredFrame(image, cal, det)
+
+
+def render_and_measure(scene: Scene, out: str | Path, *, spp: int | None = None,
+                       seed: int | None = None, variant: str = "auto", progress: bool = True,
+                       reuse: bool = True, ids: bool = True,
+                       calibration: Calibration | None = None) -> MeasuredFrame:
+    """Render ``scene`` into ``out`` (or reuse its render), then :func:`measure_frame`."""
+    files = render_to_files(scene, out, spp=spp, seed=seed, variant=variant,
+                            progress=progress, reuse=reuse, ids=ids)
+    m = measure_frame(files.image, files.capture, calibration=calibration, variant=variant,
+                      distance_error=scene.bench.calibration_distance_error)
+    return MeasuredFrame(m.image, m.calibration, m.detection, files)
