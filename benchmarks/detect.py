@@ -47,8 +47,8 @@ from mirrorsim.pipelines.evaluate import DETECTOR_SIGMA  # noqa: E402
 from mirrorsim.pipelines.frame import render_and_measure  # noqa: E402
 from mirrorsim.pipelines.random_scenes import load_spec, sample_scene  # noqa: E402
 from mirrorsim.rendering.frames import render_to_files  # noqa: E402
-from mirrorsim.truth import optics  # noqa: E402
-from solver.sltr import solve_measurements  # noqa: E402
+from mirrorsim.truth import optics, visibility  # noqa: E402
+from solver.lsq import solve_measurements  # noqa: E402
 
 BUNDLED = ("default", "exp1", "exp2", "exp3")
 
@@ -75,7 +75,7 @@ def random_scenes(n: int, rng: np.random.Generator) -> list:
             s = scene_from_dict(d, default_name=d["name"])
         except SceneError:
             continue
-        if s.warnings or any(optics.visibility(s, o).fraction < 1 for o in (s.target,
+        if s.warnings or any(visibility.visibility(s, o).fraction < 1 for o in (s.target,
                                                                             *s.beacons)):
             continue
         out.append(s)

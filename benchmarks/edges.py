@@ -38,7 +38,7 @@ from mirrorsim.scene.model import (  # noqa: E402
     TARGET_THICKNESS,
     pencil_paint_height,
 )
-from mirrorsim.truth import optics  # noqa: E402
+from mirrorsim.truth import optics, visibility  # noqa: E402
 from solver.geometry import reflect, unit  # noqa: E402
 
 
@@ -95,10 +95,10 @@ def main() -> None:
     print("\nMitsuba's ray offset at the glass, first order (each reflected ray starts "
           "(1 + max|p|)·2⁻²⁴·1500 cm along the normal: the image moves by that, "
           "projected), target left / right, px:")
-    g, along, up, n = optics.glass_frame(s)
+    g, along, up, n = visibility.glass_frame(s)
     real = np.array([[*(front + k * across * t.size[0] / 2), t.size[1] / 2] for k in (-1, 1)])
     virtual = np.array([[*reflect(q[:2], s.mirror.center, s.mirror.yaw), q[2]] for q in real])
-    ga, gb, _ = optics.glass_hits(s, real)
+    ga, gb, _ = visibility.glass_hits(s, real)
     hits = g + np.outer(ga, along) + np.outer(gb, up)
     u0 = optics.project(s.camera, virtual)[0]
     order = np.argsort(u0)  # left, right

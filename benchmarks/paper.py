@@ -32,8 +32,8 @@ from mirrorsim.pipelines.evaluate import DETECTOR_SIGMA, evaluate_scene  # noqa:
 from mirrorsim.pipelines.planning import plan_scene  # noqa: E402
 from mirrorsim.scene.model import Beacon  # noqa: E402
 from solver.geometry import yaw_difference  # noqa: E402
+from solver.lsq import solve_measurements  # noqa: E402
 from solver.montecarlo import PAPER_TABLE1, run_row, table1  # noqa: E402
-from solver.sltr import solve_measurements  # noqa: E402
 
 # Table 3's "Measured data" rows and RMSE(tar)
 PAPER = {

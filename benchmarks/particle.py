@@ -23,9 +23,10 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from solver.geometry import line_normal, wrap_bearing  # noqa: E402
+from solver.lsq import Sigma  # noqa: E402
 from solver.particle import PFParams, mirror_errors, simulate_run, track  # noqa: E402
 from solver.placement import path_points  # noqa: E402
-from solver.sltr import Sigma, observe  # noqa: E402
+from solver.sltr import observe
 
 OBSERVER, MIRROR, YAW = np.zeros(2), np.array([27.5, 65.0]), 38.0
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from solver.sltr import BeaconMeasurement, Sigma
+from solver.lsq import BeaconMeasurement, Sigma
 
 # σ's beyond these are no measurement: a bearing known to ±45° or a distance to ±100 %
 SIGMA_ALPHA_MAX_DEG = 45.0

@@ -12,7 +12,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from solver.geometry import line_normal, unit, yaw_difference
-from solver.sltr import Sigma, closed_form_unchecked, observe
+from solver.lsq import Sigma
+from solver.sltr import closed_form_unchecked, observe
 
 # v(α) [deg], v(d_total) [distance units], RMSE(ref), RMSE(tar): the paper's Table 1
 PAPER_TABLE1 = (
@@ -71,12 +72,12 @@ def run_row(sigma_alpha_deg: float, sigma_d: float, iterations: int = 200,
     at = g["target_alpha"] + rng.normal(0, sigma_alpha_deg, k)
     dt = g["target_d"] + rng.normal(0, sigma_d, k)
     est = closed_form_unchecked(np.zeros(2), g["beacon"], ab, db, at, dt)
-    ok = np.isfinite(est["target"]).all(axis=1) & np.isfinite(
-        est["target_reflection_point"]).all(axis=1)
-    ref_err = np.linalg.norm(est["target_reflection_point"][ok] - g["target_reflection_point"],
+    ok = np.isfinite(est.target).all(axis=1) & np.isfinite(
+        est.target_reflection_point).all(axis=1)
+    ref_err = np.linalg.norm(est.target_reflection_point[ok] - g["target_reflection_point"],
                              axis=1)
-    tar_err = np.linalg.norm(est["target"][ok] - g["target"], axis=1)
-    yaw_err = yaw_difference(est["yaw_deg"][ok], g["yaw_deg"])
+    tar_err = np.linalg.norm(est.target[ok] - g["target"], axis=1)
+    yaw_err = yaw_difference(est.yaw_deg[ok], g["yaw_deg"])
     return {"rmse_ref": float(np.sqrt(np.mean(ref_err ** 2))),
             "rmse_tar": float(np.sqrt(np.mean(tar_err ** 2))),
             "rmse_yaw_deg": float(np.sqrt(np.mean(yaw_err ** 2))),

@@ -38,7 +38,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from solver.geometry import line_normal, unit
-from solver.sltr import Sigma, virtual_image
+from solver.lsq import Sigma
+from solver.sltr import virtual_image
 
 SPREAD_FLOOR = (0.002, 0.001)  # the proposal's least spread: yaw (deg), offset (cm)
 MOVE_SWEEPS = 4  # Metropolis–Hastings moves after each resampling

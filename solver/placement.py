@@ -11,7 +11,8 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from solver.geometry import line_normal, reflect, unit, wrap_bearing
-from solver.sltr import Sigma, SolverError, observe, predict
+from solver.lsq import Sigma, predict
+from solver.sltr import SolverError, observe
 
 
 def _intersect(p, angle_p, q, angle_q) -> np.ndarray:

@@ -21,7 +21,7 @@ in the caller's unit (cm in mirrorsim).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -31,8 +31,9 @@ from solver.geometry import line_normal, reflect, unit, wrap_bearing, wrap_yaw
 ArrayLike = np.typing.ArrayLike
 EPS = 1e-9
 
-__all__ = ["SolverError", "MirrorLine", "Observation", "Solution", "BeaconMeasurement",
-           "Sigma", "observe", "locate", "solve_single", "solve_lsq", "solve_measurements"]
+__all__ = ["SolverError", "MirrorLine", "Observation", "Solution", "BatchEstimate", "observe",
+           "locate", "mirror_from_beacon", "ray_hits_line", "solve_single",
+           "closed_form_unchecked"]
 
 
 @dataclass(frozen=True)
@@ -122,9 +123,7 @@ class Solution:
     target_reflection_point: np.ndarray
     beacon_reflection_points: np.ndarray  # (k, 2)
     covariance: np.ndarray | None = None  # of (θ [deg], ρ, x_t, y_t)
-    residuals: np.ndarray | None = None  # weighted, at the solution
     method: str = "closed form"
-    extra: dict = field(default_factory=dict)
 
     @property
     def target_covariance(self) -> np.ndarray | None:
@@ -193,8 +192,7 @@ def mirror_from_beacon(observer: ArrayLike, beacon: ArrayLike, alpha_deg: ArrayL
     d = np.asarray(d_total, float)
     if np.any(~np.isfinite(d)) or np.any(d <= 0):
         raise SolverError(f"beacon d_total must be positive, got {d}")
-    bv = virtual_image(o, alpha_deg, d)
-    sep = bv - b
+    yaw, mid, bv, sep = _bisector(o, b, alpha_deg, d)
     dist = np.hypot(sep[..., 0], sep[..., 1])
     if np.any(dist < 1e-6 * np.maximum(1.0, d)):
         raise SolverError("the beacon's image coincides with the beacon: it stands on the "
@@ -205,10 +203,7 @@ def mirror_from_beacon(observer: ArrayLike, beacon: ArrayLike, alpha_deg: ArrayL
     if np.any(d < direct - 1e-9 * np.maximum(1.0, d)):
         raise SolverError(f"beacon d_total {_show(d)} is shorter than the beacon's direct "
                           f"distance {_show(direct)}: no mirror can produce this image")
-    mid = (b + bv) / 2.0
-    # the line is perpendicular to B′ − B
-    yaw = wrap_yaw(np.degrees(np.arctan2(sep[..., 1], sep[..., 0])) + 90.0)
-    r = _ray_hits_line(o, alpha_deg, mid, yaw)
+    r = ray_hits_line(o, alpha_deg, mid, yaw)
     return np.asarray(yaw), mid, r
 
 
@@ -218,14 +213,34 @@ def _show(x) -> str:
     return f"{float(a):g}" if a.ndim == 0 else np.array2string(a, separator=", ")
 
 
-def _ray_hits_line(o, alpha_deg, point, yaw_deg) -> np.ndarray:
-    """Where the ray from o at bearing α meets the line (raises if parallel or behind)."""
+def _bisector(o: np.ndarray, b: np.ndarray, alpha_deg: ArrayLike, d_total: ArrayLike
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The perpendicular bisector of the beacon B and its virtual image B′ (broadcasts):
+    ``(yaw_deg, midpoint, B′, B′ − B)``, unchecked."""
+    bv = virtual_image(o, alpha_deg, d_total)
+    sep = bv - b
+    # B and B′ are at equal distances from every point of the mirror: the line is
+    # perpendicular to B′ − B through their midpoint
+    yaw = wrap_yaw(np.degrees(np.arctan2(sep[..., 1], sep[..., 0])) + 90.0)
+    return yaw, (b + bv) / 2.0, bv, sep
+
+
+def _ray_parameter(o, alpha_deg, point, yaw_deg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The ray from o at bearing α against the line: its direction u, u·n and the
+    parameter t where it meets the line (inf or nan where parallel), unchecked."""
     u = unit(alpha_deg)
     n = line_normal(yaw_deg)
     denom = np.sum(u * n, axis=-1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.sum((np.asarray(point, float) - o) * n, axis=-1) / denom
+    return u, denom, t
+
+
+def ray_hits_line(o, alpha_deg, point, yaw_deg) -> np.ndarray:
+    """Where the ray from o at bearing α meets the line (raises if parallel or behind)."""
+    u, denom, t = _ray_parameter(o, alpha_deg, point, yaw_deg)
     if np.any(np.abs(denom) < 1e-9):
         raise SolverError("the observation ray runs parallel to the mirror line")
-    t = np.sum((np.asarray(point, float) - o) * n, axis=-1) / denom
     if np.any(t <= 0):
         raise SolverError("the mirror line lies behind the observer along this ray")
     return o + t[..., None] * u
@@ -245,7 +260,7 @@ def solve_single(observer: ArrayLike, beacon: ArrayLike, beacon_alpha_deg: Array
     if np.any(~np.isfinite(dt)) or np.any(dt <= 0):
         raise SolverError(f"target d_total must be positive, got {dt}")
     yaw, mid, rb = mirror_from_beacon(o, beacon, beacon_alpha_deg, beacon_d_total)
-    rt = _ray_hits_line(o, target_alpha_deg, mid, yaw)
+    rt = ray_hits_line(o, target_alpha_deg, mid, yaw)
     d1 = np.linalg.norm(rt - o, axis=-1)
     if np.any(dt <= d1):
         raise SolverError(f"target d_total {_show(dt)} does not reach past the mirror "
@@ -256,174 +271,22 @@ def solve_single(observer: ArrayLike, beacon: ArrayLike, beacon_alpha_deg: Array
                     beacon_reflection_points=np.atleast_2d(rb) if np.ndim(yaw) == 0 else rb)
 
 
+@dataclass(frozen=True)
+class BatchEstimate:
+    """:func:`closed_form_unchecked`'s estimates, one per draw (arrays over draws)."""
+
+    yaw_deg: np.ndarray
+    mirror_point: np.ndarray
+    target: np.ndarray
+    target_reflection_point: np.ndarray
+
+
 def closed_form_unchecked(observer, beacon, beacon_alpha_deg, beacon_d_total,
-                          target_alpha_deg, target_d_total) -> dict[str, np.ndarray]:
+                          target_alpha_deg, target_d_total) -> BatchEstimate:
     """:func:`solve_single`'s arithmetic without its checks, for Monte Carlo batches
-    where a few noisy draws may be physically impossible (they still give a line).
-
-    Returns arrays ``yaw_deg``, ``mirror_point``, ``target``, ``target_reflection_point``.
-    """
+    where a few noisy draws may be physically impossible (they still give a line)."""
     o, b = np.asarray(observer, float), np.asarray(beacon, float)
-    bv = virtual_image(o, beacon_alpha_deg, beacon_d_total)
-    sep = bv - b
-    yaw = wrap_yaw(np.degrees(np.arctan2(sep[..., 1], sep[..., 0])) + 90.0)
-    mid = (b + bv) / 2.0
-    u, n = unit(target_alpha_deg), line_normal(yaw)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = np.sum((mid - o) * n, axis=-1) / np.sum(u * n, axis=-1)
-    return {"yaw_deg": np.asarray(yaw), "mirror_point": mid,
-            "target": locate(o, mid, yaw, target_alpha_deg, target_d_total),
-            "target_reflection_point": o + t[..., None] * u}
-
-
-# --------------------------------------------------------------- least squares
-
-
-@dataclass(frozen=True)
-class BeaconMeasurement:
-    """A beacon's known position and its image's measured α and d_total."""
-
-    position: tuple[float, float]
-    alpha_deg: float
-    d_total: float
-
-
-@dataclass(frozen=True)
-class Sigma:
-    """Measurement standard deviations: α in degrees, d_total relative (0.002 = 0.2 %)."""
-
-    alpha_deg: float = 0.01
-    d_total_rel: float = 0.002
-
-
-def predict(params: np.ndarray, observer: np.ndarray, points: np.ndarray
-            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """α, d of ``points`` (k, 2) seen in the mirror (θ, ρ) = params[:2], with derivatives.
-
-    Returns
-    -------
-    alpha_deg, d : (k,)
-    dalpha, dd : (k, 4)
-        Derivatives with respect to (θ [deg], ρ, x, y) of the point.
-    """
-    theta, rho = params[0], params[1]
-    th = np.radians(theta)
-    n = np.array([-np.sin(th), np.cos(th)])
-    dn = np.array([-np.cos(th), -np.sin(th)])  # dn/dθ (per radian)
-    s = points @ n - rho
-    v = points - 2.0 * s[:, None] * n
-    rel = v - observer
-    d = np.hypot(rel[:, 0], rel[:, 1])
-    alpha = np.degrees(np.arctan2(rel[:, 1], rel[:, 0]))
-    # dv/dθ = −2 (dn·p) n − 2 s dn ; dv/dρ = 2 n ; dv/dp = I − 2 n nᵀ
-    dv_dth = (-2.0 * (points @ dn)[:, None] * n - 2.0 * s[:, None] * dn) * np.pi / 180.0
-    dv_drho = np.broadcast_to(2.0 * n, v.shape)
-    R = np.eye(2) - 2.0 * np.outer(n, n)
-    # dα/dv = (−rel_y, rel_x)/d² (radians) ; dd/dv = rel/d
-    ga = np.stack([-rel[:, 1], rel[:, 0]], axis=1) / d[:, None] ** 2 * (180.0 / np.pi)
-    gd = rel / d[:, None]
-    dalpha = np.column_stack([np.sum(ga * dv_dth, 1), np.sum(ga * dv_drho, 1), ga @ R])
-    dd = np.column_stack([np.sum(gd * dv_dth, 1), np.sum(gd * dv_drho, 1), gd @ R])
-    return alpha, d, dalpha, dd
-
-
-def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
-              targets: list[tuple[float, float]], sigma: Sigma | None = None,
-              initial: Solution | None = None) -> Solution:
-    """Weighted nonlinear least squares for the mirror line and the target.
-
-    Parameters
-    ----------
-    observer : (2,)
-    beacons : list of BeaconMeasurement
-        One or more beacons, or several observations of one moving beacon.
-    targets : list of (alpha_deg, d_total)
-        One or more observations of the (static) target.
-    sigma : Sigma, optional
-        Weights and covariance; without it, unit weights in (0.01°, 0.2 %) are assumed
-        and no covariance is reported.
-    initial : Solution, optional
-        Start point (default: the closed form of the first beacon).
-    """
-    if not beacons or not targets:
-        raise SolverError("least squares needs at least one beacon and one target observation")
-    o = np.asarray(observer, float)
-    s = sigma or Sigma()
-    if s.alpha_deg <= 0 or s.d_total_rel <= 0:
-        raise SolverError(f"sigmas must be positive, got {s}")
-    bpos = np.array([b.position for b in beacons], float)
-    meas_a = np.array([b.alpha_deg for b in beacons] + [t[0] for t in targets], float)
-    meas_d = np.array([b.d_total for b in beacons] + [t[1] for t in targets], float)
-    if np.any(meas_d <= 0) or not np.all(np.isfinite(meas_d)) or not np.all(np.isfinite(meas_a)):
-        raise SolverError("distances must be positive and all measurements finite")
-    init = initial or solve_single(o, bpos[0], beacons[0].alpha_deg, beacons[0].d_total,
-                                   targets[0][0], targets[0][1])
-    x0 = np.array([init.mirror.yaw_deg, init.mirror.rho, *init.target])
-    nb = len(beacons)
-    w_a = np.full(len(meas_a), 1.0 / s.alpha_deg)
-    w_d = 1.0 / (s.d_total_rel * meas_d)
-
-    def points_of(x):
-        return np.vstack([bpos, np.broadcast_to(x[2:], (len(targets), 2))])
-
-    def fun(x):
-        a, d, _, _ = predict(x, o, points_of(x))
-        return np.concatenate([w_a * wrap_bearing(a - meas_a), w_d * (d - meas_d)])
-
-    def jac(x):
-        _, _, da, dd = predict(x, o, points_of(x))
-        # beacons do not depend on the target's coordinates
-        da[:nb, 2:] = 0.0
-        dd[:nb, 2:] = 0.0
-        return np.vstack([w_a[:, None] * da, w_d[:, None] * dd])
-
-    from scipy.optimize import least_squares  # scipy is slow to import: only when used
-
-    res = least_squares(fun, x0, jac=jac, method="lm" if len(meas_a) * 2 >= 4 else "trf",
-                        xtol=1e-15, ftol=1e-15, gtol=1e-15)
-    x = res.x
-    J = jac(x)
-    jtj = J.T @ J
-    if np.linalg.cond(jtj) > 1e14:
-        raise SolverError("the measurements do not determine the mirror and the target "
-                          "(singular Jacobian)")
-    cov = np.linalg.inv(jtj) if sigma is not None else None
-    line = MirrorLine.from_params(x[0], x[1])
-    # report the foot of the first beacon on the line (the closed form's midpoint of B, B′)
-    foot = bpos[0] - (line_normal(x[0]) @ bpos[0] - x[1]) * line_normal(x[0])
-    mirror = MirrorLine(line.yaw_deg, foot)
-    target = x[2:].copy()
-    a_t = np.mean([t[0] for t in targets])
-    rt = _ray_hits_line(o, a_t, mirror.point, mirror.yaw_deg)
-    rb = np.array([observe(o, mirror.point, mirror.yaw_deg, p).reflection_point for p in bpos])
-    return Solution(mirror=mirror, target=target, target_reflection_point=rt,
-                    beacon_reflection_points=rb, covariance=cov, residuals=res.fun,
-                    method=f"least squares ({nb} beacon obs, {len(targets)} target obs)")
-
-
-def solve_measurements(observer, beacons: list[BeaconMeasurement],
-                       targets: list[tuple[float, float]], sigma: Sigma | None = None
-                       ) -> Solution:
-    """The solver's front door: the closed form for one beacon and one target without
-    σ's, weighted least squares (with covariance when σ's are given) otherwise."""
-    if len(beacons) == 1 and len(targets) == 1:
-        b = beacons[0]
-        sol = solve_single(observer, b.position, b.alpha_deg, b.d_total, *targets[0])
-        if sigma is None:
-            return sol
-        # four measurements, four unknowns: least squares is the closed form, and the
-        # covariance is J⁻¹ Σ J⁻ᵀ (no iterations, and no scipy to import)
-        params = np.array([sol.mirror.yaw_deg, sol.mirror.rho, *sol.target])
-        o = np.asarray(observer, float)
-        pts = np.vstack([np.asarray(b.position, float), sol.target])
-        _, d, da, dd = predict(params, o, pts)
-        J = np.array([[*da[0, :2], 0, 0], [*dd[0, :2], 0, 0], da[1], dd[1]])
-        sd = np.array([sigma.alpha_deg, sigma.d_total_rel * b.d_total,
-                       sigma.alpha_deg, sigma.d_total_rel * targets[0][1]])
-        if abs(np.linalg.det(J)) < 1e-12:
-            raise SolverError("the measurements do not determine the mirror and the target "
-                              "(singular Jacobian)")
-        Jinv = np.linalg.inv(J)
-        cov = Jinv @ np.diag(sd**2) @ Jinv.T
-        return replace(sol, covariance=cov, method="closed form with covariance")
-    return solve_lsq(observer, beacons, targets, sigma)
+    yaw, mid, _, _ = _bisector(o, b, beacon_alpha_deg, beacon_d_total)
+    u, _, t = _ray_parameter(o, target_alpha_deg, mid, yaw)
+    return BatchEstimate(np.asarray(yaw), mid, locate(o, mid, yaw, target_alpha_deg,
+                                                       target_d_total), o + t[..., None] * u)

@@ -23,7 +23,7 @@ from mirrorsim.rendering.passes import IN_MIRROR
 from mirrorsim.rendering.sensor import add_noise, undistort_points
 from mirrorsim.scene import imperfections
 from mirrorsim.scene.model import Bench, SensorNoise
-from mirrorsim.truth import optics
+from mirrorsim.truth import groundtruth, optics, visibility
 
 from .conftest import scene_dict
 
@@ -239,7 +239,7 @@ def test_tilted_mirror_moves_the_image_as_the_reflection_says(ideal):
 
 
 def test_visibility_reflects_in_the_tilted_glass_as_the_closed_form():
-    """The visibility checks' reflection (optics.glass_hits) in a tilted glass: the
+    """The visibility checks' reflection (visibility.glass_hits) in a tilted glass: the
     apparent point is the point reflected across the tilted plane (closed form), and the
     reflection point lies on that plane."""
     scene = bench_scene(mirror={"tilt": 3.0})
@@ -249,24 +249,24 @@ def test_visibility_reflects_in_the_tilted_glass_as_the_closed_form():
     n1 = math.cos(t) * n0 + math.sin(t) * np.array([0, 0, 1.0])
     pivot = np.r_[m.center, 0.0]
     pts = np.array([[*scene.target.position, z] for z in (0.0, 7.0, scene.target.height)])
-    a, b, apparent = optics.glass_hits(scene, pts)
+    a, b, apparent = visibility.glass_hits(scene, pts)
     for q, app in zip(pts, apparent, strict=True):
         assert app == pytest.approx(_reflect(q, pivot, n1), abs=1e-9)
-    g, along, up, n = optics.glass_frame(scene)
+    g, along, up, n = visibility.glass_frame(scene)
     assert n == pytest.approx(n1) and (g - pivot) @ n1 == pytest.approx(0.0, abs=1e-12)
 
 
 def test_visibility_sees_the_curved_glass_where_the_render_does(ideal):
     """The image of the target's axis through a concave glass (R = 600): where
-    optics.glass_hits puts its foot and top and the column of its axis, against the
+    visibility.glass_hits puts its foot and top and the column of its axis, against the
     detector's measurement on the render, both as shifts from the flat mirror."""
     scene0, _, det0, tmp = ideal
     scene = bench_scene(mirror={"curvature_radius": 600.0})
     _, det = measure(scene, tmp, "curved_for_visibility")
     pts = np.array([[*scene.target.position, 0.0], [*scene.target.position,
                                                      scene.target.height]])
-    u0, v0, _ = optics.project(scene0.camera, optics.glass_hits(scene0, pts)[2])
-    u1, v1, _ = optics.project(scene.camera, optics.glass_hits(scene, pts)[2])
+    u0, v0, _ = optics.project(scene0.camera, visibility.glass_hits(scene0, pts)[2])
+    u1, v1, _ = optics.project(scene.camera, visibility.glass_hits(scene, pts)[2])
     assert abs(u1[0] - u0[0]) + abs(v1[1] - v0[1]) > 2  # the glass moves it: a real test
     assert det.target.u_axis - det0.target.u_axis == pytest.approx(u1[0] - u0[0], abs=0.5)
     assert det.target.v_bottom - det0.target.v_bottom == pytest.approx(v1[0] - v0[0],
@@ -432,7 +432,7 @@ def test_truth_names_the_bench_it_was_rendered_with(ideal):
     assert "bench" not in files0.truth.to_json()  # the ideal bench's truth as before
     scene = bench_scene(camera={"pan_error": 0.5, "distortion": [-0.05, 0.0],
                                 "distortion_known": False})
-    truth = optics.ground_truth(scene).to_json()
+    truth = groundtruth.ground_truth(scene).to_json()
     assert truth["bench"] == {"camera.pan_error": 0.5, "camera.distortion": [-0.05, 0.0],
                               "camera.distortion_known": False}
     # and the truth is the ideal geometry: the pan error is not in it

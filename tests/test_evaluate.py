@@ -126,11 +126,11 @@ def test_full_size_end_to_end(name, tmp_path, capsys):
 def test_bundled_scenes_evaluate_contract_fields():
     """The report's error keys are INTERFACE.md's (checked on the score function)."""
     from mirrorsim.pipelines.score import score
-    from mirrorsim.truth import optics
-    from solver.sltr import solve_measurements
+    from mirrorsim.truth import groundtruth
+    from solver.lsq import solve_measurements
 
     s = load_scene(SCENES / "exp3.yaml")
-    t = optics.ground_truth(s)
+    t = groundtruth.ground_truth(s)
     meas = t.exact_measurements()
     sol = solve_measurements(meas.observer, meas.beacons, meas.targets)
     e = score(t, meas, sol).to_json()

@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 
 from mirrorsim.formats.scenefile import scene_from_dict
 from mirrorsim.scene.model import MIRROR_LIP, Camera, Mirror
-from mirrorsim.truth import optics
+from mirrorsim.truth import groundtruth, optics, visibility
 from solver.geometry import signed_distance, unit
 
 from .conftest import scene_dict
@@ -49,7 +49,7 @@ def test_virtual_image_properties(cx, cy, mx, my, yaw, px, py):
 def test_ground_truth_matches_interface_figures():
     """INTERFACE.md quotes exp1's geometry: alpha and d_total of target and beacon."""
     s = scene_from_dict(scene_dict("exp1"))
-    gt = optics.ground_truth(s).to_json()
+    gt = groundtruth.ground_truth(s).to_json()
     assert gt["target"]["alpha_deg"] == pytest.approx(66.678, abs=1e-3)
     assert gt["target"]["d_total"] == pytest.approx(98.523, abs=1e-3)
     assert gt["beacons"][0]["alpha_deg"] == pytest.approx(69.499, abs=1e-3)
@@ -88,14 +88,14 @@ def test_vertical_clipping_by_the_mirror_top(height):
     img = optics.mirror_image(s.camera.position, s.mirror, s.target.position)
     t = img.d1 / img.d_total
     z_cross = height + t * (target_h - height)
-    vis = optics.visibility(s, s.target)
+    vis = visibility.visibility(s, s.target)
     if z_cross <= mirror_h:
         assert vis.axis_fraction == 1.0
     else:
         # the part of the axis above the height whose ray meets the mirror's top edge is lost
         z_max = height + (mirror_h - height) / t
         expected = (z_max / target_h)
-        assert vis.axis_fraction == pytest.approx(expected, abs=1.0 / (optics.AXIS_SAMPLES - 1))
+        assert vis.axis_fraction == pytest.approx(expected, abs=1.0 / (visibility.AXIS_SAMPLES - 1))
         assert "above its top edge" in vis.reason
 
 
@@ -104,15 +104,15 @@ def test_not_nlos_is_a_warning_not_an_error():
     d["occluders"] = []
     s = scene_from_dict(d)
     assert any("directly" in w for w in s.warnings)
-    assert optics.direct_view_fraction(s, s.target) == 1.0
+    assert visibility.direct_view_fraction(s, s.target) == 1.0
 
 
 def test_bundled_scenes_are_nlos():
     for name in ("default", "exp1", "exp2", "exp3"):
         s = scene_from_dict(scene_dict(name))
-        assert optics.direct_view_fraction(s, s.target) == 0.0, name
+        assert visibility.direct_view_fraction(s, s.target) == 0.0, name
         for b in s.beacons:
-            assert optics.visibility(s, b).fraction == 1.0, name
+            assert visibility.visibility(s, b).fraction == 1.0, name
 
 
 @pytest.mark.parametrize("end", [-1.0, 1.0])
@@ -135,5 +135,5 @@ def test_the_frame_hides_the_strip_of_glass_beside_it(end):
         d_in = (r - np.asarray(cam.position)) / np.linalg.norm(r - cam.position)
         d_out = d_in - 2 * (d_in @ n) * n
         point = r + 25.0 * d_out  # 25 cm on along the reflected ray
-        why = optics._column_failures(s, [], point, np.array([z]))[0]
+        why = visibility._column_failures(s, [], point, np.array([z]))[0]
         assert ("meets the frame" in why) == lost, (factor, why)

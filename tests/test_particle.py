@@ -107,7 +107,7 @@ def test_a_sharp_likelihood_does_not_strand_the_filter():
     of 12 moves every final yaw error is within 0.05° of the batch smoother's (with Liu
     and West's kernel, one run in ten stayed 4° off, and the median was 0.36° against the
     smoother's 0.02° on 20-move runs)."""
-    from solver.sltr import Sigma
+    from solver.lsq import Sigma
 
     bench = _bench_particle()
     params = PFParams(sigma=Sigma(0.005, 0.006), sigma_trs=0.001)

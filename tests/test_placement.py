@@ -5,6 +5,7 @@ import math
 import numpy as np
 import pytest
 
+from solver.lsq import BeaconMeasurement, Sigma, solve_lsq, solve_measurements
 from solver.placement import (
     MirrorPrior,
     algorithm1,
@@ -17,7 +18,7 @@ from solver.placement import (
     polyline_length,
     region_area,
 )
-from solver.sltr import BeaconMeasurement, Sigma, observe, solve_lsq, solve_measurements
+from solver.sltr import observe
 
 
 def test_paper_step_and_width_by_slopes():

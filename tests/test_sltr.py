@@ -9,15 +9,8 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from solver.geometry import line_normal, signed_distance, unit
-from solver.sltr import (
-    BeaconMeasurement,
-    Sigma,
-    SolverError,
-    locate,
-    observe,
-    solve_lsq,
-    solve_single,
-)
+from solver.lsq import BeaconMeasurement, Sigma, solve_lsq
+from solver.sltr import SolverError, locate, observe, solve_single
 
 c = st.floats(-100, 100, allow_nan=False)
 
@@ -136,7 +129,7 @@ def test_least_squares_agrees_with_closed_form_on_one_beacon():
 
 
 def test_closed_form_covariance_equals_least_squares():
-    from solver.sltr import solve_measurements
+    from solver.lsq import solve_measurements
 
     o = np.zeros(2)
     bs, ts = _measure(o, (16.0, 34.5), 38.3, [(17, 33.5)], (65.5, 42.7))

@@ -75,10 +75,10 @@ def test_closed_form_unchecked_agrees_with_solve_single():
     batch = closed_form_unchecked(np.zeros(2), g["beacon"], ab, db, at, dt)
     for k in range(50):
         one = solve_single(np.zeros(2), g["beacon"], ab[k], db[k], at[k], dt[k])
-        assert np.allclose(batch["target"][k], one.target, atol=1e-12)
-        assert np.allclose(batch["target_reflection_point"][k], one.target_reflection_point,
+        assert np.allclose(batch.target[k], one.target, atol=1e-12)
+        assert np.allclose(batch.target_reflection_point[k], one.target_reflection_point,
                            atol=1e-12)
-        assert abs(batch["yaw_deg"][k] - one.mirror.yaw_deg) < 1e-10
+        assert abs(batch.yaw_deg[k] - one.mirror.yaw_deg) < 1e-10
 
 
 def test_solve_exact_measurements_of_exp1(tmp_path):

@@ -105,7 +105,7 @@ def test_paths_stay_on_the_board_and_in_front_of_the_glass(name, kind):
 
     from mirrorsim.formats.scenefile import load_scene
     from mirrorsim.pipelines.track import CLEARANCE_CM, beacon_path
-    from mirrorsim.truth.optics import ground_truth
+    from mirrorsim.truth.groundtruth import ground_truth
     from solver.geometry import signed_distance
 
     scene = load_scene(SCENES / f"{name}.yaml")
@@ -131,7 +131,8 @@ def test_the_view_heading_keeps_the_beacon_in_the_mirror(name):
 
     from mirrorsim.formats.scenefile import load_scene
     from mirrorsim.pipelines.track import beacon_path
-    from mirrorsim.truth.optics import ground_truth, visibility
+    from mirrorsim.truth.groundtruth import ground_truth
+    from mirrorsim.truth.visibility import visibility
 
     scene = load_scene(SCENES / f"{name}.yaml")
     gt = ground_truth(scene)
@@ -169,7 +170,7 @@ def test_the_path_does_not_read_the_scene_s_mirror_or_target():
 
     from mirrorsim.formats.scenefile import load_scene
     from mirrorsim.pipelines.track import beacon_path
-    from mirrorsim.truth.optics import ground_truth
+    from mirrorsim.truth.groundtruth import ground_truth
 
     scene = load_scene(SCENES / "exp1.yaml")
     gt = ground_truth(scene)

@@ -39,7 +39,7 @@ def _solve_options(p):
 def _solve(args) -> int:
     from mirrorsim.cli.tables import solution_summary
     from mirrorsim.formats.measurements import load_measurements
-    from solver.sltr import solve_measurements
+    from solver.lsq import solve_measurements
 
     m = load_measurements(args.measurements)
     sigma = m.sigma or error_model_sigma(args)
@@ -119,7 +119,7 @@ def _plan(args) -> int:
     from mirrorsim.cli.plots import plot_plan
     from mirrorsim.cli.tables import plan_text
     from mirrorsim.pipelines.planning import plan_scene, plan_summary
-    from solver.sltr import Sigma
+    from solver.lsq import Sigma
 
     finite(args, "sigma_alpha", "sigma_d", "eps", "yaw_spread", "d1_spread", "step")
     scene = load(args.scene)

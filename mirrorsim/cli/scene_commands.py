@@ -43,11 +43,11 @@ def _check_options(p):
          _check_options)
 def _check(args) -> int:
     from mirrorsim.cli.tables import check_table
-    from mirrorsim.truth import optics
+    from mirrorsim.truth import groundtruth
 
     scene = load(args.scene)
     print(check_table(scene))
-    truth = optics.ground_truth(scene)
+    truth = groundtruth.ground_truth(scene)
     emit_json(args.json, truth.to_json())
     if args.measurements:
         emit_json(args.measurements, {**truth.exact_measurements().to_json(),

@@ -8,7 +8,7 @@ from mirrorsim.detection.detector import Detection
 from mirrorsim.pipelines.score import Report
 from mirrorsim.rendering.frames import FrameFiles
 from mirrorsim.scene.model import Scene
-from mirrorsim.truth import optics
+from mirrorsim.truth import optics, visibility
 from solver.sltr import Solution
 
 if TYPE_CHECKING:  # the budget and the track run renders: no Mitsuba import to draw one
@@ -37,14 +37,14 @@ def check_table(scene: Scene) -> str:
     for label, obj in objs:
         img = optics.mirror_image(cam.position, mir, obj.position)
         ext = optics.image_extent(scene, obj)
-        vis = optics.visibility(scene, obj)
+        vis = visibility.visibility(scene, obj)
         rp = f"({img.reflection_point[0]:.2f}, {img.reflection_point[1]:.2f})"
         lines.append(f"{label:<9} {img.alpha_deg:9.3f} {img.d_total:8.3f} {img.d1:7.2f} "
                      f"{img.d2:7.2f} {rp:>16} {img.mirror_offset:+9.2f} {ext.u_axis:7.1f} "
-                     f"{ext.height_px:6.1f} {100 * vis.fraction:4.0f}%")
+                     f"{ext.height:6.1f} {100 * vis.fraction:4.0f}%")
         if vis.reason:
             lines.append(f"          {vis.reason}")
-    direct = optics.direct_view_fraction(scene, scene.target)
+    direct = visibility.direct_view_fraction(scene, scene.target)
     lines.append("target is hidden from the camera's direct view (NLOS)" if direct == 0.0 else
                  f"target is {100 * direct:.0f}% directly visible: not NLOS")
     return "\n".join(lines)

@@ -61,8 +61,8 @@ from mirrorsim.scene.model import (
     Point2,
     pencil_paint_height,
 )
+from solver.lsq import BeaconMeasurement
 from solver.measurements import Measurements
-from solver.sltr import BeaconMeasurement
 
 FRAME_OPEN_PX = 13  # wider than the mirror frame's bars at the distances of our scenes
 MERGED_MIN_AREA = 2000  # px: a grey region this large that is no panel may hold one

@@ -37,7 +37,7 @@ from mirrorsim.scene.model import (
     Target,
     footprints,
 )
-from mirrorsim.truth import optics
+from mirrorsim.truth import optics, visibility
 from solver.geometry import segment_distance, signed_distance
 
 EDGE_ON_LIMIT_DEG = 5.0  # a mirror seen at a more grazing angle than this is edge-on
@@ -357,13 +357,13 @@ def _check_sight(scene: Scene, r: Reader, bkey) -> tuple[str, ...]:
         (f"{bkey(i)}.position", b, "beacon") for i, b in enumerate(scene.beacons)]
     warnings = []
     for key, obj, what in sighted:
-        vis = optics.visibility(scene, obj)
+        vis = visibility.visibility(scene, obj)
         if vis.axis_fraction == 0.0:
             raise r.fail(key, f"{_fmt(obj.position)}: the {what}'s image does not reach the "
                          f"camera through the mirror: {vis.reason}")
         if vis.clipped:
             warnings.append(f"{key}: the {what}'s image is clipped ({vis.reason})")
-    direct = optics.direct_view_fraction(scene, scene.target)
+    direct = visibility.direct_view_fraction(scene, scene.target)
     if direct > 0.0:
         warnings.append(f"target.position: the camera also sees the target directly "
                         f"({100 * direct:.0f}% of its axis unobstructed): not an NLOS set-up")

@@ -22,8 +22,8 @@ from mirrorsim.pipelines.evaluate import evaluate_scene
 from mirrorsim.pipelines.score import Report
 from mirrorsim.scene import imperfections
 from mirrorsim.scene.model import Scene
+from solver.lsq import BeaconMeasurement, solve_measurements
 from solver.measurements import Measurements
-from solver.sltr import BeaconMeasurement, solve_measurements
 
 # central-difference steps: α (deg), d_total (cm), beacon position (cm); the solver is
 # smooth on these scales and far from them its rounding noise (1e-12) is negligible

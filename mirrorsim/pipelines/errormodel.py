@@ -26,7 +26,7 @@ from mirrorsim.formats.files import atomic_path, write_json
 from mirrorsim.formats.measurements import read_sigma
 from mirrorsim.formats.reader import Reader, read_json
 from mirrorsim.scene import imperfections
-from solver.sltr import Sigma
+from solver.lsq import Sigma
 
 FEATURES = ("1", "d_total_cm", "off_axis_deg", "incidence_deg", "inv_height_px")
 # A bench's imperfections (a dataset's bench_* columns) as features, each in the form its

@@ -21,8 +21,8 @@ from mirrorsim.pipelines.score import EXTRA_FILES, FrameRecord, Report, score
 from mirrorsim.rendering.frames import default_out
 from mirrorsim.scene.model import Scene
 from mirrorsim.truth.groundtruth import RenderInfo
+from solver.lsq import Sigma, solve_measurements
 from solver.measurements import Measurements
-from solver.sltr import Sigma, solve_measurements
 
 # Measurement σ's the solver weights with: the detector's accuracy on full-size frames
 # at the default render settings (benchmarks/detect.py; README): α to ~0.005° (p95), the

@@ -17,7 +17,8 @@ from mirrorsim.scene.model import (
     Beacon,
     Scene,
 )
-from mirrorsim.truth import optics
+from mirrorsim.truth import optics, visibility
+from solver.lsq import Sigma
 from solver.measurements import SIGMA_ALPHA_MAX_DEG, SIGMA_D_REL_MAX
 from solver.placement import (
     MirrorPrior,
@@ -30,7 +31,6 @@ from solver.placement import (
     region_area,
     visible_region,
 )
-from solver.sltr import Sigma
 
 AREA_DISTANCES = (25.0, 50.0, 100.0, 200.0, 400.0, 1000.0)
 # cm: finer grids take long without news (exp1 here: 1 cm 7 s, 0.5 cm 11 s, 0.25 cm 26 s)
@@ -96,7 +96,7 @@ def plan_scene(scene: Scene, sigma: Sigma | None = None, eps_deg: float = 5.0,
     def unobstructed(p) -> bool:
         # the true mirror's rectangle, walls and the target panel must let its image through
         moved = replace(scene, beacons=(Beacon((float(p[0]), float(p[1])), height),))
-        return optics.visibility(moved, moved.beacons[0]).fraction == 1.0
+        return visibility.visibility(moved, moved.beacons[0]).fraction == 1.0
 
     best = best_beacon(o, img.alpha_deg, img.d_total, poses, sigma, s, scene.board.size,
                        step=step, keep_out=keep_out, accept=unobstructed)

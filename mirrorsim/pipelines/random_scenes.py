@@ -28,7 +28,7 @@ from mirrorsim.formats.scenefile import (
 )
 from mirrorsim.scene.imperfections import REGISTRY, as_keys
 from mirrorsim.scene.model import PAN_WORDS, Camera, Scene
-from mirrorsim.truth import optics
+from mirrorsim.truth import visibility
 
 DEFAULT_SPEC = Path(__file__).resolve().parents[2] / "scenes" / "dataset_spec.yaml"
 
@@ -317,7 +317,7 @@ def sample_scene(spec: dict, rng: int | np.random.Generator | None, name: str,
             why = "an image clipped or the target seen directly"
             reasons[why] = reasons.get(why, 0) + 1
             continue
-        if all(optics.visibility(s, o).fraction == 1.0 for o in (s.target, *s.beacons)):
+        if all(visibility.visibility(s, o).fraction == 1.0 for o in (s.target, *s.beacons)):
             return s
         why = "an image not whole in the mirror"
         reasons[why] = reasons.get(why, 0) + 1

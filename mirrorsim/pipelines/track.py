@@ -29,7 +29,8 @@ from mirrorsim.errors import BadParameter, DetectionError
 from mirrorsim.pipelines.evaluate import DETECTOR_SIGMA
 from mirrorsim.pipelines.frame import FrameNotMeasured, render_and_measure
 from mirrorsim.scene.model import Bench, Scene
-from mirrorsim.truth.optics import target_facing, visibility
+from mirrorsim.truth.optics import target_facing
+from mirrorsim.truth.visibility import visibility
 from solver.errors import SolverError
 from solver.geometry import bearing_deg, line_normal, ray_line_intersection, unit, wrap_bearing
 from solver.particle import MovingBeaconFilter, PFParams, mirror_errors

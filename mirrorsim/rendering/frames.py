@@ -31,7 +31,7 @@ from mirrorsim.rendering.passes import (
 )
 from mirrorsim.rendering.sensor import to_srgb8
 from mirrorsim.scene.model import Bench, Scene
-from mirrorsim.truth import optics
+from mirrorsim.truth import groundtruth
 from mirrorsim.truth.groundtruth import GroundTruth, MirrorPixels, RenderInfo
 
 
@@ -77,7 +77,7 @@ def scene_fingerprint(scene: Scene, spp: int, seed: int) -> str:
 
 def truth_of(scene: Scene, frame: RenderedFrame, fingerprint: str | None) -> GroundTruth:
     """The exact ground truth with what the id pass saw of each object."""
-    truth = optics.ground_truth(scene)
+    truth = groundtruth.ground_truth(scene)
 
     def seen(obj, label: int):
         bbox, n = _mask_stats(frame.in_mirror == label)

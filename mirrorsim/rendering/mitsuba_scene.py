@@ -30,7 +30,7 @@ from mirrorsim.scene.model import (
     Target,
     pencil_paint_height,
 )
-from mirrorsim.truth import optics
+from mirrorsim.truth import optics, visibility
 from solver.geometry import line_normal, unit
 
 # Labels of the object-id pass.  Beacons take BEACON_LABEL + i, occluders after them.
@@ -195,7 +195,7 @@ def build_scene_dict(scene: Scene, *, spp: int,
         nn = _v3(line_normal(math.degrees(math.atan2(u[1], u[0])))) * OCCLUDER_THICKNESS / 2
         d[f"occluder{i}_wall"] = _box(_v3((p0 + p1) / 2, o.height / 2), u, nn,
                                       ZHAT * o.height / 2, "occluder")
-    return _recentred(d, optics.glass_frame(scene)[0])
+    return _recentred(d, visibility.glass_frame(scene)[0])
 
 
 # Mitsuba spawns each reflected ray (1 + max|p|)·2⁻²⁴·1500 off the surface along its
@@ -301,7 +301,7 @@ def _mirror_shapes(scene: Scene) -> dict:
     """
     m, bench = scene.mirror, scene.bench
     w, h = m.size
-    g, along, up, n = optics.glass_frame(scene)
+    g, along, up, n = visibility.glass_frame(scene)
     c = g - up * h / 2  # the middle of its bottom edge
     back = 0.0  # how far the curved glass's rim stands behind its centre
     if bench.curvature_radius is None:
@@ -316,7 +316,7 @@ def _mirror_shapes(scene: Scene) -> dict:
                              up * h / 2, "mirror_back")}
     # the frame runs from 0.5 behind the glass's rim to MIRROR_LIP before it
     fw, depth = MIRROR_FRAME, (0.5 + MIRROR_LIP) / 2
-    mid = optics.frame_front(scene) - depth
+    mid = visibility.frame_front(scene) - depth
     for k, s in enumerate((-1, 1)):
         d[f"mirror_frame{k}"] = _box(c + along * s * (w + fw) / 2 + up * (h + fw) / 2
                                      + n * mid, n * depth, along * fw / 2,
@@ -339,7 +339,7 @@ def _spherical_glass(centre, along, up, n, size, radius: float) -> tuple[mi.Mesh
     na, nb = (max(2, math.ceil(s / GLASS_CELL_CM) + 1) for s in (w, h))
     a, b = np.meshgrid(np.linspace(-w / 2, w / 2, na), np.linspace(-h / 2, h / 2, nb))
     a, b = a.ravel(), b.ravel()
-    sag = optics.sag(a, b, radius)
+    sag = visibility.sag(a, b, radius)
     verts = centre + np.outer(a, along) + np.outer(b, up) + np.outer(sag, n)
     normals = (np.outer(-a, along) + np.outer(-b, up) + np.outer(radius - sag, n)) / radius
     faces = []

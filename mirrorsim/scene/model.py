@@ -20,7 +20,7 @@ MIRROR_DEPTH = 0.6  # glass + dark backing + frame, behind the reflective plane
 MIRROR_FRAME = 0.5  # frame width on the sides and top, outside the reflective area
 # how far the frame's front stands before the glass's rim: a ray leaving the glass at a
 # slant meets the frame's inner side within MIRROR_LIP·tan(incidence) of the edge, so
-# the frame hides that strip of the reflection (optics.visibility counts it)
+# the frame hides that strip of the reflection (visibility.visibility counts it)
 MIRROR_LIP = 0.05
 TARGET_THICKNESS = 0.4
 # Mitsuba samplers a scene may name: plain random, or stratified in every dimension

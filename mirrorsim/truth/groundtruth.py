@@ -9,24 +9,17 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from mirrorsim.scene.model import Camera, Mirror, Occluder, Point2
+from mirrorsim.scene.imperfections import as_keys
+from mirrorsim.scene.model import Camera, Mirror, Occluder, Point2, Scene
+from mirrorsim.truth import optics, visibility
+from mirrorsim.truth.optics import ImagePx
 from solver.geometry import wrap_yaw
+from solver.lsq import BeaconMeasurement
 from solver.measurements import Measurements
-from solver.sltr import BeaconMeasurement
 
 
 def _pt(v) -> Point2:
     return (float(v[0]), float(v[1]))
-
-
-@dataclass(frozen=True)
-class ImagePx:
-    """Exact pinhole projection of an object's upright axis (px)."""
-
-    u_axis: float
-    v_top: float
-    v_bottom: float
-    height: float
 
 
 @dataclass(frozen=True)
@@ -206,3 +199,39 @@ class GroundTruth:
             targets=[(self.target.alpha_deg, self.target.d_total)],
             beacons=[BeaconMeasurement(b.position, b.alpha_deg, b.d_total)
                      for b in self.beacons])
+
+
+def ground_truth(scene: Scene) -> GroundTruth:
+    """The exact ground truth of a scene; the renderer adds what its id pass sees."""
+    cam, mir = scene.camera, scene.mirror
+
+    def entry(obj, **extra) -> ObjectTruth:
+        img = optics.mirror_image(cam.position, mir, obj.position)
+        ext = optics.image_extent(scene, obj)
+        vis = visibility.visibility(scene, obj)
+        return ObjectTruth(
+            position=tuple(obj.position), virtual=_r2(img.virtual), alpha_deg=_r(img.alpha_deg),
+            d_total=_r(img.d_total), d1=_r(img.d1), d2=_r(img.d2),
+            reflection_point=_r2(img.reflection_point), mirror_offset=_r(img.mirror_offset),
+            image_px=ImagePx(_r(ext.u_axis), _r(ext.v_top), _r(ext.v_bottom),
+                             _r(ext.height)),
+            visible_fraction=_r(vis.fraction), clipped=vis.clipped, **extra)
+
+    return GroundTruth(
+        scene=scene.name, camera=cam, mirror=mir,
+        target=entry(scene.target, size=tuple(scene.target.size),
+                     facing_deg=_r(scene.target.facing_deg)),
+        beacons=tuple(entry(b, height=b.height) for b in scene.beacons),
+        occluders=scene.occluders,
+        direct_view_fraction=_r(visibility.direct_view_fraction(scene, scene.target)),
+        bench=as_keys(scene) or None)
+
+
+def _r(x: float) -> float:
+    """Round for JSON: 1e-9 cm / deg is far below anything measurable."""
+    return round(float(x), 9)
+
+
+def _r2(v) -> tuple[float, float]:
+    return (_r(v[0]), _r(v[1]))
+
