@@ -22,33 +22,22 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from solver.geometry import line_normal, wrap_bearing  # noqa: E402
+from solver.geometry import line_normal  # noqa: E402
 from solver.lsq import Sigma  # noqa: E402
 from solver.particle import PFParams, mirror_errors, simulate_run, track  # noqa: E402
 from solver.placement import path_points  # noqa: E402
-from solver.sltr import observe
+from solver.smoother import smooth_run  # noqa: E402
 
 OBSERVER, MIRROR, YAW = np.zeros(2), np.array([27.5, 65.0]), 38.0
 
 
 def batch_yaw_error(start, controls, obs, true, params: PFParams) -> float:
-    """|yaw error| of the least-squares smoother over these steps (started at the truth:
-    it finds the optimum nearest it)."""
-    from scipy.optimize import least_squares
-
-    k, s = len(controls), params.sigma
-
-    def residuals(x):
-        b = x[2:].reshape(k + 1, 2)
-        o = observe(OBSERVER, x[1] * line_normal(x[0]), x[0], b[1:], strict=False)
-        return np.concatenate([
-            (b[0] - start) / params.sigma_trs,
-            ((b[1:] - b[:-1] - controls) / params.sigma_trs).ravel(),
-            wrap_bearing(np.asarray(o.alpha_deg) - obs[:, 0]) / s.alpha_deg,
-            (np.asarray(o.d_total) - obs[:, 1]) / (s.d_total_rel * obs[:, 1])])
-
-    x0 = np.r_[YAW, line_normal(YAW) @ MIRROR, true[: k + 1].ravel()]
-    return abs(float(least_squares(residuals, x0).x[0]) - YAW)
+    """|yaw error| of the batch smoother over these steps (started at the truth: it finds
+    the optimum nearest it)."""
+    k = len(controls)
+    run = smooth_run(OBSERVER, start, controls, obs, params, YAW, line_normal(YAW) @ MIRROR,
+                     true[: k + 1])
+    return abs(run.yaw_deg - YAW)
 
 
 def main() -> None:

@@ -8,24 +8,19 @@ and the mirror's reflection maps it affinely onto the beacon.  So each particle 
 mirror hypothesis carrying an exact Kalman filter of the beacon (mean, 2×2 covariance),
 weighted by the marginal likelihood of each observation; only the mirror is sampled.
 
-Why (``python benchmarks/particle.py``, 20 runs on EXP1's mirror): the former filter sampled
-the beacon too, in four dimensions with 4000 particles.  Each resampling kept few
-distinct mirrors (its static parameters were only roughened by 0.02° / 0.02 cm), so a
-run whose surviving cloud had locked onto a wrong yaw stayed there: the p90 of the yaw
-error stopped at 0.77° from step 8 on, and 20000 particles lowered it to 0.51° at step 23
-(``benchmarks/particle.py --particles 20000`` at commit 6e07002): sample impoverishment, not a
-wrong likelihood.  Here the beacon is integrated out.  After resampling, the mirror
-hypotheses are moved by Metropolis–Hastings (resample-move, Gilks and Berzuini 2001):
-each proposes a random-walk step scaled by the cloud's own covariance, or a draw from
-the Laplace approximation at the posterior's mode, and accepts it by the marginal
-likelihood of the whole history so far (its Kalman filter replayed from the start), so
-the duplicates become distinct draws of the exact posterior.  This
-replaced Liu and West's shrinkage kernel, which works from the cloud alone: where the
-likelihood is much narrower than the cloud (the detector's 0.005° in α, a beacon that
-does not drift or stands still) a collapsed cloud kept no spread to move by; a
-random walk alone still strands some runs far from the mode, which the Laplace proposal
-reaches at once (``tests/test_particle.py`` holds the filter to the batch smoother on
-such runs).
+Why this design: a static mirror sampled with the beacon in four dimensions keeps few
+distinct mirrors after each resampling, so a cloud that locks onto a wrong yaw stays
+there (sample impoverishment, not a wrong likelihood).  Here the beacon is integrated
+out, and after resampling the mirror hypotheses are moved by Metropolis–Hastings
+(resample-move, Gilks and Berzuini 2001): each proposes a random-walk step scaled by the
+cloud's own covariance, or a draw from the Laplace approximation at the posterior's
+mode, and accepts it by the marginal likelihood of the whole history so far (its Kalman
+filter replayed from the start), so the duplicates become distinct draws of the exact
+posterior.  A kernel that works from the cloud alone (Liu and West's shrinkage) keeps no
+spread to move by where the likelihood is much narrower than the cloud (the detector's
+0.005° in α, a beacon that does not drift); a random walk alone strands some runs far
+from the mode, which the Laplace proposal reaches at once.  ``tests/test_particle.py``
+holds the filter to the batch smoother (:mod:`solver.smoother`) on such runs.
 
 :func:`pf_step` is the pure function; :class:`MovingBeaconFilter` holds the state and
 calls it (tested to agree).

@@ -43,7 +43,9 @@ def test_reflect_across_x_axis_by_hand():
 def test_wraps(a):
     b = wrap_bearing(a)
     assert -180.0 < b <= 180.0
+    # the same direction: cosine and sine both (a bearing wrapped to −a has the cosine)
     assert np.isclose(np.cos(np.deg2rad(a)), np.cos(np.deg2rad(b)), atol=1e-9)
+    assert np.isclose(np.sin(np.deg2rad(a)), np.sin(np.deg2rad(b)), atol=1e-9)
     y = wrap_yaw(a)
     assert 0.0 <= y < 180.0
     assert np.isclose(abs(np.sin(np.deg2rad(a - y))), 0.0, atol=1e-9)

@@ -8,7 +8,6 @@ import pytest
 from mirrorsim.cli.main import main
 from mirrorsim.errors import SceneError
 from mirrorsim.formats.scenefile import load_scene
-from mirrorsim.truth import optics
 
 from .conftest import SCENES
 
@@ -66,9 +65,23 @@ def test_bundled_scenes_load(name):
     # derived values are complete when the model is made: the target faces its
     # reflection point, the camera (pan: mirror or target) points where the file says
     assert math.isfinite(s.camera.pan_deg) and math.isfinite(s.target.facing_deg)
-    rp = optics.mirror_image(s.camera.position, s.mirror, s.target.position).reflection_point
-    assert s.target.facing_deg == pytest.approx(
-        math.degrees(math.atan2(rp[1] - s.target.position[1], rp[0] - s.target.position[0])))
+    # the panel faces the camera's virtual image: the camera reflected across the mirror
+    # line (written out here, apart from the optics)
+    cx, cy = s.camera.position
+    mx, my = s.mirror.center
+    nx, ny = -math.sin(math.radians(s.mirror.yaw)), math.cos(math.radians(s.mirror.yaw))
+    dist = (cx - mx) * nx + (cy - my) * ny
+    vx, vy = cx - 2 * dist * nx, cy - 2 * dist * ny
+    tx, ty = s.target.position
+    assert s.target.facing_deg == pytest.approx(math.degrees(math.atan2(vy - ty, vx - tx)))
+    # the camera pans to the mirror's centre or to the target's virtual image
+    if s.camera.pan == "mirror":
+        aim = (mx, my)
+    else:
+        assert s.camera.pan == "target"
+        td = (tx - mx) * nx + (ty - my) * ny
+        aim = (tx - 2 * td * nx, ty - 2 * td * ny)
+    assert s.camera.pan_deg == pytest.approx(math.degrees(math.atan2(aim[1] - cy, aim[0] - cx)))
 
 
 def test_model_is_immutable_and_complete():

@@ -126,7 +126,7 @@ def test_paths_stay_on_the_board_and_in_front_of_the_glass(name, kind):
 def test_the_view_heading_keeps_the_beacon_in_the_mirror(name):
     """On the rectangular path along the reflected line of sight, the true visibility
     check (the scene's own mirror and walls) sees at least 18 of the 21 poses; along the
-    camera's line (the former default) fewer are seen on exp1 and exp3."""
+    camera's line fewer are seen on exp1 and exp3."""
     from dataclasses import replace
 
     from mirrorsim.formats.scenefile import load_scene

@@ -1,0 +1,48 @@
+"""The batch smoother beside the particle filter: every pose of a moving-beacon run, the
+mirror and the motion estimated at once by least squares.  The best any estimator can do
+with these data, so the reference the filter (:mod:`solver.particle`) is measured against.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from solver.geometry import line_normal, wrap_bearing
+from solver.particle import PFParams
+from solver.sltr import observe
+
+
+@dataclass(frozen=True)
+class SmoothedRun:
+    """The smoother's estimate: the mirror line n(θ)·x = ρ and the beacon at every pose."""
+
+    yaw_deg: float
+    rho: float
+    beacons: np.ndarray  # (k + 1, 2): the start pose, then one per control
+
+
+def smooth_run(observer, start, controls: np.ndarray, observations: np.ndarray,
+               params: PFParams, yaw_deg: float, rho: float, beacons: np.ndarray
+               ) -> SmoothedRun:
+    """Least squares over the odometry (σ_trs per move, the start as believed) and every
+    observation (α, d_total with ``params.sigma``), from the start point (``yaw_deg``,
+    ``rho``, ``beacons``): it finds the optimum nearest that point."""
+    from scipy.optimize import least_squares  # scipy is slow to import: only when used
+
+    k, s = len(controls), params.sigma
+    obs = np.asarray(observations, float)
+    o = np.asarray(observer, float)
+
+    def residuals(x):
+        b = x[2:].reshape(k + 1, 2)
+        seen = observe(o, x[1] * line_normal(x[0]), x[0], b[1:], strict=False)
+        return np.concatenate([
+            (b[0] - start) / params.sigma_trs,
+            ((b[1:] - b[:-1] - controls) / params.sigma_trs).ravel(),
+            wrap_bearing(np.asarray(seen.alpha_deg) - obs[:, 0]) / s.alpha_deg,
+            (np.asarray(seen.d_total) - obs[:, 1]) / (s.d_total_rel * obs[:, 1])])
+
+    x = least_squares(residuals, np.r_[yaw_deg, rho, np.asarray(beacons, float).ravel()]).x
+    return SmoothedRun(float(x[0]), float(x[1]), x[2:].reshape(k + 1, 2))
