@@ -63,7 +63,7 @@ def main() -> None:
         geo_err = float(np.linalg.norm(geo.target - truth))
         geo_yaw = yaw_difference(geo.mirror.yaw_deg, scene.mirror.yaw)
         plan = plan_scene(scene)
-        best = plan["best"]["position"]
+        best = plan.best.position
         moved = replace(scene, name=f"{name}_planned",
                         beacons=(Beacon((float(best[0]), float(best[1])),
                                         scene.beacons[0].height),))

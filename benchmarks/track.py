@@ -40,7 +40,7 @@ def one_run(name: str, run: str, steps: int, spp: int | None, sigma: float, out:
     scene = load_scene(Path("scenes") / f"{name}.yaml")
     kind = run
     if run == "plan's best":
-        best = plan_scene(scene)["best"]["position"]
+        best = plan_scene(scene).best.position
         scene = replace(scene, beacons=(Beacon((float(best[0]), float(best[1])),
                                                scene.beacons[0].height),))
         kind = "fixed"

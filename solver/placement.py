@@ -269,10 +269,24 @@ def expected_target_error(observer, target_alpha_deg: float, target_d_total: flo
     return rmse, count / len(poses)
 
 
+@dataclass(frozen=True)
+class BeaconSearch:
+    """:func:`best_beacon`'s answer: the position, its expected target RMSE and the share
+    of mirror poses that see it; and the whole grid's maps (``xs`` × ``ys``)."""
+
+    position: np.ndarray
+    rmse: float
+    seen_fraction: float
+    xs: np.ndarray
+    ys: np.ndarray
+    map: np.ndarray  # expected target RMSE (cm), inf where refused
+    seen: np.ndarray
+
+
 def best_beacon(observer, target_alpha_deg, target_d_total, poses, sigma: Sigma,
                 mirror_size: float, board: tuple[float, float], step: float = 0.5,
                 keep_out: list[tuple[np.ndarray, np.ndarray, float]] = (),
-                min_seen: float = 1.0, accept=None) -> dict:
+                min_seen: float = 1.0, accept=None) -> BeaconSearch:
     """Grid search over the board for the beacon position with the least expected
     target error among those seen under at least ``min_seen`` of the mirror poses (or,
     where none is, under as many as any position is).  ``keep_out`` holds segments
@@ -298,9 +312,8 @@ def best_beacon(observer, target_alpha_deg, target_d_total, poses, sigma: Sigma,
         k = next((int(i) for i in order[:500] if np.isfinite(score[i]) and accept(grid[i])), -1)
         if k < 0:
             raise SolverError("no acceptable beacon position among the 500 best candidates")
-    return {"position": grid[k], "rmse": float(err[k]), "seen_fraction": float(seen[k]),
-            "xs": xs, "ys": ys, "map": err.reshape(gx.shape),
-            "seen": seen.reshape(gx.shape)}
+    return BeaconSearch(grid[k], float(err[k]), float(seen[k]), xs, ys,
+                        err.reshape(gx.shape), seen.reshape(gx.shape))
 
 
 def _segment_dist(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -118,11 +118,11 @@ def test_expected_error_matches_least_squares_and_best_is_much_better():
                     [(ot.alpha_deg, ot.d_total)], sig)
     assert err[0] == pytest.approx(np.sqrt(np.trace(lsq.target_covariance)), rel=1e-4)
     best = best_beacon(o, ot.alpha_deg, ot.d_total, [(m, yaw)], sig, 18.2, (80, 80), step=1.0)
-    assert best["rmse"] < 0.3
+    assert best.rmse < 0.3
     # with a prior of mirror poses the best position is still an order of magnitude better
     prior = MirrorPrior(d1=float(ot.d1), yaw_deg=yaw, d1_spread=2, yaw_spread_deg=3)
     poses = prior.poses(o, ot.alpha_deg)
     best = best_beacon(o, ot.alpha_deg, ot.d_total, poses, sig, 18.2, (80, 80), step=1.0)
     paper, _ = expected_target_error(o, ot.alpha_deg, ot.d_total, np.array([[17.0, 33.5]]),
                                      poses, sig, 18.2, min_depth=0.0)
-    assert best["rmse"] < paper[0] / 10 and best["seen_fraction"] == 1.0
+    assert best.rmse < paper[0] / 10 and best.seen_fraction == 1.0

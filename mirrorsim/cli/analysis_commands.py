@@ -118,14 +118,14 @@ def _plan_options(p):
 def _plan(args) -> int:
     from mirrorsim.cli.plots import plot_plan
     from mirrorsim.cli.tables import plan_text
-    from mirrorsim.pipelines.planning import plan_scene, plan_summary
+    from mirrorsim.pipelines.planning import plan_scene
     from solver.lsq import Sigma
 
     finite(args, "sigma_alpha", "sigma_d", "eps", "yaw_spread", "d1_spread", "step")
     scene = load(args.scene)
     sigma = error_model_sigma(args) or Sigma(args.sigma_alpha, args.sigma_d)
     plan = plan_scene(scene, sigma, args.eps, args.yaw_spread, args.d1_spread, args.step)
-    summ = plan_summary(plan)
+    summ = plan.to_json()
     print(plan_text(scene, summ))
     out = args.out or Path("renders") / scene.name / f"{scene.name}.plan.png"
     print(f"  figure: {plot_plan(scene, plan, out)}")

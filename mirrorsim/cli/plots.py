@@ -19,6 +19,7 @@ from solver.geometry import unit  # noqa: E402
 
 if TYPE_CHECKING:  # the budget and the track run renders: no Mitsuba import to draw one
     from mirrorsim.pipelines.budget import Budget
+    from mirrorsim.pipelines.planning import Plan
     from mirrorsim.pipelines.track import TrackReport
 
 
@@ -141,31 +142,31 @@ def _draw_top_view(ax, scene: Scene) -> None:
     ax.grid(alpha=0.2)
 
 
-def plot_plan(scene: Scene, plan: dict, out: str | Path, *, dpi: int = 130) -> Path:
+def plot_plan(scene: Scene, plan: Plan, out: str | Path, *, dpi: int = 130) -> Path:
     """The placement analysis in four panels (like the paper's Figs. 4–6): the paper's
     triangle and the exact region where a beacon is seen for every mirror orientation
     within ±ε; the three moving-beacon paths; the expected target error over the board
     with the best position; the beacon area against d_total (paper vs exact)."""
     out = Path(out)
     fig, axes = plt.subplots(2, 2, figsize=(12, 11))
-    geo, alpha = plan["geometry"], plan["target_alpha_deg"]
+    geo, alpha = plan.geometry, plan.target_alpha_deg
     R = np.asarray(geo.R) + np.asarray(scene.camera.position, float)
 
     ax = axes[0, 0]
-    reg = plan["region"]
-    ax.contourf(reg["xs"], reg["ys"], reg["mask"].astype(float), levels=[0.5, 1.5],
+    reg = plan.region
+    ax.contourf(reg.xs, reg.ys, reg.mask.astype(float), levels=[0.5, 1.5],
                 colors=["#9ecae1"], alpha=0.7)
     for side in (1, -1):
         tri = geo.triangle(alpha, side) + np.asarray(scene.camera.position, float)
         ax.fill(tri[:, 0], tri[:, 1], facecolor="#fdae6b", edgecolor="#e6550d", alpha=0.8,
                 label="paper's triangle (a/2 × b)" if side == 1 else None)
     c = np.asarray(scene.camera.position, float)
-    ax.plot(*zip(c, c + 1.2 * plan["target_d_total"] * unit(alpha), strict=True), "k:", lw=0.8)
+    ax.plot(*zip(c, c + 1.2 * plan.target_d_total * unit(alpha), strict=True), "k:", lw=0.8)
     half = unit(alpha + 90.0) * scene.mirror.size[0] / 2
     ax.plot(*zip(R - half, R + half, strict=True), color="#2a7fbf", lw=3,
             label="mirror at R = d_total along α, square-on (±ε)")
     ax.plot(*R, "k+", ms=12)
-    ax.set_title(f"where a beacon is seen for every mirror orientation within ±{plan['eps_deg']:g}°"
+    ax.set_title(f"where a beacon is seen for every mirror orientation within ±{plan.eps_deg:g}°"
                  "\n(blue: exact; orange: the paper's triangle)", fontsize=9)
     ax.set_aspect("equal")
     ax.legend(fontsize=7, loc="upper left")
@@ -175,19 +176,19 @@ def plot_plan(scene: Scene, plan: dict, out: str | Path, *, dpi: int = 130) -> P
 
     ax = axes[0, 1]
     colours = {"linear": "green", "rectangular": "orange", "sawtooth": "blue"}
-    for k, (kind, pts) in enumerate(plan["paths"].items()):
+    for k, (kind, pts) in enumerate(plan.paths.items()):
         shift = np.array([k * (geo.half_a * 2.6), 0.0])
         ax.plot(pts[:, 0] + shift[0], pts[:, 1], "-o", ms=2, color=colours[kind],
-                label=f"{kind}: {plan['path_lengths'][kind]:.1f} cm")
+                label=f"{kind}: {plan.path_lengths[kind]:.1f} cm")
     ax.set_aspect("equal")
-    ax.set_title(f"moving-beacon paths (eqs 19–21), {plan['n_steps']} steps of b = "
+    ax.set_title(f"moving-beacon paths (eqs 19–21), {plan.n_steps} steps of b = "
                  f"{geo.b:.2f} cm, a = {2 * geo.half_a:.2f} cm", fontsize=9)
     ax.legend(fontsize=7)
 
     ax = axes[1, 0]
-    best = plan["best"]
-    err = np.where(np.isfinite(best["map"]), best["map"], np.nan)
-    im = ax.pcolormesh(best["xs"], best["ys"], np.log10(err), cmap="viridis_r", shading="auto",
+    best = plan.best
+    err = np.where(np.isfinite(best.map), best.map, np.nan)
+    im = ax.pcolormesh(best.xs, best.ys, np.log10(err), cmap="viridis_r", shading="auto",
                        vmin=np.log10(max(np.nanmin(err), 1e-3)),
                        vmax=np.log10(max(np.nanmin(err), 1e-3)) + 2)
     cb = fig.colorbar(im, ax=ax, shrink=0.8)
@@ -199,18 +200,18 @@ def plot_plan(scene: Scene, plan: dict, out: str | Path, *, dpi: int = 130) -> P
     ax.plot(*scene.target.position, "r*", ms=12, mec="k")
     for b in scene.beacons:
         ax.plot(*b.position, "o", color="#d4a017", mec="k",
-                label=f"scene beacon: {plan['scene_beacon_rmse']:.2f} cm")
-    ax.plot(*best["position"], "wP", ms=12, mec="k", label=f"best: {best['rmse']:.2f} cm")
+                label=f"scene beacon: {plan.scene_beacon_rmse:.2f} cm")
+    ax.plot(*best.position, "wP", ms=12, mec="k", label=f"best: {best.rmse:.2f} cm")
     ax.set_xlim(0, scene.board.size[0])
     ax.set_ylim(0, scene.board.size[1])
     ax.set_aspect("equal")
     ax.legend(fontsize=7, loc="upper left")
-    ax.set_title(f"expected target error, σ = ({plan['sigma'].alpha_deg:g}°, "
-                 f"{100 * plan['sigma'].d_total_rel:g} %), {plan['n_poses']} mirror poses",
+    ax.set_title(f"expected target error, σ = ({plan.sigma.alpha_deg:g}°, "
+                 f"{100 * plan.sigma.d_total_rel:g} %), {plan.n_poses} mirror poses",
                  fontsize=9)
 
     ax = axes[1, 1]
-    ds, lit, exact = plan["area_vs_d"]
+    ds, lit, exact = plan.area_vs_d
     ax.plot(ds, lit, "o-", color="#e6550d", label="paper's triangle (eqs 14, 18)")
     ax.plot(ds, exact, "s-", color="#3182bd", label="exact region (numerical)")
     ax.set_xlabel("d_total (cm)")

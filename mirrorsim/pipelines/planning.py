@@ -4,7 +4,7 @@ scene's camera, board, walls and mirror size (``mirrorsim plan``)."""
 from __future__ import annotations
 
 import math
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -21,7 +21,9 @@ from mirrorsim.truth import optics, visibility
 from solver.lsq import Sigma
 from solver.measurements import SIGMA_ALPHA_MAX_DEG, SIGMA_D_REL_MAX
 from solver.placement import (
+    BeaconSearch,
     MirrorPrior,
+    PlacementGeometry,
     best_beacon,
     expected_target_error,
     paper_placement,
@@ -37,9 +39,67 @@ AREA_DISTANCES = (25.0, 50.0, 100.0, 200.0, 400.0, 1000.0)
 MIN_STEP = 0.5
 
 
+@dataclass(frozen=True)
+class Region:
+    """The exact region seen under every mirror orientation: a mask on ``xs`` × ``ys``."""
+
+    xs: np.ndarray
+    ys: np.ndarray
+    mask: np.ndarray
+    area: float  # cm²
+
+
+@dataclass(frozen=True)
+class Plan:
+    """:func:`plan_scene`'s answer: the paper's placement numbers beside the exact ones,
+    the paths, and the best beacon position with its expected target error."""
+
+    target_alpha_deg: float
+    target_d_total: float
+    eps_deg: float
+    sigma: Sigma
+    geometry: PlacementGeometry  # the paper's eqs 9–18 as printed
+    geometry_corrected: PlacementGeometry  # eq 15 with the line perpendicular
+    n_steps: int
+    paths: dict[str, np.ndarray]
+    path_lengths: dict[str, float]
+    path_polyline_lengths: dict[str, float]
+    region: Region
+    area_vs_d: tuple[list[float], list[float], list[float]]  # d_total, paper, exact
+    n_poses: int
+    best: BeaconSearch
+    scene_beacon_rmse: float
+    scene_beacon_seen: float
+
+    def to_json(self) -> dict:
+        """The plan's JSON (``plan --json``): its numbers, not its maps."""
+        g, gc = self.geometry, self.geometry_corrected
+        ds, lit, exact = self.area_vs_d
+        return {
+            "target": {"alpha_deg": self.target_alpha_deg, "d_total": self.target_d_total},
+            "eps_deg": self.eps_deg,
+            "paper": {"b": g.b, "half_a": g.half_a, "n_beacons": g.n_beacons, "area": g.area},
+            "paper_eq15_perpendicular": {"b": gc.b, "half_a": gc.half_a, "area": gc.area},
+            "n_steps": self.n_steps,
+            "path_lengths": self.path_lengths,
+            "path_polyline_lengths": self.path_polyline_lengths,
+            "exact_region_area": self.region.area,
+            "area_vs_d_total": [{"d_total": d, "paper": a, "exact": e}
+                                for d, a, e in zip(ds, lit, exact, strict=True)],
+            "sigma": {"alpha_deg": self.sigma.alpha_deg,
+                      "d_total_rel": self.sigma.d_total_rel},
+            "mirror_poses": self.n_poses,
+            "scene_beacon": {"rmse": self.scene_beacon_rmse,
+                             "seen_fraction": self.scene_beacon_seen},
+            "best_beacon": {"position": self.best.position.tolist(),
+                            "rmse": self.best.rmse,
+                            "seen_fraction": self.best.seen_fraction},
+        }
+
+
 def plan_scene(scene: Scene, sigma: Sigma | None = None, eps_deg: float = 5.0,
                yaw_spread_deg: float = 3.0, d1_spread: float = 2.0, step: float = 1.0,
-               n_poses: int = 5) -> dict:
+               n_poses: int = 5) -> Plan:
     """Placement numbers, paths, the exact beacon region and the best beacon position.
 
     The target's α and d_total are taken as measured without error; the mirror prior is
@@ -103,41 +163,12 @@ def plan_scene(scene: Scene, sigma: Sigma | None = None, eps_deg: float = 5.0,
     scene_err, scene_seen = expected_target_error(
         o, img.alpha_deg, img.d_total, np.array([b.position for b in scene.beacons]), poses,
         sigma, s, min_depth=0.0)
-    return {
-        "target_alpha_deg": img.alpha_deg, "target_d_total": img.d_total, "eps_deg": eps_deg,
-        "sigma": sigma, "geometry": geo, "geometry_corrected": geo_corrected,
-        "n_steps": n_steps, "paths": paths,
-        "path_lengths": path_lengths(2 * geo.half_a, geo.b, n_steps),
-        "path_polyline_lengths": {k: polyline_length(v) for k, v in paths.items()},
-        "region": {"xs": xs, "ys": ys, "mask": mask,
-                   "area": float(mask.sum() * (xs[1] - xs[0]) * (ys[1] - ys[0]))},
-        "area_vs_d": (list(AREA_DISTANCES), area_lit, area_exact),
-        "n_poses": len(poses), "best": best,
-        "scene_beacon_rmse": float(scene_err[0]), "scene_beacon_seen": float(scene_seen[0]),
-    }
-
-
-def plan_summary(plan: dict) -> dict:
-    """The JSON-ready part of a plan."""
-    g, gc = plan["geometry"], plan["geometry_corrected"]
-    ds, lit, exact = plan["area_vs_d"]
-    return {
-        "target": {"alpha_deg": plan["target_alpha_deg"], "d_total": plan["target_d_total"]},
-        "eps_deg": plan["eps_deg"],
-        "paper": {"b": g.b, "half_a": g.half_a, "n_beacons": g.n_beacons, "area": g.area},
-        "paper_eq15_perpendicular": {"b": gc.b, "half_a": gc.half_a, "area": gc.area},
-        "n_steps": plan["n_steps"],
-        "path_lengths": plan["path_lengths"],
-        "path_polyline_lengths": plan["path_polyline_lengths"],
-        "exact_region_area": plan["region"]["area"],
-        "area_vs_d_total": [{"d_total": d, "paper": a, "exact": e}
-                            for d, a, e in zip(ds, lit, exact, strict=True)],
-        "sigma": {"alpha_deg": plan["sigma"].alpha_deg,
-                  "d_total_rel": plan["sigma"].d_total_rel},
-        "mirror_poses": plan["n_poses"],
-        "scene_beacon": {"rmse": plan["scene_beacon_rmse"],
-                         "seen_fraction": plan["scene_beacon_seen"]},
-        "best_beacon": {"position": plan["best"]["position"].tolist(),
-                        "rmse": plan["best"]["rmse"],
-                        "seen_fraction": plan["best"]["seen_fraction"]},
-    }
+    region = Region(xs, ys, mask, float(mask.sum() * (xs[1] - xs[0]) * (ys[1] - ys[0])))
+    return Plan(
+        target_alpha_deg=img.alpha_deg, target_d_total=img.d_total, eps_deg=eps_deg,
+        sigma=sigma, geometry=geo, geometry_corrected=geo_corrected, n_steps=n_steps,
+        paths=paths, path_lengths=path_lengths(2 * geo.half_a, geo.b, n_steps),
+        path_polyline_lengths={k: polyline_length(v) for k, v in paths.items()},
+        region=region, area_vs_d=(list(AREA_DISTANCES), area_lit, area_exact),
+        n_poses=len(poses), best=best, scene_beacon_rmse=float(scene_err[0]),
+        scene_beacon_seen=float(scene_seen[0]))
