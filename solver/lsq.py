@@ -88,11 +88,7 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
     s = sigma or Sigma()
     if s.alpha_deg <= 0 or s.d_total_rel <= 0:
         raise SolverError(f"sigmas must be positive, got {s}")
-    bpos = np.array([b.position for b in beacons], float)
-    meas_a = np.array([b.alpha_deg for b in beacons] + [t[0] for t in targets], float)
-    meas_d = np.array([b.d_total for b in beacons] + [t[1] for t in targets], float)
-    if np.any(meas_d <= 0) or not np.all(np.isfinite(meas_d)) or not np.all(np.isfinite(meas_a)):
-        raise SolverError("distances must be positive and all measurements finite")
+    bpos, meas_a, meas_d = _measurement_arrays(beacons, targets)
     init = initial or solve_single(o, bpos[0], beacons[0].alpha_deg, beacons[0].d_total,
                                    targets[0][0], targets[0][1])
     x0 = np.array([init.mirror.yaw_deg, init.mirror.rho, *init.target])
@@ -118,24 +114,39 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
 
     res = least_squares(fun, x0, jac=jac, method="lm" if len(meas_a) * 2 >= 4 else "trf",
                         xtol=1e-15, ftol=1e-15, gtol=1e-15)
-    x = res.x
-    J = jac(x)
+    J = jac(res.x)
     jtj = J.T @ J
     if np.linalg.cond(jtj) > 1e14:
         raise SolverError("the measurements do not determine the mirror and the target "
                           "(singular Jacobian)")
     cov = np.linalg.inv(jtj) if sigma is not None else None
+    return _solution(o, res.x, bpos, targets, cov)
+
+
+def _measurement_arrays(beacons: list[BeaconMeasurement], targets: list[tuple[float, float]]
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Beacon positions, then every α and every d_total (beacons first), checked."""
+    bpos = np.array([b.position for b in beacons], float)
+    meas_a = np.array([b.alpha_deg for b in beacons] + [t[0] for t in targets], float)
+    meas_d = np.array([b.d_total for b in beacons] + [t[1] for t in targets], float)
+    if np.any(meas_d <= 0) or not np.all(np.isfinite(meas_d)) or not np.all(np.isfinite(meas_a)):
+        raise SolverError("distances must be positive and all measurements finite")
+    return bpos, meas_a, meas_d
+
+
+def _solution(o: np.ndarray, x: np.ndarray, bpos: np.ndarray,
+              targets: list[tuple[float, float]], cov: np.ndarray | None) -> Solution:
+    """The least-squares parameters (θ, ρ, x_t, y_t) as a :class:`Solution`."""
     line = MirrorLine.from_params(x[0], x[1])
     # report the foot of the first beacon on the line (the closed form's midpoint of B, B′)
     foot = bpos[0] - (line_normal(x[0]) @ bpos[0] - x[1]) * line_normal(x[0])
     mirror = MirrorLine(line.yaw_deg, foot)
-    target = x[2:].copy()
     a_t = np.mean([t[0] for t in targets])
     rt = ray_hits_line(o, a_t, mirror.point, mirror.yaw_deg)
     rb = np.array([observe(o, mirror.point, mirror.yaw_deg, p).reflection_point for p in bpos])
-    return Solution(mirror=mirror, target=target, target_reflection_point=rt,
+    return Solution(mirror=mirror, target=x[2:].copy(), target_reflection_point=rt,
                     beacon_reflection_points=rb, covariance=cov,
-                    method=f"least squares ({nb} beacon obs, {len(targets)} target obs)")
+                    method=f"least squares ({len(bpos)} beacon obs, {len(targets)} target obs)")
 
 
 def solve_measurements(observer, beacons: list[BeaconMeasurement],

@@ -37,7 +37,7 @@ def one_worker(tmp_path_factory):
 
 def test_tiny_dataset_end_to_end(one_worker):
     out, res = one_worker
-    assert res["rows"] == 3 and res["computed"] == 3 and res["failed"] == 0
+    assert res.rows == 3 and res.computed == 3 and res.failed == 0
     import pyarrow.parquet as pq
 
     table = pq.read_table(out / "dataset.parquet").to_pydict()
@@ -285,7 +285,7 @@ def test_a_dataset_draws_bench_imperfections_and_its_rows_carry_them(one_worker,
                                   "calibration": {"distance_error": [-2, 2]}})
     out = tmp_path / "d"
     res = run_dataset(3, 3, out, workers=1, spec_path=spec, progress=False)
-    assert res["failed"] == 0
+    assert res.failed == 0
     rows = collect_rows(out, 3)
     pans = [r["bench_pan_error_deg"] for r in rows]
     assert len(set(pans)) == 3 and all(-0.5 <= p <= 0.5 for p in pans)

@@ -107,11 +107,11 @@ def test_only_the_scenes_own_failures_become_rows(tmp_path, monkeypatch, exc, re
     monkeypatch.setattr(evaluate, "evaluate_scene", failing)
     for sub in ("scenes", "rows", "frames"):
         (tmp_path / sub).mkdir()
-    row = dataset.process_one(0, 1, load_spec(SPEC), str(tmp_path), 1, "scalar_rgb")
+    result = dataset.process_one(0, 1, load_spec(SPEC), str(tmp_path), 1, "scalar_rgb")
     assert (tmp_path / "rows" / "scene000000.json").exists() == recorded
-    assert ("retry" in row) != recorded
+    assert (result.row is None) != recorded and bool(result.retry) != recorded
     if recorded:
-        assert row["error"].startswith("DetectionError")
+        assert result.row["error"].startswith("DetectionError")
 
 
 # ------------------------------------------------------- 2. other people's files

@@ -176,12 +176,12 @@ def _dataset(args) -> int:
             raise
         raise DatasetError(args.out, "already holds a dataset: pass --resume to finish it, "
                            "or choose another --out") from None
-    print(f"{args.out}: {res['rows']} rows ({res['computed']} computed now in "
-          f"{res['seconds']:.0f} s, {res['per_minute']:.1f} scenes/min; "
-          f"{res['already_done']} already done; {res['failed']} failed) → {res['parquet']}")
-    if res["retry"]:
-        i, why = next(iter(res["retry"].items()))
-        print(f"error: {len(res['retry'])} scene(s) failed for a reason outside the scene "
+    print(f"{args.out}: {res.rows} rows ({res.computed} computed now in "
+          f"{res.seconds:.0f} s, {res.per_minute:.1f} scenes/min; "
+          f"{res.already_done} already done; {res.failed} failed) → {res.parquet}")
+    if res.retry:
+        i, why = next(iter(res.retry.items()))
+        print(f"error: {len(res.retry)} scene(s) failed for a reason outside the scene "
               f"(scene {i}: {why}); they have no row: rerun with --resume", file=sys.stderr)
         return 1
     return 0

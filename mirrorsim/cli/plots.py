@@ -149,10 +149,16 @@ def plot_plan(scene: Scene, plan: Plan, out: str | Path, *, dpi: int = 130) -> P
     with the best position; the beacon area against d_total (paper vs exact)."""
     out = Path(out)
     fig, axes = plt.subplots(2, 2, figsize=(12, 11))
+    _plan_region(axes[0, 0], scene, plan)
+    _plan_paths(axes[0, 1], plan)
+    _plan_error_map(fig, axes[1, 0], scene, plan)
+    _plan_areas(axes[1, 1], plan)
+    fig.suptitle(f"{scene.name}: beacon placement", fontsize=11)
+    return _save(fig, out, dpi)
+
+def _plan_region(ax, scene: Scene, plan: Plan) -> None:
     geo, alpha = plan.geometry, plan.target_alpha_deg
     R = np.asarray(geo.R) + np.asarray(scene.camera.position, float)
-
-    ax = axes[0, 0]
     reg = plan.region
     ax.contourf(reg.xs, reg.ys, reg.mask.astype(float), levels=[0.5, 1.5],
                 colors=["#9ecae1"], alpha=0.7)
@@ -174,7 +180,9 @@ def plot_plan(scene: Scene, plan: Plan, out: str | Path, *, dpi: int = 130) -> P
     ax.set_xlim(R[0] - zoom, R[0] + zoom)
     ax.set_ylim(R[1] - zoom, R[1] + zoom)
 
-    ax = axes[0, 1]
+
+def _plan_paths(ax, plan: Plan) -> None:
+    geo = plan.geometry
     colours = {"linear": "green", "rectangular": "orange", "sawtooth": "blue"}
     for k, (kind, pts) in enumerate(plan.paths.items()):
         shift = np.array([k * (geo.half_a * 2.6), 0.0])
@@ -185,7 +193,8 @@ def plot_plan(scene: Scene, plan: Plan, out: str | Path, *, dpi: int = 130) -> P
                  f"{geo.b:.2f} cm, a = {2 * geo.half_a:.2f} cm", fontsize=9)
     ax.legend(fontsize=7)
 
-    ax = axes[1, 0]
+
+def _plan_error_map(fig, ax, scene: Scene, plan: Plan) -> None:
     best = plan.best
     err = np.where(np.isfinite(best.map), best.map, np.nan)
     im = ax.pcolormesh(best.xs, best.ys, np.log10(err), cmap="viridis_r", shading="auto",
@@ -210,7 +219,8 @@ def plot_plan(scene: Scene, plan: Plan, out: str | Path, *, dpi: int = 130) -> P
                  f"{100 * plan.sigma.d_total_rel:g} %), {plan.n_poses} mirror poses",
                  fontsize=9)
 
-    ax = axes[1, 1]
+
+def _plan_areas(ax, plan: Plan) -> None:
     ds, lit, exact = plan.area_vs_d
     ax.plot(ds, lit, "o-", color="#e6550d", label="paper's triangle (eqs 14, 18)")
     ax.plot(ds, exact, "s-", color="#3182bd", label="exact region (numerical)")
@@ -221,8 +231,6 @@ def plot_plan(scene: Scene, plan: Plan, out: str | Path, *, dpi: int = 130) -> P
     ax.legend(fontsize=7)
     ax.grid(alpha=0.3)
 
-    fig.suptitle(f"{scene.name}: beacon placement", fontsize=11)
-    return _save(fig, out, dpi)
 
 
 def plot_budget(budget: Budget, out: str | Path, *, dpi: int = 130) -> Path:

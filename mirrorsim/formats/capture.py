@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from mirrorsim.errors import InputError
-from mirrorsim.formats.reader import Reader, read_json, show
+from mirrorsim.formats.reader import Reader, read_json, read_resolution, show
 from mirrorsim.scene.model import Beacon, Camera, Point2, Scene
 
 REFERENCE_DISTANCE = 100.0  # cm: where calibration stands its reference objects
@@ -78,11 +78,7 @@ class CaptureRecord:
         c = r.mapping(top["camera"], "camera", ("position", "height", "pan_deg", "resolution",
                                                 "fx"),
                       ("fy", "cx", "cy", "hfov_deg", "distortion"))
-        res = c["resolution"]
-        if not isinstance(res, list) or len(res) != 2:
-            raise r.fail("camera.resolution", "expected [width, height] in px")
-        resolution = (r.integer(res[0], "camera.resolution[0]", low=2),
-                      r.integer(res[1], "camera.resolution[1]", low=2))
+        resolution = read_resolution(r, c["resolution"], "camera.resolution")
         fx = r.number(c["fx"], "camera.fx", positive=True)
         hfov = (r.number(c["hfov_deg"], "camera.hfov_deg", positive=True, high=170.0)
                 if "hfov_deg" in c else math.degrees(2 * math.atan(resolution[0] / 2 / fx)))

@@ -10,6 +10,9 @@ import math
 from pathlib import Path
 from typing import Any
 
+import yaml
+
+from mirrorsim.errors import SceneError
 from solver.errors import InputError
 
 
@@ -114,3 +117,55 @@ class Reader:
             raise self.fail(key, f"expected a list of two numbers, got {show(value)}")
         return (self.number(value[0], f"{key}[0]", positive=positive),
                 self.number(value[1], f"{key}[1]", positive=positive))
+
+
+def read_resolution(r: Reader, res: Any, key: str) -> tuple[int, int]:
+    """[width, height] in px."""
+    if not isinstance(res, list | tuple) or len(res) != 2:
+        raise r.fail(key, f"expected [width, height] in px, got {show(res)}")
+    return (r.integer(res[0], f"{key}[0]", low=2), r.integer(res[1], f"{key}[1]", low=2))
+
+
+class _StrictLoader(yaml.SafeLoader):
+    """Safe loading that also refuses duplicate keys (a silent override otherwise)."""
+
+
+def _construct_mapping(loader: _StrictLoader, node: yaml.MappingNode, deep: bool = False):
+    seen: set[Any] = set()
+    for key_node, _ in node.value:
+        key = loader.construct_object(key_node, deep=deep)
+        if key in seen:
+            raise yaml.constructor.ConstructorError(
+                None, None, f"duplicate key {key!r}", key_node.start_mark
+            )
+        seen.add(key)
+    return loader.construct_mapping(node, deep)
+
+
+_StrictLoader.add_constructor(
+    yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping
+)
+
+
+def read_yaml(path: str | Path) -> Any:
+    """Parse a YAML file strictly (safe tags only, no duplicate keys).
+
+    Raises
+    ------
+    SceneError
+        If the file is missing, unreadable or malformed.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise SceneError(path, "", "no such file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SceneError(path, "", f"cannot read: {exc}") from None
+    try:
+        return yaml.load(text, Loader=_StrictLoader)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
+        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        raise SceneError(path, "", f"malformed YAML: {where}{problem}") from None

@@ -16,11 +16,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from mirrorsim.errors import SceneError
 from mirrorsim.formats.capture import read_distortion
-from mirrorsim.formats.reader import Reader, show
+from mirrorsim.formats.reader import Reader, read_resolution, read_yaml, show
 from mirrorsim.scene.imperfections import REGISTRY, Imperfection, check_bounds, radius_bound
 from mirrorsim.scene.model import (
     PAN_WORDS,
@@ -45,51 +44,6 @@ DEFAULT_RESOLUTION = (1920, 1088)
 MAX_SPP = 1 << 16  # a documented bound: more samples than this is a typo, not a render
 
 
-class _StrictLoader(yaml.SafeLoader):
-    """Safe loading that also refuses duplicate keys (a silent override otherwise)."""
-
-
-def _construct_mapping(loader: _StrictLoader, node: yaml.MappingNode, deep: bool = False):
-    seen: set[Any] = set()
-    for key_node, _ in node.value:
-        key = loader.construct_object(key_node, deep=deep)
-        if key in seen:
-            raise yaml.constructor.ConstructorError(
-                None, None, f"duplicate key {key!r}", key_node.start_mark
-            )
-        seen.add(key)
-    return loader.construct_mapping(node, deep)
-
-
-_StrictLoader.add_constructor(
-    yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping
-)
-
-
-def read_yaml(path: str | Path) -> Any:
-    """Parse a YAML file strictly (safe tags only, no duplicate keys).
-
-    Raises
-    ------
-    SceneError
-        If the file is missing, unreadable or malformed.
-    """
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise SceneError(path, "", "no such file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SceneError(path, "", f"cannot read: {exc}") from None
-    try:
-        return yaml.load(text, Loader=_StrictLoader)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
-        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
-        raise SceneError(path, "", f"malformed YAML: {where}{problem}") from None
-
-
 def load_scene(path: str | Path) -> Scene:
     """Read and validate a scene file.
 
@@ -100,13 +54,6 @@ def load_scene(path: str | Path) -> Scene:
     """
     path = Path(path)
     return scene_from_dict(read_yaml(path), source=str(path), default_name=path.stem)
-
-
-def read_resolution(r: Reader, res: Any, key: str) -> tuple[int, int]:
-    """[width, height] in px."""
-    if not isinstance(res, list | tuple) or len(res) != 2:
-        raise r.fail(key, f"expected [width, height] in px, got {show(res)}")
-    return (r.integer(res[0], f"{key}[0]", low=2), r.integer(res[1], f"{key}[1]", low=2))
 
 
 def read_camera_model(r: Reader, cam: dict, key: str,
@@ -153,13 +100,7 @@ def scene_from_dict(data: Any, source: str = "<scene>", default_name: str = "sce
     board = _board(r, top["board"])
     cam = r.mapping(top["camera"], "camera", {"position", "height", "hfov", "pan"},
                     {"resolution", *CAMERA_IMPERFECTIONS})
-    pan = cam["pan"]
-    if isinstance(pan, str):
-        if pan not in PAN_WORDS:
-            raise r.fail("camera.pan", f"{show(pan)}: expected a bearing in degrees or one of "
-                         f"{', '.join(PAN_WORDS)}")
-    else:
-        pan = r.number(pan, "camera.pan")
+    pan = read_pan(r, cam["pan"], "camera.pan")
     position = r.pair(cam["position"], "camera.position")
     height, hfov, resolution = read_camera_model(r, cam, "camera")
 
@@ -176,18 +117,7 @@ def scene_from_dict(data: Any, source: str = "<scene>", default_name: str = "sce
 
     on_board = _board_check(r, board)
     bench = _bench(r, cam, m, top.get("calibration", {}), mirror, resolution, hfov)
-    on_board(position, "camera.position", "the camera")
-    on_board(mirror.center, "mirror.center", "the mirror")
-    for end in mirror.ends():
-        on_board(end, "mirror.center", f"the mirror's end {_fmt(end)}")
-    on_board(target_position, "target.position", "the target")
-    for i, b in enumerate(beacons):
-        on_board(b.position, f"{bkey(i)}.position", "the beacon")
-        if b.known_position is not None:
-            on_board(b.known_position, f"{bkey(i)}.known_position", "the believed position")
-    for i, o in enumerate(occluders):
-        on_board(o.start, f"occluders[{i}].start", "the wall's start")
-        on_board(o.end, f"occluders[{i}].end", "the wall's end")
+    _check_all_on_board(on_board, position, mirror, target_position, beacons, bkey, occluders)
     _check_mirror_faces(r, position, mirror, target_position, beacons, bkey)
 
     # derived values, computed once here: the panel faces the camera's virtual image
@@ -314,6 +244,34 @@ def _occluders(r: Reader, raw_occ: Any) -> tuple[Occluder, ...]:
             raise r.fail(f"occluders[{i}].end", f"{list(occ.end)}: the wall has no length")
         occluders.append(occ)
     return tuple(occluders)
+
+
+def read_pan(r: Reader, raw: Any, key: str) -> float | str:
+    """A camera's pan: a bearing in degrees or one of :data:`PAN_WORDS` (scene files and
+    specs alike)."""
+    if isinstance(raw, str):
+        if raw not in PAN_WORDS:
+            raise r.fail(key, f"{show(raw)}: expected a bearing in degrees or one of "
+                         f"{', '.join(PAN_WORDS)}")
+        return raw
+    return r.number(raw, key)
+
+
+def _check_all_on_board(on_board, position, mirror: Mirror, target_position, beacons,
+                        bkey, occluders) -> None:
+    """Every object stands on the board (the mirror's ends, believed positions too)."""
+    on_board(position, "camera.position", "the camera")
+    on_board(mirror.center, "mirror.center", "the mirror")
+    for end in mirror.ends():
+        on_board(end, "mirror.center", f"the mirror's end {_fmt(end)}")
+    on_board(target_position, "target.position", "the target")
+    for i, b in enumerate(beacons):
+        on_board(b.position, f"{bkey(i)}.position", "the beacon")
+        if b.known_position is not None:
+            on_board(b.known_position, f"{bkey(i)}.known_position", "the believed position")
+    for i, o in enumerate(occluders):
+        on_board(o.start, f"occluders[{i}].start", "the wall's start")
+        on_board(o.end, f"occluders[{i}].end", "the wall's end")
 
 
 def _board_check(r: Reader, board: Board):

@@ -28,7 +28,7 @@ import math
 import time
 import traceback
 import warnings
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -60,13 +60,20 @@ def scene_name(i: int) -> str:
     return f"scene{i:06d}"
 
 
-def process_one(i: int, seed: int, spec: dict, out: str, spp: int | None,
-                variant: str, keep: tuple[str, ...] = ()) -> dict:
-    """Draw, render, detect, solve and score scene i; write its files and its row.
+@dataclass(frozen=True)
+class SceneResult:
+    """What became of scene ``index``: its row (a failure of the scene itself recorded in
+    it, ``error``), or, for a failure from outside the scene, no row and ``retry`` why
+    (a resumed run redoes it)."""
 
-    Returns the row; a failure of the scene itself is recorded in it (``error``).  A
-    failure from outside the scene writes no row and returns ``{"index": i, "retry": why}``.
-    """
+    index: int
+    row: dict | None
+    retry: str = ""
+
+
+def process_one(i: int, seed: int, spec: dict, out: str, spp: int | None,
+                variant: str, keep: tuple[str, ...] = ()) -> SceneResult:
+    """Draw, render, detect, solve and score scene i; write its files and its row."""
     from mirrorsim.pipelines.evaluate import evaluate_scene
     from mirrorsim.pipelines.random_scenes import sample_scene, to_yaml
 
@@ -91,11 +98,11 @@ def process_one(i: int, seed: int, spec: dict, out: str, spp: int | None,
     except SCENE_FAILURES as exc:  # the scene's own: recorded, one bad scene must not stop a run
         row["error"] = f"{type(exc).__name__}: {exc}"
         row["traceback"] = traceback.format_exc(limit=3)
-    except Exception as exc:  # outside the scene: no row, so --resume redoes it
-        return {"index": i, "retry": f"{type(exc).__name__}: {exc}"}
+    except Exception as exc:  # outside the scene: no row, so a resumed run redoes it
+        return SceneResult(i, None, f"{type(exc).__name__}: {exc}")
     row["seconds_total"] = time.perf_counter() - t0
     write_json(out_dir / "rows" / f"{name}.json", row)
-    return row
+    return SceneResult(i, row)
 
 
 def _flatten(scene: Scene, rep: Report) -> dict:
@@ -179,13 +186,28 @@ class DatasetError(InputError):
         super().__init__(folder, "", message)
 
 
+@dataclass(frozen=True)
+class DatasetRun:
+    """A dataset run's summary: rows in the table, computed now, found done, failed (a
+    row with an error), and the scenes to retry (index → why: no row)."""
+
+    rows: int
+    computed: int
+    already_done: int
+    failed: int
+    retry: dict[int, str]
+    parquet: Path
+    seconds: float
+    per_minute: float
+
+
 def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
                 spec_path: str | Path | None = None, spp: int | None = None,
                 sampler: str | None = None, variant: str = "auto", resume: bool = False,
                 keep: tuple[str, ...] = (),
                 executor: str = "local",
                 scheduler: str | None = None, progress: bool = True,
-                max_rss_mb: float = MAX_WORKER_RSS_MB) -> dict:
+                max_rss_mb: float = MAX_WORKER_RSS_MB) -> DatasetRun:
     """Make (or finish) a dataset of ``n`` scenes; return a summary.
 
     Raises
@@ -223,9 +245,9 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
     t_start = time.perf_counter()
     bar = tqdm(total=len(todo), unit="scene", disable=not progress, desc="dataset")
 
-    def on_result(row: dict) -> None:
-        if "retry" in row:
-            retry[row["index"]] = row["retry"]
+    def on_result(result: SceneResult) -> None:
+        if result.row is None:
+            retry[result.index] = result.retry
         bar.update()
 
     jobs = [(i, seed, spec, str(out), spp, chosen, tuple(keep)) for i in todo]
@@ -243,10 +265,11 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
     rows = collect_rows(out, n)
     write_table(out, rows)
     write_card(out, meta, rows, chosen)
-    return {"rows": len(rows), "computed": len(todo) - len(retry),
-            "already_done": n - len(todo), "failed": sum(bool(r.get("error")) for r in rows),
-            "retry": retry, "parquet": str(out / "dataset.parquet"), "seconds": wall,
-            "per_minute": len(todo) / wall * 60 if todo and wall else 0.0}
+    return DatasetRun(rows=len(rows), computed=len(todo) - len(retry),
+                      already_done=n - len(todo),
+                      failed=sum(bool(r.get("error")) for r in rows), retry=retry,
+                      parquet=out / "dataset.parquet", seconds=wall,
+                      per_minute=len(todo) / wall * 60 if todo and wall else 0.0)
 
 
 def _claim_folder(out: Path, meta: dict, resume: bool) -> None:

@@ -16,7 +16,7 @@ import numpy as np
 from mirrorsim.detection.detector import annotate
 from mirrorsim.errors import DetectionError
 from mirrorsim.formats.files import write_png
-from mirrorsim.pipelines.frame import render_and_measure
+from mirrorsim.pipelines.frame import MeasuredFrame, render_and_measure
 from mirrorsim.pipelines.score import EXTRA_FILES, FrameRecord, Report, score
 from mirrorsim.rendering.frames import default_out
 from mirrorsim.scene.model import Scene
@@ -52,19 +52,14 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, spp: int 
     per_beacon = [scene] if len(scene.beacons) == 1 else [
         replace(scene, name=f"{scene.name}_b{i}", beacons=(b,))
         for i, b in enumerate(scene.beacons)]
-    frames, detections, truths = [], [], []
-    for sub in per_beacon:
-        m = render_and_measure(sub, out, spp=spp, seed=seed, variant=variant,
-                               progress=progress, reuse=True, ids="ids" in keep)
-        files, det, cal = m.files, m.detection, m.calibration
-        annotated = ""
-        if "annotated" in keep:
-            annotated = str(write_png(out / f"{sub.name}.annotated.png",
-                                      annotate(m.image, det)))
-        frames.append(FrameRecord(str(files.image), annotated, files.reused,
-                                  det.target.clipped, det.beacons[0][1].clipped))
-        detections.append(det)
-        truths.append(files.truth)
+    measured = [render_and_measure(sub, out, spp=spp, seed=seed, variant=variant,
+                                   progress=progress, reuse=True, ids="ids" in keep)
+                for sub in per_beacon]
+    frames = [_frame_record(m, out / f"{sub.name}.annotated.png", "annotated" in keep)
+              for sub, m in zip(per_beacon, measured, strict=True)]
+    detections = [m.detection for m in measured]
+    truths = [m.files.truth for m in measured]
+    cal = measured[-1].calibration
 
     # the scene's truth, computed once per frame: the target from the first, each beacon
     # from its own
@@ -91,3 +86,11 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, spp: int 
                                     sampler=scene.render.sampler),
                   calibration={"target_k": cal.target_k, "pencil_k": cal.pencil_k},
                   error_vs_beacons=by_count)
+
+
+def _frame_record(m: MeasuredFrame, annotated_path: Path, annotate_it: bool) -> FrameRecord:
+    """The report's entry for one frame (its annotated copy written where asked)."""
+    det = m.detection
+    annotated = str(write_png(annotated_path, annotate(m.image, det))) if annotate_it else ""
+    return FrameRecord(str(m.files.image), annotated, m.files.reused, det.target.clipped,
+                       det.beacons[0][1].clipped)

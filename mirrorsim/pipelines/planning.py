@@ -112,17 +112,7 @@ def plan_scene(scene: Scene, sigma: Sigma | None = None, eps_deg: float = 5.0,
         For a σ, ε or step that is not > 0, ε ≥ 45° or a negative spread.
     """
     sigma = sigma or Sigma()
-    for name, v, hi in (("sigma.alpha_deg", sigma.alpha_deg, SIGMA_ALPHA_MAX_DEG),
-                        ("sigma.d_total_rel", sigma.d_total_rel, SIGMA_D_REL_MAX),
-                        ("eps_deg", eps_deg, 45)):
-        if not 0 < v < hi or (name != "eps_deg" and v == hi):
-            raise BadParameter(name, f"{v} must be > 0 and {'<' if name == 'eps_deg' else '≤'} "
-                               f"{hi:g}")
-    if not MIN_STEP <= step <= 20:
-        raise BadParameter("step", f"{step} must be within [{MIN_STEP:g}, 20] cm")
-    for name, v in (("yaw_spread_deg", yaw_spread_deg), ("d1_spread", d1_spread)):
-        if not 0 <= v <= 30:
-            raise BadParameter(name, f"{v} must be within [0, 30]")
+    _check_parameters(sigma, eps_deg, step, yaw_spread_deg, d1_spread)
     cam, mir = scene.camera, scene.mirror
     img = optics.mirror_image(cam.position, mir, scene.target.position)
     o = np.asarray(cam.position, float)
@@ -134,12 +124,7 @@ def plan_scene(scene: Scene, sigma: Sigma | None = None, eps_deg: float = 5.0,
     paths = {k: path_points(k, R, img.alpha_deg, 2 * geo.half_a, geo.b, n_steps)
              for k in ("linear", "rectangular", "sawtooth")}
 
-    span = 1.5 * (s / 2) / math.tan(math.radians(2 * eps_deg)) + s
-    xs = np.linspace(R[0] - span, R[0] + span, 241)
-    ys = np.linspace(R[1] - span, R[1] + span, 241)
-    gx, gy = np.meshgrid(xs, ys)
-    mask = visible_region(o, img.alpha_deg, img.d_total, s, eps_deg,
-                          np.column_stack([gx.ravel(), gy.ravel()])).reshape(gx.shape)
+    region = _exact_region(o, R, img.alpha_deg, img.d_total, s, eps_deg)
     area_lit = [paper_placement(img.alpha_deg, d, s, eps_deg).area for d in AREA_DISTANCES]
     area_exact = [region_area(o, img.alpha_deg, d, s, eps_deg)
                   for d in AREA_DISTANCES]
@@ -147,6 +132,52 @@ def plan_scene(scene: Scene, sigma: Sigma | None = None, eps_deg: float = 5.0,
     prior = MirrorPrior(d1=img.d1, yaw_deg=mir.yaw, d1_spread=d1_spread,
                         yaw_spread_deg=yaw_spread_deg, size=s, n=n_poses)
     poses = prior.poses(o, img.alpha_deg)
+    best = _best_position(scene, o, img.alpha_deg, img.d_total, poses, sigma, step)
+    scene_err, scene_seen = expected_target_error(
+        o, img.alpha_deg, img.d_total, np.array([b.position for b in scene.beacons]), poses,
+        sigma, s, min_depth=0.0)
+    return Plan(
+        target_alpha_deg=img.alpha_deg, target_d_total=img.d_total, eps_deg=eps_deg,
+        sigma=sigma, geometry=geo, geometry_corrected=geo_corrected, n_steps=n_steps,
+        paths=paths, path_lengths=path_lengths(2 * geo.half_a, geo.b, n_steps),
+        path_polyline_lengths={k: polyline_length(v) for k, v in paths.items()},
+        region=region, area_vs_d=(list(AREA_DISTANCES), area_lit, area_exact),
+        n_poses=len(poses), best=best, scene_beacon_rmse=float(scene_err[0]),
+        scene_beacon_seen=float(scene_seen[0]))
+
+
+def _check_parameters(sigma: Sigma, eps_deg: float, step: float, yaw_spread_deg: float,
+                      d1_spread: float) -> None:
+    for name, v, hi in (("sigma.alpha_deg", sigma.alpha_deg, SIGMA_ALPHA_MAX_DEG),
+                        ("sigma.d_total_rel", sigma.d_total_rel, SIGMA_D_REL_MAX),
+                        ("eps_deg", eps_deg, 45)):
+        if not 0 < v < hi or (name != "eps_deg" and v == hi):
+            raise BadParameter(name, f"{v} must be > 0 and {'<' if name == 'eps_deg' else '≤'} "
+                               f"{hi:g}")
+    if not MIN_STEP <= step <= 20:
+        raise BadParameter("step", f"{step} must be within [{MIN_STEP:g}, 20] cm")
+    for name, v in (("yaw_spread_deg", yaw_spread_deg), ("d1_spread", d1_spread)):
+        if not 0 <= v <= 30:
+            raise BadParameter(name, f"{v} must be within [0, 30]")
+
+
+def _exact_region(o: np.ndarray, R: np.ndarray, alpha_deg: float, d_total: float, s: float,
+                  eps_deg: float) -> Region:
+    """Where a beacon is seen for every mirror orientation within ±ε, on a grid around R."""
+    span = 1.5 * (s / 2) / math.tan(math.radians(2 * eps_deg)) + s
+    xs = np.linspace(R[0] - span, R[0] + span, 241)
+    ys = np.linspace(R[1] - span, R[1] + span, 241)
+    gx, gy = np.meshgrid(xs, ys)
+    mask = visible_region(o, alpha_deg, d_total, s, eps_deg,
+                          np.column_stack([gx.ravel(), gy.ravel()])).reshape(gx.shape)
+    return Region(xs, ys, mask, float(mask.sum() * (xs[1] - xs[0]) * (ys[1] - ys[0])))
+
+
+def _best_position(scene: Scene, o: np.ndarray, alpha_deg: float, d_total: float, poses,
+                   sigma: Sigma, step: float) -> BeaconSearch:
+    """The board's best beacon position: clear of walls, the mirror and the panel, and
+    its image unobstructed through the scene's own mirror."""
+    mir = scene.mirror
     keep_out = [(occ.start, occ.end, OCCLUDER_THICKNESS / 2 + PENCIL_RADIUS)
                 for occ in scene.occluders]
     keep_out.append((*mir.ends(), MIRROR_DEPTH + PENCIL_RADIUS))
@@ -158,17 +189,5 @@ def plan_scene(scene: Scene, sigma: Sigma | None = None, eps_deg: float = 5.0,
         moved = replace(scene, beacons=(Beacon((float(p[0]), float(p[1])), height),))
         return visibility.visibility(moved, moved.beacons[0]).fraction == 1.0
 
-    best = best_beacon(o, img.alpha_deg, img.d_total, poses, sigma, s, scene.board.size,
+    return best_beacon(o, alpha_deg, d_total, poses, sigma, mir.size[0], scene.board.size,
                        step=step, keep_out=keep_out, accept=unobstructed)
-    scene_err, scene_seen = expected_target_error(
-        o, img.alpha_deg, img.d_total, np.array([b.position for b in scene.beacons]), poses,
-        sigma, s, min_depth=0.0)
-    region = Region(xs, ys, mask, float(mask.sum() * (xs[1] - xs[0]) * (ys[1] - ys[0])))
-    return Plan(
-        target_alpha_deg=img.alpha_deg, target_d_total=img.d_total, eps_deg=eps_deg,
-        sigma=sigma, geometry=geo, geometry_corrected=geo_corrected, n_steps=n_steps,
-        paths=paths, path_lengths=path_lengths(2 * geo.half_a, geo.b, n_steps),
-        path_polyline_lengths={k: polyline_length(v) for k, v in paths.items()},
-        region=region, area_vs_d=(list(AREA_DISTANCES), area_lit, area_exact),
-        n_poses=len(poses), best=best, scene_beacon_rmse=float(scene_err[0]),
-        scene_beacon_seen=float(scene_seen[0]))

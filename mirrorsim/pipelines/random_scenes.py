@@ -17,17 +17,16 @@ import numpy as np
 import yaml
 
 from mirrorsim.errors import RunFailed, SceneError
-from mirrorsim.formats.reader import Reader, show
+from mirrorsim.formats.reader import Reader, read_resolution, read_yaml, show
 from mirrorsim.formats.scenefile import (
     DEFAULT_RESOLUTION,
     read_camera_model,
+    read_pan,
     read_render,
-    read_resolution,
-    read_yaml,
     scene_from_dict,
 )
 from mirrorsim.scene.imperfections import REGISTRY, as_keys
-from mirrorsim.scene.model import PAN_WORDS, Camera, Scene
+from mirrorsim.scene.model import Camera, Scene
 from mirrorsim.truth import visibility
 
 DEFAULT_SPEC = Path(__file__).resolve().parents[2] / "scenes" / "dataset_spec.yaml"
@@ -76,12 +75,7 @@ def load_spec(path: str | Path | None = None) -> dict:
     read_resolution(r, cam.get("resolution", DEFAULT_RESOLUTION), "camera.resolution")
     if "models" in cam:
         camera_models(spec, r)
-    pan = spec["camera"].get("pan", "mirror")
-    if not isinstance(pan, str):
-        r.number(pan, "camera.pan")
-    elif pan not in PAN_WORDS:
-        raise r.fail("camera.pan", f"{show(pan)}: expected a bearing in degrees or one of "
-                     f"{', '.join(PAN_WORDS)}")
+    read_pan(r, spec["camera"].get("pan", "mirror"), "camera.pan")
     r.mapping(spec["mirror"], "mirror", {"x", "y", "yaw", "width", "height"})
     r.mapping(spec["target"], "target", {"x", "y", "size"})
     r.pair(spec["target"]["size"], "target.size", positive=True)

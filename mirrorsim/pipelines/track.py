@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mirrorsim.detection.detector import Detection
+from mirrorsim.detection.detector import Calibration, Detection
 from mirrorsim.errors import BadParameter, DetectionError
 from mirrorsim.pipelines.evaluate import DETECTOR_SIGMA
 from mirrorsim.pipelines.frame import FrameNotMeasured, render_and_measure
@@ -205,29 +205,10 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
     rng = np.random.default_rng(seed)
     b0, cam = scene.beacons[0], scene.camera
     start = np.asarray(b0.believed, float)
-    mirror_point, mirror_yaw = np.asarray(scene.mirror.center, float), scene.mirror.yaw
-    target_true = np.asarray(scene.target.position, float)
     params = PFParams(sigma=DETECTOR_SIGMA,
                       sigma_trs=max(odometry_sigma if kind != "fixed" else 0.0, 1e-3))
-    cal = None  # one camera, one calibration: made at the first pose
-
-    def pose(k: int, believed: np.ndarray, true: np.ndarray):
-        nonlocal cal
-        if on_pose:
-            on_pose(k, steps + 1)
-        posed = replace(scene, name=f"{scene.name}_pose{k:03d}",
-                        beacons=(replace(b0, position=tuple(true),
-                                         known_position=tuple(believed)),),
-                        render=replace(scene.render, seed=seed * 1000 + k))
-        try:
-            m = render_and_measure(posed, out / "poses", spp=spp, variant=variant,
-                                   progress=False, reuse=True, ids=False, calibration=cal)
-        except FrameNotMeasured as exc:
-            return None, None, exc.reason
-        cal = m.calibration
-        return _observations(m.detection)
-
-    obs, target_obs, why = pose(0, start, np.asarray(b0.position, float))
+    pose = _Poses(scene, out / "poses", seed, spp, variant, on_pose, steps + 1)
+    obs, target_obs, why = pose.measure(0, start, np.asarray(b0.position, float))
     if obs is None or target_obs is None:
         raise DetectionError(f"{scene.name}: the start pose gives the filter no prior and "
                              f"the path no heading: {why or 'the target was not measured'}")
@@ -238,33 +219,80 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
         raise DetectionError(f"{scene.name}: the start pose's measurements give no mirror "
                              f"({exc})") from None
     moves = np.diff(commanded, axis=0)
-    true = [np.asarray(b0.position, float)]
-    for mv in moves:  # a beacon that stands still does not drift
-        true.append(true[-1] + mv + (rng.normal(0.0, odometry_sigma, 2) if mv.any() else 0.0))
+    true = _true_path(np.asarray(b0.position, float), moves, odometry_sigma, rng)
     targets = [target_obs]
     records: list[TrackStep] = []
     snapshots: list[np.ndarray] = []
     for k in range(steps + 1):
         if k:
-            obs, target_obs, why = pose(k, commanded[k], true[k])
+            obs, target_obs, why = pose.measure(k, commanded[k], true[k])
             if target_obs is not None:
                 targets.append(target_obs)
         pf.step(np.zeros(2) if k == 0 else moves[k - 1], obs)
-        est = pf.estimate()
-        yaw_err, off_err = mirror_errors([est], mirror_point, mirror_yaw)
-        target = locate(cam.position, est.point, est.yaw_deg, *np.mean(targets, axis=0))
-        records.append(TrackStep(
-            step=k, commanded=tuple(map(float, commanded[k])),
-            path_length_cm=float(np.sum(np.linalg.norm(moves[:k], axis=1))),
-            beacon_position=tuple(map(float, true[k])), seen=obs is not None, why_unseen=why,
-            mirror_yaw_error_deg=float(abs(yaw_err[0])), mirror_offset_error_cm=float(off_err[0]),
-            target=tuple(map(float, target)),
-            target_error_cm=float(np.linalg.norm(target - target_true)),
-            yaw_spread_deg=est.yaw_sd_deg, offset_spread_cm=est.rho_sd))
+        records.append(_step_record(scene, k, pf.estimate(), np.mean(targets, axis=0),
+                                    commanded[k], moves[:k], true[k], obs is not None, why))
         snapshots.append(_snapshot(pf, rng))
     return TrackReport(scene=scene.name, path=kind, heading=heading,
                        odometry_sigma=odometry_sigma, seed=seed, steps=tuple(records),
                        snapshots=tuple(snapshots))
+
+
+class _Poses:
+    """Renders and measures the beacon's poses (one camera, one calibration: made at the
+    first pose)."""
+
+    def __init__(self, scene: Scene, out: Path, seed: int, spp: int | None, variant: str,
+                 on_pose: Callable[[int, int], None] | None, total: int):
+        self.scene, self.out, self.seed, self.spp, self.variant = scene, out, seed, spp, variant
+        self.on_pose, self.total = on_pose, total
+        self.calibration: Calibration | None = None
+
+    def measure(self, k: int, believed: np.ndarray, true: np.ndarray
+                ) -> tuple[tuple[float, float] | None, tuple[float, float] | None, str]:
+        """Pose k: the beacon's and the target's observations (or None) and why not."""
+        if self.on_pose:
+            self.on_pose(k, self.total)
+        b0 = self.scene.beacons[0]
+        posed = replace(self.scene, name=f"{self.scene.name}_pose{k:03d}",
+                        beacons=(replace(b0, position=tuple(true),
+                                         known_position=tuple(believed)),),
+                        render=replace(self.scene.render, seed=self.seed * 1000 + k))
+        try:
+            m = render_and_measure(posed, self.out, spp=self.spp, variant=self.variant,
+                                   progress=False, reuse=True, ids=False,
+                                   calibration=self.calibration)
+        except FrameNotMeasured as exc:
+            return None, None, exc.reason
+        self.calibration = m.calibration
+        return _observations(m.detection)
+
+
+def _true_path(start: np.ndarray, moves: np.ndarray, sigma: float,
+               rng: np.random.Generator) -> list[np.ndarray]:
+    """Where the beacon really goes: each commanded move plus odometry noise (a beacon
+    that stands still does not drift)."""
+    true = [start]
+    for mv in moves:
+        true.append(true[-1] + mv + (rng.normal(0.0, sigma, 2) if mv.any() else 0.0))
+    return true
+
+
+def _step_record(scene: Scene, k: int, est, target_obs: np.ndarray, commanded: np.ndarray,
+                 moves: np.ndarray, true: np.ndarray, seen: bool, why: str) -> TrackStep:
+    """Step k scored against the scene: the filter's mirror, and the target located with
+    it from the mean of the target's observations so far."""
+    cam = scene.camera
+    yaw_err, off_err = mirror_errors([est], np.asarray(scene.mirror.center, float),
+                                     scene.mirror.yaw)
+    target = locate(cam.position, est.point, est.yaw_deg, *target_obs)
+    return TrackStep(
+        step=k, commanded=tuple(map(float, commanded)),
+        path_length_cm=float(np.sum(np.linalg.norm(moves, axis=1))),
+        beacon_position=tuple(map(float, true)), seen=seen, why_unseen=why,
+        mirror_yaw_error_deg=float(abs(yaw_err[0])), mirror_offset_error_cm=float(off_err[0]),
+        target=tuple(map(float, target)),
+        target_error_cm=float(np.linalg.norm(target - np.asarray(scene.target.position, float))),
+        yaw_spread_deg=est.yaw_sd_deg, offset_spread_cm=est.rho_sd)
 
 
 def _observations(det: Detection

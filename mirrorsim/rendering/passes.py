@@ -97,30 +97,16 @@ def render_frame(scene: Scene, *, spp: int, seed: int, variant: str = "auto",
     lens = k != (0.0, 0.0)
     # a distorting lens: the pinhole render of a wider canvas, warped onto the sensor
     pinhole = replace(scene, camera=distortion_canvas(scene.camera, k)[0]) if lens else scene
-    background = min(scene.render.background_spp, spp)
-    box = optics.mirror_box(pinhole) if background < spp else None
-    beacon_spp = max(scene.render.beacon_spp, spp)
-    boxes = [b for b in optics.beacon_boxes(pinhole) if b is not None] \
-        if beacon_spp > spp else []
-    # the mirror's region at the full spp, then each beacon's image at beacon_spp
-    # (inside the mirror's region: pasted after it), each with its own seeds
-    passes = ([(box, spp, 1)] if box is not None else []) \
-        + [(b, beacon_spp, 2 + i) for i, b in enumerate(boxes)]
+    box, background, beacon_spp, boxes, passes = _regions(pinhole, spp)
     with variant_scope(chosen):
         crops = tuple(c for c, _, _ in passes)
         mi_scene = mi.load_dict(build_scene_dict(pinhole, spp=spp, crops=crops),
                                 optimize=False)
-        full, *crop_sensors = mi_scene.sensors()
         with tqdm(total=(spp if box is None else background) + sum(n for _, n, _ in passes),
                   unit="spp", disable=not progress, leave=False,
                   desc=f"rendering {scene.name} ({chosen})") as bar:
-            linear = _accumulate(mi_scene, full, spp if box is None else background,
-                                 (seed, 0), bar.update)
-            for sensor, ((u0, v0, u1, v1), n, stream) in zip(crop_sensors, passes,
-                                                             strict=True):
-                assert tuple(sensor.film().crop_offset()) == (u0, v0), "sensor order"
-                linear[v0:v1, u0:u1] = _accumulate(mi_scene, sensor, n, (seed, stream),
-                                                   bar.update)
+            linear = _render_regions(mi_scene, spp if box is None else background, passes,
+                                     seed, bar.update)
         t_render = time.perf_counter() - t0
         first, in_mirror = id_pass(mi_scene, pinhole)
     if lens:
@@ -134,6 +120,37 @@ def render_frame(scene: Scene, *, spp: int, seed: int, variant: str = "auto",
                          beacon_spp=beacon_spp if boxes else None,
                          seconds_render=t_render,
                          seconds_total=time.perf_counter() - t0)
+
+
+Region = tuple[int, int, int, int]
+
+
+def _regions(pinhole: Scene, spp: int) -> tuple[Region | None, int, int, list[Region],
+                                                list[tuple[Region, int, int]]]:
+    """Where the samples go: the mirror's box (None: the whole frame at spp), the spp
+    outside it, the beacons' spp and boxes, and the passes after the whole film as
+    (region, spp, seed stream): the mirror's region at the full spp, then each beacon's
+    image at beacon_spp (inside the mirror's region: pasted after it)."""
+    background = min(pinhole.render.background_spp, spp)
+    box = optics.mirror_box(pinhole) if background < spp else None
+    beacon_spp = max(pinhole.render.beacon_spp, spp)
+    boxes = [b for b in optics.beacon_boxes(pinhole) if b is not None] \
+        if beacon_spp > spp else []
+    passes = ([(box, spp, 1)] if box is not None else []) \
+        + [(b, beacon_spp, 2 + i) for i, b in enumerate(boxes)]
+    return box, background, beacon_spp, boxes, passes
+
+
+def _render_regions(mi_scene, whole_spp: int, passes: list[tuple[Region, int, int]],
+                    seed: int, step: Callable[[int], object]) -> np.ndarray:
+    """The whole film at ``whole_spp``, then each pass's region over it (each with its
+    own seed stream)."""
+    full, *crop_sensors = mi_scene.sensors()
+    linear = _accumulate(mi_scene, full, whole_spp, (seed, 0), step)
+    for sensor, ((u0, v0, u1, v1), n, stream) in zip(crop_sensors, passes, strict=True):
+        assert tuple(sensor.film().crop_offset()) == (u0, v0), "sensor order"
+        linear[v0:v1, u0:u1] = _accumulate(mi_scene, sensor, n, (seed, stream), step)
+    return linear
 
 
 def render_direct(board: Board, camera: Camera, obj: Target | Beacon, *, spp: int,

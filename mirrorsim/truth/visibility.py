@@ -15,6 +15,7 @@ from mirrorsim.scene.model import (
     PENCIL_RADIUS,
     TARGET_THICKNESS,
     Beacon,
+    Camera,
     Scene,
     Target,
 )
@@ -215,40 +216,52 @@ def _column_failures(scene: Scene, walls, point, heights: np.ndarray) -> list[st
     u, v, depth = project(cam, apparent, scene.bench.pitch, scene.bench.roll)
     outside = (depth <= 0) | (u < -0.5) | (u > cam.width - 0.5) | (v < -0.5) | (
         v > cam.height_px - 0.5)
-    # the first wall (in the walls' order) under each path: camera → mirror, then
-    # mirror → object; in plan both paths are the same for every height
-    r2 = np.asarray(img.reflection_point, float)
+    blocker = _first_blockers(walls, cam, np.asarray(img.reflection_point, float),
+                              np.asarray(point, float), zc, heights)
+    return [_why_lost(scene, offset[k], up_glass[k], lip[k], outside[k], blocker[k],
+                      (float(u[k]), float(v[k]))) for k in range(n)]
+
+
+def _first_blockers(walls, cam: Camera, r2: np.ndarray, point: np.ndarray, zc: np.ndarray,
+                    heights: np.ndarray) -> np.ndarray:
+    """The first wall (in the walls' order) under each height's path: camera → mirror,
+    then mirror → object ('' where none); in plan both paths are the same for every
+    height."""
+    n = len(heights)
     blocker = np.full(n, "", dtype=object)
     for a2, b2, za, zb in ((np.asarray(cam.position, float), r2, np.full(n, cam.height), zc),
-                           (r2, np.asarray(point, float), zc, heights)):
+                           (r2, point, zc, heights)):
         for name, w0, w1, h in walls:
             cross = segment_crossing(a2, b2, w0, w1)
             if cross is not None:
                 hit = (za + cross * (zb - za) < h) & (blocker == "")
                 blocker[hit] = name
-    out = []
-    for k in range(n):
-        if abs(offset[k]) > half_w:
-            out.append(_past_end(offset[k], half_w))
-        elif up_glass[k] > mir.size[1]:
-            out.append(f"the ray meets the mirror plane {up_glass[k] - mir.size[1]:.2f} cm "
-                       "above its top edge")
-        elif up_glass[k] < 0.0:
-            out.append(f"the ray meets the mirror plane {-up_glass[k]:.2f} cm below the board")
-        elif lip[k]:
-            leg, part = lip[k].split()
-            gap = half_w - abs(offset[k]) if part == "side" else mir.size[1] - up_glass[k]
-            out.append(f"its path to the {leg} leaves the glass {gap:.2f} cm from its "
-                       f"{part} edge and meets the frame there ({MIRROR_LIP} cm proud of "
-                       "the glass)")
-        elif outside[k]:
-            out.append(f"it lies outside the camera's field of view (pan {cam.pan_deg:.2f}°, "
-                       f"pixel ({float(u[k]):.0f}, {float(v[k]):.0f}))")
-        elif blocker[k]:
-            out.append(f"the path through the mirror is blocked by {blocker[k]}")
-        else:
-            out.append("")
-    return out
+    return blocker
+
+
+def _why_lost(scene: Scene, offset: float, up_glass: float, lip: str, outside: bool,
+              blocker: str, pixel: tuple[float, float]) -> str:
+    """Why one point's image does not reach the camera, in the order the path meets the
+    causes ('' where it does)."""
+    mir, cam = scene.mirror, scene.camera
+    half_w = mir.size[0] / 2.0
+    if abs(offset) > half_w:
+        return _past_end(offset, half_w)
+    if up_glass > mir.size[1]:
+        return f"the ray meets the mirror plane {up_glass - mir.size[1]:.2f} cm above its top edge"
+    if up_glass < 0.0:
+        return f"the ray meets the mirror plane {-up_glass:.2f} cm below the board"
+    if lip:
+        leg, part = lip.split()
+        gap = half_w - abs(offset) if part == "side" else mir.size[1] - up_glass
+        return (f"its path to the {leg} leaves the glass {gap:.2f} cm from its {part} edge "
+                f"and meets the frame there ({MIRROR_LIP} cm proud of the glass)")
+    if outside:
+        return (f"it lies outside the camera's field of view (pan {cam.pan_deg:.2f}°, "
+                f"pixel ({pixel[0]:.0f}, {pixel[1]:.0f}))")
+    if blocker:
+        return f"the path through the mirror is blocked by {blocker}"
+    return ""
 
 
 def visibility(scene: Scene, obj: Target | Beacon) -> Visibility:
