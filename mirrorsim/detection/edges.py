@@ -9,6 +9,7 @@ independent estimates; their median resists partial occlusion.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -113,14 +114,8 @@ def _local_edge(img: np.ndarray, band, axis: int, guess: float, inside_first: bo
     rows_a = np.array([line(c + int(k)) for k in k_a])
     before, after = _level(rows_b, -k_b, at, slope), _level(rows_a, k_a, at, slope)
     inside, outside = (before, after) if inside_first else (after, before)
-    if chroma:
-        # only the colour across the outside's: the outside's shading (a contact shadow,
-        # a hole, a facet turned from the light) scales its colour and drops out
-        o = np.median(rows_a if inside_first else rows_b, axis=0)  # holes: a median
-        o /= max(float(np.linalg.norm(o)), 1e-9)
-        flat = lambda x: x - (x @ o)[..., None] * o  # noqa: E731
-    else:
-        flat = lambda x: x  # noqa: E731
+    flat = _across(np.median(rows_a if inside_first else rows_b, axis=0)) if chroma \
+        else (lambda x: x)
     if near:
         # the outside changes towards the edge (a contact shadow on the board): its level
         # is the first pixel past the edge's, and the window stops at the edge's pixel
@@ -132,9 +127,17 @@ def _local_edge(img: np.ndarray, band, axis: int, guess: float, inside_first: bo
                 _mean_level(outside))
     window = np.array([line(i) for i in range(c - half, c + half + 1)])
     if chroma:
-        return _edge_by_area(flat(window), c - half, flat(inside), np.zeros_like(o),
+        return _edge_by_area(flat(window), c - half, flat(inside), np.zeros(window.shape[-1]),
                              inside_first), _mean_level(outside)
     return _edge_by_area(window, c - half, inside, outside, inside_first), _mean_level(outside)
+
+
+def _across(outside: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+    """Projection onto the colours across ``outside``'s (its median over the rows: holes
+    drop out): the outside's shading (a contact shadow, a hole, a facet turned from the
+    light) scales its colour and so drops out."""
+    o = outside / max(float(np.linalg.norm(outside)), 1e-9)
+    return lambda x: x - (x @ o)[..., None] * o
 
 
 def _mean_level(level: np.ndarray) -> np.ndarray:

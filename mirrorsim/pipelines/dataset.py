@@ -28,6 +28,7 @@ import math
 import time
 import traceback
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -204,8 +205,7 @@ class DatasetRun:
 def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
                 spec_path: str | Path | None = None, spp: int | None = None,
                 sampler: str | None = None, variant: str = "auto", resume: bool = False,
-                keep: tuple[str, ...] = (),
-                executor: str = "local",
+                keep: tuple[str, ...] = (), executor: str = "local",
                 scheduler: str | None = None, progress: bool = True,
                 max_rss_mb: float = MAX_WORKER_RSS_MB) -> DatasetRun:
     """Make (or finish) a dataset of ``n`` scenes; return a summary.
@@ -229,10 +229,7 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
         spec = {**spec, "render": {**spec.get("render", {}), "sampler": sampler}}
     meta = {"format": DATASET_FORMAT, "n": n, "seed": seed, "spp": spp, "spec": spec}
     _claim_folder(out, meta, resume)
-    for sub in ("scenes", "frames", "rows"):
-        (out / sub).mkdir(parents=True, exist_ok=True)
-    if not (out / "dataset.json").exists():
-        write_json(out / "dataset.json", meta)
+    _make_folders(out, meta)
     chosen = choose_variant(variant)  # the probe runs once here rather than in every worker
     _calibrate_models(spec, chosen, progress)
     retry: dict[int, str] = {}
@@ -252,13 +249,7 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
 
     jobs = [(i, seed, spec, str(out), spp, chosen, tuple(keep)) for i in todo]
     try:
-        if executor == "dask":
-            run_dask(process_one, jobs, scheduler, on_result)
-        elif workers <= 1:
-            for job in jobs:
-                on_result(process_one(*job))
-        else:
-            run_local(process_one, jobs, workers, is_done, on_result, max_rss_mb)
+        _run_jobs(jobs, executor, workers, scheduler, is_done, on_result, max_rss_mb)
     finally:
         bar.close()
     wall = time.perf_counter() - t_start
@@ -270,6 +261,28 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
                       failed=sum(bool(r.get("error")) for r in rows), retry=retry,
                       parquet=out / "dataset.parquet", seconds=wall,
                       per_minute=len(todo) / wall * 60 if todo and wall else 0.0)
+
+
+def _make_folders(out: Path, meta: dict) -> None:
+    """The dataset's folders, and its description (written once: a resume keeps it)."""
+    for sub in ("scenes", "frames", "rows"):
+        (out / sub).mkdir(parents=True, exist_ok=True)
+    if not (out / "dataset.json").exists():
+        write_json(out / "dataset.json", meta)
+
+
+def _run_jobs(jobs: list[tuple], executor: str, workers: int, scheduler: str | None,
+              is_done: Callable[[int], bool], on_result: Callable[[SceneResult], None],
+              max_rss_mb: float) -> None:
+    """Each job through :func:`process_one`: in this process, in warm local workers, or
+    on a Dask cluster."""
+    if executor == "dask":
+        run_dask(process_one, jobs, scheduler, on_result)
+    elif workers <= 1:
+        for job in jobs:
+            on_result(process_one(*job))
+    else:
+        run_local(process_one, jobs, workers, is_done, on_result, max_rss_mb)
 
 
 def _claim_folder(out: Path, meta: dict, resume: bool) -> None:
