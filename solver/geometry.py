@@ -85,19 +85,17 @@ def segment_distance(p0: ArrayLike, p1: ArrayLike, q0: ArrayLike, q1: ArrayLike)
     p0, p1, q0, q1 = (np.asarray(v, dtype=float) for v in (p0, p1, q0, q1))
     if _segments_cross(p0, p1, q0, q1):
         return 0.0
-    return min(
-        _point_segment_distance(p0, q0, q1),
-        _point_segment_distance(p1, q0, q1),
-        _point_segment_distance(q0, p0, p1),
-        _point_segment_distance(q1, p0, p1),
-    )
+    return float(min(point_segment_distance(p0, q0, q1), point_segment_distance(p1, q0, q1),
+                     point_segment_distance(q0, p0, p1), point_segment_distance(q1, p0, p1)))
 
 
-def _point_segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+def point_segment_distance(p: ArrayLike, a: ArrayLike, b: ArrayLike) -> np.ndarray:
+    """Distance of each point ``p`` (..., 2) from the segment a–b (a point if a = b)."""
+    p, a, b = (np.asarray(v, dtype=float) for v in (p, a, b))
     ab = b - a
     L2 = float(ab @ ab)
-    t = 0.0 if L2 == 0.0 else float(np.clip((p - a) @ ab / L2, 0.0, 1.0))
-    return float(np.linalg.norm(p - (a + t * ab)))
+    t = np.zeros(p.shape[:-1]) if L2 == 0.0 else np.clip((p - a) @ ab / L2, 0.0, 1.0)
+    return np.linalg.norm(p - (a + t[..., None] * ab), axis=-1)
 
 
 def _cross2(a: np.ndarray, b: np.ndarray) -> float:

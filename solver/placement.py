@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
-from solver.geometry import line_normal, reflect, unit, wrap_bearing
+from solver.geometry import line_normal, point_segment_distance, reflect, unit, wrap_bearing
 from solver.lsq import Sigma, predict
 from solver.sltr import SolverError, observe
 
@@ -206,7 +206,6 @@ class MirrorPrior:
     yaw_deg: float
     d1_spread: float = 5.0
     yaw_spread_deg: float = 5.0
-    size: float = 18.2
     n: int = 5
 
     def poses(self, observer, target_alpha_deg: float) -> list[tuple[np.ndarray, float]]:
@@ -300,7 +299,7 @@ def best_beacon(observer, target_alpha_deg, target_d_total, poses, sigma: Sigma,
     err, seen = expected_target_error(observer, target_alpha_deg, target_d_total, grid,
                                       poses, sigma, mirror_size)
     for a, b, clear in keep_out:
-        blocked = _segment_dist(grid, np.asarray(a, float), np.asarray(b, float)) < clear
+        blocked = point_segment_distance(grid, a, b) < clear
         err[blocked], seen[blocked] = np.inf, 0.0
     if not (seen > 0).any():
         raise SolverError("no beacon position on the board is seen through the mirror")
@@ -314,9 +313,3 @@ def best_beacon(observer, target_alpha_deg, target_d_total, poses, sigma: Sigma,
             raise SolverError("no acceptable beacon position among the 500 best candidates")
     return BeaconSearch(grid[k], float(err[k]), float(seen[k]), xs, ys,
                         err.reshape(gx.shape), seen.reshape(gx.shape))
-
-
-def _segment_dist(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    ab = b - a
-    t = np.clip(((p - a) @ ab) / max(ab @ ab, 1e-12), 0.0, 1.0)
-    return np.linalg.norm(p - (a + t[:, None] * ab), axis=1)

@@ -89,7 +89,7 @@ def observe(observer: ArrayLike, mirror_point: ArrayLike, yaw_deg: ArrayLike,
         raise SolverError("the observer or the point lies on the mirror line")
     if strict and np.any(so * sp < 0):
         raise SolverError("the point is behind the mirror (on the other side from the observer)")
-    v = p - 2.0 * sp[..., None] * n
+    v = reflect(p, mirror_point, yaw_deg)
     rel = v - o
     d_total = np.hypot(rel[..., 0], rel[..., 1])
     t = so / (so - (-sp))  # the virtual image is -sp from the line

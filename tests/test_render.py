@@ -217,7 +217,7 @@ def test_fewer_samples_outside_the_mirror(name, fast_variant):
     uniform = replace(scene, render=replace(scene.render, background_spp=16))
     plain1 = render_frame(uniform, spp=1, seed=2, variant=fast_variant, progress=False)
     plain16 = render_frame(uniform, spp=16, seed=2, variant=fast_variant, progress=False)
-    assert plain16.background_spp is None  # uniform: no mirror box rendered apart
+    assert plain16.info.background_spp is None  # uniform: no mirror box rendered apart
     u0, v0, u1, v1 = optics.mirror_box(scene)
     vs, us = np.nonzero(plain16.first == MIRROR_LABEL)
     assert u0 <= us.min() and us.max() < u1 and v0 <= vs.min() and vs.max() < v1
@@ -230,7 +230,7 @@ def test_fewer_samples_outside_the_mirror(name, fast_variant):
     # 16 samples inside: per-pixel scatter about the 16-spp frame well under 1 spp's
     assert (np.abs(box_mixed - box16).mean()
             < 0.6 * np.abs(plain1.linear[inside] - box16).mean())
-    assert mixed.background_spp == 1 and np.array_equal(mixed.first, plain16.first)
+    assert mixed.info.background_spp == 1 and np.array_equal(mixed.first, plain16.first)
 
 
 def test_more_samples_in_the_beacons_image(fast_variant):
@@ -258,7 +258,7 @@ def test_more_samples_in_the_beacons_image(fast_variant):
     assert np.array_equal(boxed.linear[~inside], plain.linear[~inside])
     err = lambda f: np.abs(f.linear[inside] - ref.linear[inside]).mean()  # noqa: E731
     assert err(boxed) < 0.5 * err(plain)
-    assert boxed.beacon_spp == 64 and plain.beacon_spp is None
+    assert boxed.info.beacon_spp == 64 and plain.info.beacon_spp is None
 
 
 def test_mirror_image_lies_where_the_mirror_puts_it(tmp_path, fast_variant):

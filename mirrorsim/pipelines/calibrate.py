@@ -14,7 +14,6 @@ or ``~/.cache/mirrorsim``).
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import numpy as np
@@ -72,11 +71,10 @@ def reference_crop(camera: Camera, obj: Target | Beacon) -> tuple[int, int, int,
     across = unit(REFERENCE_PAN + 90)
     pts = np.array([[*(np.asarray(obj.position) + s * half_w * across), z]
                     for s in (-1, 1) for z in (0.0, top)])
-    u, v, _ = optics.project(camera, pts)
-    return (int(max(0, math.floor(u.min()) - MARGIN_PX)),
-            int(max(0, math.floor(v.min()) - MARGIN_PX)),
-            int(min(camera.width, math.ceil(u.max()) + MARGIN_PX + 1)),
-            int(min(camera.height_px, math.ceil(v.max()) + MARGIN_PX + 1)))
+    box = optics.film_box(camera, *optics.project(camera, pts), MARGIN_PX)
+    if box is None:  # the reference stands on the optical axis, 100 cm ahead
+        raise DetectionError("the calibration's reference object is not on the film")
+    return box
 
 
 def measure_reference(camera: Camera, kind: str, size, variant: str = "auto",

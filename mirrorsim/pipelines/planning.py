@@ -130,7 +130,7 @@ def plan_scene(scene: Scene, sigma: Sigma | None = None, eps_deg: float = 5.0,
                   for d in AREA_DISTANCES]
 
     prior = MirrorPrior(d1=img.d1, yaw_deg=mir.yaw, d1_spread=d1_spread,
-                        yaw_spread_deg=yaw_spread_deg, size=s, n=n_poses)
+                        yaw_spread_deg=yaw_spread_deg, n=n_poses)
     poses = prior.poses(o, img.alpha_deg)
     best = _best_position(scene, o, img.alpha_deg, img.d_total, poses, sigma, step)
     scene_err, scene_seen = expected_target_error(

@@ -23,16 +23,15 @@ from mirrorsim.rendering.mitsuba_scene import (
 )
 from mirrorsim.rendering.passes import (
     IN_MIRROR,
-    MITSUBA_VERSION,
     RENDER_METHOD,
     RenderedFrame,
     encode_ids,
     render_frame,
 )
 from mirrorsim.rendering.sensor import to_srgb8
-from mirrorsim.scene.model import Bench, Scene
+from mirrorsim.scene.model import Scene
 from mirrorsim.truth import groundtruth
-from mirrorsim.truth.groundtruth import GroundTruth, MirrorPixels, RenderInfo
+from mirrorsim.truth.groundtruth import GroundTruth, MirrorPixels
 
 
 @dataclass(frozen=True)
@@ -64,13 +63,6 @@ def scene_fingerprint(scene: Scene, spp: int, seed: int) -> str:
     """What a render depends on: the scene's content (not its file name, with its
     sampler), spp, seed and the way frames are rendered."""
     d = asdict(replace(scene, source="", warnings=()))
-    # an ideal bench leaves the fingerprint as it was before benches existed, so that
-    # renders made then are still reused
-    if scene.bench == Bench():
-        del d["bench"]
-    for b in d["beacons"]:
-        if b["known_position"] is None:
-            del b["known_position"]
     text = json.dumps(d, sort_keys=True, default=str) + f"|{spp}|{seed}|{RENDER_METHOD}"
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
@@ -92,12 +84,7 @@ def truth_of(scene: Scene, frame: RenderedFrame, fingerprint: str | None) -> Gro
                    "target": TARGET_LABEL, "beacons": BEACON_LABEL,
                    "occluders": BEACON_LABEL + len(scene.beacons),
                    "seen_in_mirror_offset": IN_MIRROR},
-        render=RenderInfo(variant=frame.variant, spp=frame.spp, seed=frame.seed,
-                          sampler=frame.sampler, background_spp=frame.background_spp,
-                          beacon_spp=frame.beacon_spp,
-                          seconds_render=round(frame.seconds_render, 3),
-                          seconds_total=round(frame.seconds_total, 3),
-                          mitsuba=MITSUBA_VERSION, fingerprint=fingerprint))
+        render=replace(frame.info, fingerprint=fingerprint))
 
 
 def write_frame(scene: Scene, frame: RenderedFrame, out: Path,

@@ -30,6 +30,7 @@ from mirrorsim.rendering.mitsuba_scene import (
 from mirrorsim.rendering.sensor import add_noise, distort, distortion_canvas, to_srgb8
 from mirrorsim.scene.model import Beacon, Board, Camera, Scene, Target
 from mirrorsim.truth import optics
+from mirrorsim.truth.groundtruth import RenderInfo
 
 IN_MIRROR = 100  # ids.png: label + IN_MIRROR where the pixel sees it in the mirror
 # samples per render call: one progress step each.  A stratified sampler stratifies
@@ -50,14 +51,7 @@ class RenderedFrame:
     linear: np.ndarray
     first: np.ndarray
     in_mirror: np.ndarray
-    variant: str
-    spp: int
-    seed: int
-    sampler: str
-    background_spp: int | None  # outside the mirror's image (None: spp everywhere)
-    beacon_spp: int | None  # in the beacons' images (None: no more than spp)
-    seconds_render: float
-    seconds_total: float
+    info: RenderInfo  # how it was rendered (the truth file's ``render`` block)
 
 
 @contextlib.contextmanager
@@ -114,12 +108,12 @@ def render_frame(scene: Scene, *, spp: int, seed: int, variant: str = "auto",
         first, in_mirror = (distort(a, scene.camera, k, nearest=True) for a in (first, in_mirror))
     if bench.noise is not None:
         linear = add_noise(linear, bench.noise, seed)
-    return RenderedFrame(linear=linear, first=first, in_mirror=in_mirror, variant=chosen,
-                         spp=spp, seed=seed, sampler=scene.render.sampler,
-                         background_spp=None if box is None else background,
-                         beacon_spp=beacon_spp if boxes else None,
-                         seconds_render=t_render,
-                         seconds_total=time.perf_counter() - t0)
+    info = RenderInfo(variant=chosen, spp=spp, seed=seed, sampler=scene.render.sampler,
+                      background_spp=None if box is None else background,
+                      beacon_spp=beacon_spp if boxes else None,
+                      seconds_render=round(t_render, 3),
+                      seconds_total=round(time.perf_counter() - t0, 3), mitsuba=MITSUBA_VERSION)
+    return RenderedFrame(linear=linear, first=first, in_mirror=in_mirror, info=info)
 
 
 Region = tuple[int, int, int, int]

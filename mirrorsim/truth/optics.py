@@ -155,10 +155,10 @@ def mirror_box(scene: Scene, margin_px: int = 8) -> tuple[int, int, int, int] | 
     lean = unit(m.yaw + 90.0) * top * math.sin(math.radians(abs(bench.tilt)))
     pts = np.array([[*(c + s * d + e * lean), z] for s in (-1, 1) for z in (0.0, top)
                     for e in (-1, 1)])
-    return _film_box(cam, *project(cam, pts, bench.pitch, bench.roll), margin_px)
+    return film_box(cam, *project(cam, pts, bench.pitch, bench.roll), margin_px)
 
 
-def _film_box(cam: Camera, u: np.ndarray, v: np.ndarray, depth: np.ndarray, margin_px: int
+def film_box(cam: Camera, u: np.ndarray, v: np.ndarray, depth: np.ndarray, margin_px: int
               ) -> tuple[int, int, int, int] | None:
     """The film region (end-exclusive) around projected points, ``margin_px`` wider and
     clipped to the film; None if a point lies behind the camera or none on the film."""
@@ -182,6 +182,6 @@ def beacon_boxes(scene: Scene, margin_px: int = 16) -> list[tuple[int, int, int,
         v = mirror_image(cam.position, scene.mirror, b.position).virtual
         pts = np.array([[v[0] + dx, v[1] + dy, z] for dx in (-PENCIL_RADIUS, PENCIL_RADIUS)
                         for dy in (-PENCIL_RADIUS, PENCIL_RADIUS) for z in (0.0, b.height)])
-        out.append(_film_box(cam, *project(cam, pts, bench.pitch, bench.roll), margin_px))
+        out.append(film_box(cam, *project(cam, pts, bench.pitch, bench.roll), margin_px))
     return out
 
