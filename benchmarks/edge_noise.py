@@ -46,7 +46,7 @@ def main() -> None:
             cal = calibrate(s.camera, s.target.size, s.beacons[0].height)
             rows = []
             for seed in range(a.seeds):
-                m = render_and_measure(s, tmp / f"{spp}_{i}_{seed}", seed=seed,
+                m = render_and_measure(s.with_render(seed=seed), tmp / f"{spp}_{i}_{seed}",
                                        progress=False, ids=False, calibration=cal)
                 res, mb = m.files, m.detection.beacons[0][1]
                 d = res.truth.beacons[0].d_total

@@ -54,7 +54,7 @@ def main() -> None:
     d["camera"]["pan"] = float(alpha - a.offaxis)
     s = scene_from_dict(d, default_name="edges")
     with tempfile.TemporaryDirectory() as tmp:
-        res = render_to_files(s, tmp, spp=a.spp, progress=False)
+        res = render_to_files(s.with_render(spp=a.spp), tmp, progress=False)
         img = read_frame(res.image).astype(np.float32)
     t = s.target
     m = measure_object(img, "target", t.size[0] / t.size[1])

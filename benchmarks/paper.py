@@ -43,6 +43,11 @@ PAPER = {
 }
 
 
+def with_spp(scene, spp):
+    """The scene at ``spp`` samples per pixel where one is given."""
+    return scene if spp is None else scene.with_render(spp=spp)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--spp", type=int, default=None)
@@ -54,9 +59,9 @@ def main() -> None:
           "geometry on the paper's inputs | ours, beacon where `plan` puts it |")
     print("|---|---|---|---|---|---|")
     for name, paper in PAPER.items():
-        scene = load_scene(ROOT / "scenes" / f"{name}.yaml")
+        scene = with_spp(load_scene(ROOT / "scenes" / f"{name}.yaml"), args.spp)
         truth = np.asarray(scene.target.position, float)
-        rep = evaluate_scene(scene, args.out / name, spp=args.spp, progress=False)
+        rep = evaluate_scene(scene, args.out / name, progress=False)
         e = rep.errors
         m = load_measurements(ROOT / "scenes" / "measurements" / f"{name}_paper.json")
         geo = solve_measurements(m.observer, m.beacons, m.targets, m.sigma)
@@ -67,7 +72,7 @@ def main() -> None:
         moved = replace(scene, name=f"{name}_planned",
                         beacons=(Beacon((float(best[0]), float(best[1])),
                                         scene.beacons[0].height),))
-        rep2 = evaluate_scene(moved, args.out / f"{name}_planned", spp=args.spp, progress=False)
+        rep2 = evaluate_scene(moved, args.out / f"{name}_planned", progress=False)
         e2 = rep2.errors
         paper_yaw = abs(paper["yaw"] - scene.mirror.yaw)
         print(f"| {name.upper()} | {tuple(scene.target.position)} | {paper['tar']} "
@@ -83,8 +88,8 @@ def main() -> None:
     print("|---|---|---|---|---|")
     notes = []
     for name, paper in PAPER.items():
-        scene = load_scene(ROOT / "scenes" / "bench" / f"{name}.yaml")
-        b = run_budget(scene, args.out / "bench" / name, spp=args.spp, progress=False)
+        scene = with_spp(load_scene(ROOT / "scenes" / "bench" / f"{name}.yaml"), args.spp)
+        b = run_budget(scene, args.out / "bench" / name, progress=False)
         top = sorted((c for c in b.sources if not c.failed), key=lambda c: -c.shift_cm)[:3]
         failed = [c.source for c in b.sources if c.failed]
         if b.all.failed:

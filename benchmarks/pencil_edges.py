@@ -48,9 +48,9 @@ def main() -> None:
     for i in range(a.scenes):
         s = sample_scene(spec, np.random.SeedSequence(0, spawn_key=(i,)), f"spec{i:03d}")
         cal = calibrate(s.camera, s.target.size, s.beacons[0].height)
-        frame = render_frame(s, spp=s.render.spp, seed=0, progress=False)
+        frame = render_frame(s.with_render(spp=s.render.spp, seed=0), progress=False)
         many = replace(s, render=replace(s.render, beacon_spp=a.spp))
-        sharp = render_frame(many, spp=s.render.spp, seed=1, progress=False)
+        sharp = render_frame(many.with_render(spp=s.render.spp, seed=1), progress=False)
         cap = CaptureRecord.from_scene(s, frame=f"{s.name}.png")
         b = s.beacons[0]
         img = optics.mirror_image(s.camera.position, s.mirror, b.position)

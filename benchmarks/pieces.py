@@ -63,7 +63,7 @@ def main() -> None:
         board = replace(scene.board)  # a new object: a cache keyed by value still hits
         fn = getattr(mitsuba_scene._board_texture, "__wrapped__", mitsuba_scene._board_texture)
         _, t_tex = _timed(fn, board)
-        frame = render.render_frame(scene, spp=scene.render.spp, seed=i, progress=False)
+        frame = render.render_frame(scene.with_render(spp=scene.render.spp, seed=i), progress=False)
         srgb, t_srgb = _timed(render.to_srgb8, frame.linear)
         _, t_png = _timed(write_png, srgb, tmp / "f.png")
         from mirrorsim.formats.capture import CaptureRecord

@@ -29,8 +29,8 @@ from mirrorsim.formats.scenefile import load_scene
 from mirrorsim.rendering.frames import render_to_files
 scene = load_scene(sys.argv[1])
 t0 = time.perf_counter()
-res = render_to_files(scene, sys.argv[2], spp=int(sys.argv[3]), variant=sys.argv[4],
-                      progress=False)
+res = render_to_files(scene.with_render(spp=int(sys.argv[3])), sys.argv[2],
+                      variant=sys.argv[4], progress=False)
 print(json.dumps({"wall_s": time.perf_counter() - t0,
                   "render_s": res.truth.render.seconds_render,
                   "spp": res.truth.render.spp}))

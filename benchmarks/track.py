@@ -45,8 +45,10 @@ def one_run(name: str, run: str, steps: int, spp: int | None, sigma: float, out:
                                                scene.beacons[0].height),))
         kind = "fixed"
     t0 = time.perf_counter()
+    if spp is not None:
+        scene = scene.with_render(spp=spp)
     rep = run_track(scene, out / name / run.replace("'", "").replace(" ", "_"), kind=kind,
-                    steps=steps, spp=spp, odometry_sigma=sigma)
+                    steps=steps, odometry_sigma=sigma)
     return rep, time.perf_counter() - t0
 
 

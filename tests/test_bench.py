@@ -126,7 +126,7 @@ def test_ideal_keys_change_nothing():
     zeros = bench_scene(camera={"pan_error": 0, "pitch": 0, "roll": 0, "distortion": [0, 0]},
                         mirror={"tilt": 0}, calibration={"distance_error": 0})
     assert zeros == plain
-    assert scene_fingerprint(zeros, 8, 0) == scene_fingerprint(plain, 8, 0)
+    assert scene_fingerprint(zeros) == scene_fingerprint(plain)
 
 
 # ---------------------------------------------------------------- the sensor

@@ -225,7 +225,7 @@ def test_off_axis_target_has_no_bearing_bias_and_is_not_clipped(tmp_path, off_ax
     alpha = optics.mirror_image(ref.camera.position, ref.mirror, ref.target.position).alpha_deg
     d["camera"].update(resolution=[960, 544], pan=float(alpha - off_axis))
     scene = scene_from_dict(d, default_name="offaxis")
-    res = render_to_files(scene, tmp_path, spp=16, progress=False)
+    res = render_to_files(scene.with_render(spp=16), tmp_path, progress=False)
     cal = calibrate(scene.camera, scene.target.size, scene.beacons[0].height)
     det = detect_frame(read_frame(res.image), res.capture, cal)
     assert det.target.clipped == "" and det.target.d_total is not None

@@ -64,7 +64,7 @@ def test_random_scenes_at_half_size(k, tmp_path):
     d["beacon"]["position"] = v["beacon"]
     d["camera"]["pan"] = "mirror"
     scene = _half(d, f"variant{k}")
-    rep = evaluate_scene(scene, tmp_path, spp=16, progress=False)
+    rep = evaluate_scene(scene.with_render(spp=16), tmp_path, progress=False)
     e = rep.errors
     # the detector's bounds on half-size frames, fixed in advance: twice its full-size
     # bounds of 0.01°, 0.2 % (target) and 0.7 % (pencil)
@@ -81,15 +81,15 @@ def test_reuse_and_several_beacons(tmp_path):
     d = scene_dict("default")
     d["beacons"] = [d.pop("beacon"), {"position": [28.0, 57.0], "height": 4.2}]
     scene = _half(d, "two")
-    a = evaluate_scene(scene, tmp_path, spp=8, progress=False)
+    a = evaluate_scene(scene.with_render(spp=8), tmp_path, progress=False)
     assert [f.reused for f in a.frames] == [False, False]
     assert [r["beacons"] for r in a.to_json()["error_vs_beacons"]] == [1, 2]
-    b = evaluate_scene(scene, tmp_path, spp=8, progress=False)
+    b = evaluate_scene(scene.with_render(spp=8), tmp_path, progress=False)
     assert all(f.reused for f in b.frames)
     assert a.errors == b.errors
     assert "first k beacons" in report_table(a)
     # a different seed is a different render
-    c = evaluate_scene(scene, tmp_path, spp=8, seed=3, progress=False)
+    c = evaluate_scene(scene.with_render(spp=8, seed=3), tmp_path, progress=False)
     assert not any(f.reused for f in c.frames)
 
 

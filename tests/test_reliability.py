@@ -327,7 +327,7 @@ def half_frames(tmp_path_factory):
         path.write_text(yaml.safe_dump(d))
         from mirrorsim.formats.scenefile import load_scene
 
-        files = render_to_files(load_scene(path), folder / name, spp=8, progress=False)
+        files = render_to_files(load_scene(path).with_render(spp=8), folder / name, progress=False)
         scenes[name] = (path, files.image)
     return folder, scenes
 

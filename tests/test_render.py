@@ -5,6 +5,7 @@ import json
 import numpy as np
 import pytest
 
+from mirrorsim.errors import BadParameter
 from mirrorsim.formats.scenefile import load_scene, scene_from_dict
 from mirrorsim.rendering.frames import render_to_files
 from mirrorsim.rendering.mitsuba_scene import BEACON_LABEL, MIRROR_LABEL, TARGET_LABEL
@@ -91,7 +92,8 @@ def test_same_seed_same_bytes_other_seed_differs(tmp_path, fast_variant):
     scene = small_scene("exp1", 160, 92, spp=2)
     a = render_to_files(scene, tmp_path / "a", variant=fast_variant, progress=False)
     b = render_to_files(scene, tmp_path / "b", variant=fast_variant, progress=False)
-    c = render_to_files(scene, tmp_path / "c", seed=7, variant=fast_variant, progress=False)
+    c = render_to_files(scene.with_render(seed=7), tmp_path / "c", variant=fast_variant,
+                        progress=False)
     assert a.image.read_bytes() == b.image.read_bytes()
     assert a.image.read_bytes() != c.image.read_bytes()
     assert a.ids_png.read_bytes() == c.ids_png.read_bytes()  # geometry, not sampling
@@ -113,8 +115,13 @@ def test_scalar_and_jit_id_passes_agree(tmp_path, jit_variant):
 
 def test_refuses_bad_spp(tmp_path):
     scene = small_scene("default", 64, 36)
-    with pytest.raises(ValueError, match="spp"):
-        render_to_files(scene, tmp_path, spp=0, progress=False)
+    # the render settings are checked where they are made, before anything renders
+    with pytest.raises(BadParameter, match="spp"):
+        render_to_files(scene.with_render(spp=0), tmp_path, progress=False)
+    with pytest.raises(BadParameter, match="seed"):
+        scene.with_render(seed=-1)
+    with pytest.raises(BadParameter, match="sampler"):
+        scene.with_render(sampler="stratified")
     assert not any(tmp_path.iterdir())
 
 
@@ -153,7 +160,7 @@ def test_several_beacons_each_get_their_label(tmp_path, fast_variant):
     d["camera"]["resolution"] = [640, 363]
     d["beacons"] = [d.pop("beacon"), {"position": [28, 57], "height": 5.0}]
     scene = scene_from_dict(d)
-    res = render_to_files(scene, tmp_path, spp=1, variant=fast_variant, progress=False)
+    res = render_to_files(scene.with_render(spp=1), tmp_path, variant=fast_variant, progress=False)
     ids = _read_png(res.ids_png)
     for i, b in enumerate(scene.beacons):
         vs, us = np.nonzero(ids == IN_MIRROR + BEACON_LABEL + i)
@@ -213,10 +220,11 @@ def test_fewer_samples_outside_the_mirror(name, fast_variant):
     scene = small_scene(name, 480, 272)
     scene = replace(scene, render=replace(scene.render, beacon_spp=1))  # not tested here
     low = replace(scene, render=replace(scene.render, background_spp=1))
-    mixed = render_frame(low, spp=16, seed=2, variant=fast_variant, progress=False)
+    mixed = render_frame(low.with_render(spp=16, seed=2), variant=fast_variant, progress=False)
     uniform = replace(scene, render=replace(scene.render, background_spp=16))
-    plain1 = render_frame(uniform, spp=1, seed=2, variant=fast_variant, progress=False)
-    plain16 = render_frame(uniform, spp=16, seed=2, variant=fast_variant, progress=False)
+    plain1 = render_frame(uniform.with_render(spp=1, seed=2), variant=fast_variant, progress=False)
+    plain16 = render_frame(uniform.with_render(spp=16, seed=2), variant=fast_variant,
+                           progress=False)
     assert plain16.info.background_spp is None  # uniform: no mirror box rendered apart
     u0, v0, u1, v1 = optics.mirror_box(scene)
     vs, us = np.nonzero(plain16.first == MIRROR_LABEL)
@@ -246,9 +254,9 @@ def test_more_samples_in_the_beacons_image(fast_variant):
     scene = small_scene("default", 480, 272)
     with_box = replace(scene, render=replace(scene.render, background_spp=4, beacon_spp=64))
     without = replace(with_box, render=replace(with_box.render, beacon_spp=1))
-    boxed = render_frame(with_box, spp=4, seed=3, variant=fast_variant, progress=False)
-    plain = render_frame(without, spp=4, seed=3, variant=fast_variant, progress=False)
-    ref = render_frame(without, spp=64, seed=9, variant=fast_variant, progress=False)
+    boxed = render_frame(with_box.with_render(spp=4, seed=3), variant=fast_variant, progress=False)
+    plain = render_frame(without.with_render(spp=4, seed=3), variant=fast_variant, progress=False)
+    ref = render_frame(without.with_render(spp=64, seed=9), variant=fast_variant, progress=False)
     (u0, v0, u1, v1), = optics.beacon_boxes(scene)
     vs, us = np.nonzero(plain.in_mirror == BEACON_LABEL)
     assert len(us) > 20

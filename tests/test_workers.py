@@ -77,7 +77,7 @@ def _render_digest(i: int, name: str, variant: str) -> tuple[int, str, int]:
     from mirrorsim.rendering.passes import render_frame
 
     scene = small_scene(name, 160, 91, spp=4, sampler="multijitter")
-    f = render_frame(scene, spp=4, seed=i, variant=variant, progress=False)
+    f = render_frame(scene.with_render(spp=4, seed=i), variant=variant, progress=False)
     data = b"".join(np.ascontiguousarray(a).tobytes() for a in (f.linear, f.first,
                                                                 f.in_mirror))
     return i, hashlib.sha256(data).hexdigest(), os.getpid()

@@ -18,8 +18,9 @@ from mirrorsim.cli.registry import (
     sampler_option,
 )
 from mirrorsim.errors import BadArgument
-from mirrorsim.formats.files import emit_json
+from mirrorsim.formats.files import default_out, emit_json
 from mirrorsim.pipelines.score import EXTRA_FILES
+from mirrorsim.scene.model import RenderSettings
 from solver.measurements import SIGMA_ALPHA_MAX_DEG
 
 MAX_ITERATIONS = 1_000_000  # draws per Monte Carlo row: about a second a row at the most
@@ -127,7 +128,7 @@ def _plan(args) -> int:
     plan = plan_scene(scene, sigma, args.eps, args.yaw_spread, args.d1_spread, args.step)
     summ = plan.to_json()
     print(plan_text(scene, summ))
-    out = args.out or Path("renders") / scene.name / f"{scene.name}.plan.png"
+    out = args.out or default_out(scene.name) / f"{scene.name}.plan.png"
     print(f"  figure: {plot_plan(scene, plan, out)}")
     emit_json(args.json, summ)
     return 0
@@ -163,8 +164,9 @@ def _dataset_options(p):
 def _dataset(args) -> int:
     from mirrorsim.pipelines.dataset import DatasetError, run_dataset
 
-    at_least(("--n", args.n, 1), ("--seed", args.seed, 0), ("--workers", args.workers, 1),
-             ("--spp", args.spp, 1))
+    at_least(("--n", args.n, 1), ("--seed", args.seed, 0), ("--workers", args.workers, 1))
+    if args.spp is not None:  # checked as every scene's render settings are
+        RenderSettings(spp=args.spp)
     try:
         res = run_dataset(args.n, args.seed, args.out, workers=args.workers,
                           spec_path=args.spec, spp=args.spp, sampler=args.sampler,

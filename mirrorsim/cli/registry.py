@@ -7,13 +7,12 @@ import math
 import os
 import sys
 from collections.abc import Callable
-from dataclasses import replace
 from pathlib import Path
 
 from mirrorsim.errors import BadArgument
 from mirrorsim.formats.files import check_output_dir, check_output_file
-from mirrorsim.formats.scenefile import MAX_SPP, load_scene
-from mirrorsim.scene.model import SAMPLERS, RenderSettings, Scene
+from mirrorsim.formats.scenefile import load_scene
+from mirrorsim.scene.model import MAX_SPP, SAMPLERS, RenderSettings, Scene
 
 VARIANT_CHOICES = ["auto", "cuda", "llvm", "scalar"]
 
@@ -108,13 +107,12 @@ def sampler_option(p: argparse.ArgumentParser) -> None:
 
 
 def render_options(args: argparse.Namespace, scene: Scene) -> Scene:
-    """Refuse --spp outside 1..MAX_SPP and a negative --seed; the scene with --sampler."""
-    at_least(("--spp", args.spp, 1), ("--seed", args.seed, 0))
-    if args.spp is not None and args.spp > MAX_SPP:
-        raise BadArgument("--spp", f"{args.spp} must be ≤ {MAX_SPP}")
-    if args.sampler is None:
-        return scene
-    return replace(scene, render=replace(scene.render, sampler=args.sampler))
+    """The scene with --spp, --seed and --sampler where given: the render settings enter
+    the scene here, once, and are checked as every scene's are (a bad one names its
+    flag)."""
+    given = {k: getattr(args, k, None) for k in ("spp", "seed", "sampler")}
+    given = {k: v for k, v in given.items() if v is not None}
+    return scene.with_render(**given) if given else scene
 
 
 def load(path: Path) -> Scene:

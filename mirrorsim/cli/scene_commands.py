@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from mirrorsim.cli.registry import command, common, load, output, preload, render_options
-from mirrorsim.formats.files import emit_json, write_png
+from mirrorsim.formats.files import default_out, emit_json, write_png
 
 
 def _render_options(p):
@@ -23,8 +23,7 @@ def _render(args) -> int:
     from mirrorsim.rendering.frames import render_to_files
 
     scene = render_options(args, load(args.scene))
-    files = render_to_files(scene, args.out, spp=args.spp, seed=args.seed,
-                            variant=args.variant, progress=not args.quiet)
+    files = render_to_files(scene, args.out, variant=args.variant, progress=not args.quiet)
     print(render_summary(scene, files))
     emit_json(args.json, files.truth.to_json())
     return 0
@@ -67,7 +66,7 @@ def _plot(args) -> int:
     from mirrorsim.cli.plots import plot_top_view
 
     scene = load(args.scene)
-    print(plot_top_view(scene, args.out or Path("renders") / scene.name / f"{scene.name}.top.png"))
+    print(plot_top_view(scene, args.out or default_out(scene.name) / f"{scene.name}.top.png"))
     return 0
 
 
@@ -165,9 +164,8 @@ def _evaluate(args) -> int:
 
     scene = render_options(args, load(args.scene))
     preload("mirrorsim.cli.plots")  # matplotlib imports while the frame renders
-    out = args.out or Path("renders") / scene.name
-    report = evaluate_scene(scene, out, spp=args.spp, seed=args.seed, variant=args.variant,
-                            progress=not args.quiet)
+    out = args.out or default_out(scene.name)
+    report = evaluate_scene(scene, out, variant=args.variant, progress=not args.quiet)
     print(f"{scene.name}: {len(report.frames)} frame(s), {report.render.spp} spp, "
           f"{report.render.variant}{' (reused)' if report.reused else ''}")
     print(report_table(report))
@@ -207,13 +205,11 @@ def _budget(args) -> int:
     if not found:
         print(f"{scene.name}: no bench imperfections in {args.scene}: only the ideal bench "
               "is evaluated (see INTERFACE.md, Bench imperfections)", file=sys.stderr)
-    out = args.out or Path("renders") / scene.name / "budget"
-    runs = 1 + len(found) + (len(found) > 1)
-    done = iter(range(1, runs + 1))
-    step = (None if args.quiet else
-            lambda label: print(f"[{next(done)}/{runs}] {label}", file=sys.stderr, flush=True))
-    budget = run_budget(scene, out, spp=args.spp, seed=args.seed, variant=args.variant,
-                        progress=not args.quiet, on_step=step)
+    out = args.out or default_out(scene.name) / "budget"
+    step = (None if args.quiet else lambda label, k, runs: print(f"[{k}/{runs}] {label}",
+                                                                 file=sys.stderr, flush=True))
+    budget = run_budget(scene, out, variant=args.variant, progress=not args.quiet,
+                        on_step=step)
     print(budget_table(budget))
     path = write_json(out / "budget.json", budget.to_json())
     fig = plot_budget(budget, out / "budget.png")
@@ -268,15 +264,17 @@ def _track(args) -> int:
     # before the scene is read (run_track checks again, for callers other than the CLI)
     check_options(args.path, args.steps, args.odometry_sigma, args.side, args.step,
                   args.heading)
-    at_least(("--spp", args.spp, 1), ("--seed", args.seed, 0))
+    at_least(("--seed", args.seed, 0))
     scene = load(args.scene)
-    out = args.out or Path("renders") / scene.name / "track"
+    if args.spp is not None:  # --seed is the run's (each pose's render seed follows it)
+        scene = scene.with_render(spp=args.spp)
+    out = args.out or default_out(scene.name) / "track"
     step = (None if args.quiet else lambda k, n: print(f"\rpose {k + 1}/{n}", end="",
                                                         file=sys.stderr, flush=True))
     report = run_track(scene, out, kind=args.path, steps=args.steps,
                        odometry_sigma=args.odometry_sigma, seed=args.seed, side=args.side,
-                       step=args.step, heading=args.heading, spp=args.spp,
-                       variant=args.variant, on_pose=step)
+                       step=args.step, heading=args.heading, variant=args.variant,
+                       on_pose=step)
     if not args.quiet:
         print(file=sys.stderr)
     print(track_table(report))

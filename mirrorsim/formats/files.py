@@ -26,6 +26,11 @@ from mirrorsim.errors import OutputError
 PROBE_BYTES = 64 * 1024  # written and synced where outputs will go: a full disk says so
 
 
+def default_out(scene_name: str) -> Path:
+    """Where a scene's files go unless told otherwise: ``renders/<name>/``."""
+    return Path("renders") / scene_name
+
+
 def jsonable(value: Any) -> Any:
     """``value`` with numpy scalars and arrays made plain, and NaN/±inf made ``None``."""
     if isinstance(value, dict):

@@ -95,11 +95,12 @@ class Reader:
             raise self.fail(key, f"{show(value)} must be ≤ {high:g}")
         return v
 
-    def integer(self, value: Any, key: str, *, low: int, high: int | None = None) -> int:
-        """An integer within [low, high]."""
+    def integer(self, value: Any, key: str, *, low: int | None = None,
+                high: int | None = None) -> int:
+        """An integer within [low, high] (either bound optional)."""
         if isinstance(value, bool) or not isinstance(value, int):
             raise self.fail(key, f"expected an integer, got {show(value)}")
-        if value < low:
+        if low is not None and value < low:
             raise self.fail(key, f"{value} must be ≥ {low}")
         if high is not None and value > high:
             raise self.fail(key, f"{value} must be ≤ {high}")

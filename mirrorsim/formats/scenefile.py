@@ -17,13 +17,12 @@ from typing import Any
 
 import numpy as np
 
-from mirrorsim.errors import SceneError
+from mirrorsim.errors import BadParameter, SceneError
 from mirrorsim.formats.capture import read_distortion
 from mirrorsim.formats.reader import Reader, read_resolution, read_yaml, show
 from mirrorsim.scene.imperfections import REGISTRY, Imperfection, check_bounds, radius_bound
 from mirrorsim.scene.model import (
     PAN_WORDS,
-    SAMPLERS,
     Beacon,
     Bench,
     Board,
@@ -41,7 +40,6 @@ from solver.geometry import segment_distance, signed_distance
 
 EDGE_ON_LIMIT_DEG = 5.0  # a mirror seen at a more grazing angle than this is edge-on
 DEFAULT_RESOLUTION = (1920, 1088)
-MAX_SPP = 1 << 16  # a documented bound: more samples than this is a typo, not a render
 
 
 def load_scene(path: str | Path) -> Scene:
@@ -75,14 +73,16 @@ def read_render(r: Reader, block: Any, key: str = "render", seed: bool = True
                    {"spp", "sampler", "background_spp", "beacon_spp"}
                    | ({"seed"} if seed else set()))
     d = RenderSettings()
-    return RenderSettings(
-        spp=r.integer(rr.get("spp", d.spp), f"{key}.spp", low=1, high=MAX_SPP),
-        seed=r.integer(rr.get("seed", d.seed), f"{key}.seed", low=0),
-        sampler=r.choice(rr.get("sampler", d.sampler), f"{key}.sampler", SAMPLERS),
-        background_spp=r.integer(rr.get("background_spp", d.background_spp),
-                                 f"{key}.background_spp", low=1, high=MAX_SPP),
-        beacon_spp=r.integer(rr.get("beacon_spp", d.beacon_spp), f"{key}.beacon_spp",
-                             low=1, high=MAX_SPP))
+    try:  # the bounds are RenderSettings' own; here each key's type and its name
+        return RenderSettings(
+            spp=r.integer(rr.get("spp", d.spp), f"{key}.spp"),
+            seed=r.integer(rr.get("seed", d.seed), f"{key}.seed"),
+            sampler=rr.get("sampler", d.sampler),
+            background_spp=r.integer(rr.get("background_spp", d.background_spp),
+                                     f"{key}.background_spp"),
+            beacon_spp=r.integer(rr.get("beacon_spp", d.beacon_spp), f"{key}.beacon_spp"))
+    except BadParameter as exc:
+        raise r.fail(f"{key}.{exc.parameter}", exc.message) from None
 
 
 def scene_from_dict(data: Any, source: str = "<scene>", default_name: str = "scene") -> Scene:

@@ -142,11 +142,11 @@ def contribution(source: str, value: Any, ideal: Report, report: Report,
                         predicted_shift_cm=float(np.linalg.norm(pred)), delta=delta)
 
 
-def run_budget(scene: Scene, out: str | Path, *, spp: int | None = None,
-               seed: int | None = None, variant: str = "auto", progress: bool = True,
-               on_step: Callable[[str], None] | None = None) -> Budget:
+def run_budget(scene: Scene, out: str | Path, *, variant: str = "auto", progress: bool = True,
+               on_step: Callable[[str, int, int], None] | None = None) -> Budget:
     """Evaluate ``scene`` ideal, with each imperfection alone and with all; frames and
-    reports go to ``out/<ideal|source key|all>/``.
+    reports go to ``out/<ideal|source key|all>/``.  ``on_step(label, k, runs)`` is called
+    before run k of ``runs``.
 
     Raises
     ------
@@ -155,12 +155,14 @@ def run_budget(scene: Scene, out: str | Path, *, spp: int | None = None,
     """
     out = Path(out)
     found = imperfections.sources(scene)
+    runs = 1 + len(found) + (len(found) > 1)  # ideal, each source alone, all of them
+    done = iter(range(1, runs + 1))
 
     def run(label: str, sub: Scene) -> Report:
         if on_step is not None:
-            on_step(label)
-        return evaluate_scene(sub, out / _folder(label), spp=spp, seed=seed, variant=variant,
-                              progress=progress, keep=("annotated",))
+            on_step(label, next(done), runs)
+        return evaluate_scene(sub, out / _folder(label), variant=variant, progress=progress,
+                              keep=("annotated",))
 
     def measured(label: str, value: Any, sub: Scene) -> Contribution:
         # a bench error can make a frame unmeasurable (an image taken for the wrong one

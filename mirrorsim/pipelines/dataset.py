@@ -29,7 +29,7 @@ import time
 import traceback
 import warnings
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -85,8 +85,7 @@ def process_one(i: int, seed: int, spec: dict, out: str, spp: int | None,
     try:
         rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(i,)))
         scene = sample_scene(spec, rng, name)
-        scene = replace(scene, render=replace(scene.render, spp=spp or scene.render.spp,
-                                              seed=i))
+        scene = scene.with_render(spp=spp or scene.render.spp, seed=i)
         write_text(out_dir / "scenes" / f"{name}.yaml", to_yaml(scene))
         t1 = time.perf_counter()
         with warnings.catch_warnings():  # a spec that draws JPEG frames knows it does

@@ -15,10 +15,9 @@ import numpy as np
 
 from mirrorsim.detection.detector import annotate
 from mirrorsim.errors import DetectionError
-from mirrorsim.formats.files import write_png
+from mirrorsim.formats.files import default_out, write_png
 from mirrorsim.pipelines.frame import MeasuredFrame, render_and_measure
 from mirrorsim.pipelines.score import EXTRA_FILES, FrameRecord, Report, score
-from mirrorsim.rendering.frames import default_out
 from mirrorsim.scene.model import Scene
 from mirrorsim.truth.groundtruth import RenderInfo
 from solver.lsq import Sigma, solve_measurements
@@ -30,11 +29,11 @@ from solver.measurements import Measurements
 DETECTOR_SIGMA = Sigma(alpha_deg=0.005, d_total_rel=0.006)
 
 
-def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, spp: int | None = None,
-                   seed: int | None = None, variant: str = "auto", progress: bool = True,
-                   sigma: Sigma = DETECTOR_SIGMA, keep: tuple[str, ...] = EXTRA_FILES
-                   ) -> Report:
-    """Render (or reuse), detect, solve and score ``scene``; return the report.
+def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: str = "auto",
+                   progress: bool = True, sigma: Sigma = DETECTOR_SIGMA,
+                   keep: tuple[str, ...] = EXTRA_FILES) -> Report:
+    """Render (or reuse) with the scene's render settings, detect, solve and score
+    ``scene``; return the report.
 
     ``keep``: which of EXTRA_FILES to write beside each frame (the id labels, the
     annotated frame).
@@ -44,16 +43,14 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, spp: int 
     DetectionError
         If an object is not found, or the target's d_total in no frame.
     """
-    spp = scene.render.spp if spp is None else spp
-    seed = scene.render.seed if seed is None else seed
-    out = Path(out_dir) if out_dir is not None else default_out(scene)
+    out = Path(out_dir) if out_dir is not None else default_out(scene.name)
     cam = scene.camera
 
     per_beacon = [scene] if len(scene.beacons) == 1 else [
         replace(scene, name=f"{scene.name}_b{i}", beacons=(b,))
         for i, b in enumerate(scene.beacons)]
-    measured = [render_and_measure(sub, out, spp=spp, seed=seed, variant=variant,
-                                   progress=progress, reuse=True, ids="ids" in keep)
+    measured = [render_and_measure(sub, out, variant=variant, progress=progress, reuse=True,
+                                   ids="ids" in keep)
                 for sub in per_beacon]
     frames = [_frame_record(m, out / f"{sub.name}.annotated.png", "annotated" in keep)
               for sub, m in zip(per_beacon, measured, strict=True)]
@@ -80,10 +77,10 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, spp: int 
         by_count = tuple(score(truth, measurements,
                                solve_measurements(cam.position, beacons[:k], targets, sigma))
                          for k in range(1, len(beacons) + 1))
+    done = truths[0].render  # how the frames were rendered, read back from the first
     return Report(scene=scene.name, truth=truth, measurements=measurements, solution=sol,
                   errors=score(truth, measurements, sol), frames=tuple(frames),
-                  render=RenderInfo(variant=truths[0].render.variant, spp=spp, seed=seed,
-                                    sampler=scene.render.sampler),
+                  render=RenderInfo(done.variant, done.spp, done.seed, done.sampler),
                   calibration={"target_k": cal.target_k, "pencil_k": cal.pencil_k},
                   error_vs_beacons=by_count)
 

@@ -74,13 +74,12 @@ def measure_frame(image_path: str | Path, capture: CaptureRecord, *,
     return MeasuredFrame(image, cal, det)
 
 
-def render_and_measure(scene: Scene, out: str | Path, *, spp: int | None = None,
-                       seed: int | None = None, variant: str = "auto", progress: bool = True,
-                       reuse: bool = True, ids: bool = True,
+def render_and_measure(scene: Scene, out: str | Path, *, variant: str = "auto",
+                       progress: bool = True, reuse: bool = True, ids: bool = True,
                        calibration: Calibration | None = None) -> MeasuredFrame:
     """Render ``scene`` into ``out`` (or reuse its render), then :func:`measure_frame`."""
-    files = render_to_files(scene, out, spp=spp, seed=seed, variant=variant,
-                            progress=progress, reuse=reuse, ids=ids)
+    files = render_to_files(scene, out, variant=variant, progress=progress, reuse=reuse,
+                            ids=ids)
     m = measure_frame(files.image, files.capture, calibration=calibration, variant=variant,
                       distance_error=scene.bench.calibration_distance_error)
     return MeasuredFrame(m.image, m.calibration, m.detection, files)

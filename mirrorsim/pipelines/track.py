@@ -188,7 +188,7 @@ def check_options(kind: str, steps: int, sigma: float, side: float, step: float,
 
 def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps: int = 20,
               odometry_sigma: float = 0.1, seed: int = 0, side: float = 4.0,
-              step: float = 1.0, heading: str = "view", spp: int | None = None,
+              step: float = 1.0, heading: str = "view",
               variant: str = "auto", particles: int = 4000,
               on_pose: Callable[[int, int], None] | None = None) -> TrackReport:
     """Render, detect and filter every pose of the path; return the report.
@@ -207,7 +207,7 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
     start = np.asarray(b0.believed, float)
     params = PFParams(sigma=DETECTOR_SIGMA,
                       sigma_trs=max(odometry_sigma if kind != "fixed" else 0.0, 1e-3))
-    pose = _Poses(scene, out / "poses", seed, spp, variant, on_pose, steps + 1)
+    pose = _Poses(scene, out / "poses", seed, variant, on_pose, steps + 1)
     obs, target_obs, why = pose.measure(0, start, np.asarray(b0.position, float))
     if obs is None or target_obs is None:
         raise DetectionError(f"{scene.name}: the start pose gives the filter no prior and "
@@ -241,9 +241,9 @@ class _Poses:
     """Renders and measures the beacon's poses (one camera, one calibration: made at the
     first pose)."""
 
-    def __init__(self, scene: Scene, out: Path, seed: int, spp: int | None, variant: str,
+    def __init__(self, scene: Scene, out: Path, seed: int, variant: str,
                  on_pose: Callable[[int, int], None] | None, total: int):
-        self.scene, self.out, self.seed, self.spp, self.variant = scene, out, seed, spp, variant
+        self.scene, self.out, self.seed, self.variant = scene, out, seed, variant
         self.on_pose, self.total = on_pose, total
         self.calibration: Calibration | None = None
 
@@ -255,10 +255,10 @@ class _Poses:
         b0 = self.scene.beacons[0]
         posed = replace(self.scene, name=f"{self.scene.name}_pose{k:03d}",
                         beacons=(replace(b0, position=tuple(true),
-                                         known_position=tuple(believed)),),
-                        render=replace(self.scene.render, seed=self.seed * 1000 + k))
+                                         known_position=tuple(believed)),))
+        posed = posed.with_render(seed=self.seed * 1000 + k)
         try:
-            m = render_and_measure(posed, self.out, spp=self.spp, variant=self.variant,
+            m = render_and_measure(posed, self.out, variant=self.variant,
                                    progress=False, reuse=True, ids=False,
                                    calibration=self.calibration)
         except FrameNotMeasured as exc:

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from mirrorsim.formats.capture import CaptureRecord, load_capture
-from mirrorsim.formats.files import atomic_path, dumps, encode_jpeg, encode_png
+from mirrorsim.formats.files import atomic_path, default_out, dumps, encode_jpeg, encode_png
 from mirrorsim.rendering.mitsuba_scene import (
     BACKGROUND_LABEL,
     BEACON_LABEL,
@@ -54,16 +54,11 @@ class FrameFiles:
         return 0.0 if self.reused or r is None or r.seconds_total is None else r.seconds_total
 
 
-def default_out(scene: Scene) -> Path:
-    """Where a scene's files go unless told otherwise: ``renders/<name>/``."""
-    return Path("renders") / scene.name
-
-
-def scene_fingerprint(scene: Scene, spp: int, seed: int) -> str:
-    """What a render depends on: the scene's content (not its file name, with its
-    sampler), spp, seed and the way frames are rendered."""
+def scene_fingerprint(scene: Scene) -> str:
+    """What a render depends on: the scene's content with its render settings (not the
+    file it came from) and the way frames are rendered."""
     d = asdict(replace(scene, source="", warnings=()))
-    text = json.dumps(d, sort_keys=True, default=str) + f"|{spp}|{seed}|{RENDER_METHOD}"
+    text = json.dumps(d, sort_keys=True, default=str) + f"|{RENDER_METHOD}"
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
@@ -116,21 +111,19 @@ def _paths(scene: Scene, out: Path) -> tuple[Path, Path, Path, Path]:
                  for ext in (frame, ".ids.png", ".json", ".capture.json"))
 
 
-def render_to_files(scene: Scene, out: str | Path | None = None, *, spp: int | None = None,
-                    seed: int | None = None, variant: str = "auto", progress: bool = True,
-                    reuse: bool = False, ids: bool = True) -> FrameFiles:
-    """Render ``scene`` (or, with ``reuse``, take a render of exactly this scene, spp and
-    seed already in ``out``) and write its files (default folder ``renders/<name>/``;
-    the id labels only with ``ids``)."""
-    spp = scene.render.spp if spp is None else spp
-    seed = scene.render.seed if seed is None else seed
-    out = Path(out) if out is not None else default_out(scene)
-    fp = scene_fingerprint(scene, spp, seed)
+def render_to_files(scene: Scene, out: str | Path | None = None, *, variant: str = "auto",
+                    progress: bool = True, reuse: bool = False, ids: bool = True
+                    ) -> FrameFiles:
+    """Render ``scene`` with its render settings (or, with ``reuse``, take a render of
+    exactly this scene already in ``out``) and write its files (default folder
+    ``renders/<name>/``; the id labels only with ``ids``)."""
+    out = Path(out) if out is not None else default_out(scene.name)
+    fp = scene_fingerprint(scene)
     if reuse:
         found = _reusable(scene, out, fp)
         if found is not None:
             return found
-    frame = render_frame(scene, spp=spp, seed=seed, variant=variant, progress=progress)
+    frame = render_frame(scene, variant=variant, progress=progress)
     return write_frame(scene, frame, out, fp, ids)
 
 

@@ -171,9 +171,9 @@ def _pencil_meshes(position, height: float) -> dict[str, mi.Mesh]:
         meshes[part] = mesh
     return meshes
 
-def build_scene_dict(scene: Scene, *, spp: int,
-                     crops: tuple[tuple[int, int, int, int], ...] = ()) -> dict:
-    """The Mitsuba scene description (the variant must already be set).
+def build_scene_dict(scene: Scene, crops: tuple[tuple[int, int, int, int], ...] = ()) -> dict:
+    """The Mitsuba scene description with the scene's sampler and spp (the variant must
+    already be set).
 
     Shape keys are prefixed with the object they belong to (``mirror``, ``target``,
     ``beacon0``, ``occluder0``…), which is how the id pass labels pixels.  Each of
@@ -181,7 +181,7 @@ def build_scene_dict(scene: Scene, *, spp: int,
     rendering only that part of the film (``mi.Scene.sensors()`` lists the full film
     first, then the crops in this order).
     """
-    d = _stage(scene.board, scene.camera, spp, scene.render.sampler, scene.bench.pitch,
+    d = _stage(scene.board, scene.camera, scene.render.spp, scene.render.sampler, scene.bench.pitch,
                scene.bench.roll)
     for k, crop in enumerate(crops):
         d[f"sensor_crop{k}"] = _cropped(d["sensor"], crop)

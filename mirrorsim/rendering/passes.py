@@ -65,26 +65,18 @@ def variant_scope(name: str) -> Iterator[None]:
             yield
 
 
-def render_frame(scene: Scene, *, spp: int, seed: int, variant: str = "auto",
-                 progress: bool = True) -> RenderedFrame:
-    """Render ``scene``'s frame and its id pass.
+def render_frame(scene: Scene, *, variant: str = "auto", progress: bool = True
+                 ) -> RenderedFrame:
+    """Render ``scene``'s frame and its id pass with its render settings.
 
     Parameters
     ----------
     scene : Scene
-    spp, seed : int
-        Samples per pixel (≥ 1) and the sampler's seed (≥ 0).
     variant : {'auto', 'cuda', 'llvm', 'scalar'} or a Mitsuba variant name
     progress : bool
         Show a progress bar on stderr.
-
-    Raises
-    ------
-    ValueError
-        For spp < 1 or seed < 0.
     """
-    if spp < 1 or seed < 0:
-        raise ValueError(f"spp must be ≥ 1 and seed ≥ 0 (got spp={spp}, seed={seed})")
+    spp, seed = scene.render.spp, scene.render.seed
     chosen = choose_variant(variant)
     t0 = time.perf_counter()
     bench, k = scene.bench, scene.bench.distortion
@@ -94,7 +86,7 @@ def render_frame(scene: Scene, *, spp: int, seed: int, variant: str = "auto",
     box, background, beacon_spp, boxes, passes = _regions(pinhole, spp)
     with variant_scope(chosen):
         crops = tuple(c for c, _, _ in passes)
-        mi_scene = mi.load_dict(build_scene_dict(pinhole, spp=spp, crops=crops),
+        mi_scene = mi.load_dict(build_scene_dict(pinhole, crops),
                                 optimize=False)
         with tqdm(total=(spp if box is None else background) + sum(n for _, n, _ in passes),
                   unit="spp", disable=not progress, leave=False,

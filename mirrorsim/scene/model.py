@@ -8,10 +8,11 @@ target's facing are computed from the geometry by :mod:`mirrorsim.truth.optics` 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from mirrorsim.errors import BadParameter
 from solver.geometry import line_normal, signed_distance, unit
 
 # Physical dimensions of the rendered objects that the scene file does not set (cm).
@@ -26,6 +27,7 @@ TARGET_THICKNESS = 0.4
 # Mitsuba samplers a scene may name: plain random, or stratified in every dimension
 # (any sample count; edges converge faster, see README "Throughput")
 SAMPLERS = ("independent", "multijitter")
+MAX_SPP = 1 << 16  # a documented bound: more samples than this is a typo, not a render
 PENCIL_RADIUS = 0.4  # circumradius of the hexagonal pencil (0.69 cm across flats)
 OCCLUDER_THICKNESS = 1.0
 
@@ -171,6 +173,19 @@ class RenderSettings:
     # throughput (README "Accuracy", "Throughput")
     beacon_spp: int = 128
 
+    def __post_init__(self):
+        # the one check of the render settings, wherever they come from (a scene file, a
+        # spec, a flag): the scene reader and the CLI name the key or flag it refuses
+        for name in ("spp", "background_spp", "beacon_spp"):
+            value = getattr(self, name)
+            if not 1 <= value <= MAX_SPP:
+                raise BadParameter(name, f"{value} must be within 1..{MAX_SPP}")
+        if self.seed < 0:
+            raise BadParameter("seed", f"{self.seed} must be ≥ 0")
+        if self.sampler not in SAMPLERS:
+            raise BadParameter("sampler", f"{self.sampler!r}: expected one of "
+                               f"{', '.join(SAMPLERS)}")
+
 
 @dataclass(frozen=True)
 class SensorNoise:
@@ -215,6 +230,11 @@ class Scene:
     bench: Bench = field(default_factory=Bench)
     source: str = "<scene>"
     warnings: tuple[str, ...] = ()
+
+    def with_render(self, **settings) -> Scene:
+        """The same scene rendered with other settings (``spp``, ``seed``, ``sampler``…),
+        checked as every :class:`RenderSettings` is."""
+        return replace(self, render=replace(self.render, **settings))
 
 
 def footprints(scene: Scene, bkey=None) -> list[tuple[str, np.ndarray, np.ndarray, float]]:
