@@ -24,7 +24,8 @@ sys.path.insert(0, str(ROOT))
 
 from dataclasses import replace  # noqa: E402
 
-from mirrorsim.detection.detector import FRONT_OFFSET, detect_frame  # noqa: E402
+from mirrorsim.detection.detector import detect_frame  # noqa: E402
+from mirrorsim.detection.image_geometry import FRONT_OFFSET  # noqa: E402
 from mirrorsim.formats.capture import CaptureRecord  # noqa: E402
 from mirrorsim.pipelines.calibrate import calibrate  # noqa: E402
 from mirrorsim.pipelines.random_scenes import load_spec, sample_scene  # noqa: E402

@@ -13,7 +13,8 @@ import pytest
 import yaml
 
 from mirrorsim.cli.main import main
-from mirrorsim.detection.detector import FRONT_OFFSET, read_frame
+from mirrorsim.detection.detector import read_frame
+from mirrorsim.detection.image_geometry import FRONT_OFFSET
 from mirrorsim.formats.capture import CaptureRecord
 from mirrorsim.formats.scenefile import scene_from_dict
 from mirrorsim.pipelines.frame import render_and_measure

@@ -124,7 +124,6 @@ def _calibrate_options(p):
          "farther while 100 cm is assumed, as its bench did.",
          _calibrate_options)
 def _calibrate(args) -> int:
-    from mirrorsim.detection.detector import FRONT_OFFSET
     from mirrorsim.pipelines.calibrate import D_REF, calibrate
 
     scene = load(args.scene)
@@ -135,10 +134,9 @@ def _calibrate(args) -> int:
     print(f"camera {cam.width}×{cam.height_px}, hfov {cam.hfov:g}°, height {cam.height:g} cm "
           f"(fx {cam.fx:.2f} px)")
     print(f"  target {scene.target.size[1]:g} cm high: K = {cal.target_k:.1f} px·cm "
-          f"({cal.target_k / (D_REF - FRONT_OFFSET['target']):.2f} px at 1 m; the paper's "
-          "camera: 229 px)")
+          f"({cal.height_px('target', D_REF):.2f} px at 1 m; the paper's camera: 229 px)")
     print(f"  pencil's painted band: K = {cal.pencil_k:.1f} px·cm "
-          f"({cal.pencil_k / (D_REF - FRONT_OFFSET['beacon']):.2f} px at 1 m)")
+          f"({cal.height_px('beacon', D_REF):.2f} px at 1 m)")
     emit_json(args.json, {"key": cal.key, "target_k": cal.target_k, "pencil_k": cal.pencil_k})
     return 0
 

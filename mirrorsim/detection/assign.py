@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from dataclasses import replace
 
 import numpy as np
 
@@ -16,40 +17,50 @@ from solver.geometry import bearing_deg, wrap_bearing
 
 
 def assign_beacons(pencils: list[ImageMeasurement], view: CaptureRecord
-                    ) -> list[ImageMeasurement]:
+                   ) -> tuple[list[ImageMeasurement], list[ImageMeasurement]]:
     """Tell direct images (where the known beacon itself would appear) from mirror images,
-    and give each beacon its mirror image."""
+    and give each beacon its mirror image.  Returns every image as assigned (direct views
+    marked, each beacon's mirror image given its index) and the mirror images in the
+    beacons' order."""
     cam = view.camera
-    mirror_cands = []
+    images, mirror_at = [], []  # mirror_at: where in ``images`` each candidate stands
     for p in pencils:
         for i, b in enumerate(view.beacons):
             bearing, dist = _direct(cam, b)
             off, far = abs(wrap_bearing(p.alpha_deg - bearing)), abs(p.d_total - dist)
             if (off < 0.3 and far < 0.05 * dist) or (off < BENCH_BEARING_DEG
                                                      and far < MISPLACED_DISTANCE * dist):
-                p.source, p.beacon_index = "direct", i
-                p.notes.append(f"direct view of beacon {i} (bearing and distance agree with "
-                               "its known position)")
+                p = replace(p, source="direct", beacon_index=i, notes=(
+                    *p.notes, f"direct view of beacon {i} (bearing and distance agree with "
+                    "its known position)"))
                 break
         else:
-            mirror_cands.append(p)
+            mirror_at.append(len(images))
+        images.append(p)
+    mirror_cands = [images[k] for k in mirror_at]
     _refuse_a_misplaced_direct_view(mirror_cands, view)
     n = len(view.beacons)
     if len(mirror_cands) < n:
         raise DetectionError(f"found {len(mirror_cands)} pencil image(s) in the mirror for "
                              f"{n} beacon(s) ({len(pencils) - len(mirror_cands)} direct)")
     if n == 1:
-        return [_the_mirror_image(mirror_cands, view)]
-    # several beacons: the assignment under which all imply the same mirror line
-    best_perm, best_spread = None, math.inf
-    for perm in itertools.permutations(mirror_cands, n):
-        lines = [_bisector(cam, b, p) for b, p in zip(view.beacons, perm, strict=True)]
-        spread = float(np.var([ln[0] for ln in lines]) + np.var([ln[1] for ln in lines]))
-        if spread < best_spread:
-            best_perm, best_spread = perm, spread
-    for i, p in enumerate(best_perm):
-        p.beacon_index = i
-    return list(best_perm)
+        chosen = [_the_mirror_image(mirror_cands, view)]
+    else:
+        # several beacons: the assignment under which all imply the same mirror line
+        best_perm, best_spread = None, math.inf
+        for perm in itertools.permutations(range(len(mirror_cands)), n):
+            lines = [_bisector(cam, b, mirror_cands[k])
+                     for b, k in zip(view.beacons, perm, strict=True)]
+            spread = float(np.var([ln[0] for ln in lines]) + np.var([ln[1] for ln in lines]))
+            if spread < best_spread:
+                best_perm, best_spread = perm, spread
+        chosen = list(best_perm)
+    mirror_imgs = []
+    for i, k in enumerate(chosen):
+        at = mirror_at[k]
+        images[at] = replace(images[at], beacon_index=i)
+        mirror_imgs.append(images[at])
+    return images, mirror_imgs
 
 
 MISPLACED_DISTANCE = 0.02  # a reflection is ≥ 5 % farther than its beacon in our scenes
@@ -77,26 +88,25 @@ def _refuse_a_misplaced_direct_view(cands: list[ImageMeasurement], view: Capture
                     "not where it is believed?")
 
 
-def _the_mirror_image(cands: list[ImageMeasurement], view: CaptureRecord
-                      ) -> ImageMeasurement:
+def _the_mirror_image(cands: list[ImageMeasurement], view: CaptureRecord) -> int:
     """One beacon's mirror image among the candidates: only an image farther than the
     beacon stands can be its reflection (d_total ≥ |OB|); of those, one that sits within
     1° and 10 % of the beacon's own bearing and distance is its direct view taken for a
     mirror image.  More than one left is ambiguous: an error, not a guess."""
     bearing, dist = _direct(view.camera, view.beacons[0])
-    possible = [p for p in cands if p.d_total > dist * (1 + 1e-3)]
+    possible = [k for k, p in enumerate(cands) if p.d_total > dist * (1 + 1e-3)]
     if not possible:
         raise DetectionError(f"no pencil image lies farther than the beacon stands ({dist:.1f} "
                              "cm): none can be its reflection")
     if len(possible) > 1:
-        possible = [p for p in possible if not (abs(wrap_bearing(p.alpha_deg - bearing)) < 1.0
-                                                and abs(p.d_total - dist) < 0.1 * dist)] \
-            or possible
+        possible = [k for k in possible
+                    if not (abs(wrap_bearing(cands[k].alpha_deg - bearing)) < 1.0
+                            and abs(cands[k].d_total - dist) < 0.1 * dist)] or possible
     if len(possible) > 1:
-        found = ", ".join(f"α {p.alpha_deg:.2f}° d {p.d_total:.1f} cm" for p in possible)
+        found = ", ".join(f"α {cands[k].alpha_deg:.2f}° d {cands[k].d_total:.1f} cm"
+                          for k in possible)
         raise DetectionError(f"{len(possible)} pencil images could each be the beacon's "
                              f"reflection ({found}): ambiguous, none is used")
-    possible[0].beacon_index = 0
     return possible[0]
 
 

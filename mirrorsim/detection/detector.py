@@ -46,9 +46,7 @@ import numpy as np
 from mirrorsim.detection.assign import assign_beacons
 from mirrorsim.detection.edges import ImageMeasurement, measure_region, to_linear
 from mirrorsim.detection.image_geometry import (
-    FRONT_OFFSET,
     Calibration,
-    distance_of,
     pencil_geometry,
     target_geometry,
 )
@@ -207,20 +205,18 @@ def detect_frame(image: np.ndarray, view: CaptureRecord, calibration: Calibratio
         img = undistort(img, cam, view.distortion)
     img = img.astype(np.float32)
     linear = to_linear(img)
-    target = measure_object(img, "target", view.target_size[0] / view.target_size[1], linear)
-    target_geometry(cam, target, view.target_size, calibration.target_k)
+    target = target_geometry(cam, measure_object(img, "target", view.target_size[0]
+                                                 / view.target_size[1], linear),
+                             view.target_size, calibration.target_k)
     pencils = [measure_region(linear, b, "beacon") for b in find_pencils(img)]
-    pencils = [p for p in pencils if p.height_px and (p.u_left, p.u_right) != (None, None)]
     paint = pencil_paint_height(view.beacons[0].height)
-    for p in pencils:
-        pencil_geometry(cam, p, paint)
-        p.d_total = distance_of(cam, p.u_axis, p.height_px, calibration.pencil_k,
-                                FRONT_OFFSET["beacon"])
+    pencils = [pencil_geometry(cam, p, paint, calibration.pencil_k) for p in pencils
+               if p.height_px and (p.u_left, p.u_right) != (None, None)]
     for m in (target, *pencils):
         _check_stands_on_board(cam, m, view)
-    mirror_imgs = assign_beacons(pencils, view)
+    images, mirror_imgs = assign_beacons(pencils, view)
     det = Detection(observer=tuple(cam.position), target=target,
-                    beacons=list(zip(view.beacons, mirror_imgs, strict=True)), images=pencils)
+                    beacons=list(zip(view.beacons, mirror_imgs, strict=True)), images=images)
     _check_a_mirror_fits(det)
     return det
 

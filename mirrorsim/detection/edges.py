@@ -10,16 +10,19 @@ independent estimates; their median resists partial occlusion.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from mirrorsim.rendering.sensor import LINEAR_OF_CODE
 
 
-@dataclass
+@dataclass(frozen=True)
 class ImageMeasurement:
-    """One object's image: its upright axis, vertical extent and derived α, d_total."""
+    """One object's image: its upright axis, vertical extent and derived α, d_total.
+
+    Frozen: each stage of the detector (edges here, then the pixel geometry, then the
+    beacons' assignment) returns a new value with what it found."""
 
     kind: str  # "target" or "beacon"
     source: str  # "mirror" or "direct"
@@ -38,7 +41,7 @@ class ImageMeasurement:
     alpha_deg: float = float("nan")
     d_total: float | None = None
     beacon_index: int | None = None
-    notes: list[str] = field(default_factory=list)
+    notes: tuple[str, ...] = ()
 
 
 # ---------------------------------------------------------------- edge measurement
@@ -249,8 +252,8 @@ def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str
                                                     ("top", out_top), ("bottom", out_bottom))},
         inside=float(np.median(core.reshape(-1, img.shape[-1]).mean(axis=1))))
     if left is not None and right is not None:
-        m.u_axis = (left + right) / 2
+        m = replace(m, u_axis=(left + right) / 2)
     if top is None or bottom is None:
-        m.clipped = "top"
-        m.notes.append("no contrast at the top or bottom edge: height not measured")
+        m = replace(m, clipped="top", notes=(*m.notes, "no contrast at the top or bottom "
+                                             "edge: height not measured"))
     return m

@@ -7,7 +7,7 @@ edges, this turns them into the angle of arrival α and the path length d_total.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from mirrorsim.detection.edges import ImageMeasurement
 from mirrorsim.errors import DetectionError
@@ -26,13 +26,19 @@ FRONT_OFFSET = {"target": TARGET_THICKNESS / 2, "beacon": 0.338 * PENCIL_RADIUS 
 PENCIL_HALF_WIDTH = PENCIL_RADIUS * 3 / math.pi
 
 
-@dataclass
+@dataclass(frozen=True)
 class Calibration:
     """Size-constancy constants K = s_px · (d − front offset) (px·cm), target and pencil."""
 
     target_k: float
     pencil_k: float
     key: str = ""
+
+    def height_px(self, kind: str, distance: float) -> float:
+        """The image height (px) of the target or the beacon (``kind``) whose measured
+        face stands ``distance`` cm from the camera along the optical axis."""
+        k = self.target_k if kind == "target" else self.pencil_k
+        return k / (distance - FRONT_OFFSET[kind])
 
 
 RATIO_TOLERANCE = 0.004  # relative: the panel's angular width/height ratio is exact unclipped
@@ -69,26 +75,31 @@ def distance_of(camera: Camera, u: float, height_px: float, k: float,
     return k / height_px / math.cos(_off_axis(camera, u)) + front_offset
 
 
-def pencil_geometry(cam: Camera, m: ImageMeasurement, paint_height: float) -> None:
-    """A pencil's bearing from its edges; with one edge (the other side runs into
-    something of the paint's blue, such as the mirror's dark frame) from that edge and
-    the pencil's angular half-width, tan β = r·s·cos φ/(f·H) (r its mean silhouette
-    half-width, H its painted height)."""
+def pencil_geometry(cam: Camera, m: ImageMeasurement, paint_height: float, k: float
+                    ) -> ImageMeasurement:
+    """A pencil's bearing from its edges and its d_total from its height (K = ``k``);
+    with one edge (the other side runs into something of the paint's blue, such as the
+    mirror's dark frame) its bearing from that edge and the pencil's angular half-width,
+    tan β = r·s·cos φ/(f·H) (r its mean silhouette half-width, H its painted height)."""
     if m.u_left is not None and m.u_right is not None:
-        m.alpha_deg, m.u_axis = _axis_between(cam, m.u_left, m.u_right)
-        return
-    edge = m.u_left if m.u_left is not None else m.u_right
-    phi_edge = _off_axis(cam, edge)
-    beta = math.atan(PENCIL_HALF_WIDTH * m.height_px * math.cos(phi_edge)
-                     / (cam.fx * paint_height))
-    missing = "right" if m.u_left is not None else "left"
-    m.u_axis = _column(cam, phi_edge + beta if m.u_left is not None else phi_edge - beta)
-    m.alpha_deg = alpha_of(cam, m.u_axis)
-    m.notes.append(f"no edge on the {missing} (no contrast there): axis from the other edge "
-                   "and the pencil's half-width")
+        alpha, u_axis = _axis_between(cam, m.u_left, m.u_right)
+        notes = m.notes
+    else:
+        edge = m.u_left if m.u_left is not None else m.u_right
+        phi_edge = _off_axis(cam, edge)
+        beta = math.atan(PENCIL_HALF_WIDTH * m.height_px * math.cos(phi_edge)
+                         / (cam.fx * paint_height))
+        missing = "right" if m.u_left is not None else "left"
+        u_axis = _column(cam, phi_edge + beta if m.u_left is not None else phi_edge - beta)
+        alpha = alpha_of(cam, u_axis)
+        notes = (*m.notes, f"no edge on the {missing} (no contrast there): axis from the "
+                 "other edge and the pencil's half-width")
+    return replace(m, alpha_deg=alpha, u_axis=u_axis, notes=notes,
+                   d_total=distance_of(cam, u_axis, m.height_px, k, FRONT_OFFSET["beacon"]))
 
 
-def target_geometry(cam: Camera, m: ImageMeasurement, size: Point2, k: float) -> None:
+def target_geometry(cam: Camera, m: ImageMeasurement, size: Point2, k: float
+                    ) -> ImageMeasurement:
     """The panel's bearing, clipping and distance from its edges.
 
     Seen square-on at distance D (front face), the panel's half-width subtends
@@ -98,51 +109,63 @@ def target_geometry(cam: Camera, m: ImageMeasurement, size: Point2, k: float) ->
     frame), is clipped there and its axis is β from the other edge; one wider than its
     height allows, under something dark, is clipped at the top and its height is not used.
     """
-    w, h = size
     edges = {"left": m.u_left, "right": m.u_right}
     present = [k_ for k_, u in edges.items() if u is not None]
-    dark = {side: m.outside.get(side, math.inf) < 0.5 * m.inside
-            for side in ("left", "right", "top")}
     if m.height_px is not None and present:
-        phi0 = (sum(_off_axis(cam, edges[s_]) for s_ in present) / len(present))
-        beta = math.atan(w * m.height_px * math.cos(phi0) / (2 * cam.fx * h))
-        if len(present) == 2:
-            half = (_off_axis(cam, m.u_right) - _off_axis(cam, m.u_left)) / 2
-            r = half / beta
-            tol = max(RATIO_TOLERANCE, 0.3 / max(m.width_px, 1.0))
-            if r > 1 + tol and dark["top"]:
-                m.clipped = "top"
-                m.notes.append(f"image {100 * (r - 1):.1f}% shorter than its width implies, "
-                               "under a dark edge: clipped at the top, height not used")
-                m.height_px = None
-            elif r < 1 - tol and (dark["left"] or dark["right"]):
-                side = "left" if m.outside["left"] <= m.outside["right"] else "right"
-                m.clipped = side
-                present = ["right" if side == "left" else "left"]
-                m.notes.append(f"image {100 * (1 - r):.1f}% narrower than its height implies, "
-                               f"beside a dark edge: clipped on the {side}, axis from the "
-                               "other edge")
-            elif abs(r - 1) > tol:
-                m.notes.append(f"angular width {100 * (r - 1):+.1f}% off what its height "
-                               "implies, with no dark edge to clip it: not treated as clipped")
-        else:
-            # no contrast on one side: a clip there or a background as dark as the panel;
-            # which, the pixels cannot say, so it is noted, not flagged
-            missing = "right" if present == ["left"] else "left"
-            m.notes.append(f"no edge on the {missing} (no contrast there): axis from the "
-                           "other edge and the width the height implies")
+        m, present, beta = _target_clip(cam, m, size, present)
         if len(present) == 1:
             side = present[0]
             phi_edge = _off_axis(cam, edges[side])
-            phi = phi_edge + beta if side == "left" else phi_edge - beta
-            m.u_axis = _column(cam, phi)
-            m.alpha_deg = alpha_of(cam, m.u_axis)
+            u_axis = _column(cam, phi_edge + beta if side == "left" else phi_edge - beta)
+            m = replace(m, u_axis=u_axis, alpha_deg=alpha_of(cam, u_axis))
         else:
-            m.alpha_deg, m.u_axis = _axis_between(cam, m.u_left, m.u_right)
+            alpha, u_axis = _axis_between(cam, m.u_left, m.u_right)
+            m = replace(m, alpha_deg=alpha, u_axis=u_axis)
     elif len(present) == 2:
-        m.alpha_deg, m.u_axis = _axis_between(cam, m.u_left, m.u_right)
+        alpha, u_axis = _axis_between(cam, m.u_left, m.u_right)
+        m = replace(m, alpha_deg=alpha, u_axis=u_axis)
     else:
         raise DetectionError("the target's image has neither a measurable height nor two "
                              "side edges")
     if m.height_px is not None:
-        m.d_total = distance_of(cam, m.u_axis, m.height_px, k, FRONT_OFFSET["target"])
+        m = replace(m, d_total=distance_of(cam, m.u_axis, m.height_px, k,
+                                           FRONT_OFFSET["target"]))
+    return m
+
+
+def _target_clip(cam: Camera, m: ImageMeasurement, size: Point2, present: list[str]
+                 ) -> tuple[ImageMeasurement, list[str], float]:
+    """The panel's angular width against the one its height implies: clipped at the top
+    (height dropped), clipped on a side (that edge dropped), or noted.  Returns the
+    measurement, the edges to use and the half-width β the height implies."""
+    w, h = size
+    edges = {"left": m.u_left, "right": m.u_right}
+    dark = {side: m.outside.get(side, math.inf) < 0.5 * m.inside
+            for side in ("left", "right", "top")}
+    phi0 = (sum(_off_axis(cam, edges[s_]) for s_ in present) / len(present))
+    beta = math.atan(w * m.height_px * math.cos(phi0) / (2 * cam.fx * h))
+    if len(present) == 2:
+        half = (_off_axis(cam, m.u_right) - _off_axis(cam, m.u_left)) / 2
+        r = half / beta
+        tol = max(RATIO_TOLERANCE, 0.3 / max(m.width_px, 1.0))
+        if r > 1 + tol and dark["top"]:
+            m = replace(m, clipped="top", height_px=None, notes=(
+                *m.notes, f"image {100 * (r - 1):.1f}% shorter than its width implies, under "
+                "a dark edge: clipped at the top, height not used"))
+        elif r < 1 - tol and (dark["left"] or dark["right"]):
+            side = "left" if m.outside["left"] <= m.outside["right"] else "right"
+            present = ["right" if side == "left" else "left"]
+            m = replace(m, clipped=side, notes=(
+                *m.notes, f"image {100 * (1 - r):.1f}% narrower than its height implies, "
+                f"beside a dark edge: clipped on the {side}, axis from the other edge"))
+        elif abs(r - 1) > tol:
+            m = replace(m, notes=(*m.notes, f"angular width {100 * (r - 1):+.1f}% off what "
+                                  "its height implies, with no dark edge to clip it: not "
+                                  "treated as clipped"))
+    else:
+        # no contrast on one side: a clip there or a background as dark as the panel;
+        # which, the pixels cannot say, so it is noted, not flagged
+        missing = "right" if present == ["left"] else "left"
+        m = replace(m, notes=(*m.notes, f"no edge on the {missing} (no contrast there): axis "
+                              "from the other edge and the width the height implies"))
+    return m, present, beta

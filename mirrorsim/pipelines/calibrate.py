@@ -18,7 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from mirrorsim.detection.detector import FRONT_OFFSET, Calibration, measure_object
+from mirrorsim.detection.detector import measure_object
+from mirrorsim.detection.image_geometry import FRONT_OFFSET, Calibration
 from mirrorsim.errors import DetectionError
 from mirrorsim.formats.files import read_json_cache, write_json_cache
 from mirrorsim.rendering.backend import cache_path

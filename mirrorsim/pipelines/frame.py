@@ -12,7 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from mirrorsim.detection.detector import Calibration, Detection, detect_frame, read_frame
+from mirrorsim.detection.detector import Detection, detect_frame, read_frame
+from mirrorsim.detection.image_geometry import Calibration
 from mirrorsim.errors import DetectionError
 from mirrorsim.formats.capture import CaptureRecord
 from mirrorsim.pipelines.calibrate import calibrate

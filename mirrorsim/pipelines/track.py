@@ -24,7 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from mirrorsim.detection.detector import Calibration, Detection
+from mirrorsim.detection.detector import Detection
+from mirrorsim.detection.image_geometry import Calibration
 from mirrorsim.errors import BadParameter, DetectionError
 from mirrorsim.pipelines.evaluate import DETECTOR_SIGMA
 from mirrorsim.pipelines.frame import FrameNotMeasured, render_and_measure
