@@ -43,10 +43,17 @@ def test_tiny_dataset_end_to_end(one_worker):
     table = pq.read_table(out / "dataset.parquet").to_pydict()
     assert table["index"] == [0, 1, 2]
     assert table["error"] == ["", "", ""]
-    for col in ("target_alpha_err", "beacon_d_rel_err", "err_target_cm", "variant", "spp",
-                "mirror_yaw_deg", "target_incidence_deg"):
-        assert col in table
-    assert "dataset.parquet" in (out / "README.md").read_text()
+    # the table holds exactly the declared columns, and the card names each of them
+    from mirrorsim.formats.dataset_table import NAMES, PER_OBJECT
+
+    assert sorted(table) == sorted(NAMES)
+    card = (out / "README.md").read_text()
+    assert "dataset.parquet" in card
+    flat = " ".join(card.split())
+    for name in NAMES:
+        per_object = name.split("_", 1)[-1] if name.startswith(("target_", "beacon_")) \
+            and name.split("_", 1)[-1] in {c.name for c in PER_OBJECT} else None
+        assert f"`{'<object>_' + per_object if per_object else name}`" in flat, name
     # by default a frame's PNG, truth and capture record only (no ids, no annotated)
     assert sorted(f.name for f in (out / "frames" / "scene000000").iterdir()) == [
         "scene000000.capture.json", "scene000000.json", "scene000000.png"]

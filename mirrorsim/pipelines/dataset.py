@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import json
 import math
+import textwrap
 import time
 import traceback
 import warnings
@@ -36,6 +37,7 @@ import numpy as np
 from tqdm import tqdm
 
 from mirrorsim.errors import BadParameter, DetectionError, InputError, SolverError
+from mirrorsim.formats import dataset_table as table
 from mirrorsim.formats.files import atomic_path, write_json, write_text
 from mirrorsim.pipelines.random_scenes import NoValidScene
 from mirrorsim.pipelines.score import Report
@@ -125,18 +127,19 @@ def _flatten(scene: Scene, rep: Report) -> dict:
     for kind, truth, (alpha, d), clipped in (
             ("target", t.target, meas.targets[0], frame.target_clipped),
             ("beacon", t.beacons[0], (b.alpha_deg, b.d_total), frame.beacon_clipped)):
-        row.update({
-            f"{kind}_pos_x": truth.position[0], f"{kind}_pos_y": truth.position[1],
-            f"{kind}_alpha_true": truth.alpha_deg, f"{kind}_d_true": truth.d_total,
-            f"{kind}_d1": truth.d1, f"{kind}_d2": truth.d2,
-            f"{kind}_off_axis_deg": (truth.alpha_deg - cam.pan_deg + 180.0) % 360.0 - 180.0,
-            f"{kind}_incidence_deg": _incidence_deg(scene, truth),
-            f"{kind}_height_px_true": truth.image_px.height,
-            f"{kind}_alpha_meas": alpha, f"{kind}_d_meas": d,
-            f"{kind}_alpha_err": alpha - truth.alpha_deg,
-            f"{kind}_d_rel_err": (d - truth.d_total) / truth.d_total,
-            f"{kind}_clipped": bool(clipped),
-        })
+        values = {
+            "pos_x": truth.position[0], "pos_y": truth.position[1],
+            "alpha_true": truth.alpha_deg, "d_true": truth.d_total,
+            "d1": truth.d1, "d2": truth.d2,
+            "off_axis_deg": (truth.alpha_deg - cam.pan_deg + 180.0) % 360.0 - 180.0,
+            "incidence_deg": _incidence_deg(scene, truth),
+            "height_px_true": truth.image_px.height,
+            "alpha_meas": alpha, "d_meas": d,
+            "alpha_err": alpha - truth.alpha_deg,
+            "d_rel_err": (d - truth.d_total) / truth.d_total,
+            "clipped": bool(clipped),
+        }
+        row.update({table.object_column(kind, name): v for name, v in values.items()})
     row.update({
         "est_target_x": float(sol.target[0]), "est_target_y": float(sol.target[1]),
         "est_mirror_yaw_deg": sol.mirror.yaw_deg,
@@ -340,11 +343,23 @@ def write_table(out: Path, rows: list[dict]) -> Path:
     return path
 
 
+def _card_columns() -> str:
+    """The table's columns as the card lists them, from their declaration."""
+    groups = (("the run", table.RUN, ""), ("scene parameters", table.SCENE, ""),
+              ("for `target_*` and `beacon_*`", table.PER_OBJECT, "<object>_"),
+              ("solution", table.SOLUTION, ""),
+              ("bench imperfections (the spec's `bench:` block; ideal values when absent)",
+               table.BENCH, ""), ("timings", table.TIMING, ""))
+    return "\n".join(textwrap.fill(f"- {title}: {table.card_section(cols, prefix)}.", 88,
+                                    subsequent_indent="  ", break_on_hyphens=False)
+                      for title, cols, prefix in groups)
+
+
 def write_card(out: Path, meta: dict, rows: list[dict], variant: str) -> None:
     """Write the dataset card DIR/README.md."""
     ok = [r for r in rows if not r.get("error")]
     med = lambda k: float(np.nanmedian([abs(r[k]) for r in ok])) if ok else math.nan  # noqa: E731
-    bench_columns = ";\n".join(f"  {line}" for line in imperfections.card_lines())
+    columns = _card_columns()
     text = f"""# mirrorsim dataset
 
 Made with `mirrorsim dataset --n {meta['n']} --seed {meta['seed']}`
@@ -355,23 +370,7 @@ Each row is one random scene (`scenes/<scene>.yaml`, a normal scene file: rerun 
 `mirrorsim evaluate`), its frame (`frames/<scene>/`), and these columns of
 `dataset.parquet`:
 
-- `index`, `scene`, `seed`, `render_seed`, `variant`, `spp` (in the mirror's image),
-  `background_spp`, `beacon_spp`, `sampler`, `error` (empty if fine);
-- scene parameters: `camera_x`, `camera_y`, `camera_height`, `camera_pan_deg`,
-  `hfov_deg`, `mirror_x`, `mirror_y`, `mirror_yaw_deg`, `mirror_width`,
-  `mirror_height`, `target_x`, `target_y` (cm, degrees);
-- for `target_*` and `beacon_*`: position `pos_x`, `pos_y`; ground truth `alpha_true`,
-  `d_true`, `d1`, `d2`; geometry `off_axis_deg` (bearing of the image off the optical
-  axis), `incidence_deg` (camera ray against the mirror's normal), `height_px_true`
-  (exact image height of the upright axis); measurements `alpha_meas`, `d_meas`; errors
-  `alpha_err` (deg, measured − true) and `d_rel_err` (relative); `clipped`;
-- solution: `est_target_x`, `est_target_y`, `est_mirror_yaw_deg`; errors
-  `err_target_cm`, `err_mirror_yaw_deg`, `err_mirror_offset_cm`,
-  `err_reflection_point_cm`; the solver's own bound `target_ellipse95_major_cm`
-  (semi-major axis of its 95 % error ellipse);
-- bench imperfections (the spec's `bench:` block; ideal values when absent):
-{bench_columns};
-- timings: `seconds_sample`, `seconds_total`.
+{columns}
 
 Median |errors| here: target α {med('target_alpha_err'):.4f}°, target d
 {100 * med('target_d_rel_err'):.3f} %, beacon α {med('beacon_alpha_err'):.4f}°, beacon d

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mirrorsim.formats import dataset_table as table
 from mirrorsim.formats.files import atomic_path, write_json
 from mirrorsim.formats.measurements import read_sigma
 from mirrorsim.formats.reader import Reader, read_json
@@ -41,13 +42,13 @@ def _feature(cols: dict, kind: str, name: str) -> np.ndarray:
     """One feature column for ``kind`` (target or beacon)."""
     col = lambda k: np.asarray(cols[k], float)  # noqa: E731
     if name == "1":
-        return np.ones(len(cols[f"{kind}_d_true"]))
+        return np.ones(len(cols[table.object_column(kind, "d_true")]))
     if name in ("d_total_cm", "off_axis_deg", "incidence_deg"):
-        return col({"d_total_cm": f"{kind}_d_true"}.get(name, f"{kind}_{name}"))
+        return col(table.object_column(kind, {"d_total_cm": "d_true"}.get(name, name)))
     if name == "inv_height_px":
-        return 1.0 / col(f"{kind}_height_px_true")
+        return 1.0 / col(table.object_column(kind, "height_px_true"))
     if name in BENCH_FEATURES:
-        return BENCH_FEATURES[name].of(col, kind)
+        return BENCH_FEATURES[name].of(col, lambda k: col(table.object_column(kind, k)))
     raise KeyError(name)
 
 
@@ -108,7 +109,7 @@ def fit(cols: dict) -> dict:
         X_all = _design(cols, kind, names)
         model["objects"][kind] = {}
         for q, col in QUANTITIES.items():
-            y = np.asarray(cols[f"{kind}_{col}"], float)
+            y = np.asarray(cols[table.object_column(kind, col)], float)
             m = ok & np.isfinite(y) & np.isfinite(X_all).all(axis=1)
             X, yy = X_all[m], y[m]
             if len(yy) < len(names) + 2:
@@ -191,7 +192,7 @@ def plot(cols: dict, model: dict, out: str | Path) -> Path:
     for r, (q, col, scale, unit) in enumerate((("alpha", "alpha_err", 1.0, "°"),
                                                 ("d_rel", "d_rel_err", 100.0, "%"))):
         for kind, colour in (("target", "#c0392b"), ("beacon", "#d4a017")):
-            y = np.asarray(cols[f"{kind}_{col}"], float) * scale
+            y = np.asarray(cols[table.object_column(kind, col)], float) * scale
             X = _design(cols, kind, model["features"])
             m = ok & np.isfinite(y)
             for c, (fi, name) in enumerate(((1, "d_total (cm)"), (3, "incidence (°)"))):

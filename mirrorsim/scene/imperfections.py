@@ -23,7 +23,8 @@ import numpy as np
 
 from mirrorsim.scene.model import Bench, Scene
 
-# a dataset's columns as the error model reads them: col(name) -> float array
+# a dataset's columns as the error model reads them, as float arrays: col(name) for a
+# column of the row, obj(name) for the object's own (the target's or the beacon's)
 Columns = Callable[[str], np.ndarray]
 
 
@@ -40,12 +41,13 @@ class Column:
 
 @dataclass(frozen=True)
 class Feature:
-    """One error-model feature: ``of(col, kind)`` for ``kind`` target or beacon, in the
-    form the imperfection's first-order effect is linear in."""
+    """One error-model feature: ``of(col, obj)`` for the target or the beacon (``obj``
+    reads that object's columns), in the form the imperfection's first-order effect is
+    linear in."""
 
     name: str
     doc: str
-    of: Callable[[Columns, str], np.ndarray]
+    of: Callable[[Columns, Columns], np.ndarray]
 
 
 @dataclass(frozen=True)
@@ -95,8 +97,8 @@ def _beacon_offset(scene: Scene, axis: int) -> float:
     return b.believed[axis] - b.position[axis]
 
 
-def _off_axis_tan(col: Columns, kind: str) -> np.ndarray:
-    return np.tan(np.radians(col(f"{kind}_off_axis_deg")))
+def _off_axis_tan(obj: Columns) -> np.ndarray:
+    return np.tan(np.radians(obj("off_axis_deg")))
 
 
 def _unknown_k1(col: Columns) -> np.ndarray:
@@ -109,12 +111,12 @@ def _where_noise(col: Columns, value: Callable[[np.ndarray], np.ndarray]) -> np.
         return np.where(fw > 0, value(fw), 0.0)
 
 
-def _mirror_power(col: Columns, kind: str) -> np.ndarray:
+def _mirror_power(col: Columns, obj: Columns) -> np.ndarray:
     # a mirror of curvature 1/R changes d_total by −2·cos i·d1·d2/(R·d_total): this
     # feature's d coefficient should come out −1
-    cos_i = np.cos(np.radians(col(f"{kind}_incidence_deg")))
-    return (2 * cos_i * col(f"{kind}_d1") * col(f"{kind}_d2") * col("bench_curvature_per_cm")
-            / col(f"{kind}_d_true"))
+    cos_i = np.cos(np.radians(obj("incidence_deg")))
+    return (2 * cos_i * obj("d1") * obj("d2") * col("bench_curvature_per_cm")
+            / obj("d_true"))
 
 
 def _plain(name: str, column: str, units: str, doc: str) -> tuple[Column, ...]:
@@ -122,7 +124,7 @@ def _plain(name: str, column: str, units: str, doc: str) -> tuple[Column, ...]:
 
 
 def _linear(name: str, column: str, doc: str) -> tuple[Feature, ...]:
-    return (Feature(name, doc, lambda col, _kind: col(column)),)
+    return (Feature(name, doc, lambda col, _obj: col(column)),)
 
 
 # In INTERFACE.md's order, which is also the dataset's column order and the order a spec's
@@ -149,9 +151,9 @@ REGISTRY: tuple[Imperfection, ...] = (
         # an unknown lens's k1 moves an image at off-axis angle φ by ∝ k1·tan³φ and scales
         # it by ∝ k1·tan²φ
         features=(Feature("k1_tan3", "k1·tan³(off-axis) of an uncorrected lens",
-                          lambda col, kind: _unknown_k1(col) * _off_axis_tan(col, kind) ** 3),
+                          lambda col, obj: _unknown_k1(col) * _off_axis_tan(obj) ** 3),
                   Feature("k1_tan2", "k1·tan²(off-axis) of an uncorrected lens",
-                          lambda col, kind: _unknown_k1(col) * _off_axis_tan(col, kind) ** 2))),
+                          lambda col, obj: _unknown_k1(col) * _off_axis_tan(obj) ** 2))),
     Imperfection(
         "distortion_known", "camera.distortion_known", "bool",
         "the capture record holds the lens's coefficients (the detector undistorts)", "flag",
@@ -167,9 +169,9 @@ REGISTRY: tuple[Imperfection, ...] = (
                         lambda s: s.bench.noise.read_noise if s.bench.noise else 0.0)),
         # shot noise goes as 1/√full_well
         features=(Feature("shot_noise", "1/√full_well",
-                          lambda col, _k: _where_noise(col, lambda fw: 1.0 / np.sqrt(fw))),
+                          lambda col, _obj: _where_noise(col, lambda fw: 1.0 / np.sqrt(fw))),
                   Feature("read_noise_rel", "read noise / full well",
-                          lambda col, _k: _where_noise(
+                          lambda col, _obj: _where_noise(
                               col, lambda fw: col("bench_read_noise") / fw)))),
     Imperfection(
         "jpeg_quality", "camera.jpeg_quality", "1", "the frame stored as JPEG at this quality",
@@ -177,7 +179,7 @@ REGISTRY: tuple[Imperfection, ...] = (
         columns=(Column("bench_jpeg_quality", "1", "JPEG quality (0: lossless PNG)",
                         lambda s: s.bench.jpeg_quality or 0),),
         features=(Feature("jpeg_loss", "(100 − quality)/100",
-                          lambda col, _k: np.where(col("bench_jpeg_quality") > 0,
+                          lambda col, _obj: np.where(col("bench_jpeg_quality") > 0,
                                                    (100.0 - col("bench_jpeg_quality")) / 100,
                                                    0.0)),)),
     Imperfection(
@@ -297,8 +299,3 @@ def only(scene: Scene, key: str) -> Scene:
 def row_values(scene: Scene) -> dict[str, Any]:
     """The scene's imperfections as a dataset row's columns (:data:`ROW_COLUMNS`)."""
     return {c.name: c.of(scene) for imp in REGISTRY for c in imp.columns}
-
-
-def card_lines() -> list[str]:
-    """The dataset card's description of the imperfection columns, one line each."""
-    return [f"`{c.name}` ({c.units}): {c.doc}" for imp in REGISTRY for c in imp.columns]

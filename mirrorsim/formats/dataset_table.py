@@ -1,0 +1,94 @@
+"""The dataset table's columns, declared once: the rows are built from them, the card
+lists them, :mod:`mirrorsim.pipelines.errormodel` reads them by these names and a test
+holds every row to them.
+
+A column for each of the target and the beacon is named ``<object>_<name>``
+(:func:`object_column`); the bench imperfections' columns come from their registry.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from mirrorsim.scene.imperfections import REGISTRY
+
+
+@dataclass(frozen=True)
+class Column:
+    """One column: its name, units ('' where none) and meaning."""
+
+    name: str
+    units: str
+    doc: str
+
+
+OBJECTS = ("target", "beacon")
+
+RUN = (
+    Column("index", "", "the scene's number"), Column("scene", "", "its name"),
+    Column("seed", "", "the dataset's seed"), Column("schema", "", "row layout version"),
+    Column("render_seed", "", "the render's seed (the scene's number)"),
+    Column("variant", "", "Mitsuba variant"),
+    Column("spp", "", "samples per pixel in the mirror's image"),
+    Column("background_spp", "", "samples per pixel outside it"),
+    Column("beacon_spp", "", "samples per pixel in each beacon's image"),
+    Column("sampler", "", "Mitsuba sampler"),
+    Column("error", "", "why the scene failed (empty if fine)"),
+)
+SCENE = (
+    Column("camera_x", "cm", "camera position"), Column("camera_y", "cm", "camera position"),
+    Column("camera_height", "cm", "camera height"),
+    Column("camera_pan_deg", "deg", "optical axis bearing"),
+    Column("hfov_deg", "deg", "horizontal field of view"),
+    Column("mirror_x", "cm", "mirror centre"), Column("mirror_y", "cm", "mirror centre"),
+    Column("mirror_yaw_deg", "deg", "mirror line direction, [0, 180)"),
+    Column("mirror_width", "cm", "mirror width"), Column("mirror_height", "cm", "mirror height"),
+    Column("target_x", "cm", "target position"), Column("target_y", "cm", "target position"),
+)
+# for each of OBJECTS, as <object>_<name>
+PER_OBJECT = (
+    Column("pos_x", "cm", "position"), Column("pos_y", "cm", "position"),
+    Column("alpha_true", "deg", "exact α"), Column("d_true", "cm", "exact d_total"),
+    Column("d1", "cm", "camera → reflection point"),
+    Column("d2", "cm", "reflection point → object"),
+    Column("off_axis_deg", "deg", "bearing of the image off the optical axis (+ left)"),
+    Column("incidence_deg", "deg", "camera ray against the mirror's normal"),
+    Column("height_px_true", "px", "exact image height of the upright axis"),
+    Column("alpha_meas", "deg", "measured α"), Column("d_meas", "cm", "measured d_total"),
+    Column("alpha_err", "deg", "measured − true α"),
+    Column("d_rel_err", "1", "(measured − true) / true d_total"),
+    Column("clipped", "", "the detector found the image clipped"),
+)
+SOLUTION = (
+    Column("est_target_x", "cm", "estimated target"),
+    Column("est_target_y", "cm", "estimated target"),
+    Column("est_mirror_yaw_deg", "deg", "estimated mirror line direction"),
+    Column("err_target_cm", "cm", "target error"),
+    Column("err_mirror_yaw_deg", "deg", "mirror yaw error"),
+    Column("err_mirror_offset_cm", "cm",
+           "estimated line's distance from the true reflection point"),
+    Column("err_reflection_point_cm", "cm", "reflection point error"),
+    Column("target_ellipse95_major_cm", "cm", "semi-major axis of the solver's 95 % ellipse"),
+)
+BENCH = tuple(Column(c.name, c.units, c.doc) for imp in REGISTRY for c in imp.columns)
+TIMING = (Column("seconds_sample", "s", "drawing the scene"),
+          Column("seconds_total", "s", "the whole scene"))
+
+
+def object_column(kind: str, name: str) -> str:
+    """The column of ``name`` (one of PER_OBJECT's) for ``kind`` (target or beacon)."""
+    return f"{kind}_{name}"
+
+
+# every column of a row, in declaration order (a failed scene's row has RUN's, and TIMING's)
+COLUMNS = (*RUN, *SCENE,
+           *(Column(object_column(k, c.name), c.units, f"{k}: {c.doc}")
+             for k in OBJECTS for c in PER_OBJECT),
+           *SOLUTION, *BENCH, *TIMING)
+NAMES = tuple(c.name for c in COLUMNS)
+
+
+def card_section(group: tuple[Column, ...], prefix: str = "") -> str:
+    """A group of columns as the card lists them."""
+    return "; ".join(f"`{prefix}{c.name}`" + (f" ({c.units})" if c.units else "")
+                     + f": {c.doc}" for c in group)
