@@ -138,14 +138,14 @@ def test_error_model_recovers_a_known_law():
         cols[f"{kind}_alpha_err"] = rng.normal(0.001 + 2e-5 * d, 0.002 + 3e-5 * d)
         cols[f"{kind}_d_rel_err"] = rng.normal(-0.001, 0.003 + 0.5 / h)
     model = errormodel.fit(cols)
-    a = model["objects"]["target"]["alpha"]
-    assert a["bias"][1] == pytest.approx(2e-5, abs=4e-6)
-    assert a["spread"][1] == pytest.approx(3e-5, abs=8e-6)
-    r = model["objects"]["beacon"]["d_rel"]
-    assert r["bias"][0] == pytest.approx(-0.001, abs=4e-4)
-    assert r["spread"][4] == pytest.approx(0.5, rel=0.15)
+    a = model.fits["target"]["alpha"]
+    assert a.bias[1] == pytest.approx(2e-5, abs=4e-6)
+    assert a.spread[1] == pytest.approx(3e-5, abs=8e-6)
+    r = model.fits["beacon"]["d_rel"]
+    assert r.bias[0] == pytest.approx(-0.001, abs=4e-4)
+    assert r.spread[4] == pytest.approx(0.5, rel=0.15)
     # the solver's σ pair comes out of the model
-    assert 0.002 < model["sigma"]["alpha_deg"] < 0.01
+    assert 0.002 < model.sigma.alpha_deg < 0.01
 
 
 def test_error_model_fits_a_signed_off_axis_bias_through_outliers():
@@ -168,9 +168,9 @@ def test_error_model_fits_a_signed_off_axis_bias_through_outliers():
         cols[f"{kind}_alpha_err"] = err
         cols[f"{kind}_d_rel_err"] = rng.normal(0, 0.001, n)
     model = errormodel.fit(cols)
-    a = model["objects"]["target"]["alpha"]
+    a = model.fits["target"]["alpha"]
     assert errormodel.FEATURES[2] == "off_axis_deg"
-    assert a["bias"][2] == pytest.approx(0.0003, rel=0.05)
+    assert a.bias[2] == pytest.approx(0.0003, rel=0.05)
     middle = np.array([[1.0, 90.0, 0.0, 30.0, 1 / 170]])
     bias, sd = errormodel.predict(model, "target", "alpha", middle)
     assert abs(bias[0]) < 0.0005 and sd[0] == pytest.approx(0.002, rel=0.3)
@@ -371,12 +371,12 @@ def test_error_model_fits_bias_against_bench_imperfections():
                      f"{kind}_d_rel_err": (-0.0102 * cols["bench_calibration_error_cm"] - power
                                            + rng.normal(0, 0.002, n))})
     model = errormodel.fit(cols)
-    names = model["features"]
+    names = model.features
     assert set(names) - set(errormodel.FEATURES) == {"pan_error_deg", "calibration_error_cm",
                                                       "mirror_power"}
     for kind in ("target", "beacon"):
-        a, d = model["objects"][kind]["alpha"], model["objects"][kind]["d_rel"]
-        assert a["bias"][names.index("pan_error_deg")] == pytest.approx(1.0, abs=0.01)
-        assert d["bias"][names.index("calibration_error_cm")] == pytest.approx(-0.0102, abs=5e-4)
-        assert d["bias"][names.index("mirror_power")] == pytest.approx(-1.0, abs=0.1)
-    assert model["sigma"]["alpha_deg"] == pytest.approx(0.5 / 3**0.5, rel=0.1)
+        a, d = model.fits[kind]["alpha"], model.fits[kind]["d_rel"]
+        assert a.bias[names.index("pan_error_deg")] == pytest.approx(1.0, abs=0.01)
+        assert d.bias[names.index("calibration_error_cm")] == pytest.approx(-0.0102, abs=5e-4)
+        assert d.bias[names.index("mirror_power")] == pytest.approx(-1.0, abs=0.1)
+    assert model.sigma.alpha_deg == pytest.approx(0.5 / 3**0.5, rel=0.1)

@@ -18,6 +18,7 @@ RMS over the rows of bias and spread together, so a bench's imperfections enter 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -99,15 +100,52 @@ def _robust_fit(X: np.ndarray, y: np.ndarray, cut: float = 1.345) -> np.ndarray:
     return np.r_[w[0] - np.sum(bz * mu / sd), bz / sd]
 
 
-def fit(cols: dict) -> dict:
+@dataclass(frozen=True)
+class QuantityFit:
+    """One object's one quantity (α error in degrees, or relative d_total error): its
+    bias and spread as linear models in the features, and how many rows made them."""
+
+    bias: tuple[float, ...]
+    spread: tuple[float, ...]
+    n: int
+    gross_errors: int
+    rms: float
+    typical_sigma: float  # RMS over the rows of bias and spread together
+
+    def to_json(self) -> dict:
+        """The model file's entry."""
+        return {"bias": list(self.bias), "spread": list(self.spread), "n": self.n,
+                "gross_errors": self.gross_errors, "rms": self.rms,
+                "typical_sigma": self.typical_sigma}
+
+
+@dataclass(frozen=True)
+class ErrorModel:
+    """The fitted model: its features, a fit per object and quantity, and the σ pair the
+    solver takes."""
+
+    features: tuple[str, ...]
+    fits: dict[str, dict[str, QuantityFit]]  # "target"/"beacon" → "alpha"/"d_rel" → fit
+    sigma: Sigma
+
+    def to_json(self) -> dict:
+        """The model file (``mirrorsim errormodel``)."""
+        return {"features": list(self.features),
+                "objects": {k: {q: f.to_json() for q, f in qs.items()}
+                            for k, qs in self.fits.items()},
+                "sigma": {"alpha_deg": self.sigma.alpha_deg,
+                          "d_total_rel": self.sigma.d_total_rel}}
+
+
+def fit(cols: dict) -> ErrorModel:
     """Fit the model to dataset columns (name → sequence); rows with errors or missing
     values are left out."""
     names = features_of(cols)
-    model = {"features": names, "objects": {}}
+    fits: dict[str, dict[str, QuantityFit]] = {}
     ok = np.array([not e for e in cols.get("error", [""] * len(cols["index"]))])
     for kind in ("target", "beacon"):
         X_all = _design(cols, kind, names)
-        model["objects"][kind] = {}
+        fits[kind] = {}
         for q, col in QUANTITIES.items():
             y = np.asarray(cols[table.object_column(kind, col)], float)
             m = ok & np.isfinite(y) & np.isfinite(X_all).all(axis=1)
@@ -123,27 +161,23 @@ def fit(cols: dict) -> dict:
             spread = _robust_fit(X[keep], np.abs(resid[keep]) * math.sqrt(math.pi / 2),
                                  cut=GROSS)
             sd = np.maximum(X @ spread, 0.0)
-            model["objects"][kind][q] = {
-                "bias": bias.tolist(), "spread": spread.tolist(), "n": int(len(yy)),
-                "gross_errors": int((~keep).sum()),
-                "rms": float(np.sqrt(np.mean(yy**2))),
-                "typical_sigma": float(np.sqrt(np.mean(sd**2 + (X @ bias) ** 2))),
-            }
-    obj = model["objects"]
-    model["sigma"] = {  # the larger of target's and beacon's: one σ pair for the solver
-        "alpha_deg": max(obj[k]["alpha"]["typical_sigma"] for k in obj),
-        "d_total_rel": max(obj[k]["d_rel"]["typical_sigma"] for k in obj),
-    }
-    return model
+            fits[kind][q] = QuantityFit(
+                bias=tuple(bias.tolist()), spread=tuple(spread.tolist()), n=int(len(yy)),
+                gross_errors=int((~keep).sum()), rms=float(np.sqrt(np.mean(yy**2))),
+                typical_sigma=float(np.sqrt(np.mean(sd**2 + (X @ bias) ** 2))))
+    # the larger of target's and beacon's: one σ pair for the solver
+    sigma = Sigma(alpha_deg=max(f["alpha"].typical_sigma for f in fits.values()),
+                  d_total_rel=max(f["d_rel"].typical_sigma for f in fits.values()))
+    return ErrorModel(tuple(names), fits, sigma)
 
 
-def predict(model: dict, kind: str, quantity: str, features: np.ndarray
+def predict(model: ErrorModel, kind: str, quantity: str, features: np.ndarray
             ) -> tuple[np.ndarray, np.ndarray]:
-    """(bias, σ) of a quantity for feature rows (k, len(model["features"])), in the
-    order of ``model["features"]``."""
-    m = model["objects"][kind][quantity]
+    """(bias, σ) of a quantity for feature rows (k, len(model.features)), in the order
+    of ``model.features``."""
+    m = model.fits[kind][quantity]
     X = np.atleast_2d(features)
-    return X @ np.asarray(m["bias"]), np.maximum(X @ np.asarray(m["spread"]), 0.0)
+    return X @ np.asarray(m.bias), np.maximum(X @ np.asarray(m.spread), 0.0)
 
 
 def load_sigma(path: str | Path) -> Sigma:
@@ -163,24 +197,22 @@ def read_columns(dataset_dir: str | Path) -> dict:
     return pq.read_table(Path(dataset_dir) / "dataset.parquet").to_pydict()
 
 
-def summary(model: dict) -> str:
+def summary(model: ErrorModel) -> str:
     """The model in a few printed lines."""
-    lines = [f"error model: features {', '.join(model['features'])}"]
-    for kind, qs in model["objects"].items():
+    lines = [f"error model: features {', '.join(model.features)}"]
+    for kind, qs in model.fits.items():
         for q, m in qs.items():
             unit = "°" if q == "alpha" else " (relative)"
-            coef = ", ".join(f"{n} {c:.4g}"
-                             for n, c in zip(model["features"], m["bias"], strict=True))
-            lines.append(f"  {kind:6s} {q:5s}: n={m['n']} ({m.get('gross_errors', 0)} gross), "
-                         f"RMS {m['rms']:.5f}{unit}, typical σ "
-                         f"{m['typical_sigma']:.5f}; bias: {coef}")
-    s = model["sigma"]
-    lines.append(f"  σ for the solver: α {s['alpha_deg']:.5f}°, "
-                 f"d_total {100 * s['d_total_rel']:.3f} %")
+            coef = ", ".join(f"{n} {c:.4g}" for n, c in zip(model.features, m.bias, strict=True))
+            lines.append(f"  {kind:6s} {q:5s}: n={m.n} ({m.gross_errors} gross), "
+                         f"RMS {m.rms:.5f}{unit}, typical σ {m.typical_sigma:.5f}; "
+                         f"bias: {coef}")
+    s = model.sigma
+    lines.append(f"  σ for the solver: α {s.alpha_deg:.5f}°, d_total {100 * s.d_total_rel:.3f} %")
     return "\n".join(lines)
 
 
-def plot(cols: dict, model: dict, out: str | Path) -> Path:
+def plot(cols: dict, model: ErrorModel, out: str | Path) -> Path:
     """Errors against distance and incidence, with the fitted bias ± σ, and histograms."""
     import matplotlib
 
@@ -193,7 +225,7 @@ def plot(cols: dict, model: dict, out: str | Path) -> Path:
                                                 ("d_rel", "d_rel_err", 100.0, "%"))):
         for kind, colour in (("target", "#c0392b"), ("beacon", "#d4a017")):
             y = np.asarray(cols[table.object_column(kind, col)], float) * scale
-            X = _design(cols, kind, model["features"])
+            X = _design(cols, kind, model.features)
             m = ok & np.isfinite(y)
             for c, (fi, name) in enumerate(((1, "d_total (cm)"), (3, "incidence (°)"))):
                 ax = axes[r, c]
@@ -221,6 +253,6 @@ def plot(cols: dict, model: dict, out: str | Path) -> Path:
     return out
 
 
-def write_model(model: dict, path: str | Path) -> None:
+def write_model(model: ErrorModel, path: str | Path) -> None:
     """Write the model file (strict JSON, atomically)."""
-    write_json(path, model)
+    write_json(path, model.to_json())
