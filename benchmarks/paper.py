@@ -108,11 +108,11 @@ def main() -> None:
     print("| σ(α) ° | σ(d) | paper ref / tar | ours, same σ's | ours, detector's σ's "
           f"({DETECTOR_SIGMA.alpha_deg}°, {100 * DETECTOR_SIGMA.d_total_rel:g} %) |")
     print("|---|---|---|---|---|")
-    same = table1(200, rng=0)["rows"]  # as `mirrorsim montecarlo` prints it
+    same = table1(200, rng=0).rows  # as `mirrorsim montecarlo` prints it
     det = run_row(DETECTOR_SIGMA.alpha_deg, DETECTOR_SIGMA.d_total_rel * 5.0, 200, rng=0)
     for (sa, sd, pref, ptar), row in zip(PAPER_TABLE1, same, strict=True):
-        print(f"| {sa} | {sd} | {pref} / {ptar} | {row['rmse_ref']:.3f} / "
-              f"{row['rmse_tar']:.3f} | {det['rmse_ref']:.4f} / {det['rmse_tar']:.4f} |")
+        print(f"| {sa} | {sd} | {pref} / {ptar} | {row.ours.rmse_ref:.3f} / "
+              f"{row.ours.rmse_tar:.3f} | {det.rmse_ref:.4f} / {det.rmse_tar:.4f} |")
 
 
 if __name__ == "__main__":

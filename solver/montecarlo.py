@@ -59,9 +59,55 @@ class Table1Geometry:
                 "target_reflection_point": np.asarray(ot.reflection_point)}
 
 
+@dataclass(frozen=True)
+class RowErrors:
+    """One row's RMSEs over its draws: the reflector (the target's reflection point), the
+    target, the mirror's yaw; and how many draws gave no finite estimate."""
+
+    rmse_ref: float
+    rmse_tar: float
+    rmse_yaw_deg: float
+    failed: int
+
+
+@dataclass(frozen=True)
+class Table1Row:
+    """A row of Table 1: its σ's, the paper's figures (NaN where it has none) and ours."""
+
+    sigma_alpha_deg: float
+    sigma_d: float
+    paper_rmse_ref: float
+    paper_rmse_tar: float
+    ours: RowErrors
+
+    def to_json(self) -> dict:
+        """The row as ``montecarlo --json`` writes it."""
+        return {"sigma_alpha_deg": self.sigma_alpha_deg, "sigma_d": self.sigma_d,
+                "paper_rmse_ref": self.paper_rmse_ref, "paper_rmse_tar": self.paper_rmse_tar,
+                **asdict(self.ours)}
+
+
+@dataclass(frozen=True)
+class Table1:
+    """:func:`table1`'s result: the geometry, the draws per row and the rows."""
+
+    geometry: Table1Geometry
+    iterations: int
+    rows: tuple[Table1Row, ...]
+
+    def to_json(self) -> dict:
+        """``montecarlo --json``'s document."""
+        lay = self.geometry.layout()
+        return {"geometry": {**asdict(self.geometry),
+                             "mirror_point": lay["mirror_point"].tolist(),
+                             "mirror_yaw_deg": float(lay["yaw_deg"]),
+                             "target": lay["target"].tolist(), "beacon": lay["beacon"].tolist()},
+                "iterations": self.iterations, "rows": [r.to_json() for r in self.rows]}
+
+
 def run_row(sigma_alpha_deg: float, sigma_d: float, iterations: int = 200,
             geometry: Table1Geometry | None = None,
-            rng: int | np.random.Generator | None = 0) -> dict[str, float]:
+            rng: int | np.random.Generator | None = 0) -> RowErrors:
     """One row: RMSE of the reflector (the target's reflection point), its yaw, and the
     target, over ``iterations`` noisy draws of all four measurements (vectorized)."""
     g = (geometry or Table1Geometry()).layout()
@@ -78,28 +124,21 @@ def run_row(sigma_alpha_deg: float, sigma_d: float, iterations: int = 200,
                              axis=1)
     tar_err = np.linalg.norm(est.target[ok] - g["target"], axis=1)
     yaw_err = yaw_difference(est.yaw_deg[ok], g["yaw_deg"])
-    return {"rmse_ref": float(np.sqrt(np.mean(ref_err ** 2))),
-            "rmse_tar": float(np.sqrt(np.mean(tar_err ** 2))),
-            "rmse_yaw_deg": float(np.sqrt(np.mean(yaw_err ** 2))),
-            "failed": int(k - ok.sum())}
+    return RowErrors(rmse_ref=float(np.sqrt(np.mean(ref_err ** 2))),
+                     rmse_tar=float(np.sqrt(np.mean(tar_err ** 2))),
+                     rmse_yaw_deg=float(np.sqrt(np.mean(yaw_err ** 2))),
+                     failed=int(k - ok.sum()))
 
 
 def table1(iterations: int = 200, geometry: Table1Geometry | None = None,
            rng: int | np.random.Generator | None = 0,
-           rows: tuple = PAPER_TABLE1) -> dict:
+           rows: tuple = PAPER_TABLE1) -> Table1:
     """All rows of Table 1, ours beside the paper's."""
     rng = np.random.default_rng(rng)
     g = geometry or Table1Geometry()
-    out = []
-    for sa, sd, p_ref, p_tar in rows:
-        ours = run_row(sa, sd, iterations, g, rng)
-        out.append({"sigma_alpha_deg": sa, "sigma_d": sd, "paper_rmse_ref": p_ref,
-                    "paper_rmse_tar": p_tar, **ours})
-    lay = g.layout()
-    return {"geometry": {**asdict(g), "mirror_point": lay["mirror_point"].tolist(),
-                         "mirror_yaw_deg": float(lay["yaw_deg"]),
-                         "target": lay["target"].tolist(), "beacon": lay["beacon"].tolist()},
-            "iterations": iterations, "rows": out}
+    return Table1(g, iterations, tuple(Table1Row(sa, sd, p_ref, p_tar,
+                                                 run_row(sa, sd, iterations, g, rng))
+                                       for sa, sd, p_ref, p_tar in rows))
 
 
 def table_rows(sigmas: list[tuple[float, float]] | None = None,

@@ -50,22 +50,22 @@ def test_montecarlo_rmse_matches_first_order_prediction():
     for sa, sd in [(0.02, 0.002), (0.05, 0.001)]:
         predicted = _first_order_target_rmse(g, sa, sd)
         row = run_row(sa, sd, 4000, g, rng=3)
-        assert row["failed"] == 0
-        assert row["rmse_tar"] == pytest.approx(predicted, rel=0.06)
-    assert run_row(0.0, 0.0, 10)["rmse_tar"] < 1e-9
+        assert row.failed == 0
+        assert row.rmse_tar == pytest.approx(predicted, rel=0.06)
+    assert run_row(0.0, 0.0, 10).rmse_tar < 1e-9
     # a beacon further from the mirror conditions the problem better: prediction and
     # simulation agree on it
     near, far = Table1Geometry(beacon_depth=0.3), Table1Geometry(beacon_depth=1.5)
     assert _first_order_target_rmse(far, 0.05, 0.002) < _first_order_target_rmse(near, 0.05, 0.002)
-    assert run_row(0.05, 0.002, 2000, far, rng=2)["rmse_tar"] < run_row(
-        0.05, 0.002, 2000, near, rng=2)["rmse_tar"]
+    assert run_row(0.05, 0.002, 2000, far, rng=2).rmse_tar < run_row(
+        0.05, 0.002, 2000, near, rng=2).rmse_tar
 
 
 def test_montecarlo_table_is_seeded_and_keeps_the_paper_columns():
     a, b, c = table1(200, rng=4), table1(200, rng=4), table1(200, rng=5)
     assert a == b and a != c
-    assert [(r["sigma_alpha_deg"], r["sigma_d"], r["paper_rmse_ref"], r["paper_rmse_tar"])
-            for r in a["rows"]] == [tuple(p) for p in PAPER_TABLE1]
+    assert [(r.sigma_alpha_deg, r.sigma_d, r.paper_rmse_ref, r.paper_rmse_tar)
+            for r in a.rows] == [tuple(p) for p in PAPER_TABLE1]
 
 
 def test_closed_form_unchecked_agrees_with_solve_single():

@@ -94,7 +94,7 @@ def _montecarlo(args) -> int:
     rows = table_rows(args.sigma, error_model_sigma(args), args.d_total)
     res = table1(args.iterations, geometry, args.seed, rows)
     print(montecarlo_table(res))
-    emit_json(args.json, res)
+    emit_json(args.json, res.to_json())
     return 0
 
 

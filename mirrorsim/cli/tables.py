@@ -9,6 +9,7 @@ from mirrorsim.pipelines.score import Report
 from mirrorsim.rendering.frames import FrameFiles
 from mirrorsim.scene.model import Scene
 from mirrorsim.truth import optics, visibility
+from solver.montecarlo import Table1
 from solver.sltr import Solution
 
 if TYPE_CHECKING:  # the budget and the track run renders: no Mitsuba import to draw one
@@ -166,20 +167,21 @@ def budget_table(budget: Budget) -> str:
     return "\n".join(lines + failures)
 
 
-def montecarlo_table(res: dict) -> str:
+def montecarlo_table(res: Table1) -> str:
     """Table 1 of the paper beside ours (``mirrorsim montecarlo``)."""
-    g = res["geometry"]
-    lines = [f"Table 1 protocol: {res['iterations']} draws per row; target at alpha "
+    g = res.to_json()["geometry"]
+    lines = [f"Table 1 protocol: {res.iterations} draws per row; target at alpha "
              f"{g['alpha_deg']:g}°, d_total {g['d_total']:g}; mirror through "
              f"({g['mirror_point'][0]:.3f}, {g['mirror_point'][1]:.3f}) at yaw "
              f"{g['mirror_yaw_deg']:.1f}°; beacon at ({g['beacon'][0]:.3f}, "
              f"{g['beacon'][1]:.3f})",
              f"{'v(alpha)':>9} {'v(d)':>6} | {'paper ref':>9} {'paper tar':>9} | "
              f"{'ours ref':>9} {'ours tar':>9} {'yaw (deg)':>9}"]
-    for r in res["rows"]:
-        lines.append(f"{r['sigma_alpha_deg']:9.2f} {r['sigma_d']:6.2f} | "
-                     f"{r['paper_rmse_ref']:9.3f} {r['paper_rmse_tar']:9.3f} | "
-                     f"{r['rmse_ref']:9.3f} {r['rmse_tar']:9.3f} {r['rmse_yaw_deg']:9.2f}")
+    for r in res.rows:
+        lines.append(f"{r.sigma_alpha_deg:9.2f} {r.sigma_d:6.2f} | "
+                     f"{r.paper_rmse_ref:9.3f} {r.paper_rmse_tar:9.3f} | "
+                     f"{r.ours.rmse_ref:9.3f} {r.ours.rmse_tar:9.3f} "
+                     f"{r.ours.rmse_yaw_deg:9.2f}")
     return "\n".join(lines)
 
 
