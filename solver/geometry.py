@@ -57,29 +57,6 @@ def reflect(point: ArrayLike, line_point: ArrayLike, yaw_deg: ArrayLike) -> np.n
     return p - 2.0 * s[..., None] * n
 
 
-def ray_line_intersection(
-    origin: ArrayLike, direction: ArrayLike, line_point: ArrayLike, yaw_deg: ArrayLike
-) -> tuple[np.ndarray, np.ndarray]:
-    """Where the ray ``origin + t·direction`` meets the line.
-
-    Returns
-    -------
-    t : ndarray
-        Ray parameter (in units of ``|direction|``); ``inf`` where the ray is parallel.
-    point : ndarray
-        The intersection point, shape ``(..., 2)`` (``nan`` where parallel).
-    """
-    o = np.asarray(origin, dtype=float)
-    d = np.asarray(direction, dtype=float)
-    n = line_normal(yaw_deg)
-    denom = np.sum(d * n, axis=-1)
-    num = -signed_distance(o, line_point, yaw_deg)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = np.where(np.abs(denom) > 0.0, num / np.where(denom == 0.0, 1.0, denom), np.inf)
-    point = o + np.where(np.isfinite(t), t, np.nan)[..., None] * d
-    return t, point
-
-
 def segment_distance(p0: ArrayLike, p1: ArrayLike, q0: ArrayLike, q1: ArrayLike) -> float:
     """Shortest distance between the segments p0–p1 and q0–q1 (either may be a point)."""
     p0, p1, q0, q1 = (np.asarray(v, dtype=float) for v in (p0, p1, q0, q1))

@@ -40,8 +40,9 @@ def check_table(scene: Scene) -> str:
         ext = optics.image_extent(scene, obj)
         vis = visibility.visibility(scene, obj)
         rp = f"({img.reflection_point[0]:.2f}, {img.reflection_point[1]:.2f})"
+        along = optics.along_mirror(mir, img.reflection_point)
         lines.append(f"{label:<9} {img.alpha_deg:9.3f} {img.d_total:8.3f} {img.d1:7.2f} "
-                     f"{img.d2:7.2f} {rp:>16} {img.mirror_offset:+9.2f} {ext.u_axis:7.1f} "
+                     f"{img.d2:7.2f} {rp:>16} {along:+9.2f} {ext.u_axis:7.1f} "
                      f"{ext.height:6.1f} {100 * vis.fraction:4.0f}%")
         if vis.reason:
             lines.append(f"          {vis.reason}")

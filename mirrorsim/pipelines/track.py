@@ -33,10 +33,10 @@ from mirrorsim.scene.model import Bench, Scene
 from mirrorsim.truth.optics import target_facing
 from mirrorsim.truth.visibility import visibility
 from solver.errors import SolverError
-from solver.geometry import bearing_deg, line_normal, ray_line_intersection, unit, wrap_bearing
+from solver.geometry import bearing_deg, line_normal, wrap_bearing
 from solver.particle import MovingBeaconFilter, PFParams, mirror_errors
 from solver.placement import path_points
-from solver.sltr import locate, mirror_from_beacon, observe
+from solver.sltr import locate, mirror_from_beacon, observe, ray_hits_line
 
 PATHS = ("rectangular", "linear", "sawtooth", "fixed")  # fixed: the baseline, standing still
 HEADINGS = ("view", "camera")
@@ -140,8 +140,10 @@ def beacon_path(scene: Scene, first_obs: tuple[float, float],
     front = line_normal(yaw)
     front = front if front @ (s0 - mid) > 0 else -front
     target_alpha_deg = target_obs[0]
-    t, target_hit = ray_line_intersection(o, unit(target_alpha_deg), mid, yaw)
-    centre = (hit + target_hit) / 2 if np.isfinite(t) and t > 0 else hit
+    try:
+        centre = (hit + ray_hits_line(o, target_alpha_deg, mid, yaw)) / 2
+    except SolverError:  # the target's ray misses the line (parallel, or behind)
+        centre = hit
     mirror = replace(scene.mirror, yaw=yaw, center=tuple(map(float, centre)))
     target = tuple(map(float, locate(o, mid, yaw, *target_obs)))
     believed = replace(scene, mirror=mirror, bench=Bench(), target=replace(

@@ -212,7 +212,8 @@ def ground_truth(scene: Scene) -> GroundTruth:
         return ObjectTruth(
             position=tuple(obj.position), virtual=_r2(img.virtual), alpha_deg=_r(img.alpha_deg),
             d_total=_r(img.d_total), d1=_r(img.d1), d2=_r(img.d2),
-            reflection_point=_r2(img.reflection_point), mirror_offset=_r(img.mirror_offset),
+            reflection_point=_r2(img.reflection_point),
+            mirror_offset=_r(optics.along_mirror(mir, img.reflection_point)),
             image_px=ImagePx(_r(ext.u_axis), _r(ext.v_top), _r(ext.v_bottom),
                              _r(ext.height)),
             visible_fraction=_r(vis.fraction), clipped=vis.clipped, **extra)

@@ -26,36 +26,24 @@ from mirrorsim.scene.model import (
     Target,
 )
 from solver.geometry import bearing_deg, unit
-from solver.sltr import observe
+from solver.sltr import Observation, observe
 
 
-@dataclass(frozen=True)
-class MirrorImage:
-    """Where a board point appears in the mirror, seen from the camera."""
-
-    virtual: np.ndarray  # the point's reflection across the mirror line
-    alpha_deg: float  # bearing camera → virtual image, (-180, 180]
-    d_total: float  # |camera → virtual| = d1 + d2
-    d1: float  # camera → reflection point
-    d2: float  # reflection point → object
-    reflection_point: np.ndarray  # where the path meets the mirror line
-    mirror_offset: float  # reflection point's signed distance from the mirror centre, along yaw
-
-
-def mirror_image(observer: Point2, mirror: Mirror, point) -> MirrorImage:
-    """Virtual image, α, d_total and reflection point of a board point seen from
-    ``observer`` (the camera's position), by the solver's forward model."""
+def mirror_image(observer: Point2, mirror: Mirror, point) -> Observation:
+    """Virtual image, α, d_total, d1, d2 and reflection point of a board point seen from
+    ``observer`` (the camera's position): the solver's forward model, as plain floats."""
     obs = observe(observer, mirror.center, mirror.yaw, point, strict=False)
-    r = np.asarray(obs.reflection_point, float)
-    return MirrorImage(
-        virtual=np.asarray(obs.virtual, float),
-        alpha_deg=float(obs.alpha_deg),
-        d_total=float(obs.d_total),
-        d1=float(obs.d1),
-        d2=float(obs.d2),
-        reflection_point=r,
-        mirror_offset=float((r - np.asarray(mirror.center, float)) @ unit(mirror.yaw)),
-    )
+    return Observation(alpha_deg=float(obs.alpha_deg), d_total=float(obs.d_total),
+                       d1=float(obs.d1), d2=float(obs.d2),
+                       virtual=np.asarray(obs.virtual, float),
+                       reflection_point=np.asarray(obs.reflection_point, float))
+
+
+def along_mirror(mirror: Mirror, point) -> float:
+    """A point's signed distance from the mirror's centre along its yaw (a reflection
+    point's offset: beyond half the width, the glass does not reach it)."""
+    return float((np.asarray(point, float) - np.asarray(mirror.center, float))
+                 @ unit(mirror.yaw))
 
 
 def target_facing(observer: Point2, mirror: Mirror, target_position: Point2) -> float:

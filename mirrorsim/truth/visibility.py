@@ -19,7 +19,7 @@ from mirrorsim.scene.model import (
     Scene,
     Target,
 )
-from mirrorsim.truth.optics import mirror_image, object_height, project
+from mirrorsim.truth.optics import along_mirror, mirror_image, object_height, project
 from solver.geometry import bearing_deg, segment_crossing, signed_distance, unit
 
 AXIS_SAMPLES = 41  # heights sampled along an object's upright axis
@@ -203,9 +203,10 @@ def _column_failures(scene: Scene, walls, point, heights: np.ndarray) -> list[st
     # the mirror line's +yaw direction against the glass's `along`
     sign = 1.0 if frame[1][:2] @ unit(mir.yaw) > 0 else -1.0
     if _flat_upright(scene):
-        if abs(img.mirror_offset) > half_w:  # the whole column: no need to look further
-            return [_past_end(img.mirror_offset, half_w)] * n
-        offset, up_glass = np.full(n, img.mirror_offset), zc
+        along = along_mirror(mir, img.reflection_point)
+        if abs(along) > half_w:  # the whole column: no need to look further
+            return [_past_end(along, half_w)] * n
+        offset, up_glass = np.full(n, along), zc
         apparent = np.column_stack([np.full(n, img.virtual[0]), np.full(n, img.virtual[1]),
                                     heights])
         a, b = sign * offset, zc - mir.size[1] / 2
