@@ -31,7 +31,7 @@ D_REF = 100.0
 # per reference object: the pencil's 45 px band rests on two edges of a few columns, whose
 # render noise at 64 spp erred K for every frame of a camera alike; the target's 230 px
 # panel averages over ~90 columns and is well measured at 64
-CALIBRATION_SPP = {"target": 64, "pencil": 1024}
+CALIBRATION_SPP = {"target": 64, "beacon": 1024}
 REFERENCE_PAN = 45.0  # the reference camera looks along the board's diagonal
 MARGIN_PX = 24  # rendered around the object's projected outline
 # bump whenever the measurement changes, so that no K measured the old way is reused
@@ -45,7 +45,7 @@ def calibration_key(camera: Camera, target_size, pencil_height: float,
     the reference really stood (a bench's error; absent from the key when 0)."""
     key = (f"{camera.width}x{camera.height_px}|hfov={camera.hfov:.9g}|h={camera.height:.9g}|"
            f"target={target_size[0]:.9g}x{target_size[1]:.9g}|pencil={pencil_height:.9g}|"
-           f"spp={CALIBRATION_SPP['target']},{CALIBRATION_SPP['pencil']}|{METHOD}")
+           f"spp={CALIBRATION_SPP['target']},{CALIBRATION_SPP['beacon']}|{METHOD}")
     return key + (f"|reference_error={distance_error:.9g}" if distance_error else "")
 
 
@@ -60,7 +60,7 @@ def reference_object(kind: str, size, distance: float = D_REF) -> Target | Beaco
     p = tuple(float(v) for v in distance * unit(REFERENCE_PAN))
     if kind == "target":
         return Target(position=p, size=tuple(size), facing_deg=REFERENCE_PAN + 180.0)
-    if kind == "pencil":
+    if kind == "beacon":
         return Beacon(position=p, height=float(size))
     raise ValueError(f"unknown reference object {kind!r}")
 
@@ -114,7 +114,7 @@ def calibrate(camera: Camera, target_size, pencil_height: float, *, variant: str
         return Calibration(target_k=c["target_k"], pencil_k=c["pencil_k"], key=key)
     where = D_REF + distance_error
     s_t = measure_reference(camera, "target", tuple(target_size), variant, where)
-    s_p = measure_reference(camera, "pencil", pencil_height, variant, where)
+    s_p = measure_reference(camera, "beacon", pencil_height, variant, where)
     cal = Calibration(target_k=s_t * (D_REF - FRONT_OFFSET["target"]),
                       pencil_k=s_p * (D_REF - FRONT_OFFSET["beacon"]), key=key)
     cache[key] = {"target_k": cal.target_k, "pencil_k": cal.pencil_k,
