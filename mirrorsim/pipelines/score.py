@@ -75,6 +75,8 @@ def score(truth: GroundTruth, measurements: Measurements, sol: Solution) -> Scor
     )
 
 
+# the report's render block: how its frames were rendered (the truth files hold the rest)
+REPORT_RENDER_KEYS = ("spp", "seed", "sampler", "variant")
 # optional files beside each frame (its PNG, truth and capture record are always written)
 EXTRA_FILES = ("ids", "annotated")
 
@@ -116,8 +118,7 @@ class Report:
                "measurements": self.measurements.to_json(),
                "solution": self.solution.to_json(), "errors": self.errors.to_json(),
                "frames": [asdict(f) for f in self.frames],
-               "render": {"spp": self.render.spp, "seed": self.render.seed,
-                          "sampler": self.render.sampler, "variant": self.render.variant},
+               "render": {k: self.render.to_json()[k] for k in REPORT_RENDER_KEYS},
                "calibration": dict(self.calibration)}
         if self.error_vs_beacons:
             out["error_vs_beacons"] = [{"beacons": k + 1, **s.to_json()}
@@ -132,9 +133,7 @@ class Report:
                    solution=Solution.from_json(d["solution"]),
                    errors=Score.from_json(d["errors"]),
                    frames=tuple(FrameRecord(**f) for f in d["frames"]),
-                   render=RenderInfo(d["render"]["variant"], d["render"]["spp"],
-                                     d["render"]["seed"],
-                                     d["render"].get("sampler", "independent")),
+                   render=RenderInfo.from_json(d["render"]),
                    calibration=dict(d["calibration"]),
                    error_vs_beacons=tuple(
                        Score.from_json({k: v for k, v in e.items() if k != "beacons"})
