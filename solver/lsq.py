@@ -48,6 +48,7 @@ def predict(params: np.ndarray, observer: np.ndarray, points: np.ndarray
     n = np.array([-np.sin(th), np.cos(th)])
     dn = np.array([-np.cos(th), -np.sin(th)])  # dn/dθ (per radian)
     s = points @ n - rho
+    # the reflection written out in (θ, ρ): its derivatives below need s, n and dn
     v = points - 2.0 * s[:, None] * n
     rel = v - observer
     d = np.hypot(rel[:, 0], rel[:, 1])

@@ -242,7 +242,9 @@ def expected_target_error(observer, target_alpha_deg: float, target_d_total: flo
         n = line_normal(yaw)
         params = np.array([yaw, n @ point])
         vt = o + target_d_total * unit(target_alpha_deg)
-        tgt = vt - 2.0 * (n @ vt - params[1]) * n  # the target this pose implies
+        # the target this pose implies, reflected in the line's (θ, ρ) form that predict's
+        # Jacobian is written in
+        tgt = vt - 2.0 * (n @ vt - params[1]) * n
         _, d_b, da_b, dd_b = predict(np.r_[params, 0, 0], o, B)
         _, d_t, da_t, dd_t = predict(np.r_[params, tgt], o, tgt[None])
         J = np.zeros((len(B), 4, 4))
