@@ -106,3 +106,18 @@ def test_features_against_their_first_order_forms():
     np.testing.assert_allclose(f["shot_noise"], [0.0, 0.01])
     np.testing.assert_allclose(f["read_noise_rel"], [0.0, 5e-4])
     np.testing.assert_allclose(f["jpeg_loss"], [0.0, 0.1])
+
+
+def test_a_row_off_its_declared_columns_is_refused_where_it_is_made():
+    from mirrorsim.formats import dataset_table as table
+
+    fine = dict.fromkeys(table.NAMES, 0.0) | {"error": ""}
+    assert table.checked_row(fine) is fine
+    with pytest.raises(ValueError, match="unknown.*target_alpha_eror"):
+        table.checked_row(fine | {"target_alpha_eror": 1.0})
+    with pytest.raises(ValueError, match="missing.*beacon_d_meas"):
+        table.checked_row({k: v for k, v in fine.items() if k != "beacon_d_meas"})
+    failed = {"index": 3, "scene": "scene000003", "seed": 1, "schema": 1,
+              "error": "DetectionError: nothing found", "traceback": "…",
+              "seconds_total": 1.0}
+    assert table.checked_row(failed) is failed

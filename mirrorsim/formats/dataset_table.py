@@ -88,6 +88,19 @@ COLUMNS = (*RUN, *SCENE,
 NAMES = tuple(c.name for c in COLUMNS)
 
 
+def checked_row(row: dict) -> dict:
+    """``row`` if it holds declared columns only (and, when the scene did not fail, all of
+    them): a misspelt or forgotten column fails here, where the row is made, not in a
+    reader of the table far from the change."""
+    names = set(row) - {"traceback"}
+    unknown = names - set(NAMES)
+    missing = set() if row.get("error") else set(NAMES) - names
+    if unknown or missing:
+        raise ValueError(f"dataset row off its declared columns: unknown {sorted(unknown)}, "
+                         f"missing {sorted(missing)}")
+    return row
+
+
 def card_section(group: tuple[Column, ...], prefix: str = "") -> str:
     """A group of columns as the card lists them."""
     return "; ".join(f"`{prefix}{c.name}`" + (f" ({c.units})" if c.units else "")

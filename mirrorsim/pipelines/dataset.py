@@ -103,7 +103,7 @@ def process_one(i: int, seed: int, spec: dict, out: str, spp: int | None,
     except Exception as exc:  # outside the scene: no row, so a resumed run redoes it
         return SceneResult(i, None, f"{type(exc).__name__}: {exc}")
     row["seconds_total"] = time.perf_counter() - t0
-    write_json(out_dir / "rows" / f"{name}.json", row)
+    write_json(out_dir / "rows" / f"{name}.json", table.checked_row(row))
     return SceneResult(i, row)
 
 
