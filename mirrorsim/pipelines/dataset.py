@@ -39,7 +39,7 @@ from tqdm import tqdm
 from mirrorsim.errors import BadParameter, DetectionError, InputError, SolverError
 from mirrorsim.formats import dataset_table as table
 from mirrorsim.formats.files import atomic_path, write_json, write_text
-from mirrorsim.pipelines.random_scenes import NoValidScene
+from mirrorsim.pipelines.random_scenes import DatasetSpec, NoValidScene
 from mirrorsim.pipelines.score import Report
 from mirrorsim.pipelines.workers import run_dask, run_local
 from mirrorsim.scene import imperfections
@@ -74,7 +74,7 @@ class SceneResult:
     retry: str = ""
 
 
-def process_one(i: int, seed: int, spec: dict, out: str, spp: int | None,
+def process_one(i: int, seed: int, spec: DatasetSpec, out: str, spp: int | None,
                 variant: str, keep: tuple[str, ...] = ()) -> SceneResult:
     """Draw, render, detect, solve and score scene i; write its files and its row."""
     from mirrorsim.pipelines.evaluate import evaluate_scene
@@ -152,21 +152,21 @@ def _flatten(scene: Scene, rep: Report) -> dict:
     return row
 
 
-def _calibrate_models(spec: dict, variant: str, progress: bool) -> None:
+def _calibrate_models(spec: DatasetSpec, variant: str, progress: bool) -> None:
     """Calibrate each of the spec's camera models once, before the workers start, so
     that they all find K in the cache (with ranges instead of models, or a drawn pencil
     height, each scene calibrates its own camera as it comes)."""
     from mirrorsim.pipelines.calibrate import calibrate
     from mirrorsim.pipelines.random_scenes import camera_models
 
-    cams, height = camera_models(spec), spec["beacon"]["height"]
+    cams, height = camera_models(spec), spec.beacon_height
     # a calibration distance error drawn per scene: each scene calibrates as it comes
-    error = ((spec.get("bench") or {}).get("calibration") or {}).get("distance_error", 0.0)
+    error = spec.calibration_error
     if cams is None or isinstance(height, list) or isinstance(error, list):
         return
     for cam in tqdm(cams, desc="calibrating camera models", unit="model",
                     disable=not progress, leave=False):
-        calibrate(cam, tuple(spec["target"]["size"]), float(height), variant=variant,
+        calibrate(cam, spec.target_size, float(height), variant=variant,
                   distance_error=float(error))
 
 
@@ -228,8 +228,8 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
     out = Path(out)
     spec = load_spec(spec_path)
     if sampler is not None:  # part of the spec, so that --resume checks it
-        spec = {**spec, "render": {**spec.get("render", {}), "sampler": sampler}}
-    meta = {"format": DATASET_FORMAT, "n": n, "seed": seed, "spp": spp, "spec": spec}
+        spec = spec.with_sampler(sampler)
+    meta = {"format": DATASET_FORMAT, "n": n, "seed": seed, "spp": spp, "spec": spec.data}
     _claim_folder(out, meta, resume)
     _make_folders(out, meta)
     chosen = choose_variant(variant)  # the probe runs once here rather than in every worker

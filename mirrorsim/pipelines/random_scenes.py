@@ -40,7 +40,43 @@ class NoValidScene(RunFailed):
     """No draw of a spec gave a usable scene (the scene's own failure in a dataset)."""
 
 
-def load_spec(path: str | Path | None = None) -> dict:
+@dataclasses.dataclass(frozen=True)
+class DatasetSpec:
+    """A checked dataset spec: ``data`` as its file gives it (what a dataset's
+    ``dataset.json`` keeps), and what other modules read of it."""
+
+    data: dict
+    source: str = "<spec>"
+
+    @property
+    def max_tries(self) -> int:
+        """Draws allowed for one usable scene."""
+        return int(self.data.get("max_tries", 5000))
+
+    @property
+    def target_size(self) -> tuple[float, float]:
+        """The target panel's (width, height), cm."""
+        return tuple(self.data["target"]["size"])
+
+    @property
+    def beacon_height(self) -> float | list[float]:
+        """The pencil's height (cm): a value, or a [lo, hi] range drawn per scene."""
+        return self.data["beacon"]["height"]
+
+    @property
+    def calibration_error(self) -> float | list[float]:
+        """The bench's calibration distance error (cm): a value or a range."""
+        bench = self.data.get("bench") or {}
+        return (bench.get("calibration") or {}).get("distance_error", 0.0)
+
+    def with_sampler(self, sampler: str) -> DatasetSpec:
+        """The spec with its scenes rendered by ``sampler`` (part of the spec, so that a
+        resumed dataset checks it)."""
+        data = {**self.data, "render": {**self.data.get("render", {}), "sampler": sampler}}
+        return dataclasses.replace(self, data=data)
+
+
+def load_spec(path: str | Path | None = None) -> DatasetSpec:
     """Read and check a spec file (default: the bundled one).
 
     Every fixed value is checked as a scene file's would be, every range as a range, and
@@ -74,7 +110,7 @@ def load_spec(path: str | Path | None = None) -> dict:
     # from ranges are checked by _value as it draws
     read_resolution(r, cam.get("resolution", DEFAULT_RESOLUTION), "camera.resolution")
     if "models" in cam:
-        camera_models(spec, r)
+        _camera_models(spec, r)
     read_pan(r, spec["camera"].get("pan", "mirror"), "camera.pan")
     r.mapping(spec["mirror"], "mirror", {"x", "y", "yaw", "width", "height"})
     r.mapping(spec["target"], "target", {"x", "y", "size"})
@@ -88,17 +124,21 @@ def load_spec(path: str | Path | None = None) -> dict:
     # which no usable scene exists
     _draw(spec, np.random.default_rng(0), path)
     try:
-        sample_scene(spec, 0, "probe", tries=min(PROBE_TRIES, spec.get("max_tries", 5000)))
+        _sample(spec, 0, "probe", tries=min(PROBE_TRIES, spec.get("max_tries", 5000)))
     except NoValidScene as exc:
         raise r.fail("", str(exc)) from None
     _check_bench_ends(spec, r)
-    return spec
+    return DatasetSpec(spec, str(path))
 
 
-def camera_models(spec: dict, r: Reader | None = None) -> list[Camera] | None:
+def camera_models(spec: DatasetSpec) -> list[Camera] | None:
     """The spec's camera models as cameras (position and pan irrelevant: what K depends
     on), or None when the spec draws heights or fields of view from ranges.  A
     resolution beside the models is their default."""
+    return _camera_models(spec.data)
+
+
+def _camera_models(spec: dict, r: Reader | None = None) -> list[Camera] | None:
     models = spec["camera"].get("models")
     if models is None:
         return None
@@ -128,7 +168,7 @@ def _draw(spec: dict, rng: np.random.Generator, where="<spec>",
     ``bench_rng`` (default: ``rng``)."""
     g = lambda block, key: _value(spec, block, key, rng, where)  # noqa: E731
     position = [g("camera", "x"), g("camera", "y")]
-    models = camera_models(spec)
+    models = _camera_models(spec)
     if models:  # a lab's few cameras, each on its mount: one calibration each
         c = models[int(rng.integers(len(models)))]
         height, hfov, res = c.height, c.hfov, c.resolution
@@ -253,7 +293,7 @@ def _check_bench_ends(spec: dict, r: Reader) -> None:
     bench = spec.get("bench")
     if bench is None:
         return
-    ideal = sample_scene({**spec, "bench": None}, 0, "probe",
+    ideal = _sample({**spec, "bench": None}, 0, "probe",
                          tries=min(PROBE_TRIES, spec.get("max_tries", 5000)))
     base = yaml.safe_load(to_yaml(ideal))
     for block in BENCH_SPEC_KEYS:
@@ -284,7 +324,7 @@ def _range_end(raw: Any, end: int) -> Any:
     return raw
 
 
-def sample_scene(spec: dict, rng: int | np.random.Generator | None, name: str,
+def sample_scene(spec: DatasetSpec, rng: int | np.random.Generator | None, name: str,
                  tries: int | None = None) -> Scene:
     """Draw until a usable scene comes: valid, NLOS, both images whole in the mirror.
 
@@ -294,6 +334,11 @@ def sample_scene(spec: dict, rng: int | np.random.Generator | None, name: str,
         If ``tries`` (default: the spec's ``max_tries``) draws give none, saying why the
         draws were refused most often.
     """
+    return _sample(spec.data, rng, name, tries)
+
+
+def _sample(spec: dict, rng: int | np.random.Generator | None, name: str,
+            tries: int | None = None) -> Scene:
     rng = np.random.default_rng(rng)
     bench_rng = rng.spawn(1)[0]  # spawning leaves rng's own stream as it was
     tries = int(spec.get("max_tries", 5000)) if tries is None else tries
