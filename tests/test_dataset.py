@@ -24,8 +24,8 @@ VOLATILE = ("seconds_total", "seconds_sample", "traceback")
 def _stable(rows):
     """Rows without their timings; every row must be a success (identical failures
     would otherwise compare equal)."""
-    assert rows and all(r["error"] == "" for r in rows), [r.get("error") for r in rows]
-    return [{k: v for k, v in r.items() if k not in VOLATILE} for r in rows]
+    assert rows and all(r.error == "" for r in rows), [r.error for r in rows]
+    return [{k: v for k, v in r.columns.items() if k not in VOLATILE} for r in rows]
 
 
 @pytest.fixture(scope="module")

@@ -111,7 +111,7 @@ def test_only_the_scenes_own_failures_become_rows(tmp_path, monkeypatch, exc, re
     assert (tmp_path / "rows" / "scene000000.json").exists() == recorded
     assert (result.row is None) != recorded and bool(result.retry) != recorded
     if recorded:
-        assert result.row["error"].startswith("DetectionError")
+        assert result.row.error.startswith("DetectionError") and result.row.traceback
 
 
 # ------------------------------------------------------- 2. other people's files

@@ -9,6 +9,7 @@ A column for each of the target and the beacon is named ``<object>_<name>``
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 from mirrorsim.scene.imperfections import REGISTRY
 
@@ -99,6 +100,41 @@ def checked_row(row: dict) -> dict:
         raise ValueError(f"dataset row off its declared columns: unknown {sorted(unknown)}, "
                          f"missing {sorted(missing)}")
     return row
+
+
+@dataclass(frozen=True)
+class DatasetRow:
+    """One scene's row, written as ``rows/<scene>.json``: its columns by their declared
+    names (checked when the row is made) and, for a scene that failed, the traceback."""
+
+    columns: dict[str, Any]
+    traceback: str = ""
+
+    def __post_init__(self):
+        checked_row(self.columns)
+
+    def __getitem__(self, name: str) -> Any:
+        """A column's value, by its declared name."""
+        return self.columns[name]
+
+    @property
+    def index(self) -> int:
+        """The scene's number."""
+        return self.columns["index"]
+
+    @property
+    def error(self) -> str:
+        """Why the scene failed ('' if it did not)."""
+        return self.columns.get("error", "")
+
+    def to_json(self) -> dict:
+        """The row file."""
+        return {**self.columns, **({"traceback": self.traceback} if self.traceback else {})}
+
+    @classmethod
+    def from_json(cls, d: dict) -> DatasetRow:
+        """Inverse of :meth:`to_json`."""
+        return cls({k: v for k, v in d.items() if k != "traceback"}, d.get("traceback", ""))
 
 
 def card_section(group: tuple[Column, ...], prefix: str = "") -> str:

@@ -70,7 +70,7 @@ class SceneResult:
     (a resumed run redoes it)."""
 
     index: int
-    row: dict | None
+    row: table.DatasetRow | None
     retry: str = ""
 
 
@@ -103,8 +103,9 @@ def process_one(i: int, seed: int, spec: DatasetSpec, out: str, spp: int | None,
     except Exception as exc:  # outside the scene: no row, so a resumed run redoes it
         return SceneResult(i, None, f"{type(exc).__name__}: {exc}")
     row["seconds_total"] = time.perf_counter() - t0
-    write_json(out_dir / "rows" / f"{name}.json", table.checked_row(row))
-    return SceneResult(i, row)
+    done = table.DatasetRow.from_json(row)
+    write_json(out_dir / "rows" / f"{name}.json", done.to_json())
+    return SceneResult(i, done)
 
 
 def _flatten(scene: Scene, rep: Report) -> dict:
@@ -260,7 +261,7 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
     write_card(out, meta, rows, chosen)
     return DatasetRun(rows=len(rows), computed=len(todo) - len(retry),
                       already_done=n - len(todo),
-                      failed=sum(bool(r.get("error")) for r in rows), retry=retry,
+                      failed=sum(bool(r.error) for r in rows), retry=retry,
                       parquet=out / "dataset.parquet", seconds=wall,
                       per_minute=len(todo) / wall * 60 if todo and wall else 0.0)
 
@@ -316,30 +317,33 @@ def _claim_folder(out: Path, meta: dict, resume: bool) -> None:
                            f"(n={old['n']}, seed={old['seed']}, spp={old['spp']})")
 
 
-def collect_rows(out: Path, n: int) -> list[dict]:
+def collect_rows(out: Path, n: int) -> list[table.DatasetRow]:
     """The finished rows of scenes 0..n-1, in index order."""
     rows = []
     for i in range(n):
         p = Path(out) / "rows" / f"{scene_name(i)}.json"
         if p.exists():
-            rows.append(json.loads(p.read_text()))
+            try:
+                rows.append(table.DatasetRow.from_json(json.loads(p.read_text())))
+            except ValueError as exc:  # another version's row, or a damaged file
+                raise DatasetError(p, f"not a row of this dataset ({exc})") from None
     return rows
 
 
-def write_table(out: Path, rows: list[dict]) -> Path:
+def write_table(out: Path, rows: list[table.DatasetRow]) -> Path:
     """All rows as one Parquet table (pyarrow), written atomically."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
     cols: dict[str, list] = {}
-    keys = sorted({k for r in rows for k in r if k != "traceback"},
+    keys = sorted({k for r in rows for k in r.columns},
                   key=lambda k: (k not in ("index", "scene", "error"), k))
     for k in keys:
-        cols[k] = [r.get(k) for r in rows]
-    table = pa.table(cols) if rows else pa.table({"index": pa.array([], pa.int64())})
+        cols[k] = [r.columns.get(k) for r in rows]
+    arrow = pa.table(cols) if rows else pa.table({"index": pa.array([], pa.int64())})
     path = Path(out) / "dataset.parquet"
     with atomic_path(path) as tmp:
-        pq.write_table(table, tmp)
+        pq.write_table(arrow, tmp)
     return path
 
 
@@ -355,9 +359,9 @@ def _card_columns() -> str:
                       for title, cols, prefix in groups)
 
 
-def write_card(out: Path, meta: dict, rows: list[dict], variant: str) -> None:
+def write_card(out: Path, meta: dict, rows: list[table.DatasetRow], variant: str) -> None:
     """Write the dataset card DIR/README.md."""
-    ok = [r for r in rows if not r.get("error")]
+    ok = [r for r in rows if not r.error]
     med = lambda k: float(np.nanmedian([abs(r[k]) for r in ok])) if ok else math.nan  # noqa: E731
     columns = _card_columns()
     text = f"""# mirrorsim dataset
