@@ -121,3 +121,41 @@ def test_plot_command_writes_png(tmp_path):
     out = tmp_path / "top.png"
     assert main(["plot", str(SCENES / "default.yaml"), "--out", str(out)]) == 0
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and out.stat().st_size > 20_000
+
+
+def test_render_command_takes_its_settings_once(tmp_path, capsys):
+    """`render --spp 1 --seed 3` writes the frame, ids, truth and capture record, and
+    the truth reads back the settings the flags gave (they enter the scene once)."""
+    import json
+
+    import yaml
+
+    from .conftest import scene_dict
+
+    d = scene_dict("default")
+    d["camera"]["resolution"] = [160, 91]
+    path = tmp_path / "tiny.yaml"
+    path.write_text(yaml.safe_dump(d))
+    out = tmp_path / "out"
+    assert main(["render", str(path), "--out", str(out), "--spp", "1", "--seed", "3",
+                 "--quiet", "--json", "-"]) == 0
+    printed = capsys.readouterr().out
+    truth = json.loads(printed[printed.index("\n{") + 1:])
+    assert sorted(p.name for p in out.iterdir()) == [
+        "default.capture.json", "default.ids.png", "default.json", "default.png"]
+    assert (truth["render"]["spp"], truth["render"]["seed"]) == (1, 3)
+    assert json.loads((out / "default.json").read_text())["render"]["seed"] == 3
+    assert main(["render", str(path), "--out", str(tmp_path / "x"), "--spp", "0"]) == 2
+    assert "--spp" in capsys.readouterr().err and not (tmp_path / "x").exists()
+
+
+def test_calibrate_command_gives_the_pinhole_constant(capsys):
+    """K = s_px·(d − front offset) is the pinhole's fx·H for the target: fx·15.25."""
+    import json
+
+    scene = load_scene(SCENES / "default.yaml")
+    assert main(["calibrate", str(SCENES / "default.yaml"), "--json", "-"]) == 0
+    out = capsys.readouterr().out
+    k = json.loads(out[out.index("{"):])
+    assert k["target_k"] == pytest.approx(scene.camera.fx * 15.25, rel=0.003)
+    assert "px at 1 m" in out
