@@ -35,11 +35,8 @@ from mirrorsim.truth import optics  # noqa: E402
 
 
 def _png_writer():
-    try:
-        from mirrorsim.formats.files import encode_png
-        return lambda px, path: Path(path).write_bytes(encode_png(px))
-    except ImportError:  # before the OpenCV encoder
-        return lambda px, path: render.write_png(path, px)
+    from mirrorsim.formats.files import encode_png
+    return lambda px, path: Path(path).write_bytes(encode_png(px))
 
 
 def _timed(fn, *args):
@@ -63,7 +60,7 @@ def main() -> None:
         board = replace(scene.board)  # a new object: a cache keyed by value still hits
         fn = getattr(mitsuba_scene._board_texture, "__wrapped__", mitsuba_scene._board_texture)
         _, t_tex = _timed(fn, board)
-        frame = render.render_frame(scene.with_render(spp=scene.render.spp, seed=i), progress=False)
+        frame = render.render_frame(scene.with_render(seed=i), progress=False)
         srgb, t_srgb = _timed(render.to_srgb8, frame.linear)
         _, t_png = _timed(write_png, srgb, tmp / "f.png")
         from mirrorsim.formats.capture import CaptureRecord
@@ -76,8 +73,8 @@ def main() -> None:
         if i == 0:
             continue  # warm-up: imports, kernels, calibration
         for k, v in (("draw a valid scene", t_draw), ("board texture (uncached)", t_tex),
-                     ("render + id pass", frame.seconds_total),
-                     ("render (path tracing)", frame.seconds_render),
+                     ("render + id pass", frame.info.seconds_total),
+                     ("render (path tracing)", frame.info.seconds_render),
                      ("linear → sRGB", t_srgb), ("PNG encode + write", t_png),
                      ("detection", t_det), ("mirror's box, share of the frame", share)):
             times.setdefault(k, []).append(v)

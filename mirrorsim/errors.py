@@ -33,7 +33,7 @@ class BadParameter(InputError):
 
 
 class BadArgument(InputError):
-    """A command-line option out of range: ``BadArgument("--spp", "0 must be ≥ 1")``
+    """A command-line option out of range: ``BadArgument("--workers", "0 must be ≥ 1")``
     (raised by :mod:`mirrorsim.cli` only)."""
 
     def __init__(self, option: str, message: str):

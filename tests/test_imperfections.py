@@ -121,3 +121,13 @@ def test_a_row_off_its_declared_columns_is_refused_where_it_is_made():
               "error": "DetectionError: nothing found", "traceback": "…",
               "seconds_total": 1.0}
     assert table.checked_row(failed) is failed
+
+
+def test_null_is_absent_only_where_the_ideal_bench_has_none():
+    # no lens, no noise, no JPEG, a flat mirror: null says "none"; a number must be one
+    assert scene_from_dict(_with("camera.noise", None)).bench == Bench()
+    assert scene_from_dict(_with("mirror.curvature_radius", None)).bench == Bench()
+    for key in ("camera.pan_error", "mirror.tilt", "calibration.distance_error",
+                "camera.distortion_known"):
+        with pytest.raises(SceneError, match=key.replace(".", r"\.")):
+            scene_from_dict(_with(key, None))

@@ -17,7 +17,7 @@ from mirrorsim.cli.registry import (
     output,
     sampler_option,
 )
-from mirrorsim.errors import BadArgument
+from mirrorsim.errors import BadArgument, RunFailed
 from mirrorsim.formats.files import default_out, emit_json
 from mirrorsim.pipelines.score import EXTRA_FILES
 from mirrorsim.scene.model import RenderSettings
@@ -178,6 +178,8 @@ def _dataset(args) -> int:
             raise
         raise DatasetError(args.out, "already holds a dataset: pass --resume to finish it, "
                            "or choose another --out") from None
+    except RunFailed as exc:  # the rows done so far are kept: say how to finish
+        raise RunFailed(f"{exc}; rerun with --resume") from None
     print(f"{args.out}: {res.rows} rows ({res.computed} computed now in "
           f"{res.seconds:.0f} s, {res.per_minute:.1f} scenes/min; "
           f"{res.already_done} already done; {res.failed} failed) → {res.parquet}")

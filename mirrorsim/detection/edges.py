@@ -130,8 +130,9 @@ def _local_edge(img: np.ndarray, band, axis: int, guess: float, inside_first: bo
                 _mean_level(outside))
     window = np.array([line(i) for i in range(c - half, c + half + 1)])
     if chroma:
-        return _edge_by_area(flat(window), c - half, flat(inside), np.zeros(window.shape[-1]),
-                             inside_first), _mean_level(outside)
+        return _edge_by_area(flat(window), c - half, flat(inside),
+                             np.zeros(window.shape[-1], window.dtype), inside_first), \
+            _mean_level(outside)
     return _edge_by_area(window, c - half, inside, outside, inside_first), _mean_level(outside)
 
 

@@ -150,10 +150,16 @@ def _bench(r: Reader, cam: dict, m: dict, cal: Any, mirror: Mirror,
               "calibration": r.mapping(cal, "calibration", set(), set(_leaves("calibration")))}
     values = {}
     for imp in REGISTRY:
-        if imp.block in blocks and blocks[imp.block].get(imp.leaf) is not None:
+        # null is "absent" where the ideal bench has none (no lens, noise, JPEG, curvature);
+        # a number or a flag must be given as one
+        given = imp.block in blocks and imp.leaf in blocks[imp.block]
+        if given and (blocks[imp.block][imp.leaf] is not None or imp.form in NUMERIC_FORMS):
             values[imp.field] = _imperfection(r, imp, blocks[imp.block][imp.leaf], mirror,
                                               resolution, hfov)
     return Bench(**values)
+
+
+NUMERIC_FORMS = ("angle", "number", "flag")
 
 
 def _imperfection(r: Reader, imp: Imperfection, raw: Any, mirror: Mirror,

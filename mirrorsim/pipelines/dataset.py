@@ -232,6 +232,8 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
         spec = spec.with_sampler(sampler)
     meta = {"format": DATASET_FORMAT, "n": n, "seed": seed, "spp": spp, "spec": spec.data}
     _claim_folder(out, meta, resume)
+    if resume:  # a damaged or foreign row is refused now, not after the work
+        collect_rows(out, n)
     _make_folders(out, meta)
     chosen = choose_variant(variant)  # the probe runs once here rather than in every worker
     _calibrate_models(spec, chosen, progress)

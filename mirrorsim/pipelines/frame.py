@@ -1,7 +1,8 @@
 """One frame through the pipeline, written once: render → calibrate → detect.
 
-Every command and benchmark that measures a frame goes through here: :func:`measure_frame`
-for a frame on disk and its capture record, :func:`render_and_measure` for a scene.  The
+Every command that measures a frame goes through here (and the benchmarks that do not
+time the stages apart): :func:`measure_frame` for a frame on disk and its capture
+record, :func:`render_and_measure` for a scene.  The
 detector is handed the capture record (what the experimenter knows), never the scene.
 """
 

@@ -46,7 +46,6 @@ class DatasetSpec:
     ``dataset.json`` keeps), and what other modules read of it."""
 
     data: dict
-    source: str = "<spec>"
 
     @property
     def max_tries(self) -> int:
@@ -128,7 +127,7 @@ def load_spec(path: str | Path | None = None) -> DatasetSpec:
     except NoValidScene as exc:
         raise r.fail("", str(exc)) from None
     _check_bench_ends(spec, r)
-    return DatasetSpec(spec, str(path))
+    return DatasetSpec(spec)
 
 
 def camera_models(spec: DatasetSpec) -> list[Camera] | None:
@@ -299,8 +298,9 @@ def _check_bench_ends(spec: dict, r: Reader) -> None:
     for block in BENCH_SPEC_KEYS:
         for key, raw in (bench.get(block) or {}).items():
             for end in (0, 1):  # each range's low end, then its high end
-                pick = ([_range_end(x, end) for x in raw] if key == "distortion"
-                        and isinstance(raw, list) else _range_end(raw, end))
+                lens = _BY_SPEC_PATH[f"{block}.{key}"].form == "lens"
+                pick = ([_range_end(x, end) for x in raw] if lens and isinstance(raw, list)
+                        else _range_end(raw, end))
                 d = copy.deepcopy(base)
                 for path, value in _draw_bench({block: {key: pick}},
                                                np.random.default_rng(0), r.source).items():
@@ -334,7 +334,7 @@ def sample_scene(spec: DatasetSpec, rng: int | np.random.Generator | None, name:
         If ``tries`` (default: the spec's ``max_tries``) draws give none, saying why the
         draws were refused most often.
     """
-    return _sample(spec.data, rng, name, tries)
+    return _sample(spec.data, rng, name, spec.max_tries if tries is None else tries)
 
 
 def _sample(spec: dict, rng: int | np.random.Generator | None, name: str,

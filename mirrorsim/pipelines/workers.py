@@ -119,7 +119,7 @@ def run_local(fn: Callable, jobs: list[tuple], workers: int, is_done: Callable[[
                     deaths += _collect(s, slots, pending, is_done, on_result)
                     if deaths > MAX_WORKER_DEATHS:
                         raise RunFailed("worker processes keep dying; the rows done so far "
-                                        "are kept (resume the run to finish it)")
+                                        "are kept")
             # replace retired and dead workers while there is work for them
             while len(slots) < workers and len(pending) > sum(s.job is None for s in slots):
                 start()

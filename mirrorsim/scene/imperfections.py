@@ -211,7 +211,6 @@ REGISTRY: tuple[Imperfection, ...] = (
                  Column("bench_beacon_dy_cm", "cm", "believed − true y of beacon 0",
                         lambda s: _beacon_offset(s, 1)))),
 )
-BY_FIELD = {imp.field: imp for imp in REGISTRY}
 # Bench field → the key path a scene file writes it under (the budget's sources)
 KEYS = {imp.field: imp.key for imp in REGISTRY if imp.source and imp.block != "beacons"}
 # a dataset row's imperfection columns (every row has all of them, ideal values on an
