@@ -3,6 +3,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from mirrorsim.cli.main import main
@@ -121,6 +122,36 @@ def test_plot_command_writes_png(tmp_path):
     out = tmp_path / "top.png"
     assert main(["plot", str(SCENES / "default.yaml"), "--out", str(out)]) == 0
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and out.stat().st_size > 20_000
+
+
+def test_top_view_draws_each_object_where_it_stands():
+    """The drawing's own lines: the mirror between its ends, the target and its virtual
+    image (reflected across the mirror line by hand here), the camera at its place."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from mirrorsim.cli.plots import _draw_top_view
+
+    s = load_scene(SCENES / "default.yaml")
+    fig, ax = plt.subplots()
+    _draw_top_view(ax, s)
+    drawn = [np.column_stack(line.get_data()) for line in ax.get_lines()]
+    plt.close(fig)
+
+    def has(points) -> bool:
+        pts = np.asarray(points, float)
+        return any(d.shape == pts.shape and np.allclose(d, pts, atol=1e-9) for d in drawn)
+
+    half = 0.5 * s.mirror.size[0] * np.array([math.cos(math.radians(s.mirror.yaw)),
+                                              math.sin(math.radians(s.mirror.yaw))])
+    centre = np.asarray(s.mirror.center, float)
+    assert has([centre - half, centre + half])
+    n = np.array([-math.sin(math.radians(s.mirror.yaw)), math.cos(math.radians(s.mirror.yaw))])
+    t = np.asarray(s.target.position, float)
+    virtual = t - 2 * ((t - centre) @ n) * n
+    assert has([t]) and has([virtual]) and has([s.camera.position])
 
 
 def test_render_command_takes_its_settings_once(tmp_path, capsys):
