@@ -380,3 +380,20 @@ def test_error_model_fits_bias_against_bench_imperfections():
         assert d.bias[names.index("calibration_error_cm")] == pytest.approx(-0.0102, abs=5e-4)
         assert d.bias[names.index("mirror_power")] == pytest.approx(-1.0, abs=0.1)
     assert model.sigma.alpha_deg == pytest.approx(0.5 / 3**0.5, rel=0.1)
+
+
+def test_resume_refuses_a_foreign_row_before_any_work(one_worker, tmp_path):
+    import json
+    import shutil
+
+    from mirrorsim.pipelines.dataset import DatasetError
+
+    out, _ = one_worker
+    dst = tmp_path / "copy"
+    shutil.copytree(out, dst)
+    (dst / "dataset.parquet").unlink()
+    row = dst / "rows" / "scene000001.json"
+    row.write_text(json.dumps({**json.loads(row.read_text()), "target_alpha_eror": 1.0}))
+    with pytest.raises(DatasetError, match="scene000001.json.*target_alpha_eror"):
+        run_dataset(3, 3, dst, workers=1, spec_path=SPEC, progress=False, resume=True)
+    assert not (dst / "dataset.parquet").exists()

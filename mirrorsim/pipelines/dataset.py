@@ -232,8 +232,6 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
         spec = spec.with_sampler(sampler)
     meta = {"format": DATASET_FORMAT, "n": n, "seed": seed, "spp": spp, "spec": spec.data}
     _claim_folder(out, meta, resume)
-    if resume:  # a damaged or foreign row is refused now, not after the work
-        collect_rows(out, n)
     _make_folders(out, meta)
     chosen = choose_variant(variant)  # the probe runs once here rather than in every worker
     _calibrate_models(spec, chosen, progress)
@@ -317,6 +315,7 @@ def _claim_folder(out: Path, meta: dict, resume: bool) -> None:
     if {k: old[k] for k in keys} != {k: meta[k] for k in keys}:
         raise DatasetError(out, f"holds a dataset made with other settings "
                            f"(n={old['n']}, seed={old['seed']}, spp={old['spp']})")
+    collect_rows(out, meta["n"])  # a damaged or foreign row refused now, not after the work
 
 
 def collect_rows(out: Path, n: int) -> list[table.DatasetRow]:
