@@ -146,8 +146,11 @@ def test_errormodel_out_must_be_a_json_model(tmp_path, capsys):
     ds = tmp_path / "ds"
     ds.mkdir()
     (ds / "dataset.parquet").write_bytes(b"PAR1 not really")
-    for bad in ("model.png", "dataset.parquet", "model"):
+    for bad in ("model.png", "model"):
         _refused(capsys, ["errormodel", str(ds), "--out", str(ds / bad)], says=("*.json",))
+    # the dataset's own table: refused as the run's input, before its suffix is looked at
+    _refused(capsys, ["errormodel", str(ds), "--out", str(ds / "dataset.parquet")],
+             says=("this run reads it",))
     assert _files(ds) == {"dataset.parquet"}
 
 
@@ -390,3 +393,40 @@ def test_an_unwritable_cache_only_costs_a_redo(tmp_path, monkeypatch):
     write_json_cache(tmp_path / "cache.json", {"k": 1})  # no exception
     assert read_json_cache(tmp_path / "cache.json") == {}
     assert list(tmp_path.iterdir()) == []
+
+
+# ------------------------------------------- an output never lands on the run's input
+
+
+def test_an_output_over_the_runs_own_input_is_refused(tmp_path, capsys):
+    """`check s.yaml --json s.yaml` would replace the scene with JSON, `errormodel DS
+    --out DS/dataset.json` the dataset's description, `solve m.json --json m.json` the
+    measurements: each is bad input (exit 2, one line naming the flag), nothing written."""
+    import shutil
+
+    from mirrorsim.cli.main import main
+
+    scene = tmp_path / "s.yaml"
+    shutil.copy(DEFAULT, scene)
+    before = scene.read_bytes()
+    assert main(["check", str(scene), "--json", str(scene)]) == 2
+    assert main(["check", str(scene), "--measurements", str(tmp_path / "." / "s.yaml")]) == 2
+    assert scene.read_bytes() == before
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and all("this run reads it" in line for line in err)
+    assert "--json" in err[0] and "--measurements" in err[1]
+
+    ds = tmp_path / "ds"
+    (ds / "rows").mkdir(parents=True)
+    (ds / "dataset.json").write_text("{}")
+    for out in (ds / "dataset.json", ds / "rows" / "scene000000.json", ds / "README.md"):
+        assert main(["errormodel", str(ds), "--out", str(out)]) == 2
+    assert (ds / "dataset.json").read_text() == "{}" and not (ds / "README.md").exists()
+
+    meas = tmp_path / "m.json"
+    assert main(["check", str(scene), "--measurements", str(meas)]) == 0
+    kept = meas.read_bytes()
+    assert main(["solve", str(meas), "--json", str(meas)]) == 2
+    assert meas.read_bytes() == kept
+    # another file beside them is fine
+    assert main(["check", str(scene), "--json", str(tmp_path / "truth.json")]) == 0

@@ -13,6 +13,7 @@ from mirrorsim.cli.registry import (
     default_workers,
     error_model_sigma,
     finite,
+    inputs,
     load,
     output,
     sampler_option,
@@ -28,6 +29,7 @@ MAX_ITERATIONS = 1_000_000  # draws per Monte Carlo row: about a second a row at
 
 def _solve_options(p):
     p.add_argument("measurements", type=Path)
+    inputs(p, ("measurements", "MEASUREMENTS", "file"))
     common(p, scene=False, json="the solution",
            error_model="where the measurements give no sigma, take")
 
@@ -142,6 +144,7 @@ def _dataset_options(p):
     p.add_argument("--workers", type=int, default=default_workers(),
                    help="worker processes (default: half the cores)")
     p.add_argument("--spec", type=Path, help="ranges of the random scenes (YAML)")
+    inputs(p, ("spec", "--spec", "file"))
     p.add_argument("--spp", type=int, help="samples per pixel (default: the spec's)")
     sampler_option(p)
     p.add_argument("--keep", nargs="*", default=[], choices=EXTRA_FILES,
@@ -193,6 +196,7 @@ def _dataset(args) -> int:
 
 def _errormodel_options(p):
     p.add_argument("dataset", type=Path)
+    inputs(p, ("dataset", "the dataset DIR", "dataset"))
     output(p, "--out", "file", type=Path,
            help="model file, *.json (default DIR/error_model.json; the plots go beside it, "
            "*.png)")

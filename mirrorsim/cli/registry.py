@@ -9,7 +9,7 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from mirrorsim.errors import BadArgument
+from mirrorsim.errors import BadArgument, OutputError
 from mirrorsim.formats.files import check_output_dir, check_output_file
 from mirrorsim.formats.scenefile import load_scene
 from mirrorsim.scene.model import MAX_SPP, SAMPLERS, RenderSettings, Scene
@@ -36,14 +36,46 @@ def output(p: argparse.ArgumentParser, flag: str, kind: str, **kwargs) -> None:
     p.set_defaults(outputs=[*(p.get_default("outputs") or []), (action.dest, flag, kind)])
 
 
+def inputs(p: argparse.ArgumentParser, *named: tuple[str, str, str]) -> None:
+    """Declare input paths as (dest, name shown, kind): "file", or "dataset" (a folder
+    whose own files are all inputs); :func:`check_outputs` refuses an output over one."""
+    p.set_defaults(inputs=[*(p.get_default("inputs") or []), *named])
+
+
+# a dataset folder's own files: a run that reads the dataset writes over none of them
+DATASET_FILES = ("dataset.json", "dataset.parquet", "README.md")
+DATASET_FOLDERS = ("rows", "scenes", "frames")
+
+
 def check_outputs(args: argparse.Namespace) -> None:
-    """Refuse unwritable output paths (exit 2) before any work is done."""
+    """Refuse unwritable output paths, and an output file that is one of the run's own
+    inputs (exit 2), before any work is done."""
     for dest, flag, kind in getattr(args, "outputs", None) or []:
         value = getattr(args, dest)
         if kind == "dir":
             check_output_dir(value, flag)
         else:
             check_output_file(value, flag)
+            _check_not_an_input(args, value, flag)
+
+
+def _check_not_an_input(args: argparse.Namespace, value, flag: str) -> None:
+    if value is None or str(value) == "-":
+        return
+    target = Path(value).resolve()
+    for dest, name, kind in getattr(args, "inputs", None) or []:
+        source = getattr(args, dest, None)
+        if source is None:
+            continue
+        source = Path(source).resolve()
+        if kind == "dataset":
+            read = target.parent == source and target.name in DATASET_FILES or any(
+                target.is_relative_to(source / sub) for sub in DATASET_FOLDERS)
+        else:
+            read = target == source
+        if read:
+            raise OutputError(value, f"{flag}: this run reads it ({name}); writing there "
+                              "would lose it: choose another file")
 
 
 def common(p: argparse.ArgumentParser, *, scene: bool = True, out: str | None = None,
@@ -53,6 +85,7 @@ def common(p: argparse.ArgumentParser, *, scene: bool = True, out: str | None = 
     --error-model."""
     if scene:
         p.add_argument("scene", type=Path, help="scene file (YAML, see INTERFACE.md)")
+        inputs(p, ("scene", "SCENE", "file"))
     if out:
         output(p, "--out", out_kind, type=Path, help=out)
     if json:
@@ -69,6 +102,7 @@ def common(p: argparse.ArgumentParser, *, scene: bool = True, out: str | None = 
     if quiet:
         p.add_argument("--quiet", action="store_true", help="no progress display")
     if error_model:
+        inputs(p, ("error_model", "--error-model", "file"))
         p.add_argument("--error-model", type=Path, metavar="FILE",
                        help=f"{error_model} the σ's of an error model (`mirrorsim errormodel`)")
 

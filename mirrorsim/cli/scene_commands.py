@@ -4,7 +4,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from mirrorsim.cli.registry import command, common, load, output, preload, render_options
+from mirrorsim.cli.registry import (
+    command,
+    common,
+    inputs,
+    load,
+    output,
+    preload,
+    render_options,
+)
 from mirrorsim.formats.files import default_out, emit_json, write_png
 
 
@@ -77,6 +85,8 @@ def _detect_options(p):
                         help="the frame's capture record (`render` writes it beside the frame)")
     source.add_argument("--scene", type=Path,
                         help="a scene file: its capture record is made from it")
+    inputs(p, ("frame", "FRAME", "file"), ("capture", "--capture", "file"),
+           ("scene", "--scene", "file"))
     common(p, scene=False, json="the measurements", variant=True)
     output(p, "--annotate", "file", type=Path, metavar="OUT.png",
            help="draw the detections on the frame")
