@@ -52,6 +52,7 @@ bench: setup
 	$(BIN)/python benchmarks/pieces.py --rss 30
 	$(BIN)/python benchmarks/edge_noise.py
 	$(BIN)/python benchmarks/pencil_edges.py --spp 1024
+	$(BIN)/python benchmarks/sensor_noise.py
 
 clean:
 	rm -rf $(VENV) renders/*/ .pytest_cache .ruff_cache .hypothesis

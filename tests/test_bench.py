@@ -407,8 +407,8 @@ def test_sensor_noise_moves_the_bearing_as_first_order_predicts(ideal):
 def test_noise_and_jpeg_frames_still_measure(ideal):
     # a loose check that a noisy JPEG frame still measures; the noise's effect on the
     # bearing is held to its first-order prediction above.  Its effect on d_total is not
-    # first order (the foot's and top's levels shift under noise: −0.012 % at a full well
-    # of 6000, −0.095 % at 1500, 3σ and 12σ of the first-order spread), hence 1 % here
+    # first order (benchmarks/sensor_noise.py: 3σ of the first-order spread at a full
+    # well of 6000, 12σ at 1500), hence 1 % here
     scene0, _, det0, tmp = ideal
     scene = bench_scene(camera={"noise": {"full_well": 6000, "read_noise": 4},
                                 "jpeg_quality": 90})

@@ -392,8 +392,11 @@ def test_resume_refuses_a_foreign_row_before_any_work(one_worker, tmp_path):
     dst = tmp_path / "copy"
     shutil.copytree(out, dst)
     (dst / "dataset.parquet").unlink()
+    (dst / "rows" / "scene000002.json").unlink()  # work left to do on resume
     row = dst / "rows" / "scene000001.json"
     row.write_text(json.dumps({**json.loads(row.read_text()), "target_alpha_eror": 1.0}))
     with pytest.raises(DatasetError, match="scene000001.json.*target_alpha_eror"):
         run_dataset(3, 3, dst, workers=1, spec_path=SPEC, progress=False, resume=True)
+    # refused before the scene left to do was computed, and no table written
+    assert not (dst / "rows" / "scene000002.json").exists()
     assert not (dst / "dataset.parquet").exists()

@@ -1,1 +1,3 @@
-"""Every reader and writer of a file: scene YAML, capture record, measurements, JSON/PNG."""
+"""The files every wing shares: scene YAML, capture record, measurements, the dataset
+table's columns, the strict readers, atomic JSON/PNG writers (a file only one pipeline
+uses is read and written in that pipeline)."""

@@ -25,7 +25,8 @@ def load_measurements(path: str | Path) -> Measurements:
 
 
 def measurements_from_dict(data: Any, source: str | Path = "<measurements>") -> Measurements:
-    """Validate parsed measurement JSON (see :meth:`Measurements.from_json`)."""
+    """Validate parsed measurement JSON (raises :class:`MeasurementError` naming the
+    source and the key)."""
     r = Reader(source, MeasurementError)
     top = r.mapping(data, "", ("observer", "target", "beacons"),
                     ("sigma", "scene", "detector", "source"))

@@ -106,12 +106,6 @@ class Reader:
             raise self.fail(key, f"{value} must be ≤ {high}")
         return value
 
-    def choice(self, value: Any, key: str, allowed: tuple[str, ...]) -> str:
-        """One of the words ``allowed``."""
-        if not isinstance(value, str) or value not in allowed:
-            raise self.fail(key, f"{show(value)}: expected one of {', '.join(allowed)}")
-        return value
-
     def pair(self, value: Any, key: str, *, positive: bool = False) -> tuple[float, float]:
         """A list of two numbers."""
         if not isinstance(value, list | tuple) or len(value) != 2:

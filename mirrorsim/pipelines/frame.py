@@ -2,13 +2,13 @@
 
 Every command that measures a frame goes through here (and the benchmarks that do not
 time the stages apart): :func:`measure_frame` for a frame on disk and its capture
-record, :func:`render_and_measure` for a scene.  The
-detector is handed the capture record (what the experimenter knows), never the scene.
+record, :func:`render_and_measure` for a scene.  The detector is handed the capture
+record (what the experimenter knows), never the scene.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -84,4 +84,4 @@ def render_and_measure(scene: Scene, out: str | Path, *, variant: str = "auto",
                             ids=ids)
     m = measure_frame(files.image, files.capture, calibration=calibration, variant=variant,
                       distance_error=scene.bench.calibration_distance_error)
-    return MeasuredFrame(m.image, m.calibration, m.detection, files)
+    return replace(m, files=files)
