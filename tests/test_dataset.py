@@ -244,7 +244,8 @@ def test_camera_models_are_calibrated_once_before_the_workers(tmp_path):
     scene's camera is one of the models."""
     import yaml
 
-    from mirrorsim.pipelines.calibrate import _cache_file, calibration_key
+    from mirrorsim.formats.cache import read_entry
+    from mirrorsim.pipelines.calibrate import calibration_key
     from mirrorsim.pipelines.random_scenes import camera_models, load_spec
 
     spec = yaml.safe_load(SPEC.read_text())
@@ -257,8 +258,7 @@ def test_camera_models_are_calibrated_once_before_the_workers(tmp_path):
     assert [c.resolution for c in cams] == [(960, 544)] * 2  # the camera block's default
     keys = [calibration_key(c, (9.9, 15.25), 4.2) for c in cams]
     run_dataset(1, 1, tmp_path / "one", workers=1, spec_path=path, progress=False)
-    cache = json.loads(_cache_file().read_text())
-    assert all(k in cache for k in keys)
+    assert all(read_entry("calibration", k) is not None for k in keys)
     run_dataset(3, 1, tmp_path / "d", workers=1, spec_path=path, progress=False)
     for i in range(3):
         cam = load_scene(tmp_path / "d" / "scenes" / f"scene{i:06d}.yaml").camera
@@ -382,21 +382,30 @@ def test_error_model_fits_bias_against_bench_imperfections():
     assert model.sigma.alpha_deg == pytest.approx(0.5 / 3**0.5, rel=0.1)
 
 
-def test_resume_refuses_a_foreign_row_before_any_work(one_worker, tmp_path):
+@pytest.mark.parametrize("damage", ["misspelt column", "edited value", "truncated",
+                                    "another scene's", "no checksum"])
+def test_resume_redoes_a_row_that_fails_verification(one_worker, tmp_path, damage):
+    """A row file edited, truncated, copied from another scene or from before rows were
+    sealed: moved to rows/rejected/ with a warning and redone, to the same row."""
     import json
     import shutil
 
-    from mirrorsim.pipelines.dataset import DatasetError
+    from mirrorsim.formats.cache import seal
 
     out, _ = one_worker
     dst = tmp_path / "copy"
     shutil.copytree(out, dst)
-    (dst / "dataset.parquet").unlink()
-    (dst / "rows" / "scene000002.json").unlink()  # work left to do on resume
     row = dst / "rows" / "scene000001.json"
-    row.write_text(json.dumps({**json.loads(row.read_text()), "target_alpha_eror": 1.0}))
-    with pytest.raises(DatasetError, match="scene000001.json.*target_alpha_eror"):
-        run_dataset(3, 3, dst, workers=1, spec_path=SPEC, progress=False, resume=True)
-    # refused before the scene left to do was computed, and no table written
-    assert not (dst / "rows" / "scene000002.json").exists()
-    assert not (dst / "dataset.parquet").exists()
+    good = json.loads(row.read_text())
+    bad = {k: v for k, v in good.items() if k != "sha256"}
+    text = {"misspelt column": json.dumps(seal({**bad, "target_alpha_eror": 1.0})),
+            "edited value": json.dumps({**good, "err_target_cm": 0.0}),
+            "truncated": row.read_text()[:100],
+            "another scene's": (dst / "rows" / "scene000002.json").read_text(),
+            "no checksum": json.dumps(bad)}[damage]
+    row.write_text(text)
+    with pytest.warns(RuntimeWarning, match="scene000001.json.*not trusted"):
+        run = run_dataset(3, 3, dst, workers=1, spec_path=SPEC, progress=False, resume=True)
+    assert (run.computed, run.already_done) == (1, 2)
+    assert (dst / "rows" / "rejected" / "scene000001.json").read_text() == text  # kept
+    assert _stable(collect_rows(dst, 3)) == _stable(collect_rows(out, 3))

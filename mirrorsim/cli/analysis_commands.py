@@ -165,7 +165,8 @@ def _dataset_options(p):
          "dataset card DIR/README.md.  Interrupted runs resume with --resume; the same seed "
          "gives the same rows whatever the number of workers.", _dataset_options)
 def _dataset(args) -> int:
-    from mirrorsim.pipelines.dataset import DatasetError, run_dataset
+    from mirrorsim.formats.dataset_folder import DatasetError
+    from mirrorsim.pipelines.dataset import run_dataset
 
     at_least(("--n", args.n, 1), ("--seed", args.seed, 0), ("--workers", args.workers, 1))
     if args.spp is not None:  # checked as every scene's render settings are

@@ -184,21 +184,3 @@ def emit_json(dest: str | Path | None, data: Any) -> None:
         sys.stdout.write(dumps(data))
     else:
         write_json(dest, data)
-
-
-def read_json_cache(path: Path) -> dict:
-    """A JSON cache file's contents ({} if missing or unreadable)."""
-    try:
-        data = json.loads(path.read_text())
-    except (OSError, ValueError):
-        return {}
-    return data if isinstance(data, dict) else {}
-
-
-def write_json_cache(path: Path, data: dict) -> None:
-    """Replace a JSON cache file atomically; an unwritable cache only costs a redo."""
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        write_json(path, data)
-    except (OSError, OutputError):  # atomic writes report a failure as OutputError
-        pass

@@ -8,21 +8,19 @@ Like the paper (229 px at 1 m for its target), each object is rendered in direct
 at d_ref = 100 cm, facing the camera on its optical axis, on a plain board, and measured
 exactly as the detector measures images in the mirror
 (:func:`mirrorsim.detection.detector.measure_object`), so a bias common to both cancels.  Results
-are cached per camera and object in ``<cache>/calibration.json`` (``MIRRORSIM_CACHE_DIR``
-or ``~/.cache/mirrorsim``).
+are cached per camera and objects in ``<cache>/calibration/`` (one verified file per
+entry, :mod:`mirrorsim.formats.cache`; ``MIRRORSIM_CACHE_DIR`` or ``~/.cache/mirrorsim``):
+an entry whose K does not follow from its measured pixel heights is measured again.
 """
 
 from __future__ import annotations
-
-from pathlib import Path
 
 import numpy as np
 
 from mirrorsim.detection.detector import measure_object
 from mirrorsim.detection.image_geometry import FRONT_OFFSET, Calibration
 from mirrorsim.errors import DetectionError
-from mirrorsim.formats.files import read_json_cache, write_json_cache
-from mirrorsim.rendering.backend import cache_path
+from mirrorsim.formats.cache import read_entry, write_entry
 from mirrorsim.scene.model import PENCIL_RADIUS, Beacon, Board, Camera, Target
 from mirrorsim.truth import optics
 from solver.geometry import unit
@@ -107,21 +105,28 @@ def calibrate(camera: Camera, target_size, pencil_height: float, *, variant: str
     every d_total measured with it, comes out too small by about that fraction.
     """
     key = calibration_key(camera, target_size, pencil_height, distance_error)
-    path = _cache_file()
-    cache = read_json_cache(path)
-    if key in cache and not refresh:
-        c = cache[key]
-        return Calibration(target_k=c["target_k"], pencil_k=c["pencil_k"], key=key)
+    found = None if refresh else read_entry("calibration", key, _check_entry)
+    if found is not None:
+        return Calibration(target_k=found["target_k"], pencil_k=found["pencil_k"], key=key)
     where = D_REF + distance_error
     s_t = measure_reference(camera, "target", tuple(target_size), variant, where)
     s_p = measure_reference(camera, "beacon", pencil_height, variant, where)
     cal = Calibration(target_k=s_t * (D_REF - FRONT_OFFSET["target"]),
                       pencil_k=s_p * (D_REF - FRONT_OFFSET["beacon"]), key=key)
-    cache[key] = {"target_k": cal.target_k, "pencil_k": cal.pencil_k,
-                  "target_px_at_100cm": s_t, "pencil_paint_px_at_100cm": s_p}
-    write_json_cache(path, cache)
+    write_entry("calibration", key, {"target_k": cal.target_k, "pencil_k": cal.pencil_k,
+                                     "target_px_at_100cm": s_t, "pencil_paint_px_at_100cm": s_p})
     return cal
 
 
-def _cache_file() -> Path:
-    return cache_path().with_name("calibration.json")
+def _check_entry(value: dict) -> None:
+    """A cached calibration's numbers are finite, positive and consistent: each K is its
+    measured pixel height times the reference distance (eq 5)."""
+    for k_name, px_name, kind in (("target_k", "target_px_at_100cm", "target"),
+                                  ("pencil_k", "pencil_paint_px_at_100cm", "beacon")):
+        k, px = value[k_name], value[px_name]
+        if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in (k, px)):
+            raise TypeError(f"{k_name} and {px_name} must be numbers")
+        if not (np.isfinite(k) and np.isfinite(px) and k > 0 and px > 0):
+            raise ValueError(f"{k_name} = {k!r}, {px_name} = {px!r}: not positive numbers")
+        if not np.isclose(k, px * (D_REF - FRONT_OFFSET[kind]), rtol=1e-9):
+            raise ValueError(f"{k_name} = {k!r} does not follow from {px_name} = {px!r}")

@@ -7,7 +7,9 @@ Layout of a dataset folder::
     DIR/frames/<name>/…       its frame, capture record and ground truth (with --keep
                               ids, annotated: its id labels, the annotated frame)
     DIR/rows/<name>.json      its finished row (written last, atomically: a row file
-                              exists only for a complete scene)
+                              exists only for a complete scene), sealed with the
+                              checksum of its contents; on --resume a row that fails
+                              verification is moved to rows/rejected/ and redone
     DIR/dataset.parquet       all rows, one per scene, in index order
     DIR/README.md             the dataset card
     DIR/dataset.json          how it was made (seed, n, spec, spp): --resume checks it
@@ -23,9 +25,7 @@ Work runs in worker processes (:mod:`mirrorsim.pipelines.workers`) or on a Dask 
 
 from __future__ import annotations
 
-import json
 import math
-import textwrap
 import time
 import traceback
 import warnings
@@ -38,7 +38,17 @@ from tqdm import tqdm
 
 from mirrorsim.errors import BadParameter, DetectionError, InputError, SolverError
 from mirrorsim.formats import dataset_table as table
-from mirrorsim.formats.files import atomic_path, write_json, write_text
+from mirrorsim.formats.cache import seal
+from mirrorsim.formats.dataset_folder import (
+    DATASET_FORMAT,
+    claim_folder,
+    collect_rows,
+    make_folders,
+    scene_name,
+    write_card,
+    write_table,
+)
+from mirrorsim.formats.files import write_json, write_text
 from mirrorsim.pipelines.random_scenes import DatasetSpec, NoValidScene
 from mirrorsim.pipelines.score import Report
 from mirrorsim.pipelines.workers import run_dask, run_local
@@ -53,14 +63,8 @@ ROW_SCHEMA_VERSION = 1
 # "Throughput"), so this only stops a leak that another Mitsuba might bring
 MAX_WORKER_RSS_MB = 3072
 MAX_SCENES = 1_000_000  # a documented bound on --n
-DATASET_FORMAT = "mirrorsim-dataset"
 # failures that belong to the scene (recorded as its row); all else is redone on resume
 SCENE_FAILURES = (InputError, DetectionError, SolverError, NoValidScene)
-
-
-def scene_name(i: int) -> str:
-    """File name of scene i."""
-    return f"scene{i:06d}"
 
 
 @dataclass(frozen=True)
@@ -104,7 +108,7 @@ def process_one(i: int, seed: int, spec: DatasetSpec, out: str, spp: int | None,
         return SceneResult(i, None, f"{type(exc).__name__}: {exc}")
     row["seconds_total"] = time.perf_counter() - t0
     done = table.DatasetRow.from_json(row)
-    write_json(out_dir / "rows" / f"{name}.json", done.to_json())
+    write_json(out_dir / "rows" / f"{name}.json", seal(done.to_json()))
     return SceneResult(i, done)
 
 
@@ -181,15 +185,6 @@ def _incidence_deg(scene: Scene, truth: ObjectTruth) -> float:
 # ------------------------------------------------------------------- the run
 
 
-class DatasetError(InputError):
-    """A run that cannot start (e.g. a folder holding another dataset): bad input;
-    ``resumable``: the folder holds this very dataset, unfinished or not."""
-
-    def __init__(self, folder: str | Path, message: str, resumable: bool = False):
-        self.resumable = resumable
-        super().__init__(folder, "", message)
-
-
 @dataclass(frozen=True)
 class DatasetRun:
     """A dataset run's summary: rows in the table, computed now, found done, failed (a
@@ -231,8 +226,8 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
     if sampler is not None:  # part of the spec, so that --resume checks it
         spec = spec.with_sampler(sampler)
     meta = {"format": DATASET_FORMAT, "n": n, "seed": seed, "spp": spp, "spec": spec.data}
-    _claim_folder(out, meta, resume)
-    _make_folders(out, meta)
+    claim_folder(out, meta, resume)
+    make_folders(out, meta)
     chosen = choose_variant(variant)  # the probe runs once here rather than in every worker
     _calibrate_models(spec, chosen, progress)
     retry: dict[int, str] = {}
@@ -256,7 +251,7 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
     finally:
         bar.close()
     wall = time.perf_counter() - t_start
-    rows = collect_rows(out, n)
+    rows = collect_rows(out, n, seed)
     write_table(out, rows)
     write_card(out, meta, rows, chosen)
     return DatasetRun(rows=len(rows), computed=len(todo) - len(retry),
@@ -264,14 +259,6 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
                       failed=sum(bool(r.error) for r in rows), retry=retry,
                       parquet=out / "dataset.parquet", seconds=wall,
                       per_minute=len(todo) / wall * 60 if todo and wall else 0.0)
-
-
-def _make_folders(out: Path, meta: dict) -> None:
-    """The dataset's folders, and its description (written once: a resume keeps it)."""
-    for sub in ("scenes", "frames", "rows"):
-        (out / sub).mkdir(parents=True, exist_ok=True)
-    if not (out / "dataset.json").exists():
-        write_json(out / "dataset.json", meta)
 
 
 def _run_jobs(jobs: list[tuple], executor: str, workers: int, scheduler: str | None,
@@ -288,101 +275,3 @@ def _run_jobs(jobs: list[tuple], executor: str, workers: int, scheduler: str | N
         run_local(process_one, jobs, workers, is_done, on_result, max_rss_mb)
 
 
-def _claim_folder(out: Path, meta: dict, resume: bool) -> None:
-    """``out`` must be new or empty, or hold this command's dataset (with --resume)."""
-    if out.exists() and not out.is_dir():
-        raise DatasetError(out, "is a file, not a new or empty folder")
-    meta_path = out / "dataset.json"
-    if not meta_path.exists():
-        if out.is_dir() and any(out.iterdir()):
-            shown = ", ".join(sorted(p.name for p in out.iterdir())[:3])
-            raise DatasetError(out, f"holds other files ({shown}, …), not a dataset: use a new "
-                               "or empty folder")
-        if resume:
-            raise DatasetError(out, "there is no dataset here to resume")
-        return
-    try:
-        old = json.loads(meta_path.read_text())
-    except (OSError, ValueError) as exc:
-        raise DatasetError(meta_path, f"not a readable dataset description ({exc})") from None
-    keys = ("n", "seed", "spp", "spec")
-    if not isinstance(old, dict) or not all(k in old for k in keys) or old.get(
-            "format", DATASET_FORMAT) != DATASET_FORMAT:
-        raise DatasetError(out, "holds a dataset.json that is not a mirrorsim dataset's")
-    if not resume:
-        raise DatasetError(out, "already holds a dataset: resume it, or choose another "
-                           "folder", resumable=True)
-    if {k: old[k] for k in keys} != {k: meta[k] for k in keys}:
-        raise DatasetError(out, f"holds a dataset made with other settings "
-                           f"(n={old['n']}, seed={old['seed']}, spp={old['spp']})")
-    collect_rows(out, meta["n"])  # a damaged or foreign row refused now, not after the work
-
-
-def collect_rows(out: Path, n: int) -> list[table.DatasetRow]:
-    """The finished rows of scenes 0..n-1, in index order."""
-    rows = []
-    for i in range(n):
-        p = Path(out) / "rows" / f"{scene_name(i)}.json"
-        if p.exists():
-            try:
-                rows.append(table.DatasetRow.from_json(json.loads(p.read_text())))
-            except ValueError as exc:  # another version's row, or a damaged file
-                raise DatasetError(p, f"not a row of this dataset ({exc})") from None
-    return rows
-
-
-def write_table(out: Path, rows: list[table.DatasetRow]) -> Path:
-    """All rows as one Parquet table (pyarrow), written atomically."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    cols: dict[str, list] = {}
-    keys = sorted({k for r in rows for k in r.columns},
-                  key=lambda k: (k not in ("index", "scene", "error"), k))
-    for k in keys:
-        cols[k] = [r.columns.get(k) for r in rows]
-    arrow = pa.table(cols) if rows else pa.table({"index": pa.array([], pa.int64())})
-    path = Path(out) / "dataset.parquet"
-    with atomic_path(path) as tmp:
-        pq.write_table(arrow, tmp)
-    return path
-
-
-def _card_columns() -> str:
-    """The table's columns as the card lists them, from their declaration."""
-    groups = (("the run", table.RUN, ""), ("scene parameters", table.SCENE, ""),
-              ("for `target_*` and `beacon_*`", table.PER_OBJECT, "<object>_"),
-              ("solution", table.SOLUTION, ""),
-              ("bench imperfections (the spec's `bench:` block; ideal values when absent)",
-               table.BENCH, ""), ("timings", table.TIMING, ""))
-    return "\n".join(textwrap.fill(f"- {title}: {table.card_section(cols, prefix)}.", 88,
-                                    subsequent_indent="  ", break_on_hyphens=False)
-                      for title, cols, prefix in groups)
-
-
-def write_card(out: Path, meta: dict, rows: list[table.DatasetRow], variant: str) -> None:
-    """Write the dataset card DIR/README.md."""
-    ok = [r for r in rows if not r.error]
-    med = lambda k: float(np.nanmedian([abs(r[k]) for r in ok])) if ok else math.nan  # noqa: E731
-    columns = _card_columns()
-    text = f"""# mirrorsim dataset
-
-Made with `mirrorsim dataset --n {meta['n']} --seed {meta['seed']}`
-({'scene spp' if meta['spp'] is None else f"--spp {meta['spp']}"}; backend {variant}).
-{len(rows)} rows, {len(rows) - len(ok)} failed (their `error` column says why).
-
-Each row is one random scene (`scenes/<scene>.yaml`, a normal scene file: rerun it with
-`mirrorsim evaluate`), its frame (`frames/<scene>/`), and these columns of
-`dataset.parquet`:
-
-{columns}
-
-Median |errors| here: target α {med('target_alpha_err'):.4f}°, target d
-{100 * med('target_d_rel_err'):.3f} %, beacon α {med('beacon_alpha_err'):.4f}°, beacon d
-{100 * med('beacon_d_rel_err'):.3f} %, target {med('err_target_cm'):.3f} cm.
-
-Scene i is drawn from `SeedSequence({meta['seed']}).spawn({meta['n']})[i]` with the spec in
-`dataset.json` and rendered with seed i.  `mirrorsim errormodel DIR` fits the error
-model.
-"""
-    write_text(Path(out) / "README.md", text)

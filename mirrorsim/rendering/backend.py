@@ -4,7 +4,9 @@
 selection) when drjit finds libLLVM 15 or 16; ``mi.set_variant`` succeeds and the
 crash comes at the first kernel.  So each JIT variant is tried in a child process
 that renders a tiny mirror scene, and the answer is cached per machine and software
-(so the probe runs once, not on every command).
+(so the probe runs once, not on every command).  A crash of the probe (an abort, a
+segmentation fault, an error) is a verdict; a probe killed from outside (the OOM
+killer's SIGKILL, a SIGTERM) says nothing about the variant and is not cached.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ from __future__ import annotations
 import hashlib
 import os
 import platform
+import signal
 import subprocess
 import sys
 import warnings
@@ -19,10 +22,13 @@ from importlib import metadata
 from pathlib import Path
 
 from mirrorsim.errors import BackendError
-from mirrorsim.formats.files import read_json_cache, write_json_cache
+from mirrorsim.formats.cache import read_entry, write_entry
 
 VARIANTS = {"cuda": "cuda_ad_rgb", "llvm": "llvm_ad_rgb", "scalar": "scalar_rgb"}
 PROBE_TIMEOUT_S = 180
+# signals that end a process from outside: its death is no verdict on the variant
+NOT_A_VERDICT = frozenset({signal.SIGKILL, signal.SIGTERM, signal.SIGINT, signal.SIGHUP,
+                           signal.SIGQUIT})
 FAST_PATH_HINT = (
     "the fast LLVM backend is unavailable, rendering with scalar_rgb (about 5-10x slower); "
     "to get it, install libLLVM 19 (Debian/Ubuntu: `apt-get install libllvm19`) or point "
@@ -54,13 +60,6 @@ import numpy as np
 assert np.isfinite(np.asarray(image)).all()
 print("mirrorsim-probe-ok")
 """
-
-
-def cache_path() -> Path:
-    """Where probe answers are kept (``MIRRORSIM_CACHE_DIR`` overrides)."""
-    root = os.environ.get("MIRRORSIM_CACHE_DIR") or os.path.join(
-        os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"), "mirrorsim")
-    return Path(root) / "backend.json"
 
 
 def _machine_key(variant: str) -> str:
@@ -107,34 +106,42 @@ def probe(variant: str, *, use_cache: bool = True) -> tuple[bool, str]:
     detail : str
         Why not, when it does not (the child's last line of output or its signal).
     """
-    key = _machine_key(variant)
-    path = cache_path()
-    cache = read_json_cache(path)
-    if use_cache and key in cache:
-        return bool(cache[key]["ok"]), str(cache[key]["detail"])
-    ok, detail = _run_probe(variant)
-    cache[key] = {"variant": variant, "ok": ok, "detail": detail}
-    write_json_cache(path, cache)
+    key = f"{variant}|{_machine_key(variant)}"
+    found = read_entry("backend", key, _check_answer) if use_cache else None
+    if found is not None:
+        return found["ok"], found["detail"]
+    ok, detail, verdict = _run_probe(variant)
+    if verdict:
+        write_entry("backend", key, {"variant": variant, "ok": ok, "detail": detail})
     return ok, detail
 
 
-def _run_probe(variant: str) -> tuple[bool, str]:
+def _check_answer(value: dict) -> None:
+    if not isinstance(value["ok"], bool) or not isinstance(value["detail"], str):
+        raise TypeError("ok must be true or false and detail a text")
+
+
+def _run_probe(variant: str) -> tuple[bool, str, bool]:
+    """(works, why not, whether that is a verdict worth caching)."""
     try:
         proc = subprocess.run(
             [sys.executable, "-c", _PROBE_CODE, variant],
             capture_output=True, text=True, timeout=PROBE_TIMEOUT_S,
         )
     except subprocess.TimeoutExpired:
-        return False, f"probe timed out after {PROBE_TIMEOUT_S} s"
+        return False, f"probe timed out after {PROBE_TIMEOUT_S} s", True
     if proc.returncode == 0 and "mirrorsim-probe-ok" in proc.stdout:
-        return True, ""
+        return True, "", True
     lines = [ln for ln in (proc.stderr + proc.stdout).splitlines() if ln.strip()]
     # LLVM's crash dump is long: its first line says what happened
     first_error = next((ln for ln in lines if "ERROR" in ln or "Error" in ln), None)
     why = first_error or (lines[-1] if lines else "")
     code = proc.returncode
+    if code < 0 and -code in NOT_A_VERDICT:
+        return False, (f"the probe was killed by signal {-code} (not a verdict: tried again "
+                       "next run)"), False
     status = f"killed by signal {-code}" if code < 0 else f"exit status {code}"
-    return False, f"{status}: {why.strip()[:200]}"
+    return False, f"{status}: {why.strip()[:200]}", True
 
 
 def choose_variant(requested: str = "auto") -> str:

@@ -1,6 +1,10 @@
 """A rendered frame's files: ``<name>.png`` (or ``.jpg``), the ground truth
 ``<name>.json``, the capture record and the object ids ``<name>.ids.png``; computed
-once, written atomically, reused by fingerprint.
+once, written atomically, reused by fingerprint once verified.
+
+The truth file records the SHA-256 of each file written with it and a checksum of its
+own contents (``sha256``), so a cached frame that was damaged, truncated or swapped for
+another render is not reused: it is rendered again, with a ``warning:`` line.
 """
 
 from __future__ import annotations
@@ -8,11 +12,13 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import json
+import warnings
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
+from mirrorsim.formats.cache import seal, unseal
 from mirrorsim.formats.capture import CaptureRecord, load_capture
 from mirrorsim.formats.files import atomic_path, default_out, dumps, encode_jpeg, encode_png
 from mirrorsim.rendering.mitsuba_scene import (
@@ -93,9 +99,12 @@ def write_frame(scene: Scene, frame: RenderedFrame, out: Path,
     srgb = to_srgb8(frame.linear)
     quality = scene.bench.jpeg_quality
     files = {image: encode_png(srgb) if quality is None else encode_jpeg(srgb, quality),
-             js: dumps(truth.to_json()).encode(), cap: dumps(capture.to_json()).encode()}
+             cap: dumps(capture.to_json()).encode()}
     if ids:
         files[ids_png] = encode_png(encode_ids(frame.first, frame.in_mirror))
+    truth = replace(truth, render=replace(truth.render, files={
+        p.name: hashlib.sha256(data).hexdigest() for p, data in files.items()}))
+    files[js] = dumps(seal(truth.to_json())).encode()
     with contextlib.ExitStack() as stack:
         for path, data in files.items():
             stack.enter_context(atomic_path(path)).write_bytes(data)
@@ -128,18 +137,35 @@ def render_to_files(scene: Scene, out: str | Path | None = None, *, variant: str
 
 
 def _reusable(scene: Scene, out: Path, fingerprint: str) -> FrameFiles | None:
+    """The frame of exactly this scene already in ``out``, verified; None (with a warning
+    where files are there but fail verification) to render it again."""
     image, ids, js, cap = _paths(scene, out)
     if not (image.exists() and js.exists() and cap.exists()):
         return None
     try:
-        truth = GroundTruth.from_json(json.loads(js.read_text()))
-        capture = load_capture(cap)
-    except (OSError, ValueError, KeyError, TypeError):  # CaptureError is a ValueError
-        return None
+        truth = GroundTruth.from_json(unseal(json.loads(js.read_bytes()), js.name))
+    except (OSError, ValueError, KeyError, TypeError, RecursionError) as exc:
+        return _rerender(image, str(exc))
     if truth.render is None or truth.render.fingerprint != fingerprint:
-        return None
-    return FrameFiles(image=image, truth_json=js, ids_png=ids if ids.exists() else None,
+        return None  # another scene's (or another version's) frame: simply rendered anew
+    try:
+        digests = truth.render.files or {}
+        # the id labels are optional (a dataset keeps them on request): checked if there
+        have_ids = ids.name in digests and ids.exists()
+        for path in (image, cap, *((ids,) if have_ids else ())):
+            if digests.get(path.name) != hashlib.sha256(path.read_bytes()).hexdigest():
+                raise ValueError(f"{path.name}'s bytes do not match the hash in {js.name}")
+        capture = load_capture(cap)
+    except (OSError, ValueError, KeyError, TypeError) as exc:  # CaptureError: a ValueError
+        return _rerender(image, str(exc))
+    return FrameFiles(image=image, truth_json=js, ids_png=ids if have_ids else None,
                       capture_json=cap, capture=capture, truth=truth, reused=True)
+
+
+def _rerender(image: Path, why: str) -> None:
+    warnings.warn(f"cached frame {str(image)!r} not trusted ({why}); rendering it again",
+                  RuntimeWarning, stacklevel=3)
+    return None
 
 
 def _mask_stats(mask: np.ndarray) -> tuple[tuple[int, int, int, int] | None, int]:

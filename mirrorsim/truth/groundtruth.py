@@ -91,6 +91,9 @@ class RenderInfo:
     seconds_total: float | None = None
     mitsuba: str | None = None
     fingerprint: str | None = None
+    # the SHA-256 of each file written with the truth (frame, capture record, ids), by
+    # name: a cached frame is reused only while its bytes match
+    files: dict[str, str] | None = None
 
     def to_json(self) -> dict:
         """The truth's ``render`` block."""
@@ -98,13 +101,14 @@ class RenderInfo:
                 "sampler": self.sampler, "background_spp": self.background_spp,
                 "beacon_spp": self.beacon_spp,
                 "seconds_render": self.seconds_render, "seconds_total": self.seconds_total,
-                "mitsuba": self.mitsuba, "fingerprint": self.fingerprint}
+                "mitsuba": self.mitsuba, "fingerprint": self.fingerprint,
+                **({"files": dict(self.files)} if self.files is not None else {})}
 
     @classmethod
     def from_json(cls, d: dict) -> RenderInfo:
         """Inverse of :meth:`to_json`."""
         fields = ("variant", "spp", "seed", "background_spp", "beacon_spp", "seconds_render",
-                  "seconds_total", "mitsuba", "fingerprint")
+                  "seconds_total", "mitsuba", "fingerprint", "files")
         return cls(**{k: d.get(k) for k in fields}, sampler=d.get("sampler", "independent"))
 
 

@@ -1,0 +1,185 @@
+"""A dataset's folder on disk: claiming it, its row files (sealed and verified), its
+Parquet table and its card.  The layout is described in :mod:`mirrorsim.pipelines.dataset`.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import textwrap
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from mirrorsim.errors import InputError
+from mirrorsim.formats import dataset_table as table
+from mirrorsim.formats.cache import unseal
+from mirrorsim.formats.files import atomic_path, write_json, write_text
+
+DATASET_FORMAT = "mirrorsim-dataset"
+
+
+def scene_name(i: int) -> str:
+    """File name of scene i."""
+    return f"scene{i:06d}"
+
+
+
+class DatasetError(InputError):
+    """A run that cannot start (e.g. a folder holding another dataset): bad input;
+    ``resumable``: the folder holds this very dataset, unfinished or not."""
+
+    def __init__(self, folder: str | Path, message: str, resumable: bool = False):
+        self.resumable = resumable
+        super().__init__(folder, "", message)
+
+
+
+def make_folders(out: Path, meta: dict) -> None:
+    """The dataset's folders, and its description (written once: a resume keeps it)."""
+    for sub in ("scenes", "frames", "rows"):
+        (out / sub).mkdir(parents=True, exist_ok=True)
+    if not (out / "dataset.json").exists():
+        write_json(out / "dataset.json", meta)
+
+
+
+def claim_folder(out: Path, meta: dict, resume: bool) -> None:
+    """``out`` must be new or empty, or hold this command's dataset (with --resume)."""
+    if out.exists() and not out.is_dir():
+        raise DatasetError(out, "is a file, not a new or empty folder")
+    meta_path = out / "dataset.json"
+    if not meta_path.exists():
+        if out.is_dir() and any(out.iterdir()):
+            shown = ", ".join(sorted(p.name for p in out.iterdir())[:3])
+            raise DatasetError(out, f"holds other files ({shown}, …), not a dataset: use a new "
+                               "or empty folder")
+        if resume:
+            raise DatasetError(out, "there is no dataset here to resume")
+        return
+    try:
+        old = json.loads(meta_path.read_text())
+    except (OSError, ValueError) as exc:
+        raise DatasetError(meta_path, f"not a readable dataset description ({exc})") from None
+    keys = ("n", "seed", "spp", "spec")
+    if not isinstance(old, dict) or not all(k in old for k in keys) or old.get(
+            "format", DATASET_FORMAT) != DATASET_FORMAT:
+        raise DatasetError(out, "holds a dataset.json that is not a mirrorsim dataset's")
+    if not resume:
+        raise DatasetError(out, "already holds a dataset: resume it, or choose another "
+                           "folder", resumable=True)
+    if {k: old[k] for k in keys} != {k: meta[k] for k in keys}:
+        raise DatasetError(out, f"holds a dataset made with other settings "
+                           f"(n={old['n']}, seed={old['seed']}, spp={old['spp']})")
+    reject_bad_rows(out, meta["n"], meta["seed"])
+
+
+def read_row(path: Path, index: int, seed: int) -> table.DatasetRow:
+    """Scene ``index``'s row file, verified: its checksum, its declared columns, and that
+    it is this dataset's (its index and seed).
+
+    Raises
+    ------
+    ValueError
+        Why it is not trusted.
+    """
+    try:
+        row = table.DatasetRow.from_json(unseal(json.loads(path.read_bytes()), path.name))
+    except (ValueError, TypeError, RecursionError) as exc:
+        raise ValueError(str(exc) or type(exc).__name__) from None
+    if (row.index, row.columns.get("seed")) != (index, seed):
+        raise ValueError(f"the row of scene {row.index} of seed {row.columns.get('seed')}, "
+                         f"not of scene {index} of seed {seed}")
+    return row
+
+
+def reject_bad_rows(out: Path, n: int, seed: int) -> None:
+    """Move each row file that fails verification to ``rows/rejected/`` (kept, not lost),
+    with a warning: its scene is redone."""
+    for i in range(n):
+        path = out / "rows" / f"{scene_name(i)}.json"
+        if not path.exists():
+            continue
+        try:
+            read_row(path, i, seed)
+        except (OSError, ValueError) as exc:
+            aside = out / "rows" / "rejected" / path.name
+            aside.parent.mkdir(exist_ok=True)
+            path.replace(aside)
+            warnings.warn(f"{str(path)!r} not trusted ({exc}); moved to {str(aside)!r}, "
+                          "its scene is redone", RuntimeWarning, stacklevel=2)
+
+
+def collect_rows(out: Path, n: int, seed: int | None = None) -> list[table.DatasetRow]:
+    """The finished rows of scenes 0..n-1, in index order, each verified (``seed``: the
+    dataset's, read from its ``dataset.json`` when not given)."""
+    out = Path(out)
+    if seed is None:
+        seed = json.loads((out / "dataset.json").read_text())["seed"]
+    rows = []
+    for i in range(n):
+        p = out / "rows" / f"{scene_name(i)}.json"
+        if p.exists():
+            try:
+                rows.append(read_row(p, i, seed))
+            except ValueError as exc:
+                raise DatasetError(p, f"not a row of this dataset ({exc})") from None
+    return rows
+
+
+def write_table(out: Path, rows: list[table.DatasetRow]) -> Path:
+    """All rows as one Parquet table (pyarrow), written atomically."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    cols: dict[str, list] = {}
+    keys = sorted({k for r in rows for k in r.columns},
+                  key=lambda k: (k not in ("index", "scene", "error"), k))
+    for k in keys:
+        cols[k] = [r.columns.get(k) for r in rows]
+    arrow = pa.table(cols) if rows else pa.table({"index": pa.array([], pa.int64())})
+    path = Path(out) / "dataset.parquet"
+    with atomic_path(path) as tmp:
+        pq.write_table(arrow, tmp)
+    return path
+
+
+def card_columns() -> str:
+    """The table's columns as the card lists them, from their declaration."""
+    groups = (("the run", table.RUN, ""), ("scene parameters", table.SCENE, ""),
+              ("for `target_*` and `beacon_*`", table.PER_OBJECT, "<object>_"),
+              ("solution", table.SOLUTION, ""),
+              ("bench imperfections (the spec's `bench:` block; ideal values when absent)",
+               table.BENCH, ""), ("timings", table.TIMING, ""))
+    return "\n".join(textwrap.fill(f"- {title}: {table.card_section(cols, prefix)}.", 88,
+                                    subsequent_indent="  ", break_on_hyphens=False)
+                      for title, cols, prefix in groups)
+
+
+def write_card(out: Path, meta: dict, rows: list[table.DatasetRow], variant: str) -> None:
+    """Write the dataset card DIR/README.md."""
+    ok = [r for r in rows if not r.error]
+    med = lambda k: float(np.nanmedian([abs(r[k]) for r in ok])) if ok else math.nan  # noqa: E731
+    columns = card_columns()
+    text = f"""# mirrorsim dataset
+
+Made with `mirrorsim dataset --n {meta['n']} --seed {meta['seed']}`
+({'scene spp' if meta['spp'] is None else f"--spp {meta['spp']}"}; backend {variant}).
+{len(rows)} rows, {len(rows) - len(ok)} failed (their `error` column says why).
+
+Each row is one random scene (`scenes/<scene>.yaml`, a normal scene file: rerun it with
+`mirrorsim evaluate`), its frame (`frames/<scene>/`), and these columns of
+`dataset.parquet`:
+
+{columns}
+
+Median |errors| here: target α {med('target_alpha_err'):.4f}°, target d
+{100 * med('target_d_rel_err'):.3f} %, beacon α {med('beacon_alpha_err'):.4f}°, beacon d
+{100 * med('beacon_d_rel_err'):.3f} %, target {med('err_target_cm'):.3f} cm.
+
+Scene i is drawn from `SeedSequence({meta['seed']}).spawn({meta['n']})[i]` with the spec in
+`dataset.json` and rendered with seed i.  `mirrorsim errormodel DIR` fits the error
+model.
+"""
+    write_text(Path(out) / "README.md", text)

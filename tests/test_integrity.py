@@ -1,0 +1,145 @@
+"""Integrity (README "Reliability"): what is read from disk is verified before it is
+trusted, and concurrent runs do not lose each other's work."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from mirrorsim.formats.cache import entry_path, read_entry, write_entry
+from mirrorsim.pipelines import calibrate as cal_mod
+from mirrorsim.scene.model import Camera
+
+# ------------------------------------------------------------------- cached entries
+
+
+@pytest.fixture
+def fake_reference(monkeypatch, tmp_path):
+    """Calibration with a stand-in for the reference render: 230 px for the target,
+    47 px for the pencil, counting the measurements made."""
+    monkeypatch.setenv("MIRRORSIM_CACHE_DIR", str(tmp_path))
+    calls = []
+
+    def measure(_camera, kind, *_rest, **_kw):
+        calls.append(kind)
+        return 230.0 if kind == "target" else 47.0
+
+    monkeypatch.setattr(cal_mod, "measure_reference", measure)
+    return calls
+
+
+CAMERA = Camera(position=(0.0, 0.0), height=10.0, resolution=(1920, 1088), hfov=60.0,
+                pan=45.0, pan_deg=45.0)
+
+
+def _entry_file() -> tuple[str, object]:
+    key = cal_mod.calibration_key(CAMERA, (10.0, 10.0), 17.5)
+    return key, entry_path("calibration", key)
+
+
+def test_a_calibration_is_reused_only_while_it_verifies(fake_reference):
+    first = cal_mod.calibrate(CAMERA, (10.0, 10.0), 17.5)
+    assert fake_reference == ["target", "beacon"]
+    assert cal_mod.calibrate(CAMERA, (10.0, 10.0), 17.5) == first  # reused
+    assert len(fake_reference) == 2
+    key, path = _entry_file()
+    entry = json.loads(path.read_text())
+
+    # K scaled by 1.10 with the checksum made to match: K no longer follows from the
+    # measured height (eq 5); without the checksum mended, the checksum catches it
+    cases = []
+    scaled = json.loads(json.dumps(entry))
+    scaled["value"]["target_k"] *= 1.10
+    cases.append((scaled, "checksum"))
+    mended = json.loads(json.dumps(scaled))
+    from mirrorsim.formats.cache import checksum
+    mended["sha256"] = checksum({"key": key, "value": mended["value"]})
+    cases.append((mended, "does not follow"))
+    missing = json.loads(json.dumps(entry))
+    del missing["value"]["pencil_k"]
+    missing["sha256"] = checksum({"key": key, "value": missing["value"]})
+    cases.append((missing, "pencil_k"))
+    wrong_type = json.loads(json.dumps(entry))
+    wrong_type["value"]["target_k"] = "2.3e4"
+    wrong_type["sha256"] = checksum({"key": key, "value": wrong_type["value"]})
+    cases.append((wrong_type, "must be numbers"))
+    other_key = json.loads(json.dumps(entry))
+    other_key["key"] = key.replace("hfov=60", "hfov=61")
+    cases.append((other_key, "another key"))
+    for damaged, why in cases:
+        path.write_text(json.dumps(damaged))
+        n = len(fake_reference)
+        with pytest.warns(RuntimeWarning, match=why):
+            again = cal_mod.calibrate(CAMERA, (10.0, 10.0), 17.5)
+        assert again == first and len(fake_reference) == n + 2  # measured again
+        assert read_entry("calibration", key) is not None  # and the entry mended
+    path.write_text(path.read_text()[:40])  # truncated
+    with pytest.warns(RuntimeWarning, match="not trusted"):
+        assert cal_mod.calibrate(CAMERA, (10.0, 10.0), 17.5) == first
+
+
+_WRITER = """
+import sys
+from mirrorsim.formats.cache import write_entry
+who = sys.argv[1]
+for i in range(40):
+    write_entry("calibration", f"{who}-{i}", {"who": who, "i": i})
+"""
+
+
+def test_concurrent_writers_keep_every_entry(tmp_path, monkeypatch):
+    """Four real processes writing 40 entries each into one empty cache, at once: all
+    160 are there and verify (one shared file rewritten by each kept about a quarter)."""
+    env = {"MIRRORSIM_CACHE_DIR": str(tmp_path), "PATH": "/usr/bin:/bin"}
+    procs = [subprocess.Popen([sys.executable, "-c", _WRITER, who], env=env)
+             for who in "abcd"]
+    assert all(p.wait(timeout=120) == 0 for p in procs)
+    monkeypatch.setenv("MIRRORSIM_CACHE_DIR", str(tmp_path))
+    found = [read_entry("calibration", f"{who}-{i}") for who in "abcd" for i in range(40)]
+    assert found == [{"who": who, "i": i} for who in "abcd" for i in range(40)]
+    assert not [p for p in (tmp_path / "calibration").iterdir() if p.name.startswith(".")]
+
+
+def test_a_cache_entry_for_another_key_is_not_taken(tmp_path, monkeypatch):
+    monkeypatch.setenv("MIRRORSIM_CACHE_DIR", str(tmp_path))
+    write_entry("calibration", "a", {"v": 1})
+    entry_path("calibration", "a").replace(entry_path("calibration", "b"))
+    with pytest.warns(RuntimeWarning, match="another key"):
+        assert read_entry("calibration", "b") is None
+
+
+# ------------------------------------------------------------------- cached frames
+
+
+def test_a_cached_frame_is_reused_only_while_its_bytes_verify(tmp_path):
+    """Truncated, swapped for another scene's render, or its truth edited: rendered
+    again with a warning (and the same bytes come back: renders are deterministic)."""
+    import warnings
+
+    from mirrorsim.rendering.frames import render_to_files
+
+    from .conftest import small_scene
+
+    scene = small_scene("default", 160, 92, spp=2, beacon_spp=4, background_spp=1)
+    other = small_scene("exp2", 160, 92, spp=2, beacon_spp=4, background_spp=1)
+    first = render_to_files(scene, tmp_path / "a", progress=False)
+    good = first.image.read_bytes()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # an intact frame is reused without a word
+        assert render_to_files(scene, tmp_path / "a", progress=False, reuse=True).reused
+    swapped = render_to_files(other, tmp_path / "b", progress=False).image.read_bytes()
+
+    def edit_truth(path):
+        path.write_text(path.read_text().replace('"d_total": ', '"d_total": 1', 1))
+
+    for damage, why in ((lambda: first.image.write_bytes(good[: len(good) // 2]), "bytes"),
+                        (lambda: first.image.write_bytes(swapped), "bytes"),
+                        (lambda: edit_truth(first.truth_json), "checksum"),
+                        (lambda: first.capture_json.write_text("{}"), "bytes")):
+        damage()
+        with pytest.warns(RuntimeWarning, match=why):
+            again = render_to_files(scene, tmp_path / "a", progress=False, reuse=True)
+        assert not again.reused and again.image.read_bytes() == good
