@@ -8,6 +8,8 @@ statuses with :func:`exit_status`; nothing is told apart by name.
 
 from __future__ import annotations
 
+import sys
+
 from solver.errors import InputError, SolverError
 
 EXIT_BAD_INPUT = 2
@@ -15,7 +17,8 @@ EXIT_FAILED = 1
 
 __all__ = ["InputError", "SolverError", "SceneError", "BadParameter", "BadArgument", "OutputError",
            "RunFailed",
-           "DetectionError", "BackendError", "EXIT_BAD_INPUT", "EXIT_FAILED", "exit_status"]
+           "DetectionError", "BackendError", "EXIT_BAD_INPUT", "EXIT_FAILED", "exit_status",
+           "one_line_warning"]
 
 
 class SceneError(InputError):
@@ -66,3 +69,10 @@ def exit_status(exc: BaseException) -> int | None:
     if isinstance(exc, RunFailed | SolverError):
         return EXIT_FAILED
     return None
+
+
+def one_line_warning(message, category, filename, lineno, file=None,  # noqa: ARG001
+                     line=None) -> None:  # noqa: ARG001
+    """``warnings.showwarning`` for the command line (and its worker processes): one
+    ``warning:`` line on stderr, without the source line."""
+    print(f"warning: {message}", file=sys.stderr)

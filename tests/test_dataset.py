@@ -409,3 +409,70 @@ def test_resume_redoes_a_row_that_fails_verification(one_worker, tmp_path, damag
     assert (run.computed, run.already_done) == (1, 2)
     assert (dst / "rows" / "rejected" / "scene000001.json").read_text() == text  # kept
     assert _stable(collect_rows(dst, 3)) == _stable(collect_rows(out, 3))
+
+
+# ------------------------------------------------ a table that is not fitted blindly
+
+
+def _table_cases():
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from mirrorsim.formats.dataset_folder import write_table
+    from mirrorsim.formats.dataset_table import DatasetRow
+
+    def truncated(ds):
+        p = ds / "dataset.parquet"
+        p.write_bytes(p.read_bytes()[:300])
+
+    def edited(ds):  # a value changed, the metadata (and its checksum) kept
+        p = ds / "dataset.parquet"
+        t = pq.read_table(p)
+        i = t.schema.get_field_index("err_target_cm")
+        t = t.set_column(i, "err_target_cm", pa.array([0.0] * t.num_rows))
+        pq.write_table(t, p)
+
+    def column_dropped(ds):
+        p = ds / "dataset.parquet"
+        t = pq.read_table(p)
+        pq.write_table(t.drop_columns(["target_alpha_err"]), p)
+
+    def no_rows(ds):
+        write_table(ds, [])
+
+    def all_failed(ds):
+        rows = collect_rows(ds, 3)
+        write_table(ds, [DatasetRow({k: r[k] for k in ("index", "scene", "seed", "schema")}
+                                    | {"error": "DetectionError: nothing seen"}) for r in rows])
+
+    def folder(ds):
+        (ds / "dataset.parquet").unlink()
+        (ds / "dataset.parquet").mkdir()
+
+    return [(truncated, "not a readable Parquet table"), (edited, "checksum"),
+            (column_dropped, "checksum"), (no_rows, "holds no rows"),
+            (all_failed, "all 3 rows failed"), (folder, "not a file")]
+
+
+@pytest.mark.parametrize("case", range(6))
+def test_errormodel_refuses_a_table_it_cannot_trust(one_worker, tmp_path, capsys, case):
+    """Truncated, edited, a column short, empty, all failed, or a folder: exit 2 with one
+    line, and no model written."""
+    import shutil
+
+    from mirrorsim.cli.main import main
+
+    damage, says = _table_cases()[case]
+    ds = tmp_path / "ds"
+    shutil.copytree(one_worker[0], ds)
+    damage(ds)
+    assert main(["errormodel", str(ds)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "dataset.parquet" in err and says in err, err
+    assert not (ds / "error_model.json").exists()
+
+
+def test_the_table_a_dataset_writes_verifies(one_worker):
+    from mirrorsim.formats.dataset_folder import read_table
+
+    assert read_table(one_worker[0])["index"] == [0, 1, 2]

@@ -4,6 +4,7 @@ trusted, and concurrent runs do not lose each other's work."""
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 
@@ -143,3 +144,126 @@ def test_a_cached_frame_is_reused_only_while_its_bytes_verify(tmp_path):
         with pytest.warns(RuntimeWarning, match=why):
             again = render_to_files(scene, tmp_path / "a", progress=False, reuse=True)
         assert not again.reused and again.image.read_bytes() == good
+
+
+# ------------------------------------------ every value that passes `check` renders
+
+
+@pytest.mark.parametrize("edit, key", [
+    (lambda d: d["mirror"].update(curvature_radius=1e308), "mirror.curvature_radius"),
+    (lambda d: d["mirror"].update(curvature_radius=-2e7), "mirror.curvature_radius"),
+    (lambda d: d["camera"].update(noise={"full_well": 1e300, "read_noise": 2}),
+     "camera.noise.full_well"),
+    (lambda d: d["camera"].update(noise={"full_well": 1e4, "read_noise": 1e9}),
+     "camera.noise.read_noise"),
+    (lambda d: d["camera"].update(resolution=[100000, 100000]), r"camera.resolution\[0\]"),
+    (lambda d: d["camera"].update(resolution=[1920, 5000]), r"camera.resolution\[1\]"),
+    (lambda d: d["board"].update(size=[1e5, 1e5]), r"board.size\[0\]"),
+    (lambda d: d["board"].update(size=[80, 201]), r"board.size\[1\]"),
+])
+def test_check_refuses_values_beyond_the_documented_bounds(tmp_path, capsys, edit, key):
+    import yaml
+
+    from mirrorsim.cli.main import main
+
+    from .conftest import scene_dict
+
+    d = scene_dict("default")
+    edit(d)
+    path = tmp_path / "s.yaml"
+    path.write_text(yaml.safe_dump(d))
+    assert main(["check", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and re.search(f"s.yaml: {key}: ", err), err
+
+
+def test_a_scene_at_the_bounds_renders():
+    """The largest board, the flattest curved mirror and the largest sensor noise that
+    `check` accepts: rendered, and every pixel finite."""
+    import copy
+
+    import numpy as np
+
+    from mirrorsim.formats.scenefile import scene_from_dict
+    from mirrorsim.rendering.passes import render_frame
+    from mirrorsim.scene.model import MAX_BOARD_CM, MAX_CURVATURE_RADIUS, MAX_FULL_WELL
+
+    from .conftest import scene_dict
+
+    d = copy.deepcopy(scene_dict("default"))
+    d["board"]["size"] = [MAX_BOARD_CM, MAX_BOARD_CM]
+    d["mirror"]["curvature_radius"] = -MAX_CURVATURE_RADIUS
+    d["camera"].update(resolution=[160, 92], noise={"full_well": MAX_FULL_WELL,
+                                                     "read_noise": 100.0})
+    d["render"] = {"spp": 1, "beacon_spp": 1, "background_spp": 1}
+    frame = render_frame(scene_from_dict(d, "bounds.yaml"), progress=False)
+    assert frame.linear.shape == (92, 160, 3) and np.isfinite(frame.linear).all()
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["--odometry-sigma", "1e300"], "--odometry-sigma: 1e+300 must be within 0..10"),
+    (["--side", "200"], "--side: 200 must be a positive length (cm) within the board's 80"),
+    (["--step", "81"], "--step: 81 must be"),
+    (["--spp", "70000"], "--spp: 70000 must be within 1..65536"),
+])
+def test_track_refuses_paths_off_the_board_and_absurd_noise(tmp_path, capsys, argv, says):
+    from mirrorsim.cli.main import main
+
+    from .conftest import SCENES
+
+    assert main(["track", str(SCENES / "default.yaml"), "--out", str(tmp_path / "t"),
+                 "--quiet", *argv]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and says in err, err
+    assert not (tmp_path / "t").exists()
+
+
+# ------------------------------------------ outputs land only where they may
+
+
+def _refused(capsys, argv, says):
+    from mirrorsim.cli.main import main
+
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and says in err, err
+
+
+def test_a_folder_of_the_users_files_is_not_written_into(tmp_path, capsys):
+    """A user's file named like the frame stays as it was; nothing else appears."""
+    from .conftest import SCENES
+
+    user = tmp_path / "photos"
+    user.mkdir()
+    (user / "default.png").write_bytes(b"my holiday")
+    for cmd in ("render", "evaluate", "budget", "track"):
+        _refused(capsys, [cmd, str(SCENES / "default.yaml"), "--out", str(user), "--quiet"],
+                 "holds files mirrorsim did not write ('default.png')")
+    assert [p.name for p in user.iterdir()] == ["default.png"]
+    assert (user / "default.png").read_bytes() == b"my holiday"
+
+
+def test_no_output_over_another_output_of_the_run(tmp_path, capsys):
+    from .conftest import SCENES
+
+    scene = str(SCENES / "default.yaml")
+    _refused(capsys, ["check", scene, "--json", str(tmp_path / "a.json"),
+                      "--measurements", str(tmp_path / "a.json")], "--json writes this file too")
+    out = tmp_path / "out"
+    out.mkdir()
+    # the run names the files of its folder: a --json there could be its frame
+    _refused(capsys, ["evaluate", scene, "--out", str(out), "--json", str(out / "default.png")],
+             "inside the run's output folder")
+    assert list(tmp_path.iterdir()) == [out] and not list(out.iterdir())
+
+
+@pytest.mark.parametrize("link", ["dangling", "looping"])
+def test_a_broken_link_as_out_is_refused(tmp_path, capsys, link):
+    from .conftest import SCENES
+
+    out = tmp_path / "out"
+    out.symlink_to(tmp_path / "nowhere" if link == "dangling" else out)
+    _refused(capsys, ["render", str(SCENES / "default.yaml"), "--out", str(out)],
+             "a symbolic link to nothing")
+    _refused(capsys, ["check", str(SCENES / "default.yaml"), "--json", str(out)],
+             "a symbolic link to nothing")

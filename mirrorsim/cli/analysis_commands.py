@@ -15,11 +15,12 @@ from mirrorsim.cli.registry import (
     finite,
     inputs,
     load,
+    out_file,
     output,
     sampler_option,
 )
 from mirrorsim.errors import BadArgument, RunFailed
-from mirrorsim.formats.files import default_out, emit_json
+from mirrorsim.formats.files import emit_json
 from mirrorsim.pipelines.score import EXTRA_FILES
 from mirrorsim.scene.model import RenderSettings
 from solver.measurements import SIGMA_ALPHA_MAX_DEG
@@ -130,7 +131,7 @@ def _plan(args) -> int:
     plan = plan_scene(scene, sigma, args.eps, args.yaw_spread, args.d1_spread, args.step)
     summ = plan.to_json()
     print(plan_text(scene, summ))
-    out = args.out or default_out(scene.name) / f"{scene.name}.plan.png"
+    out = out_file(args, scene, f"{scene.name}.plan.png")
     print(f"  figure: {plot_plan(scene, plan, out)}")
     emit_json(args.json, summ)
     return 0
@@ -139,7 +140,7 @@ def _plan(args) -> int:
 def _dataset_options(p):
     p.add_argument("--n", type=int, required=True, help="number of scenes")
     p.add_argument("--seed", type=int, required=True)
-    output(p, "--out", "dir", type=Path, required=True,
+    output(p, "--out", "dataset", type=Path, required=True,
            help="a new or empty folder, or (with --resume) one of its datasets")
     p.add_argument("--workers", type=int, default=default_workers(),
                    help="worker processes (default: half the cores)")
@@ -213,8 +214,6 @@ def _errormodel(args) -> int:
     if args.out is not None and args.out.suffix != ".json":
         raise BadArgument("--out", f"{args.out}: the model is JSON: give a *.json path (its "
                           "plots go beside it as *.png)")
-    if not (args.dataset / "dataset.parquet").exists():
-        raise BadArgument(str(args.dataset), "no dataset.parquet here (run `mirrorsim dataset`)")
     cols = errormodel.read_columns(args.dataset)
     try:
         model = errormodel.fit(cols)

@@ -15,7 +15,13 @@ import warnings
 from mirrorsim import __version__
 from mirrorsim.cli import analysis_commands, scene_commands  # noqa: F401 (they register)
 from mirrorsim.cli.registry import COMMANDS, check_outputs
-from mirrorsim.errors import BadArgument, BadParameter, SolverError, exit_status
+from mirrorsim.errors import (
+    BadArgument,
+    BadParameter,
+    SolverError,
+    exit_status,
+    one_line_warning,
+)
 
 # a library parameter whose flag is not "--" + its name with "-" for "_"
 FLAG_OF = {"kind": "--path", "eps_deg": "--eps", "yaw_spread_deg": "--yaw-spread",
@@ -46,7 +52,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     """Run one command; return its exit status."""
     args = build_parser().parse_args(argv)
-    warnings.showwarning = _one_line_warning
+    warnings.showwarning = one_line_warning
     try:
         check_outputs(args)
         return args.handler(args)
@@ -70,11 +76,6 @@ def main(argv: list[str] | None = None) -> int:
 def flag_of(parameter: str) -> str:
     """The command-line flag of a library parameter (``odometry_sigma`` → ``--odometry-sigma``)."""
     return FLAG_OF.get(parameter, "--" + parameter.replace("_", "-"))
-
-
-def _one_line_warning(message, category, filename, lineno, file=None,  # noqa: ARG001
-                      line=None) -> None:  # noqa: ARG001
-    print(f"warning: {message}", file=sys.stderr)
 
 
 if __name__ == "__main__":

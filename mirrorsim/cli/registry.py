@@ -10,7 +10,12 @@ from collections.abc import Callable
 from pathlib import Path
 
 from mirrorsim.errors import BadArgument, OutputError
-from mirrorsim.formats.files import check_output_dir, check_output_file
+from mirrorsim.formats.files import (
+    check_output_dir,
+    check_output_file,
+    claim_output_folder,
+    default_out,
+)
 from mirrorsim.formats.scenefile import load_scene
 from mirrorsim.scene.model import MAX_SPP, SAMPLERS, RenderSettings, Scene
 
@@ -30,8 +35,9 @@ def command(name: str, summary: str, description: str, options: Options):
 
 
 def output(p: argparse.ArgumentParser, flag: str, kind: str, **kwargs) -> None:
-    """Add an output option; ``kind`` "file" or "dir" says how :func:`check_outputs`
-    checks it before the command does any work."""
+    """Add an output option; ``kind`` "file", "dir" or "dataset" (a folder with its own
+    claim, :func:`mirrorsim.formats.dataset_folder.claim_folder`) says how
+    :func:`check_outputs` checks it before the command does any work."""
     action = p.add_argument(flag, **kwargs)
     p.set_defaults(outputs=[*(p.get_default("outputs") or []), (action.dest, flag, kind)])
 
@@ -48,15 +54,57 @@ DATASET_FOLDERS = ("rows", "scenes", "frames")
 
 
 def check_outputs(args: argparse.Namespace) -> None:
-    """Refuse unwritable output paths, and an output file that is one of the run's own
-    inputs (exit 2), before any work is done."""
+    """Refuse, before any work is done (exit 2): unwritable output paths, an output
+    folder holding files mirrorsim did not write, an output file that is one of the
+    run's own inputs, that another output also names, or that lies in the run's output
+    folder (whose names the run gives)."""
+    files: dict[Path, str] = {}
     for dest, flag, kind in getattr(args, "outputs", None) or []:
         value = getattr(args, dest)
-        if kind == "dir":
-            check_output_dir(value, flag)
-        else:
-            check_output_file(value, flag)
-            _check_not_an_input(args, value, flag)
+        if kind in ("dir", "dataset"):
+            if value is None and getattr(args, "default_out", False):
+                check_output_dir(default_out("x").parent, flag, ours=False)
+            check_output_dir(value, flag, ours=kind == "dir")
+            continue
+        check_output_file(value, flag)
+        _check_not_an_input(args, value, flag)
+        if value is not None and str(value) != "-":
+            target = Path(value).resolve()
+            if target in files:
+                raise OutputError(value, f"{flag}: {files[target]} writes this file too")
+            files[target] = flag
+    if getattr(args, "out", None) is not None and files:
+        _check_files_outside(args, Path(args.out))
+
+
+def _check_files_outside(args: argparse.Namespace, folder: Path) -> None:
+    """No file output of the run inside ``folder``, the run's output folder."""
+    if not any(kind in ("dir", "dataset")
+               for _d, _f, kind in getattr(args, "outputs", None) or []):
+        return
+    folder = folder.resolve()
+    for dest, flag, kind in getattr(args, "outputs", None) or []:
+        value = getattr(args, dest)
+        if kind == "file" and value is not None and str(value) != "-" and \
+                Path(value).resolve().is_relative_to(folder):
+            raise OutputError(value, f"{flag}: inside the run's output folder {str(folder)!r}, "
+                              "whose file names the run gives: put it elsewhere")
+
+
+def out_folder(args: argparse.Namespace, scene: Scene, sub: str = "") -> Path:
+    """The run's output folder, claimed (:func:`claim_output_folder`): ``--out``, else
+    ``renders/<name>/<sub>``; no file output of the run may lie inside it."""
+    out = args.out if args.out is not None else default_out(scene.name) / sub
+    _check_files_outside(args, out)
+    return claim_output_folder(out, "--out")
+
+
+def out_file(args: argparse.Namespace, scene: Scene, name: str) -> Path:
+    """A file output: ``--out``, else ``name`` in the scene's claimed folder
+    ``renders/<name>/``."""
+    if args.out is not None:
+        return args.out
+    return claim_output_folder(default_out(scene.name), "--out") / name
 
 
 def _check_not_an_input(args: argparse.Namespace, value, flag: str) -> None:
@@ -86,8 +134,9 @@ def common(p: argparse.ArgumentParser, *, scene: bool = True, out: str | None = 
     if scene:
         p.add_argument("scene", type=Path, help="scene file (YAML, see INTERFACE.md)")
         inputs(p, ("scene", "SCENE", "file"))
-    if out:
+    if out:  # every such --out defaults to a place in renders/<name>/
         output(p, "--out", out_kind, type=Path, help=out)
+        p.set_defaults(default_out=True)
     if json:
         output(p, "--json", "file", metavar="FILE", help=f"write {json} here (- = stdout)")
     if spp:

@@ -9,11 +9,13 @@ from mirrorsim.cli.registry import (
     common,
     inputs,
     load,
+    out_file,
+    out_folder,
     output,
     preload,
     render_options,
 )
-from mirrorsim.formats.files import default_out, emit_json, write_png
+from mirrorsim.formats.files import emit_json, write_png
 
 
 def _render_options(p):
@@ -31,7 +33,8 @@ def _render(args) -> int:
     from mirrorsim.rendering.frames import render_to_files
 
     scene = render_options(args, load(args.scene))
-    files = render_to_files(scene, args.out, variant=args.variant, progress=not args.quiet)
+    files = render_to_files(scene, out_folder(args, scene), variant=args.variant,
+                            progress=not args.quiet)
     print(render_summary(scene, files))
     emit_json(args.json, files.truth.to_json())
     return 0
@@ -74,7 +77,7 @@ def _plot(args) -> int:
     from mirrorsim.cli.plots import plot_top_view
 
     scene = load(args.scene)
-    print(plot_top_view(scene, args.out or default_out(scene.name) / f"{scene.name}.top.png"))
+    print(plot_top_view(scene, out_file(args, scene, f"{scene.name}.top.png")))
     return 0
 
 
@@ -172,7 +175,7 @@ def _evaluate(args) -> int:
 
     scene = render_options(args, load(args.scene))
     preload("mirrorsim.cli.plots")  # matplotlib imports while the frame renders
-    out = args.out or default_out(scene.name)
+    out = out_folder(args, scene)
     report = evaluate_scene(scene, out, variant=args.variant, progress=not args.quiet)
     print(f"{scene.name}: {len(report.frames)} frame(s), {report.render.spp} spp, "
           f"{report.render.variant}{' (reused)' if report.reused else ''}")
@@ -213,7 +216,7 @@ def _budget(args) -> int:
     if not found:
         print(f"{scene.name}: no bench imperfections in {args.scene}: only the ideal bench "
               "is evaluated (see INTERFACE.md, Bench imperfections)", file=sys.stderr)
-    out = args.out or default_out(scene.name) / "budget"
+    out = out_folder(args, scene, "budget")
     step = (None if args.quiet else lambda label, k, runs: print(f"[{k}/{runs}] {label}",
                                                                  file=sys.stderr, flush=True))
     budget = run_budget(scene, out, variant=args.variant, progress=not args.quiet,
@@ -276,7 +279,9 @@ def _track(args) -> int:
     scene = load(args.scene)
     if args.spp is not None:  # --seed is the run's (each pose's render seed follows it)
         scene = scene.with_render(spp=args.spp)
-    out = args.out or default_out(scene.name) / "track"
+    check_options(args.path, args.steps, args.odometry_sigma, args.side, args.step,
+                  args.heading, scene.board.size)  # side and step within the board
+    out = out_folder(args, scene, "track")
     step = (None if args.quiet else lambda k, n: print(f"\rpose {k + 1}/{n}", end="",
                                                         file=sys.stderr, flush=True))
     report = run_track(scene, out, kind=args.path, steps=args.steps,

@@ -1,5 +1,6 @@
 """A dataset's folder on disk: claiming it, its row files (sealed and verified), its
-Parquet table and its card.  The layout is described in :mod:`mirrorsim.pipelines.dataset`.
+Parquet table (sealed and verified) and its card.  The layout is described in
+:mod:`mirrorsim.pipelines.dataset`.
 """
 
 from __future__ import annotations
@@ -14,10 +15,11 @@ import numpy as np
 
 from mirrorsim.errors import InputError
 from mirrorsim.formats import dataset_table as table
-from mirrorsim.formats.cache import unseal
-from mirrorsim.formats.files import atomic_path, write_json, write_text
+from mirrorsim.formats.cache import checksum, unseal
+from mirrorsim.formats.files import atomic_path, jsonable, write_json, write_text
 
 DATASET_FORMAT = "mirrorsim-dataset"
+TABLE_SEAL = "mirrorsim.sha256"  # the Parquet schema's metadata key of its checksum
 
 
 def scene_name(i: int) -> str:
@@ -139,10 +141,55 @@ def write_table(out: Path, rows: list[table.DatasetRow]) -> Path:
     for k in keys:
         cols[k] = [r.columns.get(k) for r in rows]
     arrow = pa.table(cols) if rows else pa.table({"index": pa.array([], pa.int64())})
+    # sealed like a row file: a table edited or written by another tool is not fitted
+    arrow = arrow.replace_schema_metadata(
+        {TABLE_SEAL: checksum(jsonable(arrow.to_pydict()))})
     path = Path(out) / "dataset.parquet"
     with atomic_path(path) as tmp:
         pq.write_table(arrow, tmp)
     return path
+
+
+def read_table(folder: str | Path) -> dict[str, list]:
+    """A dataset's table as columns (name → list), verified: a readable Parquet file
+    whose checksum matches its contents, with rows, at least one of them a success, and
+    every declared column.
+
+    Raises
+    ------
+    DatasetError
+        Saying which of these fails.
+    """
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    path = Path(folder) / "dataset.parquet"
+    if not path.exists():
+        raise DatasetError(path, "no such file (make it with `mirrorsim dataset`)")
+    if not path.is_file():
+        raise DatasetError(path, "not a file")
+    try:
+        arrow = pq.read_table(path)
+    except (pa.ArrowException, OSError) as exc:
+        why = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise DatasetError(path, f"not a readable Parquet table ({why})") from None
+    cols = arrow.to_pydict()
+    seal = (arrow.schema.metadata or {}).get(TABLE_SEAL.encode())
+    if seal is None or seal.decode() != checksum(jsonable(cols)):
+        raise DatasetError(path, "its checksum does not match its contents (edited, or not "
+                           "written by `mirrorsim dataset`, which writes it again from the "
+                           "verified rows when the dataset is resumed)")
+    n = len(cols.get("index", []))
+    if n == 0:
+        raise DatasetError(path, "holds no rows")
+    failed = sum(bool(e) for e in cols.get("error", [""] * n))
+    if failed == n:
+        raise DatasetError(path, f"all {n} rows failed (their `error` column says why)")
+    missing = sorted(set(table.NAMES) - set(cols))
+    if missing:
+        raise DatasetError(path, f"missing columns {', '.join(missing[:4])}"
+                           + (f" and {len(missing) - 4} more" if len(missing) > 4 else ""))
+    return cols
 
 
 def card_columns() -> str:

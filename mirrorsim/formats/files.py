@@ -24,6 +24,9 @@ import numpy as np
 from mirrorsim.errors import OutputError
 
 PROBE_BYTES = 64 * 1024  # written and synced where outputs will go: a full disk says so
+# the mark of a folder mirrorsim made (or found empty) for its outputs: it writes the
+# files it names itself only into such a folder, never among a user's other files
+OUTPUT_MARK = ".mirrorsim"
 
 
 def default_out(scene_name: str) -> Path:
@@ -88,6 +91,7 @@ def check_output_file(path: str | Path | None, option: str) -> None:
     if path is None or str(path) == "-":
         return
     path = Path(path)
+    _not_a_broken_link(path, option)
     if path.is_dir():
         raise OutputError(path, f"{option}: is a folder; a file is wanted here")
     if path.exists() and not path.is_file():
@@ -98,11 +102,16 @@ def check_output_file(path: str | Path | None, option: str) -> None:
     _probe(parent, path, option)
 
 
-def check_output_dir(path: str | Path | None, option: str) -> None:
-    """Refuse a folder output that cannot be made or written (its parent must exist)."""
+def check_output_dir(path: str | Path | None, option: str, ours: bool = True) -> None:
+    """Refuse a folder output that cannot be made or written (its parent must exist), or
+    (``ours``) one that holds files mirrorsim did not write (see
+    :func:`claim_output_folder`)."""
     if path is None:
         return
     path = Path(path)
+    _not_a_broken_link(path, option)
+    if ours and path.is_dir():
+        _check_ours(path, option)
     if path.exists() and not path.is_dir():
         raise OutputError(path, f"{option}: is a file; a folder is wanted here")
     if path.is_dir():
@@ -112,6 +121,50 @@ def check_output_dir(path: str | Path | None, option: str) -> None:
     if not parent.is_dir():
         raise OutputError(path, f"{option}: no such folder {str(parent)!r} (make it first)")
     _probe(parent, path, option)
+
+
+def claim_output_folder(path: str | Path, option: str) -> Path:
+    """``path`` as mirrorsim's output folder: made (with each missing parent) and marked,
+    or taken if empty or already marked.
+
+    Raises
+    ------
+    OutputError
+        If it holds files mirrorsim did not write, or cannot be made.
+    """
+    path = Path(path)
+    _not_a_broken_link(path, option)
+    made = []
+    p = path
+    while not p.exists() and p != p.parent:
+        made.append(p)
+        p = p.parent
+    try:
+        for d in reversed(made):
+            d.mkdir()
+            (d / OUTPUT_MARK).touch()
+        if not made:
+            _check_ours(path, option)
+            (path / OUTPUT_MARK).touch()
+    except OSError as exc:
+        raise OutputError(path, f"{option}: cannot make or write the folder: {_why(exc)}"
+                          ) from None
+    return path
+
+
+def _check_ours(folder: Path, option: str) -> None:
+    if (folder / OUTPUT_MARK).exists():
+        return
+    names = sorted(p.name for p in folder.iterdir())
+    if names:
+        shown = ", ".join(repr(n) for n in names[:3]) + (", …" if len(names) > 3 else "")
+        raise OutputError(folder, f"{option}: holds files mirrorsim did not write ({shown}); "
+                          "choose a new or empty folder")
+
+
+def _not_a_broken_link(path: Path, option: str) -> None:
+    if path.is_symlink() and not path.exists():
+        raise OutputError(path, f"{option}: a symbolic link to nothing (dangling or looping)")
 
 
 def _probe(folder: Path, path: Path, option: str) -> None:

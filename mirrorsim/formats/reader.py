@@ -13,6 +13,7 @@ from typing import Any
 import yaml
 
 from mirrorsim.errors import SceneError
+from mirrorsim.scene.model import MAX_RESOLUTION
 from solver.errors import InputError
 
 
@@ -106,19 +107,21 @@ class Reader:
             raise self.fail(key, f"{value} must be ≤ {high}")
         return value
 
-    def pair(self, value: Any, key: str, *, positive: bool = False) -> tuple[float, float]:
-        """A list of two numbers."""
+    def pair(self, value: Any, key: str, *, positive: bool = False,
+             high: float | None = None) -> tuple[float, float]:
+        """A list of two numbers (each ≤ ``high`` where given)."""
         if not isinstance(value, list | tuple) or len(value) != 2:
             raise self.fail(key, f"expected a list of two numbers, got {show(value)}")
-        return (self.number(value[0], f"{key}[0]", positive=positive),
-                self.number(value[1], f"{key}[1]", positive=positive))
+        return (self.number(value[0], f"{key}[0]", positive=positive, high=high),
+                self.number(value[1], f"{key}[1]", positive=positive, high=high))
 
 
 def read_resolution(r: Reader, res: Any, key: str) -> tuple[int, int]:
-    """[width, height] in px."""
+    """[width, height] in px, each within 2..MAX_RESOLUTION."""
     if not isinstance(res, list | tuple) or len(res) != 2:
         raise r.fail(key, f"expected [width, height] in px, got {show(res)}")
-    return (r.integer(res[0], f"{key}[0]", low=2), r.integer(res[1], f"{key}[1]", low=2))
+    return (r.integer(res[0], f"{key}[0]", low=2, high=MAX_RESOLUTION[0]),
+            r.integer(res[1], f"{key}[1]", low=2, high=MAX_RESOLUTION[1]))
 
 
 class _StrictLoader(yaml.SafeLoader):

@@ -22,6 +22,10 @@ from mirrorsim.formats.capture import read_distortion
 from mirrorsim.formats.reader import Reader, read_resolution, read_yaml, show
 from mirrorsim.scene.imperfections import REGISTRY, Imperfection, check_bounds, radius_bound
 from mirrorsim.scene.model import (
+    MAX_BOARD_CM,
+    MAX_CURVATURE_RADIUS,
+    MAX_FULL_WELL,
+    MAX_READ_NOISE,
     PAN_WORDS,
     Beacon,
     Bench,
@@ -188,14 +192,17 @@ def _imperfection(r: Reader, imp: Imperfection, raw: Any, mirror: Mirror,
         return k
     if imp.form == "noise":
         n = r.mapping(raw, key, {"full_well", "read_noise"})
-        return SensorNoise(r.number(n["full_well"], f"{key}.full_well", positive=True),
-                           r.number(n["read_noise"], f"{key}.read_noise", low=0.0))
+        return SensorNoise(r.number(n["full_well"], f"{key}.full_well", positive=True,
+                                    high=MAX_FULL_WELL),
+                           r.number(n["read_noise"], f"{key}.read_noise", low=0.0,
+                                    high=MAX_READ_NOISE))
     if imp.form == "radius":
         radius = r.number(raw, key)
         diagonal = radius_bound(mirror.size)
-        if abs(radius) < diagonal:
+        if not diagonal <= abs(radius) <= MAX_CURVATURE_RADIUS:
             raise r.fail(key, f"{radius:g}: |radius| must be at least the mirror's diagonal "
-                         f"({diagonal:.1f} cm)")
+                         f"({diagonal:.1f} cm) and at most {MAX_CURVATURE_RADIUS:g} cm "
+                         "(flatter: leave the key out)")
         return radius
     raise AssertionError(f"{imp.key}: no scene-file reader for form {imp.form!r}")
 
@@ -209,7 +216,7 @@ def distortion_monotonic(k: tuple[float, float], r_max: float) -> bool:
 
 def _board(r: Reader, raw: Any) -> Board:
     b = r.mapping(raw, "board", {"size"}, {"hole_pitch"})
-    board = Board(size=r.pair(b["size"], "board.size", positive=True),
+    board = Board(size=r.pair(b["size"], "board.size", positive=True, high=MAX_BOARD_CM),
                   hole_pitch=r.number(b.get("hole_pitch", 2.5), "board.hole_pitch", low=0.0))
     if 0.0 < board.hole_pitch <= board.hole_diameter:
         raise r.fail("board.hole_pitch", f"{board.hole_pitch:g} must exceed the hole diameter "

@@ -151,7 +151,8 @@ def fit(cols: dict) -> ErrorModel:
             m = ok & np.isfinite(y) & np.isfinite(X_all).all(axis=1)
             X, yy = X_all[m], y[m]
             if len(yy) < len(names) + 2:
-                raise ValueError(f"too few usable rows ({len(yy)}) to fit {kind} {q}")
+                raise ValueError(f"too few usable rows ({len(yy)}) to fit {kind} {q}: "
+                                 f"{len(names) + 2} needed")
             bias = _robust_fit(X, yy)
             resid = yy - X @ bias
             # gross errors (beyond GROSS robust σ's) are counted, not fitted: the spread
@@ -191,10 +192,11 @@ def load_sigma(path: str | Path) -> Sigma:
 
 
 def read_columns(dataset_dir: str | Path) -> dict:
-    """The dataset table as columns (name → list)."""
-    import pyarrow.parquet as pq
+    """The dataset table as columns (name → list), verified
+    (:func:`mirrorsim.formats.dataset_folder.read_table`)."""
+    from mirrorsim.formats.dataset_folder import read_table
 
-    return pq.read_table(Path(dataset_dir) / "dataset.parquet").to_pydict()
+    return read_table(dataset_dir)
 
 
 def summary(model: ErrorModel) -> str:

@@ -26,7 +26,7 @@ from mirrorsim.formats.scenefile import (
     scene_from_dict,
 )
 from mirrorsim.scene.imperfections import REGISTRY, as_keys
-from mirrorsim.scene.model import Camera, Scene
+from mirrorsim.scene.model import MAX_BOARD_CM, Camera, Scene
 from mirrorsim.truth import visibility
 
 DEFAULT_SPEC = Path(__file__).resolve().parents[2] / "scenes" / "dataset_spec.yaml"
@@ -92,7 +92,7 @@ def load_spec(path: str | Path | None = None) -> DatasetSpec:
     r.mapping(spec, "", {"board", "camera", "mirror", "target", "beacon", "occluder"},
               {"render", "max_tries", "bench"})
     r.mapping(spec["board"], "board", {"size"}, {"hole_pitch"})
-    r.pair(spec["board"]["size"], "board.size", positive=True)
+    r.pair(spec["board"]["size"], "board.size", positive=True, high=MAX_BOARD_CM)
     cam = r.mapping(spec["camera"], "camera", {"x", "y"},
                     {"height", "hfov", "resolution", "pan", "models"})
     if "models" in cam:

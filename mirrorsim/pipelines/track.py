@@ -42,6 +42,7 @@ PATHS = ("rectangular", "linear", "sawtooth", "fixed")  # fixed: the baseline, s
 HEADINGS = ("view", "camera")
 PRIOR_YAW_DEG, PRIOR_OFFSET_CM = 15.0, 8.0
 MAX_STEPS = 500
+MAX_ODOMETRY_SIGMA = 10.0  # cm per move: a robot that errs more than this is not driving
 CLEARANCE_CM = 1.0  # the path's least distance in front of the start's mirror line
 
 
@@ -165,6 +166,10 @@ def beacon_path(scene: Scene, first_obs: tuple[float, float],
             score = (allowed, seen, forwards, -spread)
             if best is None or score > best[0]:
                 best = (score, pts)
+    if not best[0][0]:
+        raise BadParameter("side", f"{side:g} cm (with a step of {step:g} cm, {steps} steps): "
+                           "every way to walk this path leaves the board or comes within "
+                           f"{CLEARANCE_CM:g} cm of the mirror; make the path smaller")
     return best[1]
 
 
@@ -174,19 +179,23 @@ def _seen_in(scene: Scene, beacon) -> bool:
 
 
 def check_options(kind: str, steps: int, sigma: float, side: float, step: float,
-                  heading: str = "view") -> None:
-    """Refuse bad options as bad input."""
+                  heading: str = "view", board: tuple[float, float] | None = None) -> None:
+    """Refuse bad options as bad input (``board``: its size, which bounds side and step;
+    whether a whole path fits is known once the start pose is measured)."""
     if kind not in PATHS:
         raise BadParameter("kind", f"{kind!r}: expected one of {', '.join(PATHS)}")
     if heading not in HEADINGS:
         raise BadParameter("heading", f"{heading!r}: expected one of {', '.join(HEADINGS)}")
     if not 1 <= steps <= MAX_STEPS:
         raise BadParameter("steps", f"{steps} must be within 1..{MAX_STEPS}")
-    if not (np.isfinite(sigma) and sigma >= 0):
-        raise BadParameter("odometry_sigma", f"{sigma} must be a number ≥ 0 (cm)")
+    if not (np.isfinite(sigma) and 0 <= sigma <= MAX_ODOMETRY_SIGMA):
+        raise BadParameter("odometry_sigma", f"{sigma:g} must be within 0..{MAX_ODOMETRY_SIGMA:g}"
+                           " (cm per move)")
+    longest = max(board) if board is not None else np.inf
     for name, v in (("side", side), ("step", step)):
-        if not (np.isfinite(v) and v > 0):
-            raise BadParameter(name, f"{v} must be a positive length (cm)")
+        if not (np.isfinite(v) and 0 < v <= longest):
+            raise BadParameter(name, f"{v:g} must be a positive length (cm)" + (
+                f" within the board's {longest:g} cm" if board is not None else ""))
 
 
 def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps: int = 20,
@@ -203,7 +212,7 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
     DetectionError
         If the beacon or the target is not measured at the start pose (no prior, no path).
     """
-    check_options(kind, steps, odometry_sigma, side, step, heading)
+    check_options(kind, steps, odometry_sigma, side, step, heading, scene.board.size)
     out = Path(out)
     rng = np.random.default_rng(seed)
     b0, cam = scene.beacons[0], scene.camera

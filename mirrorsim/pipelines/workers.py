@@ -21,11 +21,12 @@ import multiprocessing as mp
 import os
 import signal
 import sys
+import warnings
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from multiprocessing.connection import Connection, wait
 
-from mirrorsim.errors import RunFailed
+from mirrorsim.errors import RunFailed, one_line_warning
 
 MAX_WORKER_DEATHS = 3
 
@@ -60,6 +61,7 @@ def _worker(conn: Connection, fn: Callable, max_rss_mb: float) -> None:
     """A worker's life: jobs in, (ok, value, retiring) out, until told to stop (None) or
     its memory passes the limit."""
     _ignore_sigint()
+    warnings.showwarning = one_line_warning  # as the parent shows them
     while True:
         try:
             job = conn.recv()

@@ -28,6 +28,15 @@ TARGET_THICKNESS = 0.4
 # (any sample count; edges converge faster, see README "Throughput")
 SAMPLERS = ("independent", "multijitter")
 MAX_SPP = 1 << 16  # a documented bound: more samples than this is a typo, not a render
+# Documented bounds on a scene's sizes, so that every scene `check` accepts renders:
+# the pegboard's texture has 24 texels a cm (a 200 cm board: 4800² texels, ~0.3 GiB)
+MAX_BOARD_CM = 200.0
+MAX_RESOLUTION = (7680, 4320)  # 8K UHD: the film and its passes fit a few GiB
+# electrons: at 1e7 shot noise is 0.03 % of full scale (no noise: leave `noise` out)
+MAX_FULL_WELL = 1e7
+MAX_READ_NOISE = 1e5  # electrons rms
+# a mirror flatter than this (100 km) is flat: leave `curvature_radius` out
+MAX_CURVATURE_RADIUS = 1e7
 PENCIL_RADIUS = 0.4  # circumradius of the hexagonal pencil (0.69 cm across flats)
 OCCLUDER_THICKNESS = 1.0
 
