@@ -2,6 +2,6 @@
 
 import sys
 
-from mirrorsim.cli.main import main
+from mirrorsim.cli.entry import main
 
 sys.exit(main())

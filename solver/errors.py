@@ -13,7 +13,9 @@ class InputError(ValueError):
     def __init__(self, file: object, key: str, message: str):
         # ``file``: a path or a name such as ``<measurements>``, shown as str(file)
         self.file, self.key, self.message = str(file), key, message
-        super().__init__(f"{file}: {key}: {message}" if key else f"{file}: {message}")
+        # a file name with a newline or other control character would split the line
+        shown = repr(self.file) if any(c < " " for c in self.file) else self.file
+        super().__init__(f"{shown}: {key}: {message}" if key else f"{shown}: {message}")
 
 
 class SolverError(ValueError):

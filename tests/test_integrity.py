@@ -7,6 +7,7 @@ import json
 import re
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -267,3 +268,148 @@ def test_a_broken_link_as_out_is_refused(tmp_path, capsys, link):
              "a symbolic link to nothing")
     _refused(capsys, ["check", str(SCENES / "default.yaml"), "--json", str(out)],
              "a symbolic link to nothing")
+
+
+@pytest.mark.parametrize("cmd, out", [("plot", "topview"), ("plan", "plan.txt"),
+                                      ("plot", "top.jpeg")])
+def test_a_plot_without_a_format_suffix_is_refused(tmp_path, capsys, cmd, out):
+    from .conftest import SCENES
+
+    _refused(capsys, [cmd, str(SCENES / "default.yaml"), "--out", str(tmp_path / out)],
+             "the format goes by the file's suffix: use .png, .pdf, .svg")
+    assert not list(tmp_path.iterdir())
+
+
+def test_odd_scene_file_names_get_one_line(tmp_path, capsys):
+    """A newline in the file name is shown escaped; a file name that cannot be the
+    scene's name is blamed on the missing `name:`, not on a key the file lacks."""
+    import yaml
+
+    from .conftest import scene_dict
+
+    bad = tmp_path / "two\nlines.yaml"
+    bad.write_text("board: 3\n")
+    _refused(capsys, ["check", str(bad)], "two\\nlines.yaml': camera: missing required key")
+    d = scene_dict("default")
+    del d["name"]
+    spaced = tmp_path / "my scene.yaml"
+    spaced.write_text(yaml.safe_dump(d))
+    _refused(capsys, ["check", str(spaced)], "my scene.yaml: has no `name:` and its file "
+             "name 'my scene' cannot stand in for one")
+
+
+# ------------------------------------------------------------------------ signals
+
+
+def _cli(*argv: str, env: dict | None = None) -> subprocess.Popen:
+    """The command as a terminal's foreground job runs it (SIGINT not ignored), in a
+    session of its own so that its workers can be found."""
+    import os
+    import signal
+
+    return subprocess.Popen([sys.executable, "-m", "mirrorsim", *argv], text=True,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            start_new_session=True, env={**os.environ, **(env or {})},
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+
+
+@pytest.mark.parametrize("delay", [0.15, 0.4, 0.8])
+def test_ctrl_c_while_the_command_starts_is_a_clean_interrupt(delay):
+    """While the commands' modules import (NumPy, SciPy, Mitsuba): exit 130, one line."""
+    import signal
+    import time
+
+    from .conftest import SCENES
+
+    proc = _cli("check", str(SCENES / "default.yaml"))
+    time.sleep(delay)
+    proc.send_signal(signal.SIGINT)
+    _out, err = proc.communicate(timeout=60)
+    if proc.returncode == 0:
+        pytest.skip("the command finished before the signal")
+    assert proc.returncode == 130 and err == "interrupted\n", err
+
+
+def test_ctrl_c_during_a_calibration_render_exits_130(tmp_path):
+    """Dr.Jit turns an interrupt inside a render into a RuntimeError: still 130, one
+    line, and no calibration cached."""
+    import signal
+    import time
+
+    from .conftest import SCENES
+
+    proc = _cli("calibrate", str(SCENES / "default.yaml"),
+                env={"MIRRORSIM_CACHE_DIR": str(tmp_path)})
+    deadline = time.time() + 120
+    # the reference renders begin once the backend's answer is cached
+    while time.time() < deadline and not (tmp_path / "backend").exists():
+        time.sleep(0.05)
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGINT)
+    _out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130 and err == "interrupted\n", err
+    assert not (tmp_path / "calibration").exists()
+
+
+def _session_gone(pgid: int, seconds: float) -> bool:
+    import os
+    import time
+
+    t0 = time.time()
+    while time.time() - t0 < seconds:
+        try:
+            os.killpg(pgid, 0)
+        except ProcessLookupError:
+            return True
+        time.sleep(0.1)
+    return False
+
+
+@pytest.mark.parametrize("sig", ["SIGKILL", "SIGTERM"])
+def test_a_dataset_parent_killed_alone_takes_its_workers_with_it(tmp_path, sig):
+    """The signal to the parent only (not its process group): no worker lives on to
+    finish its scene; SIGTERM exits 143 like an interrupt; the rows on disk verify and
+    --resume finishes the dataset."""
+    import os
+    import signal
+    import time
+
+    from mirrorsim.pipelines.dataset import collect_rows
+
+    spec = Path(__file__).parent / "data" / "tiny_spec.yaml"
+    out = tmp_path / "ds"
+    argv = ("dataset", "--n", "4", "--seed", "5", "--out", str(out), "--spec", str(spec),
+            "--workers", "2", "--quiet")
+    proc = _cli(*argv)
+    deadline = time.time() + 120
+    while time.time() < deadline and not list((out / "rows").glob("scene*.json")):
+        time.sleep(0.05)
+    proc.send_signal(getattr(signal, sig))
+    _out, err = proc.communicate(timeout=60)
+    if sig == "SIGTERM":
+        assert proc.returncode == 143 and "terminated" in err, err
+    else:
+        assert proc.returncode == -9
+    assert _session_gone(proc.pid, 10), "a worker outlived its parent"
+    rows = collect_rows(out, 4)  # each row on disk verifies
+    assert 1 <= len(rows) < 4
+    finish = subprocess.run([sys.executable, "-m", "mirrorsim", *argv, "--resume"],
+                            capture_output=True, text=True, env=os.environ)
+    assert finish.returncode == 0, finish.stderr
+    assert len(collect_rows(out, 4)) == 4
+
+
+def test_a_killed_writers_temporary_file_is_swept(tmp_path):
+    """kill -9 between writing and renaming leaves `.NAME.tmpPID.png`: the next write
+    of that file removes it when PID is gone (a live writer's is left alone)."""
+    import os
+
+    from mirrorsim.formats.files import write_text
+
+    dead = tmp_path / ".frame.tmp999999999.png"  # no such process
+    live = tmp_path / f".frame.tmp{os.getppid()}.png"
+    other = tmp_path / ".other.tmp999999999.png"
+    for p in (dead, live, other):
+        p.write_bytes(b"half a frame")
+    write_text(tmp_path / "frame.png", "x")
+    assert not dead.exists() and live.exists() and other.exists()

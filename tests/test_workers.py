@@ -53,6 +53,18 @@ def test_a_warm_worker_takes_every_job_without_a_limit():
     assert len({pid for _, pid in got}) == 1  # one process did them all
 
 
+def test_a_worker_retires_after_its_bounded_number_of_jobs():
+    """Memory or not, a worker retires after max_jobs (Dr.Jit's kernels of new scenes
+    pile up): 7 jobs at 3 a worker take 3 processes, in order, none lost."""
+    got = []
+    run_local(_grow, [(i, 0) for i in range(7)], 1, lambda i: any(g[0] == i for g in got),
+              got.append, 0.0, max_jobs=3)
+    assert [i for i, _ in got] == list(range(7))
+    pids = [pid for _, pid in got]
+    assert [len(set(pids[k:k + 3])) for k in (0, 3, 6)] == [1, 1, 1]
+    assert len(set(pids)) == 3
+
+
 def test_a_worker_past_its_memory_limit_is_replaced():
     # each job holds 64 MiB more; a limit 100 MiB above a fresh worker's footprint lets
     # a worker finish one or two jobs before it retires

@@ -168,12 +168,19 @@ def _dataset_options(p):
 def _dataset(args) -> int:
     from mirrorsim.formats.dataset_folder import DatasetError
     from mirrorsim.pipelines.dataset import run_dataset
+    from mirrorsim.pipelines.workers import max_workers
 
     at_least(("--n", args.n, 1), ("--seed", args.seed, 0), ("--workers", args.workers, 1))
     if args.spp is not None:  # checked as every scene's render settings are
         RenderSettings(spp=args.spp)
+    workers = args.workers
+    if args.executor == "local":
+        most, why = max_workers()
+        if workers > most:
+            print(f"warning: --workers {workers} capped to {most} ({why})", file=sys.stderr)
+            workers = most
     try:
-        res = run_dataset(args.n, args.seed, args.out, workers=args.workers,
+        res = run_dataset(args.n, args.seed, args.out, workers=workers,
                           spec_path=args.spec, spp=args.spp, sampler=args.sampler,
                           variant=args.variant, keep=tuple(args.keep), resume=args.resume,
                           executor=args.executor, scheduler=args.scheduler,

@@ -9,7 +9,9 @@ stderr.
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
+import threading
 import warnings
 
 from mirrorsim import __version__
@@ -49,20 +51,57 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class _Interrupt:
+    """The signal that stopped the run, if any: an interrupt can reach us wrapped in
+    another exception (Dr.Jit turns one raised inside a render into a RuntimeError)."""
+
+    signum: int | None = None
+
+    @classmethod
+    def handle(cls, signum: int, _frame) -> None:
+        cls.signum = signum
+        raise KeyboardInterrupt
+
+
+def _interrupted() -> int:
+    signum = _Interrupt.signum or signal.SIGINT
+    print("interrupted" if signum == signal.SIGINT else "terminated", file=sys.stderr)
+    return 128 + signum
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Run one command; return its exit status."""
+    """Run one command; return its exit status (130 after Ctrl-C, 143 after SIGTERM)."""
+    _Interrupt.signum = None
+    # the parser imports the commands' modules: under the entry point's handlers still
+    # (:mod:`mirrorsim.cli.entry`), which end the process at once
     args = build_parser().parse_args(argv)
+    # signals can be handled in the main thread only (a caller may run us in another)
+    main_thread = threading.current_thread() is threading.main_thread()
+    before = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)
+              if main_thread}
+    for sig, handler in before.items():
+        if handler is not signal.SIG_IGN:  # a background job's SIGINT stays ignored
+            signal.signal(sig, _Interrupt.handle)
+    try:
+        return _run(args)
+    finally:  # a caller in Python (a test, a notebook) gets its own handlers back
+        for sig, handler in before.items():
+            signal.signal(sig, handler)
+
+
+def _run(args: argparse.Namespace) -> int:
     warnings.showwarning = one_line_warning
     try:
         check_outputs(args)
         return args.handler(args)
     except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        return 130
+        return _interrupted()
     except BrokenPipeError:  # output piped into `head` and the like
         sys.stderr.close()
         return 0
     except Exception as exc:
+        if _Interrupt.signum is not None:
+            return _interrupted()
         if isinstance(exc, BadParameter):  # the library names parameters, the user flags
             exc = BadArgument(flag_of(exc.parameter), exc.message)
         status = exit_status(exc)

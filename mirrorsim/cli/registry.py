@@ -20,6 +20,7 @@ from mirrorsim.formats.scenefile import load_scene
 from mirrorsim.scene.model import MAX_SPP, SAMPLERS, RenderSettings, Scene
 
 VARIANT_CHOICES = ["auto", "cuda", "llvm", "scalar"]
+IMAGE_SUFFIXES = (".png", ".pdf", ".svg")  # what a plot may be written as
 
 Options = Callable[[argparse.ArgumentParser], None]
 Handler = Callable[[argparse.Namespace], int]
@@ -34,12 +35,15 @@ def command(name: str, summary: str, description: str, options: Options):
     return register
 
 
-def output(p: argparse.ArgumentParser, flag: str, kind: str, **kwargs) -> None:
+def output(p: argparse.ArgumentParser, flag: str, kind: str,
+           suffixes: tuple[str, ...] = (), **kwargs) -> None:
     """Add an output option; ``kind`` "file", "dir" or "dataset" (a folder with its own
     claim, :func:`mirrorsim.formats.dataset_folder.claim_folder`) says how
     :func:`check_outputs` checks it before the command does any work."""
     action = p.add_argument(flag, **kwargs)
     p.set_defaults(outputs=[*(p.get_default("outputs") or []), (action.dest, flag, kind)])
+    if suffixes:  # the file's format goes by its suffix (matplotlib, OpenCV)
+        p.set_defaults(suffixes={**(p.get_default("suffixes") or {}), action.dest: suffixes})
 
 
 def inputs(p: argparse.ArgumentParser, *named: tuple[str, str, str]) -> None:
@@ -58,6 +62,14 @@ def check_outputs(args: argparse.Namespace) -> None:
     folder holding files mirrorsim did not write, an output file that is one of the
     run's own inputs, that another output also names, or that lies in the run's output
     folder (whose names the run gives)."""
+    try:
+        _check_outputs(args)
+    except OSError as exc:  # a name too long, a loop of links, an unreadable folder
+        flag = next((f for d, f, _k in args.outputs if getattr(args, d) is not None), "")
+        raise OutputError(exc.filename or "", f"{flag}: {exc.strerror or exc}") from None
+
+
+def _check_outputs(args: argparse.Namespace) -> None:
     files: dict[Path, str] = {}
     for dest, flag, kind in getattr(args, "outputs", None) or []:
         value = getattr(args, dest)
@@ -68,6 +80,10 @@ def check_outputs(args: argparse.Namespace) -> None:
             continue
         check_output_file(value, flag)
         _check_not_an_input(args, value, flag)
+        allowed = (getattr(args, "suffixes", None) or {}).get(dest)
+        if value is not None and allowed and Path(value).suffix.lower() not in allowed:
+            raise OutputError(value, f"{flag}: the format goes by the file's suffix: use "
+                              f"{', '.join(allowed)}")
         if value is not None and str(value) != "-":
             target = Path(value).resolve()
             if target in files:
@@ -135,7 +151,8 @@ def common(p: argparse.ArgumentParser, *, scene: bool = True, out: str | None = 
         p.add_argument("scene", type=Path, help="scene file (YAML, see INTERFACE.md)")
         inputs(p, ("scene", "SCENE", "file"))
     if out:  # every such --out defaults to a place in renders/<name>/
-        output(p, "--out", out_kind, type=Path, help=out)
+        output(p, "--out", out_kind, type=Path, help=out,
+               suffixes=IMAGE_SUFFIXES if out_kind == "file" else ())
         p.set_defaults(default_out=True)
     if json:
         output(p, "--json", "file", metavar="FILE", help=f"write {json} here (- = stdout)")

@@ -54,6 +54,7 @@ from mirrorsim.errors import DetectionError, InputError
 from mirrorsim.formats.capture import CaptureRecord
 from mirrorsim.rendering.sensor import undistort
 from mirrorsim.scene.model import (
+    MAX_RESOLUTION,
     Beacon,
     Camera,
     Point2,
@@ -293,16 +294,23 @@ def annotate(image: np.ndarray, detection: Detection) -> np.ndarray:
     return out[..., ::-1]
 
 
-def read_frame(path) -> np.ndarray:
+def read_frame(path, size: tuple[int, int] | None = None) -> np.ndarray:
     """An 8-bit RGB frame from a PNG or JPEG file.
+
+    Its size is read from the file's header before anything is decoded: a frame larger
+    than ``MAX_RESOLUTION``, or (``size``: the capture record's camera, width × height)
+    of another size, is refused at once.
 
     Raises
     ------
     InputError
-        If the file is missing, not a PNG or JPEG, or damaged (one line, no library
-        noise).  A JPEG gives a warning: compression blurs the edges that are measured.
+        If the file is missing, not a PNG or JPEG, of the wrong size, or damaged (one
+        line, no library noise).  A JPEG gives a warning: compression blurs the edges
+        that are measured.
     """
     try:
+        if Path(path).exists() and not Path(path).is_file():
+            raise InputError(path, "", "not a regular file (a folder, FIFO, device or socket)")
         data = np.frombuffer(Path(path).read_bytes(), np.uint8)
     except FileNotFoundError:
         raise InputError(path, "", "no such file") from None
@@ -311,6 +319,15 @@ def read_frame(path) -> np.ndarray:
     head = data[:8].tobytes()
     if not (head.startswith(b"\x89PNG\r\n\x1a\n") or head.startswith(b"\xff\xd8\xff")):
         raise InputError(path, "", "not a PNG or JPEG image")
+    found = header_size(data[:1 << 20].tobytes())
+    if found is None:
+        raise InputError(path, "", "a damaged image: its header gives no size")
+    if size is not None and found != tuple(size):
+        raise InputError(path, "", f"the frame is {found[0]}×{found[1]} px but the capture "
+                         f"record's camera is {size[0]}×{size[1]}")
+    if found[0] > MAX_RESOLUTION[0] or found[1] > MAX_RESOLUTION[1]:
+        raise InputError(path, "", f"the frame is {found[0]}×{found[1]} px, over the "
+                         f"largest camera ({MAX_RESOLUTION[0]}×{MAX_RESOLUTION[1]})")
     level = cv2.utils.logging.getLogLevel()
     cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
     try:
@@ -323,3 +340,26 @@ def read_frame(path) -> np.ndarray:
         warnings.warn(f"{path}: a JPEG frame: compression blurs the edges the detector "
                       "measures; expect larger errors", RuntimeWarning, stacklevel=2)
     return bgr[..., ::-1]
+
+
+def header_size(data: bytes) -> tuple[int, int] | None:
+    """(width, height) from a PNG's IHDR or a JPEG's start-of-frame marker, without
+    decoding; None if the header is damaged."""
+    if data.startswith(b"\x89PNG\r\n\x1a\n"):
+        if len(data) < 24 or data[12:16] != b"IHDR":
+            return None
+        return int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")
+    i = 2
+    while i + 9 < len(data):
+        if data[i] != 0xFF:
+            return None
+        marker = data[i + 1]
+        if marker in (0xD8, 0x01) or 0xD0 <= marker <= 0xD7:  # no length follows
+            i += 2
+            continue
+        # SOF0..SOF15 hold the size; C4 (Huffman), C8 (reserved), CC (arithmetic) do not
+        if 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):
+            return int.from_bytes(data[i + 7:i + 9], "big"), int.from_bytes(
+                data[i + 5:i + 7], "big")
+        i += 2 + int.from_bytes(data[i + 2:i + 4], "big")
+    return None

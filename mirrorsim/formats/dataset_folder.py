@@ -41,6 +41,8 @@ class DatasetError(InputError):
 def make_folders(out: Path, meta: dict) -> None:
     """The dataset's folders, and its description (written once: a resume keeps it)."""
     for sub in ("scenes", "frames", "rows"):
+        if (out / sub).exists() and not (out / sub).is_dir():
+            raise DatasetError(out / sub, "is not a folder: this is not a dataset's layout")
         (out / sub).mkdir(parents=True, exist_ok=True)
     if not (out / "dataset.json").exists():
         write_json(out / "dataset.json", meta)
@@ -62,7 +64,7 @@ def claim_folder(out: Path, meta: dict, resume: bool) -> None:
         return
     try:
         old = json.loads(meta_path.read_text())
-    except (OSError, ValueError) as exc:
+    except (OSError, ValueError, RecursionError) as exc:
         raise DatasetError(meta_path, f"not a readable dataset description ({exc})") from None
     keys = ("n", "seed", "spp", "spec")
     if not isinstance(old, dict) or not all(k in old for k in keys) or old.get(

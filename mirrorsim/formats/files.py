@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import glob
 import json
 import math
 import os
@@ -68,6 +69,7 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     disk, no permission) leaves nothing behind and raises :class:`OutputError`.
     """
     path = Path(path)
+    _sweep_stale(path)
     tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}{path.suffix}")
     try:
         yield tmp
@@ -77,6 +79,31 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     finally:
         with contextlib.suppress(OSError):
             tmp.unlink(missing_ok=True)
+
+
+def _sweep_stale(path: Path) -> None:
+    """Remove the temporary files of earlier writes of ``path`` whose process is gone (a
+    run killed with SIGKILL between writing and renaming)."""
+    prefix = f".{path.stem}.tmp"
+    try:
+        found = list(path.parent.glob(f"{glob.escape(prefix)}*{glob.escape(path.suffix)}"))
+    except OSError:
+        return
+    for tmp in found:
+        pid = tmp.name[len(prefix):len(tmp.name) - len(path.suffix)]
+        if pid.isdigit() and int(pid) != os.getpid() and not _alive(int(pid)):
+            with contextlib.suppress(OSError):
+                tmp.unlink()
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # another user's process: alive
+        return True
+    return True
 
 
 def _why(exc: OSError) -> str:

@@ -30,19 +30,33 @@ def show(value: Any) -> str:
     return str(value)
 
 
-def read_json(path: str | Path, error_class: type[InputError] = InputError) -> Any:
-    """Parse a JSON file, raising ``error_class`` with one line for a missing, unreadable
-    or malformed one."""
+def read_input_text(path: str | Path, error_class: type[InputError] = InputError) -> str:
+    """The text of an input file, or ``error_class`` with one line: missing, not a
+    regular file (a FIFO would wait for a writer for ever), unreadable, not UTF-8."""
     path = Path(path)
     try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise error_class(path, "", "no such file") from None
+        if not path.is_file():
+            raise error_class(path, "", "no such file" if not path.exists() else
+                              "not a regular file (a folder, FIFO, device or socket)")
+        return path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
-        raise error_class(path, "", f"cannot read: {exc}") from None
+        why = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
+        raise error_class(path, "", f"cannot read: {why}") from None
+
+
+def read_json(path: str | Path, error_class: type[InputError] = InputError) -> Any:
+    """Parse a JSON file, raising ``error_class`` with one line for a missing, unreadable,
+    malformed or absurdly nested one."""
+    text = read_input_text(path, error_class)
+    try:
+        return json.loads(text)
     except json.JSONDecodeError as exc:
         raise error_class(path, "", f"malformed JSON: line {exc.lineno}, column "
                           f"{exc.colno}: {exc.msg}") from None
+    except ValueError as exc:  # e.g. an integer of more digits than Python converts
+        raise error_class(path, "", f"malformed JSON: {str(exc).splitlines()[0]}") from None
+    except RecursionError:
+        raise error_class(path, "", "malformed JSON: nested too deeply") from None
 
 
 class Reader:
@@ -153,13 +167,7 @@ def read_yaml(path: str | Path) -> Any:
     SceneError
         If the file is missing, unreadable or malformed.
     """
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise SceneError(path, "", "no such file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SceneError(path, "", f"cannot read: {exc}") from None
+    text = read_input_text(path, SceneError)
     try:
         return yaml.load(text, Loader=_StrictLoader)
     except yaml.YAMLError as exc:
@@ -167,3 +175,7 @@ def read_yaml(path: str | Path) -> Any:
         where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
         problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
         raise SceneError(path, "", f"malformed YAML: {where}{problem}") from None
+    except ValueError as exc:  # e.g. an integer of more digits than Python converts
+        raise SceneError(path, "", f"malformed YAML: {str(exc).splitlines()[0]}") from None
+    except RecursionError:
+        raise SceneError(path, "", "malformed YAML: nested too deeply") from None

@@ -63,7 +63,7 @@ def read_camera_model(r: Reader, cam: dict, key: str,
                                                                    tuple[int, int]]:
     """A camera's model from its block (scene files and specs alike): mount height (cm),
     hfov (°), resolution (px)."""
-    return (r.number(cam["height"], f"{key}.height", positive=True),
+    return (r.number(cam["height"], f"{key}.height", positive=True, high=MAX_BOARD_CM),
             r.number(cam["hfov"], f"{key}.hfov", positive=True, high=170.0),
             read_resolution(r, cam.get("resolution", default_resolution),
                             f"{key}.resolution"))
@@ -99,8 +99,11 @@ def scene_from_dict(data: Any, source: str = "<scene>", default_name: str = "sce
     )
     name = top.get("name", default_name)
     if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}", name):
-        raise r.fail("name", f"{show(name)} is not a plain file name "
-                     "(letters, digits, '.', '_', '-'; no path)")
+        rule = "letters, digits, '.', '_', '-'; no path"
+        if "name" not in top:  # the file's own name stands in: say so, not blame a key
+            raise r.fail("", f"has no `name:` and its file name {show(name)} cannot stand in "
+                         f"for one ({rule}): add a `name:` key")
+        raise r.fail("name", f"{show(name)} is not a plain file name ({rule})")
     board = _board(r, top["board"])
     cam = r.mapping(top["camera"], "camera", {"position", "height", "hfov", "pan"},
                     {"resolution", *CAMERA_IMPERFECTIONS})
@@ -111,10 +114,10 @@ def scene_from_dict(data: Any, source: str = "<scene>", default_name: str = "sce
     m = r.mapping(top["mirror"], "mirror", {"center", "yaw", "size"}, set(MIRROR_IMPERFECTIONS))
     mirror = Mirror(center=r.pair(m["center"], "mirror.center"),
                     yaw=r.number(m["yaw"], "mirror.yaw"),
-                    size=r.pair(m["size"], "mirror.size", positive=True))
+                    size=r.pair(m["size"], "mirror.size", positive=True, high=MAX_BOARD_CM))
     t = r.mapping(top["target"], "target", {"position", "size"})
     target_position = r.pair(t["position"], "target.position")
-    target_size = r.pair(t["size"], "target.size", positive=True)
+    target_size = r.pair(t["size"], "target.size", positive=True, high=MAX_BOARD_CM)
     beacons, bkey = _beacons(r, top)
     occluders = _occluders(r, top.get("occluders", []))
     rs = read_render(r, top.get("render", {}))
@@ -238,7 +241,8 @@ def _beacons(r: Reader, top: dict) -> tuple[tuple[Beacon, ...], Callable[[int], 
         bb = r.mapping(raw, bkey(i), {"position", "height"}, {"known_position"})
         known = bb.get("known_position")
         beacons.append(Beacon(position=r.pair(bb["position"], f"{bkey(i)}.position"),
-                              height=r.number(bb["height"], f"{bkey(i)}.height", positive=True),
+                              height=r.number(bb["height"], f"{bkey(i)}.height", positive=True,
+                                              high=MAX_BOARD_CM),
                               known_position=None if known is None else
                               r.pair(known, f"{bkey(i)}.known_position")))
     return tuple(beacons), bkey
@@ -252,7 +256,8 @@ def _occluders(r: Reader, raw_occ: Any) -> tuple[Occluder, ...]:
         o = r.mapping(raw, f"occluders[{i}]", {"start", "end", "height"})
         occ = Occluder(start=r.pair(o["start"], f"occluders[{i}].start"),
                        end=r.pair(o["end"], f"occluders[{i}].end"),
-                       height=r.number(o["height"], f"occluders[{i}].height", positive=True))
+                       height=r.number(o["height"], f"occluders[{i}].height", positive=True,
+                                       high=MAX_BOARD_CM))
         if np.hypot(occ.end[0] - occ.start[0], occ.end[1] - occ.start[1]) < 0.1:
             raise r.fail(f"occluders[{i}].end", f"{list(occ.end)}: the wall has no length")
         occluders.append(occ)

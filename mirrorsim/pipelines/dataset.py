@@ -268,10 +268,7 @@ def _run_jobs(jobs: list[tuple], executor: str, workers: int, scheduler: str | N
     on a Dask cluster."""
     if executor == "dask":
         run_dask(process_one, jobs, scheduler, on_result)
-    elif workers <= 1:
-        for job in jobs:
-            on_result(process_one(*job))
-    else:
+    else:  # one worker too: a worker process retires, this process could not
         run_local(process_one, jobs, workers, is_done, on_result, max_rss_mb)
 
 

@@ -65,7 +65,8 @@ def measure_frame(image_path: str | Path, capture: CaptureRecord, *,
     DetectionError
         When the calibration's own references cannot be measured.
     """
-    image = read_frame(image_path)
+    cam = capture.camera
+    image = read_frame(image_path, (cam.width, cam.height_px))
     cal = calibration or calibration_for(capture, variant=variant,
                                          distance_error=distance_error)
     try:

@@ -1,22 +1,23 @@
 """Running many scenes in long-lived worker processes (or on a Dask cluster), safe to
 interrupt.
 
-* Warm workers: each worker process imports Mitsuba and compiles its kernels once, then
-  takes scene after scene (Dr.Jit's kernel cache serves every later scene of the same
-  structure).  A worker retires when its resident memory passes ``max_rss_mb`` and a
-  fresh one takes its place (Mitsuba leaked when scenes were reloaded, mitsuba3 #1890;
-  measured here, no growth over 30 scenes: README "Throughput").
+* Warm workers: each worker process imports Mitsuba once, then takes scene after
+  scene.  A worker retires when its resident memory passes ``max_rss_mb`` or after
+  MAX_JOBS_PER_WORKER scenes, and a fresh one takes its place (Dr.Jit keeps every new
+  scene's kernels in memory).
 * Only the parent process handles Ctrl-C: workers start with SIGINT blocked (the
   signal mask survives ``spawn``'s exec) and then ignore it, so an interrupt can never
   land inside a worker and be mistaken for the scene's failure.  On Ctrl-C the parent
   kills its workers at once and stops; nothing they were doing is recorded.
 * A worker that dies (killed, out of memory) is replaced; its job goes to another
-  worker unless ``is_done`` says it finished.
+  worker unless ``is_done`` says it finished.  A parent that dies (SIGKILL; SIGTERM is
+  handled as Ctrl-C is) takes its workers with it (Linux: PR_SET_PDEATHSIG).
 """
 
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import multiprocessing as mp
 import os
 import signal
@@ -29,6 +30,13 @@ from multiprocessing.connection import Connection, wait
 from mirrorsim.errors import RunFailed, one_line_warning
 
 MAX_WORKER_DEATHS = 3
+# a worker retires after this many scenes whatever its memory: Dr.Jit keeps each new
+# scene's kernels (~2 MiB a scene measured), so a long-lived worker grows without bound
+MAX_JOBS_PER_WORKER = 100
+# the memory a worker needs: ~500 MiB measured warm after a full-size scene
+# (README "Throughput"), doubled for the passes of larger frames
+WORKER_MEMORY_MB = 1024
+PR_SET_PDEATHSIG = 1  # <linux/prctl.h>
 
 
 def _ignore_sigint() -> None:
@@ -57,11 +65,39 @@ def rss_mb() -> float:
     return pages * os.sysconf("SC_PAGE_SIZE") / 2**20
 
 
-def _worker(conn: Connection, fn: Callable, max_rss_mb: float) -> None:
-    """A worker's life: jobs in, (ok, value, retiring) out, until told to stop (None) or
-    its memory passes the limit."""
+def _die_with(parent: int) -> None:
+    """Have the kernel kill this process when its parent dies (Linux's
+    PR_SET_PDEATHSIG): a parent killed by SIGKILL leaves no worker finishing a scene
+    that nobody will collect."""
+    with contextlib.suppress(OSError, AttributeError):
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+    if os.getppid() != parent:  # the parent died before the request was made
+        os._exit(1)
+
+
+def max_workers() -> tuple[int, str]:
+    """How many local workers this machine runs usefully: one per core, and no more
+    than its available memory holds (WORKER_MEMORY_MB each); and why."""
+    cores = os.cpu_count() or 1
+    try:
+        with open("/proc/meminfo") as f:
+            free_mb = next(int(line.split()[1]) for line in f
+                           if line.startswith("MemAvailable:")) / 1024
+    except (OSError, StopIteration, ValueError, IndexError):
+        return cores, f"{cores} cores"
+    by_memory = max(1, int(free_mb // WORKER_MEMORY_MB))
+    return min(cores, by_memory), (f"{cores} cores; {free_mb / 1024:.1f} GiB available "
+                                   f"holds {by_memory} workers of ~{WORKER_MEMORY_MB} MiB")
+
+
+def _worker(conn: Connection, fn: Callable, max_rss_mb: float, parent: int,
+            max_jobs: int) -> None:
+    """A worker's life: jobs in, (ok, value, retiring) out, until told to stop (None), its
+    memory passes the limit or it has done ``max_jobs`` jobs."""
+    _die_with(parent)
     _ignore_sigint()
     warnings.showwarning = one_line_warning  # as the parent shows them
+    done = 0
     while True:
         try:
             job = conn.recv()
@@ -73,7 +109,8 @@ def _worker(conn: Connection, fn: Callable, max_rss_mb: float) -> None:
             value, ok = fn(*job), True
         except Exception as exc:  # the parent re-raises it, as a pool's future would
             value, ok = exc, False
-        retiring = max_rss_mb > 0 and rss_mb() > max_rss_mb
+        done += 1
+        retiring = (max_rss_mb > 0 and rss_mb() > max_rss_mb) or done >= max_jobs
         conn.send((ok, value, retiring))
         if retiring:
             return
@@ -82,19 +119,21 @@ def _worker(conn: Connection, fn: Callable, max_rss_mb: float) -> None:
 class _Slot:
     """One worker process, its pipe and the job it holds."""
 
-    def __init__(self, ctx, fn: Callable, max_rss_mb: float):
+    def __init__(self, ctx, fn: Callable, max_rss_mb: float, max_jobs: int):
         self.conn, child = ctx.Pipe()
-        self.proc = ctx.Process(target=_worker, args=(child, fn, max_rss_mb), daemon=True)
+        self.proc = ctx.Process(target=_worker, args=(child, fn, max_rss_mb, os.getpid(), max_jobs),
+                                daemon=True)
         self.proc.start()
         child.close()
         self.job: tuple | None = None
 
 
 def run_local(fn: Callable, jobs: list[tuple], workers: int, is_done: Callable[[int], bool],
-              on_result: Callable[[object], None], max_rss_mb: float = 0.0) -> None:
+              on_result: Callable[[object], None], max_rss_mb: float = 0.0,
+              max_jobs: int = MAX_JOBS_PER_WORKER) -> None:
     """Call ``fn(*job)`` for each job in ``workers`` warm processes; ``on_result`` gets
-    each return value.  A worker past ``max_rss_mb`` MiB (0: no limit) retires after its
-    job; one that dies is replaced and its job, unless ``is_done(index)`` (the index is
+    each return value.  A worker past ``max_rss_mb`` MiB (0: no limit) or ``max_jobs``
+    jobs retires after its job; one that dies is replaced and its job, unless ``is_done(index)`` (the index is
     a job's first element), given to the next free worker."""
     ctx = mp.get_context("spawn")  # a fresh interpreter: no inherited Mitsuba state
     pending = deque(jobs)
@@ -103,7 +142,7 @@ def run_local(fn: Callable, jobs: list[tuple], workers: int, is_done: Callable[[
 
     def start() -> None:
         with _sigint_held():
-            slots.append(_Slot(ctx, fn, max_rss_mb))
+            slots.append(_Slot(ctx, fn, max_rss_mb, max_jobs))
 
     try:
         for _ in range(min(workers, len(pending))):

@@ -29,7 +29,8 @@ TARGET_THICKNESS = 0.4
 SAMPLERS = ("independent", "multijitter")
 MAX_SPP = 1 << 16  # a documented bound: more samples than this is a typo, not a render
 # Documented bounds on a scene's sizes, so that every scene `check` accepts renders:
-# the pegboard's texture has 24 texels a cm (a 200 cm board: 4800² texels, ~0.3 GiB)
+# the pegboard's texture has 24 texels a cm (a 200 cm board: 4800² texels, ~0.3 GiB);
+# no size or height on the bench (mirror, target, pencil, occluder, camera) exceeds it
 MAX_BOARD_CM = 200.0
 MAX_RESOLUTION = (7680, 4320)  # 8K UHD: the film and its passes fit a few GiB
 # electrons: at 1e7 shot noise is 0.03 % of full scale (no noise: leave `noise` out)

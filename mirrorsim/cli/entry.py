@@ -1,0 +1,34 @@
+"""The ``mirrorsim`` command's entry point: signals first, then the heavy imports.
+
+Importing the commands takes most of a second (NumPy, Mitsuba's bindings): a Ctrl-C then
+would raise inside a C extension's initialisation (a traceback, or an abort).  So until
+the commands are imported, SIGINT and SIGTERM end the process at once with the status
+of an interrupt (128 + the signal); afterwards :func:`mirrorsim.cli.main.main` handles
+them as exceptions, so that a run stops cleanly.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+
+
+def _exit_now(signum: int, _frame) -> None:
+    os.write(2, b"interrupted\n" if signum == signal.SIGINT else b"terminated\n")
+    os._exit(128 + signum)
+
+
+def main() -> int:
+    """Run the command line (the console script)."""
+    # a signal ignored by the caller (a background job's SIGINT) stays ignored
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        if signal.getsignal(sig) is not signal.SIG_IGN:
+            signal.signal(sig, _exit_now)
+    from mirrorsim.cli.main import main as run
+
+    return run()
+
+
+if __name__ == "__main__":
+    sys.exit(main())
