@@ -413,3 +413,105 @@ def test_a_killed_writers_temporary_file_is_swept(tmp_path):
         p.write_bytes(b"half a frame")
     write_text(tmp_path / "frame.png", "x")
     assert not dead.exists() and live.exists() and other.exists()
+
+
+# ------------------------------------------------------ resource bombs and odd files
+
+
+def _deep_json(depth: int) -> str:
+    return "[" * depth + "]" * depth
+
+
+@pytest.mark.parametrize("cmd", ["solve", "detect", "plan"])
+def test_json_nested_absurdly_deep_is_one_line(tmp_path, capsys, cmd):
+    """As measurements, a capture record and an error model."""
+    from .conftest import SCENES
+
+    bomb = tmp_path / "bomb.json"
+    bomb.write_text(_deep_json(100_000))
+    frame = tmp_path / "f.png"
+    frame.write_bytes(b"\x89PNG\r\n\x1a\n")
+    argv = {"solve": ["solve", str(bomb)],
+            "detect": ["detect", str(frame), "--capture", str(bomb)],
+            "plan": ["plan", str(SCENES / "default.yaml"), "--error-model", str(bomb)]}[cmd]
+    _refused(capsys, argv, "bomb.json: malformed JSON: nested too deeply")
+
+
+@pytest.mark.parametrize("cmd", ["check", "dataset"])
+def test_yaml_nested_absurdly_deep_is_one_line(tmp_path, capsys, cmd):
+    bomb = tmp_path / "bomb.yaml"
+    bomb.write_text("a: " + "[" * 5000 + "]" * 5000 + "\n")
+    argv = ([cmd, str(bomb)] if cmd == "check" else
+            ["dataset", "--n", "1", "--seed", "1", "--out", str(tmp_path / "d"), "--spec",
+             str(bomb)])
+    _refused(capsys, argv, "bomb.yaml: malformed YAML: nested too deeply")
+    assert not (tmp_path / "d").exists()
+
+
+def test_numbers_past_pythons_digit_limit_are_one_line(tmp_path, capsys):
+    f = tmp_path / "m.json"
+    f.write_text('{"alpha": ' + "9" * 5000 + "}")
+    _refused(capsys, ["solve", str(f)], "m.json: malformed JSON: ")
+
+
+@pytest.mark.parametrize("kind", ["png", "jpeg"])
+def test_a_huge_frame_is_refused_from_its_header(tmp_path, capsys, kind):
+    """A 30000×30000 image (1 MB of zeros compresses well) is refused before decoding:
+    reading its header is enough, and the refusal names both sizes."""
+    import struct
+    import time
+    import zlib
+
+    frame = tmp_path / f"huge.{'png' if kind == 'png' else 'jpg'}"
+    if kind == "png":
+        def chunk(tag, data):
+            return (struct.pack(">I", len(data)) + tag + data
+                    + struct.pack(">I", zlib.crc32(tag + data)))
+        frame.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(
+            ">IIBBBBB", 30000, 30000, 8, 0, 0, 0, 0)) + chunk(b"IDAT", zlib.compress(
+                b"\0" * 30001 * 300)) + chunk(b"IEND", b""))
+    else:  # SOI, then a baseline start-of-frame claiming 60000×60000
+        frame.write_bytes(b"\xff\xd8" + b"\xff\xc0\x00\x11\x08" + struct.pack(">HH", 60000, 60000)
+                          + b"\x03\x01\x22\x00\x02\x11\x01\x03\x11\x01" + b"\xff\xd9")
+    size = "30000×30000" if kind == "png" else "60000×60000"
+    t0 = time.perf_counter()
+    _refused(capsys, ["detect", str(frame), "--capture", str(_capture(tmp_path))],
+             f"the frame is {size} px but the capture record's camera is 1920×1088")
+    assert time.perf_counter() - t0 < 30  # no decode (which took 20 s and 5 GB)
+
+
+def _capture(tmp_path) -> Path:
+    from mirrorsim.formats.capture import CaptureRecord
+    from mirrorsim.formats.files import write_json
+    from mirrorsim.formats.scenefile import load_scene
+
+    from .conftest import SCENES
+
+    scene = load_scene(SCENES / "default.yaml")
+    return write_json(tmp_path / "cap.json", CaptureRecord.from_scene(scene, "f.png").to_json())
+
+
+def test_a_fifo_as_a_scene_is_refused_not_waited_on(tmp_path, capsys):
+    import os
+
+    fifo = tmp_path / "scene.yaml"
+    os.mkfifo(fifo)
+    _refused(capsys, ["check", str(fifo)], "not a regular file")
+
+
+def test_an_output_name_too_long_is_one_line(tmp_path, capsys):
+    from .conftest import SCENES
+
+    _refused(capsys, ["render", str(SCENES / "default.yaml"), "--out",
+                      str(tmp_path / ("x" * 300))], "File name too long")
+
+
+def test_dataset_workers_are_capped_by_cores_and_memory(monkeypatch):
+    from mirrorsim.pipelines import workers
+
+    monkeypatch.setattr(workers.os, "cpu_count", lambda: 64)
+    most, why = workers.max_workers()
+    with open("/proc/meminfo") as f:
+        free = next(int(ln.split()[1]) for ln in f if ln.startswith("MemAvailable:")) / 1024
+    assert most == min(64, max(1, int(free // workers.WORKER_MEMORY_MB)))
+    assert "64 cores" in why and "GiB available" in why
