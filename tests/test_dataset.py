@@ -476,3 +476,22 @@ def test_the_table_a_dataset_writes_verifies(one_worker):
     from mirrorsim.formats.dataset_folder import read_table
 
     assert read_table(one_worker[0])["index"] == [0, 1, 2]
+
+
+def test_errormodel_refuses_a_dataset_whose_row_files_no_longer_verify(one_worker, tmp_path,
+                                                                        capsys):
+    """The table is fitted only while it is its verified rows: a row file stubbed since
+    the table was written is found (resuming redoes that scene)."""
+    import shutil
+
+    from mirrorsim.cli.main import main
+
+    ds = tmp_path / "ds"
+    shutil.copytree(one_worker[0], ds)
+    (ds / "rows" / "scene000001.json").write_text("{}")
+    assert main(["errormodel", str(ds)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "scene000001.json: not a row of this dataset" in err, err
+    (ds / "rows" / "scene000001.json").unlink()
+    assert main(["errormodel", str(ds)]) == 2
+    assert "its rows differ from the row files" in capsys.readouterr().err

@@ -128,7 +128,8 @@ def collect_rows(out: Path, n: int, seed: int | None = None) -> list[table.Datas
             try:
                 rows.append(read_row(p, i, seed))
             except ValueError as exc:
-                raise DatasetError(p, f"not a row of this dataset ({exc})") from None
+                raise DatasetError(p, f"not a row of this dataset ({exc}); resuming the "
+                                   "dataset redoes it") from None
     return rows
 
 
@@ -187,6 +188,15 @@ def read_table(folder: str | Path) -> dict[str, list]:
     failed = sum(bool(e) for e in cols.get("error", [""] * n))
     if failed == n:
         raise DatasetError(path, f"all {n} rows failed (their `error` column says why)")
+    meta = Path(folder) / "dataset.json"
+    try:
+        n_scenes = json.loads(meta.read_text())["n"]
+    except (OSError, ValueError, KeyError, TypeError, RecursionError):
+        raise DatasetError(meta, "not a readable dataset description") from None
+    # the table is its verified rows: a row file damaged since, or missing, is found here
+    if [r.index for r in collect_rows(folder, n_scenes)] != cols["index"]:
+        raise DatasetError(path, "its rows differ from the row files in rows/ (resuming the "
+                           "dataset writes the table again)")
     missing = sorted(set(table.NAMES) - set(cols))
     if missing:
         raise DatasetError(path, f"missing columns {', '.join(missing[:4])}"
