@@ -515,3 +515,30 @@ def test_dataset_workers_are_capped_by_cores_and_memory(monkeypatch):
         free = next(int(ln.split()[1]) for ln in f if ln.startswith("MemAvailable:")) / 1024
     assert most == min(64, max(1, int(free // workers.WORKER_MEMORY_MB)))
     assert "64 cores" in why and "GiB available" in why
+
+
+_READ_ONLY = 'mount --bind "$0" "$0" && mount -o remount,bind,ro "$0" && cd "$0" && exec "$@"'
+
+
+@pytest.mark.parametrize("cmd", ["render", "evaluate", "plot", "budget", "track", "plan"])
+def test_the_default_folder_in_a_read_only_directory_is_one_line(tmp_path, cmd):
+    """renders/ cannot be made where the command runs: exit 2 naming --out, nothing
+    written.  (Root ignores permission bits: the folder is a read-only bind mount.)"""
+    import shutil
+
+    from .conftest import SCENES
+
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    probe = subprocess.run(["unshare", "-m", "sh", "-c", _READ_ONLY, str(ro), "sh", "-c",
+                            "touch x 2>/dev/null && echo writable || echo read-only"],
+                           capture_output=True, text=True) if shutil.which("unshare") else None
+    if probe is None or probe.stdout.strip() != "read-only":
+        pytest.skip("no read-only bind mount here (unshare -m needs root)")
+    proc = subprocess.run(["unshare", "-m", "sh", "-c", _READ_ONLY, str(ro), sys.executable,
+                           "-m", "mirrorsim", cmd, str(SCENES / "default.yaml")],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.count("\n") == 1 and "--out" in proc.stderr and "renders" in \
+        proc.stderr, proc.stderr
+    assert not list(ro.iterdir())

@@ -143,7 +143,8 @@ def _dataset_options(p):
     output(p, "--out", "dataset", type=Path, required=True,
            help="a new or empty folder, or (with --resume) one of its datasets")
     p.add_argument("--workers", type=int, default=default_workers(),
-                   help="worker processes (default: half the cores)")
+                   help="worker processes (default: half the cores; more than the cores, "
+                        "or than the available memory holds at 1 GiB each, is capped)")
     p.add_argument("--spec", type=Path, help="ranges of the random scenes (YAML)")
     inputs(p, ("spec", "--spec", "file"))
     p.add_argument("--spp", type=int, help="samples per pixel (default: the spec's)")

@@ -230,7 +230,7 @@ def _budget(args) -> int:
 
 
 def _track_options(p):
-    from mirrorsim.pipelines.track import HEADINGS, PATHS
+    from mirrorsim.pipelines.track import HEADINGS, MAX_ODOMETRY_SIGMA, MAX_STEPS, PATHS
 
     common(p, out="output folder (default renders/<name>/track/)", json="the track report",
            variant=True, quiet=True)
@@ -242,15 +242,19 @@ def _track_options(p):
                         "measurement shows it; camera, along the camera's line to the "
                         "beacon, towards the camera.  Side a goes to the side that keeps "
                         "the path farther in front of the mirror")
-    p.add_argument("--steps", type=int, default=20, help="moves after the start (default 20)")
+    p.add_argument("--steps", type=int, default=20,
+                   help=f"moves after the start, 1..{MAX_STEPS} (default 20)")
     p.add_argument("--odometry-sigma", type=float, default=0.1, metavar="CM",
-                   help="the beacon's motion error per move and axis, cm (default 0.1)")
+                   help="the beacon's motion error per move and axis, cm, 0.."
+                        f"{MAX_ODOMETRY_SIGMA:g} (default 0.1)")
     p.add_argument("--seed", type=int, default=0,
                    help="seeds the odometry noise, the filter and the renders (default 0)")
     p.add_argument("--side", type=float, default=4.0, metavar="CM",
-                   help="a: the path's width across its heading (default 4)")
+                   help="a: the path's width across its heading, at most the board's "
+                        "size; a path that leaves the board is refused (default 4)")
     p.add_argument("--step", type=float, default=1.0, metavar="CM",
-                   help="b: the path's step along its heading (default 1)")
+                   help="b: the path's step along its heading, at most the board's size "
+                        "(default 1)")
     p.add_argument("--spp", type=int, help="samples per pixel (default: the scene's)")
 
 

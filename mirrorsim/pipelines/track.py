@@ -141,14 +141,7 @@ def beacon_path(scene: Scene, first_obs: tuple[float, float],
     front = line_normal(yaw)
     front = front if front @ (s0 - mid) > 0 else -front
     target_alpha_deg = target_obs[0]
-    try:
-        centre = (hit + ray_hits_line(o, target_alpha_deg, mid, yaw)) / 2
-    except SolverError:  # the target's ray misses the line (parallel, or behind)
-        centre = hit
-    mirror = replace(scene.mirror, yaw=yaw, center=tuple(map(float, centre)))
-    target = tuple(map(float, locate(o, mid, yaw, *target_obs)))
-    believed = replace(scene, mirror=mirror, bench=Bench(), target=replace(
-        scene.target, position=target, facing_deg=target_facing(o, mirror, target)))
+    believed = _believed_scene(scene, o, yaw, mid, hit, target_obs)
     h = float(bearing_deg(hit, s0) if heading == "view" else bearing_deg(s0, o))
     size = np.asarray(scene.board.size, float)
     best: tuple[tuple, np.ndarray] | None = None
@@ -171,6 +164,21 @@ def beacon_path(scene: Scene, first_obs: tuple[float, float],
                            "every way to walk this path leaves the board or comes within "
                            f"{CLEARANCE_CM:g} cm of the mirror; make the path smaller")
     return best[1]
+
+
+def _believed_scene(scene: Scene, o: np.ndarray, yaw: float, mid: np.ndarray,
+                    hit: np.ndarray, target_obs: tuple[float, float]) -> Scene:
+    """The scene as the start pose's measurements make it: the mirror on the beacon's
+    mirror line, between the beacon's and the target's reflection points, and the
+    target where that mirror puts it, on an ideal bench."""
+    try:
+        centre = (hit + ray_hits_line(o, target_obs[0], mid, yaw)) / 2
+    except SolverError:  # the target's ray misses the line (parallel, or behind)
+        centre = hit
+    mirror = replace(scene.mirror, yaw=yaw, center=tuple(map(float, centre)))
+    target = tuple(map(float, locate(o, mid, yaw, *target_obs)))
+    return replace(scene, mirror=mirror, bench=Bench(), target=replace(
+        scene.target, position=target, facing_deg=target_facing(o, mirror, target)))
 
 
 def _seen_in(scene: Scene, beacon) -> bool:

@@ -133,8 +133,9 @@ def run_local(fn: Callable, jobs: list[tuple], workers: int, is_done: Callable[[
               max_jobs: int = MAX_JOBS_PER_WORKER) -> None:
     """Call ``fn(*job)`` for each job in ``workers`` warm processes; ``on_result`` gets
     each return value.  A worker past ``max_rss_mb`` MiB (0: no limit) or ``max_jobs``
-    jobs retires after its job; one that dies is replaced and its job, unless ``is_done(index)`` (the index is
-    a job's first element), given to the next free worker."""
+    jobs retires after its job; one that dies is replaced and its job, unless
+    ``is_done(index)`` (the index is a job's first element), given to the next free
+    worker."""
     ctx = mp.get_context("spawn")  # a fresh interpreter: no inherited Mitsuba state
     pending = deque(jobs)
     slots: list[_Slot] = []
