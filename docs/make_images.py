@@ -55,11 +55,13 @@ def curved_mirrors(radius: float = 300.0) -> None:
         d = {**base, "name": f"default_{label}", "mirror": dict(base["mirror"])}
         if r is not None:
             d["mirror"]["curvature_radius"] = r
-        path = ROOT / "renders" / "docs" / f"default_{label}.yaml"
+        # the scene files beside, the frames in their own output folder
+        path = ROOT / "renders" / "docs_scenes" / f"default_{label}.yaml"
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(yaml.safe_dump(d))
-        run("render", str(path), "--quiet", "--out", str(path.parent))
-        img = np.asarray(Image.open(path.with_suffix(".png")).convert("RGB"))
+        out = ROOT / "renders" / "docs" / label
+        run("render", str(path), "--quiet", "--out", str(out))
+        img = np.asarray(Image.open(out / f"default_{label}.png").convert("RGB"))
         crops.append(img[360:700, 800:1120])
     gap = np.full((crops[0].shape[0], 8, 3), 255, np.uint8)
     Image.fromarray(np.hstack([crops[0], gap, crops[1], gap, crops[2]])).save(

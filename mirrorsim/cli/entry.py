@@ -1,10 +1,11 @@
 """The ``mirrorsim`` command's entry point: signals first, then the heavy imports.
 
-Importing the commands takes most of a second (NumPy, Mitsuba's bindings): a Ctrl-C then
-would raise inside a C extension's initialisation (a traceback, or an abort).  So until
-the commands are imported, SIGINT and SIGTERM end the process at once with the status
-of an interrupt (128 + the signal); afterwards :func:`mirrorsim.cli.main.main` handles
-them as exceptions, so that a run stops cleanly.
+Importing the commands and building the parser takes most of a second (NumPy, SciPy's
+optimizer): a Ctrl-C then would raise inside a module's initialisation (a traceback, or
+an abort inside a C extension).  So until the parser is built, SIGINT and SIGTERM end
+the process at once with the status of an interrupt (128 + the signal); afterwards
+:func:`mirrorsim.cli.main.main` handles them as exceptions, so that a run (and Mitsuba,
+imported by the commands that render) stops cleanly.
 """
 
 from __future__ import annotations

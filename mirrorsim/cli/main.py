@@ -86,7 +86,8 @@ def main(argv: list[str] | None = None) -> int:
         return _run(args)
     finally:  # a caller in Python (a test, a notebook) gets its own handlers back
         for sig, handler in before.items():
-            signal.signal(sig, handler)
+            if handler is not None:  # None: installed outside Python, cannot be restored
+                signal.signal(sig, handler)
 
 
 def _run(args: argparse.Namespace) -> int:

@@ -62,17 +62,19 @@ def check_outputs(args: argparse.Namespace) -> None:
     folder holding files mirrorsim did not write, an output file that is one of the
     run's own inputs, that another output also names, or that lies in the run's output
     folder (whose names the run gives)."""
+    checking = ["--out"]  # the flag being checked, for an OSError from any check below
     try:
-        _check_outputs(args)
+        _check_outputs(args, checking)
     except OSError as exc:  # a name too long, a loop of links, an unreadable folder
-        flag = next((f for d, f, _k in args.outputs if getattr(args, d) is not None), "")
-        raise OutputError(exc.filename or "", f"{flag}: {exc.strerror or exc}") from None
+        raise OutputError(exc.filename or "", f"{checking[0]}: {exc.strerror or exc}"
+                          ) from None
 
 
-def _check_outputs(args: argparse.Namespace) -> None:
+def _check_outputs(args: argparse.Namespace, checking: list[str]) -> None:
     files: dict[Path, str] = {}
     for dest, flag, kind in getattr(args, "outputs", None) or []:
         value = getattr(args, dest)
+        checking[0] = flag
         if kind in ("dir", "dataset"):
             if value is None and getattr(args, "default_out", False):
                 check_output_dir(default_out("x").parent, flag, ours=False)

@@ -319,7 +319,7 @@ def read_frame(path, size: tuple[int, int] | None = None) -> np.ndarray:
     head = data[:8].tobytes()
     if not (head.startswith(b"\x89PNG\r\n\x1a\n") or head.startswith(b"\xff\xd8\xff")):
         raise InputError(path, "", "not a PNG or JPEG image")
-    found = header_size(data[:1 << 20].tobytes())
+    found = header_size(data.tobytes())
     if found is None:
         raise InputError(path, "", "a damaged image: its header gives no size")
     if size is not None and found != tuple(size):
@@ -353,6 +353,8 @@ def header_size(data: bytes) -> tuple[int, int] | None:
     while i + 9 < len(data):
         if data[i] != 0xFF:
             return None
+        while data[i + 1] == 0xFF and i + 10 < len(data):  # fill bytes before a marker
+            i += 1
         marker = data[i + 1]
         if marker in (0xD8, 0x01) or 0xD0 <= marker <= 0xD7:  # no length follows
             i += 2

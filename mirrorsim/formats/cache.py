@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from mirrorsim.errors import OutputError
-from mirrorsim.formats.files import write_json
+from mirrorsim.formats.files import jsonable, write_json
 
 FORMAT = "mirrorsim-cache-1"
 
@@ -44,9 +44,11 @@ def checksum(data: Any) -> str:
 
 
 def seal(data: dict) -> dict:
-    """``data`` with the checksum of its contents under ``"sha256"`` (a frame's truth
-    file, a dataset's row file)."""
-    return {**data, "sha256": checksum(data)}
+    """``data`` as it is written (:func:`~mirrorsim.formats.files.jsonable`: NaN as null,
+    numpy numbers plain) with the checksum of its contents under ``"sha256"`` (a frame's
+    truth file, a dataset's row file)."""
+    plain = jsonable(data)
+    return {**plain, "sha256": checksum(plain)}
 
 
 def unseal(data: object, what: str) -> dict:
@@ -77,13 +79,13 @@ def read_entry(kind: str, key: str, check: Callable[[dict], None] | None = None
     """
     path = entry_path(kind, key)
     try:
-        text = path.read_text()
+        data = path.read_bytes()
     except FileNotFoundError:
         return None
     except OSError as exc:
         return _distrust(path, f"unreadable ({exc.strerror})")
     try:
-        entry = json.loads(text)
+        entry = json.loads(data)  # bytes: a file that is not UTF-8 fails here, a ValueError
         if not isinstance(entry, dict) or entry.get("format") != FORMAT:
             raise ValueError("not a mirrorsim cache entry")
         value = entry["value"]

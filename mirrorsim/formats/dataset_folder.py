@@ -90,11 +90,16 @@ def read_row(path: Path, index: int, seed: int) -> table.DatasetRow:
     """
     try:
         row = table.DatasetRow.from_json(unseal(json.loads(path.read_bytes()), path.name))
+        found = (row.index, row.columns.get("seed"))
+    except KeyError as exc:
+        raise ValueError(f"no {exc} column") from None
+    except OSError as exc:
+        raise ValueError(f"unreadable ({exc.strerror or exc})") from None
     except (ValueError, TypeError, RecursionError) as exc:
         raise ValueError(str(exc) or type(exc).__name__) from None
-    if (row.index, row.columns.get("seed")) != (index, seed):
-        raise ValueError(f"the row of scene {row.index} of seed {row.columns.get('seed')}, "
-                         f"not of scene {index} of seed {seed}")
+    if found != (index, seed):
+        raise ValueError(f"the row of scene {found[0]} of seed {found[1]}, not of scene "
+                         f"{index} of seed {seed}")
     return row
 
 
@@ -107,12 +112,23 @@ def reject_bad_rows(out: Path, n: int, seed: int) -> None:
             continue
         try:
             read_row(path, i, seed)
-        except (OSError, ValueError) as exc:
-            aside = out / "rows" / "rejected" / path.name
-            aside.parent.mkdir(exist_ok=True)
+        except ValueError as exc:
+            aside = _aside(out / "rows" / "rejected", path.name)
             path.replace(aside)
             warnings.warn(f"{str(path)!r} not trusted ({exc}); moved to {str(aside)!r}, "
                           "its scene is redone", RuntimeWarning, stacklevel=2)
+
+
+def _aside(folder: Path, name: str) -> Path:
+    """A new path for a rejected file in ``folder``: a second rejection of the same
+    scene keeps the first."""
+    if folder.exists() and not folder.is_dir():
+        raise DatasetError(folder, "is not a folder: this is not a dataset's layout")
+    folder.mkdir(exist_ok=True)
+    aside, k = folder / name, 1
+    while aside.exists():
+        aside, k = folder / f"{Path(name).stem}.{k}.json", k + 1
+    return aside
 
 
 def collect_rows(out: Path, n: int, seed: int | None = None) -> list[table.DatasetRow]:
@@ -178,7 +194,11 @@ def read_table(folder: str | Path) -> dict[str, list]:
         raise DatasetError(path, f"not a readable Parquet table ({why})") from None
     cols = arrow.to_pydict()
     seal = (arrow.schema.metadata or {}).get(TABLE_SEAL.encode())
-    if seal is None or seal.decode() != checksum(jsonable(cols)):
+    if seal is None:
+        raise DatasetError(path, "carries no checksum (written by an older mirrorsim or "
+                           "another tool; resuming the dataset redoes its unsealed rows and "
+                           "writes it again)")
+    if seal.decode() != checksum(jsonable(cols)):
         raise DatasetError(path, "its checksum does not match its contents (edited, or not "
                            "written by `mirrorsim dataset`, which writes it again from the "
                            "verified rows when the dataset is resumed)")

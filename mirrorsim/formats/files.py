@@ -10,10 +10,10 @@ from __future__ import annotations
 
 import contextlib
 import errno
-import glob
 import json
 import math
 import os
+import re
 import sys
 import tempfile
 from collections.abc import Iterator
@@ -81,17 +81,24 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
             tmp.unlink(missing_ok=True)
 
 
+_SWEPT: set[Path] = set()  # folders swept by this process: once each, not on every write
+
+
 def _sweep_stale(path: Path) -> None:
-    """Remove the temporary files of earlier writes of ``path`` whose process is gone (a
-    run killed with SIGKILL between writing and renaming)."""
-    prefix = f".{path.stem}.tmp"
+    """Remove the temporary files left in ``path``'s folder by earlier writes whose
+    process is gone (a run killed with SIGKILL between writing and renaming); once per
+    folder and process, since listing a folder of a million rows costs."""
+    folder = path.parent.absolute()
+    if folder in _SWEPT:
+        return
+    _SWEPT.add(folder)
     try:
-        found = list(path.parent.glob(f"{glob.escape(prefix)}*{glob.escape(path.suffix)}"))
+        found = [p for p in folder.iterdir() if p.name.startswith(".") and ".tmp" in p.name]
     except OSError:
         return
     for tmp in found:
-        pid = tmp.name[len(prefix):len(tmp.name) - len(path.suffix)]
-        if pid.isdigit() and int(pid) != os.getpid() and not _alive(int(pid)):
+        m = re.fullmatch(r"\..*\.tmp(\d+)(\.[^.]*)?", tmp.name)
+        if m and int(m[1]) != os.getpid() and not _alive(int(m[1])):
             with contextlib.suppress(OSError):
                 tmp.unlink()
 
@@ -168,9 +175,12 @@ def claim_output_folder(path: str | Path, option: str) -> Path:
         p = p.parent
     try:
         for d in reversed(made):
-            d.mkdir()
+            try:
+                d.mkdir()
+            except FileExistsError:  # another run made it meanwhile: its, then ours
+                continue
             (d / OUTPUT_MARK).touch()
-        if not made:
+        if not made or not (path / OUTPUT_MARK).exists():
             _check_ours(path, option)
             (path / OUTPUT_MARK).touch()
     except OSError as exc:

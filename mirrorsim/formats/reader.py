@@ -99,7 +99,10 @@ class Reader:
         """A finite number, optionally > 0 and within [low, high]."""
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise self.fail(key, f"expected a number, got {show(value)}")
-        v = float(value)
+        try:
+            v = float(value)
+        except OverflowError:  # an integer of hundreds of digits
+            raise self.fail(key, f"{show(value)[:20]}… is not a finite number") from None
         if not math.isfinite(v):
             raise self.fail(key, f"{show(value)} is not a finite number")
         if positive and v <= 0.0:

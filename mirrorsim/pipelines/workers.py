@@ -75,15 +75,23 @@ def _die_with(parent: int) -> None:
         os._exit(1)
 
 
+def available_mb() -> float | None:
+    """The memory available to new processes (Linux's MemAvailable, MiB), or None."""
+    try:
+        with open("/proc/meminfo") as f:
+            return next(int(line.split()[1]) for line in f
+                        if line.startswith("MemAvailable:")) / 1024
+    except (OSError, StopIteration, ValueError, IndexError):
+        return None
+
+
 def max_workers() -> tuple[int, str]:
     """How many local workers this machine runs usefully: one per core, and no more
     than its available memory holds (WORKER_MEMORY_MB each); and why."""
-    cores = os.cpu_count() or 1
-    try:
-        with open("/proc/meminfo") as f:
-            free_mb = next(int(line.split()[1]) for line in f
-                           if line.startswith("MemAvailable:")) / 1024
-    except (OSError, StopIteration, ValueError, IndexError):
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (
+        os.cpu_count() or 1)  # the cores this process may use (affinity, cpusets)
+    free_mb = available_mb()
+    if free_mb is None:
         return cores, f"{cores} cores"
     by_memory = max(1, int(free_mb // WORKER_MEMORY_MB))
     return min(cores, by_memory), (f"{cores} cores; {free_mb / 1024:.1f} GiB available "
