@@ -596,3 +596,15 @@ def test_frame_sizes_read_from_headers_match_the_decoded_images():
     for data in (png, jpg, padded):
         assert header_size(data) == (53, 37)
     assert header_size(png[:20]) is None and header_size(b"\xff\xd8\x00\x00" * 4) is None
+
+
+def test_errormodel_plots_never_go_over_a_file_that_is_not_a_models(tmp_path, capsys):
+    """--out notes/model.json puts its plots in notes/model.png: a user's model.png
+    there (without a model.json beside it) is refused before any work."""
+    notes = tmp_path / "notes"
+    notes.mkdir()
+    (notes / "model.png").write_bytes(b"my figure")
+    _refused(capsys, ["errormodel", str(tmp_path / "ds"), "--out", str(notes / "model.json")],
+             "its plots would go over")
+    assert (notes / "model.png").read_bytes() == b"my figure"
+    assert [p.name for p in notes.iterdir()] == ["model.png"]

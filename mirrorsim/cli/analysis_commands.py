@@ -222,6 +222,11 @@ def _errormodel(args) -> int:
     if args.out is not None and args.out.suffix != ".json":
         raise BadArgument("--out", f"{args.out}: the model is JSON: give a *.json path (its "
                           "plots go beside it as *.png)")
+    plots = (args.out or args.dataset / "error_model.json").with_suffix(".png")
+    if args.out is not None and plots.exists() and not args.out.exists():
+        # the plots' file, named by us, is someone else's unless it came with the model
+        raise BadArgument("--out", f"{args.out}: its plots would go over {str(plots)!r}, "
+                          "which is not a model's: choose another name")
     cols = errormodel.read_columns(args.dataset)
     try:
         model = errormodel.fit(cols)
