@@ -303,3 +303,62 @@ def test_mirror_image_lies_where_the_mirror_puts_it(tmp_path, fast_variant):
         [[*reflect(front + k * across * t.size[0] / 2, s.mirror.center, s.mirror.yaw),
           t.size[1] / 2] for k in (-1, 1)]))
     assert abs(m.u_left - u.min()) < 0.025 and abs(m.u_right - u.max()) < 0.025
+
+
+def test_a_tile_renders_its_window_as_a_crop_of_the_film_does(fast_variant):
+    """The tile sensor aimed at a window (its principal point) sees exactly what a crop
+    of the full film there sees: the same pixels, at the same seed, to float rounding."""
+    import mitsuba as mi
+
+    from mirrorsim.rendering.mitsuba_scene import _cropped, aim_tile, build_scene_dict
+    from mirrorsim.rendering.passes import variant_scope
+
+    scene = small_scene("default", 480, 272)
+    u0, v0 = optics.mirror_box(scene)[:2]
+    with variant_scope(fast_variant):
+        d = build_scene_dict(scene, tiles=(64,))
+        d["sensor_crop"] = _cropped(d["sensor"], (u0, v0, u0 + 64, v0 + 64))
+        ms = mi.load_dict(d, optimize=False)
+        sensors = {s.id(): s for s in ms.sensors()}
+        aim_tile(mi.traverse(sensors["sensor_tile64"]), scene.camera, 64, u0, v0)
+        tile, crop = (np.array(mi.render(ms, sensor=sensors[k], spp=16, seed=7))
+                      for k in ("sensor_tile64", "sensor_crop"))
+    assert crop.shape == tile.shape == (64, 64, 3) and crop.mean() > 0.01
+    assert np.abs(tile - crop).max() < 1e-5
+
+
+def test_a_new_scene_compiles_no_new_kernel(jit_variant):
+    """Dr.Jit's kernel history: after one scene, a scene with its mirror, target and
+    beacon elsewhere (by amounts drawn afresh each run, so that no earlier run's kernel
+    cache serves them) and another seed renders with kernels already compiled (the
+    light is a mesh; the boxes are rendered in fixed tiles, aimed by parameters)."""
+    import copy
+
+    import drjit as dr
+
+    from mirrorsim.rendering.passes import render_frame
+
+    from .conftest import scene_dict
+
+    rng = np.random.default_rng()
+    shift = rng.uniform(-1.0, 1.0, 3)
+
+    def scene(dx: float, dy: float, db: float):
+        d = copy.deepcopy(scene_dict("default"))
+        d["camera"]["resolution"] = [480, 272]
+        d["mirror"]["center"] = [d["mirror"]["center"][0] + dx, d["mirror"]["center"][1] + dy]
+        d["target"]["position"][0] += dx
+        d["beacon"]["position"][1] += db
+        return scene_from_dict(d, "shifted.yaml", "shifted")
+
+    render_frame(scene(0.0, 0.0, 0.0), variant=jit_variant, progress=False)
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        dr.kernel_history()  # emptied
+        render_frame(scene(*shift).with_render(seed=int(rng.integers(1 << 30))),
+                     variant=jit_variant, progress=False)
+        new = [h for h in dr.kernel_history()
+               if h["type"] == dr.KernelType.JIT and not h["cache_hit"]]
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    assert new == [], (shift, [h["size"] for h in new])

@@ -171,20 +171,22 @@ def _pencil_meshes(position, height: float) -> dict[str, mi.Mesh]:
         meshes[part] = mesh
     return meshes
 
-def build_scene_dict(scene: Scene, crops: tuple[tuple[int, int, int, int], ...] = ()) -> dict:
+def build_scene_dict(scene: Scene, tiles: tuple[int, ...] = ()) -> dict:
     """The Mitsuba scene description with the scene's sampler and spp (the variant must
     already be set).
 
     Shape keys are prefixed with the object they belong to (``mirror``, ``target``,
-    ``beacon0``, ``occluder0``…), which is how the id pass labels pixels.  Each of
-    ``crops`` (u0, v0, u1, v1) adds a sensor, ``sensor_crop<k>``: the same camera
-    rendering only that part of the film (``mi.Scene.sensors()`` lists the full film
-    first, then the crops in this order).
+    ``beacon0``, ``occluder0``…), which is how the id pass labels pixels.  Each size T
+    of ``tiles`` adds a sensor ``sensor_tile<T>``: the same camera with a T × T film and
+    the full film's focal length, aimed at any T × T window of the full film by its
+    principal point (:func:`aim_tile`).  Its kernel depends on T alone, so one compiled
+    kernel serves every window of every scene (a film crop's offset and size were
+    compiled in: a new kernel for each new scene's mirror and beacon boxes).
     """
     d = _stage(scene.board, scene.camera, scene.render.spp, scene.render.sampler, scene.bench.pitch,
                scene.bench.roll)
-    for k, crop in enumerate(crops):
-        d[f"sensor_crop{k}"] = _cropped(d["sensor"], crop)
+    for t in tiles:
+        d[f"sensor_tile{t}"] = _tile_sensor(d["sensor"], scene.camera, t)
     d.update(_mirror_shapes(scene))
     d.update(_target_shapes(scene.target))
     for i, b in enumerate(scene.beacons):
@@ -235,6 +237,25 @@ def build_direct_dict(board: Board, camera: Camera, obj: Target | Beacon, *, spp
     return d
 
 
+def _tile_sensor(sensor: dict, cam: Camera, t: int) -> dict:
+    """A copy of a sensor description with a t × t film and the same pixel size."""
+    fov = math.degrees(2.0 * math.atan(t / 2.0 / cam.fx))
+    return {**sensor, "fov": fov, "sampler": dict(sensor["sampler"]),
+            "film": {**sensor["film"], "width": t, "height": t}}
+
+
+def aim_tile(params, cam: Camera, t: int, u0: int, v0: int) -> None:
+    """Aim a tile sensor (its ``mi.traverse`` parameters) at the full film's window with
+    top-left pixel (u0, v0): the full film's optical axis, at (W/2, H/2), falls at
+    (W/2 − u0, H/2 − v0) of the tile, so that tile pixel (i, j) is film pixel
+    (u0 + i, v0 + j).  Mitsuba's offset is in tile sizes, from the tile's centre, with
+    the opposite sign (checked: a tile renders the crop of the same window bit for bit
+    at the same seed)."""
+    params["principal_point_offset_x"] = (u0 + t / 2.0 - cam.width / 2.0) / t
+    params["principal_point_offset_y"] = (v0 + t / 2.0 - cam.height_px / 2.0) / t
+    params.update()
+
+
 def _cropped(sensor: dict, crop: tuple[int, int, int, int]) -> dict:
     """A copy of a sensor description that renders only the film's ``crop``."""
     u0, v0, u1, v1 = crop
@@ -276,10 +297,7 @@ def _stage(board: Board, cam: Camera, spp: int, sampler: str, pitch: float = 0.0
         "room_floor": {"type": "rectangle", "to_world": mi.ScalarTransform4f()
                        .translate(list(bc + [0, 0, -0.6])).scale([140, 140, 1]),
                        "bsdf": _diffuse("floor")},
-        "room_light": {"type": "rectangle", "to_world": mi.ScalarTransform4f()
-                       .translate(list(bc + [-20, -30, 150])).rotate([1, 0, 0], 180)
-                       .scale([60, 60, 1]),
-                       "emitter": {"type": "area", "radiance": {"type": "rgb", "value": 6.0}}},
+        "room_light": _ceiling_light(bc + [-20, -30, 150], 60.0, 6.0),
         "board_top": {"type": "rectangle",
                       "to_world": mi.ScalarTransform4f().translate(list(bc))
                       .scale([sx / 2, sy / 2, 1]),
@@ -289,6 +307,29 @@ def _stage(board: Board, cam: Camera, spp: int, sampler: str, pitch: float = 0.0
         "board_slab": _box(bc - [0, 0, 0.3], [sx / 2, 0, 0], [0, sy / 2, 0], [0, 0, 0.299],
                            "board_edge"),
     }
+
+
+def _ceiling_light(centre, half: float, radiance: float) -> mi.Mesh:
+    """A square area light facing down, as a two-triangle mesh.
+
+    A mesh and not a ``rectangle``: a rectangle's transform is compiled into the
+    render kernels as constants, and the light moves with every scene (the world is
+    centred on the glass), so each new scene compiled its whole-film kernel again
+    (0.4–0.5 s); a mesh's vertices are data, and the kernel is reused.
+    """
+    x, y, z = (float(v) for v in centre)
+    verts = np.array([[x - half, y - half, z], [x + half, y - half, z],
+                      [x + half, y + half, z], [x - half, y + half, z]], np.float32)
+    faces = np.array([[0, 2, 1], [0, 3, 2]], np.uint32)  # clockwise from above: facing down
+    props = mi.Properties()
+    props["emitter"] = mi.load_dict({"type": "area",
+                                     "radiance": {"type": "rgb", "value": radiance}})
+    mesh = mi.Mesh("room_light", 4, 2, props=props, has_vertex_normals=False)
+    params = mi.traverse(mesh)
+    params["vertex_positions"] = type(params["vertex_positions"])(verts.ravel())
+    params["faces"] = type(params["faces"])(faces.ravel())
+    params.update()
+    return mesh
 
 
 def _mirror_shapes(scene: Scene) -> dict:

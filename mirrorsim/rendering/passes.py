@@ -23,6 +23,7 @@ from mirrorsim.rendering.backend import choose_variant
 from mirrorsim.rendering.mitsuba_scene import (
     BACKGROUND_LABEL,
     MIRROR_LABEL,
+    aim_tile,
     build_direct_dict,
     build_scene_dict,
     label_of,
@@ -36,7 +37,15 @@ IN_MIRROR = 100  # ids.png: label + IN_MIRROR where the pixel sees it in the mir
 # samples per render call: one progress step each.  A stratified sampler stratifies
 # within a call, so the passes are large; a dataset's few-spp frame is one call.
 PASS_SPP = 16
-RENDER_METHOD = "passes16-ss-glass0"  # part of a frame's fingerprint: bump when renders change
+# part of a frame's fingerprint: bump when renders change
+RENDER_METHOD = "passes16-ss-glass0-tiles"
+# the boxes are rendered in fixed square tiles (one compiled kernel per size for every
+# scene): the mirror's box at the frame's spp in tiles of MIRROR_TILE px, each beacon's
+# box at beacon_spp in tiles of BEACON_TILE px (small: its samples are 16× dearer)
+MIRROR_TILE, BEACON_TILE = 128, 64
+# samples per render call of a tile at most: a beacon's 64² tile takes its 128 spp in
+# two calls, not eight (each call costs ~5 ms besides its samples)
+TILE_SAMPLES = 1 << 20
 MITSUBA_VERSION = mi.__version__
 
 
@@ -85,14 +94,14 @@ def render_frame(scene: Scene, *, variant: str = "auto", progress: bool = True
     pinhole = replace(scene, camera=distortion_canvas(scene.camera, k)[0]) if lens else scene
     box, background, beacon_spp, boxes, passes = _regions(pinhole, spp)
     with variant_scope(chosen):
-        crops = tuple(c for c, _, _ in passes)
-        mi_scene = mi.load_dict(build_scene_dict(pinhole, crops),
-                                optimize=False)
-        with tqdm(total=(spp if box is None else background) + sum(n for _, n, _ in passes),
+        tiles = tuple(sorted({t for *_, t in passes}))
+        mi_scene = mi.load_dict(build_scene_dict(pinhole, tiles), optimize=False)
+        with tqdm(total=(spp if box is None else background) + sum(n for _, n, _, _ in passes),
                   unit="spp", disable=not progress, leave=False,
                   desc=f"rendering {scene.name} ({chosen})") as bar:
-            linear = _render_regions(mi_scene, spp if box is None else background, passes,
-                                     seed, bar.update)
+            linear = _render_regions(mi_scene, pinhole.camera,
+                                     spp if box is None else background, passes, seed,
+                                     bar.update)
         t_render = time.perf_counter() - t0
         first, in_mirror = id_pass(mi_scene, pinhole)
     if lens:
@@ -112,30 +121,41 @@ Region = tuple[int, int, int, int]
 
 
 def _regions(pinhole: Scene, spp: int) -> tuple[Region | None, int, int, list[Region],
-                                                list[tuple[Region, int, int]]]:
+                                                list[tuple[Region, int, int, int]]]:
     """Where the samples go: the mirror's box (None: the whole frame at spp), the spp
     outside it, the beacons' spp and boxes, and the passes after the whole film as
-    (region, spp, seed stream): the mirror's region at the full spp, then each beacon's
-    image at beacon_spp (inside the mirror's region: pasted after it)."""
+    (region, spp, seed stream, tile size): the mirror's region at the full spp, then
+    each beacon's image at beacon_spp (inside the mirror's region: pasted after it)."""
     background = min(pinhole.render.background_spp, spp)
     box = optics.mirror_box(pinhole) if background < spp else None
     beacon_spp = max(pinhole.render.beacon_spp, spp)
     boxes = [b for b in optics.beacon_boxes(pinhole) if b is not None] \
         if beacon_spp > spp else []
-    passes = ([(box, spp, 1)] if box is not None else []) \
-        + [(b, beacon_spp, 2 + i) for i, b in enumerate(boxes)]
+    passes = ([(box, spp, 1, MIRROR_TILE)] if box is not None else []) \
+        + [(b, beacon_spp, 2 + i, BEACON_TILE) for i, b in enumerate(boxes)]
     return box, background, beacon_spp, boxes, passes
 
 
-def _render_regions(mi_scene, whole_spp: int, passes: list[tuple[Region, int, int]],
-                    seed: int, step: Callable[[int], object]) -> np.ndarray:
-    """The whole film at ``whole_spp``, then each pass's region over it (each with its
-    own seed stream)."""
-    full, *crop_sensors = mi_scene.sensors()
-    linear = _accumulate(mi_scene, full, whole_spp, (seed, 0), step)
-    for sensor, ((u0, v0, u1, v1), n, stream) in zip(crop_sensors, passes, strict=True):
-        assert tuple(sensor.film().crop_offset()) == (u0, v0), "sensor order"
-        linear[v0:v1, u0:u1] = _accumulate(mi_scene, sensor, n, (seed, stream), step)
+def _render_regions(mi_scene, cam: Camera, whole_spp: int,
+                    passes: list[tuple[Region, int, int, int]], seed: int,
+                    step: Callable[[float], object]) -> np.ndarray:
+    """The whole film at ``whole_spp``, then each pass's region over it, tile by tile
+    (each tile with its own seed stream)."""
+    sensors = {s.id(): s for s in mi_scene.sensors()}
+    linear = _accumulate(mi_scene, sensors["sensor"], whole_spp, (seed, 0), step)
+    H, W = linear.shape[:2]
+    for (u0, v0, u1, v1), n, stream, t in passes:
+        sensor = sensors[f"sensor_tile{t}"]
+        params = mi.traverse(sensor)
+        corners = [(u, v) for v in range(v0, v1, t) for u in range(u0, u1, t)]
+        share = 1.0 / len(corners)  # the progress bar counts a region's spp once
+        for k, (u, v) in enumerate(corners):
+            aim_tile(params, cam, t, u, v)
+            img = _accumulate(mi_scene, sensor, n, (seed, stream, k),
+                              lambda m, f=share: step(m * f), _tile_pass(n, t))
+            # the tile's part inside the region (a tile may reach past it, or the film)
+            h, w = min(t, v1 - v, H - v), min(t, u1 - u, W - u)
+            linear[v:v + h, u:u + w] = img[:h, :w]
     return linear
 
 
@@ -150,18 +170,27 @@ def render_direct(board: Board, camera: Camera, obj: Target | Beacon, *, spp: in
                                     lambda _n: None))
 
 
-def _pass_seed(seed: tuple[int, int], k: int) -> int:
-    """Mitsuba's 32-bit seed of pass k of a render (seed, stream): hashed by a
+def _tile_pass(spp: int, t: int) -> int:
+    """Samples per call for a t × t tile: PASS_SPP times a power of 4 (a multijitter
+    sampler rounds other counts up) that divides ``spp``, within TILE_SAMPLES."""
+    per = PASS_SPP
+    while per * 4 * t * t <= TILE_SAMPLES and spp % (per * 4) == 0:
+        per *= 4
+    return per
+
+
+def _pass_seed(seed: tuple[int, ...], k: int) -> int:
+    """Mitsuba's 32-bit seed of pass k of a render (seed, stream[, tile]): hashed by a
     SeedSequence, so that any seed ≥ 0 works (Mitsuba refuses seeds ≥ 2³²) and passes
-    of different renders or streams do not share one."""
+    of different renders, streams or tiles do not share one."""
     return int(np.random.SeedSequence([*seed, k]).generate_state(1)[0])
 
 
-def _accumulate(mi_scene, sensor, spp: int, seed: tuple[int, int],
-                step: Callable[[int], object]) -> np.ndarray:
-    """Linear RGB, averaged over passes of PASS_SPP samples (one progress step each);
-    ``seed`` is (the render's seed, a stream number)."""
-    passes = [PASS_SPP] * (spp // PASS_SPP) + ([spp % PASS_SPP] if spp % PASS_SPP else [])
+def _accumulate(mi_scene, sensor, spp: int, seed: tuple[int, ...],
+                step: Callable[[int], object], per_pass: int = PASS_SPP) -> np.ndarray:
+    """Linear RGB, averaged over passes of ``per_pass`` samples (one progress step
+    each); ``seed`` is (the render's seed, a stream number[, a tile])."""
+    passes = [per_pass] * (spp // per_pass) + ([spp % per_pass] if spp % per_pass else [])
     if len(passes) == 1:  # the common case in datasets: no float64 sum to make
         img = np.array(mi.render(mi_scene, sensor=sensor, spp=spp, seed=_pass_seed(seed, 0)),
                        dtype=np.float32)
