@@ -345,15 +345,21 @@ def test_ctrl_c_during_a_calibration_render_exits_130(tmp_path):
     from mirrorsim.formats.cache import cache_root
     from mirrorsim.rendering import backend
 
-    from .conftest import SCENES
-
     # the backend's answer known (the session's), so that the renders start at once
     if not backend.probe("llvm_ad_rgb")[0]:
         pytest.skip("no LLVM backend here: the interrupt to wrap is Dr.Jit's")
     shutil.copytree(cache_root() / "backend", tmp_path / "backend")
-    proc = _cli("calibrate", str(SCENES / "default.yaml"), "--variant", "llvm",
+    import yaml
+
+    from .conftest import scene_dict
+
+    d = scene_dict("default")
+    d["camera"]["resolution"] = [3840, 2176]  # 4× the pixels: renders of ~10 s here
+    big = tmp_path / "big.yaml"
+    big.write_text(yaml.safe_dump(d))
+    proc = _cli("calibrate", str(big), "--variant", "llvm",
                 env={"MIRRORSIM_CACHE_DIR": str(tmp_path)})
-    time.sleep(3.0)  # imports (~1 s), then two reference renders of several seconds
+    time.sleep(3.0)  # imports (~1 s), then the reference renders
     proc.send_signal(signal.SIGINT)
     _out, err = proc.communicate(timeout=60)
     if proc.returncode == 0:

@@ -21,9 +21,6 @@ from mirrorsim.cli.registry import (
 )
 from mirrorsim.errors import BadArgument, RunFailed
 from mirrorsim.formats.files import emit_json
-from mirrorsim.pipelines.score import EXTRA_FILES
-from mirrorsim.scene.model import RenderSettings
-from solver.measurements import SIGMA_ALPHA_MAX_DEG
 
 MAX_ITERATIONS = 1_000_000  # draws per Monte Carlo row: about a second a row at the most
 
@@ -77,6 +74,7 @@ def _montecarlo_options(p):
          "mirror and beacon stand: the options below set them.", _montecarlo_options)
 def _montecarlo(args) -> int:
     from mirrorsim.cli.tables import montecarlo_table
+    from solver.measurements import SIGMA_ALPHA_MAX_DEG
     from solver.montecarlo import Table1Geometry, table1, table_rows
     from solver.sltr import SolverError
 
@@ -149,6 +147,8 @@ def _dataset_options(p):
     inputs(p, ("spec", "--spec", "file"))
     p.add_argument("--spp", type=int, help="samples per pixel (default: the spec's)")
     sampler_option(p)
+    from mirrorsim.pipelines.score import EXTRA_FILES
+
     p.add_argument("--keep", nargs="*", default=[], choices=EXTRA_FILES,
                    help="files to write beside each frame besides its PNG, capture record "
                    "and truth: ids (the id labels), annotated (the detections drawn); "
@@ -173,6 +173,8 @@ def _dataset(args) -> int:
 
     at_least(("--n", args.n, 1), ("--seed", args.seed, 0), ("--workers", args.workers, 1))
     if args.spp is not None:  # checked as every scene's render settings are
+        from mirrorsim.scene.model import RenderSettings
+
         RenderSettings(spp=args.spp)
     workers = args.workers
     if args.executor == "local":

@@ -28,7 +28,18 @@ def main() -> int:
             signal.signal(sig, _exit_now)
     from mirrorsim.cli.main import main as run
 
-    return run()
+    status = run()
+    # past the run, a late signal ends the process at once again; and after an interrupt
+    # the interpreter's clean-up is skipped: Dr.Jit's threads may still be finishing a
+    # kernel, and calling back into a finalizing interpreter aborts it
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        if signal.getsignal(sig) is not signal.SIG_IGN:
+            signal.signal(sig, _exit_now)
+    if status >= 128:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(status)
+    return status
 
 
 if __name__ == "__main__":

@@ -34,8 +34,11 @@ ORDER = ("evaluate", "render", "check", "plot", "detect", "calibrate", "budget",
          "errormodel", "solve", "montecarlo", "plan")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser with every registered command."""
+def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
+    """The argument parser with every registered command; given the command line
+    ``argv``, with the options of its command only (a command's options import what it
+    needs, SciPy's optimizer for `track`: `mirrorsim --help` and `check` need none of
+    that)."""
     parser = argparse.ArgumentParser(
         prog="mirrorsim",
         description="Physically rendered mirror space for NLOS localization (SLTR): render "
@@ -43,10 +46,12 @@ def build_parser() -> argparse.ArgumentParser:
                     "error models and beacon placement.")
     parser.add_argument("--version", action="version", version=f"mirrorsim {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    chosen = None if argv is None else next((a for a in argv if not a.startswith("-")), "")
     for name in sorted(COMMANDS, key=lambda n: ORDER.index(n) if n in ORDER else len(ORDER)):
         summary, description, options, handler = COMMANDS[name]
         p = sub.add_parser(name, help=summary, description=description)
-        options(p)
+        if chosen is None or name == chosen:
+            options(p)
         p.set_defaults(handler=handler)
     return parser
 
@@ -74,7 +79,8 @@ def main(argv: list[str] | None = None) -> int:
     _Interrupt.signum = None
     # the parser imports the commands' modules: under the entry point's handlers still
     # (:mod:`mirrorsim.cli.entry`), which end the process at once
-    args = build_parser().parse_args(argv)
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = build_parser(argv).parse_args(argv)
     # signals can be handled in the main thread only (a caller may run us in another)
     main_thread = threading.current_thread() is threading.main_thread()
     before = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)

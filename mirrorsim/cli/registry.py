@@ -8,6 +8,7 @@ import os
 import sys
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from mirrorsim.errors import BadArgument, OutputError
 from mirrorsim.formats.files import (
@@ -16,8 +17,9 @@ from mirrorsim.formats.files import (
     claim_output_folder,
     default_out,
 )
-from mirrorsim.formats.scenefile import load_scene
-from mirrorsim.scene.model import MAX_SPP, SAMPLERS, RenderSettings, Scene
+
+if TYPE_CHECKING:  # the rest is imported where used: `mirrorsim --help` needs none of it
+    from mirrorsim.scene.model import Scene
 
 VARIANT_CHOICES = ["auto", "cuda", "llvm", "scalar"]
 IMAGE_SUFFIXES = (".png", ".pdf", ".svg")  # what a plot may be written as
@@ -159,6 +161,8 @@ def common(p: argparse.ArgumentParser, *, scene: bool = True, out: str | None = 
     if json:
         output(p, "--json", "file", metavar="FILE", help=f"write {json} here (- = stdout)")
     if spp:
+        from mirrorsim.scene.model import MAX_SPP, RenderSettings
+
         p.add_argument("--spp", type=int, help=f"samples per pixel in the mirror's image, "
                        f"1..{MAX_SPP} (default: the scene's, else {RenderSettings().spp})")
         p.add_argument("--seed", type=int, help="sampler seed ≥ 0 (default: the scene's, else 0)")
@@ -203,6 +207,8 @@ def finite(args: argparse.Namespace, *dests: str) -> None:
 
 def sampler_option(p: argparse.ArgumentParser) -> None:
     """--sampler, for commands that render."""
+    from mirrorsim.scene.model import SAMPLERS, RenderSettings
+
     p.add_argument("--sampler", choices=SAMPLERS,
                    help="Mitsuba sampler (default: the scene's render.sampler, else "
                    f"{RenderSettings().sampler}); see README, Throughput")
@@ -219,6 +225,8 @@ def render_options(args: argparse.Namespace, scene: Scene) -> Scene:
 
 def load(path: Path) -> Scene:
     """Load a scene and print its warnings on stderr."""
+    from mirrorsim.formats.scenefile import load_scene
+
     scene = load_scene(path)
     for w in scene.warnings:
         print(f"warning: {path}: {w}", file=sys.stderr)

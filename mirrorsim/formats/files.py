@@ -18,11 +18,12 @@ import sys
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from mirrorsim.errors import OutputError
+
+if TYPE_CHECKING:
+    import numpy as np
 
 PROBE_BYTES = 64 * 1024  # written and synced where outputs will go: a full disk says so
 # the mark of a folder mirrorsim made (or found empty) for its outputs: it writes the
@@ -37,6 +38,7 @@ def default_out(scene_name: str) -> Path:
 
 def jsonable(value: Any) -> Any:
     """``value`` with numpy scalars and arrays made plain, and NaN/±inf made ``None``."""
+    import numpy as np  # here, not at the top: the command line's start-up imports this
     if isinstance(value, dict):
         return {str(k): jsonable(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
@@ -245,6 +247,7 @@ def encode_jpeg(pixels: np.ndarray, quality: int) -> bytes:
 
 def _encode(pixels: np.ndarray, ext: str, params: list[int]) -> bytes:
     import cv2
+    import numpy as np
 
     px = np.ascontiguousarray(pixels[..., ::-1] if pixels.ndim == 3 else pixels)
     ok, buf = cv2.imencode(ext, px, params)
