@@ -28,7 +28,7 @@ llvm:
 	else echo "note: install libLLVM 19 (apt-get install libllvm19) for the fast backend"; fi
 
 demo: setup
-	$(BIN)/mirrorsim evaluate scenes/default.yaml
+	$(BIN)/mirrorsim evaluate scenes/default.yaml --keep plot annotated
 
 test: setup
 	$(BIN)/python -m pytest

@@ -28,7 +28,7 @@ def run(*args: str) -> None:
 
 def main() -> None:
     """Make the README's pictures."""
-    run("evaluate", "scenes/default.yaml", "--quiet")
+    run("evaluate", "scenes/default.yaml", "--quiet", "--keep", "annotated", "plot")
     (DOCS / "default_eval.png").write_bytes(
         (ROOT / "renders" / "default" / "default.eval.png").read_bytes())
     run("plot", "scenes/default.yaml", "--out", str(DOCS / "default_top.png"))

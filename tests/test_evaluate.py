@@ -97,7 +97,8 @@ def test_reuse_and_several_beacons(tmp_path):
 @pytest.mark.parametrize("name", ["default", "exp1"])
 def test_full_size_end_to_end(name, tmp_path, capsys):
     out = tmp_path / name
-    assert main(["evaluate", str(SCENES / f"{name}.yaml"), "--out", str(out), "--quiet"]) == 0
+    assert main(["evaluate", str(SCENES / f"{name}.yaml"), "--out", str(out), "--quiet",
+                 "--keep", "annotated", "plot"]) == 0
     rep = json.loads((out / f"{name}.report.json").read_text())
     e = rep["errors"]
     # the solver's 95 % bound from the detector's measured σ's and this geometry

@@ -157,33 +157,43 @@ def _calibrate(args) -> int:
 def _evaluate_options(p):
     common(p, out="output folder (default renders/<name>/)", json="the report", spp=True,
             variant=True, quiet=True)
+    p.add_argument("--keep", nargs="*", default=[], choices=("ids", "annotated", "plot"),
+                   help="write also: ids, each frame's object-id labels (<name>.ids.png); "
+                        "annotated, each frame with its detections drawn "
+                        "(<name>.annotated.png); plot, the top view of truth and estimate "
+                        "with the 95 %% error ellipse (<name>.eval.png).  Each costs "
+                        "0.1-2 s, so none by default")
 
 
 @command("evaluate", "render, detect, solve and score against ground truth",
          "The main job: render SCENE (or reuse a render of the same scene, spp and seed), detect "
          "the target and beacons, localize mirror and target, and score everything against the "
-         "exact ground truth.  Prints a table; writes DIR/<name>.report.json, DIR/<name>.eval.png "
-         "(truth vs estimate with the 95 %% error ellipse) and the annotated frame(s).  A scene "
-         "with several beacons renders one frame per beacon and reports the error as beacons "
-         "are added.  Exit 0 whenever it ran.",
+         "exact ground truth.  Prints a table; writes the frame, its ground truth and capture "
+         "record, DIR/<name>.report.json and, with --keep, the id labels, the annotated "
+         "frame(s) and a top view.  A scene with several beacons renders one frame per beacon "
+         "and reports the error as beacons are added.  Exit 0 whenever it ran.",
          _evaluate_options)
 def _evaluate(args) -> int:
-    from mirrorsim.cli.plots import plot_evaluation
     from mirrorsim.cli.tables import report_table
     from mirrorsim.formats.files import write_json
     from mirrorsim.pipelines.evaluate import evaluate_scene
 
     scene = render_options(args, load(args.scene))
-    preload("mirrorsim.cli.plots")  # matplotlib imports while the frame renders
+    if "plot" in args.keep:
+        preload("mirrorsim.cli.plots")  # matplotlib imports while the frame renders
     out = out_folder(args, scene)
-    report = evaluate_scene(scene, out, variant=args.variant, progress=not args.quiet)
+    report = evaluate_scene(scene, out, variant=args.variant, progress=not args.quiet,
+                            keep=tuple(k for k in args.keep if k != "plot"))
     print(f"{scene.name}: {len(report.frames)} frame(s), {report.render.spp} spp, "
           f"{report.render.variant}{' (reused)' if report.reused else ''}")
     print(report_table(report))
-    path = write_json(out / f"{scene.name}.report.json", report.to_json())
-    fig = plot_evaluation(scene, report, out / f"{scene.name}.eval.png")
-    print(f"report: {path}\ntop view: {fig}\nannotated: "
-          + ", ".join(f.annotated for f in report.frames))
+    print(f"report: {write_json(out / f'{scene.name}.report.json', report.to_json())}")
+    if "plot" in args.keep:
+        from mirrorsim.cli.plots import plot_evaluation
+
+        print(f"top view: {plot_evaluation(scene, report, out / f'{scene.name}.eval.png')}")
+    if "annotated" in args.keep:
+        print("annotated: " + ", ".join(f.annotated for f in report.frames))
     emit_json(args.json, report.to_json())
     return 0
 

@@ -96,23 +96,55 @@ def find_target(img: np.ndarray, ratio: float) -> tuple[int, int, int, int] | No
         if not whole and area < MERGED_MIN_AREA:
             continue
         # re-grow around the region's own colour: separates a differently grey neighbour,
-        # also one that merged with the panel into a region no panel could be
-        core = blur[labels == k]
-        med = np.median(core, axis=0)
-        similar = (np.abs(blur - med).max(axis=2) < 22) & neutral
-        similar = cv2.morphologyEx(similar.astype(np.uint8), cv2.MORPH_OPEN, kernel)
-        lab2, comps2 = _components(similar, 300)
-        seed = lab2[y + h // 2, x + w // 2]
-        for kk, x2, y2, w2, h2, area2 in comps2:
-            if area2 / (w2 * h2) < 0.75 or not 0.8 / ratio <= h2 / w2 <= 4.0:
-                continue
-            if whole and kk != seed:
-                continue
-            if not whole and np.count_nonzero((lab2 == kk) & (labels == k)) < 0.5 * area2:
-                continue
-            if best is None or area2 > best[4]:
-                best = (x2, y2, x2 + w2 - 1, y2 + h2 - 1, area2)
+        # also one that merged with the panel into a region no panel could be.  In a
+        # window around the region (the whole frame only where what matters reaches the
+        # window's edge: the same result, without rescanning the frame per region)
+        box = (x, y, w, h)
+        found = _regrow(blur, neutral, labels, k, box, whole, ratio, kernel, max(w, h))
+        if found is None:
+            found = _regrow(blur, neutral, labels, k, box, whole, ratio, kernel, None)
+        for cand in found:
+            if best is None or cand[4] > best[4]:
+                best = cand
     return None if best is None else best[:4]
+
+
+def _regrow(blur, neutral, labels, k, box, whole: bool, ratio: float, kernel,
+            margin: int | None) -> list[tuple[int, int, int, int, int]] | None:
+    """The panel-shaped regions of region ``k``'s own colour that belong to it, as
+    (u0, v0, u1, v1, area), looked for within ``margin`` px of its box (None: the
+    whole frame); None if one that matters comes near the window's edge, where the
+    opening and the regions could differ from the whole frame's."""
+    x, y, w, h = box
+    H, W = labels.shape
+    near = 2 * FRAME_OPEN_PX  # the opening's reach, twice
+    if margin is None:
+        u0, v0, u1, v1 = 0, 0, W, H
+    else:
+        u0, v0 = max(0, x - margin - near), max(0, y - margin - near)
+        u1, v1 = min(W, x + w + margin + near), min(H, y + h + margin + near)
+    win = (slice(v0, v1), slice(u0, u1))
+    mine = labels[win] == k
+    med = np.median(blur[win][mine], axis=0)
+    similar = (np.abs(blur[win] - med).max(axis=2) < 22) & neutral[win]
+    similar = cv2.morphologyEx(similar.astype(np.uint8), cv2.MORPH_OPEN, kernel)
+    lab2, comps2 = _components(similar, 300)
+    seed = lab2[y + h // 2 - v0, x + w // 2 - u0]
+    out = []
+    for kk, x2, y2, w2, h2, area2 in comps2:
+        if whole and kk != seed:
+            continue
+        if not whole and np.count_nonzero((lab2 == kk) & mine) < 0.5 * area2:
+            continue
+        inner = ((x2 < near and u0 > 0) or (y2 < near and v0 > 0)
+                 or (x2 + w2 > (u1 - u0) - near and u1 < W)
+                 or (y2 + h2 > (v1 - v0) - near and v1 < H))
+        if inner:
+            return None
+        if area2 / (w2 * h2) < 0.75 or not 0.8 / ratio <= h2 / w2 <= 4.0:
+            continue
+        out.append((x2 + u0, y2 + v0, x2 + u0 + w2 - 1, y2 + v0 + h2 - 1, area2))
+    return out
 
 
 def find_pencils(img: np.ndarray) -> list[tuple[int, int, int, int]]:

@@ -55,8 +55,10 @@ def calibration_for(capture: CaptureRecord, *, variant: str = "auto",
 
 def measure_frame(image_path: str | Path, capture: CaptureRecord, *,
                   calibration: Calibration | None = None, variant: str = "auto",
-                  distance_error: float = 0.0, source: str = "") -> MeasuredFrame:
-    """Calibrate (unless given) and detect one frame from its pixels and capture record.
+                  distance_error: float = 0.0, source: str = "",
+                  pixels: np.ndarray | None = None) -> MeasuredFrame:
+    """Calibrate (unless given) and detect one frame from its pixels and capture record
+    (``pixels``: the file's pixels already in memory, a PNG just written).
 
     Raises
     ------
@@ -66,7 +68,8 @@ def measure_frame(image_path: str | Path, capture: CaptureRecord, *,
         When the calibration's own references cannot be measured.
     """
     cam = capture.camera
-    image = read_frame(image_path, (cam.width, cam.height_px))
+    image = pixels if pixels is not None else read_frame(image_path,
+                                                           (cam.width, cam.height_px))
     cal = calibration or calibration_for(capture, variant=variant,
                                          distance_error=distance_error)
     try:
@@ -84,5 +87,6 @@ def render_and_measure(scene: Scene, out: str | Path, *, variant: str = "auto",
     files = render_to_files(scene, out, variant=variant, progress=progress, reuse=reuse,
                             ids=ids)
     m = measure_frame(files.image, files.capture, calibration=calibration, variant=variant,
-                      distance_error=scene.bench.calibration_distance_error)
+                      distance_error=scene.bench.calibration_distance_error,
+                      pixels=files.pixels)
     return replace(m, files=files)

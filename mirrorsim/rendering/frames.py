@@ -13,7 +13,7 @@ import contextlib
 import hashlib
 import json
 import warnings
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -52,6 +52,9 @@ class FrameFiles:
     capture: CaptureRecord
     truth: GroundTruth
     reused: bool = False
+    # the frame's 8-bit RGB pixels as written to a lossless PNG just now (None: reused, or
+    # a JPEG, which the detector must see as decoded): detection need not decode it again
+    pixels: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     @property
     def seconds(self) -> float:
@@ -109,7 +112,8 @@ def write_frame(scene: Scene, frame: RenderedFrame, out: Path,
         for path, data in files.items():
             stack.enter_context(atomic_path(path)).write_bytes(data)
     return FrameFiles(image=image, truth_json=js, ids_png=ids_png if ids else None,
-                      capture_json=cap, capture=capture, truth=truth)
+                      capture_json=cap, capture=capture, truth=truth,
+                      pixels=srgb if quality is None else None)
 
 
 def _paths(scene: Scene, out: Path) -> tuple[Path, Path, Path, Path]:

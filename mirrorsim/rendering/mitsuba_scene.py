@@ -91,19 +91,27 @@ def _board_texture(board: Board) -> np.ndarray:
     caller must not modify it; mi.Bitmap copies it)."""
     sx, sy = board.size
     nx, ny = (max(2, round(s * BOARD_TEXELS_PER_CM)) for s in (sx, sy))
-    base = np.broadcast_to(np.array(_COLOURS["board"], np.float32), (ny, nx, 3)).copy()
+    base = np.broadcast_to(np.array(_COLOURS["board"], np.float32), (ny, nx, 3))
     pitch = board.hole_pitch
     if pitch <= 0:
-        return base
+        return base.copy()
     # texel centres in cm; row 0 is the far (y = sy) edge as textures run top-down
     x = (np.arange(nx) + 0.5) * sx / nx
     y = sy - (np.arange(ny) + 0.5) * sy / ny
     dx = (x - pitch / 2) % pitch - pitch / 2
     dy = (y - pitch / 2) % pitch - pitch / 2
-    dist = np.hypot(dx[None, :], dy[:, None])
+    # the grid repeats: each distinct (dx, dy) pair is computed once, then its columns
+    # and rows copied out (the same floats as computing every texel, several times
+    # faster where the pitch is a whole number of texels, as on the default board)
+    ux, ix = np.unique(dx, return_inverse=True)
+    uy, iy = np.unique(dy, return_inverse=True)
+    if len(ux) * len(uy) * 16 > nx * ny:  # a pitch of no whole number of texels: no repeats
+        ux, ix, uy, iy = dx, np.arange(nx), dy, np.arange(ny)
+    dist = np.hypot(ux[None, :], uy[:, None])
     hole = np.clip(0.5 + (board.hole_diameter / 2 - dist) * BOARD_TEXELS_PER_CM, 0, 1)
     hole = hole[..., None].astype(np.float32)
-    return base * (1 - hole) + np.array(_COLOURS["hole"], np.float32) * hole
+    cell = base[:len(uy), :len(ux)] * (1 - hole) + np.array(_COLOURS["hole"], np.float32) * hole
+    return np.take(np.take(cell, ix, axis=1), iy, axis=0)
 
 
 @functools.lru_cache(maxsize=1)

@@ -115,13 +115,19 @@ def to_srgb8(linear: np.ndarray) -> np.ndarray:
 
     By lookup of the linear value where each 8-bit step begins (the curve is
     monotonic), compared as float32 bit patterns (ordered like the values for x ≥ 0;
-    negative values sort below all steps, so map to 0 as clipping would): the same
+    negative values sort below all steps, so map to 0 as clipping would): a table by the
+    upper 16 bits, and a comparison with the one step's edge a bucket may hold.  The same
     codes as evaluating the curve and rounding (tests/test_render.py checks random values
-    and both sides of every step's edge), in half the time (benchmarks/pieces.py).
+    and both sides of every step's edge).
     """
     x = np.ascontiguousarray(linear, np.float32)
-    return np.searchsorted(_SRGB_STEP_BITS, x.view(np.int32).ravel(),
-                           side="right").astype(np.uint8).reshape(x.shape)
+    bits = x.view(np.int32).ravel()
+    # a table by the upper 16 bits (values beyond [0, 1] clipped, as the steps do)
+    clipped = np.clip(bits, 0, _ONE_BITS)
+    bucket = clipped >> 16
+    codes = _BUCKET_CODE[bucket]
+    codes += clipped >= _BUCKET_EDGE[bucket]
+    return codes.reshape(x.shape)
 
 
 def _srgb_steps() -> np.ndarray:
@@ -135,6 +141,15 @@ def _srgb_steps() -> np.ndarray:
 
 
 _SRGB_STEP_BITS = _srgb_steps()
+_ONE_BITS = int(np.float32(1.0).view(np.int32))
+_BUCKET_STARTS = np.arange((_ONE_BITS >> 16) + 1, dtype=np.int64) << 16
+_BUCKET_CODE = np.searchsorted(_SRGB_STEP_BITS, _BUCKET_STARTS, side="right").astype(np.uint8)
+# a bucket spans 2¹⁶ float32 values: at most one step's edge falls in it (the steps are
+# wider than a bucket everywhere in [0, 1]; checked here), found at the bucket's code
+_n_edges = np.searchsorted(_SRGB_STEP_BITS, _BUCKET_STARTS + 0xFFFF, side="right") - _BUCKET_CODE
+assert _n_edges.max() <= 1, "two sRGB steps in one bucket"
+_BUCKET_EDGE = np.where(_n_edges == 1, _SRGB_STEP_BITS[np.minimum(_BUCKET_CODE, 254)],
+                        np.iinfo(np.int32).max).astype(np.int32)
 _CODES = np.arange(256) / 255.0
 # linear radiance of each 8-bit code, float64 (the detector scales it to 0–255)
 LINEAR_OF_CODE = np.where(_CODES <= 0.04045, _CODES / 12.92, ((_CODES + 0.055) / 1.055) ** 2.4)
