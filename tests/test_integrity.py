@@ -614,3 +614,16 @@ def test_errormodel_plots_never_go_over_a_file_that_is_not_a_models(tmp_path, ca
              "its plots would go over")
     assert (notes / "model.png").read_bytes() == b"my figure"
     assert [p.name for p in notes.iterdir()] == ["model.png"]
+
+
+def test_a_cached_frame_without_its_ids_is_rendered_again_when_they_are_asked(tmp_path):
+    from mirrorsim.rendering.frames import render_to_files
+
+    from .conftest import small_scene
+
+    scene = small_scene("default", 160, 92, spp=2, beacon_spp=4, background_spp=1)
+    first = render_to_files(scene, tmp_path, progress=False, ids=False)
+    assert first.ids_png is None and not (tmp_path / "default.ids.png").exists()
+    again = render_to_files(scene, tmp_path, progress=False, reuse=True, ids=True)
+    assert not again.reused and again.ids_png.exists()
+    assert render_to_files(scene, tmp_path, progress=False, reuse=True, ids=True).reused

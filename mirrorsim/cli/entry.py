@@ -10,6 +10,7 @@ imported by the commands that render) stops cleanly.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import sys
@@ -36,8 +37,9 @@ def main() -> int:
         if signal.getsignal(sig) is not signal.SIG_IGN:
             signal.signal(sig, _exit_now)
     if status >= 128:
-        sys.stdout.flush()
-        sys.stderr.flush()
+        with contextlib.suppress(OSError):  # a reader that went away
+            sys.stdout.flush()
+            sys.stderr.flush()
         os._exit(status)
     return status
 

@@ -134,7 +134,7 @@ def render_to_files(scene: Scene, out: str | Path | None = None, *, variant: str
     fp = scene_fingerprint(scene)
     if reuse:
         found = _reusable(scene, out, fp)
-        if found is not None:
+        if found is not None and (found.ids_png is not None or not ids):  # ids asked: kept
             return found
     frame = render_frame(scene, variant=variant, progress=progress)
     return write_frame(scene, frame, out, fp, ids)

@@ -220,7 +220,7 @@ def id_pass(mi_scene, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
     """
     cam = scene.camera
     shapes = [(s, label_of(s.id(), len(scene.beacons))) for s in mi_scene.shapes()]
-    sensor = mi_scene.sensors()[0]  # the full film (crop sensors come after it)
+    sensor = {s.id(): s for s in mi_scene.sensors()}["sensor"]  # the full film
     cast = _id_pass_jit if dr.is_jit_v(mi.Float) else _id_pass_scalar
     return cast(mi_scene, sensor, shapes, cam.width, cam.height_px)
 
