@@ -313,7 +313,7 @@ def _cli(*argv: str, env: dict | None = None) -> subprocess.Popen:
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
 
 
-@pytest.mark.parametrize("delay", [0.05, 0.3, 0.6])
+@pytest.mark.parametrize("delay", [0.02, 0.1, 0.2])
 def test_ctrl_c_while_the_command_starts_is_a_clean_interrupt(delay):
     """While the commands' modules import (NumPy, SciPy): exit 130, one line.  The delay
     counts from when the entry point runs (the interpreter's own start-up, measured
@@ -330,7 +330,9 @@ def test_ctrl_c_while_the_command_starts_is_a_clean_interrupt(delay):
     time.sleep(start_up + delay)
     proc.send_signal(signal.SIGINT)
     _out, err = proc.communicate(timeout=60)
-    if proc.returncode == 0:
+    # finished first: exit 0, or killed by the signal after the interpreter's own
+    # clean-up restored its default action (nothing of mirrorsim runs then)
+    if proc.returncode == 0 or (proc.returncode == -2 and not err):
         pytest.skip("the command finished before the signal")
     assert proc.returncode == 130 and err == "interrupted\n", err
 
