@@ -94,7 +94,7 @@ for i in range(40):
 
 def test_concurrent_writers_keep_every_entry(tmp_path, monkeypatch):
     """Four real processes writing 40 entries each into one empty cache, at once: all
-    160 are there and verify (one shared file rewritten by each kept about a quarter)."""
+    160 are there and verify."""
     env = {"MIRRORSIM_CACHE_DIR": str(tmp_path), "PATH": "/usr/bin:/bin"}
     procs = [subprocess.Popen([sys.executable, "-c", _WRITER, who], env=env)
              for who in "abcd"]

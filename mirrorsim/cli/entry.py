@@ -21,21 +21,24 @@ def _exit_now(signum: int, _frame) -> None:
     os._exit(128 + signum)
 
 
-def main() -> int:
-    """Run the command line (the console script)."""
-    # a signal ignored by the caller (a background job's SIGINT) stays ignored
+def _end_on_signals() -> None:
+    """SIGINT and SIGTERM end the process at once (one ignored by the caller, a
+    background job's SIGINT, stays ignored)."""
     for sig in (signal.SIGINT, signal.SIGTERM):
         if signal.getsignal(sig) is not signal.SIG_IGN:
             signal.signal(sig, _exit_now)
+
+
+def main() -> int:
+    """Run the command line (the console script)."""
+    _end_on_signals()
     from mirrorsim.cli.main import main as run
 
     status = run()
     # past the run, a late signal ends the process at once again; and after an interrupt
     # the interpreter's clean-up is skipped: Dr.Jit's threads may still be finishing a
     # kernel, and calling back into a finalizing interpreter aborts it
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        if signal.getsignal(sig) is not signal.SIG_IGN:
-            signal.signal(sig, _exit_now)
+    _end_on_signals()
     if status >= 128:
         with contextlib.suppress(OSError):  # a reader that went away
             sys.stdout.flush()

@@ -343,15 +343,15 @@ def read_frame(path, size: tuple[int, int] | None = None) -> np.ndarray:
     try:
         if Path(path).exists() and not Path(path).is_file():
             raise InputError(path, "", "not a regular file (a folder, FIFO, device or socket)")
-        data = np.frombuffer(Path(path).read_bytes(), np.uint8)
+        raw = Path(path).read_bytes()
     except FileNotFoundError:
         raise InputError(path, "", "no such file") from None
     except OSError as exc:
         raise InputError(path, "", f"cannot read: {exc.strerror or exc}") from None
-    head = data[:8].tobytes()
+    head = raw[:8]
     if not (head.startswith(b"\x89PNG\r\n\x1a\n") or head.startswith(b"\xff\xd8\xff")):
         raise InputError(path, "", "not a PNG or JPEG image")
-    found = header_size(data.tobytes())
+    found = header_size(raw)
     if found is None:
         raise InputError(path, "", "a damaged image: its header gives no size")
     if size is not None and found != tuple(size):
@@ -363,7 +363,7 @@ def read_frame(path, size: tuple[int, int] | None = None) -> np.ndarray:
     level = cv2.utils.logging.getLogLevel()
     cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
     try:
-        bgr = cv2.imdecode(data, cv2.IMREAD_COLOR)
+        bgr = cv2.imdecode(np.frombuffer(raw, np.uint8), cv2.IMREAD_COLOR)
     finally:
         cv2.utils.logging.setLogLevel(level)
     if bgr is None:

@@ -210,11 +210,12 @@ def read_table(folder: str | Path) -> dict[str, list]:
         raise DatasetError(path, f"all {n} rows failed (their `error` column says why)")
     meta = Path(folder) / "dataset.json"
     try:
-        n_scenes = json.loads(meta.read_text())["n"]
+        described = json.loads(meta.read_text())
+        n_scenes, seed = described["n"], described["seed"]
     except (OSError, ValueError, KeyError, TypeError, RecursionError):
         raise DatasetError(meta, "not a readable dataset description") from None
     # the table is its verified rows: a row file damaged since, or missing, is found here
-    if [r.index for r in collect_rows(folder, n_scenes)] != cols["index"]:
+    if [r.index for r in collect_rows(folder, n_scenes, seed)] != cols["index"]:
         raise DatasetError(path, "its rows differ from the row files in rows/ (resuming the "
                            "dataset writes the table again)")
     missing = sorted(set(table.NAMES) - set(cols))
