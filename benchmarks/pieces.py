@@ -5,7 +5,10 @@
 Times (median over ``--scenes`` scenes of the default spec, after one warm-up scene):
 drawing a valid scene, the board texture, the render at the spec's settings, the id
 pass, linear → sRGB, PNG encoding, detection; then (``--rss N``) the process's resident
-memory after each of N whole dataset scenes.  Runs on older checkouts too (it looks up
+memory after each of N whole dataset scenes; then (``--ratio N``) for N scenes of a
+fresh seed, a whole dataset scene's wall time against the bare render of its passes
+(the scene loaded beforehand, the same ``mi.render`` calls, warm kernels) in the same
+process.  Runs on older checkouts too (it looks up
 what each has), so that before/after figures come from the same script.
 """
 
@@ -49,6 +52,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenes", type=int, default=8)
     ap.add_argument("--rss", type=int, default=0)
+    ap.add_argument("--ratio", type=int, default=0)
     a = ap.parse_args()
     spec = load_spec(None)
     write_png = _png_writer()
@@ -95,6 +99,61 @@ def main() -> None:
                 mib = int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
             if i in (0, 1, 4, 9) or i == a.rss - 1 or (i + 1) % 10 == 0:
                 print(f"| {i + 1} | {mib:.0f} |")
+    if a.ratio:
+        _ratio(spec, a.ratio, tmp / "ratio")
+
+
+def _bare_render(scene) -> float:
+    """Seconds of the ``mi.render`` calls of ``scene``'s passes alone: the whole film,
+    then each tile (aimed as mirrorsim aims it), each evaluated; the scene is loaded
+    before the clock starts."""
+    import drjit as dr
+    import mitsuba as mi
+
+    spp = scene.render.spp
+    box, background, _, _, passes = render._regions(scene, spp)  # what render_frame does
+    tiles = tuple(sorted({t for *_, t in passes}))
+    mi_scene = mi.load_dict(mitsuba_scene.build_scene_dict(scene, tiles), optimize=False)
+    sensors = {s.id(): s for s in mi_scene.sensors()}
+    t0 = time.perf_counter()
+    dr.eval(mi.render(mi_scene, sensor=sensors["sensor"],
+                      spp=spp if box is None else background, seed=1))
+    dr.sync_thread()
+    for (u0, v0, u1, v1), n, _, t in passes:
+        sensor = sensors[f"sensor_tile{t}"]
+        params = mi.traverse(sensor)
+        for v in range(v0, v1, t):
+            for u in range(u0, u1, t):
+                mitsuba_scene.aim_tile(params, scene.camera, t, u, v)
+                per = render._tile_pass(n, t)  # samples per call, as mirrorsim splits them
+                for k, m in enumerate([per] * (n // per) + ([n % per] if n % per else [])):
+                    dr.eval(mi.render(mi_scene, sensor=sensor, spp=m, seed=2 + k))
+                    dr.sync_thread()
+    return time.perf_counter() - t0
+
+
+def _ratio(spec, n: int, tmp: Path) -> None:
+    from mirrorsim.pipelines.dataset import process_one
+    from mirrorsim.pipelines.random_scenes import sample_scene as draw
+
+    for d in ("rows", "scenes", "frames"):
+        (tmp / d).mkdir(parents=True)
+    seed = int.from_bytes(os.urandom(3), "big")
+    print(f"\nseed {seed}: a whole dataset scene (draw, render, detect, solve, score, "
+          "write) against the bare render of its passes\n")
+    print("| scene | whole (s) | bare render (s) | ratio |\n|---|---|---|---|")
+    ratios = []
+    for i in range(n + 1):
+        t0 = time.perf_counter()
+        process_one(i, seed, spec, str(tmp), None, "auto")
+        whole = time.perf_counter() - t0
+        rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(i,)))
+        bare = _bare_render(draw(spec, rng, f"r{i}").with_render(seed=i))
+        if i == 0:
+            continue  # warm-up
+        ratios.append(whole / bare)
+        print(f"| {i} | {whole:.2f} | {bare:.2f} | {whole / bare:.2f} |")
+    print(f"| median | | | {statistics.median(ratios):.2f} |")
 
 
 if __name__ == "__main__":
