@@ -116,7 +116,12 @@ def target_geometry(cam: Camera, m: ImageMeasurement, size: Point2, k: float
         if len(present) == 1:
             side = present[0]
             phi_edge = _off_axis(cam, edges[side])
-            u_axis = _column(cam, phi_edge + beta if side == "left" else phi_edge - beta)
+            sign = 1.0 if side == "left" else -1.0
+            for _ in range(2):  # β's cos φ is the axis's, not the edge's: refine
+                phi_axis = phi_edge + sign * beta
+                beta = math.atan(size[0] * m.height_px * math.cos(phi_axis)
+                                 / (2 * cam.fx * size[1]))
+            u_axis = _column(cam, phi_edge + sign * beta)
             m = replace(m, u_axis=u_axis, alpha_deg=alpha_of(cam, u_axis))
         else:
             alpha, u_axis = _axis_between(cam, m.u_left, m.u_right)
@@ -163,9 +168,11 @@ def _target_clip(cam: Camera, m: ImageMeasurement, size: Point2, present: list[s
                                   "its height implies, with no dark edge to clip it: not "
                                   "treated as clipped"))
     else:
-        # no contrast on one side: a clip there or a background as dark as the panel;
-        # which, the pixels cannot say, so it is noted, not flagged
+        # no edge on one side: no contrast there (a clip, or a background as dark as the
+        # panel), or one far from the panel's region (edges.SIDE_MAX_OFF_PX); which, the
+        # pixels cannot say, so it is noted, not flagged
         missing = "right" if present == ["left"] else "left"
-        m = replace(m, notes=(*m.notes, f"no edge on the {missing} (no contrast there): axis "
-                              "from the other edge and the width the height implies"))
+        m = replace(m, notes=(*m.notes, f"no edge on the {missing} (no contrast there, or "
+                              "not at the panel's region): axis from the other edge and the "
+                              "width the height implies"))
     return m, present, beta
