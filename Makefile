@@ -6,7 +6,13 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test test-fast lint bench setup llvm clean
+.PHONY: demo test test-fast lint bench setup llvm clean error-model
+
+# the error model shipped in mirrorsim/data: fitted on the project's own dataset of the
+# default spec (ideal bench, default render settings); tests/test_uncertainty.py makes
+# the same dataset again and checks that its fit is the shipped model
+ERROR_MODEL_SEED := 20261202
+ERROR_MODEL_N := 120
 
 setup: $(STAMP) llvm
 
@@ -53,6 +59,13 @@ bench: setup
 	$(BIN)/python benchmarks/edge_noise.py
 	$(BIN)/python benchmarks/pencil_edges.py --spp 1024
 	$(BIN)/python benchmarks/sensor_noise.py
+
+error-model: setup
+	rm -rf renders/error-model
+	$(BIN)/mirrorsim dataset --n $(ERROR_MODEL_N) --seed $(ERROR_MODEL_SEED) \
+	  --out renders/error-model --workers 2 --quiet
+	$(BIN)/mirrorsim errormodel renders/error-model
+	cp renders/error-model/error_model.json mirrorsim/data/error_model.json
 
 clean:
 	rm -rf $(VENV) renders/*/ .pytest_cache .ruff_cache .hypothesis

@@ -41,9 +41,9 @@ sys.path.insert(0, str(ROOT))
 
 from mirrorsim.detection.detector import detect_frame, read_frame  # noqa: E402
 from mirrorsim.errors import DetectionError, SceneError  # noqa: E402
+from mirrorsim.formats.error_model import default_error_model  # noqa: E402
 from mirrorsim.formats.scenefile import load_scene, scene_from_dict  # noqa: E402
 from mirrorsim.pipelines.calibrate import calibrate  # noqa: E402
-from mirrorsim.pipelines.evaluate import DETECTOR_SIGMA  # noqa: E402
 from mirrorsim.pipelines.frame import render_and_measure  # noqa: E402
 from mirrorsim.pipelines.random_scenes import load_spec, sample_scene  # noqa: E402
 from mirrorsim.rendering.frames import render_to_files  # noqa: E402
@@ -116,7 +116,10 @@ def measure(scene, tmp: Path) -> dict:
     target_cm = None
     if mt.d_total is not None:  # end to end: the solver on these measurements
         meas = out.measurements()
-        sol = solve_measurements(meas.observer, meas.beacons, meas.targets, DETECTOR_SIGMA)
+        sigma = default_error_model().sigmas(meas.targets[0], [(b.alpha_deg, b.d_total)
+                                                               for b in meas.beacons],
+                                             meas.observer_pan_deg)
+        sol = solve_measurements(meas.observer, meas.beacons, meas.targets, sigma)
         target_cm = float(np.linalg.norm(sol.target - np.asarray(t.position)))
     return {
         "scene": scene.name, "spp": spp, "seconds": dt, "target_cm": target_cm,

@@ -27,10 +27,54 @@ class BeaconMeasurement:
 
 @dataclass(frozen=True)
 class Sigma:
-    """Measurement standard deviations: α in degrees, d_total relative (0.002 = 0.2 %)."""
+    """One measurement's standard deviations: α in degrees, d_total relative (a
+    fraction: 0.002 = 0.2 %)."""
 
     alpha_deg: float = 0.01
     d_total_rel: float = 0.002
+
+
+@dataclass(frozen=True)
+class ObjectSigmas:
+    """σ's per observation: the target's and each beacon observation's (a single beacon
+    σ serves every beacon observation).  The target's image and a pencil's are measured
+    with different accuracy, so one pair for both would over- or under-weight one."""
+
+    target: Sigma
+    beacons: tuple[Sigma, ...]
+
+    @classmethod
+    def same(cls, sigma: Sigma) -> ObjectSigmas:
+        """One pair for every observation."""
+        return cls(sigma, (sigma,))
+
+    def describe(self) -> str:
+        """The σ's in words: α in degrees, d_total in % of d_total."""
+        pair = lambda s: f"{s.alpha_deg:.3g}°, {100 * s.d_total_rel:.3g} %"  # noqa: E731
+        if self.beacons == (self.target,):
+            return f"σ ({pair(self.target)})"
+        bs = "; ".join(pair(b) for b in dict.fromkeys(self.beacons))
+        return f"σ target ({pair(self.target)}), beacon ({bs})"
+
+    def arrays(self, n_beacons: int, n_targets: int) -> tuple[np.ndarray, np.ndarray]:
+        """σ_α (deg) and relative σ_d of each observation, beacons first then targets
+        (the order of the solver's residuals)."""
+        if len(self.beacons) not in (1, n_beacons):
+            raise SolverError(f"{len(self.beacons)} beacon σ's for {n_beacons} beacon "
+                              "observations: give one, or one per observation")
+        bs = self.beacons * n_beacons if len(self.beacons) == 1 else self.beacons
+        every = [*bs, *([self.target] * n_targets)]
+        sa = np.array([s.alpha_deg for s in every], float)
+        sd = np.array([s.d_total_rel for s in every], float)
+        if not (np.all(sa > 0) and np.all(sd > 0) and np.all(np.isfinite(sa))
+                and np.all(np.isfinite(sd))):
+            raise SolverError(f"sigmas must be positive and finite, got {self}")
+        return sa, sd
+
+
+def as_object_sigmas(sigma: Sigma | ObjectSigmas) -> ObjectSigmas:
+    """Either form of σ's as :class:`ObjectSigmas`."""
+    return sigma if isinstance(sigma, ObjectSigmas) else ObjectSigmas.same(sigma)
 
 
 def predict(params: np.ndarray, observer: np.ndarray, points: np.ndarray
@@ -66,7 +110,7 @@ def predict(params: np.ndarray, observer: np.ndarray, points: np.ndarray
 
 
 def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
-              targets: list[tuple[float, float]], sigma: Sigma | None = None,
+              targets: list[tuple[float, float]], sigma: Sigma | ObjectSigmas | None = None,
               initial: Solution | None = None) -> Solution:
     """Weighted nonlinear least squares for the mirror line and the target.
 
@@ -77,25 +121,23 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
         One or more beacons, or several observations of one moving beacon.
     targets : list of (alpha_deg, d_total)
         One or more observations of the (static) target.
-    sigma : Sigma, optional
-        Weights and covariance; without it, unit weights in (0.01°, 0.2 %) are assumed
-        and no covariance is reported.
+    sigma : Sigma or ObjectSigmas, optional
+        Weights and covariance (one pair for all, or per observation); without it,
+        unit weights in (0.01°, 0.2 %) are assumed and no covariance is reported.
     initial : Solution, optional
         Start point (default: the closed form of the first beacon).
     """
     if not beacons or not targets:
         raise SolverError("least squares needs at least one beacon and one target observation")
     o = np.asarray(observer, float)
-    s = sigma or Sigma()
-    if s.alpha_deg <= 0 or s.d_total_rel <= 0:
-        raise SolverError(f"sigmas must be positive, got {s}")
+    sa, sd = as_object_sigmas(sigma or Sigma()).arrays(len(beacons), len(targets))
     bpos, meas_a, meas_d = _measurement_arrays(beacons, targets)
     init = initial or solve_single(o, bpos[0], beacons[0].alpha_deg, beacons[0].d_total,
                                    targets[0][0], targets[0][1])
     x0 = np.array([init.mirror.yaw_deg, init.mirror.rho, *init.target])
     nb = len(beacons)
-    w_a = np.full(len(meas_a), 1.0 / s.alpha_deg)
-    w_d = 1.0 / (s.d_total_rel * meas_d)
+    w_a = 1.0 / sa
+    w_d = 1.0 / (sd * meas_d)
 
     def points_of(x):
         return np.vstack([bpos, np.broadcast_to(x[2:], (len(targets), 2))])
@@ -150,9 +192,39 @@ def _solution(o: np.ndarray, x: np.ndarray, bpos: np.ndarray,
                     method=f"least squares ({len(bpos)} beacon obs, {len(targets)} target obs)")
 
 
+def crlb(observer: ArrayLike, beacons: ArrayLike, mirror_yaw_deg: float, mirror_rho: float,
+         target: ArrayLike, sigma: Sigma | ObjectSigmas, n_targets: int = 1) -> np.ndarray:
+    """The Cramér–Rao bound of (θ [deg], ρ, x_t, y_t): (Jᵀ Σ⁻¹ J)⁻¹ at the true mirror
+    and target, for Gaussian measurement errors of these σ's (beacon positions known).
+
+    No unbiased estimator's covariance is smaller; for one beacon and one target the
+    four measurements fix the four unknowns and the bound is J⁻¹ Σ J⁻ᵀ.
+
+    Raises
+    ------
+    SolverError
+        When the geometry does not determine the unknowns (singular information).
+    """
+    o = np.asarray(observer, float)
+    B = np.atleast_2d(np.asarray(beacons, float))
+    t = np.asarray(target, float)
+    x = np.array([mirror_yaw_deg, mirror_rho, *t])
+    pts = np.vstack([B, np.broadcast_to(t, (n_targets, 2))])
+    _, d, da, dd = predict(x, o, pts)
+    da[:len(B), 2:] = 0.0  # a beacon's image does not move with the target
+    dd[:len(B), 2:] = 0.0
+    sa, sr = as_object_sigmas(sigma).arrays(len(B), n_targets)
+    J = np.vstack([da / sa[:, None], dd / (sr * d)[:, None]])
+    info = J.T @ J
+    if np.linalg.cond(info) > 1e14:
+        raise SolverError("the geometry does not determine the mirror and the target "
+                          "(singular Fisher information)")
+    return np.linalg.inv(info)
+
+
 def solve_measurements(observer, beacons: list[BeaconMeasurement],
-                       targets: list[tuple[float, float]], sigma: Sigma | None = None
-                       ) -> Solution:
+                       targets: list[tuple[float, float]],
+                       sigma: Sigma | ObjectSigmas | None = None) -> Solution:
     """The solver's front door: the closed form for one beacon and one target without
     σ's, weighted least squares (with covariance when σ's are given) otherwise."""
     if len(beacons) == 1 and len(targets) == 1:
@@ -167,8 +239,8 @@ def solve_measurements(observer, beacons: list[BeaconMeasurement],
         pts = np.vstack([np.asarray(b.position, float), sol.target])
         _, d, da, dd = predict(params, o, pts)
         J = np.array([[*da[0, :2], 0, 0], [*dd[0, :2], 0, 0], da[1], dd[1]])
-        sd = np.array([sigma.alpha_deg, sigma.d_total_rel * b.d_total,
-                       sigma.alpha_deg, sigma.d_total_rel * targets[0][1]])
+        sa, sr = as_object_sigmas(sigma).arrays(1, 1)
+        sd = np.array([sa[0], sr[0] * b.d_total, sa[1], sr[1] * targets[0][1]])
         if abs(np.linalg.det(J)) < 1e-12:
             raise SolverError("the measurements do not determine the mirror and the target "
                               "(singular Jacobian)")

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from solver.lsq import BeaconMeasurement, Sigma
+from solver.lsq import BeaconMeasurement, ObjectSigmas
 
 # σ's beyond these are no measurement: a bearing known to ±45° or a distance to ±100 %
 SIGMA_ALPHA_MAX_DEG = 45.0
@@ -14,12 +14,16 @@ SIGMA_D_REL_MAX = 1.0
 
 @dataclass(frozen=True)
 class Measurements:
-    """The solver's inputs: observer, target observations, beacons, optional σ's."""
+    """The solver's inputs: observer, target observations, beacons, optional σ's per
+    observation."""
 
     observer: tuple[float, float]
     targets: list[tuple[float, float]]  # (alpha_deg, d_total) observations of the target
     beacons: list[BeaconMeasurement]
-    sigma: Sigma | None = None
+    sigma: ObjectSigmas | None = None
+    # the optical axis's bearing (deg), where known: an error model's σ's depend on how
+    # far off the axis each image is
+    observer_pan_deg: float | None = None
 
     def to_json(self) -> dict:
         """The measurements document (one target observation as an object, several as a
@@ -29,7 +33,17 @@ class Measurements:
                "target": t[0] if len(t) == 1 else t,
                "beacons": [{"position": list(b.position), "alpha_deg": b.alpha_deg,
                             "d_total": b.d_total} for b in self.beacons]}
+        if self.observer_pan_deg is not None:
+            out["observer_pan_deg"] = self.observer_pan_deg
         if self.sigma is not None:
-            out["sigma"] = {"alpha_deg": self.sigma.alpha_deg,
-                            "d_total_rel": self.sigma.d_total_rel}
+            out["sigma"] = sigma_json(self.sigma)
         return out
+
+
+def sigma_json(sigma: ObjectSigmas) -> dict:
+    """A ``sigma`` block: one pair where every observation shares it, else the target's
+    and the beacons' (d_total_rel a fraction: 0.002 = 0.2 %)."""
+    pair = lambda s: {"alpha_deg": s.alpha_deg, "d_total_rel": s.d_total_rel}  # noqa: E731
+    if sigma.beacons == (sigma.target,):
+        return pair(sigma.target)
+    return {"target": pair(sigma.target), "beacons": [pair(b) for b in sigma.beacons]}

@@ -12,7 +12,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from solver.geometry import line_normal, unit, yaw_difference
-from solver.lsq import Sigma
+from solver.lsq import ObjectSigmas
 from solver.sltr import closed_form_unchecked, observe
 
 # v(α) [deg], v(d_total) [distance units], RMSE(ref), RMSE(tar): the paper's Table 1
@@ -75,16 +75,21 @@ class Table1Row:
     """A row of Table 1: its σ's, the paper's figures (NaN where it has none) and ours."""
 
     sigma_alpha_deg: float
-    sigma_d: float
+    sigma_d: float  # absolute, in the table's distance units (the paper's convention)
     paper_rmse_ref: float
     paper_rmse_tar: float
     ours: RowErrors
+    # the beacon's (σ_α, σ_d) where they differ from the target's (an error model's row)
+    beacon_sigma: tuple[float, float] | None = None
 
     def to_json(self) -> dict:
         """The row as ``montecarlo --json`` writes it."""
-        return {"sigma_alpha_deg": self.sigma_alpha_deg, "sigma_d": self.sigma_d,
-                "paper_rmse_ref": self.paper_rmse_ref, "paper_rmse_tar": self.paper_rmse_tar,
-                **asdict(self.ours)}
+        out = {"sigma_alpha_deg": self.sigma_alpha_deg, "sigma_d": self.sigma_d,
+               "paper_rmse_ref": self.paper_rmse_ref, "paper_rmse_tar": self.paper_rmse_tar,
+               **asdict(self.ours)}
+        if self.beacon_sigma is not None:
+            out["beacon_sigma_alpha_deg"], out["beacon_sigma_d"] = self.beacon_sigma
+        return out
 
 
 @dataclass(frozen=True)
@@ -107,14 +112,17 @@ class Table1:
 
 def run_row(sigma_alpha_deg: float, sigma_d: float, iterations: int = 200,
             geometry: Table1Geometry | None = None,
-            rng: int | np.random.Generator | None = 0) -> RowErrors:
+            rng: int | np.random.Generator | None = 0,
+            beacon_sigma: tuple[float, float] | None = None) -> RowErrors:
     """One row: RMSE of the reflector (the target's reflection point), its yaw, and the
-    target, over ``iterations`` noisy draws of all four measurements (vectorized)."""
+    target, over ``iterations`` noisy draws of all four measurements (vectorized); σ_d
+    absolute; ``beacon_sigma``: the beacon's (σ_α, σ_d) where they differ."""
     g = (geometry or Table1Geometry()).layout()
     rng = np.random.default_rng(rng)
     k = iterations
-    ab = g["beacon_alpha"] + rng.normal(0, sigma_alpha_deg, k)
-    db = g["beacon_d"] + rng.normal(0, sigma_d, k)
+    sab, sdb = beacon_sigma or (sigma_alpha_deg, sigma_d)
+    ab = g["beacon_alpha"] + rng.normal(0, sab, k)
+    db = g["beacon_d"] + rng.normal(0, sdb, k)
     at = g["target_alpha"] + rng.normal(0, sigma_alpha_deg, k)
     dt = g["target_d"] + rng.normal(0, sigma_d, k)
     est = closed_form_unchecked(np.zeros(2), g["beacon"], ab, db, at, dt)
@@ -136,17 +144,20 @@ def table1(iterations: int = 200, geometry: Table1Geometry | None = None,
     """All rows of Table 1, ours beside the paper's."""
     rng = np.random.default_rng(rng)
     g = geometry or Table1Geometry()
-    return Table1(g, iterations, tuple(Table1Row(sa, sd, p_ref, p_tar,
-                                                 run_row(sa, sd, iterations, g, rng))
-                                       for sa, sd, p_ref, p_tar in rows))
+    return Table1(g, iterations, tuple(
+        Table1Row(sa, sd, p_ref, p_tar, run_row(sa, sd, iterations, g, rng, *beacon), *beacon)
+        for sa, sd, p_ref, p_tar, *beacon in rows))
 
 
 def table_rows(sigmas: list[tuple[float, float]] | None = None,
-               relative: Sigma | None = None, d_total: float = 5.0) -> tuple:
-    """The rows to run: the paper's (or ``sigmas``: (σ_α deg, σ_d) pairs without paper
-    figures), plus one for a relative σ (an error model's) at ``d_total``."""
+               relative: ObjectSigmas | None = None, d_total: float = 5.0) -> tuple:
+    """The rows to run: the paper's (or ``sigmas``: (σ_α deg, σ_d absolute) pairs without
+    paper figures), plus one for an error model's relative σ's (the target's and the
+    beacon's) at ``d_total``."""
     nan = float("nan")
     rows = PAPER_TABLE1 if not sigmas else tuple((a, d, nan, nan) for a, d in sigmas)
     if relative is not None:
-        rows = (*rows, (relative.alpha_deg, relative.d_total_rel * d_total, nan, nan))
+        t, b = relative.target, relative.beacons[0]
+        rows = (*rows, (t.alpha_deg, t.d_total_rel * d_total, nan, nan,
+                        (b.alpha_deg, b.d_total_rel * d_total)))
     return rows

@@ -11,7 +11,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from solver.geometry import line_normal, point_segment_distance, reflect, unit, wrap_bearing
-from solver.lsq import Sigma, predict
+from solver.lsq import ObjectSigmas, Sigma, as_object_sigmas, predict
 from solver.sltr import SolverError, observe
 
 
@@ -219,7 +219,8 @@ class MirrorPrior:
 
 
 def expected_target_error(observer, target_alpha_deg: float, target_d_total: float,
-                          beacons: np.ndarray, poses, sigma: Sigma, mirror_size: float,
+                          beacons: np.ndarray, poses, sigma: Sigma | ObjectSigmas,
+                          mirror_size: float,
                           min_depth: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
     """First-order RMS target error for each candidate beacon position over the mirror
     poses where it is seen, and the fraction of poses where it is seen.
@@ -236,6 +237,8 @@ def expected_target_error(observer, target_alpha_deg: float, target_d_total: flo
     """
     o = np.asarray(observer, float)
     B = np.asarray(beacons, float)
+    sig = as_object_sigmas(sigma)
+    st, sb = sig.target, sig.beacons[0]  # every candidate is one beacon, with its σ's
     total = np.zeros(len(B))
     count = np.zeros(len(B))
     for point, yaw in poses:
@@ -250,9 +253,9 @@ def expected_target_error(observer, target_alpha_deg: float, target_d_total: flo
         J = np.zeros((len(B), 4, 4))
         J[:, 0, :2], J[:, 1, :2] = da_b[:, :2], dd_b[:, :2]
         J[:, 2, :], J[:, 3, :] = da_t[0], dd_t[0]
-        sd = np.stack([np.full(len(B), sigma.alpha_deg), sigma.d_total_rel * d_b,
-                       np.full(len(B), sigma.alpha_deg),
-                       np.full(len(B), sigma.d_total_rel * d_t[0])], axis=1)
+        sd = np.stack([np.full(len(B), sb.alpha_deg), sb.d_total_rel * d_b,
+                       np.full(len(B), st.alpha_deg),
+                       np.full(len(B), st.d_total_rel * d_t[0])], axis=1)
         with np.errstate(all="ignore"):
             Jinv = np.linalg.pinv(J)
             cov_t = np.einsum("kij,kj,klj->kil", Jinv[:, 2:, :], sd**2, Jinv[:, 2:, :])
@@ -284,7 +287,8 @@ class BeaconSearch:
     seen: np.ndarray
 
 
-def best_beacon(observer, target_alpha_deg, target_d_total, poses, sigma: Sigma,
+def best_beacon(observer, target_alpha_deg, target_d_total, poses,
+                sigma: Sigma | ObjectSigmas,
                 mirror_size: float, board: tuple[float, float], step: float = 0.5,
                 keep_out: list[tuple[np.ndarray, np.ndarray, float]] = (),
                 min_seen: float = 1.0, accept=None) -> BeaconSearch:

@@ -130,6 +130,15 @@ class Solution:
         """The target's 2×2 covariance block, if σ's were given."""
         return None if self.covariance is None else self.covariance[2:, 2:]
 
+    def mahalanobis(self, point: ArrayLike) -> float | None:
+        """How many σ's ``point`` lies from the estimated target, by its covariance
+        (√(Δᵀ C⁻¹ Δ); its median over honest estimates is χ₂'s, 1.18)."""
+        cov = self.target_covariance
+        if cov is None:
+            return None
+        delta = np.asarray(point, float) - self.target
+        return float(np.sqrt(delta @ np.linalg.solve(cov, delta)))
+
     def ellipse95(self) -> tuple[float, float, float] | None:
         """The target's 95 % error ellipse: semi-axes (major, minor) and the major axis's
         bearing in degrees."""

@@ -59,3 +59,26 @@ def pytest_report_header(config) -> str:  # noqa: ARG001
     from mirrorsim.rendering.backend import choose_variant
 
     return f"mirrorsim rendering tests run on: {choose_variant('auto')} (fast_variant fixture)"
+
+
+def synthetic_columns(n: int, seed: int, sigma_alpha=(0.003, 0.003), sigma_d=(0.002, 0.005),
+                      **extra) -> dict:
+    """Dataset columns as an error model reads them, for n rows of one camera pan (0°):
+    each object's errors drawn N(0, σ) with (target, beacon) ``sigma_alpha`` (deg) and
+    ``sigma_d`` (relative), plus ``extra`` columns."""
+    import numpy as np
+
+    rng = np.random.default_rng(seed)
+    cols = {"index": list(range(n)), "error": [""] * n, "observer_pan_deg": np.zeros(n)}
+    for k, kind in enumerate(("target", "beacon")):
+        d = rng.uniform(40, 140, n)
+        alpha = rng.uniform(-25, 25, n)
+        a_err = rng.normal(0, sigma_alpha[k], n)
+        d_err = rng.normal(0, sigma_d[k], n)
+        cols.update({f"{kind}_d_true": d, f"{kind}_off_axis_deg": alpha,
+                     f"{kind}_incidence_deg": rng.uniform(0, 60, n),
+                     f"{kind}_height_px_true": 15000 / d,
+                     f"{kind}_alpha_err": a_err, f"{kind}_d_rel_err": d_err,
+                     f"{kind}_alpha_meas": alpha + a_err, f"{kind}_d_meas": d * (1 + d_err)})
+    cols.update(extra)
+    return cols

@@ -18,6 +18,7 @@ PACKAGE = ROOT / "mirrorsim"
 # the wings in the order data flows through them: a wing imports only wings before it
 WINGS = ("scene", "truth", "formats", "rendering", "detection", "pipelines", "cli")
 SHARED = {"errors", "__init__"}  # mirrorsim/errors.py and the package's face: for every wing
+DATA = "data"  # files shipped with the package (the default error model); no code
 
 
 def _modules(folder: Path) -> list[Path]:
@@ -49,7 +50,8 @@ def test_every_module_sits_in_a_wing():
     loose = [p.name for p in PACKAGE.glob("*.py") if p.stem not in SHARED | {"__main__"}]
     assert loose == []
     assert {p.name for p in PACKAGE.iterdir() if p.is_dir() and p.name != "__pycache__"} \
-        == set(WINGS)
+        == {*WINGS, DATA}
+    assert not list((PACKAGE / DATA).rglob("*.py"))
 
 
 @pytest.mark.parametrize("wing", WINGS)

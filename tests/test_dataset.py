@@ -16,6 +16,7 @@ from mirrorsim.cli.main import main
 from mirrorsim.formats.scenefile import load_scene
 from mirrorsim.pipelines import errormodel
 from mirrorsim.pipelines.dataset import collect_rows, run_dataset
+from tests.conftest import synthetic_columns
 
 SPEC = Path(__file__).parent / "data" / "tiny_spec.yaml"
 VOLATILE = ("seconds_total", "seconds_sample", "traceback")
@@ -122,80 +123,58 @@ def test_dask_local_cluster_gives_the_same_rows(one_worker, tmp_path):
     assert _stable(collect_rows(tmp_path / "d", 2)) == _stable(collect_rows(out, 3)[:2])
 
 
-def test_error_model_recovers_a_known_law():
-    """Synthetic rows with α error ~ N(0.001 + 2e-5·d, 0.002 + 3e-5·d) and d error ~
-    N(−0.001, 0.003 + 0.5/height_px): the fit finds those coefficients."""
-    rng = np.random.default_rng(0)
+def test_error_model_bias_recovers_a_known_law():
+    """Synthetic rows with α error ~ N(0.001 + 2e-5·d, 0.002) and d error ~ N(−0.001,
+    0.003): the diagnostic bias fit finds those coefficients, and the σ law (about the
+    truth: the bias is part of the spread) the RMS."""
     n = 4000
-    cols = {"index": list(range(n)), "error": [""] * n}
+    cols = synthetic_columns(n, 0)
+    rng = np.random.default_rng(0)
     for kind in ("target", "beacon"):
-        d = rng.uniform(40, 140, n)
-        h = rng.uniform(40, 300, n)
-        cols[f"{kind}_d_true"] = d
-        cols[f"{kind}_off_axis_deg"] = rng.uniform(-20, 20, n)
-        cols[f"{kind}_incidence_deg"] = rng.uniform(0, 60, n)
-        cols[f"{kind}_height_px_true"] = h
-        cols[f"{kind}_alpha_err"] = rng.normal(0.001 + 2e-5 * d, 0.002 + 3e-5 * d)
-        cols[f"{kind}_d_rel_err"] = rng.normal(-0.001, 0.003 + 0.5 / h)
+        d = np.asarray(cols[f"{kind}_d_true"])
+        cols[f"{kind}_alpha_err"] = rng.normal(0.001 + 2e-5 * d, 0.002)
+        cols[f"{kind}_d_rel_err"] = rng.normal(-0.001, 0.003, n)
     model = errormodel.fit(cols)
     a = model.fits["target"]["alpha"]
     assert a.bias[1] == pytest.approx(2e-5, abs=4e-6)
-    assert a.spread[1] == pytest.approx(3e-5, abs=8e-6)
     r = model.fits["beacon"]["d_rel"]
     assert r.bias[0] == pytest.approx(-0.001, abs=4e-4)
-    assert r.spread[4] == pytest.approx(0.5, rel=0.15)
-    # the solver's σ pair comes out of the model
-    assert 0.002 < model.sigma.alpha_deg < 0.01
+    assert r.typical_sigma == pytest.approx(np.hypot(0.001, 0.003), rel=0.08)
 
 
 def test_error_model_fits_a_signed_off_axis_bias_through_outliers():
     """α bias = 0.003°·(off-axis/10°) changes sign across the axis; σ = 0.002°; 3 % of the
-    rows are gross errors of ±0.5°.  The signed, robust fit recovers the slope and a σ
-    near 0.002° (a least-squares fit on |off-axis| can do neither: its σ would be
-    ≈ 0.087° from the outliers alone)."""
-    rng = np.random.default_rng(1)
+    rows are gross errors of ±0.5°.  The signed, robust fit recovers the slope, and the
+    gross errors are counted apart, not fitted."""
     n = 3000
-    cols = {"index": list(range(n)), "error": [""] * n}
+    cols = synthetic_columns(n, 1)
+    rng = np.random.default_rng(1)
     for kind in ("target", "beacon"):
-        off = rng.uniform(-25, 25, n)
-        cols[f"{kind}_d_true"] = rng.uniform(40, 140, n)
-        cols[f"{kind}_off_axis_deg"] = off
-        cols[f"{kind}_incidence_deg"] = rng.uniform(0, 60, n)
-        cols[f"{kind}_height_px_true"] = rng.uniform(40, 300, n)
+        off = np.asarray(cols[f"{kind}_off_axis_deg"])
         err = 0.0003 * off + rng.normal(0, 0.002, n)
         gross = rng.random(n) < 0.03
         err[gross] += rng.choice([-0.5, 0.5], gross.sum())
         cols[f"{kind}_alpha_err"] = err
-        cols[f"{kind}_d_rel_err"] = rng.normal(0, 0.001, n)
     model = errormodel.fit(cols)
     a = model.fits["target"]["alpha"]
     assert errormodel.FEATURES[2] == "off_axis_deg"
     assert a.bias[2] == pytest.approx(0.0003, rel=0.05)
-    middle = np.array([[1.0, 90.0, 0.0, 30.0, 1 / 170]])
-    bias, sd = errormodel.predict(model, "target", "alpha", middle)
-    assert abs(bias[0]) < 0.0005 and sd[0] == pytest.approx(0.002, rel=0.3)
+    assert a.gross_errors == pytest.approx(0.03 * n, rel=0.25)
+    assert a.typical_sigma < 0.02  # the ±0.5° errors left out of the σ
 
 
 def test_errormodel_command_on_a_dataset(one_worker, tmp_path, capsys):
     out, _ = one_worker
-    # three rows are too few for five coefficients: a clear refusal
+    # three rows are too few: a clear refusal, saying how many it needs
     assert main(["errormodel", str(out)]) == 2
-    assert "too few" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "too few usable rows (3)" in err and "15 needed" in err
     # a model file feeds solve/montecarlo/plan
-    rng = np.random.default_rng(1)
-    n = 50
-    cols = {"index": list(range(n)), "error": [""] * n}
-    for kind in ("target", "beacon"):
-        cols.update({f"{kind}_d_true": rng.uniform(40, 140, n),
-                     f"{kind}_off_axis_deg": rng.uniform(-20, 20, n),
-                     f"{kind}_incidence_deg": rng.uniform(0, 60, n),
-                     f"{kind}_height_px_true": rng.uniform(40, 300, n),
-                     f"{kind}_alpha_err": rng.normal(0, 0.004, n),
-                     f"{kind}_d_rel_err": rng.normal(0, 0.005, n)})
+    cols = synthetic_columns(50, 1, sigma_alpha=(0.004, 0.004), sigma_d=(0.005, 0.005))
     model_path = tmp_path / "m.json"
     errormodel.write_model(errormodel.fit(cols), model_path)
     assert main(["montecarlo", "--error-model", str(model_path)]) == 0
-    assert len(capsys.readouterr().out.strip().splitlines()) == 6  # a 4th row
+    assert len(capsys.readouterr().out.strip().splitlines()) == 7  # a 4th row
     meas = tmp_path / "meas.json"
     main(["check", str(Path(__file__).parents[1] / "scenes" / "exp1.yaml"),
           "--measurements", str(meas)])
@@ -346,11 +325,11 @@ def test_bad_bench_ranges_are_refused_with_their_key(tmp_path, capsys, bench, ke
 def test_error_model_fits_bias_against_bench_imperfections():
     """Synthetic rows on a bench: α error = pan error + N(0, 0.003°); d_total error =
     −0.0102·(calibration error) − mirror power + N(0, 0.002).  The fit recovers the
-    coefficients 1, −0.0102 and −1 by the features' names, and the solver's σ's grow to
-    the bench's (pan error uniform in ±0.5°: σ ≈ 0.29°)."""
+    coefficients 1, −0.0102 and −1 by the features' names, and the σ's grow to the
+    bench's (pan error uniform in ±0.5°: σ ≈ 0.29°)."""
     rng = np.random.default_rng(2)
     n = 3000
-    cols = {"index": list(range(n)), "error": [""] * n}
+    cols = synthetic_columns(n, 2)
     zeros = np.zeros(n)
     cols.update({"bench_pan_error_deg": rng.uniform(-0.5, 0.5, n),
                  "bench_calibration_error_cm": rng.uniform(-2, 2, n),
@@ -371,7 +350,7 @@ def test_error_model_fits_bias_against_bench_imperfections():
                      f"{kind}_d_rel_err": (-0.0102 * cols["bench_calibration_error_cm"] - power
                                            + rng.normal(0, 0.002, n))})
     model = errormodel.fit(cols)
-    names = model.features
+    names = model.bias_features
     assert set(names) - set(errormodel.FEATURES) == {"pan_error_deg", "calibration_error_cm",
                                                       "mirror_power"}
     for kind in ("target", "beacon"):
@@ -379,7 +358,8 @@ def test_error_model_fits_bias_against_bench_imperfections():
         assert a.bias[names.index("pan_error_deg")] == pytest.approx(1.0, abs=0.01)
         assert d.bias[names.index("calibration_error_cm")] == pytest.approx(-0.0102, abs=5e-4)
         assert d.bias[names.index("mirror_power")] == pytest.approx(-1.0, abs=0.1)
-    assert model.sigma.alpha_deg == pytest.approx(0.5 / 3**0.5, rel=0.1)
+    # the σ's about the truth hold the bench's spread (pan error uniform in ±0.5°)
+    assert model.typical.target.alpha_deg == pytest.approx(0.5 / 3**0.5, rel=0.1)
 
 
 @pytest.mark.parametrize("damage", ["misspelt column", "edited value", "truncated",

@@ -192,15 +192,17 @@ def test_plan_command(tmp_path):
     poses = MirrorPrior(d1=img.d1, yaw_deg=scene.mirror.yaw, d1_spread=2.0,
                         yaw_spread_deg=3.0, n=5).poses(o, ta)
     beacon = np.asarray(p["best_beacon"]["position"])
-    sa, sd = p["sigma"]["alpha_deg"], p["sigma"]["d_total_rel"]
+    # the default: the shipped error model's typical σ's, the target's and the beacon's
+    ts, bs = p["sigma"]["target"], p["sigma"]["beacons"][0]
     rng = np.random.default_rng(11)
     sq, k = [], 2000
     for point, yaw in poses:
         b = observe(o, point, yaw, beacon)
         virtual = o + td * np.array([np.cos(np.radians(ta)), np.sin(np.radians(ta))])
         target = reflect(virtual, point, yaw)  # the target this pose implies
-        est = solve_single(o, beacon, b.alpha_deg + rng.normal(0, sa, k),
-                           b.d_total * (1 + rng.normal(0, sd, k)), ta + rng.normal(0, sa, k),
-                           td * (1 + rng.normal(0, sd, k)))
+        est = solve_single(o, beacon, b.alpha_deg + rng.normal(0, bs["alpha_deg"], k),
+                           b.d_total * (1 + rng.normal(0, bs["d_total_rel"], k)),
+                           ta + rng.normal(0, ts["alpha_deg"], k),
+                           td * (1 + rng.normal(0, ts["d_total_rel"], k)))
         sq.append(np.mean(np.sum((est.target - target) ** 2, axis=1)))
     assert p["best_beacon"]["rmse"] == pytest.approx(np.sqrt(np.mean(sq)), rel=0.05)

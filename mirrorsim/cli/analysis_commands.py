@@ -11,7 +11,7 @@ from mirrorsim.cli.registry import (
     command,
     common,
     default_workers,
-    error_model_sigma,
+    error_model_of,
     finite,
     inputs,
     load,
@@ -29,22 +29,39 @@ def _solve_options(p):
     p.add_argument("measurements", type=Path)
     inputs(p, ("measurements", "MEASUREMENTS", "file"))
     common(p, scene=False, json="the solution",
-           error_model="where the measurements give no sigma, take")
+           error_model="each measurement's σ's; given, it replaces the file's `sigma`")
 
 
 @command("solve", "localize the mirror and the target from measurements",
-         "Read MEASUREMENTS.json (INTERFACE.md: observer, target alpha/d_total, beacons with "
-         "positions) and estimate the mirror line and the target.  One beacon and no sigma: the "
-         "exact closed form; otherwise weighted least squares, with the target's covariance and "
-         "95 % error ellipse when `sigma` is given.", _solve_options)
+         "Read MEASUREMENTS.json (observer, target alpha/d_total, beacons with positions; "
+         "optionally `sigma` and `observer_pan_deg`) and estimate the mirror line and the "
+         "target by weighted least squares (one beacon: the exact closed form), with the "
+         "target's covariance and 95 %% error ellipse.  The σ's: --error-model's if given "
+         "(it wins over the file's `sigma`, and says so), else the file's `sigma`, else the "
+         "shipped error model's.", _solve_options)
 def _solve(args) -> int:
     from mirrorsim.cli.tables import solution_summary
+    from mirrorsim.formats.error_model import default_error_model
     from mirrorsim.formats.measurements import load_measurements
     from solver.lsq import solve_measurements
 
     m = load_measurements(args.measurements)
-    sigma = m.sigma or error_model_sigma(args)
+    model = error_model_of(args)
+    if model is not None and m.sigma is not None:
+        print(f"note: --error-model {args.error_model} gives the σ's; the `sigma` of "
+              f"{args.measurements} is not used", file=sys.stderr)
+    if model is None and m.sigma is not None:
+        sigma, source = m.sigma, f"`sigma` of {args.measurements}"
+    else:
+        model = model or default_error_model()
+        sigma = model.sigmas(m.targets[0], [(b.alpha_deg, b.d_total) for b in m.beacons],
+                             m.observer_pan_deg)
+        source = (f"error model {args.error_model}" if args.error_model
+                  else "the shipped error model (ideal bench)")
+        if m.observer_pan_deg is None:
+            source += "; no observer_pan_deg: images taken as off-axis as its training rows"
     sol = solve_measurements(m.observer, m.beacons, m.targets, sigma)
+    print(f"σ's from {source}", file=sys.stderr)
     print(solution_summary(str(args.measurements), sol))
     emit_json(args.json, sol.to_json())
     return 0
@@ -63,8 +80,10 @@ def _montecarlo_options(p):
     p.add_argument("--beacon-along", type=float, default=0.3,
                    help="beacon's offset along the mirror from the reflection point")
     p.add_argument("--sigma", nargs=2, type=float, action="append", metavar=("ALPHA", "D"),
-                   help="a row of your own (deg, distance units); repeatable")
-    common(p, scene=False, json="the table", error_model="add a row with")
+                   help="a row of your own: σ_α in degrees, σ_d absolute in the table's "
+                   "distance units (the paper's convention); repeatable")
+    common(p, scene=False, json="the table", error_model="add a row with its typical σ's "
+           "(relative σ_d times --d-total; the target's and the beacon's)")
 
 
 @command("montecarlo", "the paper's Table 1 protocol",
@@ -92,7 +111,8 @@ def _montecarlo(args) -> int:
         geometry.layout()
     except (ValueError, SolverError) as exc:
         raise BadArgument("geometry", str(exc)) from None
-    rows = table_rows(args.sigma, error_model_sigma(args), args.d_total)
+    model = error_model_of(args)
+    rows = table_rows(args.sigma, None if model is None else model.typical, args.d_total)
     res = table1(args.iterations, geometry, args.seed, rows)
     print(montecarlo_table(res))
     emit_json(args.json, res.to_json())
@@ -102,13 +122,15 @@ def _montecarlo(args) -> int:
 def _plan_options(p):
     common(p, out="PNG (default renders/<name>/<name>.plan.png)", out_kind="file",
            json="the analysis")
-    p.add_argument("--sigma-alpha", type=float, default=0.01, help="deg (default 0.01)")
-    p.add_argument("--sigma-d", type=float, default=0.002, help="relative (default 0.002)")
+    p.add_argument("--sigma-alpha", type=float, help="σ_α, deg, for every measurement "
+                   "(with --sigma-d; default: the error model's typical σ's per object)")
+    p.add_argument("--sigma-d", type=float, help="σ_d, relative: a fraction of d_total "
+                   "(0.002 = 0.2 %%)")
     p.add_argument("--eps", type=float, default=5.0, help="orientation range ±eps (deg)")
     p.add_argument("--yaw-spread", type=float, default=3.0, help="prior yaw ± (deg)")
     p.add_argument("--d1-spread", type=float, default=2.0, help="prior mirror distance ± (cm)")
     p.add_argument("--step", type=float, default=1.0, help="grid step of the search (cm)")
-    common(p, scene=False, error_model="instead of --sigma-alpha/--sigma-d, take")
+    common(p, scene=False, error_model="its typical σ's per object (target, beacon)")
 
 
 @command("plan", "beacon placement analysis and the best beacon position",
@@ -120,12 +142,20 @@ def _plan_options(p):
 def _plan(args) -> int:
     from mirrorsim.cli.plots import plot_plan
     from mirrorsim.cli.tables import plan_text
+    from mirrorsim.formats.error_model import default_error_model
     from mirrorsim.pipelines.planning import plan_scene
-    from solver.lsq import Sigma
+    from solver.lsq import ObjectSigmas, Sigma
 
     finite(args, "sigma_alpha", "sigma_d", "eps", "yaw_spread", "d1_spread", "step")
+    if (args.sigma_alpha is None) != (args.sigma_d is None):
+        raise BadArgument("--sigma-alpha" if args.sigma_alpha is None else "--sigma-d",
+                          "give --sigma-alpha and --sigma-d together")
+    if args.sigma_alpha is not None and args.error_model:
+        raise BadArgument("--error-model", "give either it or --sigma-alpha/--sigma-d")
     scene = load(args.scene)
-    sigma = error_model_sigma(args) or Sigma(args.sigma_alpha, args.sigma_d)
+    sigma = (ObjectSigmas.same(Sigma(args.sigma_alpha, args.sigma_d))
+             if args.sigma_alpha is not None
+             else (error_model_of(args) or default_error_model()).typical)
     plan = plan_scene(scene, sigma, args.eps, args.yaw_spread, args.d1_spread, args.step)
     summ = plan.to_json()
     print(plan_text(scene, summ))
@@ -207,36 +237,78 @@ def _dataset(args) -> int:
 
 
 def _errormodel_options(p):
-    p.add_argument("dataset", type=Path)
-    inputs(p, ("dataset", "the dataset DIR", "dataset"))
+    p.add_argument("dataset", type=Path, nargs="?",
+                   help="the dataset to fit (omit it to only --test a model)")
+    inputs(p, ("dataset", "the dataset DIR", "dataset"), ("test", "--test", "dataset"))
     output(p, "--out", "file", type=Path,
-           help="model file, *.json (default DIR/error_model.json; the plots go beside it, "
-           "*.png)")
+           help="model file, *.json (default DIR/error_model.json; its plots go beside it, "
+           "*.png, and with --test *.reliability.png)")
+    p.add_argument("--test", type=Path, metavar="HELDOUT",
+                   help="a dataset the model was not fitted on: print the coverage of the "
+                   "target's 50/90/95 %% ellipses, the median Mahalanobis distance and each "
+                   "measurement's errors within 1σ/2σ")
+    common(p, scene=False, json="the validation (with --test)",
+           error_model="the model to --test, when no DATASET is fitted")
+    output(p, "--plot", "file", type=Path, metavar="PNG", suffixes=(".png",),
+           help="the reliability diagram (with --test; default beside the model)")
 
 
-@command("errormodel", "fit the detector's error model to a dataset",
-         "Fit bias and spread of alpha and d_total/d against distance, off-axis bearing, mirror "
-         "incidence and image size; write DIR/error_model.json (give it to solve, montecarlo or "
-         "plan with --error-model) and DIR/error_model.png.", _errormodel_options)
+@command("errormodel", "fit the detector's error model to a dataset, and test it on another",
+         "Fit each measurement's σ (target and beacon, alpha and d_total) as a function of what "
+         "is known when the photograph is measured (log d_total, off-axis bearing), and the "
+         "errors' bias against geometry and bench (to explain them); write "
+         "DIR/error_model.json (give it to evaluate, dataset, budget, track, solve, montecarlo "
+         "or plan with --error-model) and DIR/error_model.png.  With --test HELDOUT: solve "
+         "each held-out row again with the model's σ's and say whether its ellipses hold.",
+         _errormodel_options)
 def _errormodel(args) -> int:
+    from mirrorsim.formats.error_model import default_error_model
     from mirrorsim.pipelines import errormodel
 
+    if args.dataset is None and args.test is None:
+        raise BadArgument("DATASET", "give a dataset to fit, or --test HELDOUT to test a model")
+    if args.dataset is not None and args.error_model:
+        raise BadArgument("--error-model", "it names a model to test: give it or DATASET")
     if args.out is not None and args.out.suffix != ".json":
         raise BadArgument("--out", f"{args.out}: the model is JSON: give a *.json path (its "
                           "plots go beside it as *.png)")
-    plots = (args.out or args.dataset / "error_model.json").with_suffix(".png")
-    if args.out is not None and plots.exists() and not args.out.exists():
-        # the plots' file, named by us, is someone else's unless it came with the model
-        raise BadArgument("--out", f"{args.out}: its plots would go over {str(plots)!r}, "
-                          "which is not a model's: choose another name")
-    cols = errormodel.read_columns(args.dataset)
-    try:
-        model = errormodel.fit(cols)
-    except ValueError as exc:
-        raise BadArgument(str(args.dataset), str(exc)) from None
-    out = args.out or args.dataset / "error_model.json"
-    errormodel.write_model(model, out)
-    png = errormodel.plot(cols, model, out.with_suffix(".png"))
-    print(errormodel.summary(model))
-    print(f"model: {out}\nplots: {png}")
+    out = None
+    if args.dataset is not None:
+        out = args.out or args.dataset / "error_model.json"
+        plots = out.with_suffix(".png")
+        if args.out is not None and plots.exists() and not args.out.exists():
+            # the plots' file, named by us, is someone else's unless it came with the model
+            raise BadArgument("--out", f"{args.out}: its plots would go over {str(plots)!r}, "
+                              "which is not a model's: choose another name")
+        cols = errormodel.read_columns(args.dataset)
+        try:
+            model = errormodel.fit(cols, errormodel.provenance_of(args.dataset, cols))
+        except ValueError as exc:
+            raise BadArgument(str(args.dataset), str(exc)) from None
+        errormodel.write_model(model, out)
+        png = errormodel.plot(cols, model, plots)
+        print(errormodel.summary(model))
+        print(f"model: {out}\nplots: {png}")
+    else:
+        model = error_model_of(args) or default_error_model()
+    if args.test is not None:
+        _test_model(args, model, out)
     return 0
+
+
+def _test_model(args, model, out: Path | None) -> None:
+    from mirrorsim.formats.files import emit_json
+    from mirrorsim.pipelines import errormodel, uncertainty
+
+    try:
+        v = uncertainty.validate(model, errormodel.read_columns(args.test))
+    except ValueError as exc:
+        raise BadArgument(str(args.test), str(exc)) from None
+    name = args.error_model or out or "the shipped error model"
+    print(f"{name} on {args.test}:")
+    print("\n".join(uncertainty.report_lines(v)))
+    plot = args.plot or (out.with_suffix(".reliability.png") if out is not None else None)
+    if plot is not None:
+        print(f"reliability diagram: "
+              f"{uncertainty.reliability_plot(v, plot, f'{name} on {args.test}')}")
+    emit_json(args.json, v.to_json())

@@ -215,8 +215,8 @@ def _plan_error_map(fig, ax, scene: Scene, plan: Plan) -> None:
     ax.set_ylim(0, scene.board.size[1])
     ax.set_aspect("equal")
     ax.legend(fontsize=7, loc="upper left")
-    ax.set_title(f"expected target error, σ = ({plan.sigma.alpha_deg:g}°, "
-                 f"{100 * plan.sigma.d_total_rel:g} %), {plan.n_poses} mirror poses",
+    ax.set_title(f"expected target error, {plan.sigma.describe()}, {plan.n_poses} mirror "
+                 "poses",
                  fontsize=9)
 
 

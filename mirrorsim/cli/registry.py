@@ -176,16 +176,18 @@ def common(p: argparse.ArgumentParser, *, scene: bool = True, out: str | None = 
     if error_model:
         inputs(p, ("error_model", "--error-model", "file"))
         p.add_argument("--error-model", type=Path, metavar="FILE",
-                       help=f"{error_model} the σ's of an error model (`mirrorsim errormodel`)")
+                       help=f"an error model (`mirrorsim errormodel`): {error_model} (default: "
+                       "the model shipped for the ideal bench at the default render "
+                       "settings)")
 
 
-def error_model_sigma(args: argparse.Namespace):
-    """The σ's of ``--error-model``, or None where it is not given."""
+def error_model_of(args: argparse.Namespace):
+    """The model of ``--error-model``, or None where it is not given."""
     if not args.error_model:
         return None
-    from mirrorsim.pipelines.errormodel import load_sigma
+    from mirrorsim.formats.error_model import load_error_model
 
-    return load_sigma(args.error_model)
+    return load_error_model(args.error_model)
 
 
 def at_least(*checks: tuple[str, int | None, int]) -> None:

@@ -7,6 +7,7 @@ from pathlib import Path
 from mirrorsim.cli.registry import (
     command,
     common,
+    error_model_of,
     inputs,
     load,
     out_file,
@@ -156,7 +157,8 @@ def _calibrate(args) -> int:
 
 def _evaluate_options(p):
     common(p, out="output folder (default renders/<name>/)", json="the report", spp=True,
-            variant=True, quiet=True)
+            variant=True, quiet=True, error_model="each measurement's σ's, which weight the "
+            "solver and make the 95 %% ellipse")
     p.add_argument("--keep", nargs="*", default=[], choices=("ids", "annotated", "plot"),
                    help="write also: ids, each frame's object-id labels (<name>.ids.png); "
                         "annotated, each frame with its detections drawn "
@@ -183,7 +185,8 @@ def _evaluate(args) -> int:
         preload("mirrorsim.cli.plots")  # matplotlib imports while the frame renders
     out = out_folder(args, scene)
     report = evaluate_scene(scene, out, variant=args.variant, progress=not args.quiet,
-                            keep=tuple(k for k in args.keep if k != "plot"))
+                            keep=tuple(k for k in args.keep if k != "plot"),
+                            error_model=error_model_of(args))
     print(f"{scene.name}: {len(report.frames)} frame(s), {report.render.spp} spp, "
           f"{report.render.variant}{' (reused)' if report.reused else ''}")
     print(report_table(report))
@@ -200,7 +203,8 @@ def _evaluate(args) -> int:
 
 def _budget_options(p):
     common(p, out="output folder (default renders/<name>/budget/)", json="the budget", spp=True,
-           variant=True, quiet=True)
+           variant=True, quiet=True, error_model="each measurement's σ's (the solver's "
+           "weights)")
 
 
 @command("budget", "error budget of a bench: each imperfection alone, then all",
@@ -230,7 +234,7 @@ def _budget(args) -> int:
     step = (None if args.quiet else lambda label, k, runs: print(f"[{k}/{runs}] {label}",
                                                                  file=sys.stderr, flush=True))
     budget = run_budget(scene, out, variant=args.variant, progress=not args.quiet,
-                        on_step=step)
+                        on_step=step, error_model=error_model_of(args))
     print(budget_table(budget))
     path = write_json(out / "budget.json", budget.to_json())
     fig = plot_budget(budget, out / "budget.png")
@@ -243,7 +247,8 @@ def _track_options(p):
     from mirrorsim.pipelines.track import HEADINGS, MAX_ODOMETRY_SIGMA, MAX_STEPS, PATHS
 
     common(p, out="output folder (default renders/<name>/track/)", json="the track report",
-           variant=True, quiet=True)
+           variant=True, quiet=True, error_model="the filter's measurement σ's (the beacon's "
+           "typical ones)")
     p.add_argument("--path", default="rectangular", metavar="|".join(PATHS),
                    help="the beacon's path (paper eqs 19-21; default rectangular)")
     p.add_argument("--heading", default="view", metavar="|".join(HEADINGS),
@@ -301,7 +306,7 @@ def _track(args) -> int:
     report = run_track(scene, out, kind=args.path, steps=args.steps,
                        odometry_sigma=args.odometry_sigma, seed=args.seed, side=args.side,
                        step=args.step, heading=args.heading, variant=args.variant,
-                       on_pose=step)
+                       on_pose=step, error_model=error_model_of(args))
     if not args.quiet:
         print(file=sys.stderr)
     print(track_table(report))

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 from mirrorsim.detection.detector import Detection
 from mirrorsim.pipelines.score import Report
 from mirrorsim.rendering.frames import FrameFiles
@@ -92,7 +94,9 @@ def solution_summary(source: str, sol: Solution) -> str:
     if sol.covariance is not None:
         major, minor, angle = sol.ellipse95()
         lines.append(f"  95 % ellipse of the target: {major:.3f} × {minor:.3f} cm, major axis "
-                     f"at {angle:.1f}°")
+                     f"at {angle:.1f}°; RMS {np.sqrt(np.trace(sol.target_covariance)):.3f} cm "
+                     "(the Cramér–Rao bound at the estimate: the least squares attain it to "
+                     "first order)")
     return "\n".join(lines)
 
 
@@ -122,6 +126,12 @@ def report_table(report: Report) -> str:
               f"{e.target_cm:.3f}" + ("" if bound is None else f"  (95 %: {bound:.3f})"))]
     lines = _columns(rows)
     lines.insert(1, "-" * len(lines[0]))
+    if m.sigma is not None:
+        lines.append(f"σ's from the error model: {m.sigma.describe()}")
+    if e.target_mahalanobis is not None:
+        lines.append(f"the true target lies {e.target_mahalanobis:.2f} σ from the estimate "
+                     f"(inside the 95 % ellipse below 2.45); Cramér–Rao bound of the "
+                     f"target's RMS error: {e.target_crlb_cm:.3f} cm")
     if report.error_vs_beacons:
         lines.append("target error with the first k beacons: " + ", ".join(
             f"{k + 1}: {r.target_cm:.3f} cm" for k, r in enumerate(report.error_vs_beacons)))
@@ -176,20 +186,25 @@ def montecarlo_table(res: Table1) -> str:
              f"({g['mirror_point'][0]:.3f}, {g['mirror_point'][1]:.3f}) at yaw "
              f"{g['mirror_yaw_deg']:.1f}°; beacon at ({g['beacon'][0]:.3f}, "
              f"{g['beacon'][1]:.3f})",
-             f"{'v(alpha)':>9} {'v(d)':>6} | {'paper ref':>9} {'paper tar':>9} | "
+             "σ_α: the angle's standard deviation (deg); σ_d: d_total's, absolute (the "
+             "paper's units); RMSEs in the same units",
+             f"{'σ_α (°)':>9} {'σ_d':>6} | {'paper ref':>9} {'paper tar':>9} | "
              f"{'ours ref':>9} {'ours tar':>9} {'yaw (deg)':>9}"]
     for r in res.rows:
-        lines.append(f"{r.sigma_alpha_deg:9.2f} {r.sigma_d:6.2f} | "
+        lines.append(f"{r.sigma_alpha_deg:9.4g} {r.sigma_d:6.4g} | "
                      f"{r.paper_rmse_ref:9.3f} {r.paper_rmse_tar:9.3f} | "
                      f"{r.ours.rmse_ref:9.3f} {r.ours.rmse_tar:9.3f} "
-                     f"{r.ours.rmse_yaw_deg:9.2f}")
+                     f"{r.ours.rmse_yaw_deg:9.2f}"
+                     + ("" if r.beacon_sigma is None else
+                        f"  (error model: target's σ's; beacon's {r.beacon_sigma[0]:.4g}°, "
+                        f"{r.beacon_sigma[1]:.4g})"))
     return "\n".join(lines)
 
 
 def plan_text(scene: Scene, summ: dict) -> str:
     """The placement analysis as ``mirrorsim plan`` prints it."""
     p, q, L = summ["paper"], summ["paper_eq15_perpendicular"], summ["path_lengths"]
-    sb, bb, sig = summ["scene_beacon"], summ["best_beacon"], summ["sigma"]
+    sb, bb, sig = summ["scene_beacon"], summ["best_beacon"], summ["sigma_text"]
     return "\n".join([
         f"{scene.name}: target alpha {summ['target']['alpha_deg']:.3f}°, d_total "
         f"{summ['target']['d_total']:.2f} cm, mirror {scene.mirror.size[0]:g} cm wide, "
@@ -204,8 +219,7 @@ def plan_text(scene: Scene, summ: dict) -> str:
             for a in summ["area_vs_d_total"]),
         f"  paths over {summ['n_steps']} steps: linear {L['linear']:.1f}, rectangular "
         f"{L['rectangular']:.1f}, saw-tooth {L['sawtooth']:.1f} cm",
-        f"  expected target RMSE at sigma ({sig['alpha_deg']:g}°, "
-        f"{100 * sig['d_total_rel']:g} %) over {summ['mirror_poses']} mirror poses:",
+        f"  expected target RMSE at {sig} over {summ['mirror_poses']} mirror poses:",
         f"    scene's beacon {list(scene.beacons[0].position)}: {sb['rmse']:.3f} cm "
         f"(seen under {100 * sb['seen_fraction']:.0f}% of poses)",
         f"    best position ({bb['position'][0]:.1f}, {bb['position'][1]:.1f}): "

@@ -167,6 +167,7 @@ class Detection:
     target: ImageMeasurement
     beacons: list[tuple[Beacon, ImageMeasurement]]  # each beacon and its mirror image
     images: list[ImageMeasurement]  # every pencil image found (mirror and direct)
+    pan_deg: float | None = None  # the optical axis's bearing, as the capture record says
 
     def measurements(self) -> Measurements:
         """The solver's inputs (raises DetectionError if the target's d_total is missing)."""
@@ -175,7 +176,7 @@ class Detection:
                                  "clipped at the top)")
         return Measurements(observer=self.observer,
                             targets=[(self.target.alpha_deg, self.target.d_total)],
-                            beacons=self.beacon_measurements())
+                            beacons=self.beacon_measurements(), observer_pan_deg=self.pan_deg)
 
     def beacon_measurements(self) -> list[BeaconMeasurement]:
         """Each beacon's known position with its mirror image's α and d_total."""
@@ -187,7 +188,8 @@ class Detection:
         pixels (axis column, edges, bbox, clipping, direct or mirror)."""
         t = self.target
         out = Measurements(observer=self.observer, targets=[(t.alpha_deg, t.d_total)],
-                           beacons=self.beacon_measurements()).to_json()
+                           beacons=self.beacon_measurements(),
+                           observer_pan_deg=self.pan_deg).to_json()
         out["target"]["clipped"] = bool(t.clipped)
         for entry, (_, m) in zip(out["beacons"], self.beacons, strict=True):
             entry.update(clipped=bool(m.clipped), source="mirror")
@@ -248,7 +250,7 @@ def detect_frame(image: np.ndarray, view: CaptureRecord, calibration: Calibratio
     for m in (target, *pencils):
         _check_stands_on_board(cam, m, view)
     images, mirror_imgs = assign_beacons(pencils, view)
-    det = Detection(observer=tuple(cam.position), target=target,
+    det = Detection(observer=tuple(cam.position), pan_deg=cam.pan_deg, target=target,
                     beacons=list(zip(view.beacons, mirror_imgs, strict=True)), images=images)
     _check_a_mirror_fits(det)
     return det

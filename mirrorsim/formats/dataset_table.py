@@ -46,6 +46,15 @@ SCENE = (
     Column("mirror_width", "cm", "mirror width"), Column("mirror_height", "cm", "mirror height"),
     Column("target_x", "cm", "target position"), Column("target_y", "cm", "target position"),
 )
+# what the solver was given besides the images (the capture record's: believed values)
+KNOWN = (
+    Column("observer_x", "cm", "camera position the solver was given"),
+    Column("observer_y", "cm", "camera position the solver was given"),
+    Column("observer_pan_deg", "deg", "pan the camera's mount reported"),
+    Column("fx_px", "px", "the camera's focal length"),
+    Column("beacon_known_x", "cm", "beacon position the solver was given"),
+    Column("beacon_known_y", "cm", "beacon position the solver was given"),
+)
 # for each of OBJECTS, as <object>_<name>
 PER_OBJECT = (
     Column("pos_x", "cm", "position"), Column("pos_y", "cm", "position"),
@@ -59,6 +68,9 @@ PER_OBJECT = (
     Column("alpha_err", "deg", "measured − true α"),
     Column("d_rel_err", "1", "(measured − true) / true d_total"),
     Column("clipped", "", "the detector found the image clipped"),
+    Column("sigma_alpha_deg", "deg", "σ of the measured α, from the error model"),
+    Column("sigma_d_rel", "1", "σ of the measured d_total, relative (a fraction), from the "
+                               "error model"),
 )
 SOLUTION = (
     Column("est_target_x", "cm", "estimated target"),
@@ -70,6 +82,11 @@ SOLUTION = (
            "estimated line's distance from the true reflection point"),
     Column("err_reflection_point_cm", "cm", "reflection point error"),
     Column("target_ellipse95_major_cm", "cm", "semi-major axis of the solver's 95 % ellipse"),
+    Column("target_cov_xx", "cm²", "the estimated target's covariance"),
+    Column("target_cov_xy", "cm²", "the estimated target's covariance"),
+    Column("target_cov_yy", "cm²", "the estimated target's covariance"),
+    Column("target_mahalanobis", "1",
+           "true target's distance from the estimate in σ's of that covariance"),
 )
 BENCH = tuple(Column(c.name, c.units, c.doc) for imp in REGISTRY for c in imp.columns)
 TIMING = (Column("seconds_sample", "s", "drawing the scene"),
@@ -82,7 +99,7 @@ def object_column(kind: str, name: str) -> str:
 
 
 # every column of a row, in declaration order (a failed scene's row has RUN's, and TIMING's)
-COLUMNS = (*RUN, *SCENE,
+COLUMNS = (*RUN, *SCENE, *KNOWN,
            *(Column(object_column(k, c.name), c.units, f"{k}: {c.doc}")
              for k in OBJECTS for c in PER_OBJECT),
            *SOLUTION, *BENCH, *TIMING)

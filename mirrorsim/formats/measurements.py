@@ -8,7 +8,7 @@ from typing import Any
 
 from mirrorsim.formats.reader import Reader, read_json
 from solver.errors import InputError
-from solver.lsq import BeaconMeasurement, Sigma
+from solver.lsq import BeaconMeasurement, ObjectSigmas, Sigma
 from solver.measurements import SIGMA_ALPHA_MAX_DEG, SIGMA_D_REL_MAX, Measurements
 
 # what detect adds beside the solver's inputs; the solver ignores it
@@ -29,7 +29,7 @@ def measurements_from_dict(data: Any, source: str | Path = "<measurements>") -> 
     source and the key)."""
     r = Reader(source, MeasurementError)
     top = r.mapping(data, "", ("observer", "target", "beacons"),
-                    ("sigma", "scene", "detector", "source"))
+                    ("sigma", "observer_pan_deg", "scene", "detector", "source"))
     observer = r.pair(top["observer"], "observer")
     raw_t = top["target"]
     listed = isinstance(raw_t, list)
@@ -51,12 +51,30 @@ def measurements_from_dict(data: Any, source: str | Path = "<measurements>") -> 
             r.pair(b["position"], f"{key}.position"),
             r.number(b["alpha_deg"], f"{key}.alpha_deg"),
             r.number(b["d_total"], f"{key}.d_total", positive=True)))
-    sigma = read_sigma(r, top["sigma"]) if "sigma" in top else None
-    return Measurements(observer, targets, beacons, sigma)
+    sigma = read_sigmas(r, top["sigma"], len(beacons)) if "sigma" in top else None
+    pan = (r.number(top["observer_pan_deg"], "observer_pan_deg", low=-360.0, high=360.0)
+           if "observer_pan_deg" in top else None)
+    return Measurements(observer, targets, beacons, sigma, pan)
+
+
+def read_sigmas(r: Reader, value: Any, n_beacons: int, key: str = "sigma") -> ObjectSigmas:
+    """A ``sigma`` block: one pair for every observation, or ``target`` and ``beacons``
+    (one pair for all beacons, or a list of one per beacon)."""
+    if isinstance(value, dict) and "target" in value:
+        s = r.mapping(value, key, ("target", "beacons"))
+        raw = s["beacons"]
+        if isinstance(raw, list):
+            if len(raw) != n_beacons:
+                raise r.fail(f"{key}.beacons", f"{len(raw)} entries for {n_beacons} beacons")
+            beacons = tuple(read_sigma(r, b, f"{key}.beacons[{i}]") for i, b in enumerate(raw))
+        else:
+            beacons = (read_sigma(r, raw, f"{key}.beacons"),)
+        return ObjectSigmas(read_sigma(r, s["target"], f"{key}.target"), beacons)
+    return ObjectSigmas.same(read_sigma(r, value, key))
 
 
 def read_sigma(r: Reader, value: Any, key: str = "sigma") -> Sigma:
-    """A ``sigma`` block: α in degrees and d_total relative, each > 0 and sensible."""
+    """A σ pair: α in degrees and d_total relative (a fraction), each > 0 and sensible."""
     s = r.mapping(value, key, ("alpha_deg", "d_total_rel"))
     return Sigma(r.number(s["alpha_deg"], f"{key}.alpha_deg", positive=True,
                           high=SIGMA_ALPHA_MAX_DEG),

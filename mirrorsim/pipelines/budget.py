@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from mirrorsim.errors import DetectionError, SolverError
+from mirrorsim.formats.error_model import ErrorModel
 from mirrorsim.pipelines.evaluate import evaluate_scene
 from mirrorsim.pipelines.score import Report
 from mirrorsim.scene import imperfections
@@ -143,7 +144,8 @@ def contribution(source: str, value: Any, ideal: Report, report: Report,
 
 
 def run_budget(scene: Scene, out: str | Path, *, variant: str = "auto", progress: bool = True,
-               on_step: Callable[[str, int, int], None] | None = None) -> Budget:
+               on_step: Callable[[str, int, int], None] | None = None,
+               error_model: ErrorModel | None = None) -> Budget:
     """Evaluate ``scene`` ideal, with each imperfection alone and with all; frames and
     reports go to ``out/<ideal|source key|all>/``.  ``on_step(label, k, runs)`` is called
     before run k of ``runs``.
@@ -162,7 +164,7 @@ def run_budget(scene: Scene, out: str | Path, *, variant: str = "auto", progress
         if on_step is not None:
             on_step(label, next(done), runs)
         return evaluate_scene(sub, out / _folder(label), variant=variant, progress=progress,
-                              keep=("annotated",))
+                              keep=("annotated",), error_model=error_model)
 
     def measured(label: str, value: Any, sub: Scene) -> Contribution:
         # a bench error can make a frame unmeasurable (an image taken for the wrong one

@@ -25,6 +25,7 @@ Work runs in worker processes (:mod:`mirrorsim.pipelines.workers`) or on a Dask 
 
 from __future__ import annotations
 
+import hashlib
 import math
 import time
 import traceback
@@ -39,6 +40,7 @@ from tqdm import tqdm
 from mirrorsim.errors import BadParameter, DetectionError, InputError, SolverError
 from mirrorsim.formats import dataset_table as table
 from mirrorsim.formats.cache import seal
+from mirrorsim.formats.capture import CaptureRecord
 from mirrorsim.formats.dataset_folder import (
     DATASET_FORMAT,
     claim_folder,
@@ -48,7 +50,8 @@ from mirrorsim.formats.dataset_folder import (
     write_card,
     write_table,
 )
-from mirrorsim.formats.files import write_json, write_text
+from mirrorsim.formats.error_model import ErrorModel, default_error_model
+from mirrorsim.formats.files import dumps, write_json, write_text
 from mirrorsim.pipelines.random_scenes import DatasetSpec, NoValidScene
 from mirrorsim.pipelines.score import Report
 from mirrorsim.pipelines.workers import run_dask, run_local
@@ -57,7 +60,7 @@ from mirrorsim.scene.model import Scene
 from mirrorsim.truth.groundtruth import ObjectTruth
 from solver.geometry import yaw_difference
 
-ROW_SCHEMA_VERSION = 1
+ROW_SCHEMA_VERSION = 2
 # a worker retires past this resident memory; measured on llvm_ad_rgb, a warm worker
 # holds ~500 MiB after its first full-size scene and no more after 30 (README
 # "Throughput"), so this only stops a leak that another Mitsuba might bring
@@ -79,8 +82,11 @@ class SceneResult:
 
 
 def process_one(i: int, seed: int, spec: DatasetSpec, out: str, spp: int | None,
-                variant: str, keep: tuple[str, ...] = ()) -> SceneResult:
-    """Draw, render, detect, solve and score scene i; write its files and its row."""
+                variant: str, keep: tuple[str, ...] = (),
+                error_model: ErrorModel | None = None) -> SceneResult:
+    """Draw, render, detect, solve and score scene i; write its files, the measurements
+    the solver saw (``frames/<scene>/<scene>.measurements.json``, for ``solve``) and its
+    row."""
     from mirrorsim.pipelines.evaluate import evaluate_scene
     from mirrorsim.pipelines.random_scenes import sample_scene, to_yaml
 
@@ -97,7 +103,9 @@ def process_one(i: int, seed: int, spec: DatasetSpec, out: str, spp: int | None,
         with warnings.catch_warnings():  # a spec that draws JPEG frames knows it does
             warnings.filterwarnings("ignore", message=".*a JPEG frame")
             rep = evaluate_scene(scene, out_dir / "frames" / name, variant=variant,
-                                 progress=False, keep=keep)
+                                 progress=False, keep=keep, error_model=error_model)
+        write_json(out_dir / "frames" / name / f"{name}.measurements.json",
+                   rep.measurements.to_json())
         row.update(_flatten(scene, rep))
         row["seconds_sample"] = t1 - t0
         row["error"] = ""
@@ -116,6 +124,7 @@ def _flatten(scene: Scene, rep: Report) -> dict:
     """The row's columns: scene parameters, truth, measurements, solution, errors."""
     cam, mir, t = scene.camera, scene.mirror, rep.truth
     meas, sol, err = rep.measurements, rep.solution, rep.errors
+    cov = sol.target_covariance
     row = {
         "camera_x": cam.position[0], "camera_y": cam.position[1], "camera_height": cam.height,
         "camera_pan_deg": cam.pan_deg, "hfov_deg": cam.hfov,
@@ -129,9 +138,15 @@ def _flatten(scene: Scene, rep: Report) -> dict:
         **imperfections.row_values(scene),
     }
     b, frame = meas.beacons[0], rep.frames[0]
-    for kind, truth, (alpha, d), clipped in (
-            ("target", t.target, meas.targets[0], frame.target_clipped),
-            ("beacon", t.beacons[0], (b.alpha_deg, b.d_total), frame.beacon_clipped)):
+    row.update({"observer_x": meas.observer[0], "observer_y": meas.observer[1],
+                "observer_pan_deg": CaptureRecord.from_scene(scene).camera.pan_deg,
+                "fx_px": scene.camera.fx,
+                "beacon_known_x": b.position[0], "beacon_known_y": b.position[1]})
+    sig = meas.sigma
+    for kind, truth, (alpha, d), clipped, s in (
+            ("target", t.target, meas.targets[0], frame.target_clipped, sig.target),
+            ("beacon", t.beacons[0], (b.alpha_deg, b.d_total), frame.beacon_clipped,
+             sig.beacons[0])):
         values = {
             "pos_x": truth.position[0], "pos_y": truth.position[1],
             "alpha_true": truth.alpha_deg, "d_true": truth.d_total,
@@ -143,6 +158,7 @@ def _flatten(scene: Scene, rep: Report) -> dict:
             "alpha_err": alpha - truth.alpha_deg,
             "d_rel_err": (d - truth.d_total) / truth.d_total,
             "clipped": bool(clipped),
+            "sigma_alpha_deg": s.alpha_deg, "sigma_d_rel": s.d_total_rel,
         }
         row.update({table.object_column(kind, name): v for name, v in values.items()})
     row.update({
@@ -153,6 +169,8 @@ def _flatten(scene: Scene, rep: Report) -> dict:
         "err_reflection_point_cm": err.reflection_point_cm,
         "target_ellipse95_major_cm": (math.nan if err.target_ellipse95_major_cm is None
                                       else err.target_ellipse95_major_cm),
+        "target_cov_xx": float(cov[0, 0]), "target_cov_xy": float(cov[0, 1]),
+        "target_cov_yy": float(cov[1, 1]), "target_mahalanobis": err.target_mahalanobis,
     })
     return row
 
@@ -205,8 +223,12 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
                 sampler: str | None = None, variant: str = "auto", resume: bool = False,
                 keep: tuple[str, ...] = (), executor: str = "local",
                 scheduler: str | None = None, progress: bool = True,
-                max_rss_mb: float = MAX_WORKER_RSS_MB) -> DatasetRun:
+                max_rss_mb: float = MAX_WORKER_RSS_MB,
+                error_model: ErrorModel | None = None) -> DatasetRun:
     """Make (or finish) a dataset of ``n`` scenes; return a summary.
+
+    ``error_model`` gives each row's measurements their σ's (default: the model shipped
+    for the ideal bench); a resumed dataset keeps the model it was started with.
 
     Raises
     ------
@@ -225,7 +247,9 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
     spec = load_spec(spec_path)
     if sampler is not None:  # part of the spec, so that --resume checks it
         spec = spec.with_sampler(sampler)
-    meta = {"format": DATASET_FORMAT, "n": n, "seed": seed, "spp": spp, "spec": spec.data}
+    model = error_model or default_error_model()
+    meta = {"format": DATASET_FORMAT, "n": n, "seed": seed, "spp": spp, "spec": spec.data,
+            "error_model_sha256": hashlib.sha256(dumps(model.to_json()).encode()).hexdigest()}
     claim_folder(out, meta, resume)
     make_folders(out, meta)
     chosen = choose_variant(variant)  # the probe runs once here rather than in every worker
@@ -245,7 +269,7 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
             retry[result.index] = result.retry
         bar.update()
 
-    jobs = [(i, seed, spec, str(out), spp, chosen, tuple(keep)) for i in todo]
+    jobs = [(i, seed, spec, str(out), spp, chosen, tuple(keep), model) for i in todo]
     try:
         _run_jobs(jobs, executor, workers, scheduler, is_done, on_result, max_rss_mb)
     finally:

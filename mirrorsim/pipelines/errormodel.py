@@ -1,42 +1,46 @@
-"""The error model: bias and spread of the detector's α and d_total/d against geometry.
+"""The error model: each measurement's σ from what the experimenter knows, fitted on a
+dataset's rows; and, to explain the errors, their bias against geometry and the bench.
 
-For each object (target, beacon) and quantity (α error in degrees, relative d_total
-error), a linear model in the features [1, d_total, signed off-axis bearing, mirror
-incidence, 1/image height in px]: the bias by a robust fit (Huber loss, scipy's
-``least_squares``: a few gross errors do not drag it), the spread by the same on the
-absolute residuals (× √(π/2), so it estimates a Gaussian σ) of the rows within
-``GROSS`` robust σ's; the rows beyond are counted as gross errors.  The off-axis bearing is
-signed (α − pan: + = left of the axis): a bias that changes sign across the axis is a line
-through zero, which |off-axis| cannot represent.  A dataset drawn with bench
-imperfections (the spec's ``bench:`` block) adds a feature for each imperfection that
-varies in it (:data:`BENCH_FEATURES`), so the bias and spread are fitted against the
-pan error, the calibration error, the mirror's curvature…  The model file also holds the
-typical σ's that `solve`, `montecarlo` and `plan` take (``--error-model FILE``): the
-RMS over the rows of bias and spread together, so a bench's imperfections enter them.
+For each object kind (target, beacon) and quantity (α error in degrees, relative d_total
+error):
+
+* **σ** (:mod:`mirrorsim.formats.error_model`): log σ linear in the measured features
+  (log d_total, |off-axis bearing|), fitted by maximum likelihood on the errors about
+  the truth, gross errors (beyond GROSS predicted σ's) left out and counted.  What the
+  solver weights with, and what its error ellipse is made of.
+* **bias** (diagnostic): a robust linear fit (Huber loss, scipy's ``least_squares``) in
+  the geometry [1, d_total, signed off-axis bearing, mirror incidence, 1/image height]
+  and, for a dataset drawn with bench imperfections, each imperfection that varies in it
+  (:data:`BENCH_FEATURES`: the pan error, the calibration error, the mirror's
+  curvature…).  These features come from the truth and from values an experimenter
+  does not know, so the bias says what drives the errors; it never sets a σ.
 """
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from mirrorsim.formats import dataset_table as table
+from mirrorsim.formats.error_model import (
+    KINDS,
+    SIGMA_FEATURES,
+    ErrorModel,
+    LogSigma,
+    QuantityFit,
+    measured_features,
+)
 from mirrorsim.formats.files import atomic_path, write_json
-from mirrorsim.formats.measurements import read_sigma
-from mirrorsim.formats.reader import Reader, read_json
 from mirrorsim.scene import imperfections
-from solver.lsq import Sigma
 
 FEATURES = ("1", "d_total_cm", "off_axis_deg", "incidence_deg", "inv_height_px")
-# A bench's imperfections (a dataset's bench_* columns) as features, each in the form its
-# first-order effect is linear in (declared with its imperfection in the registry).  A
-# feature enters a model only where its column varies.
+# A bench's imperfections (a dataset's bench_* columns) as bias features, each in the form
+# its first-order effect is linear in (declared with its imperfection in the registry).
+# A feature enters the bias fit only where its column varies.
 BENCH_FEATURES = {f.name: f for f in imperfections.FEATURES}
-QUANTITIES = {"alpha": "alpha_err", "d_rel": "d_rel_err"}
-GROSS = 6.0  # residuals beyond this many robust σ's are gross errors, counted apart
+QUANTITY_COLUMNS = {"alpha": "alpha_err", "d_rel": "d_rel_err"}
+GROSS = 6.0  # errors beyond this many σ's are gross errors, counted apart
 
 
 def _feature(cols: dict, kind: str, name: str) -> np.ndarray:
@@ -100,95 +104,117 @@ def _robust_fit(X: np.ndarray, y: np.ndarray, cut: float = 1.345) -> np.ndarray:
     return np.r_[w[0] - np.sum(bz * mu / sd), bz / sd]
 
 
-@dataclass(frozen=True)
-class QuantityFit:
-    """One object's one quantity (α error in degrees, or relative d_total error): its
-    bias and spread as linear models in the features, and how many rows made them."""
+def fit_log_sigma(X: np.ndarray, y: np.ndarray, ridge: float = 1e-3) -> LogSigma:
+    """σ = exp(w·z) by maximum likelihood of y ~ N(0, σ²) (z: [1, standardized X]), with
+    a small ridge on the slopes so that a feature the rows barely vary in stays flat.
+    σ is the spread about the truth (a bias is part of it: a measurement cannot be
+    corrected for a bias its features do not predict)."""
+    from scipy.optimize import minimize
 
-    bias: tuple[float, ...]
-    spread: tuple[float, ...]
-    n: int
-    gross_errors: int
-    rms: float
-    typical_sigma: float  # RMS over the rows of bias and spread together
+    mu = X.mean(axis=0)
+    sc = X.std(axis=0)
+    sc[sc == 0] = 1.0
+    Z = np.column_stack([np.ones(len(y)), (X - mu) / sc])
+    y2 = np.maximum(y**2, 1e-300)
+    n = len(y)
 
-    def to_json(self) -> dict:
-        """The model file's entry."""
-        return {"bias": list(self.bias), "spread": list(self.spread), "n": self.n,
-                "gross_errors": self.gross_errors, "rms": self.rms,
-                "typical_sigma": self.typical_sigma}
+    def nll(w):
+        eta = Z @ w
+        e = y2 * np.exp(-2.0 * eta)
+        value = np.sum(eta + 0.5 * e) + ridge * n * np.sum(w[1:] ** 2)
+        grad = Z.T @ (1.0 - e) + np.r_[0.0, 2.0 * ridge * n * w[1:]]
+        return value, grad
 
-
-@dataclass(frozen=True)
-class ErrorModel:
-    """The fitted model: its features, a fit per object and quantity, and the σ pair the
-    solver takes."""
-
-    features: tuple[str, ...]
-    fits: dict[str, dict[str, QuantityFit]]  # "target"/"beacon" → "alpha"/"d_rel" → fit
-    sigma: Sigma
-
-    def to_json(self) -> dict:
-        """The model file (``mirrorsim errormodel``)."""
-        return {"features": list(self.features),
-                "objects": {k: {q: f.to_json() for q, f in qs.items()}
-                            for k, qs in self.fits.items()},
-                "sigma": {"alpha_deg": self.sigma.alpha_deg,
-                          "d_total_rel": self.sigma.d_total_rel}}
+    w0 = np.r_[0.5 * np.log(np.mean(y2)), np.zeros(X.shape[1])]
+    w = minimize(nll, w0, jac=True, method="BFGS").x
+    return LogSigma(float(w[0]), tuple(w[1:].tolist()), tuple(mu.tolist()), tuple(sc.tolist()))
 
 
-def fit(cols: dict) -> ErrorModel:
+def _sigma_fit(X: np.ndarray, y: np.ndarray) -> tuple[LogSigma, np.ndarray]:
+    """The σ law fitted on the rows that are not gross errors, and which rows are (more
+    than GROSS predicted σ's off): a gross error is a detector fault, counted apart."""
+    scale = 1.4826 * float(np.median(np.abs(y))) or float(np.std(y)) or 1.0
+    keep = np.abs(y) <= GROSS * scale
+    for _ in range(4):  # the gross rows by the fitted σ's, until they settle
+        law = fit_log_sigma(X[keep], y[keep])
+        now = np.abs(y) <= GROSS * law(X)
+        if np.array_equal(now, keep):
+            break
+        keep = now
+    return law, ~keep
+
+
+def sigma_features_of(cols: dict, kind: str) -> np.ndarray:
+    """The σ law's features (SIGMA_FEATURES) of ``kind``'s measurements in dataset
+    columns: from the measurement and the pan the capture record gives, as at
+    measurement time."""
+    col = lambda k: np.asarray(cols[k], float)  # noqa: E731
+    for k in (table.object_column(kind, "d_meas"), "observer_pan_deg"):
+        if k not in cols:
+            raise ValueError(f"the dataset has no column {k!r}: it was made by an older "
+                             "mirrorsim; make it again")
+    return measured_features(col(table.object_column(kind, "d_meas")),
+                             col(table.object_column(kind, "alpha_meas")),
+                             col("observer_pan_deg"))
+
+
+def min_rows(names: tuple[str, ...] | list[str]) -> int:
+    """The fewest usable rows a fit takes: five per coefficient of the σ law, and two
+    more than the bias fit's coefficients."""
+    return max(5 * (len(SIGMA_FEATURES) + 1), len(names) + 2)
+
+
+def fit(cols: dict, provenance: dict | None = None) -> ErrorModel:
     """Fit the model to dataset columns (name → sequence); rows with errors or missing
-    values are left out."""
+    values are left out.
+
+    Raises
+    ------
+    ValueError
+        When too few rows are usable (the message says how many are needed).
+    """
     names = features_of(cols)
     fits: dict[str, dict[str, QuantityFit]] = {}
     ok = np.array([not e for e in cols.get("error", [""] * len(cols["index"]))])
-    for kind in ("target", "beacon"):
+    need = min_rows(names)
+    # pixel errors scale as 1/fx: each row's errors as at the rows' median focal length
+    fx = np.asarray(cols["fx_px"], float) if "fx_px" in cols else np.full(len(ok), np.nan)
+    fx_px = float(np.median(fx[ok & np.isfinite(fx)])) if np.any(ok & np.isfinite(fx)) else None
+    at_fx = np.where(np.isfinite(fx), fx / (fx_px or 1.0), 1.0)
+    for kind in KINDS:
         X_all = _design(cols, kind, names)
+        S_all = sigma_features_of(cols, kind)
         fits[kind] = {}
-        for q, col in QUANTITIES.items():
+        for q, col in QUANTITY_COLUMNS.items():
             y = np.asarray(cols[table.object_column(kind, col)], float)
-            m = ok & np.isfinite(y) & np.isfinite(X_all).all(axis=1)
-            X, yy = X_all[m], y[m]
-            if len(yy) < len(names) + 2:
-                raise ValueError(f"too few usable rows ({len(yy)}) to fit {kind} {q}: "
-                                 f"{len(names) + 2} needed")
-            bias = _robust_fit(X, yy)
-            resid = yy - X @ bias
-            # gross errors (beyond GROSS robust σ's) are counted, not fitted: the spread
-            # is the Gaussian part's
-            sigma0 = 1.4826 * float(np.median(np.abs(resid - np.median(resid))))
-            keep = np.abs(resid) <= GROSS * sigma0 if sigma0 > 0 else np.ones(len(yy), bool)
-            spread = _robust_fit(X[keep], np.abs(resid[keep]) * math.sqrt(math.pi / 2),
-                                 cut=GROSS)
-            sd = np.maximum(X @ spread, 0.0)
+            m = ok & np.isfinite(y) & np.isfinite(X_all).all(axis=1) & np.isfinite(S_all).all(1)
+            if m.sum() < need:
+                raise ValueError(f"too few usable rows ({int(m.sum())}) to fit {kind} {q}: "
+                                 f"{need} needed")
+            law, gross = _sigma_fit(S_all[m], (y * at_fx)[m])
+            bias = _robust_fit(X_all[m][~gross], y[m][~gross])
             fits[kind][q] = QuantityFit(
-                bias=tuple(bias.tolist()), spread=tuple(spread.tolist()), n=int(len(yy)),
-                gross_errors=int((~keep).sum()), rms=float(np.sqrt(np.mean(yy**2))),
-                typical_sigma=float(np.sqrt(np.mean(sd**2 + (X @ bias) ** 2))))
-    # the larger of target's and beacon's: one σ pair for the solver
-    sigma = Sigma(alpha_deg=max(f["alpha"].typical_sigma for f in fits.values()),
-                  d_total_rel=max(f["d_rel"].typical_sigma for f in fits.values()))
-    return ErrorModel(tuple(names), fits, sigma)
+                log_sigma=law, n=int(m.sum()), gross_errors=int(gross.sum()),
+                rms=float(np.sqrt(np.mean((y * at_fx)[m] ** 2))),
+                typical_sigma=float(np.sqrt(np.mean(law(S_all[m][~gross]) ** 2))),
+                bias=tuple(bias.tolist()))
+    return ErrorModel(fits, tuple(names), provenance, fx_px)
 
 
-def predict(model: ErrorModel, kind: str, quantity: str, features: np.ndarray
-            ) -> tuple[np.ndarray, np.ndarray]:
-    """(bias, σ) of a quantity for feature rows (k, len(model.features)), in the order
-    of ``model.features``."""
-    m = model.fits[kind][quantity]
-    X = np.atleast_2d(features)
-    return X @ np.asarray(m.bias), np.maximum(X @ np.asarray(m.spread), 0.0)
+def bias_of(model: ErrorModel, kind: str, quantity: str, features: np.ndarray) -> np.ndarray:
+    """The diagnostic bias fit of a quantity at feature rows (k, len(model.bias_features))."""
+    return np.atleast_2d(features) @ np.asarray(model.fits[kind][quantity].bias)
 
 
-def load_sigma(path: str | Path) -> Sigma:
-    """The typical σ's of a model file, as the solver takes them (checked as a
-    measurement file's ``sigma`` is)."""
-    model = read_json(path)
-    r = Reader(path)
-    if not isinstance(model, dict) or "sigma" not in model:
-        raise r.fail("sigma", "missing: not an error model file (`mirrorsim errormodel`)")
-    return read_sigma(r, model["sigma"])
+def provenance_of(dataset_dir: str | Path, cols: dict) -> dict:
+    """Where a model comes from: the dataset's seed, scene count and spec's name, and the
+    command that fits it."""
+    import json
+
+    meta = json.loads((Path(dataset_dir) / "dataset.json").read_text())
+    return {"dataset_seed": meta.get("seed"), "dataset_n": meta.get("n"),
+            "rows_used": int(sum(not e for e in cols.get("error", []))),
+            "command": f"mirrorsim errormodel {Path(dataset_dir).name}"}
 
 
 def read_columns(dataset_dir: str | Path) -> dict:
@@ -200,51 +226,58 @@ def read_columns(dataset_dir: str | Path) -> dict:
 
 
 def summary(model: ErrorModel) -> str:
-    """The model in a few printed lines."""
-    lines = [f"error model: features {', '.join(model.features)}"]
+    """The model in a few printed lines (σ_d in %)."""
+    lines = ["error model: σ = exp(w·z), z = [1, " + ", ".join(SIGMA_FEATURES)
+             + "] standardized; α in degrees, d_total in % of d_total"]
     for kind, qs in model.fits.items():
         for q, m in qs.items():
-            unit = "°" if q == "alpha" else " (relative)"
-            coef = ", ".join(f"{n} {c:.4g}" for n, c in zip(model.features, m.bias, strict=True))
-            lines.append(f"  {kind:6s} {q:5s}: n={m.n} ({m.gross_errors} gross), "
-                         f"RMS {m.rms:.5f}{unit}, typical σ {m.typical_sigma:.5f}; "
-                         f"bias: {coef}")
-    s = model.sigma
-    lines.append(f"  σ for the solver: α {s.alpha_deg:.5f}°, d_total {100 * s.d_total_rel:.3f} %")
+            scale, unit = (1.0, "°") if q == "alpha" else (100.0, " %")
+            w = ", ".join(f"{n} {c:+.3f}" for n, c in zip(SIGMA_FEATURES, m.log_sigma.weights,
+                                                          strict=True))
+            lines.append(f"  {kind:6s} {q:5s}: n={m.n} ({m.gross_errors} gross left out), "
+                         f"RMS error {scale * m.rms:.4f}{unit}, typical σ "
+                         f"{scale * m.typical_sigma:.4f}{unit}; log σ slopes: {w}")
     return "\n".join(lines)
 
 
 def plot(cols: dict, model: ErrorModel, out: str | Path) -> Path:
-    """Errors against distance and incidence, with the fitted bias ± σ, and histograms."""
+    """Each row's error against its measured d_total and off-axis bearing, with the σ
+    the model gives that row (a ±2σ bar on each point), and the errors in σ's against a
+    standard normal."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(2, 4, figsize=(18, 8))
+    fig, axes = plt.subplots(2, 3, figsize=(16, 8.5))
     ok = np.array([not e for e in cols.get("error", [""] * len(cols["index"]))])
+    grid = np.linspace(-5, 5, 201)
     for r, (q, col, scale, unit) in enumerate((("alpha", "alpha_err", 1.0, "°"),
-                                                ("d_rel", "d_rel_err", 100.0, "%"))):
-        for kind, colour in (("target", "#c0392b"), ("beacon", "#d4a017")):
-            y = np.asarray(cols[table.object_column(kind, col)], float) * scale
-            X = _design(cols, kind, model.features)
-            m = ok & np.isfinite(y)
-            for c, (fi, name) in enumerate(((1, "d_total (cm)"), (3, "incidence (°)"))):
-                ax = axes[r, c]
-                ax.scatter(X[m, fi], y[m], s=8, color=colour, alpha=0.6, label=kind)
-                xs = np.linspace(X[m, fi].min(), X[m, fi].max(), 50)
-                F = np.tile(X[m].mean(axis=0), (50, 1))
-                F[:, fi] = xs
-                b, sd = predict(model, kind, q, F)
-                ax.plot(xs, b * scale, color=colour)
-                ax.fill_between(xs, (b - sd) * scale, (b + sd) * scale, color=colour, alpha=0.15)
-                ax.set_xlabel(name)
-                ax.set_ylabel(f"{q} error ({unit})")
-            axes[r, 2 if kind == "target" else 3].hist(y[m], bins=30, color=colour, alpha=0.8)
-            axes[r, 2 if kind == "target" else 3].set_title(f"{kind}: {q} error ({unit})")
-        axes[r, 0].legend(fontsize=8)
-    fig.suptitle("detector error against geometry (lines: fitted bias, bands: ±σ at mean "
-                 "features)")
+                                                ("d_rel", "d_rel_err", 100.0, "% of d_total"))):
+        for k, (kind, colour) in enumerate((("target", "#c0392b"), ("beacon", "#b8860b"))):
+            y = np.asarray(cols[table.object_column(kind, col)], float)
+            S = sigma_features_of(cols, kind)
+            m = ok & np.isfinite(y) & np.isfinite(S).all(axis=1)
+            fx = np.asarray(cols.get("fx_px", np.full(len(ok), np.nan)), float)[m]
+            per_fx = np.where(np.isfinite(fx) & bool(model.fx_px), (model.fx_px or 1.0) / fx, 1.0)
+            sd = model.fits[kind][q].log_sigma(S[m]) * per_fx
+            for c, (x, name) in enumerate(((np.exp(S[m, 0]), "measured d_total (cm)"),
+                                           (S[m, 1], "|off-axis bearing| (°)"))):
+                axes[r, c].errorbar(x + 0.15 * k, y[m] * scale, yerr=2 * sd * scale, fmt="o",
+                                    ms=3, color=colour, ecolor=colour, elinewidth=0.6,
+                                    alpha=0.6, label=f"{kind} (bar: ±2σ of the model)")
+                axes[r, c].set_xlabel(name)
+                axes[r, c].set_ylabel(f"{q} error ({unit})")
+            z = y[m] / sd
+            axes[r, 2].hist(np.clip(z, -5, 5), bins=40, range=(-5, 5), density=True,
+                            histtype="step", color=colour, label=f"{kind}: error / σ")
+        axes[r, 2].plot(grid, np.exp(-grid**2 / 2) / np.sqrt(2 * np.pi), "k--", lw=1,
+                        label="standard normal")
+        axes[r, 2].set_xlabel(f"{q} error / σ (clipped to ±5)")
+        axes[r, 2].set_ylabel("density")
+        for ax in axes[r]:
+            ax.legend(fontsize=8)
+    fig.suptitle("detector errors and the error model's σ per measurement (training rows)")
     fig.tight_layout()
     out = Path(out)
     try:

@@ -15,28 +15,26 @@ import numpy as np
 
 from mirrorsim.detection.detector import annotate
 from mirrorsim.errors import DetectionError
+from mirrorsim.formats.error_model import ErrorModel, default_error_model
 from mirrorsim.formats.files import default_out, write_png
 from mirrorsim.pipelines.frame import MeasuredFrame, render_and_measure
 from mirrorsim.pipelines.score import EXTRA_FILES, FrameRecord, Report, score
 from mirrorsim.scene.model import Scene
 from mirrorsim.truth.groundtruth import RenderInfo
-from solver.lsq import Sigma, solve_measurements
+from solver.lsq import solve_measurements
 from solver.measurements import Measurements
-
-# Measurement σ's the solver weights with: the detector's accuracy on full-size frames
-# at the default render settings (benchmarks/detect.py; README): α to ~0.005° (p95), the
-# target's d_total to ~0.1 %, the pencil's to ~0.6 % (mean).  One σ_d serves both.
-DETECTOR_SIGMA = Sigma(alpha_deg=0.005, d_total_rel=0.006)
 
 
 def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: str = "auto",
-                   progress: bool = True, sigma: Sigma = DETECTOR_SIGMA,
+                   progress: bool = True, error_model: ErrorModel | None = None,
                    keep: tuple[str, ...] = EXTRA_FILES) -> Report:
     """Render (or reuse) with the scene's render settings, detect, solve and score
     ``scene``; return the report.
 
-    ``keep``: which of EXTRA_FILES to write beside each frame (the id labels, the
-    annotated frame).
+    ``error_model``: gives each measurement its σ's, which weight the solver and make
+    its error ellipse (default: the model shipped for the ideal bench at the default
+    render settings).  ``keep``: which of EXTRA_FILES to write beside each frame (the id
+    labels, the annotated frame).
 
     Raises
     ------
@@ -69,13 +67,18 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
         raise DetectionError("the target's d_total could not be measured in any frame "
                              "(its image is clipped at the top)")
     mean_target = tuple(float(v) for v in np.mean(targets, axis=0))
+    model = error_model or default_error_model()
+    # what the experimenter knows: the measurements and the capture record's pan
+    pan, fx = measured[0].files.capture.camera.pan_deg, measured[0].files.capture.camera.fx
+    sigma = model.sigmas(mean_target, [(b.alpha_deg, b.d_total) for b in beacons], pan, fx)
     measurements = Measurements(observer=cam.position, targets=[mean_target], beacons=beacons,
-                                sigma=sigma)
+                                sigma=sigma, observer_pan_deg=pan)
     sol = solve_measurements(cam.position, beacons, targets, sigma)
     by_count = ()
     if len(beacons) > 1:
         by_count = tuple(score(truth, measurements,
-                               solve_measurements(cam.position, beacons[:k], targets, sigma))
+                               solve_measurements(cam.position, beacons[:k], targets,
+                                                  replace(sigma, beacons=sigma.beacons[:k])))
                          for k in range(1, len(beacons) + 1))
     done = truths[0].render  # how the frames were rendered, read back from the first
     return Report(scene=scene.name, truth=truth, measurements=measurements, solution=sol,

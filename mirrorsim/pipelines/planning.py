@@ -18,8 +18,8 @@ from mirrorsim.scene.model import (
     Scene,
 )
 from mirrorsim.truth import optics, visibility
-from solver.lsq import Sigma
-from solver.measurements import SIGMA_ALPHA_MAX_DEG, SIGMA_D_REL_MAX
+from solver.lsq import ObjectSigmas, Sigma, as_object_sigmas
+from solver.measurements import SIGMA_ALPHA_MAX_DEG, SIGMA_D_REL_MAX, sigma_json
 from solver.placement import (
     BeaconSearch,
     MirrorPrior,
@@ -57,7 +57,7 @@ class Plan:
     target_alpha_deg: float
     target_d_total: float
     eps_deg: float
-    sigma: Sigma
+    sigma: ObjectSigmas  # the target's and the beacon's
     geometry: PlacementGeometry  # the paper's eqs 9–18 as printed
     geometry_corrected: PlacementGeometry  # eq 15 with the line perpendicular
     n_steps: int
@@ -86,8 +86,7 @@ class Plan:
             "exact_region_area": self.region.area,
             "area_vs_d_total": [{"d_total": d, "paper": a, "exact": e}
                                 for d, a, e in zip(ds, lit, exact, strict=True)],
-            "sigma": {"alpha_deg": self.sigma.alpha_deg,
-                      "d_total_rel": self.sigma.d_total_rel},
+            "sigma": sigma_json(self.sigma), "sigma_text": self.sigma.describe(),
             "mirror_poses": self.n_poses,
             "scene_beacon": {"rmse": self.scene_beacon_rmse,
                              "seen_fraction": self.scene_beacon_seen},
@@ -97,7 +96,7 @@ class Plan:
         }
 
 
-def plan_scene(scene: Scene, sigma: Sigma | None = None, eps_deg: float = 5.0,
+def plan_scene(scene: Scene, sigma: Sigma | ObjectSigmas | None = None, eps_deg: float = 5.0,
                yaw_spread_deg: float = 3.0, d1_spread: float = 2.0, step: float = 1.0,
                n_poses: int = 5) -> Plan:
     """Placement numbers, paths, the exact beacon region and the best beacon position.
@@ -111,7 +110,7 @@ def plan_scene(scene: Scene, sigma: Sigma | None = None, eps_deg: float = 5.0,
     BadParameter
         For a σ, ε or step that is not > 0, ε ≥ 45° or a negative spread.
     """
-    sigma = sigma or Sigma()
+    sigma = as_object_sigmas(sigma or Sigma())
     _check_parameters(sigma, eps_deg, step, yaw_spread_deg, d1_spread)
     cam, mir = scene.camera, scene.mirror
     img = optics.mirror_image(cam.position, mir, scene.target.position)
@@ -146,10 +145,11 @@ def plan_scene(scene: Scene, sigma: Sigma | None = None, eps_deg: float = 5.0,
         scene_beacon_seen=float(scene_seen[0]))
 
 
-def _check_parameters(sigma: Sigma, eps_deg: float, step: float, yaw_spread_deg: float,
-                      d1_spread: float) -> None:
-    for name, v, hi in (("sigma.alpha_deg", sigma.alpha_deg, SIGMA_ALPHA_MAX_DEG),
-                        ("sigma.d_total_rel", sigma.d_total_rel, SIGMA_D_REL_MAX),
+def _check_parameters(sigma: ObjectSigmas, eps_deg: float, step: float,
+                      yaw_spread_deg: float, d1_spread: float) -> None:
+    pairs = (sigma.target, *sigma.beacons)
+    for name, v, hi in (*(("sigma.alpha_deg", s.alpha_deg, SIGMA_ALPHA_MAX_DEG) for s in pairs),
+                        *(("sigma.d_total_rel", s.d_total_rel, SIGMA_D_REL_MAX) for s in pairs),
                         ("eps_deg", eps_deg, 45)):
         if not 0 < v < hi or (name != "eps_deg" and v == hi):
             raise BadParameter(name, f"{v} must be > 0 and {'<' if name == 'eps_deg' else '≤'} "

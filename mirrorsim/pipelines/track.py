@@ -27,7 +27,7 @@ import numpy as np
 from mirrorsim.detection.detector import Detection
 from mirrorsim.detection.image_geometry import Calibration
 from mirrorsim.errors import BadParameter, DetectionError
-from mirrorsim.pipelines.evaluate import DETECTOR_SIGMA
+from mirrorsim.formats.error_model import ErrorModel, default_error_model
 from mirrorsim.pipelines.frame import FrameNotMeasured, render_and_measure
 from mirrorsim.scene.model import Bench, Scene
 from mirrorsim.truth.optics import target_facing
@@ -210,8 +210,12 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
               odometry_sigma: float = 0.1, seed: int = 0, side: float = 4.0,
               step: float = 1.0, heading: str = "view",
               variant: str = "auto", particles: int = 4000,
-              on_pose: Callable[[int, int], None] | None = None) -> TrackReport:
+              on_pose: Callable[[int, int], None] | None = None,
+              error_model: ErrorModel | None = None) -> TrackReport:
     """Render, detect and filter every pose of the path; return the report.
+
+    ``error_model``: the filter weighs each beacon observation with the model's typical
+    beacon σ's (default: the model shipped for the ideal bench).
 
     Raises
     ------
@@ -225,7 +229,8 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
     rng = np.random.default_rng(seed)
     b0, cam = scene.beacons[0], scene.camera
     start = np.asarray(b0.believed, float)
-    params = PFParams(sigma=DETECTOR_SIGMA,
+    model = error_model or default_error_model()
+    params = PFParams(sigma=model.typical_at(cam.fx).beacons[0],
                       sigma_trs=max(odometry_sigma if kind != "fixed" else 0.0, 1e-3))
     pose = _Poses(scene, out / "poses", seed, variant, on_pose, steps + 1)
     obs, target_obs, why = pose.measure(0, start, np.asarray(b0.position, float))

@@ -1,0 +1,118 @@
+"""Benchmark: how close the solver's estimates come to the Cramér–Rao bound.
+
+    python benchmarks/uncertainty.py [--scenes 40] [--draws 2000] [--seed S] [--beacons 1 2 3]
+
+For random scenes of the default spec (geometry only: nothing is rendered), the exact
+measurements of the target and of 1, 2 or 3 beacons (the spec's beacon and beacons drawn
+on the board where the mirror shows them), each measurement's σ's from the shipped error
+model, and DRAWS Gaussian draws of those σ's: the estimator's RMS target error, mirror
+yaw error and mirror offset error against the CRLB's (√trace of the target block, √ of
+the yaw and offset variances) at the truth.  Efficiency = RMSE / √CRLB (1: efficient).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+from mirrorsim.formats.error_model import default_error_model  # noqa: E402
+from mirrorsim.pipelines.random_scenes import load_spec, sample_scene  # noqa: E402
+from solver.errors import SolverError  # noqa: E402
+from solver.geometry import line_normal, yaw_difference  # noqa: E402
+from solver.lsq import BeaconMeasurement, crlb, solve_measurements  # noqa: E402
+from solver.sltr import observe  # noqa: E402
+
+
+def _extra_beacons(scene, rng, k: int) -> list[np.ndarray]:
+    """k more beacon positions in front of the mirror, seen in it: near the spec's beacon."""
+    m, cam = scene.mirror, scene.camera
+    out, tries = [], 0
+    b0 = np.asarray(scene.beacons[0].position, float)
+    while len(out) < k and tries < 2000:
+        tries += 1
+        p = b0 + rng.uniform(-8, 8, 2)
+        try:
+            o = observe(cam.position, m.center, m.yaw, p)
+        except SolverError:
+            continue
+        along = (np.asarray(o.reflection_point) - np.asarray(m.center)) @ np.array(
+            [np.cos(np.radians(m.yaw)), np.sin(np.radians(m.yaw))])
+        if abs(along) < 0.4 * m.size[0]:
+            out.append(p)
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenes", type=int, default=40)
+    ap.add_argument("--draws", type=int, default=2000)
+    ap.add_argument("--seed", type=int, help="default: a fresh one, printed")
+    ap.add_argument("--beacons", type=int, nargs="+", default=[1, 2, 3])
+    a = ap.parse_args()
+    seed = a.seed if a.seed is not None else int.from_bytes(os.urandom(3), "big")
+    model = default_error_model()
+    spec = load_spec(None)
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT,
+                            capture_output=True, text=True).stdout.strip()
+    print(f"estimator efficiency against the CRLB: {a.scenes} scenes of the default spec, "
+          f"seed {seed}, {a.draws} draws each, σ's from the shipped error model; commit "
+          f"{commit}, {time.strftime('%Y-%m-%d')}, {platform.machine()}\n")
+    print("| beacons | estimator | target RMSE / √CRLB median (p5–p95) | yaw | offset | "
+          "target √CRLB cm median |\n|---|---|---|---|---|---|")
+    rng = np.random.default_rng(seed)
+    for nb in a.beacons:
+        eff = {"target": [], "yaw": [], "offset": []}
+        bound_cm = []
+        for i in range(a.scenes):
+            scene = sample_scene(spec, np.random.default_rng(np.random.SeedSequence(
+                seed, spawn_key=(nb, i))), f"s{i}")
+            cam, m = scene.camera, scene.mirror
+            beacons = [np.asarray(scene.beacons[0].position, float)]
+            beacons += _extra_beacons(scene, rng, nb - 1)
+            if len(beacons) < nb:
+                continue
+            t = np.asarray(scene.target.position, float)
+            ob = [observe(cam.position, m.center, m.yaw, b) for b in beacons]
+            ot = observe(cam.position, m.center, m.yaw, t)
+            sig = model.sigmas((float(ot.alpha_deg), float(ot.d_total)),
+                               [(float(o.alpha_deg), float(o.d_total)) for o in ob], cam.pan_deg)
+            n = line_normal(m.yaw % 180)
+            rho = float(n @ np.asarray(m.center, float))
+            bound = crlb(cam.position, np.array(beacons), m.yaw % 180, rho, t, sig)
+            errs = {"target": [], "yaw": [], "offset": []}
+            for _ in range(a.draws):
+                bs = [BeaconMeasurement(tuple(b), float(o.alpha_deg) + rng.normal(0, s.alpha_deg),
+                                        float(o.d_total) * (1 + rng.normal(0, s.d_total_rel)))
+                      for b, o, s in zip(beacons, ob, sig.beacons, strict=True)]
+                ts = [(float(ot.alpha_deg) + rng.normal(0, sig.target.alpha_deg),
+                       float(ot.d_total) * (1 + rng.normal(0, sig.target.d_total_rel)))]
+                try:
+                    sol = solve_measurements(cam.position, bs, ts, sig)
+                except SolverError:
+                    continue
+                errs["target"].append(np.sum((sol.target - t) ** 2))
+                errs["yaw"].append(yaw_difference(sol.mirror.yaw_deg, m.yaw % 180) ** 2)
+                errs["offset"].append((sol.mirror.rho - rho) ** 2)
+            eff["target"].append(np.sqrt(np.mean(errs["target"]) / np.trace(bound[2:, 2:])))
+            eff["yaw"].append(np.sqrt(np.mean(errs["yaw"]) / bound[0, 0]))
+            eff["offset"].append(np.sqrt(np.mean(errs["offset"]) / bound[1, 1]))
+            bound_cm.append(np.sqrt(np.trace(bound[2:, 2:])))
+        name = "closed form" if nb == 1 else "least squares"
+        cells = [f"{statistics.median(v):.3f} ({np.percentile(v, 5):.3f}–"
+                 f"{np.percentile(v, 95):.3f})" for v in eff.values()]
+        print(f"| {nb} | {name} | {' | '.join(cells)} | {statistics.median(bound_cm):.3f} |",
+              flush=True)
+
+
+if __name__ == "__main__":
+    main()

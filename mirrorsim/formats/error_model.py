@@ -1,0 +1,223 @@
+"""The error model file (``mirrorsim errormodel`` writes it; every command that solves
+reads it): per object kind (target, beacon) and quantity (α, d_total), a σ that the
+experimenter can compute for each measurement, and the diagnostic bias fits.
+
+A measurement's σ is ``exp(w · z)`` with z = [1, standardized measured features]
+(:data:`SIGMA_FEATURES`): positive by construction, and a function of what is known
+when the photograph is measured (the measurement itself and the capture record), never
+of the truth or of a bench's imperfection values, which the experimenter does not know.
+A bench's unknown imperfections enter as the spread they cause in the dataset the
+model was fitted on.  The detector's errors are pixel errors: at a focal length of fx
+pixels σ_α (an axis column's error over fx) and σ_d (a height's error over the height,
+∝ fx) both scale as 1/fx, so a model fitted at the training frames' median fx
+(``fx_px``) serves other resolutions and fields of view by the factor fx_px / fx.
+
+Units, in the file and everywhere in mirrorsim: α errors and σ_α in degrees; d_total
+errors and σ_d relative, a fraction of d_total (0.002 = 0.2 %; printed tables show %).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mirrorsim.formats.reader import Reader, read_json
+from solver.errors import InputError
+from solver.lsq import ObjectSigmas, Sigma
+from solver.measurements import SIGMA_ALPHA_MAX_DEG, SIGMA_D_REL_MAX
+
+FORMAT = "mirrorsim error model"
+VERSION = 2
+KINDS = ("target", "beacon")
+QUANTITIES = ("alpha", "d_rel")
+# what σ depends on, from the measurement and the capture record alone
+SIGMA_FEATURES = ("log_d_total_cm", "abs_off_axis_deg")
+UNITS = {"alpha": "deg", "d_rel": "fraction of d_total (0.002 = 0.2 %)"}
+DEFAULT_NAME = "error_model.json"
+
+
+class ErrorModelError(InputError):
+    """A bad error model file."""
+
+
+def measured_features(d_total: Any, alpha_deg: Any, pan_deg: Any) -> np.ndarray:
+    """:data:`SIGMA_FEATURES` of measurements (broadcasts): log of the measured d_total
+    (cm) and the image's bearing off the optical axis (deg, unsigned)."""
+    d = np.asarray(d_total, float)
+    off = (np.asarray(alpha_deg, float) - np.asarray(pan_deg, float) + 180.0) % 360.0 - 180.0
+    return np.stack(np.broadcast_arrays(np.log(d), np.abs(off)), axis=-1)
+
+
+@dataclass(frozen=True)
+class LogSigma:
+    """σ = exp(intercept + Σ weight·(feature − mean)/scale): one quantity of one kind."""
+
+    intercept: float
+    weights: tuple[float, ...]
+    mean: tuple[float, ...]
+    scale: tuple[float, ...]
+
+    def __call__(self, features: np.ndarray) -> np.ndarray:
+        """σ for feature rows (…, len(SIGMA_FEATURES))."""
+        z = (np.asarray(features, float) - np.asarray(self.mean)) / np.asarray(self.scale)
+        return np.exp(self.intercept + z @ np.asarray(self.weights))
+
+    def to_json(self) -> dict:
+        """The file's entry."""
+        return {"intercept": self.intercept, "weights": list(self.weights),
+                "mean": list(self.mean), "scale": list(self.scale)}
+
+
+@dataclass(frozen=True)
+class QuantityFit:
+    """One kind's one quantity: its σ law, how many rows made it and how many gross
+    errors were left out, the rows' RMS error, and the diagnostic bias fit (linear in
+    the model's ``bias_features``, which may include truth and bench values: it explains
+    the errors, it does not predict a measurement's σ)."""
+
+    log_sigma: LogSigma
+    n: int
+    gross_errors: int
+    rms: float
+    typical_sigma: float  # RMS over the training rows of the predicted σ
+    bias: tuple[float, ...] = ()
+
+    def to_json(self) -> dict:
+        """The file's entry."""
+        return {"log_sigma": self.log_sigma.to_json(), "n": self.n,
+                "gross_errors": self.gross_errors, "rms": self.rms,
+                "typical_sigma": self.typical_sigma, "bias": list(self.bias)}
+
+
+@dataclass(frozen=True)
+class ErrorModel:
+    """The fitted model: a :class:`QuantityFit` per kind and quantity."""
+
+    fits: dict[str, dict[str, QuantityFit]]  # "target"/"beacon" → "alpha"/"d_rel" → fit
+    bias_features: tuple[str, ...] = ()
+    provenance: dict | None = None  # how it was made (dataset, seed, n, command)
+    fx_px: float | None = None  # the training frames' median focal length (px)
+
+    def sigma(self, kind: str, d_total: float, alpha_deg: float, pan_deg: float | None,
+              fx_px: float | None = None) -> Sigma:
+        """The σ pair of one measurement of a ``kind`` image (``pan_deg`` None: the pan
+        is not known, and the image is taken as off the axis as the training rows were on
+        average; ``fx_px``: the camera's focal length in pixels, None: the training's)."""
+        q = self.fits[kind]
+        scale = self.fx_px / fx_px if fx_px and self.fx_px else 1.0
+
+        def at(law: LogSigma) -> float:
+            x = measured_features(d_total, alpha_deg, 0.0 if pan_deg is None else pan_deg)
+            if pan_deg is None:
+                x[..., 1] = law.mean[1]
+            return float(law(x)) * scale
+
+        return Sigma(at(q["alpha"].log_sigma), at(q["d_rel"].log_sigma))
+
+    def sigmas(self, target: tuple[float, float], beacons: list[tuple[float, float]],
+               pan_deg: float | None, fx_px: float | None = None) -> ObjectSigmas:
+        """Each observation's σ's: the target's (α, d_total) and each beacon's."""
+        return ObjectSigmas(self.sigma("target", target[1], target[0], pan_deg, fx_px),
+                            tuple(self.sigma("beacon", d, a, pan_deg, fx_px)
+                                  for a, d in beacons))
+
+    def typical_at(self, fx_px: float | None) -> ObjectSigmas:
+        """:attr:`typical` for a camera of focal length ``fx_px`` (None: the training's)."""
+        t = self.typical
+        scale = self.fx_px / fx_px if fx_px and self.fx_px else 1.0
+        pair = lambda s: Sigma(s.alpha_deg * scale, s.d_total_rel * scale)  # noqa: E731
+        return ObjectSigmas(pair(t.target), tuple(pair(b) for b in t.beacons))
+
+    @property
+    def typical(self) -> ObjectSigmas:
+        """The typical σ's (RMS over the training rows) per kind, for analyses without
+        measurements (Monte Carlo tables, beacon placement)."""
+        pair = lambda k: Sigma(self.fits[k]["alpha"].typical_sigma,  # noqa: E731
+                               self.fits[k]["d_rel"].typical_sigma)
+        return ObjectSigmas(pair("target"), (pair("beacon"),))
+
+    def to_json(self) -> dict:
+        """The model file."""
+        out = {"format": FORMAT, "version": VERSION, "units": UNITS, "fx_px": self.fx_px,
+               "sigma_features": list(SIGMA_FEATURES), "bias_features": list(self.bias_features),
+               "objects": {k: {q: f.to_json() for q, f in qs.items()}
+                           for k, qs in self.fits.items()}}
+        if self.provenance:
+            out["provenance"] = self.provenance
+        return out
+
+
+def model_from_dict(data: Any, source: str | Path) -> ErrorModel:
+    """Validate a parsed model file (raises :class:`ErrorModelError` naming the file and
+    the key)."""
+    r = Reader(source, ErrorModelError)
+    top = r.mapping(data, "", ("format", "version", "objects"),
+                    ("units", "sigma_features", "bias_features", "provenance", "fx_px"))
+    if top["format"] != FORMAT or top["version"] != VERSION:
+        raise r.fail("version", f"{top['version']!r}: not a version-{VERSION} {FORMAT}; fit it "
+                                "again with this mirrorsim (`mirrorsim errormodel DATASET`)")
+    if top.get("sigma_features", list(SIGMA_FEATURES)) != list(SIGMA_FEATURES):
+        raise r.fail("sigma_features", f"{top['sigma_features']!r}: this mirrorsim computes "
+                                       f"{list(SIGMA_FEATURES)}")
+    objects = r.mapping(top["objects"], "objects", KINDS)
+    fits: dict[str, dict[str, QuantityFit]] = {}
+    for kind in KINDS:
+        qs = r.mapping(objects[kind], f"objects.{kind}", QUANTITIES)
+        fits[kind] = {q: _quantity(r, qs[q], f"objects.{kind}.{q}", q) for q in QUANTITIES}
+    bias_features = top.get("bias_features", [])
+    if not isinstance(bias_features, list) or not all(isinstance(b, str) for b in bias_features):
+        raise r.fail("bias_features", "expected a list of names")
+    prov = top.get("provenance")
+    fx = top.get("fx_px")
+    fx = None if fx is None else r.number(fx, "fx_px", positive=True, high=1e6)
+    return ErrorModel(fits, tuple(bias_features), prov if isinstance(prov, dict) else None, fx)
+
+
+def _quantity(r: Reader, value: Any, key: str, q: str) -> QuantityFit:
+    f = r.mapping(value, key, ("log_sigma", "n", "typical_sigma"),
+                  ("gross_errors", "rms", "bias"))
+    ls = r.mapping(f["log_sigma"], f"{key}.log_sigma", ("intercept", "weights", "mean", "scale"))
+    k = len(SIGMA_FEATURES)
+    vec = lambda name: tuple(r.number(v, f"{key}.log_sigma.{name}[{i}]")  # noqa: E731
+                             for i, v in enumerate(_list(r, ls[name], f"{key}.log_sigma.{name}",
+                                                         k)))
+    law = LogSigma(r.number(ls["intercept"], f"{key}.log_sigma.intercept", low=-50, high=50),
+                   vec("weights"), vec("mean"), vec("scale"))
+    if not all(s > 0 for s in law.scale):
+        raise r.fail(f"{key}.log_sigma.scale", f"{list(law.scale)}: scales must be > 0")
+    high = SIGMA_ALPHA_MAX_DEG if q == "alpha" else SIGMA_D_REL_MAX
+    typical = r.number(f["typical_sigma"], f"{key}.typical_sigma", positive=True, high=high)
+    bias = f.get("bias", [])
+    return QuantityFit(law, int(r.number(f["n"], f"{key}.n", low=0)),
+                       int(r.number(f.get("gross_errors", 0), f"{key}.gross_errors", low=0)),
+                       r.number(f.get("rms", 0.0), f"{key}.rms", low=0),
+                       typical,
+                       tuple(r.number(b, f"{key}.bias[{i}]")
+                             for i, b in enumerate(_list(r, bias, f"{key}.bias"))))
+
+
+def _list(r: Reader, value: Any, key: str, length: int | None = None) -> list:
+    if not isinstance(value, list) or (length is not None and len(value) != length):
+        want = f"a list of {length} numbers" if length is not None else "a list of numbers"
+        raise r.fail(key, f"expected {want}")
+    return value
+
+
+def load_error_model(path: str | Path) -> ErrorModel:
+    """Read and validate a model file."""
+    return model_from_dict(read_json(path, ErrorModelError), path)
+
+
+def default_model_path() -> Path:
+    """The model shipped with mirrorsim: the ideal bench at the default render settings,
+    fitted on the project's own dataset (``make error-model`` regenerates it)."""
+    return Path(str(resources.files("mirrorsim") / "data" / DEFAULT_NAME))
+
+
+def default_error_model() -> ErrorModel:
+    """:func:`default_model_path`'s model."""
+    return load_error_model(default_model_path())

@@ -1,0 +1,203 @@
+"""Whether an error model's error bars hold on rows it was not fitted on.
+
+Each held-out dataset row's measurements (what the solver saw: the observer, the
+beacon's believed position, the measured α and d_total) are solved again with the σ's
+the model gives them, and the estimate's covariance is held against the true target:
+
+* the coverage of the target's 50, 90 and 95 % ellipses, with a Clopper–Pearson 95 %
+  interval (a model is honest where the interval holds the nominal level);
+* the median Mahalanobis distance, against χ₂'s median √(2 ln 2) = 1.18;
+* for each measurement (target and beacon, α and d_total), the fraction of errors within
+  1σ and 2σ (0.683 and 0.954 for Gaussian errors of those σ's);
+* a reliability diagram: nominal against empirical coverage.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from mirrorsim.formats import dataset_table as table
+from mirrorsim.formats.error_model import KINDS, ErrorModel, measured_features
+from mirrorsim.formats.files import atomic_path
+from solver.errors import SolverError
+from solver.lsq import BeaconMeasurement, solve_measurements
+
+LEVELS = (0.5, 0.9, 0.95)
+CHI2_MEDIAN = math.sqrt(2.0 * math.log(2.0))  # the median of a χ with 2 degrees of freedom
+
+
+def chi2_2_radius(level: float) -> float:
+    """The Mahalanobis radius of a 2-D Gaussian's ``level`` region."""
+    return math.sqrt(-2.0 * math.log(1.0 - level))
+
+
+def binomial_interval(k: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
+    """Clopper–Pearson interval of a proportion k/n."""
+    from scipy.stats import beta
+
+    a = (1.0 - confidence) / 2.0
+    lo = 0.0 if k == 0 else float(beta.ppf(a, k, n - k + 1))
+    hi = 1.0 if k == n else float(beta.ppf(1.0 - a, k + 1, n - k))
+    return lo, hi
+
+
+@dataclass(frozen=True)
+class Coverage:
+    """How many held-out targets fell inside the ``level`` ellipse."""
+
+    level: float
+    inside: int
+    n: int
+
+    @property
+    def fraction(self) -> float:
+        """The fraction inside."""
+        return self.inside / self.n if self.n else math.nan
+
+    def to_json(self) -> dict:
+        """The validation file's entry."""
+        lo, hi = binomial_interval(self.inside, self.n)
+        return {"level": self.level, "inside": self.inside, "n": self.n,
+                "fraction": self.fraction, "interval95": [lo, hi]}
+
+
+@dataclass(frozen=True)
+class Validation:
+    """An error model held against held-out rows."""
+
+    n_rows: int
+    n_failed: int  # rows the solver could not solve again (or that had failed)
+    mahalanobis: np.ndarray  # per solved row
+    coverage: tuple[Coverage, ...]
+    within: dict[str, dict[str, tuple[float, float]]]  # kind → quantity → (1σ, 2σ)
+
+    @property
+    def median_mahalanobis(self) -> float:
+        """The median distance in σ's (1.18 for honest Gaussian ellipses)."""
+        return float(np.median(self.mahalanobis)) if self.mahalanobis.size else math.nan
+
+    def to_json(self) -> dict:
+        """The validation document."""
+        return {"rows": self.n_rows, "not_solved": self.n_failed,
+                "coverage": [c.to_json() for c in self.coverage],
+                "median_mahalanobis": self.median_mahalanobis,
+                "chi2_2_median": CHI2_MEDIAN,
+                "within": {k: {q: {"1sigma": a, "2sigma": b} for q, (a, b) in qs.items()}
+                           for k, qs in self.within.items()},
+                "expected_within": {"1sigma": 0.6827, "2sigma": 0.9545}}
+
+
+def _col(cols: dict, name: str) -> np.ndarray:
+    if name not in cols:
+        raise ValueError(f"the dataset has no column {name!r}: it was made by an older "
+                         "mirrorsim; make it again")
+    return np.asarray(cols[name], float)
+
+
+def validate(model: ErrorModel, cols: dict) -> Validation:
+    """Solve each usable row of ``cols`` (dataset columns) again with ``model``'s σ's and
+    score the target's covariance against the true target."""
+    n = len(cols["index"])
+    ok = np.array([not e for e in cols.get("error", [""] * n)])
+    pan = _col(cols, "observer_pan_deg")
+    fx = np.asarray(cols["fx_px"], float) if "fx_px" in cols else np.full(n, np.nan)
+    meas = {(k, q): _col(cols, table.object_column(k, q)) for k in KINDS
+            for q in ("alpha_meas", "d_meas")}
+    obs = np.column_stack([_col(cols, "observer_x"), _col(cols, "observer_y")])
+    known = np.column_stack([_col(cols, "beacon_known_x"), _col(cols, "beacon_known_y")])
+    truth = np.column_stack([_col(cols, "target_x"), _col(cols, "target_y")])
+    dist, failed = [], int((~ok).sum())
+    for i in np.flatnonzero(ok):
+        t = (meas["target", "alpha_meas"][i], meas["target", "d_meas"][i])
+        b = (meas["beacon", "alpha_meas"][i], meas["beacon", "d_meas"][i])
+        try:
+            sigma = model.sigmas(t, [b], pan[i], fx[i] if np.isfinite(fx[i]) else None)
+            sol = solve_measurements(obs[i], [BeaconMeasurement(tuple(known[i]), *b)], [t],
+                                     sigma)
+            dist.append(sol.mahalanobis(truth[i]))
+        except (SolverError, np.linalg.LinAlgError):
+            failed += 1
+    m = np.asarray(dist, float)
+    coverage = tuple(Coverage(p, int(np.sum(m <= chi2_2_radius(p))), len(m)) for p in LEVELS)
+    return Validation(int(ok.sum()), failed, m, coverage, _within(model, cols, ok, pan, fx))
+
+
+def _within(model: ErrorModel, cols: dict, ok: np.ndarray, pan: np.ndarray, fx: np.ndarray
+            ) -> dict[str, dict[str, tuple[float, float]]]:
+    """Each measurement's errors in the model's σ's: the fractions within 1σ and 2σ."""
+    out: dict[str, dict[str, tuple[float, float]]] = {}
+    for kind in KINDS:
+        x = measured_features(_col(cols, table.object_column(kind, "d_meas")),
+                              _col(cols, table.object_column(kind, "alpha_meas")), pan)
+        out[kind] = {}
+        for q, col in (("alpha", "alpha_err"), ("d_rel", "d_rel_err")):
+            err = _col(cols, table.object_column(kind, col))
+            m = ok & np.isfinite(err) & np.isfinite(x).all(axis=1)
+            scale = np.where(np.isfinite(fx[m]) & (model.fx_px or 0) > 0,
+                             (model.fx_px or 1.0) / fx[m], 1.0)
+            z = np.abs(err[m]) / (model.fits[kind][q].log_sigma(x[m]) * scale)
+            out[kind][q] = (float(np.mean(z <= 1.0)), float(np.mean(z <= 2.0))) if z.size \
+                else (math.nan, math.nan)
+    return out
+
+
+def report_lines(v: Validation) -> list[str]:
+    """The validation as printed lines (σ fractions against their Gaussian values)."""
+    lines = [f"held-out rows: {v.n_rows} ({v.n_failed} not solved)"]
+    for c in v.coverage:
+        lo, hi = binomial_interval(c.inside, c.n)
+        lines.append(f"  {100 * c.level:.0f} % ellipse: {c.inside}/{c.n} inside = "
+                     f"{c.fraction:.3f} (95 % interval {lo:.3f}–{hi:.3f})")
+    lines.append(f"  median Mahalanobis distance {v.median_mahalanobis:.2f} (honest: "
+                 f"{CHI2_MEDIAN:.2f})")
+    for kind, qs in v.within.items():
+        for q, (a, b) in qs.items():
+            lines.append(f"  {kind:6s} {q:5s} errors within 1σ {a:.3f} (0.683), within 2σ "
+                         f"{b:.3f} (0.954)")
+    return lines
+
+
+def reliability_plot(v: Validation, out: str | Path, title: str = "") -> Path:
+    """Nominal against empirical coverage of the target's ellipses (with each level's
+    Clopper–Pearson interval), and the Mahalanobis distances against χ₂."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    levels = np.linspace(0.05, 0.99, 40)
+    m = v.mahalanobis
+    inside = np.array([np.sum(m <= chi2_2_radius(p)) for p in levels])
+    band = np.array([binomial_interval(int(round(p * m.size)), m.size) for p in levels])
+    fig, (a, b) = plt.subplots(1, 2, figsize=(12, 5))
+    a.plot([0, 1], [0, 1], "k--", lw=1, label="honest")
+    a.fill_between(levels, band[:, 0], band[:, 1], color="0.85",
+                   label="95 % binomial band of an honest model")
+    a.plot(levels, inside / max(m.size, 1), "o-", ms=3, color="#c0392b",
+           label=f"held-out rows (n = {m.size})")
+    a.set_xlabel("nominal coverage of the target's ellipse")
+    a.set_ylabel("fraction of true targets inside")
+    a.set_title("reliability")
+    a.legend(fontsize=8)
+    r = np.linspace(0, max(4.0, float(np.percentile(m, 99)) if m.size else 4.0), 200)
+    b.hist(m, bins=30, range=(0, r[-1]), density=True, color="#c0392b", alpha=0.6,
+           label="held-out rows")
+    b.plot(r, r * np.exp(-r**2 / 2), "k--", lw=1, label="χ with 2 degrees of freedom")
+    b.axvline(v.median_mahalanobis, color="#c0392b", lw=1,
+              label=f"median {v.median_mahalanobis:.2f} (honest {CHI2_MEDIAN:.2f})")
+    b.set_xlabel("Mahalanobis distance of the true target (σ's)")
+    b.set_ylabel("density")
+    b.legend(fontsize=8)
+    fig.suptitle(title or "error model on held-out rows")
+    fig.tight_layout()
+    out = Path(out)
+    try:
+        with atomic_path(out) as tmp:
+            fig.savefig(tmp, dpi=110)
+    finally:
+        plt.close(fig)
+    return out
