@@ -10,6 +10,12 @@ percentile over seeds of the mirror's yaw and offset errors after each step, bes
 same for the batch least-squares smoother over all steps so far (every pose, the mirror
 and the motion at once: the best any estimator can do with these data, a reference
 for the filter).
+
+With --nees: the filter's own uncertainty against its errors.  After each step, the
+normalized estimation error squared of the mirror (yaw, offset) under the particles'
+weighted covariance, NEES = eᵀ C⁻¹ e, averaged over the seeds (a consistent filter gives
+2, the χ²₂ mean; the 95 % interval of a mean over N seeds is χ²₂N's quantiles / N), and
+the fraction of seeds whose truth lies in the 95 % region (NEES ≤ 5.99).
 """
 
 from __future__ import annotations
@@ -24,7 +30,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from solver.geometry import line_normal  # noqa: E402
 from solver.lsq import Sigma  # noqa: E402
-from solver.particle import PFParams, mirror_errors, simulate_run, track  # noqa: E402
+from solver.particle import (  # noqa: E402
+    MovingBeaconFilter,
+    PFParams,
+    mirror_errors,
+    simulate_run,
+    track,
+)
 from solver.placement import path_points  # noqa: E402
 from solver.smoother import smooth_run  # noqa: E402
 
@@ -47,10 +59,15 @@ def main() -> None:
     ap.add_argument("--sigma-trs", type=float, default=0.1, help="odometry σ per move, cm")
     ap.add_argument("--sigma-alpha", type=float, default=0.05, help="σ of α, degrees")
     ap.add_argument("--sigma-d", type=float, default=0.005, help="relative σ of d_total")
+    ap.add_argument("--nees", action="store_true",
+                    help="the filter's consistency (NEES) instead of its convergence")
     args = ap.parse_args()
     params = PFParams(Sigma(args.sigma_alpha, args.sigma_d), args.sigma_trs)
     path = path_points("rectangular", (30.0, 60.0), 66.7, 4.0, 1.0, 12)
     rho = line_normal(YAW) @ MIRROR
+    if args.nees:
+        nees_table(args, params, path, rho)
+        return
     yaw_errs, off_errs, batch = [], [], []
     for seed in range(args.seeds):
         controls, obs, true = simulate_run(OBSERVER, MIRROR, YAW, path, params, seed)
@@ -71,6 +88,43 @@ def main() -> None:
         print(f"| {k + 1} | {np.median(y[:, k]):.3f} | {np.percentile(y[:, k], 90):.3f} | "
               f"{np.median(o[:, k]):.3f} | {np.percentile(o[:, k], 90):.3f} | "
               f"{np.median(b[:, k]):.3f} | {np.percentile(b[:, k], 90):.3f} |")
+
+
+def _nees(f: MovingBeaconFilter, rho: float) -> float:
+    """eᵀ C⁻¹ e of the mirror's (yaw, offset) under the particles' weighted covariance."""
+    w, m = f.weights, f.particles.mirror
+    mean = w @ m
+    d = m - mean
+    cov = (w[:, None] * d).T @ d
+    e = np.array([YAW, rho]) - mean
+    return float(e @ np.linalg.solve(cov, e))
+
+
+def nees_table(args, params: PFParams, path: np.ndarray, rho: float) -> None:
+    """Mean NEES and 95 % coverage per step over the seeds."""
+    from scipy.stats import chi2
+
+    rows = []
+    for seed in range(args.seeds):
+        controls, obs, _ = simulate_run(OBSERVER, MIRROR, YAW, path, params, seed)
+        f = MovingBeaconFilter(OBSERVER, path[0], (YAW - 15, YAW + 15), (rho - 8, rho + 8),
+                               args.particles, params, 1000 + seed)
+        per = []
+        for c, z in zip(controls, obs, strict=True):
+            f.step(c, z)
+            per.append(_nees(f, rho))
+        rows.append(per)
+    v = np.array(rows)
+    n = v.shape[0]
+    lo, hi = chi2.ppf(0.025, 2 * n) / n, chi2.ppf(0.975, 2 * n) / n
+    print(f"filter consistency: {n} seeds, {args.particles} particles, σ_trs "
+          f"{args.sigma_trs:g} cm, σ = ({args.sigma_alpha:g}°, {100 * args.sigma_d:g} %); "
+          f"a consistent filter's mean NEES lies in {lo:.2f}–{hi:.2f} (95 %)\n")
+    print("| step | mean NEES (2 if consistent) | median | truth in the 95 % region |")
+    print("|---|---|---|---|")
+    for k in range(v.shape[1]):
+        print(f"| {k + 1} | {v[:, k].mean():.2f} | {np.median(v[:, k]):.2f} | "
+              f"{np.mean(v[:, k] <= chi2.ppf(0.95, 2)):.2f} |")
 
 
 if __name__ == "__main__":

@@ -14,6 +14,8 @@ from solver.geometry import line_normal, wrap_bearing
 from solver.sltr import MirrorLine, Solution, observe, ray_hits_line, solve_single
 
 ArrayLike = np.typing.ArrayLike
+# residuals beyond this many σ's weigh less (a Huber loss): a gross error in one image
+HUBER_K = 3.0
 
 
 @dataclass(frozen=True)
@@ -155,15 +157,31 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
 
     from scipy.optimize import least_squares  # scipy is slow to import: only when used
 
-    res = least_squares(fun, x0, jac=jac, method="lm" if len(meas_a) * 2 >= 4 else "trf",
+    # more measurements than unknowns: a Huber loss, so that one bad image (a residual
+    # beyond HUBER_K σ's) does not drag the estimate; it is named in the solution
+    robust = len(meas_a) * 2 > len(x0)
+    res = least_squares(fun, x0, jac=jac, method="trf" if robust else "lm",
+                        loss="huber" if robust else "linear", f_scale=HUBER_K,
                         xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    r = fun(res.x)
+    w = np.where(np.abs(r) > HUBER_K, HUBER_K / np.maximum(np.abs(r), 1e-300), 1.0)
     J = jac(res.x)
-    jtj = J.T @ J
+    jtj = J.T @ (w[:, None] * J)
     if np.linalg.cond(jtj) > 1e14:
         raise SolverError("the measurements do not determine the mirror and the target "
                           "(singular Jacobian)")
     cov = np.linalg.inv(jtj) if sigma is not None else None
-    return _solution(o, res.x, bpos, targets, cov)
+    names = _residual_names(len(beacons), len(targets))
+    down = tuple(f"{names[i]} ({abs(r[i]):.1f} σ off)" for i in np.flatnonzero(w < 1.0))
+    return replace(_solution(o, res.x, bpos, targets, cov), downweighted=down)
+
+
+def _residual_names(nb: int, nt: int) -> list[str]:
+    """The residuals' measurements, in their order: every α (beacons, then targets),
+    then every d_total."""
+    who = [f"beacon {i}" for i in range(nb)] + (
+        ["target"] if nt == 1 else [f"target {k}" for k in range(nt)])
+    return [f"{w} α" for w in who] + [f"{w} d_total" for w in who]
 
 
 def _measurement_arrays(beacons: list[BeaconMeasurement], targets: list[tuple[float, float]]

@@ -85,6 +85,7 @@ class Table1Row:
     def to_json(self) -> dict:
         """The row as ``montecarlo --json`` writes it."""
         out = {"sigma_alpha_deg": self.sigma_alpha_deg, "sigma_d": self.sigma_d,
+               "sigma_d_units": "absolute (the table's distance units)",
                "paper_rmse_ref": self.paper_rmse_ref, "paper_rmse_tar": self.paper_rmse_tar,
                **asdict(self.ours)}
         if self.beacon_sigma is not None:

@@ -124,6 +124,7 @@ class Solution:
     beacon_reflection_points: np.ndarray  # (k, 2)
     covariance: np.ndarray | None = None  # of (θ [deg], ρ, x_t, y_t)
     method: str = "closed form"
+    downweighted: tuple[str, ...] = ()  # measurements the robust fit trusted less
 
     @property
     def target_covariance(self) -> np.ndarray | None:
@@ -154,6 +155,8 @@ class Solution:
             "beacon_reflection_points": self.beacon_reflection_points.tolist(),
             "method": self.method,
         }
+        if self.downweighted:
+            out["downweighted"] = list(self.downweighted)
         if self.covariance is not None:
             major, minor, angle = self.ellipse95()
             out["covariance"] = {
@@ -173,7 +176,7 @@ class Solution:
                    target_reflection_point=np.asarray(d["target"]["reflection_point"], float),
                    beacon_reflection_points=np.asarray(d["beacon_reflection_points"], float),
                    covariance=None if cov is None else np.asarray(cov, float),
-                   method=d["method"])
+                   method=d["method"], downweighted=tuple(d.get("downweighted", ())))
 
 
 def error_ellipse(cov: ArrayLike, level: float = 0.95) -> tuple[float, float, float]:

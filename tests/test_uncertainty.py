@@ -21,14 +21,14 @@ from solver.sltr import observe
 
 from .conftest import SCENES, synthetic_columns
 
-O = np.array([0.0, 0.0])
+OBS = np.array([0.0, 0.0])
 MIRROR = (np.array([40.0, 40.0]), 20.0)  # a point on the line, its yaw
 TARGET = np.array([52.0, 20.0])
 BEACONS = [np.array([30.0, 25.0]), np.array([45.0, 28.0]), np.array([20.0, 30.0])]
 
 
 def _exact(points):
-    return [observe(O, MIRROR[0], MIRROR[1], p) for p in points]
+    return [observe(OBS, MIRROR[0], MIRROR[1], p) for p in points]
 
 
 def _noisy(rng, sig: ObjectSigmas, beacons=BEACONS):
@@ -61,14 +61,14 @@ def test_per_object_sigmas_give_ellipses_that_hold_and_meet_the_cramer_rao_bound
     est, dist = [], []
     for _ in range(600):
         bs, ts = _noisy(rng, sig, beacons)
-        sol = solve_measurements(O, bs, ts, sig)
+        sol = solve_measurements(OBS, bs, ts, sig)
         est.append(sol.target)
         dist.append(sol.mahalanobis(TARGET))
     dist = np.array(dist)
     inside = np.mean(dist <= uncertainty.chi2_2_radius(0.95))
     assert 0.925 <= inside <= 0.970
     assert np.median(dist) == pytest.approx(uncertainty.CHI2_MEDIAN, rel=0.1)
-    bound = crlb(O, np.array(beacons), MIRROR[1], _rho(), TARGET, sig)[2:, 2:]
+    bound = crlb(OBS, np.array(beacons), MIRROR[1], _rho(), TARGET, sig)[2:, 2:]
     mse = np.cov(np.array(est).T, bias=True) + np.outer(np.mean(est, 0) - TARGET,
                                                          np.mean(est, 0) - TARGET)
     assert math.sqrt(np.trace(mse) / np.trace(bound)) == pytest.approx(1.0, abs=0.1)
@@ -84,8 +84,8 @@ def test_one_pair_for_both_objects_gives_a_wrong_ellipse():
     per, same = [], []
     for _ in range(300):
         bs, ts = _noisy(rng, sig)
-        per.append(solve_measurements(O, bs, ts, sig).mahalanobis(TARGET))
-        same.append(solve_measurements(O, bs, ts, one).mahalanobis(TARGET))
+        per.append(solve_measurements(OBS, bs, ts, sig).mahalanobis(TARGET))
+        same.append(solve_measurements(OBS, bs, ts, one).mahalanobis(TARGET))
     assert np.median(per) == pytest.approx(1.18, rel=0.15)
     assert np.median(same) < 0.8 * np.median(per)
 
@@ -96,8 +96,8 @@ def test_crlb_of_one_beacon_is_the_closed_forms_covariance():
     sig = ObjectSigmas(Sigma(0.004, 0.001), (Sigma(0.002, 0.003),))
     bs, ts = _noisy(np.random.default_rng(0), ObjectSigmas.same(Sigma(1e-12, 1e-12)),
                     BEACONS[:1])
-    sol = solve_measurements(O, bs, ts, sig)
-    bound = crlb(O, BEACONS[:1], MIRROR[1], _rho(), TARGET, sig)
+    sol = solve_measurements(OBS, bs, ts, sig)
+    bound = crlb(OBS, BEACONS[:1], MIRROR[1], _rho(), TARGET, sig)
     np.testing.assert_allclose(sol.covariance, bound, rtol=1e-5, atol=1e-12)
 
 
@@ -231,3 +231,43 @@ def test_solve_says_which_sigmas_win(tmp_path, capsys):
     narrow = json.loads(out.read_text())["covariance"]["target_ellipse95"]["major"]
     assert narrow < wide / 10
     assert load_error_model(model).to_json() == default_error_model().to_json()
+
+
+@pytest.mark.slow
+def test_the_shipped_model_is_what_make_error_model_fits(tmp_path):
+    """The shipped model comes from `make error-model`: the dataset of its recorded seed
+    and size, made again here, fits to the same model (same rows: renders are
+    bit-identical for a seed, whatever the workers)."""
+    from mirrorsim.pipelines.dataset import run_dataset
+
+    shipped = default_error_model()
+    prov = shipped.provenance
+    out = tmp_path / "error-model"
+    run_dataset(prov["dataset_n"], prov["dataset_seed"], out, workers=2, progress=False)
+    again = errormodel.fit(errormodel.read_columns(out),
+                           errormodel.provenance_of(out, errormodel.read_columns(out)))
+    a, b = again.to_json(), shipped.to_json()
+    assert a["bias_features"] == b["bias_features"] and a["provenance"] == b["provenance"]
+    for kind in ("target", "beacon"):
+        for q in ("alpha", "d_rel"):
+            x, y = a["objects"][kind][q], b["objects"][kind][q]
+            assert (x["n"], x["gross_errors"]) == (y["n"], y["gross_errors"])
+            np.testing.assert_allclose(
+                [x["log_sigma"]["intercept"], *x["log_sigma"]["weights"], x["typical_sigma"]],
+                [y["log_sigma"]["intercept"], *y["log_sigma"]["weights"], y["typical_sigma"]],
+                rtol=1e-6, atol=1e-9)
+
+
+def test_one_bad_image_does_not_drag_the_estimate_and_is_named():
+    """Three beacons, one of whose d_total is off by 5 % (a gross detector error, 25 of
+    its σ's): the robust fit keeps the target within 3 σ of the truth and names the
+    measurement it trusted less; clean measurements name none."""
+    sig = ObjectSigmas(Sigma(0.002, 0.0005), (Sigma(0.003, 0.002),))
+    bs, ts = _noisy(np.random.default_rng(5), sig)
+    bad = [bs[0], BeaconMeasurement(bs[1].position, bs[1].alpha_deg, bs[1].d_total * 1.05),
+           bs[2]]
+    sol = solve_measurements(OBS, bad, ts, sig)
+    assert any(name.startswith("beacon 1 d_total") for name in sol.downweighted)
+    assert sol.mahalanobis(TARGET) < 3.0
+    clean = solve_measurements(OBS, bs, ts, sig)
+    assert clean.downweighted == ()

@@ -79,9 +79,9 @@ def _montecarlo_options(p):
                    help="beacon's distance in front of the mirror")
     p.add_argument("--beacon-along", type=float, default=0.3,
                    help="beacon's offset along the mirror from the reflection point")
-    p.add_argument("--sigma", nargs=2, type=float, action="append", metavar=("ALPHA", "D"),
-                   help="a row of your own: σ_α in degrees, σ_d absolute in the table's "
-                   "distance units (the paper's convention); repeatable")
+    p.add_argument("--sigma", nargs=2, type=float, action="append", metavar=("ALPHA", "DREL"),
+                   help="a row of your own: σ_α in degrees, σ_d relative, a fraction of "
+                   "d_total (0.002 = 0.2 %%); repeatable")
     common(p, scene=False, json="the table", error_model="add a row with its typical σ's "
            "(relative σ_d times --d-total; the target's and the beacon's)")
 
@@ -102,9 +102,10 @@ def _montecarlo(args) -> int:
         raise BadArgument("--iterations", f"{args.iterations} must be ≤ {MAX_ITERATIONS}")
     finite(args, "alpha", "d_total", "d1", "incidence", "beacon_depth", "beacon_along", "sigma")
     for a, d in args.sigma or []:
-        if not (0 <= a <= SIGMA_ALPHA_MAX_DEG and 0 <= d <= args.d_total):
+        if not (0 <= a <= SIGMA_ALPHA_MAX_DEG and 0 <= d <= 1):
             raise BadArgument("--sigma", f"{a:g} {d:g}: need 0 ≤ σ_α ≤ "
-                              f"{SIGMA_ALPHA_MAX_DEG:g}° and 0 ≤ σ_d ≤ d_total")
+                              f"{SIGMA_ALPHA_MAX_DEG:g}° and 0 ≤ σ_d ≤ 1 (a fraction of "
+                              "d_total)")
     try:
         geometry = Table1Geometry(args.alpha, args.d_total, args.d1, args.incidence,
                                   args.beacon_depth, args.beacon_along)
@@ -112,7 +113,8 @@ def _montecarlo(args) -> int:
     except (ValueError, SolverError) as exc:
         raise BadArgument("geometry", str(exc)) from None
     model = error_model_of(args)
-    rows = table_rows(args.sigma, None if model is None else model.typical, args.d_total)
+    rows = table_rows([(a, d * args.d_total) for a, d in args.sigma or []] or None,
+                      None if model is None else model.typical, args.d_total)
     res = table1(args.iterations, geometry, args.seed, rows)
     print(montecarlo_table(res))
     emit_json(args.json, res.to_json())

@@ -97,6 +97,8 @@ def solution_summary(source: str, sol: Solution) -> str:
                      f"at {angle:.1f}°; RMS {np.sqrt(np.trace(sol.target_covariance)):.3f} cm "
                      "(the Cramér–Rao bound at the estimate: the least squares attain it to "
                      "first order)")
+    if sol.downweighted:
+        lines.append("  trusted less (a Huber loss): " + ", ".join(sol.downweighted))
     return "\n".join(lines)
 
 
@@ -128,6 +130,8 @@ def report_table(report: Report) -> str:
     lines.insert(1, "-" * len(lines[0]))
     if m.sigma is not None:
         lines.append(f"σ's from the error model: {m.sigma.describe()}")
+    if s.downweighted:
+        lines.append("trusted less by the solver (a Huber loss): " + ", ".join(s.downweighted))
     if e.target_mahalanobis is not None:
         lines.append(f"the true target lies {e.target_mahalanobis:.2f} σ from the estimate "
                      f"(inside the 95 % ellipse below 2.45); Cramér–Rao bound of the "
@@ -186,18 +190,20 @@ def montecarlo_table(res: Table1) -> str:
              f"({g['mirror_point'][0]:.3f}, {g['mirror_point'][1]:.3f}) at yaw "
              f"{g['mirror_yaw_deg']:.1f}°; beacon at ({g['beacon'][0]:.3f}, "
              f"{g['beacon'][1]:.3f})",
-             "σ_α: the angle's standard deviation (deg); σ_d: d_total's, absolute (the "
-             "paper's units); RMSEs in the same units",
-             f"{'σ_α (°)':>9} {'σ_d':>6} | {'paper ref':>9} {'paper tar':>9} | "
+             "σ_α: the angle's standard deviation (deg); σ_d: d_total's, in % of d_total "
+             "(the paper's absolute σ_d divided by d_total); RMSEs in the table's distance "
+             "units",
+             f"{'σ_α (°)':>9} {'σ_d (%)':>7} | {'paper ref':>9} {'paper tar':>9} | "
              f"{'ours ref':>9} {'ours tar':>9} {'yaw (deg)':>9}"]
+    d_total = res.geometry.d_total
     for r in res.rows:
-        lines.append(f"{r.sigma_alpha_deg:9.4g} {r.sigma_d:6.4g} | "
+        lines.append(f"{r.sigma_alpha_deg:9.4g} {100 * r.sigma_d / d_total:7.4g} | "
                      f"{r.paper_rmse_ref:9.3f} {r.paper_rmse_tar:9.3f} | "
                      f"{r.ours.rmse_ref:9.3f} {r.ours.rmse_tar:9.3f} "
                      f"{r.ours.rmse_yaw_deg:9.2f}"
                      + ("" if r.beacon_sigma is None else
                         f"  (error model: target's σ's; beacon's {r.beacon_sigma[0]:.4g}°, "
-                        f"{r.beacon_sigma[1]:.4g})"))
+                        f"{100 * r.beacon_sigma[1] / d_total:.4g} %)"))
     return "\n".join(lines)
 
 
