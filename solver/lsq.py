@@ -16,6 +16,10 @@ from solver.sltr import MirrorLine, Solution, observe, ray_hits_line, solve_sing
 ArrayLike = np.typing.ArrayLike
 # residuals beyond this many σ's weigh less (a Huber loss): a gross error in one image
 HUBER_K = 3.0
+# nuisances a bench shares across its measurements, estimated with the mirror when asked
+# (self-calibration): "pan", an offset δ (deg) on every α (the mount's pan reading);
+# "scale", a factor s on every d_total (the calibration's K): α_meas = α + δ, d_meas = s·d
+NUISANCES = {"pan": ("pan_offset_deg", 0.0), "scale": ("range_scale", 1.0)}
 
 
 @dataclass(frozen=True)
@@ -113,7 +117,7 @@ def predict(params: np.ndarray, observer: np.ndarray, points: np.ndarray
 
 def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
               targets: list[tuple[float, float]], sigma: Sigma | ObjectSigmas | None = None,
-              initial: Solution | None = None) -> Solution:
+              initial: Solution | None = None, nuisances: tuple[str, ...] = ()) -> Solution:
     """Weighted nonlinear least squares for the mirror line and the target.
 
     Parameters
@@ -128,31 +132,36 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
         unit weights in (0.01°, 0.2 %) are assumed and no covariance is reported.
     initial : Solution, optional
         Start point (default: the closed form of the first beacon).
+    nuisances : tuple of {'pan', 'scale'}
+        Bench errors shared by every measurement, estimated jointly (self-calibration,
+        :data:`NUISANCES`); the target comes out corrected for them.
+
+    Raises
+    ------
+    SolverError
+        Too few measurements for the unknowns, or a geometry that does not determine
+        them (saying which).
     """
     if not beacons or not targets:
         raise SolverError("least squares needs at least one beacon and one target observation")
+    _check_nuisances(nuisances, len(beacons), len(targets))
     o = np.asarray(observer, float)
     sa, sd = as_object_sigmas(sigma or Sigma()).arrays(len(beacons), len(targets))
     bpos, meas_a, meas_d = _measurement_arrays(beacons, targets)
     init = initial or solve_single(o, bpos[0], beacons[0].alpha_deg, beacons[0].d_total,
                                    targets[0][0], targets[0][1])
-    x0 = np.array([init.mirror.yaw_deg, init.mirror.rho, *init.target])
-    nb = len(beacons)
+    x0 = np.array([init.mirror.yaw_deg, init.mirror.rho, *init.target,
+                   *(NUISANCES[n][1] for n in nuisances)])
+    nt = len(targets)
     w_a = 1.0 / sa
     w_d = 1.0 / (sd * meas_d)
 
-    def points_of(x):
-        return np.vstack([bpos, np.broadcast_to(x[2:], (len(targets), 2))])
-
     def fun(x):
-        a, d, _, _ = predict(x, o, points_of(x))
+        a, d, _, _ = _forward(x, o, bpos, nt, nuisances)
         return np.concatenate([w_a * wrap_bearing(a - meas_a), w_d * (d - meas_d)])
 
     def jac(x):
-        _, _, da, dd = predict(x, o, points_of(x))
-        # beacons do not depend on the target's coordinates
-        da[:nb, 2:] = 0.0
-        dd[:nb, 2:] = 0.0
+        _, _, da, dd = _forward(x, o, bpos, nt, nuisances)
         return np.vstack([w_a[:, None] * da, w_d[:, None] * dd])
 
     from scipy.optimize import least_squares  # scipy is slow to import: only when used
@@ -168,12 +177,60 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
     J = jac(res.x)
     jtj = J.T @ (w[:, None] * J)
     if np.linalg.cond(jtj) > 1e14:
-        raise SolverError("the measurements do not determine the mirror and the target "
-                          "(singular Jacobian)")
+        raise SolverError(_undetermined(nuisances))
     cov = np.linalg.inv(jtj) if sigma is not None else None
     names = _residual_names(len(beacons), len(targets))
     down = tuple(f"{names[i]} ({abs(r[i]):.1f} σ off)" for i in np.flatnonzero(w < 1.0))
-    return replace(_solution(o, res.x, bpos, targets, cov), downweighted=down)
+    sol = _solution(o, res.x[:4], bpos, targets, cov)
+    return replace(sol, downweighted=down,
+                   nuisances={NUISANCES[n][0]: float(v)
+                              for n, v in zip(nuisances, res.x[4:], strict=True)},
+                   method=sol.method + (f", self-calibrated ({', '.join(nuisances)})"
+                                        if nuisances else ""))
+
+
+def _forward(x: np.ndarray, o: np.ndarray, bpos: np.ndarray, nt: int,
+             nuisances: tuple[str, ...]) -> tuple[np.ndarray, ...]:
+    """α and d_total of every observation (beacons, then nt of the target) for the
+    parameters x = (θ, ρ, x_t, y_t, *nuisances), and their derivatives (k, len(x))."""
+    nb = len(bpos)
+    pts = np.vstack([bpos, np.broadcast_to(x[2:4], (nt, 2))])
+    a, d, da, dd = predict(x[:4], o, pts)
+    da[:nb, 2:] = 0.0  # a beacon's image does not move with the target
+    dd[:nb, 2:] = 0.0
+    ea, ed = np.zeros((len(a), len(nuisances))), np.zeros((len(a), len(nuisances)))
+    for j, name in enumerate(nuisances):
+        v = x[4 + j]
+        if name == "pan":
+            a = a + v
+            ea[:, j] = 1.0
+        else:  # scale: every d_total, and its derivatives, times s
+            ed[:, j] = d
+            d, dd = d * v, dd * v
+    return a, d, np.hstack([da, ea]), np.hstack([dd, ed])
+
+
+def _check_nuisances(nuisances: tuple[str, ...], nb: int, nt: int) -> None:
+    """Refuse unknown nuisances, and more unknowns than measurements."""
+    bad = [n for n in nuisances if n not in NUISANCES]
+    if bad or len(set(nuisances)) != len(nuisances):
+        raise SolverError(f"unknown or repeated nuisance(s) {', '.join(bad) or nuisances}: "
+                          f"choose from {', '.join(NUISANCES)}")
+    unknowns = 4 + len(nuisances)
+    if nuisances and 2 * (nb + nt) < unknowns:
+        need = -(-(unknowns - 2 * nt) // 2)
+        raise SolverError(f"calibrating {' and '.join(nuisances)} needs at least {need} beacon "
+                          f"observations ({nb} given): each image gives 2 measurements, and "
+                          f"the mirror, the target and {len(nuisances)} nuisance(s) are "
+                          f"{unknowns} unknowns")
+
+
+def _undetermined(nuisances: tuple[str, ...]) -> str:
+    if not nuisances:
+        return "the measurements do not determine the mirror and the target (singular Jacobian)"
+    return (f"the beacons do not separate {' and '.join(nuisances)} from the mirror (singular "
+            "Jacobian): their virtual images are too close together or in line with the "
+            "camera; spread the beacons along the mirror")
 
 
 def _residual_names(nb: int, nt: int) -> list[str]:
@@ -211,9 +268,11 @@ def _solution(o: np.ndarray, x: np.ndarray, bpos: np.ndarray,
 
 
 def crlb(observer: ArrayLike, beacons: ArrayLike, mirror_yaw_deg: float, mirror_rho: float,
-         target: ArrayLike, sigma: Sigma | ObjectSigmas, n_targets: int = 1) -> np.ndarray:
-    """The Cramér–Rao bound of (θ [deg], ρ, x_t, y_t): (Jᵀ Σ⁻¹ J)⁻¹ at the true mirror
-    and target, for Gaussian measurement errors of these σ's (beacon positions known).
+         target: ArrayLike, sigma: Sigma | ObjectSigmas, n_targets: int = 1,
+         nuisances: tuple[str, ...] = ()) -> np.ndarray:
+    """The Cramér–Rao bound of (θ [deg], ρ, x_t, y_t, *nuisances): (Jᵀ Σ⁻¹ J)⁻¹ at the
+    true mirror and target (nuisances at their neutral values), for Gaussian measurement
+    errors of these σ's (beacon positions known).
 
     No unbiased estimator's covariance is smaller; for one beacon and one target the
     four measurements fix the four unknowns and the bound is J⁻¹ Σ J⁻ᵀ.
@@ -225,12 +284,10 @@ def crlb(observer: ArrayLike, beacons: ArrayLike, mirror_yaw_deg: float, mirror_
     """
     o = np.asarray(observer, float)
     B = np.atleast_2d(np.asarray(beacons, float))
-    t = np.asarray(target, float)
-    x = np.array([mirror_yaw_deg, mirror_rho, *t])
-    pts = np.vstack([B, np.broadcast_to(t, (n_targets, 2))])
-    _, d, da, dd = predict(x, o, pts)
-    da[:len(B), 2:] = 0.0  # a beacon's image does not move with the target
-    dd[:len(B), 2:] = 0.0
+    x = np.array([mirror_yaw_deg, mirror_rho, *np.asarray(target, float),
+                  *(NUISANCES[n][1] for n in nuisances)])
+    _check_nuisances(nuisances, len(B), n_targets)
+    _, d, da, dd = _forward(x, o, B, n_targets, nuisances)
     sa, sr = as_object_sigmas(sigma).arrays(len(B), n_targets)
     J = np.vstack([da / sa[:, None], dd / (sr * d)[:, None]])
     info = J.T @ J
@@ -242,10 +299,11 @@ def crlb(observer: ArrayLike, beacons: ArrayLike, mirror_yaw_deg: float, mirror_
 
 def solve_measurements(observer, beacons: list[BeaconMeasurement],
                        targets: list[tuple[float, float]],
-                       sigma: Sigma | ObjectSigmas | None = None) -> Solution:
+                       sigma: Sigma | ObjectSigmas | None = None,
+                       nuisances: tuple[str, ...] = ()) -> Solution:
     """The solver's front door: the closed form for one beacon and one target without
     σ's, weighted least squares (with covariance when σ's are given) otherwise."""
-    if len(beacons) == 1 and len(targets) == 1:
+    if len(beacons) == 1 and len(targets) == 1 and not nuisances:
         b = beacons[0]
         sol = solve_single(observer, b.position, b.alpha_deg, b.d_total, *targets[0])
         if sigma is None:
@@ -265,4 +323,4 @@ def solve_measurements(observer, beacons: list[BeaconMeasurement],
         Jinv = np.linalg.inv(J)
         cov = Jinv @ np.diag(sd**2) @ Jinv.T
         return replace(sol, covariance=cov, method="closed form with covariance")
-    return solve_lsq(observer, beacons, targets, sigma)
+    return solve_lsq(observer, beacons, targets, sigma, nuisances=nuisances)

@@ -21,7 +21,7 @@ in the caller's unit (cm in mirrorsim).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -125,11 +125,14 @@ class Solution:
     covariance: np.ndarray | None = None  # of (θ [deg], ρ, x_t, y_t)
     method: str = "closed form"
     downweighted: tuple[str, ...] = ()  # measurements the robust fit trusted less
+    # self-calibration's estimates (pan_offset_deg, range_scale), after θ, ρ, x_t, y_t in
+    # the covariance
+    nuisances: dict[str, float] = field(default_factory=dict)
 
     @property
     def target_covariance(self) -> np.ndarray | None:
         """The target's 2×2 covariance block, if σ's were given."""
-        return None if self.covariance is None else self.covariance[2:, 2:]
+        return None if self.covariance is None else self.covariance[2:4, 2:4]
 
     def mahalanobis(self, point: ArrayLike) -> float | None:
         """How many σ's ``point`` lies from the estimated target, by its covariance
@@ -157,12 +160,15 @@ class Solution:
         }
         if self.downweighted:
             out["downweighted"] = list(self.downweighted)
+        if self.nuisances:
+            out["self_calibration"] = dict(self.nuisances)
         if self.covariance is not None:
             major, minor, angle = self.ellipse95()
             out["covariance"] = {
                 "target": self.target_covariance.tolist(),
                 "params": self.covariance.tolist(),
-                "params_order": ["mirror_yaw_deg", "mirror_rho", "target_x", "target_y"],
+                "params_order": ["mirror_yaw_deg", "mirror_rho", "target_x", "target_y",
+                                 *self.nuisances],
                 "target_ellipse95": {"major": major, "minor": minor, "angle_deg": angle},
             }
         return out
@@ -176,7 +182,8 @@ class Solution:
                    target_reflection_point=np.asarray(d["target"]["reflection_point"], float),
                    beacon_reflection_points=np.asarray(d["beacon_reflection_points"], float),
                    covariance=None if cov is None else np.asarray(cov, float),
-                   method=d["method"], downweighted=tuple(d.get("downweighted", ())))
+                   method=d["method"], downweighted=tuple(d.get("downweighted", ())),
+                   nuisances=dict(d.get("self_calibration", {})))
 
 
 def error_ellipse(cov: ArrayLike, level: float = 0.95) -> tuple[float, float, float]:
