@@ -144,7 +144,7 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
     """
     if not beacons or not targets:
         raise SolverError("least squares needs at least one beacon and one target observation")
-    _check_nuisances(nuisances, len(beacons), len(targets))
+    check_nuisances(nuisances, len(beacons), len(targets))
     o = np.asarray(observer, float)
     sa, sd = as_object_sigmas(sigma or Sigma()).arrays(len(beacons), len(targets))
     bpos, meas_a, meas_d = _measurement_arrays(beacons, targets)
@@ -210,7 +210,7 @@ def _forward(x: np.ndarray, o: np.ndarray, bpos: np.ndarray, nt: int,
     return a, d, np.hstack([da, ea]), np.hstack([dd, ed])
 
 
-def _check_nuisances(nuisances: tuple[str, ...], nb: int, nt: int) -> None:
+def check_nuisances(nuisances: tuple[str, ...], nb: int, nt: int) -> None:
     """Refuse unknown nuisances, and more unknowns than measurements."""
     bad = [n for n in nuisances if n not in NUISANCES]
     if bad or len(set(nuisances)) != len(nuisances):
@@ -286,7 +286,7 @@ def crlb(observer: ArrayLike, beacons: ArrayLike, mirror_yaw_deg: float, mirror_
     B = np.atleast_2d(np.asarray(beacons, float))
     x = np.array([mirror_yaw_deg, mirror_rho, *np.asarray(target, float),
                   *(NUISANCES[n][1] for n in nuisances)])
-    _check_nuisances(nuisances, len(B), n_targets)
+    check_nuisances(nuisances, len(B), n_targets)
     _, d, da, dd = _forward(x, o, B, n_targets, nuisances)
     sa, sr = as_object_sigmas(sigma).arrays(len(B), n_targets)
     J = np.vstack([da / sa[:, None], dd / (sr * d)[:, None]])

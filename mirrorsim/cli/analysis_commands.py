@@ -8,6 +8,7 @@ from pathlib import Path
 
 from mirrorsim.cli.registry import (
     at_least,
+    calibrate_option,
     command,
     common,
     default_workers,
@@ -15,6 +16,7 @@ from mirrorsim.cli.registry import (
     finite,
     inputs,
     load,
+    nuisances_of,
     out_file,
     output,
     sampler_option,
@@ -30,6 +32,7 @@ def _solve_options(p):
     inputs(p, ("measurements", "MEASUREMENTS", "file"))
     common(p, scene=False, json="the solution",
            error_model="each measurement's σ's; given, it replaces the file's `sigma`")
+    calibrate_option(p)
 
 
 @command("solve", "localize the mirror and the target from measurements",
@@ -46,6 +49,7 @@ def _solve(args) -> int:
     from solver.lsq import solve_measurements
 
     m = load_measurements(args.measurements)
+    nuisances = nuisances_of(args, len(m.beacons), len(m.targets))
     model = error_model_of(args)
     if model is not None and m.sigma is not None:
         print(f"note: --error-model {args.error_model} gives the σ's; the `sigma` of "
@@ -60,7 +64,7 @@ def _solve(args) -> int:
                   else "the shipped error model (ideal bench)")
         if m.observer_pan_deg is None:
             source += "; no observer_pan_deg: images taken as off-axis as its training rows"
-    sol = solve_measurements(m.observer, m.beacons, m.targets, sigma)
+    sol = solve_measurements(m.observer, m.beacons, m.targets, sigma, nuisances)
     print(f"σ's from {source}", file=sys.stderr)
     print(solution_summary(str(args.measurements), sol))
     emit_json(args.json, sol.to_json())
@@ -132,6 +136,11 @@ def _plan_options(p):
     p.add_argument("--yaw-spread", type=float, default=3.0, help="prior yaw ± (deg)")
     p.add_argument("--d1-spread", type=float, default=2.0, help="prior mirror distance ± (cm)")
     p.add_argument("--step", type=float, default=1.0, help="grid step of the search (cm)")
+    p.add_argument("--beacons", type=int, default=1, metavar="N",
+                   help="place N beacons, one at a time, each where it lowers the expected "
+                   "target error most (with --calibrate's nuisances estimated alongside); "
+                   "prints what each buys (default 1)")
+    calibrate_option(p)
     common(p, scene=False, error_model="its typical σ's per object (target, beacon)")
 
 
@@ -158,7 +167,8 @@ def _plan(args) -> int:
     sigma = (ObjectSigmas.same(Sigma(args.sigma_alpha, args.sigma_d))
              if args.sigma_alpha is not None
              else (error_model_of(args) or default_error_model()).typical)
-    plan = plan_scene(scene, sigma, args.eps, args.yaw_spread, args.d1_spread, args.step)
+    plan = plan_scene(scene, sigma, args.eps, args.yaw_spread, args.d1_spread, args.step,
+                      n_beacons=args.beacons, nuisances=nuisances_of(args))
     summ = plan.to_json()
     print(plan_text(scene, summ))
     out = out_file(args, scene, f"{scene.name}.plan.png")

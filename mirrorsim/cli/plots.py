@@ -201,19 +201,29 @@ def _plan_error_map(fig, ax, scene: Scene, plan: Plan) -> None:
                        vmin=np.log10(max(np.nanmin(err), 1e-3)),
                        vmax=np.log10(max(np.nanmin(err), 1e-3)) + 2)
     cb = fig.colorbar(im, ax=ax, shrink=0.8)
-    cb.set_label("log10 expected target RMSE (cm)")
+    cb.set_label("expected target RMSE of a beacon there alone (log10 of cm)")
     for o in scene.occluders:
         ax.plot(*zip(o.start, o.end, strict=True), color="#555", lw=4)
     m0, m1 = scene.mirror.ends()
     ax.plot(*zip(m0, m1, strict=True), color="#2a7fbf", lw=3)
     ax.plot(*scene.target.position, "r*", ms=12, mec="k")
-    for b in scene.beacons:
+    for i, (b, (e, _)) in enumerate(zip(scene.beacons, plan.scene_beacons, strict=True)):
         ax.plot(*b.position, "o", color="#d4a017", mec="k",
-                label=f"scene beacon: {plan.scene_beacon_rmse:.2f} cm")
-    ax.plot(*best.position, "wP", ms=12, mec="k", label=f"best: {best.rmse:.2f} cm")
+                label=f"scene beacon {i} alone: {e:.2f} cm")
+    ax.plot(*best.position, "wP", ms=12, mec="k", label=f"best single: {best.rmse:.2f} cm")
+    if plan.beacon_set is not None:
+        bs = plan.beacon_set
+        ax.plot(*bs.positions.T, "s", color="w", mec="k", ms=7,
+                label=f"{len(bs.positions)} planned: {bs.rmse[-1]:.2f} cm"
+                + (f" ({'+'.join(bs.nuisances)} estimated)" if bs.nuisances else ""))
+        for k, p in enumerate(bs.positions):
+            ax.annotate(str(k), p, xytext=(4, 4), textcoords="offset points", fontsize=8,
+                        color="w", weight="bold")
     ax.set_xlim(0, scene.board.size[0])
     ax.set_ylim(0, scene.board.size[1])
     ax.set_aspect("equal")
+    ax.set_xlabel("x (cm)")
+    ax.set_ylabel("y (cm)")
     ax.legend(fontsize=7, loc="upper left")
     ax.set_title(f"expected target error, {plan.sigma.describe()}, {plan.n_poses} mirror "
                  "poses",

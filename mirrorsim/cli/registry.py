@@ -181,6 +181,35 @@ def common(p: argparse.ArgumentParser, *, scene: bool = True, out: str | None = 
                        "settings)")
 
 
+def calibrate_option(p: argparse.ArgumentParser) -> None:
+    """``--calibrate pan,scale``: self-calibration's nuisances."""
+    p.add_argument("--calibrate", default="", metavar="pan,scale",
+                   help="estimate bench errors shared by every measurement with the mirror "
+                   "(self-calibration; needs 2+ beacons): pan, an offset on every alpha (the "
+                   "mount's pan reading); scale, a factor on every d_total (the "
+                   "calibration); comma-separated")
+
+
+def nuisances_of(args: argparse.Namespace, n_beacons: int | None = None,
+                 n_targets: int = 1) -> tuple[str, ...]:
+    """--calibrate's nuisances, checked (and, where ``n_beacons`` is known, that the
+    measurements can carry them) before any work is done."""
+    from solver.errors import SolverError
+    from solver.lsq import NUISANCES, check_nuisances
+
+    names = tuple(n.strip() for n in args.calibrate.split(",") if n.strip())
+    bad = [n for n in names if n not in NUISANCES]
+    if bad or len(set(names)) != len(names):
+        raise BadArgument("--calibrate", f"{args.calibrate!r}: choose from "
+                          f"{', '.join(NUISANCES)} (comma-separated, each once)")
+    if n_beacons is not None:
+        try:
+            check_nuisances(names, n_beacons, n_targets)
+        except SolverError as exc:
+            raise BadArgument("--calibrate", str(exc)) from None
+    return names
+
+
 def error_model_of(args: argparse.Namespace):
     """The model of ``--error-model``, or None where it is not given."""
     if not args.error_model:

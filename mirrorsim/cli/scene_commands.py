@@ -5,11 +5,13 @@ from __future__ import annotations
 from pathlib import Path
 
 from mirrorsim.cli.registry import (
+    calibrate_option,
     command,
     common,
     error_model_of,
     inputs,
     load,
+    nuisances_of,
     out_file,
     out_folder,
     output,
@@ -159,6 +161,7 @@ def _evaluate_options(p):
     common(p, out="output folder (default renders/<name>/)", json="the report", spp=True,
             variant=True, quiet=True, error_model="each measurement's σ's, which weight the "
             "solver and make the 95 %% ellipse")
+    calibrate_option(p)
     p.add_argument("--keep", nargs="*", default=[], choices=("ids", "annotated", "plot"),
                    help="write also: ids, each frame's object-id labels (<name>.ids.png); "
                         "annotated, each frame with its detections drawn "
@@ -181,12 +184,13 @@ def _evaluate(args) -> int:
     from mirrorsim.pipelines.evaluate import evaluate_scene
 
     scene = render_options(args, load(args.scene))
+    nuisances = nuisances_of(args, len(scene.beacons))  # before anything renders
     if "plot" in args.keep:
         preload("mirrorsim.cli.plots")  # matplotlib imports while the frame renders
     out = out_folder(args, scene)
     report = evaluate_scene(scene, out, variant=args.variant, progress=not args.quiet,
                             keep=tuple(k for k in args.keep if k != "plot"),
-                            error_model=error_model_of(args))
+                            error_model=error_model_of(args), nuisances=nuisances)
     print(f"{scene.name}: {len(report.frames)} frame(s), {report.render.spp} spp, "
           f"{report.render.variant}{' (reused)' if report.reused else ''}")
     print(report_table(report))
@@ -205,6 +209,7 @@ def _budget_options(p):
     common(p, out="output folder (default renders/<name>/budget/)", json="the budget", spp=True,
            variant=True, quiet=True, error_model="each measurement's σ's (the solver's "
            "weights)")
+    calibrate_option(p)
 
 
 @command("budget", "error budget of a bench: each imperfection alone, then all",
@@ -226,6 +231,7 @@ def _budget(args) -> int:
     from mirrorsim.scene.imperfections import sources
 
     scene = render_options(args, load(args.scene))
+    nuisances = nuisances_of(args, len(scene.beacons))  # before anything renders
     found = sources(scene)
     if not found:
         print(f"{scene.name}: no bench imperfections in {args.scene}: only the ideal bench "
@@ -234,7 +240,7 @@ def _budget(args) -> int:
     step = (None if args.quiet else lambda label, k, runs: print(f"[{k}/{runs}] {label}",
                                                                  file=sys.stderr, flush=True))
     budget = run_budget(scene, out, variant=args.variant, progress=not args.quiet,
-                        on_step=step, error_model=error_model_of(args))
+                        on_step=step, error_model=error_model_of(args), nuisances=nuisances)
     print(budget_table(budget))
     path = write_json(out / "budget.json", budget.to_json())
     fig = plot_budget(budget, out / "budget.png")

@@ -99,7 +99,21 @@ def solution_summary(source: str, sol: Solution) -> str:
                      "first order)")
     if sol.downweighted:
         lines.append("  trusted less (a Huber loss): " + ", ".join(sol.downweighted))
+    if sol.nuisances:
+        lines.append("  self-calibration: " + nuisance_text(sol))
     return "\n".join(lines)
+
+
+def nuisance_text(sol: Solution) -> str:
+    """Self-calibration's estimates with their σ's (from the covariance, where there)."""
+    sd = (np.sqrt(np.diag(sol.covariance))[4:] if sol.covariance is not None
+          else [None] * len(sol.nuisances))
+    words = {"pan_offset_deg": ("pan offset", "°", 1.0), "range_scale": ("range scale", "", 1.0)}
+    out = []
+    for (name, v), e in zip(sol.nuisances.items(), sd, strict=True):
+        label, unit, _ = words.get(name, (name, "", 1.0))
+        out.append(f"{label} {v:.4f}{unit}" + ("" if e is None else f" ± {e:.4f}{unit}"))
+    return ", ".join(out)
 
 
 def report_table(report: Report) -> str:
@@ -132,6 +146,8 @@ def report_table(report: Report) -> str:
         lines.append(f"σ's from the error model: {m.sigma.describe()}")
     if s.downweighted:
         lines.append("trusted less by the solver (a Huber loss): " + ", ".join(s.downweighted))
+    if s.nuisances:
+        lines.append("self-calibration: " + nuisance_text(s))
     if e.target_mahalanobis is not None:
         lines.append(f"the true target lies {e.target_mahalanobis:.2f} σ from the estimate "
                      f"(inside the 95 % ellipse below 2.45); Cramér–Rao bound of the "
@@ -154,32 +170,46 @@ def _show_value(value) -> str:
 
 
 def budget_table(budget: Budget) -> str:
-    """The table ``mirrorsim budget`` prints: each source's measured deltas, the target
-    error it leaves, and the first-order prediction."""
+    """The table ``mirrorsim budget`` prints: each source's measured deltas (a labelled
+    column per beacon), the target error it leaves, the first-order prediction and, with
+    self-calibration, the self-calibrated target error."""
     def signed(x: float, digits: int) -> str:
         return f"{x:+.{digits}f}"
 
-    rows = [("source", "value", "Δα_t (°)", "Δd_t (%)", "Δα_b (°)", "Δd_b (%)", "moved (cm)",
-             "1st order", "target (cm)", "1st order")]
+    nb = max((len(c.delta.beacon_alpha_deg) for c in (*budget.sources, budget.all)
+              if c is not None and c.delta is not None), default=1)
+    cal = bool(budget.nuisances)
+    rows = [("source", "value", "Δα_t (°)", "Δd_t (%)",
+             *(h for i in range(nb) for h in (f"Δα_b{i} (°)", f"Δd_b{i} (%)")),
+             "moved (cm)", "1st order", "target (cm)", "1st order",
+             *(["self-cal (cm)"] if cal else []))]
     failures = []
     for c in (*budget.sources, *([budget.all] if budget.all else [])):
         d = c.delta
         value = _show_value(c.value)
         if c.failed:
-            rows.append((c.source, value, *["failed"] + [""] * 7))
+            rows.append((c.source, value, "failed", *[""] * (len(rows[0]) - 3)))
             failures.append(f"  {c.source}: {c.failed}")
             continue
+        per = [x for a, p in zip(d.beacon_alpha_deg, d.beacon_d_total_pct, strict=True)
+               for x in (signed(a, 4), signed(p, 3))]
         rows.append((c.source, value, signed(d.target_alpha_deg, 4),
-                     signed(d.target_d_total_pct, 3),
-                     " ".join(signed(a, 4) for a in d.beacon_alpha_deg),
-                     " ".join(signed(p, 3) for p in d.beacon_d_total_pct),
+                     signed(d.target_d_total_pct, 3), *per, *[""] * (2 * nb - len(per)),
                      f"{c.shift_cm:.2f}", f"{c.predicted_shift_cm:.2f}",
-                     f"{c.target_cm:.2f}", f"{c.predicted_cm:.2f}"))
+                     f"{c.target_cm:.2f}", f"{c.predicted_cm:.2f}",
+                     *([_cm(c.calibrated_cm)] if cal else [])))
     lines = _columns(rows)
     lines.insert(1, "-" * len(lines[0]))
-    lines.insert(0, f"{budget.scene}: ideal bench {budget.ideal_cm:.2f} cm; each source alone"
-                 + (", then all together" if budget.all else ""))
+    head = f"{budget.scene}: ideal bench {budget.ideal_cm:.2f} cm"
+    if cal:
+        head += (f" ({_cm(budget.ideal_calibrated_cm)} cm self-calibrated for "
+                 f"{' and '.join(budget.nuisances)})")
+    lines.insert(0, head + "; each source alone" + (", then all together" if budget.all else ""))
     return "\n".join(lines + failures)
+
+
+def _cm(x: float | None) -> str:
+    return "n/a" if x is None else f"{x:.2f}"
 
 
 def montecarlo_table(res: Table1) -> str:
@@ -210,7 +240,7 @@ def montecarlo_table(res: Table1) -> str:
 def plan_text(scene: Scene, summ: dict) -> str:
     """The placement analysis as ``mirrorsim plan`` prints it."""
     p, q, L = summ["paper"], summ["paper_eq15_perpendicular"], summ["path_lengths"]
-    sb, bb, sig = summ["scene_beacon"], summ["best_beacon"], summ["sigma_text"]
+    bb, sig = summ["best_beacon"], summ["sigma_text"]
     return "\n".join([
         f"{scene.name}: target alpha {summ['target']['alpha_deg']:.3f}°, d_total "
         f"{summ['target']['d_total']:.2f} cm, mirror {scene.mirror.size[0]:g} cm wide, "
@@ -226,10 +256,27 @@ def plan_text(scene: Scene, summ: dict) -> str:
         f"  paths over {summ['n_steps']} steps: linear {L['linear']:.1f}, rectangular "
         f"{L['rectangular']:.1f}, saw-tooth {L['sawtooth']:.1f} cm",
         f"  expected target RMSE at {sig} over {summ['mirror_poses']} mirror poses:",
-        f"    scene's beacon {list(scene.beacons[0].position)}: {sb['rmse']:.3f} cm "
-        f"(seen under {100 * sb['seen_fraction']:.0f}% of poses)",
+        *(f"    scene's beacon {i} {list(b.position)} alone: {e['rmse']:.3f} cm (seen under "
+          f"{100 * e['seen_fraction']:.0f}% of poses)"
+          for i, (b, e) in enumerate(zip(scene.beacons, summ["scene_beacons"], strict=True))),
         f"    best position ({bb['position'][0]:.1f}, {bb['position'][1]:.1f}): "
-        f"{bb['rmse']:.3f} cm"])
+        f"{bb['rmse']:.3f} cm", *_set_lines(summ.get("beacon_set"))])
+
+
+def _set_lines(bs: dict | None) -> list[str]:
+    """What each planned beacon buys."""
+    if not bs:
+        return []
+    nu = " and ".join(bs["self_calibration"])
+    out = [f"  {len(bs['beacons'])} beacons, chosen one at a time"
+           + (f" with {nu} estimated alongside (self-calibration)" if nu else "") + ":"]
+    for k, b in enumerate(bs["beacons"]):
+        cal = ("not yet observable" if b["rmse_after"] is None
+               else f"{b['rmse_after']:.3f} cm")
+        out.append(f"    beacon {k} at ({b['position'][0]:.1f}, {b['position'][1]:.1f}): "
+                   f"expected target RMSE with {k + 1} beacon(s) {cal}"
+                   + (f" (without {nu} errors {b['rmse_after_plain']:.3f} cm)" if nu else ""))
+    return out
 
 
 def track_table(report: TrackReport) -> str:

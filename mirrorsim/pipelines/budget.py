@@ -64,6 +64,9 @@ class Contribution:
     predicted_shift_cm: float | None  # first order: |J·delta|
     delta: Delta | None
     failed: str = ""
+    # the same frames self-calibrated (the budget's nuisances; None: not asked, or the
+    # geometry cannot carry them)
+    calibrated_cm: float | None = None
 
     def to_json(self) -> dict:
         """One entry of ``sources``."""
@@ -71,6 +74,8 @@ class Contribution:
                "predicted_cm": self.predicted_cm, "shift_cm": self.shift_cm,
                "predicted_shift_cm": self.predicted_shift_cm,
                "delta": None if self.delta is None else self.delta.to_json()}
+        if self.calibrated_cm is not None:
+            out["calibrated_target_cm"] = self.calibrated_cm
         return out | ({"failed": self.failed} if self.failed else {})
 
 
@@ -82,11 +87,18 @@ class Budget:
     ideal_cm: float
     all: Contribution | None  # None when the scene has a single source (or none)
     sources: tuple[Contribution, ...]
+    nuisances: tuple[str, ...] = ()  # self-calibration's, where asked
+    ideal_calibrated_cm: float | None = None
 
     def to_json(self) -> dict:
         """The budget document."""
-        out = {"scene": self.scene, "ideal": {"target_cm": self.ideal_cm},
+        ideal = {"target_cm": self.ideal_cm}
+        if self.nuisances:
+            ideal["calibrated_target_cm"] = self.ideal_calibrated_cm
+        out = {"scene": self.scene, "ideal": ideal,
                "sources": [c.to_json() for c in self.sources]}
+        if self.nuisances:
+            out["self_calibration"] = list(self.nuisances)
         if self.all is not None:
             out["all"] = {k: v for k, v in self.all.to_json().items()
                           if k not in ("source", "value", "delta")}
@@ -121,9 +133,23 @@ def jacobian(m: Measurements) -> np.ndarray:
     return np.column_stack(cols)
 
 
+def calibrated_error(report: Report, nuisances: tuple[str, ...]) -> float | None:
+    """The target error of the report's measurements solved self-calibrated (None where
+    not asked, or where the geometry cannot carry the nuisances)."""
+    if not nuisances:
+        return None
+    m = report.measurements
+    try:
+        sol = solve_measurements(m.observer, m.beacons, m.targets, m.sigma, nuisances)
+    except SolverError:
+        return None
+    return float(np.linalg.norm(sol.target - np.asarray(report.truth.target.position, float)))
+
+
 def contribution(source: str, value: Any, ideal: Report, report: Report,
-                 J: np.ndarray) -> Contribution:
-    """Compare a source's report with the ideal one; predict its effect to first order."""
+                 J: np.ndarray, nuisances: tuple[str, ...] = ()) -> Contribution:
+    """Compare a source's report with the ideal one; predict its effect to first order;
+    with ``nuisances``, also solve its frames self-calibrated."""
     v0, v1 = _vector(ideal.measurements), _vector(report.measurements)
     dv = v1 - v0
     truth = np.asarray(ideal.truth.target.position, float)
@@ -140,12 +166,14 @@ def contribution(source: str, value: Any, ideal: Report, report: Report,
                         target_cm=float(np.linalg.norm(est1 - truth)),
                         shift_cm=float(np.linalg.norm(est1 - est0)),
                         predicted_cm=float(np.linalg.norm(est0 - truth + pred)),
-                        predicted_shift_cm=float(np.linalg.norm(pred)), delta=delta)
+                        predicted_shift_cm=float(np.linalg.norm(pred)), delta=delta,
+                        calibrated_cm=calibrated_error(report, nuisances))
 
 
 def run_budget(scene: Scene, out: str | Path, *, variant: str = "auto", progress: bool = True,
                on_step: Callable[[str, int, int], None] | None = None,
-               error_model: ErrorModel | None = None) -> Budget:
+               error_model: ErrorModel | None = None,
+               nuisances: tuple[str, ...] = ()) -> Budget:
     """Evaluate ``scene`` ideal, with each imperfection alone and with all; frames and
     reports go to ``out/<ideal|source key|all>/``.  ``on_step(label, k, runs)`` is called
     before run k of ``runs``.
@@ -170,7 +198,7 @@ def run_budget(scene: Scene, out: str | Path, *, variant: str = "auto", progress
         # a bench error can make a frame unmeasurable (an image taken for the wrong one
         # is refused) or unsolvable (no mirror fits): that is its effect, recorded
         try:
-            return contribution(label, value, ideal, run(label, sub), J)
+            return contribution(label, value, ideal, run(label, sub), J, nuisances)
         except (DetectionError, SolverError) as exc:
             return Contribution(label, value, None, None, None, None, None, failed=str(exc))
 
@@ -183,7 +211,8 @@ def run_budget(scene: Scene, out: str | Path, *, variant: str = "auto", progress
                           for s in found)
     everything = measured("all", None, scene) if len(found) > 1 else None
     return Budget(scene=scene.name, ideal_cm=ideal.errors.target_cm, all=everything,
-                  sources=contributions)
+                  sources=contributions, nuisances=nuisances,
+                  ideal_calibrated_cm=calibrated_error(ideal, nuisances))
 
 
 def _folder(label: str) -> str:

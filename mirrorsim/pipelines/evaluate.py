@@ -27,14 +27,16 @@ from solver.measurements import Measurements
 
 def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: str = "auto",
                    progress: bool = True, error_model: ErrorModel | None = None,
-                   keep: tuple[str, ...] = EXTRA_FILES) -> Report:
+                   keep: tuple[str, ...] = EXTRA_FILES, nuisances: tuple[str, ...] = ()
+                   ) -> Report:
     """Render (or reuse) with the scene's render settings, detect, solve and score
     ``scene``; return the report.
 
     ``error_model``: gives each measurement its σ's, which weight the solver and make
     its error ellipse (default: the model shipped for the ideal bench at the default
     render settings).  ``keep``: which of EXTRA_FILES to write beside each frame (the id
-    labels, the annotated frame).
+    labels, the annotated frame).  ``nuisances``: bench errors to estimate with the mirror
+    (self-calibration, :data:`solver.lsq.NUISANCES`; needs two beacons or more).
 
     Raises
     ------
@@ -73,12 +75,16 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
     sigma = model.sigmas(mean_target, [(b.alpha_deg, b.d_total) for b in beacons], pan, fx)
     measurements = Measurements(observer=cam.position, targets=[mean_target], beacons=beacons,
                                 sigma=sigma, observer_pan_deg=pan)
-    sol = solve_measurements(cam.position, beacons, targets, sigma)
+    sol = solve_measurements(cam.position, beacons, targets, sigma, nuisances)
     by_count = ()
     if len(beacons) > 1:
-        by_count = tuple(score(truth, measurements,
-                               solve_measurements(cam.position, beacons[:k], targets,
-                                                  replace(sigma, beacons=sigma.beacons[:k])))
+        def first(k: int):
+            # self-calibration from the first k beacons where they can carry it
+            nu = nuisances if 2 * (k + len(targets)) > 4 + len(nuisances) else ()
+            return solve_measurements(cam.position, beacons[:k], targets,
+                                      replace(sigma, beacons=sigma.beacons[:k]), nu)
+
+        by_count = tuple(score(truth, measurements, first(k))
                          for k in range(1, len(beacons) + 1))
     done = truths[0].render  # how the frames were rendered, read back from the first
     return Report(scene=scene.name, truth=truth, measurements=measurements, solution=sol,

@@ -18,6 +18,7 @@ from mirrorsim.scene.model import (
     Scene,
 )
 from mirrorsim.truth import optics, visibility
+from solver.beacon_set import BeaconSet, best_beacon_set
 from solver.lsq import ObjectSigmas, Sigma, as_object_sigmas
 from solver.measurements import SIGMA_ALPHA_MAX_DEG, SIGMA_D_REL_MAX, sigma_json
 from solver.placement import (
@@ -37,6 +38,8 @@ from solver.placement import (
 AREA_DISTANCES = (25.0, 50.0, 100.0, 200.0, 400.0, 1000.0)
 # cm: finer grids take long without news (exp1 here: 1 cm 7 s, 0.5 cm 11 s, 0.25 cm 26 s)
 MIN_STEP = 0.5
+# the most beacons plan places (each a greedy step over the whole grid)
+MAX_PLANNED_BEACONS = 8
 
 
 @dataclass(frozen=True)
@@ -70,6 +73,9 @@ class Plan:
     best: BeaconSearch
     scene_beacon_rmse: float
     scene_beacon_seen: float
+    # every scene beacon's (rmse, seen fraction), alone
+    scene_beacons: tuple[tuple[float, float], ...] = ()
+    beacon_set: BeaconSet | None = None  # plan --beacons N (with --calibrate's nuisances)
 
     def to_json(self) -> dict:
         """The plan's JSON (``plan --json``): its numbers, not its maps."""
@@ -93,17 +99,29 @@ class Plan:
             "best_beacon": {"position": self.best.position.tolist(),
                             "rmse": self.best.rmse,
                             "seen_fraction": self.best.seen_fraction},
+            "scene_beacons": [{"rmse": r, "seen_fraction": f} for r, f in self.scene_beacons],
+            **({"beacon_set": _set_json(self.beacon_set)} if self.beacon_set else {}),
         }
+
+
+def _set_json(bs: BeaconSet) -> dict:
+    """The planned set: positions in the order chosen, the expected RMSE after each."""
+    inf = lambda x: None if not np.isfinite(x) else x  # noqa: E731  (strict JSON)
+    return {"self_calibration": list(bs.nuisances),
+            "beacons": [{"position": p.tolist(), "rmse_after": inf(r), "rmse_after_plain": q}
+                        for p, r, q in zip(bs.positions, bs.rmse, bs.rmse_plain, strict=True)]}
 
 
 def plan_scene(scene: Scene, sigma: Sigma | ObjectSigmas | None = None, eps_deg: float = 5.0,
                yaw_spread_deg: float = 3.0, d1_spread: float = 2.0, step: float = 1.0,
-               n_poses: int = 5) -> Plan:
+               n_poses: int = 5, n_beacons: int = 1, nuisances: tuple[str, ...] = ()) -> Plan:
     """Placement numbers, paths, the exact beacon region and the best beacon position.
 
     The target's α and d_total are taken as measured without error; the mirror prior is
     centred on the scene's mirror (its reflection point along the target's ray, its yaw)
-    with the given spreads.
+    with the given spreads.  With ``n_beacons`` > 1 or ``nuisances``: the best set of
+    that many beacons, chosen one at a time, with the nuisances estimated alongside
+    (:func:`solver.beacon_set.best_beacon_set`).
 
     Raises
     ------
@@ -132,6 +150,14 @@ def plan_scene(scene: Scene, sigma: Sigma | ObjectSigmas | None = None, eps_deg:
                         yaw_spread_deg=yaw_spread_deg, n=n_poses)
     poses = prior.poses(o, img.alpha_deg)
     best = _best_position(scene, o, img.alpha_deg, img.d_total, poses, sigma, step)
+    chosen = None
+    if n_beacons > 1 or nuisances:
+        if not 1 <= n_beacons <= MAX_PLANNED_BEACONS:
+            raise BadParameter("n_beacons", f"{n_beacons} must be within 1..{MAX_PLANNED_BEACONS}")
+        keep_out, accept = _placement_rules(scene)
+        chosen = best_beacon_set(o, img.alpha_deg, img.d_total, poses, sigma, s,
+                                 scene.board.size, n_beacons, nuisances, step=step,
+                                 keep_out=keep_out, accept=accept)
     scene_err, scene_seen = expected_target_error(
         o, img.alpha_deg, img.d_total, np.array([b.position for b in scene.beacons]), poses,
         sigma, s, min_depth=0.0)
@@ -142,7 +168,10 @@ def plan_scene(scene: Scene, sigma: Sigma | ObjectSigmas | None = None, eps_deg:
         path_polyline_lengths={k: polyline_length(v) for k, v in paths.items()},
         region=region, area_vs_d=(list(AREA_DISTANCES), area_lit, area_exact),
         n_poses=len(poses), best=best, scene_beacon_rmse=float(scene_err[0]),
-        scene_beacon_seen=float(scene_seen[0]))
+        scene_beacon_seen=float(scene_seen[0]),
+        scene_beacons=tuple((float(e), float(f)) for e, f in zip(scene_err, scene_seen,
+                                                                  strict=True)),
+        beacon_set=chosen)
 
 
 def _check_parameters(sigma: ObjectSigmas, eps_deg: float, step: float,
@@ -177,6 +206,14 @@ def _best_position(scene: Scene, o: np.ndarray, alpha_deg: float, d_total: float
                    sigma: Sigma, step: float) -> BeaconSearch:
     """The board's best beacon position: clear of walls, the mirror and the panel, and
     its image unobstructed through the scene's own mirror."""
+    keep_out, unobstructed = _placement_rules(scene)
+    return best_beacon(o, alpha_deg, d_total, poses, sigma, scene.mirror.size[0],
+                       scene.board.size, step=step, keep_out=keep_out, accept=unobstructed)
+
+
+def _placement_rules(scene: Scene):
+    """Where a beacon may stand: clear of walls, the mirror and the panel (segments with
+    clearances), and its image unobstructed through the scene's own mirror (a test)."""
     mir = scene.mirror
     keep_out = [(occ.start, occ.end, OCCLUDER_THICKNESS / 2 + PENCIL_RADIUS)
                 for occ in scene.occluders]
@@ -189,5 +226,4 @@ def _best_position(scene: Scene, o: np.ndarray, alpha_deg: float, d_total: float
         moved = replace(scene, beacons=(Beacon((float(p[0]), float(p[1])), height),))
         return visibility.visibility(moved, moved.beacons[0]).fraction == 1.0
 
-    return best_beacon(o, alpha_deg, d_total, poses, sigma, mir.size[0], scene.board.size,
-                       step=step, keep_out=keep_out, accept=unobstructed)
+    return keep_out, unobstructed

@@ -1,0 +1,155 @@
+"""Where to put N beacons: a greedy choice over the board's grid that minimises the
+expected target error with the chosen nuisances estimated alongside the mirror
+(self-calibration; the paper's "number of needed beacons and their locations", for a
+bench with a pan and a calibration error).
+
+The expected error of a set is the Cramér–Rao bound's target block (√trace), from the
+Fisher information of every beacon's and the target's α and d_total, averaged over the
+mirror poses of a prior.  Information adds over measurements, so each candidate's
+information is computed once per pose and the greedy step inverts one small matrix per
+candidate and pose.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from solver.errors import SolverError
+from solver.geometry import line_normal, point_segment_distance, unit
+from solver.lsq import NUISANCES, ObjectSigmas, Sigma, as_object_sigmas, predict
+from solver.sltr import observe
+
+# an expected variance beyond this (cm²) is no estimate: the set cannot determine it
+UNDETERMINED_CM2 = 1e6
+
+
+@dataclass(frozen=True)
+class BeaconSet:
+    """:func:`best_beacon_set`'s answer: the positions in the order chosen, and after
+    each, the expected target RMSE with the nuisances estimated (inf: not yet
+    observable) and without nuisances (a bench without pan or scale error)."""
+
+    positions: np.ndarray  # (n, 2)
+    rmse: tuple[float, ...]
+    rmse_plain: tuple[float, ...]
+    nuisances: tuple[str, ...]
+
+
+def _information(o: np.ndarray, B: np.ndarray, t_alpha: float, t_d: float, point, yaw: float,
+                 sig: ObjectSigmas, nuisances: tuple[str, ...]
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """At one mirror pose: each candidate beacon's Fisher information (K, P, P), the
+    target's (P, P), and the candidates' beacon d_total (K,); P = 4 + len(nuisances)."""
+    n = line_normal(yaw)
+    params = np.array([yaw, n @ point])
+    vt = o + t_d * unit(t_alpha)
+    tgt = vt - 2.0 * (n @ vt - params[1]) * n  # the target this pose implies
+    _, d_b, da_b, dd_b = predict(np.r_[params, 0, 0], o, B)
+    _, d_t, da_t, dd_t = predict(np.r_[params, tgt], o, tgt[None])
+    P = 4 + len(nuisances)
+    ra, rd = np.zeros((len(B), P)), np.zeros((len(B), P))
+    ra[:, :2], rd[:, :2] = da_b[:, :2], dd_b[:, :2]
+    ta, td = np.zeros(P), np.zeros(P)
+    ta[:4], td[:4] = da_t[0], dd_t[0]
+    for j, name in enumerate(nuisances):
+        if name == "pan":
+            ra[:, 4 + j], ta[4 + j] = 1.0, 1.0
+        else:
+            rd[:, 4 + j], td[4 + j] = d_b, d_t[0]
+    sb, st = sig.beacons[0], sig.target
+    ra /= sb.alpha_deg
+    rd /= (sb.d_total_rel * d_b)[:, None]
+    ta, td = ta / st.alpha_deg, td / (st.d_total_rel * d_t[0])
+    info_b = np.einsum("ki,kj->kij", ra, ra) + np.einsum("ki,kj->kij", rd, rd)
+    return info_b, np.outer(ta, ta) + np.outer(td, td), d_b
+
+
+def _seen(o: np.ndarray, B: np.ndarray, point, yaw: float, mirror_size: float,
+          min_depth: float) -> np.ndarray:
+    """Which candidates a mirror pose shows: in front of it by ``min_depth``, their image
+    on the glass of width ``mirror_size``."""
+    n = line_normal(yaw)
+    so, sp = (o - point) @ n, (B - point) @ n
+    obs = observe(o, point, yaw, B, strict=False)
+    off = (np.asarray(obs.reflection_point) - point) @ unit(yaw)
+    return (sp * so > 0) & (np.abs(sp) >= min_depth) & (np.abs(off) <= mirror_size / 2)
+
+
+def _target_variance(info: np.ndarray, keep: int) -> np.ndarray:
+    """Trace of the target block of the inverse of info's first ``keep`` parameters
+    (batched over leading axes); UNDETERMINED where singular."""
+    m = info[..., :keep, :keep]
+    scale = np.maximum(np.abs(np.diagonal(m, axis1=-2, axis2=-1)).max(axis=-1), 1e-300)
+    ridge = 1e-12 * scale[..., None, None] * np.eye(keep)
+    with np.errstate(all="ignore"):
+        inv = np.linalg.inv(m + ridge)
+    v = inv[..., 2, 2] + inv[..., 3, 3]
+    return np.where(np.isfinite(v) & (v > 0) & (v < UNDETERMINED_CM2), v, np.inf)
+
+
+def best_beacon_set(observer, target_alpha_deg: float, target_d_total: float, poses,
+                    sigma: Sigma | ObjectSigmas, mirror_size: float,
+                    board: tuple[float, float], n: int, nuisances: tuple[str, ...] = (),
+                    step: float = 1.0, keep_out=(), clearance: float = 1.0, accept=None,
+                    min_depth: float = 0.5) -> BeaconSet:
+    """Choose ``n`` beacon positions on the board's grid one at a time, each the one that
+    lowers the expected target error most (with ``nuisances`` estimated), among
+    positions every pose shows, clear of ``keep_out`` segments (start, end, clearance)
+    and ``clearance`` from the beacons already chosen, vetted by ``accept(position)``.
+    While the set cannot yet carry the nuisances (one beacon for pan and scale), the
+    choice is by the error without them.
+
+    Raises
+    ------
+    SolverError
+        No position is seen under every pose, or none passes ``accept``.
+    """
+    if any(x not in NUISANCES for x in nuisances):
+        raise SolverError(f"unknown nuisance in {nuisances}: choose from {', '.join(NUISANCES)}")
+    o = np.asarray(observer, float)
+    sig = as_object_sigmas(sigma)
+    xs = np.arange(step / 2, board[0], step)
+    ys = np.arange(step / 2, board[1], step)
+    gx, gy = np.meshgrid(xs, ys)
+    grid = np.column_stack([gx.ravel(), gy.ravel()])
+    allowed = np.ones(len(grid), bool)
+    for a, b, clear in keep_out:
+        allowed &= point_segment_distance(grid, a, b) >= clear
+    per_pose = []
+    for point, yaw in poses:
+        allowed &= _seen(o, grid, point, yaw, mirror_size, min_depth)
+        info_b, info_t, _ = _information(o, grid, target_alpha_deg, target_d_total, point, yaw,
+                                         sig, nuisances)
+        per_pose.append((info_b, info_t))
+    if not allowed.any():
+        raise SolverError("no beacon position on the board is seen under every mirror pose")
+    P = 4 + len(nuisances)
+    base = [info_t.copy() for _, info_t in per_pose]
+    chosen, rmse, plain = [], [], []
+    for _ in range(n):
+        full = np.zeros(len(grid))
+        only = np.zeros(len(grid))
+        for (info_b, _), b0 in zip(per_pose, base, strict=True):
+            m = b0[None] + info_b
+            full += _target_variance(m, P)
+            only += _target_variance(m, 4)
+        full, only = np.sqrt(full / len(poses)), np.sqrt(only / len(poses))
+        if 2 * (len(chosen) + 2) < P:  # the set and the target cannot carry the nuisances
+            full[:] = np.inf
+        ok = allowed.copy()
+        for c in chosen:
+            ok &= np.hypot(*(grid - grid[c]).T) >= clearance
+        score = np.where(ok, full if np.isfinite(full[ok]).any() else only, np.inf)
+        order = np.argsort(score)
+        pick = next((int(i) for i in order[:500] if np.isfinite(score[i])
+                     and (accept is None or accept(grid[i]))), -1)
+        if pick < 0:
+            raise SolverError(f"no acceptable position for beacon {len(chosen) + 1}")
+        chosen.append(pick)
+        rmse.append(float(full[pick]))
+        plain.append(float(only[pick]))
+        for k, (info_b, _) in enumerate(per_pose):
+            base[k] = base[k] + info_b[pick]
+    return BeaconSet(grid[chosen], tuple(rmse), tuple(plain), tuple(nuisances))
