@@ -342,3 +342,18 @@ def test_a_side_beside_a_strip_of_glass_and_the_frame_is_not_measured_on_the_fra
     assert m.u_left is None and m.u_right == pytest.approx(140.0, abs=0.6)
     monkeypatch.setattr(edges, "SIDE_MAX_OFF_PX", None)
     assert edges.measure_region(img, (48, 40, 139, 179), "target").u_left < 45.0
+
+
+def test_a_pencil_beside_the_frame_is_not_measured_on_its_other_side(monkeypatch):
+    """A pencil 3 px from the frame's bar (one of 120 random scenes: α off by 0.31°): the
+    bar became the coarse pass's outside and the left side was found on the right one;
+    now that side is dropped (its axis then comes from the other side)."""
+    from mirrorsim.detection import edges
+
+    img = np.full((220, 220, 3), 51.0, np.float32)  # the board, in the blue channel too
+    img[:, 28:44] = 6.0  # the frame's bar
+    img[40:180, 47:65] = (200.0, 150.0, 0.5)  # the yellow paint: blue ≈ 0
+    m = edges.measure_region(img, (47, 40, 64, 179), "beacon")
+    assert m.u_left is None and m.u_right == pytest.approx(64.5, abs=0.6)
+    monkeypatch.setattr(edges, "SIDE_MAX_OFF_PX", None)
+    assert edges.measure_region(img, (47, 40, 64, 179), "beacon").u_left > 60

@@ -304,11 +304,15 @@ def _public(m: ImageMeasurement) -> dict:
 
 
 def annotate(image: np.ndarray, detection: Detection) -> np.ndarray:
-    """Draw the detections (boxes, axis columns, edges, α and d) on a copy of the frame."""
+    """Draw the detections (boxes, axis columns, edges, α and d) on a copy of the frame;
+    each label names its object (a beacon by its index) on a dark band, moved down
+    where it would cover another label."""
     out = np.ascontiguousarray(image[..., ::-1].copy())  # OpenCV draws in BGR
+    placed: list[tuple[int, int, int, int]] = []
+    font, scale = cv2.FONT_HERSHEY_SIMPLEX, 0.5
     for m in [detection.target, *detection.images]:
-        colour = (0, 0, 255) if m.kind == "target" else (
-            (255, 128, 0) if m.source == "mirror" else (160, 160, 160))
+        colour = (60, 60, 255) if m.kind == "target" else (
+            (255, 160, 40) if m.source == "mirror" else (230, 230, 230))
         u0, v0, u1, v1 = m.bbox_px
         cv2.rectangle(out, (u0 - 2, v0 - 2), (u1 + 2, v1 + 2), colour, 1)
         if np.isfinite(m.u_axis):
@@ -318,13 +322,20 @@ def annotate(image: np.ndarray, detection: Detection) -> np.ndarray:
             if v is not None:
                 y = int(round(v))
                 cv2.line(out, (u0 - 8, y), (u1 + 8, y), (0, 255, 0), 1)
-        d = "—" if m.d_total is None else f"{m.d_total:.2f} cm"
-        label = f"{m.kind} ({m.source}): a {m.alpha_deg:.3f} deg, d {d}"
+        name = m.kind if m.beacon_index is None else f"beacon {m.beacon_index}"
+        d = "-" if m.d_total is None else f"{m.d_total:.2f} cm"
+        label = f"{name} ({m.source}): a {m.alpha_deg:.3f} deg, d {d}"
         if m.clipped:
             label += f", clipped {m.clipped}"
-        y = max(14, v0 - 8)
-        cv2.putText(out, label, (max(0, u0 - 40), y), cv2.FONT_HERSHEY_SIMPLEX, 0.45, colour,
-                    1, cv2.LINE_AA)
+        (w, h), base = cv2.getTextSize(label, font, scale, 1)
+        x0, y0 = max(0, min(u0 - 40, out.shape[1] - w - 4)), max(h + 4, v0 - 10)
+        while any(x0 < bx1 and bx0 < x0 + w + 4 and y0 - h - 3 < by1 and by0 < y0 + base + 2
+                  for bx0, by0, bx1, by1 in placed):
+            y0 += h + base + 4  # below the label it would cover
+        box = (x0, y0 - h - 3, x0 + w + 4, y0 + base + 2)
+        placed.append(box)
+        cv2.rectangle(out, box[:2], box[2:], (20, 20, 20), -1)  # a dark band under the text
+        cv2.putText(out, label, (x0 + 2, y0), font, scale, colour, 1, cv2.LINE_AA)
     return out[..., ::-1]
 
 

@@ -75,15 +75,30 @@ def distance_of(camera: Camera, u: float, height_px: float, k: float,
     return k / height_px / math.cos(_off_axis(camera, u)) + front_offset
 
 
+# a pencil image's width over what its height implies: beyond this, one side is wrong
+PENCIL_WIDTH_RATIO = (0.8, 1.25)
+
+
 def pencil_geometry(cam: Camera, m: ImageMeasurement, paint_height: float, k: float
                     ) -> ImageMeasurement:
     """A pencil's bearing from its edges and its d_total from its height (K = ``k``);
     with one edge (the other side runs into something of the paint's blue, such as the
     mirror's dark frame) its bearing from that edge and the pencil's angular half-width,
     tan β = r·s·cos φ/(f·H) (r its mean silhouette half-width, H its painted height)."""
+    notes = m.notes
+    if m.u_left is not None and m.u_right is not None and m.height_px:
+        # a backstop: a width far from what the height implies means one side is not the
+        # pencil's (good mirror images: 0.91-1.05 of it); the side farther from its
+        # region's edge is dropped
+        r = (m.u_right - m.u_left) / (2 * PENCIL_HALF_WIDTH * m.height_px / paint_height)
+        if not PENCIL_WIDTH_RATIO[0] <= r <= PENCIL_WIDTH_RATIO[1]:
+            u0, _, u1, _ = m.bbox_px
+            bad = "left" if abs(m.u_left - (u0 - 0.5)) > abs(m.u_right - (u1 + 0.5)) else "right"
+            notes = (*notes, f"width {r:.2f} of what the height implies: the {bad} edge is "
+                     "not the pencil's")
+            m = replace(m, **{f"u_{bad}": None})
     if m.u_left is not None and m.u_right is not None:
         alpha, u_axis = _axis_between(cam, m.u_left, m.u_right)
-        notes = m.notes
     else:
         edge = m.u_left if m.u_left is not None else m.u_right
         phi_edge = _off_axis(cam, edge)
@@ -92,8 +107,8 @@ def pencil_geometry(cam: Camera, m: ImageMeasurement, paint_height: float, k: fl
         missing = "right" if m.u_left is not None else "left"
         u_axis = _column(cam, phi_edge + beta if m.u_left is not None else phi_edge - beta)
         alpha = alpha_of(cam, u_axis)
-        notes = (*m.notes, f"no edge on the {missing} (no contrast there): axis from the "
-                 "other edge and the pencil's half-width")
+        notes = (*notes, f"no edge on the {missing} (no contrast there, or not the "
+                 "pencil's): axis from the other edge and the pencil's half-width")
     return replace(m, alpha_deg=alpha, u_axis=u_axis, notes=notes,
                    d_total=distance_of(cam, u_axis, m.height_px, k, FRONT_OFFSET["beacon"]))
 
