@@ -218,16 +218,16 @@ def _plan_error_map(fig, ax, scene: Scene, plan: Plan) -> None:
                 + (f" ({'+'.join(bs.nuisances)} estimated)" if bs.nuisances else ""))
         for k, p in enumerate(bs.positions):
             ax.annotate(str(k), p, xytext=(4, 4), textcoords="offset points", fontsize=8,
-                        color="w", weight="bold")
+                        color="k", weight="bold",
+                        bbox={"boxstyle": "round,pad=0.15", "fc": "w", "ec": "none"})
     ax.set_xlim(0, scene.board.size[0])
     ax.set_ylim(0, scene.board.size[1])
     ax.set_aspect("equal")
     ax.set_xlabel("x (cm)")
     ax.set_ylabel("y (cm)")
-    ax.legend(fontsize=7, loc="upper left")
-    ax.set_title(f"expected target error, {plan.sigma.describe()}, {plan.n_poses} mirror "
-                 "poses",
-                 fontsize=9)
+    ax.legend(fontsize=7, loc="lower left")
+    ax.set_title(f"expected target error over {plan.n_poses} mirror poses\n"
+                 f"{plan.sigma.describe()}", fontsize=9)
 
 
 def _plan_areas(ax, plan: Plan) -> None:

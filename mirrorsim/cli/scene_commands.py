@@ -295,7 +295,7 @@ def _track(args) -> int:
     from mirrorsim.cli.registry import at_least
     from mirrorsim.cli.tables import track_table
     from mirrorsim.formats.files import write_json
-    from mirrorsim.pipelines.track import check_options, run_track
+    from mirrorsim.pipelines.track import check_one_beacon, check_options, run_track
 
     # before the scene is read (run_track checks again, for callers other than the CLI)
     check_options(args.path, args.steps, args.odometry_sigma, args.side, args.step,
@@ -306,6 +306,7 @@ def _track(args) -> int:
         scene = scene.with_render(spp=args.spp)
     check_options(args.path, args.steps, args.odometry_sigma, args.side, args.step,
                   args.heading, scene.board.size)  # side and step within the board
+    check_one_beacon(scene, args.scene)
     out = out_folder(args, scene, "track")
     step = (None if args.quiet else lambda k, n: print(f"\rpose {k + 1}/{n}", end="",
                                                         file=sys.stderr, flush=True))

@@ -26,7 +26,7 @@ import numpy as np
 
 from mirrorsim.detection.detector import Detection
 from mirrorsim.detection.image_geometry import Calibration
-from mirrorsim.errors import BadParameter, DetectionError
+from mirrorsim.errors import BadParameter, DetectionError, SceneError
 from mirrorsim.formats.error_model import ErrorModel, default_error_model
 from mirrorsim.pipelines.frame import FrameNotMeasured, render_and_measure
 from mirrorsim.scene.model import Bench, Scene
@@ -206,6 +206,17 @@ def check_options(kind: str, steps: int, sigma: float, side: float, step: float,
                 f" within the board's {longest:g} cm" if board is not None else ""))
 
 
+def check_one_beacon(scene: Scene, source: str | Path | None = None) -> None:
+    """Refuse a scene of several beacons (``source``: its file, for the message): the
+    filter follows one moving beacon and cannot yet use fixed ones beside it, and
+    dropping them silently would mislead."""
+    if len(scene.beacons) > 1:
+        raise SceneError(source or scene.name, "beacons",
+                         f"{len(scene.beacons)} beacons: the moving-beacon filter follows one "
+                         "and cannot yet use fixed beacons beside it; give a scene with one "
+                         "beacon")
+
+
 def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps: int = 20,
               odometry_sigma: float = 0.1, seed: int = 0, side: float = 4.0,
               step: float = 1.0, heading: str = "view",
@@ -225,6 +236,7 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
         If the beacon or the target is not measured at the start pose (no prior, no path).
     """
     check_options(kind, steps, odometry_sigma, side, step, heading, scene.board.size)
+    check_one_beacon(scene)
     out = Path(out)
     rng = np.random.default_rng(seed)
     b0, cam = scene.beacons[0], scene.camera
