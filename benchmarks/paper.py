@@ -1,6 +1,7 @@
 """The paper side by side: its Table 3 (EXP1–3) and Table 1 against ours.
 
     python benchmarks/paper.py [--spp N]
+    python benchmarks/paper.py --beacons 3
 
 Table 3, per experiment: the paper's real data and its measured results; ours from
 rendered frames (`mirrorsim evaluate`); what exact geometry makes of the paper's own
@@ -11,6 +12,11 @@ The paper's bench explained: per experiment, the ideal simulation, the simulatio
 the hand-built bench's imperfections (scenes/bench/, magnitudes stated there before any
 run) and the paper's real error, with the three largest sources of the bench's error
 budget (`mirrorsim budget scenes/bench/expN.yaml`).
+
+With --beacons N, only the bench with N beacons where `plan --beacons N --calibrate
+pan,scale` puts them (each believed position off by 0.2 cm, in turn +x, −x, +y, −y …, as
+the bench's one beacon is): the target error of plain least squares and self-calibrated,
+beside the one-beacon bench and the paper.
 """
 
 from __future__ import annotations
@@ -53,7 +59,11 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--spp", type=int, default=None)
     ap.add_argument("--out", type=Path, default=ROOT / "renders" / "paper")
+    ap.add_argument("--beacons", type=int, default=0)
     args = ap.parse_args()
+    if args.beacons:
+        several_beacons(args)
+        return
 
     print("Table 3: target error (cm) / mirror yaw error (°)\n")
     print("| | true target | paper: measured target (RMSE) | ours, rendered frames | exact "
@@ -117,6 +127,39 @@ def main() -> None:
     for (sa, sd, pref, ptar), row in zip(PAPER_TABLE1, same, strict=True):
         print(f"| {sa} | {sd} | {pref} / {ptar} | {row.ours.rmse_ref:.3f} / "
               f"{row.ours.rmse_tar:.3f} | {det.rmse_ref:.4f} / {det.rmse_tar:.4f} |")
+
+
+# each planned beacon's believed position: 0.2 cm off, as the bench's one beacon is
+OFFSETS = ((0.2, 0.0), (-0.2, 0.0), (0.0, 0.2), (0.0, -0.2))
+
+
+def several_beacons(args) -> None:
+    """The bench with N planned beacons: plain and self-calibrated target errors."""
+    nu = ("pan", "scale")
+    print(f"The paper's bench with {args.beacons} beacons where `plan --beacons "
+          f"{args.beacons} --calibrate pan,scale` puts them: target error (cm)\n")
+    print("| | bench, one beacon (the paper's place) | bench, planned beacons, least squares | "
+          "the same frames, self-calibrated (pan, scale estimated) | paper, real bench |")
+    print("|---|---|---|---|---|")
+    for name, paper in PAPER.items():
+        scene = with_spp(load_scene(ROOT / "scenes" / "bench" / f"{name}.yaml"), args.spp)
+        one = evaluate_scene(scene, args.out / "bench1" / name, progress=False).errors
+        plan = plan_scene(scene, n_beacons=args.beacons, nuisances=nu)
+        h = scene.beacons[0].height
+        beacons = tuple(Beacon((float(p[0]), float(p[1])), h,
+                               (float(p[0] + dx), float(p[1] + dy)))
+                        for p, (dx, dy) in zip(plan.beacon_set.positions,
+                                               OFFSETS * args.beacons, strict=False))
+        multi = replace(scene, name=f"{name}_{args.beacons}b", beacons=beacons)
+        rep = evaluate_scene(multi, args.out / f"bench{args.beacons}" / name, progress=False)
+        m = rep.measurements
+        cal = solve_measurements(m.observer, m.beacons, m.targets, m.sigma, nu)
+        truth = np.asarray(scene.target.position, float)
+        pan, scale = cal.nuisances["pan_offset_deg"], cal.nuisances["range_scale"]
+        print(f"| {name.upper()} | {one.target_cm:.2f} | {rep.errors.target_cm:.2f} | "
+              f"{np.linalg.norm(cal.target - truth):.2f} (pan {pan:+.2f}° for "
+              f"{scene.bench.pan_error:+.2f}°, scale {scale:.4f}) | {paper['rmse']:.2f} |",
+              flush=True)
 
 
 if __name__ == "__main__":

@@ -66,3 +66,65 @@ def test_self_calibration_refuses_what_it_cannot_observe():
     same = [bs[0], BeaconMeasurement(bs[0].position, bs[0].alpha_deg, bs[0].d_total)]
     with pytest.raises(SolverError, match="do not separate"):
         solve_measurements(OBS, same, ts, SIG, nuisances=("pan", "scale"))
+
+
+def test_plan_places_several_beacons_and_says_what_each_buys(tmp_path):
+    """plan --beacons 3 --calibrate pan,scale: three positions; after one beacon the
+    nuisances are not observable (null), after two and three the expected error equals
+    the CRLB of that set computed independently (solver.lsq.crlb averaged over the same
+    mirror poses), and the third beacon lowers it."""
+    import json
+
+    from mirrorsim.cli.main import main
+    from mirrorsim.formats.scenefile import load_scene
+    from mirrorsim.truth import optics
+    from solver.placement import MirrorPrior
+
+    from .conftest import SCENES
+
+    js = tmp_path / "p.json"
+    assert main(["plan", str(SCENES / "exp1.yaml"), "--beacons", "3", "--calibrate",
+                 "pan,scale", "--step", "2", "--out", str(tmp_path / "p.png"),
+                 "--json", str(js)]) == 0
+    bs = json.loads(js.read_text())["beacon_set"]["beacons"]
+    assert len(bs) == 3 and bs[0]["rmse_after"] is None
+    assert bs[2]["rmse_after"] < bs[1]["rmse_after"]
+    scene = load_scene(SCENES / "exp1.yaml")
+    o = np.asarray(scene.camera.position, float)
+    img = optics.mirror_image(o, scene.mirror, scene.target.position)
+    poses = MirrorPrior(d1=img.d1, yaw_deg=scene.mirror.yaw, d1_spread=2.0,
+                        yaw_spread_deg=3.0, n=5).poses(o, img.alpha_deg)
+    sig = json.loads(js.read_text())["sigma"]
+    s = ObjectSigmas(Sigma(**sig["target"]), (Sigma(**sig["beacons"][0]),))
+    pos = np.array([b["position"] for b in bs])
+    var = []
+    for point, yaw in poses:
+        n = np.array([-np.sin(np.radians(yaw)), np.cos(np.radians(yaw))])
+        vt = o + img.d_total * np.array([np.cos(np.radians(img.alpha_deg)),
+                                         np.sin(np.radians(img.alpha_deg))])
+        t = vt - 2.0 * (n @ vt - n @ point) * n
+        bound = crlb(o, pos, yaw, n @ point, t, s, nuisances=("pan", "scale"))
+        var.append(np.trace(bound[2:4, 2:4]))
+    assert bs[2]["rmse_after"] == pytest.approx(np.sqrt(np.mean(var)), rel=1e-6)
+
+
+def test_commands_refuse_self_calibration_they_cannot_do(tmp_path, capsys):
+    from mirrorsim.cli.main import main
+
+    from .conftest import SCENES
+
+    for argv in (["evaluate", str(SCENES / "exp1.yaml"), "--calibrate", "pan,scale", "--out",
+                  str(tmp_path / "e")],
+                 ["budget", str(SCENES / "bench" / "exp1.yaml"), "--calibrate", "pan", "--out",
+                  str(tmp_path / "b")],
+                 ["evaluate", str(SCENES / "exp1.yaml"), "--calibrate", "roll", "--out",
+                  str(tmp_path / "e")]):
+        assert main(argv) == 2
+        err = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("error:")]
+        assert len(err) == 1 and "--calibrate" in err[0], err
+    assert not (tmp_path / "e").exists() and not (tmp_path / "b").exists()
+    # the moving-beacon filter cannot use several beacons: refused, not the first taken
+    assert main(["track", str(SCENES / "bench" / "exp1_3beacons.yaml"), "--out",
+                 str(tmp_path / "t")]) == 2
+    assert "3 beacons" in capsys.readouterr().err
+    assert not (tmp_path / "t").exists()
