@@ -206,3 +206,15 @@ def test_plan_command(tmp_path):
                            td * (1 + rng.normal(0, ts["d_total_rel"], k)))
         sq.append(np.mean(np.sum((est.target - target) ** 2, axis=1)))
     assert p["best_beacon"]["rmse"] == pytest.approx(np.sqrt(np.mean(sq)), rel=0.05)
+
+
+def test_json_to_stdout_pipes_alone(tmp_path, capsys):
+    """`--json -` leaves stdout to the JSON (it pipes into jq); the table goes to stderr."""
+    meas = tmp_path / "m.json"
+    for argv in (["check", str(SCENES / "exp1.yaml"), "--measurements", str(meas), "--json",
+                  "-"],
+                 ["solve", str(meas), "--json", "-"],
+                 ["montecarlo", "--iterations", "20", "--json", "-"]):
+        assert main(argv) == 0
+        out, err = capsys.readouterr()
+        assert isinstance(json.loads(out), dict) and err.strip()

@@ -12,6 +12,7 @@ from mirrorsim.cli.registry import (
     command,
     common,
     default_workers,
+    emit,
     error_model_of,
     finite,
     inputs,
@@ -22,7 +23,6 @@ from mirrorsim.cli.registry import (
     sampler_option,
 )
 from mirrorsim.errors import BadArgument, RunFailed
-from mirrorsim.formats.files import emit_json
 
 MAX_ITERATIONS = 1_000_000  # draws per Monte Carlo row: about a second a row at the most
 
@@ -67,7 +67,7 @@ def _solve(args) -> int:
     sol = solve_measurements(m.observer, m.beacons, m.targets, sigma, nuisances)
     print(f"σ's from {source}", file=sys.stderr)
     print(solution_summary(str(args.measurements), sol))
-    emit_json(args.json, sol.to_json())
+    emit(args, sol.to_json())
     return 0
 
 
@@ -121,7 +121,7 @@ def _montecarlo(args) -> int:
                       None if model is None else model.typical, args.d_total)
     res = table1(args.iterations, geometry, args.seed, rows)
     print(montecarlo_table(res))
-    emit_json(args.json, res.to_json())
+    emit(args, res.to_json())
     return 0
 
 
@@ -173,7 +173,7 @@ def _plan(args) -> int:
     print(plan_text(scene, summ))
     out = out_file(args, scene, f"{scene.name}.plan.png")
     print(f"  figure: {plot_plan(scene, plan, out)}")
-    emit_json(args.json, summ)
+    emit(args, summ)
     return 0
 
 
@@ -309,7 +309,6 @@ def _errormodel(args) -> int:
 
 
 def _test_model(args, model, out: Path | None) -> None:
-    from mirrorsim.formats.files import emit_json
     from mirrorsim.pipelines import errormodel, uncertainty
 
     try:
@@ -323,4 +322,4 @@ def _test_model(args, model, out: Path | None) -> None:
     if plot is not None:
         print(f"reliability diagram: "
               f"{uncertainty.reliability_plot(v, plot, f'{name} on {args.test}')}")
-    emit_json(args.json, v.to_json())
+    emit(args, v.to_json())

@@ -9,6 +9,7 @@ stderr.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import signal
 import sys
 import threading
@@ -100,7 +101,14 @@ def _run(args: argparse.Namespace) -> int:
     warnings.showwarning = one_line_warning
     try:
         check_outputs(args)
-        return args.handler(args)
+        if str(getattr(args, "json", "")) != "-":
+            return args.handler(args)
+        # `--json -`: stdout carries the JSON alone (it pipes into jq); what the command
+        # prints for people goes to stderr
+        out = sys.stdout
+        args.json_stdout = out
+        with contextlib.redirect_stdout(sys.stderr):
+            return args.handler(args)
     except KeyboardInterrupt:
         return _interrupted()
     except BrokenPipeError:  # output piped into `head` and the like

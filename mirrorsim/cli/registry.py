@@ -210,6 +210,14 @@ def nuisances_of(args: argparse.Namespace, n_beacons: int | None = None,
     return names
 
 
+def emit(args: argparse.Namespace, data) -> None:
+    """``--json``'s document: to its file, or (``-``) to stdout alone (the command's
+    printed lines went to stderr, :func:`mirrorsim.cli.main._run`)."""
+    from mirrorsim.formats.files import emit_json
+
+    emit_json(args.json, data, getattr(args, "json_stdout", None))
+
+
 def error_model_of(args: argparse.Namespace):
     """The model of ``--error-model``, or None where it is not given."""
     if not args.error_model:

@@ -8,6 +8,7 @@ from mirrorsim.cli.registry import (
     calibrate_option,
     command,
     common,
+    emit,
     error_model_of,
     inputs,
     load,
@@ -39,7 +40,7 @@ def _render(args) -> int:
     files = render_to_files(scene, out_folder(args, scene), variant=args.variant,
                             progress=not args.quiet)
     print(render_summary(scene, files))
-    emit_json(args.json, files.truth.to_json())
+    emit(args, files.truth.to_json())
     return 0
 
 
@@ -61,7 +62,7 @@ def _check(args) -> int:
     scene = load(args.scene)
     print(check_table(scene))
     truth = groundtruth.ground_truth(scene)
-    emit_json(args.json, truth.to_json())
+    emit(args, truth.to_json())
     if args.measurements:
         emit_json(args.measurements, {**truth.exact_measurements().to_json(),
                                       "source": "exact geometry (mirrorsim check)"})
@@ -124,7 +125,7 @@ def _detect(args) -> int:
     if args.annotate:
         write_png(args.annotate, annotate(m.image, m.detection))
         print(f"  annotated: {args.annotate}")
-    emit_json(args.json, m.detection.to_json())
+    emit(args, m.detection.to_json())
     return 0
 
 
@@ -153,7 +154,7 @@ def _calibrate(args) -> int:
           f"({cal.height_px('target', D_REF):.2f} px at 1 m; the paper's camera: 229 px)")
     print(f"  pencil's painted band: K = {cal.pencil_k:.1f} px·cm "
           f"({cal.height_px('beacon', D_REF):.2f} px at 1 m)")
-    emit_json(args.json, {"key": cal.key, "target_k": cal.target_k, "pencil_k": cal.pencil_k})
+    emit(args, {"key": cal.key, "target_k": cal.target_k, "pencil_k": cal.pencil_k})
     return 0
 
 
@@ -201,7 +202,7 @@ def _evaluate(args) -> int:
         print(f"top view: {plot_evaluation(scene, report, out / f'{scene.name}.eval.png')}")
     if "annotated" in args.keep:
         print("annotated: " + ", ".join(f.annotated for f in report.frames))
-    emit_json(args.json, report.to_json())
+    emit(args, report.to_json())
     return 0
 
 
@@ -245,7 +246,7 @@ def _budget(args) -> int:
     path = write_json(out / "budget.json", budget.to_json())
     fig = plot_budget(budget, out / "budget.png")
     print(f"budget: {path}\ntornado chart: {fig}")
-    emit_json(args.json, budget.to_json())
+    emit(args, budget.to_json())
     return 0
 
 
@@ -321,5 +322,5 @@ def _track(args) -> int:
     png = plot_track(report, out / "track.png")
     gif = animate_track(scene, report, out / "track.gif")
     print(f"report: {path}\nplot: {png}\nanimation: {gif}")
-    emit_json(args.json, report.to_json())
+    emit(args, report.to_json())
     return 0

@@ -269,11 +269,12 @@ def write_json(path: str | Path, data: Any) -> Path:
     return write_text(path, dumps(data))
 
 
-def emit_json(dest: str | Path | None, data: Any) -> None:
-    """Write strict JSON to a file, to stdout for ``"-"``, or nowhere for None."""
+def emit_json(dest: str | Path | None, data: Any, stdout=None) -> None:
+    """Write strict JSON to a file, to stdout (or the ``stdout`` given) for ``"-"``, or
+    nowhere for None."""
     if dest is None:
         return
     if str(dest) == "-":
-        sys.stdout.write(dumps(data))
+        (stdout or sys.stdout).write(dumps(data) + "\n")
     else:
         write_json(dest, data)
