@@ -194,7 +194,7 @@ def _evaluate(args) -> int:
                             error_model=error_model_of(args), nuisances=nuisances)
     print(f"{scene.name}: {len(report.frames)} frame(s), {report.render.spp} spp, "
           f"{report.render.variant}{' (reused)' if report.reused else ''}")
-    print(report_table(report))
+    print(report_table(report, scene))
     print(f"report: {write_json(out / f'{scene.name}.report.json', report.to_json())}")
     if "plot" in args.keep:
         from mirrorsim.cli.plots import plot_evaluation
@@ -309,14 +309,17 @@ def _track(args) -> int:
                   args.heading, scene.board.size)  # side and step within the board
     check_one_beacon(scene, args.scene)
     out = out_folder(args, scene, "track")
-    step = (None if args.quiet else lambda k, n: print(f"\rpose {k + 1}/{n}", end="",
-                                                        file=sys.stderr, flush=True))
-    report = run_track(scene, out, kind=args.path, steps=args.steps,
-                       odometry_sigma=args.odometry_sigma, seed=args.seed, side=args.side,
-                       step=args.step, heading=args.heading, variant=args.variant,
-                       on_pose=step, error_model=error_model_of(args))
-    if not args.quiet:
-        print(file=sys.stderr)
+    from tqdm import tqdm
+
+    # each pose is a render and a detection (seconds): a bar with its rate and ETA
+    with tqdm(total=args.steps + 1, unit="pose", desc="track", disable=args.quiet,
+              file=sys.stderr) as bar:
+        report = run_track(scene, out, kind=args.path, steps=args.steps,
+                           odometry_sigma=args.odometry_sigma, seed=args.seed, side=args.side,
+                           step=args.step, heading=args.heading, variant=args.variant,
+                           on_pose=lambda k, _n: bar.update(k - bar.n),  # pose k begins
+                           error_model=error_model_of(args))
+        bar.update(bar.total - bar.n)
     print(track_table(report))
     path = write_json(out / "track.json", report.to_json())
     png = plot_track(report, out / "track.png")

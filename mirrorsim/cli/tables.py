@@ -51,7 +51,18 @@ def check_table(scene: Scene) -> str:
     direct = visibility.direct_view_fraction(scene, scene.target)
     lines.append("target is hidden from the camera's direct view (NLOS)" if direct == 0.0 else
                  f"target is {100 * direct:.0f}% directly visible: not NLOS")
-    return "\n".join(lines)
+    return "\n".join([*lines, bench_line(scene)])
+
+
+def bench_line(scene: Scene) -> str:
+    """The scene's bench imperfections in one line (its frames' errors come from them as
+    well as from the detector)."""
+    from mirrorsim.scene.imperfections import as_keys
+
+    found = as_keys(scene)
+    if not found:
+        return "bench: ideal (no imperfections)"
+    return "bench imperfections: " + ", ".join(f"{k} {_show_value(v)}" for k, v in found.items())
 
 
 def render_summary(scene: Scene, files: FrameFiles) -> str:
@@ -116,8 +127,9 @@ def nuisance_text(sol: Solution) -> str:
     return ", ".join(out)
 
 
-def report_table(report: Report) -> str:
-    """The compact table ``mirrorsim evaluate`` prints."""
+def report_table(report: Report, report_scene: Scene | None = None) -> str:
+    """The compact table ``mirrorsim evaluate`` prints (with ``report_scene``, its bench
+    imperfections too)."""
     t, m, s, e = report.truth, report.measurements, report.solution, report.errors
     alpha_t, d_t = m.targets[0]
     rows = [("", "truth", "measured", "estimate", "error"),
@@ -142,6 +154,8 @@ def report_table(report: Report) -> str:
               f"{e.target_cm:.3f}" + ("" if bound is None else f"  (95 %: {bound:.3f})"))]
     lines = _columns(rows)
     lines.insert(1, "-" * len(lines[0]))
+    if report_scene is not None:
+        lines.append(bench_line(report_scene))
     if m.sigma is not None:
         lines.append(f"σ's from the error model: {m.sigma.describe()}")
     if s.downweighted:
