@@ -475,3 +475,20 @@ def test_errormodel_refuses_a_dataset_whose_row_files_no_longer_verify(one_worke
     (ds / "rows" / "scene000001.json").unlink()
     assert main(["errormodel", str(ds)]) == 2
     assert "its rows differ from the row files" in capsys.readouterr().err
+
+
+def test_load_dataset_gives_a_dataframe_with_the_files(one_worker):
+    """`mirrorsim.load_dataset`: the verified table as a DataFrame, each row with its
+    frame and measurements file; pandas alone reads the same Parquet columns."""
+    import pandas as pd
+
+    import mirrorsim as ms
+
+    out, _ = one_worker
+    df = ms.load_dataset(out)
+    assert len(df) == 3 and df["index"].tolist() == [0, 1, 2]
+    assert all(Path(p).exists() for p in df["frame"]) and all(
+        Path(p).exists() for p in df["measurements_file"])
+    plain = pd.read_parquet(out / "dataset.parquet")
+    assert set(plain.columns) <= set(df.columns)
+    assert df["target_mahalanobis"].notna().all()

@@ -225,6 +225,30 @@ def read_table(folder: str | Path) -> dict[str, list]:
     return cols
 
 
+def load_dataset(folder: str | Path):
+    """A dataset's table, verified (:func:`read_table`), as a pandas DataFrame with each
+    scene's frame, scene file and measurements file beside its columns (``frame``,
+    ``scene_file``, ``measurements_file``: paths; empty for a failed scene).  The same
+    Parquet file loads without mirrorsim (``pandas.read_parquet``), unverified."""
+    import pandas as pd
+
+    folder = Path(folder)
+    df = pd.DataFrame(read_table(folder))
+    frames = folder / "frames"
+
+    def path_of(name: str, suffix: str, failed: bool) -> str:
+        p = frames / name / f"{name}{suffix}"
+        return "" if failed or not p.exists() else str(p)
+
+    failed = df["error"].astype(bool)
+    df["frame"] = [path_of(n, ".png", f) or path_of(n, ".jpg", f)
+                   for n, f in zip(df["scene"], failed, strict=True)]
+    df["scene_file"] = [str(folder / "scenes" / f"{n}.yaml") for n in df["scene"]]
+    df["measurements_file"] = [path_of(n, ".measurements.json", f)
+                               for n, f in zip(df["scene"], failed, strict=True)]
+    return df
+
+
 def card_columns() -> str:
     """The table's columns as the card lists them, from their declaration."""
     groups = (("the run", table.RUN, ""), ("scene parameters", table.SCENE, ""),

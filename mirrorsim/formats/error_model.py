@@ -212,6 +212,11 @@ def load_error_model(path: str | Path) -> ErrorModel:
     return model_from_dict(read_json(path, ErrorModelError), path)
 
 
+def load_error_model_or_default(path: str | Path | None = None) -> ErrorModel:
+    """The model file at ``path``, or (None) the shipped one."""
+    return default_error_model() if path is None else load_error_model(path)
+
+
 def default_model_path() -> Path:
     """The model shipped with mirrorsim: the ideal bench at the default render settings,
     fitted on the project's own dataset (``make error-model`` regenerates it)."""

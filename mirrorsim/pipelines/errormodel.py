@@ -206,6 +206,12 @@ def bias_of(model: ErrorModel, kind: str, quantity: str, features: np.ndarray) -
     return np.atleast_2d(features) @ np.asarray(model.fits[kind][quantity].bias)
 
 
+def fit_dataset(dataset_dir: str | Path) -> ErrorModel:
+    """The error model of a dataset folder (its verified table), with its provenance."""
+    cols = read_columns(dataset_dir)
+    return fit(cols, provenance_of(dataset_dir, cols))
+
+
 def provenance_of(dataset_dir: str | Path, cols: dict) -> dict:
     """Where a model comes from: the dataset's seed, scene count and spec's name, and the
     command that fits it."""
