@@ -28,7 +28,7 @@ def assign_beacons(pencils: list[ImageMeasurement], view: CaptureRecord
         for i, b in enumerate(view.beacons):
             bearing, dist = _direct(cam, b)
             off, far = abs(wrap_bearing(p.alpha_deg - bearing)), abs(p.d_total - dist)
-            if (off < 0.3 and far < 0.05 * dist) or (off < BENCH_BEARING_DEG
+            if (off < 0.3 and far < REFLECTION_EXCESS * dist) or (off < BENCH_BEARING_DEG
                                                      and far < MISPLACED_DISTANCE * dist):
                 p = replace(p, source="direct", beacon_index=i, notes=(
                     *p.notes, f"direct view of beacon {i} (bearing and distance agree with "
@@ -63,7 +63,11 @@ def assign_beacons(pencils: list[ImageMeasurement], view: CaptureRecord
     return images, mirror_imgs
 
 
-MISPLACED_DISTANCE = 0.02  # a reflection is ≥ 5 % farther than its beacon in our scenes
+# a beacon's reflection must lie this much (a fraction) farther than the beacon itself
+# for its image to be told from a direct view by distance (4 cm or more in front of the
+# mirror in our scenes); plan places beacons where it does
+REFLECTION_EXCESS = 0.05
+MISPLACED_DISTANCE = 0.02  # within this of a beacon's own distance: its direct view
 # how far off its believed bearing a real bench shows a beacon's direct view: a mount's
 # pan reading and a pencil placed by hand (INTERFACE.md Bench imperfections)
 BENCH_BEARING_DEG = 2.0

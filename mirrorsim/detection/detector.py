@@ -52,6 +52,7 @@ from mirrorsim.detection.image_geometry import (
 )
 from mirrorsim.errors import DetectionError, InputError
 from mirrorsim.formats.capture import CaptureRecord
+from mirrorsim.formats.files import decode_image
 from mirrorsim.rendering.sensor import undistort
 from mirrorsim.scene.model import (
     MAX_RESOLUTION,
@@ -373,18 +374,13 @@ def read_frame(path, size: tuple[int, int] | None = None) -> np.ndarray:
     if found[0] > MAX_RESOLUTION[0] or found[1] > MAX_RESOLUTION[1]:
         raise InputError(path, "", f"the frame is {found[0]}×{found[1]} px, over the "
                          f"largest camera ({MAX_RESOLUTION[0]}×{MAX_RESOLUTION[1]})")
-    level = cv2.utils.logging.getLogLevel()
-    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
-    try:
-        bgr = cv2.imdecode(np.frombuffer(raw, np.uint8), cv2.IMREAD_COLOR)
-    finally:
-        cv2.utils.logging.setLogLevel(level)
-    if bgr is None:
+    rgb = decode_image(raw)
+    if rgb is None:
         raise InputError(path, "", "a damaged image that cannot be decoded")
     if head.startswith(b"\xff\xd8\xff"):
         warnings.warn(f"{path}: a JPEG frame: compression blurs the edges the detector "
                       "measures; expect larger errors", RuntimeWarning, stacklevel=2)
-    return bgr[..., ::-1]
+    return rgb
 
 
 def header_size(data: bytes) -> tuple[int, int] | None:

@@ -245,6 +245,21 @@ def encode_jpeg(pixels: np.ndarray, quality: int) -> bytes:
     return _encode(pixels, ".jpg", [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
 
 
+def decode_image(data: bytes):
+    """8-bit RGB pixels of PNG or JPEG bytes (None where they cannot be decoded), without
+    OpenCV's own messages on stderr."""
+    import cv2
+    import numpy as np
+
+    level = cv2.utils.logging.getLogLevel()
+    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
+    try:
+        bgr = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+    finally:
+        cv2.utils.logging.setLogLevel(level)
+    return None if bgr is None else bgr[..., ::-1]
+
+
 def _encode(pixels: np.ndarray, ext: str, params: list[int]) -> bytes:
     import cv2
     import numpy as np

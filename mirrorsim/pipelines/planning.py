@@ -8,6 +8,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from mirrorsim.detection.assign import REFLECTION_EXCESS
 from mirrorsim.errors import BadParameter
 from mirrorsim.scene.model import (
     MIRROR_DEPTH,
@@ -222,8 +223,13 @@ def _placement_rules(scene: Scene):
     height = scene.beacons[0].height
 
     def unobstructed(p) -> bool:
-        # the true mirror's rectangle, walls and the target panel must let its image through
+        # the true mirror's rectangle, walls and the target panel must let its image
+        # through, and the image must lie far enough beyond the beacon itself for the
+        # detector to tell it from a direct view
         moved = replace(scene, beacons=(Beacon((float(p[0]), float(p[1])), height),))
-        return visibility.visibility(moved, moved.beacons[0]).fraction == 1.0
+        img = optics.mirror_image(scene.camera.position, mir, moved.beacons[0].position)
+        direct = float(np.hypot(*(np.asarray(p, float) - scene.camera.position)))
+        return (img.d_total >= (1 + REFLECTION_EXCESS) * direct
+                and visibility.visibility(moved, moved.beacons[0]).fraction == 1.0)
 
     return keep_out, unobstructed
