@@ -117,7 +117,8 @@ def predict(params: np.ndarray, observer: np.ndarray, points: np.ndarray
 
 def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
               targets: list[tuple[float, float]], sigma: Sigma | ObjectSigmas | None = None,
-              initial: Solution | None = None, nuisances: tuple[str, ...] = ()) -> Solution:
+              initial: Solution | None = None, nuisances: tuple[str, ...] = (),
+              position_sigma: float = 0.0) -> Solution:
     """Weighted nonlinear least squares for the mirror line and the target.
 
     Parameters
@@ -135,6 +136,10 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
     nuisances : tuple of {'pan', 'scale'}
         Bench errors shared by every measurement, estimated jointly (self-calibration,
         :data:`NUISANCES`); the target comes out corrected for them.
+    position_sigma : float
+        How well the beacons' positions are known (cm, each axis; 0: exactly).  Where
+        > 0, each beacon's offset from its believed position is estimated too, with that
+        prior: a misplaced beacon then moves its own image's fit, not the nuisances.
 
     Raises
     ------
@@ -148,27 +153,36 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
     o = np.asarray(observer, float)
     sa, sd = as_object_sigmas(sigma or Sigma()).arrays(len(beacons), len(targets))
     bpos, meas_a, meas_d = _measurement_arrays(beacons, targets)
+    if initial is None and (nuisances or position_sigma):
+        # start from the plain fit: from the one-beacon closed form, a pan offset and a
+        # range scale let the fit wander to a mirror on the far side of a beacon
+        initial = solve_lsq(observer, beacons, targets, sigma)
     init = initial or solve_single(o, bpos[0], beacons[0].alpha_deg, beacons[0].d_total,
                                    targets[0][0], targets[0][1])
+    if not (np.isfinite(position_sigma) and position_sigma >= 0):
+        raise SolverError(f"position_sigma must be ≥ 0, got {position_sigma}")
+    free = position_sigma > 0
+    nb, nt, k = len(beacons), len(targets), len(nuisances)
     x0 = np.array([init.mirror.yaw_deg, init.mirror.rho, *init.target,
-                   *(NUISANCES[n][1] for n in nuisances)])
-    nt = len(targets)
+                   *(NUISANCES[n][1] for n in nuisances), *np.zeros(2 * nb if free else 0)])
     w_a = 1.0 / sa
     w_d = 1.0 / (sd * meas_d)
+    prior = np.eye(len(x0))[4 + k:] / position_sigma if free else np.zeros((0, len(x0)))
 
     def fun(x):
-        a, d, _, _ = _forward(x, o, bpos, nt, nuisances)
-        return np.concatenate([w_a * wrap_bearing(a - meas_a), w_d * (d - meas_d)])
+        a, d, _, _ = _forward(x, o, bpos, nt, nuisances, free)
+        return np.concatenate([w_a * wrap_bearing(a - meas_a), w_d * (d - meas_d),
+                               prior @ x])
 
     def jac(x):
-        _, _, da, dd = _forward(x, o, bpos, nt, nuisances)
-        return np.vstack([w_a[:, None] * da, w_d[:, None] * dd])
+        _, _, da, dd = _forward(x, o, bpos, nt, nuisances, free)
+        return np.vstack([w_a[:, None] * da, w_d[:, None] * dd, prior])
 
     from scipy.optimize import least_squares  # scipy is slow to import: only when used
 
     # more measurements than unknowns: a Huber loss, so that one bad image (a residual
     # beyond HUBER_K σ's) does not drag the estimate; it is named in the solution
-    robust = len(meas_a) * 2 > len(x0)
+    robust = len(meas_a) * 2 + len(prior) > len(x0)
     res = least_squares(fun, x0, jac=jac, method="trf" if robust else "lm",
                         loss="huber" if robust else "linear", f_scale=HUBER_K,
                         xtol=1e-15, ftol=1e-15, gtol=1e-15)
@@ -179,26 +193,33 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
     if np.linalg.cond(jtj) > 1e14:
         raise SolverError(_undetermined(nuisances))
     cov = np.linalg.inv(jtj) if sigma is not None else None
-    names = _residual_names(len(beacons), len(targets))
+    names = _residual_names(nb, nt) + [f"beacon {i} believed {c}" for i in range(nb)
+                                       for c in "xy"][:len(prior)]
     down = tuple(f"{names[i]} ({abs(r[i]):.1f} σ off)" for i in np.flatnonzero(w < 1.0))
     sol = _solution(o, res.x[:4], bpos, targets, cov)
     return replace(sol, downweighted=down,
                    nuisances={NUISANCES[n][0]: float(v)
-                              for n, v in zip(nuisances, res.x[4:], strict=True)},
+                              for n, v in zip(nuisances, res.x[4:4 + k], strict=True)},
                    method=sol.method + (f", self-calibrated ({', '.join(nuisances)})"
                                         if nuisances else ""))
 
 
 def _forward(x: np.ndarray, o: np.ndarray, bpos: np.ndarray, nt: int,
-             nuisances: tuple[str, ...]) -> tuple[np.ndarray, ...]:
+             nuisances: tuple[str, ...], free: bool = False) -> tuple[np.ndarray, ...]:
     """α and d_total of every observation (beacons, then nt of the target) for the
-    parameters x = (θ, ρ, x_t, y_t, *nuisances), and their derivatives (k, len(x))."""
-    nb = len(bpos)
-    pts = np.vstack([bpos, np.broadcast_to(x[2:4], (nt, 2))])
+    parameters x = (θ, ρ, x_t, y_t, *nuisances[, each beacon's offset from its believed
+    position, with ``free``]), and their derivatives (k, len(x))."""
+    nb, k = len(bpos), len(nuisances)
+    offsets = x[4 + k:].reshape(nb, 2) if free else np.zeros((nb, 2))
+    pts = np.vstack([bpos + offsets, np.broadcast_to(x[2:4], (nt, 2))])
     a, d, da, dd = predict(x[:4], o, pts)
+    oa, od = np.zeros((len(a), 2 * nb if free else 0)), np.zeros((len(a), 2 * nb if free else 0))
+    if free:  # a beacon's image moves with its own position
+        for i in range(nb):
+            oa[i, 2 * i:2 * i + 2], od[i, 2 * i:2 * i + 2] = da[i, 2:], dd[i, 2:]
     da[:nb, 2:] = 0.0  # a beacon's image does not move with the target
     dd[:nb, 2:] = 0.0
-    ea, ed = np.zeros((len(a), len(nuisances))), np.zeros((len(a), len(nuisances)))
+    ea, ed = np.zeros((len(a), k)), np.zeros((len(a), k))
     for j, name in enumerate(nuisances):
         v = x[4 + j]
         if name == "pan":
@@ -206,8 +227,8 @@ def _forward(x: np.ndarray, o: np.ndarray, bpos: np.ndarray, nt: int,
             ea[:, j] = 1.0
         else:  # scale: every d_total, and its derivatives, times s
             ed[:, j] = d
-            d, dd = d * v, dd * v
-    return a, d, np.hstack([da, ea]), np.hstack([dd, ed])
+            d, dd, od = d * v, dd * v, od * v
+    return a, d, np.hstack([da, ea, oa]), np.hstack([dd, ed, od])
 
 
 def check_nuisances(nuisances: tuple[str, ...], nb: int, nt: int) -> None:
@@ -300,10 +321,11 @@ def crlb(observer: ArrayLike, beacons: ArrayLike, mirror_yaw_deg: float, mirror_
 def solve_measurements(observer, beacons: list[BeaconMeasurement],
                        targets: list[tuple[float, float]],
                        sigma: Sigma | ObjectSigmas | None = None,
-                       nuisances: tuple[str, ...] = ()) -> Solution:
+                       nuisances: tuple[str, ...] = (), position_sigma: float = 0.0
+                       ) -> Solution:
     """The solver's front door: the closed form for one beacon and one target without
     σ's, weighted least squares (with covariance when σ's are given) otherwise."""
-    if len(beacons) == 1 and len(targets) == 1 and not nuisances:
+    if len(beacons) == 1 and len(targets) == 1 and not nuisances and not position_sigma:
         b = beacons[0]
         sol = solve_single(observer, b.position, b.alpha_deg, b.d_total, *targets[0])
         if sigma is None:
@@ -323,4 +345,5 @@ def solve_measurements(observer, beacons: list[BeaconMeasurement],
         Jinv = np.linalg.inv(J)
         cov = Jinv @ np.diag(sd**2) @ Jinv.T
         return replace(sol, covariance=cov, method="closed form with covariance")
-    return solve_lsq(observer, beacons, targets, sigma, nuisances=nuisances)
+    return solve_lsq(observer, beacons, targets, sigma, nuisances=nuisances,
+                     position_sigma=position_sigma)

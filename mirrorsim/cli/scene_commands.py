@@ -147,8 +147,7 @@ def _calibrate(args) -> int:
     cam = scene.camera
     cal = calibrate(cam, scene.target.size, scene.beacons[0].height, variant=args.variant,
                     refresh=args.refresh,
-                    distance_error=scene.bench.calibration_distance_error,
-                    jpeg_quality=scene.bench.jpeg_quality)
+                    distance_error=scene.bench.calibration_distance_error)
     print(f"camera {cam.width}×{cam.height_px}, hfov {cam.hfov:g}°, height {cam.height:g} cm "
           f"(fx {cam.fx:.2f} px)")
     print(f"  target {scene.target.size[1]:g} cm high: K = {cal.target_k:.1f} px·cm "

@@ -43,7 +43,6 @@ class CaptureRecord:
     frame: str = ""
     reference_distance: float = REFERENCE_DISTANCE
     distortion: tuple[float, float] = (0.0, 0.0)  # the lens's k1, k2 as calibrated
-    jpeg_quality: int | None = None  # the camera stores JPEG at this quality (None: PNG)
 
     @classmethod
     def from_scene(cls, scene: Scene, frame: str = "") -> CaptureRecord:
@@ -56,8 +55,7 @@ class CaptureRecord:
         beacons = tuple(Beacon(b.believed, b.height) for b in scene.beacons)
         return cls(camera=camera, beacons=beacons, target_size=scene.target.size,
                    frame=frame,
-                   distortion=bench.distortion if bench.distortion_known else (0.0, 0.0),
-                   jpeg_quality=bench.jpeg_quality)
+                   distortion=bench.distortion if bench.distortion_known else (0.0, 0.0))
 
     def to_json(self) -> dict:
         """The capture record document."""
@@ -66,9 +64,7 @@ class CaptureRecord:
                 "camera": {"position": list(c.position), "height": c.height,
                            "pan_deg": c.pan_deg, "resolution": list(c.resolution),
                            "fx": c.fx, "fy": c.fx, "cx": c.cx, "cy": c.cy,
-                           "hfov_deg": c.hfov, "distortion": list(self.distortion),
-                           **({"jpeg_quality": self.jpeg_quality}
-                              if self.jpeg_quality is not None else {})},
+                           "hfov_deg": c.hfov, "distortion": list(self.distortion)},
                 "beacons": [{"position": list(b.position), "height": b.height}
                             for b in self.beacons],
                 "target": {"size": list(self.target_size)},
@@ -81,7 +77,7 @@ class CaptureRecord:
         top = r.mapping(data, "", ("camera", "beacons", "target"), ("frame", "calibration"))
         c = r.mapping(top["camera"], "camera", ("position", "height", "pan_deg", "resolution",
                                                 "fx"),
-                      ("fy", "cx", "cy", "hfov_deg", "distortion", "jpeg_quality"))
+                      ("fy", "cx", "cy", "hfov_deg", "distortion"))
         resolution = read_resolution(r, c["resolution"], "camera.resolution")
         fx = r.number(c["fx"], "camera.fx", positive=True)
         hfov = (r.number(c["hfov_deg"], "camera.hfov_deg", positive=True, high=170.0)
@@ -104,11 +100,9 @@ class CaptureRecord:
                                   r.number(b["height"], f"beacons[{i}].height", positive=True)))
         t = r.mapping(top["target"], "target", ("size",))
         cal = r.mapping(top.get("calibration", {}), "calibration", (), ("reference_distance",))
-        jpeg = (int(r.number(c["jpeg_quality"], "camera.jpeg_quality", low=1, high=100))
-                if "jpeg_quality" in c else None)
         return cls(camera=camera, beacons=tuple(beacons),
                    target_size=r.pair(t["size"], "target.size", positive=True),
-                   frame=str(top.get("frame", "")), distortion=distortion, jpeg_quality=jpeg,
+                   frame=str(top.get("frame", "")), distortion=distortion,
                    reference_distance=r.number(cal.get("reference_distance", REFERENCE_DISTANCE),
                                                "calibration.reference_distance",
                                                positive=True))

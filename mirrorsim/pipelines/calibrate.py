@@ -38,15 +38,13 @@ METHOD = "foot-chroma|target-foot-chroma|front-0.338|slope8|seeds-ss"
 
 
 def calibration_key(camera: Camera, target_size, pencil_height: float,
-                    distance_error: float = 0.0, jpeg_quality: int | None = None) -> str:
-    """What K depends on: the camera model, the objects' sizes, the method, where the
-    reference really stood (a bench's error) and the camera's JPEG quality (each absent
-    from the key where there is none)."""
+                    distance_error: float = 0.0) -> str:
+    """What K depends on: the camera model, the objects' sizes, the method, and where
+    the reference really stood (a bench's error; absent from the key when 0)."""
     key = (f"{camera.width}x{camera.height_px}|hfov={camera.hfov:.9g}|h={camera.height:.9g}|"
            f"target={target_size[0]:.9g}x{target_size[1]:.9g}|pencil={pencil_height:.9g}|"
            f"spp={CALIBRATION_SPP['target']},{CALIBRATION_SPP['beacon']}|{METHOD}")
-    return (key + (f"|reference_error={distance_error:.9g}" if distance_error else "")
-            + (f"|jpeg={jpeg_quality}" if jpeg_quality is not None else ""))
+    return key + (f"|reference_error={distance_error:.9g}" if distance_error else "")
 
 
 def reference_camera(camera: Camera) -> Camera:
@@ -79,10 +77,8 @@ def reference_crop(camera: Camera, obj: Target | Beacon) -> tuple[int, int, int,
 
 
 def measure_reference(camera: Camera, kind: str, size, variant: str = "auto",
-                      distance: float = D_REF, jpeg_quality: int | None = None) -> float:
-    """Pixel height of the object standing at ``distance``, as the detector measures it
-    (photographed as the camera stores its frames: JPEG at ``jpeg_quality``, where it
-    does)."""
+                      distance: float = D_REF) -> float:
+    """Pixel height of the object standing at ``distance``, as the detector measures it."""
     from mirrorsim.rendering.passes import render_direct  # Mitsuba only when a render is needed
 
     cam = reference_camera(camera)
@@ -90,12 +86,6 @@ def measure_reference(camera: Camera, kind: str, size, variant: str = "auto",
     # a plain board: a hole under the reference object's foot would bias its calibration
     img = render_direct(Board(size=(80.0, 80.0), hole_pitch=0.0), cam, obj,
                         spp=CALIBRATION_SPP[kind], crop=reference_crop(cam, obj), variant=variant)
-    if jpeg_quality is not None:
-        # a lab calibrates with the camera it measures with: JPEG's chroma subsampling
-        # shifts the yellow band's edges in the reference as in the frames, and cancels
-        from mirrorsim.formats.files import decode_image, encode_jpeg
-
-        img = decode_image(encode_jpeg(img, jpeg_quality))
     ratio = size[0] / size[1] if kind == "target" else None
     try:
         m = measure_object(img, kind, ratio)
@@ -107,22 +97,20 @@ def measure_reference(camera: Camera, kind: str, size, variant: str = "auto",
 
 
 def calibrate(camera: Camera, target_size, pencil_height: float, *, variant: str = "auto",
-              refresh: bool = False, distance_error: float = 0.0,
-              jpeg_quality: int | None = None) -> Calibration:
+              refresh: bool = False, distance_error: float = 0.0) -> Calibration:
     """K for the target and the pencil with this camera (cached).
 
     ``distance_error``: a bench's reference objects stood this much farther than the
     D_REF that K assumes (INTERFACE.md ``calibration.distance_error``), so every K, and
     every d_total measured with it, comes out too small by about that fraction.
-    ``jpeg_quality``: the camera stores JPEG; the references are measured through it too.
     """
-    key = calibration_key(camera, target_size, pencil_height, distance_error, jpeg_quality)
+    key = calibration_key(camera, target_size, pencil_height, distance_error)
     found = None if refresh else read_entry("calibration", key, _check_entry)
     if found is not None:
         return Calibration(target_k=found["target_k"], pencil_k=found["pencil_k"], key=key)
     where = D_REF + distance_error
-    s_t = measure_reference(camera, "target", tuple(target_size), variant, where, jpeg_quality)
-    s_p = measure_reference(camera, "beacon", pencil_height, variant, where, jpeg_quality)
+    s_t = measure_reference(camera, "target", tuple(target_size), variant, where)
+    s_p = measure_reference(camera, "beacon", pencil_height, variant, where)
     cal = Calibration(target_k=s_t * (D_REF - FRONT_OFFSET["target"]),
                       pencil_k=s_p * (D_REF - FRONT_OFFSET["beacon"]), key=key)
     write_entry("calibration", key, {"target_k": cal.target_k, "pencil_k": cal.pencil_k,

@@ -50,8 +50,7 @@ def calibration_for(capture: CaptureRecord, *, variant: str = "auto",
     know; the simulator renders its calibration with it.
     """
     return calibrate(capture.camera, capture.target_size, capture.beacons[0].height,
-                     variant=variant, distance_error=distance_error,
-                     jpeg_quality=capture.jpeg_quality)
+                     variant=variant, distance_error=distance_error)
 
 
 def measure_frame(image_path: str | Path, capture: CaptureRecord, *,
