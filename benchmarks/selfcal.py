@@ -8,8 +8,10 @@ them: pan error, calibration error, curvature, JPEG…), `plan --beacons N --cal
 pan,scale` places N beacons; each beacon's believed position is off by the spec's
 `beacon.known_position_offset` range (drawn per beacon and axis); the scene is rendered
 (one frame per beacon), detected, and solved four ways from the same measurements:
-plain least squares and self-calibrated (pan and scale), with the believed beacon
-positions and with the exact ones.  Prints each scene's target errors and the medians.
+plain least squares and self-calibrated (pan and scale; the beacons known to the
+offsets' σ, (hi − lo)/√12, as the experimenter would say), with the believed beacon
+positions and with the exact ones (then known exactly).  The plan is made with the same
+σ.  Prints each scene's target errors and the medians.
 """
 
 from __future__ import annotations
@@ -40,15 +42,16 @@ from solver.lsq import BeaconMeasurement, solve_measurements  # noqa: E402
 NUISANCES = ("pan", "scale")
 
 
-def _errors(rep, scene) -> tuple[float, float, float, float]:
+def _errors(rep, scene, position_sigma: float) -> tuple[float, float, float, float]:
     """Target error: plain and self-calibrated, with believed and with exact positions."""
     m, truth = rep.measurements, np.asarray(rep.truth.target.position, float)
     exact = [BeaconMeasurement(tuple(b.position), mb.alpha_deg, mb.d_total)
              for b, mb in zip(scene.beacons, m.beacons, strict=True)]
     out = []
-    for beacons in (m.beacons, exact):
+    for beacons, ps in ((m.beacons, position_sigma), (exact, 0.0)):
         for nu in ((), NUISANCES):
-            sol = solve_measurements(m.observer, beacons, m.targets, m.sigma, nu)
+            sol = solve_measurements(m.observer, beacons, m.targets, m.sigma, nu,
+                                     ps if nu else 0.0)
             out.append(float(np.linalg.norm(sol.target - truth)))
     return tuple(out)
 
@@ -65,6 +68,7 @@ def main() -> None:
     seed = a.seed if a.seed is not None else int.from_bytes(os.urandom(3), "big")
     spec = load_spec(a.spec)
     lo, hi = spec.data.get("bench", {}).get("beacon", {}).get("known_position_offset", [0, 0])
+    position_sigma = (hi - lo) / np.sqrt(12)  # a uniform offset's σ
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT,
                             capture_output=True, text=True).stdout.strip()
     print(f"self-calibration on rendered frames: {a.scenes} scenes of {a.spec.name}, seed "
@@ -80,7 +84,8 @@ def main() -> None:
             scene = sample_scene(spec, np.random.default_rng(np.random.SeedSequence(
                 seed, spawn_key=(i,))), f"sc{i:03d}")
             try:
-                plan = plan_scene(scene, n_beacons=a.beacons, nuisances=NUISANCES, step=a.step)
+                plan = plan_scene(scene, n_beacons=a.beacons, nuisances=NUISANCES, step=a.step,
+                                  position_sigma=position_sigma)
             except (SolverError, ValueError) as exc:
                 skipped.append(f"{scene.name}: plan: {exc}")
                 continue
@@ -92,7 +97,7 @@ def main() -> None:
             scene = replace(scene, beacons=beacons)
             try:
                 rep = evaluate_scene(scene, out / scene.name, progress=False, keep=())
-                e = _errors(rep, scene)
+                e = _errors(rep, scene, position_sigma)
             except (DetectionError, SolverError) as exc:
                 skipped.append(f"{scene.name}: {exc}")
                 continue

@@ -38,10 +38,14 @@ class BeaconSet:
 
 
 def _information(o: np.ndarray, B: np.ndarray, t_alpha: float, t_d: float, point, yaw: float,
-                 sig: ObjectSigmas, nuisances: tuple[str, ...]
+                 sig: ObjectSigmas, nuisances: tuple[str, ...], position_sigma: float = 0.0
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """At one mirror pose: each candidate beacon's Fisher information (K, P, P), the
-    target's (P, P), and the candidates' beacon d_total (K,); P = 4 + len(nuisances)."""
+    target's (P, P), and the candidates' beacon d_total (K,); P = 4 + len(nuisances).
+
+    A beacon known to ``position_sigma`` (cm per axis) has its measurements' covariance
+    grown by σ_p²·J_p J_pᵀ (J_p: its image's α and d_total against its position): the
+    position offset marginalized, exactly to first order."""
     n = line_normal(yaw)
     params = np.array([yaw, n @ point])
     vt = o + t_d * unit(t_alpha)
@@ -59,10 +63,14 @@ def _information(o: np.ndarray, B: np.ndarray, t_alpha: float, t_d: float, point
         else:
             rd[:, 4 + j], td[4 + j] = d_b, d_t[0]
     sb, st = sig.beacons[0], sig.target
-    ra /= sb.alpha_deg
-    rd /= (sb.d_total_rel * d_b)[:, None]
+    R = np.stack([ra, rd], axis=1)  # (K, 2, P): each candidate's α and d rows
+    C = np.zeros((len(B), 2, 2))
+    C[:, 0, 0], C[:, 1, 1] = sb.alpha_deg**2, (sb.d_total_rel * d_b) ** 2
+    if position_sigma > 0:
+        Jp = np.stack([da_b[:, 2:], dd_b[:, 2:]], axis=1)  # (K, 2, 2)
+        C = C + position_sigma**2 * Jp @ np.swapaxes(Jp, 1, 2)
+    info_b = np.swapaxes(R, 1, 2) @ np.linalg.solve(C, R)
     ta, td = ta / st.alpha_deg, td / (st.d_total_rel * d_t[0])
-    info_b = np.einsum("ki,kj->kij", ra, ra) + np.einsum("ki,kj->kij", rd, rd)
     return info_b, np.outer(ta, ta) + np.outer(td, td), d_b
 
 
@@ -93,13 +101,14 @@ def best_beacon_set(observer, target_alpha_deg: float, target_d_total: float, po
                     sigma: Sigma | ObjectSigmas, mirror_size: float,
                     board: tuple[float, float], n: int, nuisances: tuple[str, ...] = (),
                     step: float = 1.0, keep_out=(), clearance: float = 1.0, accept=None,
-                    min_depth: float = 0.5) -> BeaconSet:
+                    min_depth: float = 0.5, position_sigma: float = 0.0) -> BeaconSet:
     """Choose ``n`` beacon positions on the board's grid one at a time, each the one that
     lowers the expected target error most (with ``nuisances`` estimated), among
     positions every pose shows, clear of ``keep_out`` segments (start, end, clearance)
     and ``clearance`` from the beacons already chosen, vetted by ``accept(position)``.
     While the set cannot yet carry the nuisances (one beacon for pan and scale), the
-    choice is by the error without them.
+    choice is by the error without them.  ``position_sigma``: how well a placed beacon's
+    position is known (cm per axis): clustered beacons then buy less.
 
     Raises
     ------
@@ -121,7 +130,7 @@ def best_beacon_set(observer, target_alpha_deg: float, target_d_total: float, po
     for point, yaw in poses:
         allowed &= _seen(o, grid, point, yaw, mirror_size, min_depth)
         info_b, info_t, _ = _information(o, grid, target_alpha_deg, target_d_total, point, yaw,
-                                         sig, nuisances)
+                                         sig, nuisances, position_sigma)
         per_pose.append((info_b, info_t))
     if not allowed.any():
         raise SolverError("no beacon position on the board is seen under every mirror pose")

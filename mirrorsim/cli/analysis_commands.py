@@ -8,6 +8,7 @@ from pathlib import Path
 
 from mirrorsim.cli.registry import (
     at_least,
+    beacon_sigma_of,
     calibrate_option,
     command,
     common,
@@ -64,7 +65,8 @@ def _solve(args) -> int:
                   else "the shipped error model (ideal bench)")
         if m.observer_pan_deg is None:
             source += "; no observer_pan_deg: images taken as off-axis as its training rows"
-    sol = solve_measurements(m.observer, m.beacons, m.targets, sigma, nuisances)
+    sol = solve_measurements(m.observer, m.beacons, m.targets, sigma, nuisances,
+                             beacon_sigma_of(args))
     print(f"σ's from {source}", file=sys.stderr)
     print(solution_summary(str(args.measurements), sol))
     emit(args, sol.to_json())
@@ -168,7 +170,8 @@ def _plan(args) -> int:
              if args.sigma_alpha is not None
              else (error_model_of(args) or default_error_model()).typical)
     plan = plan_scene(scene, sigma, args.eps, args.yaw_spread, args.d1_spread, args.step,
-                      n_beacons=args.beacons, nuisances=nuisances_of(args))
+                      n_beacons=args.beacons, nuisances=nuisances_of(args),
+                      position_sigma=beacon_sigma_of(args))
     summ = plan.to_json()
     print(plan_text(scene, summ))
     out = out_file(args, scene, f"{scene.name}.plan.png")

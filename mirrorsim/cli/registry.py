@@ -188,6 +188,22 @@ def calibrate_option(p: argparse.ArgumentParser) -> None:
                    "(self-calibration; needs 2+ beacons): pan, an offset on every alpha (the "
                    "mount's pan reading); scale, a factor on every d_total (the "
                    "calibration); comma-separated")
+    p.add_argument("--beacon-sigma", type=float, default=0.0, metavar="CM",
+                   help="how well each beacon's position is known, cm per axis (default 0: "
+                   "exactly); each beacon's offset is then estimated with that prior, and the "
+                   "ellipse includes it (positions read off a pegboard by hand: ~0.1)")
+
+
+def beacon_sigma_of(args: argparse.Namespace) -> float:
+    """--beacon-sigma, checked: finite, 0..MAX_BEACON_SIGMA cm."""
+    v = args.beacon_sigma
+    if not (v == v and 0.0 <= v <= MAX_BEACON_SIGMA):  # v == v: not NaN
+        raise BadArgument("--beacon-sigma", f"{v:g} must be within 0..{MAX_BEACON_SIGMA:g} cm")
+    return float(v)
+
+
+# a beacon known to worse than this is no known position
+MAX_BEACON_SIGMA = 10.0
 
 
 def nuisances_of(args: argparse.Namespace, n_beacons: int | None = None,

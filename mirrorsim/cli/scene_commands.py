@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from mirrorsim.cli.registry import (
+    beacon_sigma_of,
     calibrate_option,
     command,
     common,
@@ -191,7 +192,8 @@ def _evaluate(args) -> int:
     out = out_folder(args, scene)
     report = evaluate_scene(scene, out, variant=args.variant, progress=not args.quiet,
                             keep=tuple(k for k in args.keep if k != "plot"),
-                            error_model=error_model_of(args), nuisances=nuisances)
+                            error_model=error_model_of(args), nuisances=nuisances,
+                            position_sigma=beacon_sigma_of(args))
     print(f"{scene.name}: {len(report.frames)} frame(s), {report.render.spp} spp, "
           f"{report.render.variant}{' (reused)' if report.reused else ''}")
     print(report_table(report, scene))
@@ -241,7 +243,8 @@ def _budget(args) -> int:
     step = (None if args.quiet else lambda label, k, runs: print(f"[{k}/{runs}] {label}",
                                                                  file=sys.stderr, flush=True))
     budget = run_budget(scene, out, variant=args.variant, progress=not args.quiet,
-                        on_step=step, error_model=error_model_of(args), nuisances=nuisances)
+                        on_step=step, error_model=error_model_of(args), nuisances=nuisances,
+                        position_sigma=beacon_sigma_of(args))
     print(budget_table(budget))
     path = write_json(out / "budget.json", budget.to_json())
     fig = plot_budget(budget, out / "budget.png")

@@ -217,7 +217,9 @@ def budget_table(budget: Budget) -> str:
     head = f"{budget.scene}: ideal bench {budget.ideal_cm:.2f} cm"
     if cal:
         head += (f" ({_cm(budget.ideal_calibrated_cm)} cm self-calibrated for "
-                 f"{' and '.join(budget.nuisances)})")
+                 f"{' and '.join(budget.nuisances)}"
+                 + (f", beacons known to {budget.position_sigma:g} cm" if budget.position_sigma
+                    else "") + ")")
     lines.insert(0, head + "; each source alone" + (", then all together" if budget.all else ""))
     return "\n".join(lines + failures)
 

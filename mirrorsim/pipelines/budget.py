@@ -89,6 +89,7 @@ class Budget:
     sources: tuple[Contribution, ...]
     nuisances: tuple[str, ...] = ()  # self-calibration's, where asked
     ideal_calibrated_cm: float | None = None
+    position_sigma: float = 0.0  # how well the self-calibration took the beacons as known
 
     def to_json(self) -> dict:
         """The budget document."""
@@ -98,7 +99,8 @@ class Budget:
         out = {"scene": self.scene, "ideal": ideal,
                "sources": [c.to_json() for c in self.sources]}
         if self.nuisances:
-            out["self_calibration"] = list(self.nuisances)
+            out["self_calibration"] = {"nuisances": list(self.nuisances),
+                                       "beacon_position_sigma_cm": self.position_sigma}
         if self.all is not None:
             out["all"] = {k: v for k, v in self.all.to_json().items()
                           if k not in ("source", "value", "delta")}
@@ -133,21 +135,24 @@ def jacobian(m: Measurements) -> np.ndarray:
     return np.column_stack(cols)
 
 
-def calibrated_error(report: Report, nuisances: tuple[str, ...]) -> float | None:
+def calibrated_error(report: Report, nuisances: tuple[str, ...], position_sigma: float = 0.0
+                     ) -> float | None:
     """The target error of the report's measurements solved self-calibrated (None where
     not asked, or where the geometry cannot carry the nuisances)."""
     if not nuisances:
         return None
     m = report.measurements
     try:
-        sol = solve_measurements(m.observer, m.beacons, m.targets, m.sigma, nuisances)
+        sol = solve_measurements(m.observer, m.beacons, m.targets, m.sigma, nuisances,
+                                 position_sigma)
     except SolverError:
         return None
     return float(np.linalg.norm(sol.target - np.asarray(report.truth.target.position, float)))
 
 
 def contribution(source: str, value: Any, ideal: Report, report: Report,
-                 J: np.ndarray, nuisances: tuple[str, ...] = ()) -> Contribution:
+                 J: np.ndarray, nuisances: tuple[str, ...] = (),
+                 position_sigma: float = 0.0) -> Contribution:
     """Compare a source's report with the ideal one; predict its effect to first order;
     with ``nuisances``, also solve its frames self-calibrated."""
     v0, v1 = _vector(ideal.measurements), _vector(report.measurements)
@@ -167,13 +172,13 @@ def contribution(source: str, value: Any, ideal: Report, report: Report,
                         shift_cm=float(np.linalg.norm(est1 - est0)),
                         predicted_cm=float(np.linalg.norm(est0 - truth + pred)),
                         predicted_shift_cm=float(np.linalg.norm(pred)), delta=delta,
-                        calibrated_cm=calibrated_error(report, nuisances))
+                        calibrated_cm=calibrated_error(report, nuisances, position_sigma))
 
 
 def run_budget(scene: Scene, out: str | Path, *, variant: str = "auto", progress: bool = True,
                on_step: Callable[[str, int, int], None] | None = None,
                error_model: ErrorModel | None = None,
-               nuisances: tuple[str, ...] = ()) -> Budget:
+               nuisances: tuple[str, ...] = (), position_sigma: float = 0.0) -> Budget:
     """Evaluate ``scene`` ideal, with each imperfection alone and with all; frames and
     reports go to ``out/<ideal|source key|all>/``.  ``on_step(label, k, runs)`` is called
     before run k of ``runs``.
@@ -198,7 +203,8 @@ def run_budget(scene: Scene, out: str | Path, *, variant: str = "auto", progress
         # a bench error can make a frame unmeasurable (an image taken for the wrong one
         # is refused) or unsolvable (no mirror fits): that is its effect, recorded
         try:
-            return contribution(label, value, ideal, run(label, sub), J, nuisances)
+            return contribution(label, value, ideal, run(label, sub), J, nuisances,
+                                position_sigma)
         except (DetectionError, SolverError) as exc:
             return Contribution(label, value, None, None, None, None, None, failed=str(exc))
 
@@ -212,7 +218,8 @@ def run_budget(scene: Scene, out: str | Path, *, variant: str = "auto", progress
     everything = measured("all", None, scene) if len(found) > 1 else None
     return Budget(scene=scene.name, ideal_cm=ideal.errors.target_cm, all=everything,
                   sources=contributions, nuisances=nuisances,
-                  ideal_calibrated_cm=calibrated_error(ideal, nuisances))
+                  ideal_calibrated_cm=calibrated_error(ideal, nuisances, position_sigma),
+                  position_sigma=position_sigma)
 
 
 def _folder(label: str) -> str:

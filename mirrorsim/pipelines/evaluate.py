@@ -27,8 +27,8 @@ from solver.measurements import Measurements
 
 def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: str = "auto",
                    progress: bool = True, error_model: ErrorModel | None = None,
-                   keep: tuple[str, ...] = EXTRA_FILES, nuisances: tuple[str, ...] = ()
-                   ) -> Report:
+                   keep: tuple[str, ...] = EXTRA_FILES, nuisances: tuple[str, ...] = (),
+                   position_sigma: float = 0.0) -> Report:
     """Render (or reuse) with the scene's render settings, detect, solve and score
     ``scene``; return the report.
 
@@ -37,6 +37,7 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
     render settings).  ``keep``: which of EXTRA_FILES to write beside each frame (the id
     labels, the annotated frame).  ``nuisances``: bench errors to estimate with the mirror
     (self-calibration, :data:`solver.lsq.NUISANCES`; needs two beacons or more).
+    ``position_sigma``: how well the beacons' positions are known (cm; 0: exactly).
 
     Raises
     ------
@@ -75,14 +76,15 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
     sigma = model.sigmas(mean_target, [(b.alpha_deg, b.d_total) for b in beacons], pan, fx)
     measurements = Measurements(observer=cam.position, targets=[mean_target], beacons=beacons,
                                 sigma=sigma, observer_pan_deg=pan)
-    sol = solve_measurements(cam.position, beacons, targets, sigma, nuisances)
+    sol = solve_measurements(cam.position, beacons, targets, sigma, nuisances, position_sigma)
     by_count = ()
     if len(beacons) > 1:
         def first(k: int):
             # self-calibration from the first k beacons where they can carry it
             nu = nuisances if 2 * (k + len(targets)) > 4 + len(nuisances) else ()
             return solve_measurements(cam.position, beacons[:k], targets,
-                                      replace(sigma, beacons=sigma.beacons[:k]), nu)
+                                      replace(sigma, beacons=sigma.beacons[:k]), nu,
+                                      position_sigma)
 
         by_count = tuple(score(truth, measurements, first(k))
                          for k in range(1, len(beacons) + 1))

@@ -39,6 +39,10 @@ from solver.placement import (
 AREA_DISTANCES = (25.0, 50.0, 100.0, 200.0, 400.0, 1000.0)
 # cm: finer grids take long without news (exp1 here: 1 cm 7 s, 0.5 cm 11 s, 0.25 cm 26 s)
 MIN_STEP = 0.5
+# how much farther than its beacon a planned beacon's reflection must lie: twice what
+# the detector needs to tell it from a direct view, as a bench's errors move d_total by a
+# few per cent (a calibration error, JPEG, a curved mirror)
+PLACEMENT_EXCESS = 2 * REFLECTION_EXCESS
 # the most beacons plan places (each a greedy step over the whole grid)
 MAX_PLANNED_BEACONS = 8
 
@@ -115,14 +119,16 @@ def _set_json(bs: BeaconSet) -> dict:
 
 def plan_scene(scene: Scene, sigma: Sigma | ObjectSigmas | None = None, eps_deg: float = 5.0,
                yaw_spread_deg: float = 3.0, d1_spread: float = 2.0, step: float = 1.0,
-               n_poses: int = 5, n_beacons: int = 1, nuisances: tuple[str, ...] = ()) -> Plan:
+               n_poses: int = 5, n_beacons: int = 1, nuisances: tuple[str, ...] = (),
+               position_sigma: float = 0.0) -> Plan:
     """Placement numbers, paths, the exact beacon region and the best beacon position.
 
     The target's α and d_total are taken as measured without error; the mirror prior is
     centred on the scene's mirror (its reflection point along the target's ray, its yaw)
     with the given spreads.  With ``n_beacons`` > 1 or ``nuisances``: the best set of
     that many beacons, chosen one at a time, with the nuisances estimated alongside
-    (:func:`solver.beacon_set.best_beacon_set`).
+    (:func:`solver.beacon_set.best_beacon_set`), each beacon's position known to
+    ``position_sigma`` cm.
 
     Raises
     ------
@@ -158,7 +164,8 @@ def plan_scene(scene: Scene, sigma: Sigma | ObjectSigmas | None = None, eps_deg:
         keep_out, accept = _placement_rules(scene)
         chosen = best_beacon_set(o, img.alpha_deg, img.d_total, poses, sigma, s,
                                  scene.board.size, n_beacons, nuisances, step=step,
-                                 keep_out=keep_out, accept=accept)
+                                 keep_out=keep_out, accept=accept,
+                                 position_sigma=position_sigma)
     scene_err, scene_seen = expected_target_error(
         o, img.alpha_deg, img.d_total, np.array([b.position for b in scene.beacons]), poses,
         sigma, s, min_depth=0.0)
@@ -229,7 +236,7 @@ def _placement_rules(scene: Scene):
         moved = replace(scene, beacons=(Beacon((float(p[0]), float(p[1])), height),))
         img = optics.mirror_image(scene.camera.position, mir, moved.beacons[0].position)
         direct = float(np.hypot(*(np.asarray(p, float) - scene.camera.position)))
-        return (img.d_total >= (1 + REFLECTION_EXCESS) * direct
+        return (img.d_total >= (1 + PLACEMENT_EXCESS) * direct
                 and visibility.visibility(moved, moved.beacons[0]).fraction == 1.0)
 
     return keep_out, unobstructed
