@@ -271,3 +271,20 @@ def test_one_bad_image_does_not_drag_the_estimate_and_is_named():
     assert sol.mahalanobis(TARGET) < 3.0
     clean = solve_measurements(OBS, bs, ts, sig)
     assert clean.downweighted == ()
+
+
+def test_validation_scales_the_sigmas_by_each_rows_focal_length():
+    """Rows of a camera with half the training's fx have twice the pixel-limited errors:
+    with their fx recorded, the model's σ's double and 95 % of the errors stay within
+    2σ."""
+    train, test = _simulated_rows(300, 3), _simulated_rows(300, 4)
+    train["fx_px"] = [1500.0] * 300
+    model = errormodel.fit(train)
+    assert model.fx_px == 1500.0
+    for k in ("target", "beacon"):
+        for q in ("alpha_err", "d_rel_err"):
+            test[f"{k}_{q}"] = np.asarray(test[f"{k}_{q}"]) * 2
+    test["fx_px"] = [750.0] * 300
+    v = uncertainty.validate(model, test)
+    one, two = v.within["beacon"]["d_rel"]
+    assert two == pytest.approx(0.954, abs=0.04)

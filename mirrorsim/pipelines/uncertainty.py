@@ -137,7 +137,7 @@ def _within(model: ErrorModel, cols: dict, ok: np.ndarray, pan: np.ndarray, fx: 
         for q, col in (("alpha", "alpha_err"), ("d_rel", "d_rel_err")):
             err = _col(cols, table.object_column(kind, col))
             m = ok & np.isfinite(err) & np.isfinite(x).all(axis=1)
-            scale = np.where(np.isfinite(fx[m]) & (model.fx_px or 0) > 0,
+            scale = np.where(np.isfinite(fx[m]) & ((model.fx_px or 0) > 0),
                              (model.fx_px or 1.0) / fx[m], 1.0)
             z = np.abs(err[m]) / (model.fits[kind][q].log_sigma(x[m]) * scale)
             out[kind][q] = (float(np.mean(z <= 1.0)), float(np.mean(z <= 2.0))) if z.size \
