@@ -130,7 +130,8 @@ def renders(path: Path, n: int, seed: int) -> None:
 
     from mirrorsim.formats.scenefile import load_scene
     from mirrorsim.pipelines.evaluate import evaluate_scene
-    from mirrorsim.pipelines.uncertainty import binomial_interval, chi2_2_radius
+    from mirrorsim.pipelines.uncertainty import binomial_interval
+    from solver.sltr import chi2_2_radius
 
     scene = load_scene(path)
     rows = []

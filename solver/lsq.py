@@ -132,7 +132,8 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
         Weights and covariance (one pair for all, or per observation); without it,
         unit weights in (0.01°, 0.2 %) are assumed and no covariance is reported.
     initial : Solution, optional
-        Start point (default: the closed form of the first beacon).
+        Start point (default: the closed form of the first beacon; with nuisances or a
+        position σ, the plain fit's).
     nuisances : tuple of {'pan', 'scale'}
         Bench errors shared by every measurement, estimated jointly (self-calibration,
         :data:`NUISANCES`); the target comes out corrected for them.
@@ -238,8 +239,10 @@ def check_nuisances(nuisances: tuple[str, ...], nb: int, nt: int) -> None:
         raise SolverError(f"unknown or repeated nuisance(s) {', '.join(bad) or nuisances}: "
                           f"choose from {', '.join(NUISANCES)}")
     unknowns = 4 + len(nuisances)
-    if nuisances and 2 * (nb + nt) < unknowns:
-        need = -(-(unknowns - 2 * nt) // 2)
+    # the target's observations (one per frame) repeat one image's measurement: they
+    # count once
+    if nuisances and 2 * (nb + min(nt, 1)) < unknowns:
+        need = -(-(unknowns - 2) // 2)
         raise SolverError(f"calibrating {' and '.join(nuisances)} needs at least {need} beacon "
                           f"observations ({nb} given): each image gives 2 measurements, and "
                           f"the mirror, the target and {len(nuisances)} nuisance(s) are "
@@ -305,9 +308,9 @@ def crlb(observer: ArrayLike, beacons: ArrayLike, mirror_yaw_deg: float, mirror_
     """
     o = np.asarray(observer, float)
     B = np.atleast_2d(np.asarray(beacons, float))
+    check_nuisances(nuisances, len(B), n_targets)
     x = np.array([mirror_yaw_deg, mirror_rho, *np.asarray(target, float),
                   *(NUISANCES[n][1] for n in nuisances)])
-    check_nuisances(nuisances, len(B), n_targets)
     _, d, da, dd = _forward(x, o, B, n_targets, nuisances)
     sa, sr = as_object_sigmas(sigma).arrays(len(B), n_targets)
     J = np.vstack([da / sa[:, None], dd / (sr * d)[:, None]])

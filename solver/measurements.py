@@ -46,4 +46,6 @@ def sigma_json(sigma: ObjectSigmas) -> dict:
     pair = lambda s: {"alpha_deg": s.alpha_deg, "d_total_rel": s.d_total_rel}  # noqa: E731
     if sigma.beacons == (sigma.target,):
         return pair(sigma.target)
-    return {"target": pair(sigma.target), "beacons": [pair(b) for b in sigma.beacons]}
+    beacons = pair(sigma.beacons[0]) if len(sigma.beacons) == 1 else [pair(b) for b in
+                                                                      sigma.beacons]
+    return {"target": pair(sigma.target), "beacons": beacons}

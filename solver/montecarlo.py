@@ -151,14 +151,18 @@ def table1(iterations: int = 200, geometry: Table1Geometry | None = None,
 
 
 def table_rows(sigmas: list[tuple[float, float]] | None = None,
-               relative: ObjectSigmas | None = None, d_total: float = 5.0) -> tuple:
-    """The rows to run: the paper's (or ``sigmas``: (σ_α deg, σ_d absolute) pairs without
+               relative: ObjectSigmas | None = None,
+               geometry: Table1Geometry | None = None) -> tuple:
+    """The rows to run: the paper's (or ``sigmas``: (σ_α deg, σ_d relative) pairs without
     paper figures), plus one for an error model's relative σ's (the target's and the
-    beacon's) at ``d_total``."""
+    beacon's); relative σ_d's become absolute at each object's own d_total."""
     nan = float("nan")
-    rows = PAPER_TABLE1 if not sigmas else tuple((a, d, nan, nan) for a, d in sigmas)
+    lay = (geometry or Table1Geometry()).layout()
+    d_t, d_b = lay["target_d"], lay["beacon_d"]
+    rows = PAPER_TABLE1 if not sigmas else tuple((a, d * d_t, nan, nan, (a, d * d_b))
+                                                 for a, d in sigmas)
     if relative is not None:
         t, b = relative.target, relative.beacons[0]
-        rows = (*rows, (t.alpha_deg, t.d_total_rel * d_total, nan, nan,
-                        (b.alpha_deg, b.d_total_rel * d_total)))
+        rows = (*rows, (t.alpha_deg, t.d_total_rel * d_t, nan, nan,
+                        (b.alpha_deg, b.d_total_rel * d_b)))
     return rows

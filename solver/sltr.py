@@ -33,7 +33,7 @@ EPS = 1e-9
 
 __all__ = ["SolverError", "MirrorLine", "Observation", "Solution", "BatchEstimate", "observe",
            "locate", "mirror_from_beacon", "ray_hits_line", "solve_single",
-           "closed_form_unchecked"]
+           "closed_form_unchecked", "chi2_2_radius", "error_ellipse"]
 
 
 @dataclass(frozen=True)
@@ -122,7 +122,7 @@ class Solution:
     target: np.ndarray
     target_reflection_point: np.ndarray
     beacon_reflection_points: np.ndarray  # (k, 2)
-    covariance: np.ndarray | None = None  # of (θ [deg], ρ, x_t, y_t)
+    covariance: np.ndarray | None = None  # of params_order: (θ [deg], ρ, x_t, y_t, …)
     method: str = "closed form"
     downweighted: tuple[str, ...] = ()  # measurements the robust fit trusted less
     # self-calibration's estimates (pan_offset_deg, range_scale), after θ, ρ, x_t, y_t in
@@ -133,6 +133,14 @@ class Solution:
     def target_covariance(self) -> np.ndarray | None:
         """The target's 2×2 covariance block, if σ's were given."""
         return None if self.covariance is None else self.covariance[2:4, 2:4]
+
+    @property
+    def params_order(self) -> list[str]:
+        """The covariance's parameters: the mirror, the target, the nuisances, then each
+        beacon's offset from its believed position where those were estimated."""
+        names = ["mirror_yaw_deg", "mirror_rho", "target_x", "target_y", *self.nuisances]
+        extra = 0 if self.covariance is None else len(self.covariance) - len(names)
+        return names + [f"beacon{i // 2}_offset_{'xy'[i % 2]}" for i in range(extra)]
 
     def mahalanobis(self, point: ArrayLike) -> float | None:
         """How many σ's ``point`` lies from the estimated target, by its covariance
@@ -167,8 +175,7 @@ class Solution:
             out["covariance"] = {
                 "target": self.target_covariance.tolist(),
                 "params": self.covariance.tolist(),
-                "params_order": ["mirror_yaw_deg", "mirror_rho", "target_x", "target_y",
-                                 *self.nuisances],
+                "params_order": self.params_order,
                 "target_ellipse95": {"major": major, "minor": minor, "angle_deg": angle},
             }
         return out
@@ -186,11 +193,15 @@ class Solution:
                    nuisances=dict(d.get("self_calibration", {})))
 
 
+def chi2_2_radius(level: float) -> float:
+    """The Mahalanobis radius of a 2-D Gaussian's ``level`` region, √(χ²₂ quantile)."""
+    return float(np.sqrt(-2.0 * np.log(1.0 - level)))
+
+
 def error_ellipse(cov: ArrayLike, level: float = 0.95) -> tuple[float, float, float]:
     """Semi-axes (major, minor) and major-axis bearing of a 2-D Gaussian's ``level`` region."""
     vals, vecs = np.linalg.eigh(np.asarray(cov, float))
-    k = -2.0 * np.log(1.0 - level)  # the χ² quantile with 2 degrees of freedom
-    major, minor = np.sqrt(k * np.maximum(vals[::-1], 0.0))
+    major, minor = chi2_2_radius(level) * np.sqrt(np.maximum(vals[::-1], 0.0))
     v = vecs[:, 1]
     return float(major), float(minor), float(wrap_yaw(np.degrees(np.arctan2(v[1], v[0]))))
 

@@ -95,7 +95,7 @@ def test_plan_places_several_beacons_and_says_what_each_buys(tmp_path):
     poses = MirrorPrior(d1=img.d1, yaw_deg=scene.mirror.yaw, d1_spread=2.0,
                         yaw_spread_deg=3.0, n=5).poses(o, img.alpha_deg)
     sig = json.loads(js.read_text())["sigma"]
-    s = ObjectSigmas(Sigma(**sig["target"]), (Sigma(**sig["beacons"][0]),))
+    s = ObjectSigmas(Sigma(**sig["target"]), (Sigma(**sig["beacons"]),))  # one for all
     pos = np.array([b["position"] for b in bs])
     var = []
     for point, yaw in poses:

@@ -167,7 +167,9 @@ def test_montecarlo_command(capsys):
 
     J = np.column_stack([(target(x0 + h * e) - target(x0 - h * e)) / (2 * h)
                          for e, h in zip(np.eye(4), (1e-5, 1e-6, 1e-5, 1e-6), strict=True)])
-    cov = J @ np.diag([sa**2, sd**2, sa**2, sd**2]) @ J.T
+    # --sigma's σ_d is relative: each object's absolute σ_d is it times its own d_total
+    rel = sd / 5.0
+    cov = J @ np.diag([sa**2, (rel * g["beacon_d"])**2, sa**2, (rel * g["target_d"])**2]) @ J.T
     # 4000 draws: the RMSE's own sampling error is ~1.1 %
     assert r1["rmse_tar"] == pytest.approx(np.sqrt(np.trace(cov)), rel=0.05)
     assert main(["montecarlo", "--iterations", "1"]) == 2
@@ -193,7 +195,7 @@ def test_plan_command(tmp_path):
                         yaw_spread_deg=3.0, n=5).poses(o, ta)
     beacon = np.asarray(p["best_beacon"]["position"])
     # the default: the shipped error model's typical σ's, the target's and the beacon's
-    ts, bs = p["sigma"]["target"], p["sigma"]["beacons"][0]
+    ts, bs = p["sigma"]["target"], p["sigma"]["beacons"]  # one pair for every beacon
     rng = np.random.default_rng(11)
     sq, k = [], 2000
     for point, yaw in poses:

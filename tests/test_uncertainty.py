@@ -17,7 +17,7 @@ from mirrorsim.formats.error_model import (
 from mirrorsim.formats.measurements import measurements_from_dict
 from mirrorsim.pipelines import errormodel, uncertainty
 from solver.lsq import BeaconMeasurement, ObjectSigmas, Sigma, crlb, solve_measurements
-from solver.sltr import observe
+from solver.sltr import chi2_2_radius, observe
 
 from .conftest import SCENES, synthetic_columns
 
@@ -65,7 +65,7 @@ def test_per_object_sigmas_give_ellipses_that_hold_and_meet_the_cramer_rao_bound
         est.append(sol.target)
         dist.append(sol.mahalanobis(TARGET))
     dist = np.array(dist)
-    inside = np.mean(dist <= uncertainty.chi2_2_radius(0.95))
+    inside = np.mean(dist <= chi2_2_radius(0.95))
     assert 0.925 <= inside <= 0.970
     assert np.median(dist) == pytest.approx(uncertainty.CHI2_MEDIAN, rel=0.1)
     bound = crlb(OBS, np.array(beacons), MIRROR[1], _rho(), TARGET, sig)[2:, 2:]
@@ -288,3 +288,27 @@ def test_validation_scales_the_sigmas_by_each_rows_focal_length():
     v = uncertainty.validate(model, test)
     one, two = v.within["beacon"]["d_rel"]
     assert two == pytest.approx(0.954, abs=0.04)
+
+
+def test_one_beacon_sigma_for_several_beacons_round_trips():
+    base = {"observer": [0, 0], "target": {"alpha_deg": 30, "d_total": 60},
+            "beacons": [{"position": [30, 25], "alpha_deg": 35, "d_total": 50}] * 2}
+    m = measurements_from_dict({**base, "sigma": {
+        "target": {"alpha_deg": 0.001, "d_total_rel": 0.0005},
+        "beacons": {"alpha_deg": 0.002, "d_total_rel": 0.002}}})
+    assert measurements_from_dict(m.to_json()) == m
+
+
+def test_beacon_position_sigma_widens_the_ellipse_and_names_the_offsets():
+    """Beacons known to 0.2 cm: the target's ellipse grows (the positions' uncertainty is
+    in it), the covariance names each beacon's offset, and solve prints the
+    self-calibration with it (the nuisances' σ's come from their own rows)."""
+    from mirrorsim.cli.tables import solution_summary
+
+    sig = ObjectSigmas(Sigma(0.002, 0.0005), (Sigma(0.003, 0.002),))
+    bs, ts = _noisy(np.random.default_rng(2), sig)
+    exact = solve_measurements(OBS, bs, ts, sig, ("pan", "scale"))
+    loose = solve_measurements(OBS, bs, ts, sig, ("pan", "scale"), position_sigma=0.2)
+    assert np.trace(loose.target_covariance) > np.trace(exact.target_covariance)
+    assert loose.params_order[-1] == "beacon2_offset_y" and len(loose.params_order) == 12
+    assert "pan offset" in solution_summary("m.json", loose)

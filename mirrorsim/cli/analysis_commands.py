@@ -40,7 +40,7 @@ def _solve_options(p):
          "Read MEASUREMENTS.json (observer, target alpha/d_total, beacons with positions; "
          "optionally `sigma` and `observer_pan_deg`) and estimate the mirror line and the "
          "target by weighted least squares (one beacon: the exact closed form), with the "
-         "target's covariance and 95 %% error ellipse.  The σ's: --error-model's if given "
+         "target's covariance and 95 % error ellipse.  The σ's: --error-model's if given "
          "(it wins over the file's `sigma`, and says so), else the file's `sigma`, else the "
          "shipped error model's.", _solve_options)
 def _solve(args) -> int:
@@ -119,8 +119,7 @@ def _montecarlo(args) -> int:
     except (ValueError, SolverError) as exc:
         raise BadArgument("geometry", str(exc)) from None
     model = error_model_of(args)
-    rows = table_rows([(a, d * args.d_total) for a, d in args.sigma or []] or None,
-                      None if model is None else model.typical, args.d_total)
+    rows = table_rows(args.sigma, None if model is None else model.typical, geometry)
     res = table1(args.iterations, geometry, args.seed, rows)
     print(montecarlo_table(res))
     emit(args, res.to_json())
@@ -283,7 +282,11 @@ def _errormodel(args) -> int:
     if args.dataset is None and args.test is None:
         raise BadArgument("DATASET", "give a dataset to fit, or --test HELDOUT to test a model")
     if args.dataset is not None and args.error_model:
-        raise BadArgument("--error-model", "it names a model to test: give it or DATASET")
+        raise BadArgument("--error-model", "it names a model to --test; give it or a DATASET "
+                          "to fit, not both")
+    for flag, value in (("--json", args.json), ("--plot", args.plot)):
+        if value is not None and args.test is None:
+            raise BadArgument(flag, "it writes the validation: give --test HELDOUT too")
     if args.out is not None and args.out.suffix != ".json":
         raise BadArgument("--out", f"{args.out}: the model is JSON: give a *.json path (its "
                           "plots go beside it as *.png)")

@@ -20,6 +20,7 @@ from mirrorsim.cli.registry import (
     preload,
     render_options,
 )
+from mirrorsim.errors import BadArgument
 from mirrorsim.formats.files import emit_json, write_png
 
 
@@ -235,6 +236,9 @@ def _budget(args) -> int:
 
     scene = render_options(args, load(args.scene))
     nuisances = nuisances_of(args, len(scene.beacons))  # before anything renders
+    if beacon_sigma_of(args) and not nuisances:
+        raise BadArgument("--beacon-sigma", "the budget uses it in its self-calibrated "
+                          "column only: give --calibrate too")
     found = sources(scene)
     if not found:
         print(f"{scene.name}: no bench imperfections in {args.scene}: only the ideal bench "

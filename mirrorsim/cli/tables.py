@@ -12,7 +12,7 @@ from mirrorsim.rendering.frames import FrameFiles
 from mirrorsim.scene.model import Scene
 from mirrorsim.truth import optics, visibility
 from solver.montecarlo import Table1
-from solver.sltr import Solution
+from solver.sltr import Solution, chi2_2_radius
 
 if TYPE_CHECKING:  # the budget and the track run renders: no Mitsuba import to draw one
     from mirrorsim.pipelines.budget import Budget
@@ -106,8 +106,8 @@ def solution_summary(source: str, sol: Solution) -> str:
         major, minor, angle = sol.ellipse95()
         lines.append(f"  95 % ellipse of the target: {major:.3f} × {minor:.3f} cm, major axis "
                      f"at {angle:.1f}°; RMS {np.sqrt(np.trace(sol.target_covariance)):.3f} cm "
-                     "(the Cramér–Rao bound at the estimate: the least squares attain it to "
-                     "first order)")
+                     "(first order, at the estimate; without down-weighting or a position "
+                     "prior, the Cramér–Rao bound there)")
     if sol.downweighted:
         lines.append("  trusted less (a Huber loss): " + ", ".join(sol.downweighted))
     if sol.nuisances:
@@ -117,12 +117,13 @@ def solution_summary(source: str, sol: Solution) -> str:
 
 def nuisance_text(sol: Solution) -> str:
     """Self-calibration's estimates with their σ's (from the covariance, where there)."""
-    sd = (np.sqrt(np.diag(sol.covariance))[4:] if sol.covariance is not None
-          else [None] * len(sol.nuisances))
-    words = {"pan_offset_deg": ("pan offset", "°", 1.0), "range_scale": ("range scale", "", 1.0)}
+    k = len(sol.nuisances)
+    sd = (np.sqrt(np.diag(sol.covariance))[4:4 + k] if sol.covariance is not None
+          else [None] * k)
+    words = {"pan_offset_deg": ("pan offset", "°"), "range_scale": ("range scale", "")}
     out = []
     for (name, v), e in zip(sol.nuisances.items(), sd, strict=True):
-        label, unit, _ = words.get(name, (name, "", 1.0))
+        label, unit = words.get(name, (name, ""))
         out.append(f"{label} {v:.4f}{unit}" + ("" if e is None else f" ± {e:.4f}{unit}"))
     return ", ".join(out)
 
@@ -163,9 +164,10 @@ def report_table(report: Report, report_scene: Scene | None = None) -> str:
     if s.nuisances:
         lines.append("self-calibration: " + nuisance_text(s))
     if e.target_mahalanobis is not None:
+        bound = ("" if e.target_crlb_cm is None else "; Cramér–Rao bound of the target's "
+                 f"RMS error: {e.target_crlb_cm:.3f} cm")
         lines.append(f"the true target lies {e.target_mahalanobis:.2f} σ from the estimate "
-                     f"(inside the 95 % ellipse below 2.45); Cramér–Rao bound of the "
-                     f"target's RMS error: {e.target_crlb_cm:.3f} cm")
+                     f"(inside the 95 % ellipse below {chi2_2_radius(0.95):.2f}){bound}")
     if report.error_vs_beacons:
         lines.append("target error with the first k beacons: " + ", ".join(
             f"{k + 1}: {r.target_cm:.3f} cm" for k, r in enumerate(report.error_vs_beacons)))
@@ -241,15 +243,18 @@ def montecarlo_table(res: Table1) -> str:
              "units",
              f"{'σ_α (°)':>9} {'σ_d (%)':>7} | {'paper ref':>9} {'paper tar':>9} | "
              f"{'ours ref':>9} {'ours tar':>9} {'yaw (deg)':>9}"]
-    d_total = res.geometry.d_total
+    d_total, d_b = res.geometry.d_total, res.geometry.layout()["beacon_d"]
     for r in res.rows:
-        lines.append(f"{r.sigma_alpha_deg:9.4g} {100 * r.sigma_d / d_total:7.4g} | "
+        rel_t = r.sigma_d / d_total
+        beacon = ""
+        if r.beacon_sigma is not None and not np.allclose(
+                (r.beacon_sigma[0], r.beacon_sigma[1] / d_b), (r.sigma_alpha_deg, rel_t)):
+            beacon = (f"  (the target's σ's; the beacon's {r.beacon_sigma[0]:.4g}°, "
+                      f"{100 * r.beacon_sigma[1] / d_b:.4g} %)")
+        lines.append(f"{r.sigma_alpha_deg:9.4g} {100 * rel_t:7.4g} | "
                      f"{r.paper_rmse_ref:9.3f} {r.paper_rmse_tar:9.3f} | "
                      f"{r.ours.rmse_ref:9.3f} {r.ours.rmse_tar:9.3f} "
-                     f"{r.ours.rmse_yaw_deg:9.2f}"
-                     + ("" if r.beacon_sigma is None else
-                        f"  (error model: target's σ's; beacon's {r.beacon_sigma[0]:.4g}°, "
-                        f"{100 * r.beacon_sigma[1] / d_total:.4g} %)"))
+                     f"{r.ours.rmse_yaw_deg:9.2f}" + beacon)
     return "\n".join(lines)
 
 

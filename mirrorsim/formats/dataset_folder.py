@@ -73,6 +73,10 @@ def claim_folder(out: Path, meta: dict, resume: bool) -> None:
     if not resume:
         raise DatasetError(out, "already holds a dataset: resume it, or choose another "
                            "folder", resumable=True)
+    if old.get("error_model_sha256") != meta.get("error_model_sha256"):
+        raise DatasetError(out, "was made with another error model (its rows' σ's would "
+                           "mix two models): resume it with the model it was made with, or "
+                           "choose another folder")
     if {k: old[k] for k in keys} != {k: meta[k] for k in keys}:
         raise DatasetError(out, f"holds a dataset made with other settings "
                            f"(n={old['n']}, seed={old['seed']}, spp={old['spp']})")

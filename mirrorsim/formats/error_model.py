@@ -102,13 +102,21 @@ class ErrorModel:
     provenance: dict | None = None  # how it was made (dataset, seed, n, command)
     fx_px: float | None = None  # the training frames' median focal length (px)
 
+    def fx_scale(self, fx_px):
+        """The factor on σ for frames of focal length ``fx_px`` (broadcasts; 1 where it
+        or the model's is unknown): pixel errors scale as fx_px(model) / fx."""
+        fx = np.asarray(np.nan if fx_px is None else fx_px, float)
+        ok = np.isfinite(fx) & (fx > 0) & bool(self.fx_px)
+        scale = np.where(ok, (self.fx_px or 1.0) / np.where(ok, fx, 1.0), 1.0)
+        return float(scale) if scale.ndim == 0 else scale
+
     def sigma(self, kind: str, d_total: float, alpha_deg: float, pan_deg: float | None,
               fx_px: float | None = None) -> Sigma:
         """The σ pair of one measurement of a ``kind`` image (``pan_deg`` None: the pan
         is not known, and the image is taken as off the axis as the training rows were on
         average; ``fx_px``: the camera's focal length in pixels, None: the training's)."""
         q = self.fits[kind]
-        scale = self.fx_px / fx_px if fx_px and self.fx_px else 1.0
+        scale = self.fx_scale(fx_px)
 
         def at(law: LogSigma) -> float:
             x = measured_features(d_total, alpha_deg, 0.0 if pan_deg is None else pan_deg)
@@ -128,7 +136,7 @@ class ErrorModel:
     def typical_at(self, fx_px: float | None) -> ObjectSigmas:
         """:attr:`typical` for a camera of focal length ``fx_px`` (None: the training's)."""
         t = self.typical
-        scale = self.fx_px / fx_px if fx_px and self.fx_px else 1.0
+        scale = self.fx_scale(fx_px)
         pair = lambda s: Sigma(s.alpha_deg * scale, s.d_total_rel * scale)  # noqa: E731
         return ObjectSigmas(pair(t.target), tuple(pair(b) for b in t.beacons))
 

@@ -228,7 +228,7 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
     """Make (or finish) a dataset of ``n`` scenes; return a summary.
 
     ``error_model`` gives each row's measurements their σ's (default: the model shipped
-    for the ideal bench); a resumed dataset keeps the model it was started with.
+    for the ideal bench); a dataset is resumed only with the model it was started with.
 
     Raises
     ------

@@ -265,8 +265,7 @@ def plot(cols: dict, model: ErrorModel, out: str | Path) -> Path:
             S = sigma_features_of(cols, kind)
             m = ok & np.isfinite(y) & np.isfinite(S).all(axis=1)
             fx = np.asarray(cols.get("fx_px", np.full(len(ok), np.nan)), float)[m]
-            per_fx = np.where(np.isfinite(fx) & bool(model.fx_px), (model.fx_px or 1.0) / fx, 1.0)
-            sd = model.fits[kind][q].log_sigma(S[m]) * per_fx
+            sd = model.fits[kind][q].log_sigma(S[m]) * model.fx_scale(fx)
             for c, (x, name) in enumerate(((np.exp(S[m, 0]), "measured d_total (cm)"),
                                            (S[m, 1], "|off-axis bearing| (°)"))):
                 axes[r, c].errorbar(x + 0.15 * k, y[m] * scale, yerr=2 * sd * scale, fmt="o",

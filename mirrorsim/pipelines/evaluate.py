@@ -21,7 +21,8 @@ from mirrorsim.pipelines.frame import MeasuredFrame, render_and_measure
 from mirrorsim.pipelines.score import EXTRA_FILES, FrameRecord, Report, score
 from mirrorsim.scene.model import Scene
 from mirrorsim.truth.groundtruth import RenderInfo
-from solver.lsq import solve_measurements
+from solver.errors import SolverError
+from solver.lsq import check_nuisances, solve_measurements
 from solver.measurements import Measurements
 
 
@@ -76,13 +77,20 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
     sigma = model.sigmas(mean_target, [(b.alpha_deg, b.d_total) for b in beacons], pan, fx)
     measurements = Measurements(observer=cam.position, targets=[mean_target], beacons=beacons,
                                 sigma=sigma, observer_pan_deg=pan)
-    sol = solve_measurements(cam.position, beacons, targets, sigma, nuisances, position_sigma)
+    # the target once, at its mean over the frames: each frame's detection of the same
+    # image shares its errors (bias included), so several would shrink its σ by √frames
+    target = [mean_target]
+    sol = solve_measurements(cam.position, beacons, target, sigma, nuisances, position_sigma)
     by_count = ()
     if len(beacons) > 1:
         def first(k: int):
             # self-calibration from the first k beacons where they can carry it
-            nu = nuisances if 2 * (k + len(targets)) > 4 + len(nuisances) else ()
-            return solve_measurements(cam.position, beacons[:k], targets,
+            try:
+                check_nuisances(nuisances, k, 1)
+                nu = nuisances
+            except SolverError:
+                nu = ()
+            return solve_measurements(cam.position, beacons[:k], target,
                                       replace(sigma, beacons=sigma.beacons[:k]), nu,
                                       position_sigma)
 

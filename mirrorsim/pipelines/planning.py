@@ -137,6 +137,8 @@ def plan_scene(scene: Scene, sigma: Sigma | ObjectSigmas | None = None, eps_deg:
     """
     sigma = as_object_sigmas(sigma or Sigma())
     _check_parameters(sigma, eps_deg, step, yaw_spread_deg, d1_spread)
+    if not 1 <= n_beacons <= MAX_PLANNED_BEACONS:
+        raise BadParameter("n_beacons", f"{n_beacons} must be within 1..{MAX_PLANNED_BEACONS}")
     cam, mir = scene.camera, scene.mirror
     img = optics.mirror_image(cam.position, mir, scene.target.position)
     o = np.asarray(cam.position, float)
@@ -158,9 +160,7 @@ def plan_scene(scene: Scene, sigma: Sigma | ObjectSigmas | None = None, eps_deg:
     poses = prior.poses(o, img.alpha_deg)
     best = _best_position(scene, o, img.alpha_deg, img.d_total, poses, sigma, step)
     chosen = None
-    if n_beacons > 1 or nuisances:
-        if not 1 <= n_beacons <= MAX_PLANNED_BEACONS:
-            raise BadParameter("n_beacons", f"{n_beacons} must be within 1..{MAX_PLANNED_BEACONS}")
+    if n_beacons > 1 or nuisances or position_sigma:
         keep_out, accept = _placement_rules(scene)
         chosen = best_beacon_set(o, img.alpha_deg, img.d_total, poses, sigma, s,
                                  scene.board.size, n_beacons, nuisances, step=step,

@@ -13,7 +13,7 @@ from mirrorsim.formats.measurements import measurements_from_dict
 from mirrorsim.truth.groundtruth import GroundTruth, RenderInfo
 from solver.errors import SolverError
 from solver.geometry import line_normal, yaw_difference
-from solver.lsq import crlb
+from solver.lsq import NUISANCES, crlb
 from solver.measurements import Measurements
 from solver.sltr import Solution
 
@@ -83,23 +83,25 @@ def score(truth: GroundTruth, measurements: Measurements, sol: Solution) -> Scor
                                  zip(measurements.beacons, truth.beacons, strict=True)),
         target_ellipse95_major_cm=None if ellipse is None else float(ellipse[0]),
         target_mahalanobis=sol.mahalanobis(t_true),
-        target_crlb_cm=_crlb_cm(truth, measurements),
+        target_crlb_cm=_crlb_cm(truth, measurements, sol),
     )
 
 
-def _crlb_cm(truth: GroundTruth, m: Measurements) -> float | None:
-    """√trace of the target's CRLB at the truth for ``m``'s σ's (None without σ's, or
-    where the geometry determines nothing)."""
+def _crlb_cm(truth: GroundTruth, m: Measurements, sol: Solution) -> float | None:
+    """√trace of the target's CRLB at the truth for ``m``'s σ's and the nuisances the
+    solution estimated (None without σ's, or where the geometry determines nothing; a
+    beacon-position prior is not in it)."""
     if m.sigma is None:
         return None
     yaw = truth.mirror_yaw_deg
     rho = float(line_normal(yaw) @ np.asarray(truth.target.reflection_point, float))
+    nuisances = tuple(n for n, (key, _) in NUISANCES.items() if key in sol.nuisances)
     try:
         bound = crlb(m.observer, [b.position for b in m.beacons], yaw, rho,
-                     truth.target.position, m.sigma, len(m.targets))
+                     truth.target.position, m.sigma, len(m.targets), nuisances)
     except SolverError:
         return None
-    return float(np.sqrt(np.trace(bound[2:, 2:])))
+    return float(np.sqrt(np.trace(bound[2:4, 2:4])))
 
 
 # the report's render block: how its frames were rendered (the truth files hold the rest)

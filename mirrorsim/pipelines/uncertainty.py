@@ -25,14 +25,10 @@ from mirrorsim.formats.error_model import KINDS, ErrorModel, measured_features
 from mirrorsim.formats.files import atomic_path
 from solver.errors import SolverError
 from solver.lsq import BeaconMeasurement, solve_measurements
+from solver.sltr import chi2_2_radius
 
 LEVELS = (0.5, 0.9, 0.95)
 CHI2_MEDIAN = math.sqrt(2.0 * math.log(2.0))  # the median of a χ with 2 degrees of freedom
-
-
-def chi2_2_radius(level: float) -> float:
-    """The Mahalanobis radius of a 2-D Gaussian's ``level`` region."""
-    return math.sqrt(-2.0 * math.log(1.0 - level))
 
 
 def binomial_interval(k: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
@@ -69,11 +65,12 @@ class Coverage:
 class Validation:
     """An error model held against held-out rows."""
 
-    n_rows: int
-    n_failed: int  # rows the solver could not solve again (or that had failed)
+    n_rows: int  # the held-out rows whose scene did not fail
+    n_failed: int  # of those, the ones the solver could not solve again
     mahalanobis: np.ndarray  # per solved row
     coverage: tuple[Coverage, ...]
     within: dict[str, dict[str, tuple[float, float]]]  # kind → quantity → (1σ, 2σ)
+    n_scene_failed: int = 0  # rows whose scene had failed in the dataset (not attempted)
 
     @property
     def median_mahalanobis(self) -> float:
@@ -83,6 +80,7 @@ class Validation:
     def to_json(self) -> dict:
         """The validation document."""
         return {"rows": self.n_rows, "not_solved": self.n_failed,
+                "scenes_failed": self.n_scene_failed,
                 "coverage": [c.to_json() for c in self.coverage],
                 "median_mahalanobis": self.median_mahalanobis,
                 "chi2_2_median": CHI2_MEDIAN,
@@ -110,7 +108,7 @@ def validate(model: ErrorModel, cols: dict) -> Validation:
     obs = np.column_stack([_col(cols, "observer_x"), _col(cols, "observer_y")])
     known = np.column_stack([_col(cols, "beacon_known_x"), _col(cols, "beacon_known_y")])
     truth = np.column_stack([_col(cols, "target_x"), _col(cols, "target_y")])
-    dist, failed = [], int((~ok).sum())
+    dist, failed = [], 0
     for i in np.flatnonzero(ok):
         t = (meas["target", "alpha_meas"][i], meas["target", "d_meas"][i])
         b = (meas["beacon", "alpha_meas"][i], meas["beacon", "d_meas"][i])
@@ -123,7 +121,8 @@ def validate(model: ErrorModel, cols: dict) -> Validation:
             failed += 1
     m = np.asarray(dist, float)
     coverage = tuple(Coverage(p, int(np.sum(m <= chi2_2_radius(p))), len(m)) for p in LEVELS)
-    return Validation(int(ok.sum()), failed, m, coverage, _within(model, cols, ok, pan, fx))
+    return Validation(int(ok.sum()), failed, m, coverage, _within(model, cols, ok, pan, fx),
+                      int((~ok).sum()))
 
 
 def _within(model: ErrorModel, cols: dict, ok: np.ndarray, pan: np.ndarray, fx: np.ndarray
@@ -137,9 +136,7 @@ def _within(model: ErrorModel, cols: dict, ok: np.ndarray, pan: np.ndarray, fx: 
         for q, col in (("alpha", "alpha_err"), ("d_rel", "d_rel_err")):
             err = _col(cols, table.object_column(kind, col))
             m = ok & np.isfinite(err) & np.isfinite(x).all(axis=1)
-            scale = np.where(np.isfinite(fx[m]) & ((model.fx_px or 0) > 0),
-                             (model.fx_px or 1.0) / fx[m], 1.0)
-            z = np.abs(err[m]) / (model.fits[kind][q].log_sigma(x[m]) * scale)
+            z = np.abs(err[m]) / (model.fits[kind][q].log_sigma(x[m]) * model.fx_scale(fx[m]))
             out[kind][q] = (float(np.mean(z <= 1.0)), float(np.mean(z <= 2.0))) if z.size \
                 else (math.nan, math.nan)
     return out
@@ -147,7 +144,8 @@ def _within(model: ErrorModel, cols: dict, ok: np.ndarray, pan: np.ndarray, fx: 
 
 def report_lines(v: Validation) -> list[str]:
     """The validation as printed lines (σ fractions against their Gaussian values)."""
-    lines = [f"held-out rows: {v.n_rows} ({v.n_failed} not solved)"]
+    lines = [f"held-out rows: {v.n_rows} ({v.n_failed} not solved again; "
+             f"{v.n_scene_failed} whose scene had failed, left out)"]
     for c in v.coverage:
         lo, hi = binomial_interval(c.inside, c.n)
         lines.append(f"  {100 * c.level:.0f} % ellipse: {c.inside}/{c.n} inside = "
