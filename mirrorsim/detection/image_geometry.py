@@ -75,8 +75,29 @@ def distance_of(camera: Camera, u: float, height_px: float, k: float,
     return k / height_px / math.cos(_off_axis(camera, u)) + front_offset
 
 
-# a pencil image's width over what its height implies: beyond this, one side is wrong
+# a pencil image's angular width over what its height implies: beyond this, one side is
+# wrong
 PENCIL_WIDTH_RATIO = (0.8, 1.25)
+
+
+def _half_angle(cam: Camera, half_width: float, height_px: float, height: float,
+                phi: float) -> float:
+    """β, the angular half-width of an upright object of ``half_width`` and ``height``
+    (cm) whose image is ``height_px`` tall, its axis at φ off the optical axis (rad):
+    tan β = half_width·s·cos φ/(f·height)."""
+    return math.atan(half_width * height_px * math.cos(phi) / (cam.fx * height))
+
+
+def _axis_from_edge(cam: Camera, edge_u: float, side: str, half_width: float,
+                    height_px: float, height: float) -> float:
+    """The axis column of an object seen by one side edge (``side``: which) and its
+    height: β from that edge, β's cos φ taken at the axis (refined twice)."""
+    phi_edge = _off_axis(cam, edge_u)
+    sign = 1.0 if side == "left" else -1.0
+    beta = _half_angle(cam, half_width, height_px, height, phi_edge)
+    for _ in range(2):
+        beta = _half_angle(cam, half_width, height_px, height, phi_edge + sign * beta)
+    return _column(cam, phi_edge + sign * beta)
 
 
 def pencil_geometry(cam: Camera, m: ImageMeasurement, paint_height: float, k: float
@@ -85,12 +106,15 @@ def pencil_geometry(cam: Camera, m: ImageMeasurement, paint_height: float, k: fl
     with one edge (the other side runs into something of the paint's blue, such as the
     mirror's dark frame) its bearing from that edge and the pencil's angular half-width,
     tan β = r·s·cos φ/(f·H) (r its mean silhouette half-width, H its painted height)."""
+    # (a good mirror image's angular width is 0.91-1.05 of what its height implies)
     notes = m.notes
     if m.u_left is not None and m.u_right is not None and m.height_px:
         # a backstop: a width far from what the height implies means one side is not the
         # pencil's (good mirror images: 0.91-1.05 of it); the side farther from its
         # region's edge is dropped
-        r = (m.u_right - m.u_left) / (2 * PENCIL_HALF_WIDTH * m.height_px / paint_height)
+        half = (_off_axis(cam, m.u_right) - _off_axis(cam, m.u_left)) / 2
+        phi = (_off_axis(cam, m.u_right) + _off_axis(cam, m.u_left)) / 2
+        r = half / _half_angle(cam, PENCIL_HALF_WIDTH, m.height_px, paint_height, phi)
         if not PENCIL_WIDTH_RATIO[0] <= r <= PENCIL_WIDTH_RATIO[1]:
             u0, _, u1, _ = m.bbox_px
             bad = "left" if abs(m.u_left - (u0 - 0.5)) > abs(m.u_right - (u1 + 0.5)) else "right"
@@ -100,12 +124,10 @@ def pencil_geometry(cam: Camera, m: ImageMeasurement, paint_height: float, k: fl
     if m.u_left is not None and m.u_right is not None:
         alpha, u_axis = _axis_between(cam, m.u_left, m.u_right)
     else:
-        edge = m.u_left if m.u_left is not None else m.u_right
-        phi_edge = _off_axis(cam, edge)
-        beta = math.atan(PENCIL_HALF_WIDTH * m.height_px * math.cos(phi_edge)
-                         / (cam.fx * paint_height))
-        missing = "right" if m.u_left is not None else "left"
-        u_axis = _column(cam, phi_edge + beta if m.u_left is not None else phi_edge - beta)
+        side = "left" if m.u_left is not None else "right"
+        missing = "right" if side == "left" else "left"
+        u_axis = _axis_from_edge(cam, m.u_left if side == "left" else m.u_right, side,
+                                 PENCIL_HALF_WIDTH, m.height_px, paint_height)
         alpha = alpha_of(cam, u_axis)
         notes = (*notes, f"no edge on the {missing} (no contrast there, or not the "
                  "pencil's): axis from the other edge and the pencil's half-width")
@@ -130,13 +152,8 @@ def target_geometry(cam: Camera, m: ImageMeasurement, size: Point2, k: float
         m, present, beta = _target_clip(cam, m, size, present)
         if len(present) == 1:
             side = present[0]
-            phi_edge = _off_axis(cam, edges[side])
-            sign = 1.0 if side == "left" else -1.0
-            for _ in range(2):  # β's cos φ is the axis's, not the edge's: refine
-                phi_axis = phi_edge + sign * beta
-                beta = math.atan(size[0] * m.height_px * math.cos(phi_axis)
-                                 / (2 * cam.fx * size[1]))
-            u_axis = _column(cam, phi_edge + sign * beta)
+            u_axis = _axis_from_edge(cam, edges[side], side, size[0] / 2, m.height_px,
+                                     size[1])
             m = replace(m, u_axis=u_axis, alpha_deg=alpha_of(cam, u_axis))
         else:
             alpha, u_axis = _axis_between(cam, m.u_left, m.u_right)
@@ -163,7 +180,7 @@ def _target_clip(cam: Camera, m: ImageMeasurement, size: Point2, present: list[s
     dark = {side: m.outside.get(side, math.inf) < 0.5 * m.inside
             for side in ("left", "right", "top")}
     phi0 = (sum(_off_axis(cam, edges[s_]) for s_ in present) / len(present))
-    beta = math.atan(w * m.height_px * math.cos(phi0) / (2 * cam.fx * h))
+    beta = _half_angle(cam, w / 2, m.height_px, h, phi0)
     if len(present) == 2:
         half = (_off_axis(cam, m.u_right) - _off_axis(cam, m.u_left)) / 2
         r = half / beta
