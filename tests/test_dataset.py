@@ -55,9 +55,11 @@ def test_tiny_dataset_end_to_end(one_worker):
         per_object = name.split("_", 1)[-1] if name.startswith(("target_", "beacon_")) \
             and name.split("_", 1)[-1] in {c.name for c in PER_OBJECT} else None
         assert f"`{'<object>_' + per_object if per_object else name}`" in flat, name
-    # by default a frame's PNG, truth and capture record only (no ids, no annotated)
+    # by default a frame's PNG, truth and capture record, and the measurements the solver
+    # saw (no ids, no annotated)
     assert sorted(f.name for f in (out / "frames" / "scene000000").iterdir()) == [
-        "scene000000.capture.json", "scene000000.json", "scene000000.png"]
+        "scene000000.capture.json", "scene000000.json", "scene000000.measurements.json",
+        "scene000000.png"]
     # every row's scene is a normal scene file that loads on its own
     for i in range(3):
         s = load_scene(out / "scenes" / f"scene{i:06d}.yaml")

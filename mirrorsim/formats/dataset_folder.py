@@ -256,6 +256,7 @@ def load_dataset(folder: str | Path):
 def card_columns() -> str:
     """The table's columns as the card lists them, from their declaration."""
     groups = (("the run", table.RUN, ""), ("scene parameters", table.SCENE, ""),
+              ("what the solver was given besides the images", table.KNOWN, ""),
               ("for `target_*` and `beacon_*`", table.PER_OBJECT, "<object>_"),
               ("solution", table.SOLUTION, ""),
               ("bench imperfections (the spec's `bench:` block; ideal values when absent)",
