@@ -134,6 +134,9 @@ def test_error_model_bias_recovers_a_known_law():
     rng = np.random.default_rng(0)
     for kind in ("target", "beacon"):
         d = np.asarray(cols[f"{kind}_d_true"])
+        # heights drawn apart from d: 1/height and d would be collinear otherwise, and the
+        # fit would share the slope between them
+        cols[f"{kind}_height_px_true"] = rng.uniform(40, 300, n)
         cols[f"{kind}_alpha_err"] = rng.normal(0.001 + 2e-5 * d, 0.002)
         cols[f"{kind}_d_rel_err"] = rng.normal(-0.001, 0.003, n)
     model = errormodel.fit(cols)

@@ -170,8 +170,7 @@ def test_render_command_takes_its_settings_once(tmp_path, capsys):
     out = tmp_path / "out"
     assert main(["render", str(path), "--out", str(out), "--spp", "1", "--seed", "3",
                  "--quiet", "--json", "-"]) == 0
-    printed = capsys.readouterr().out
-    truth = json.loads(printed[printed.index("\n{") + 1:])
+    truth = json.loads(capsys.readouterr().out)  # `--json -`: the JSON alone
     assert sorted(p.name for p in out.iterdir()) == [  # .mirrorsim: the folder is its own
         ".mirrorsim", "default.capture.json", "default.ids.png", "default.json", "default.png"]
     assert (truth["render"]["spp"], truth["render"]["seed"]) == (1, 3)
@@ -186,7 +185,7 @@ def test_calibrate_command_gives_the_pinhole_constant(capsys):
 
     scene = load_scene(SCENES / "default.yaml")
     assert main(["calibrate", str(SCENES / "default.yaml"), "--json", "-"]) == 0
-    out = capsys.readouterr().out
-    k = json.loads(out[out.index("{"):])
+    out, err = capsys.readouterr()
+    k = json.loads(out)  # `--json -`: the JSON alone on stdout, the table on stderr
     assert k["target_k"] == pytest.approx(scene.camera.fx * 15.25, rel=0.003)
-    assert "px at 1 m" in out
+    assert "px at 1 m" in err

@@ -34,6 +34,7 @@ from mirrorsim.truth.optics import target_facing
 from mirrorsim.truth.visibility import visibility
 from solver.errors import SolverError
 from solver.geometry import bearing_deg, line_normal, wrap_bearing
+from solver.lsq import Sigma
 from solver.particle import MovingBeaconFilter, PFParams, mirror_errors
 from solver.placement import path_points
 from solver.sltr import locate, mirror_from_beacon, observe, ray_hits_line
@@ -206,6 +207,11 @@ def check_options(kind: str, steps: int, sigma: float, side: float, step: float,
                 f" within the board's {longest:g} cm" if board is not None else ""))
 
 
+# the narrowest likelihood the filter is given: the σ's it was validated with before the
+# error model (tests/test_track.py: the filter converges on rendered frames with them)
+FILTER_SIGMA_FLOOR = Sigma(alpha_deg=0.005, d_total_rel=0.006)
+
+
 def check_one_beacon(scene: Scene, source: str | Path | None = None) -> None:
     """Refuse a scene of several beacons (``source``: its file, for the message): the
     filter follows one moving beacon and cannot yet use fixed ones beside it, and
@@ -242,7 +248,11 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
     b0, cam = scene.beacons[0], scene.camera
     start = np.asarray(b0.believed, float)
     model = error_model or default_error_model()
-    params = PFParams(sigma=model.typical_at(cam.fx).beacons[0],
+    typical = model.typical_at(cam.fx).beacons[0]
+    # a particle filter cannot follow a likelihood much narrower than its particles'
+    # spread (they all but one get weight 0): no narrower than FILTER_SIGMA_FLOOR
+    params = PFParams(sigma=Sigma(max(typical.alpha_deg, FILTER_SIGMA_FLOOR.alpha_deg),
+                                  max(typical.d_total_rel, FILTER_SIGMA_FLOOR.d_total_rel)),
                       sigma_trs=max(odometry_sigma if kind != "fixed" else 0.0, 1e-3))
     pose = _Poses(scene, out / "poses", seed, variant, on_pose, steps + 1)
     obs, target_obs, why = pose.measure(0, start, np.asarray(b0.position, float))
