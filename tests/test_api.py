@@ -37,7 +37,7 @@ def test_the_api_returns_the_typed_values_the_cli_prints():
 @pytest.mark.slow
 def test_the_example_sweeps_a_yaw_and_plots(tmp_path):
     out = subprocess.run([sys.executable, str(ROOT / "examples" / "sweep_yaw.py"), "--yaws",
-                          "15", "25", "--width", "480", "--out", str(tmp_path)],
+                          "18", "22", "--width", "960", "--out", str(tmp_path)],
                          capture_output=True, text=True, cwd=ROOT, timeout=600)
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.count("target error") == 2
