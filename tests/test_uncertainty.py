@@ -251,8 +251,10 @@ def test_solve_says_which_sigmas_win(tmp_path, capsys):
 @pytest.mark.slow
 def test_the_shipped_model_is_what_make_error_model_fits(tmp_path):
     """The shipped model comes from `make error-model`: the dataset of its recorded seed
-    and size, made again here, fits to the same model (same rows: renders are
-    bit-identical for a seed, whatever the workers)."""
+    and size, made again here, fits to the same model: the same rows counted and left
+    out, and the σ law's coefficients to 1e-4 in log σ (0.01 % of σ per feature's SD:
+    a render made again agrees to float rounding, the threads summing samples in their
+    own order, which moves a sub-pixel edge by ~1e-6 px)."""
     from mirrorsim.pipelines.dataset import run_dataset
 
     shipped = default_error_model()
@@ -268,9 +270,9 @@ def test_the_shipped_model_is_what_make_error_model_fits(tmp_path):
             x, y = a["objects"][kind][q], b["objects"][kind][q]
             assert (x["n"], x["gross_errors"]) == (y["n"], y["gross_errors"])
             np.testing.assert_allclose(
-                [x["log_sigma"]["intercept"], *x["log_sigma"]["weights"], x["typical_sigma"]],
-                [y["log_sigma"]["intercept"], *y["log_sigma"]["weights"], y["typical_sigma"]],
-                rtol=1e-6, atol=1e-9)
+                [x["log_sigma"]["intercept"], *x["log_sigma"]["weights"]],
+                [y["log_sigma"]["intercept"], *y["log_sigma"]["weights"]], rtol=0, atol=1e-4)
+            assert x["typical_sigma"] == pytest.approx(y["typical_sigma"], rel=1e-4)
 
 
 def test_one_bad_image_does_not_drag_the_estimate_and_is_named():
