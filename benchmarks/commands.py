@@ -12,9 +12,6 @@ frames fresh too).  Stamped with commit, date and machine.
 from __future__ import annotations
 
 import argparse
-import datetime
-import os
-import platform
 import statistics
 import subprocess
 import sys
@@ -23,6 +20,7 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+from stamp import stamp  # noqa: E402  (benchmarks/ is the script's own folder on sys.path)
 
 
 def _wall(argv: list[str]) -> float:
@@ -36,10 +34,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=3)
     a = ap.parse_args()
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT,
-                            capture_output=True, text=True).stdout.strip()
-    print(f"commit {commit}, {datetime.date.today()}, {platform.node()} "
-          f"({platform.machine()}, {os.cpu_count()} cores)\n")
+    print(f"{stamp()}\n")
     print("| command | median (s) | range (s) |\n|---|---|---|")
     with tempfile.TemporaryDirectory() as tmp:
         runs = {

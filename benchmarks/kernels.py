@@ -13,10 +13,6 @@ from __future__ import annotations
 
 import argparse
 import copy
-import datetime
-import os
-import platform
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -26,6 +22,7 @@ import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from stamp import stamp  # noqa: E402
 
 from mirrorsim.formats.scenefile import scene_from_dict  # noqa: E402
 from mirrorsim.rendering.passes import render_frame  # noqa: E402
@@ -48,10 +45,7 @@ def main() -> None:
     ap.add_argument("--scenes", type=int, default=3)
     ap.add_argument("--variant", default="llvm")
     a = ap.parse_args()
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT,
-                            capture_output=True, text=True).stdout.strip()
-    print(f"commit {commit}, {datetime.date.today()}, {platform.node()} "
-          f"({platform.machine()}, {os.cpu_count()} cores), variant {a.variant}\n")
+    print(f"{stamp()}, variant {a.variant}\n")
     print("| render | wall (s) | kernels launched | compiled | compile (s) |\n"
           "|---|---|---|---|---|")
     rng = np.random.default_rng()

@@ -18,12 +18,9 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import statistics
-import subprocess
 import sys
 import tempfile
-import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -31,6 +28,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from stamp import stamp  # noqa: E402
+
 from mirrorsim.errors import DetectionError  # noqa: E402
 from mirrorsim.pipelines.evaluate import evaluate_scene  # noqa: E402
 from mirrorsim.pipelines.planning import plan_scene  # noqa: E402
@@ -69,11 +68,9 @@ def main() -> None:
     spec = load_spec(a.spec)
     lo, hi = spec.data.get("bench", {}).get("beacon", {}).get("known_position_offset", [0, 0])
     position_sigma = (hi - lo) / np.sqrt(12)  # a uniform offset's σ
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT,
-                            capture_output=True, text=True).stdout.strip()
     print(f"self-calibration on rendered frames: {a.scenes} scenes of {a.spec.name}, seed "
           f"{seed}, {a.beacons} planned beacons, believed positions off by U({lo}, {hi}) cm "
-          f"per axis; commit {commit}, {time.strftime('%Y-%m-%d')}, {platform.machine()}\n")
+          f"per axis; {stamp()}\n")
     print("| scene | plain (cm) | self-calibrated | plain, exact positions | self-calibrated, "
           "exact positions | pan error ° | calibration error cm |\n|---|---|---|---|---|---|---|")
     rows, skipped = [], []

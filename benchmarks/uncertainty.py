@@ -21,7 +21,6 @@ import argparse
 import os
 import platform
 import statistics
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -30,6 +29,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from stamp import stamp  # noqa: E402
+
 from mirrorsim.formats.error_model import default_error_model  # noqa: E402
 from mirrorsim.pipelines.random_scenes import load_spec, sample_scene  # noqa: E402
 from solver.errors import SolverError  # noqa: E402
@@ -72,11 +73,8 @@ def main() -> None:
         return
     model = default_error_model()
     spec = load_spec(None)
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT,
-                            capture_output=True, text=True).stdout.strip()
     print(f"estimator efficiency against the CRLB: {a.scenes} scenes of the default spec, "
-          f"seed {seed}, {a.draws} draws each, σ's from the shipped error model; commit "
-          f"{commit}, {time.strftime('%Y-%m-%d')}, {platform.machine()}\n")
+          f"seed {seed}, {a.draws} draws each, σ's from the shipped error model; {stamp()}\n")
     print("| beacons | estimator | target RMSE / √CRLB median (p5–p95) | yaw | offset | "
           "target √CRLB cm median |\n|---|---|---|---|---|---|")
     rng = np.random.default_rng(seed)

@@ -17,9 +17,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from solver.errors import SolverError
-from solver.geometry import line_normal, point_segment_distance, unit
+from solver.geometry import point_segment_distance
 from solver.lsq import NUISANCES, ObjectSigmas, Sigma, as_object_sigmas, predict
-from solver.sltr import observe
+from solver.placement import implied_target, seen_in_mirror
 
 # an expected variance beyond this (cm²) is no estimate: the set cannot determine it
 UNDETERMINED_CM2 = 1e6
@@ -46,10 +46,7 @@ def _information(o: np.ndarray, B: np.ndarray, t_alpha: float, t_d: float, point
     A beacon known to ``position_sigma`` (cm per axis) has its measurements' covariance
     grown by σ_p²·J_p J_pᵀ (J_p: its image's α and d_total against its position): the
     position offset marginalized, exactly to first order."""
-    n = line_normal(yaw)
-    params = np.array([yaw, n @ point])
-    vt = o + t_d * unit(t_alpha)
-    tgt = vt - 2.0 * (n @ vt - params[1]) * n  # the target this pose implies
+    params, tgt = implied_target(o, t_alpha, t_d, point, yaw)
     _, d_b, da_b, dd_b = predict(np.r_[params, 0, 0], o, B)
     _, d_t, da_t, dd_t = predict(np.r_[params, tgt], o, tgt[None])
     P = 4 + len(nuisances)
@@ -72,17 +69,6 @@ def _information(o: np.ndarray, B: np.ndarray, t_alpha: float, t_d: float, point
     info_b = np.swapaxes(R, 1, 2) @ np.linalg.solve(C, R)
     ta, td = ta / st.alpha_deg, td / (st.d_total_rel * d_t[0])
     return info_b, np.outer(ta, ta) + np.outer(td, td), d_b
-
-
-def _seen(o: np.ndarray, B: np.ndarray, point, yaw: float, mirror_size: float,
-          min_depth: float) -> np.ndarray:
-    """Which candidates a mirror pose shows: in front of it by ``min_depth``, their image
-    on the glass of width ``mirror_size``."""
-    n = line_normal(yaw)
-    so, sp = (o - point) @ n, (B - point) @ n
-    obs = observe(o, point, yaw, B, strict=False)
-    off = (np.asarray(obs.reflection_point) - point) @ unit(yaw)
-    return (sp * so > 0) & (np.abs(sp) >= min_depth) & (np.abs(off) <= mirror_size / 2)
 
 
 def _target_variance(info: np.ndarray, keep: int) -> np.ndarray:
@@ -128,7 +114,7 @@ def best_beacon_set(observer, target_alpha_deg: float, target_d_total: float, po
         allowed &= point_segment_distance(grid, a, b) >= clear
     per_pose = []
     for point, yaw in poses:
-        allowed &= _seen(o, grid, point, yaw, mirror_size, min_depth)
+        allowed &= seen_in_mirror(o, grid, point, yaw, mirror_size, min_depth)
         info_b, info_t, _ = _information(o, grid, target_alpha_deg, target_d_total, point, yaw,
                                          sig, nuisances, position_sigma)
         per_pose.append((info_b, info_t))

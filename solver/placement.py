@@ -218,6 +218,27 @@ class MirrorPrior:
         return out
 
 
+def implied_target(observer: np.ndarray, target_alpha_deg: float, target_d_total: float,
+                   point, yaw: float) -> tuple[np.ndarray, np.ndarray]:
+    """A mirror pose's (θ, ρ) and the target it implies for this target measurement: its
+    virtual image reflected in the line (the (θ, ρ) form :func:`predict` differentiates)."""
+    n = line_normal(yaw)
+    params = np.array([yaw, n @ point])
+    vt = observer + target_d_total * unit(target_alpha_deg)
+    return params, vt - 2.0 * (n @ vt - params[1]) * n
+
+
+def seen_in_mirror(observer: np.ndarray, points: np.ndarray, point, yaw: float,
+                   mirror_size: float, min_depth: float) -> np.ndarray:
+    """Which points a mirror pose (a point on the line, its yaw) shows the observer: in
+    front of it by ``min_depth``, their image on the glass of width ``mirror_size``."""
+    n = line_normal(yaw)
+    so, sp = (observer - point) @ n, (points - point) @ n
+    obs = observe(observer, point, yaw, points, strict=False)
+    off = (np.asarray(obs.reflection_point) - point) @ unit(yaw)
+    return (sp * so > 0) & (np.abs(sp) >= min_depth) & (np.abs(off) <= mirror_size / 2)
+
+
 def expected_target_error(observer, target_alpha_deg: float, target_d_total: float,
                           beacons: np.ndarray, poses, sigma: Sigma | ObjectSigmas,
                           mirror_size: float,
@@ -242,12 +263,7 @@ def expected_target_error(observer, target_alpha_deg: float, target_d_total: flo
     total = np.zeros(len(B))
     count = np.zeros(len(B))
     for point, yaw in poses:
-        n = line_normal(yaw)
-        params = np.array([yaw, n @ point])
-        vt = o + target_d_total * unit(target_alpha_deg)
-        # the target this pose implies, reflected in the line's (θ, ρ) form that predict's
-        # Jacobian is written in
-        tgt = vt - 2.0 * (n @ vt - params[1]) * n
+        params, tgt = implied_target(o, target_alpha_deg, target_d_total, point, yaw)
         _, d_b, da_b, dd_b = predict(np.r_[params, 0, 0], o, B)
         _, d_t, da_t, dd_t = predict(np.r_[params, tgt], o, tgt[None])
         J = np.zeros((len(B), 4, 4))
@@ -260,12 +276,7 @@ def expected_target_error(observer, target_alpha_deg: float, target_d_total: flo
             Jinv = np.linalg.pinv(J)
             cov_t = np.einsum("kij,kj,klj->kil", Jinv[:, 2:, :], sd**2, Jinv[:, 2:, :])
             err2 = cov_t[:, 0, 0] + cov_t[:, 1, 1]
-        so = (o - point) @ n
-        sp = (B - point) @ n
-        obs = observe(o, point, yaw, B, strict=False)
-        off = (np.asarray(obs.reflection_point) - point) @ unit(yaw)
-        seen = (sp * so > 0) & (np.abs(sp) >= min_depth) & (np.abs(off) <= mirror_size / 2)
-        seen &= np.isfinite(err2)
+        seen = seen_in_mirror(o, B, point, yaw, mirror_size, min_depth) & np.isfinite(err2)
         total += np.where(seen, err2, 0.0)
         count += seen
     with np.errstate(divide="ignore", invalid="ignore"):

@@ -11,7 +11,7 @@ matplotlib.use("Agg")  # files only; no display on the machines this runs on
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from mirrorsim.formats.files import atomic_path  # noqa: E402
+from mirrorsim.formats.files import atomic_path, save_figure  # noqa: E402
 from mirrorsim.pipelines.score import Report  # noqa: E402
 from mirrorsim.scene.model import Scene  # noqa: E402
 from mirrorsim.truth import optics  # noqa: E402
@@ -32,15 +32,7 @@ def plot_top_view(scene: Scene, out: str | Path, *, dpi: int = 150) -> Path:
 
 
 def _save(fig, out: Path, dpi: int) -> Path:
-    out.parent.mkdir(parents=True, exist_ok=True)
-    try:
-        with atomic_path(out) as tmp:
-            # tight layout rather than bbox_inches="tight": one drawing instead of two
-            fig.set_layout_engine("tight")
-            fig.savefig(tmp, dpi=dpi)
-    finally:
-        plt.close(fig)
-    return out
+    return save_figure(fig, out, dpi)
 
 
 def plot_evaluation(scene: Scene, report: Report, out: str | Path, *, dpi: int = 130) -> Path:

@@ -279,6 +279,22 @@ def write_png(path: str | Path, pixels: np.ndarray) -> Path:
     return Path(path)
 
 
+def save_figure(fig, path: str | Path, dpi: int = 110) -> Path:
+    """Write a matplotlib figure as a PNG atomically (tight layout), and close it."""
+    import matplotlib.pyplot as plt
+
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        with atomic_path(out) as tmp:
+            # tight layout rather than bbox_inches="tight": one drawing instead of two
+            fig.set_layout_engine("tight")
+            fig.savefig(tmp, dpi=dpi)
+    finally:
+        plt.close(fig)
+    return out
+
+
 def write_json(path: str | Path, data: Any) -> Path:
     """Write strict JSON atomically."""
     return write_text(path, dumps(data))

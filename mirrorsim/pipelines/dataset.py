@@ -40,7 +40,6 @@ from tqdm import tqdm
 from mirrorsim.errors import BadParameter, DetectionError, InputError, SolverError
 from mirrorsim.formats import dataset_table as table
 from mirrorsim.formats.cache import seal
-from mirrorsim.formats.capture import CaptureRecord
 from mirrorsim.formats.dataset_folder import (
     DATASET_FORMAT,
     claim_folder,
@@ -139,7 +138,7 @@ def _flatten(scene: Scene, rep: Report) -> dict:
     }
     b, frame = meas.beacons[0], rep.frames[0]
     row.update({"observer_x": meas.observer[0], "observer_y": meas.observer[1],
-                "observer_pan_deg": CaptureRecord.from_scene(scene).camera.pan_deg,
+                "observer_pan_deg": meas.observer_pan_deg,  # the capture record's
                 "fx_px": scene.camera.fx,
                 "beacon_known_x": b.position[0], "beacon_known_y": b.position[1]})
     sig = meas.sigma

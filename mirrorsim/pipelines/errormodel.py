@@ -31,7 +31,7 @@ from mirrorsim.formats.error_model import (
     QuantityFit,
     measured_features,
 )
-from mirrorsim.formats.files import atomic_path, write_json
+from mirrorsim.formats.files import save_figure, write_json
 from mirrorsim.scene import imperfections
 
 FEATURES = ("1", "d_total_cm", "off_axis_deg", "incidence_deg", "inv_height_px")
@@ -283,14 +283,7 @@ def plot(cols: dict, model: ErrorModel, out: str | Path) -> Path:
         for ax in axes[r]:
             ax.legend(fontsize=8)
     fig.suptitle("detector errors and the error model's σ per measurement (training rows)")
-    fig.tight_layout()
-    out = Path(out)
-    try:
-        with atomic_path(out) as tmp:
-            fig.savefig(tmp, dpi=110)
-    finally:
-        plt.close(fig)
-    return out
+    return save_figure(fig, out)
 
 
 def write_model(model: ErrorModel, path: str | Path) -> None:

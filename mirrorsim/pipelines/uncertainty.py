@@ -22,7 +22,7 @@ import numpy as np
 
 from mirrorsim.formats import dataset_table as table
 from mirrorsim.formats.error_model import KINDS, ErrorModel, measured_features
-from mirrorsim.formats.files import atomic_path
+from mirrorsim.formats.files import save_figure
 from solver.errors import SolverError
 from solver.lsq import BeaconMeasurement, solve_measurements
 from solver.sltr import chi2_2_radius
@@ -191,11 +191,4 @@ def reliability_plot(v: Validation, out: str | Path, title: str = "") -> Path:
     b.set_ylabel("density")
     b.legend(fontsize=8)
     fig.suptitle(title or "error model on held-out rows")
-    fig.tight_layout()
-    out = Path(out)
-    try:
-        with atomic_path(out) as tmp:
-            fig.savefig(tmp, dpi=110)
-    finally:
-        plt.close(fig)
-    return out
+    return save_figure(fig, out)
