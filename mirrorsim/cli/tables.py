@@ -8,15 +8,15 @@ import numpy as np
 
 from mirrorsim.detection.detector import Detection
 from mirrorsim.pipelines.score import Report
-from mirrorsim.rendering.frames import FrameFiles
 from mirrorsim.scene.model import Scene
 from mirrorsim.truth import optics, visibility
 from solver.montecarlo import Table1
 from solver.sltr import Solution, chi2_2_radius
 
-if TYPE_CHECKING:  # the budget and the track run renders: no Mitsuba import to draw one
+if TYPE_CHECKING:  # renders, budgets and tracks: no Mitsuba import to print a table
     from mirrorsim.pipelines.budget import Budget
     from mirrorsim.pipelines.track import TrackReport
+    from mirrorsim.rendering.frames import FrameFiles
 
 
 def _columns(rows: list[tuple[str, ...]]) -> list[str]:
