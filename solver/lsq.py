@@ -48,19 +48,35 @@ class ObjectSigmas:
 
     target: Sigma
     beacons: tuple[Sigma, ...]
+    # σ (deg) of an α offset that every image of one frame shares (the mount's pan
+    # reading): on a bench it is most of each α's error, and counted as independent
+    # per image it would misplace the ellipse (errors that move every α alike largely
+    # cancel in the target); the α σ's above are then each image's own part
+    shared_alpha_deg: float = 0.0
 
     @classmethod
     def same(cls, sigma: Sigma) -> ObjectSigmas:
         """One pair for every observation."""
         return cls(sigma, (sigma,))
 
+    def alpha_whitener(self, sa: np.ndarray) -> np.ndarray:
+        """L⁻¹ for the α's covariance diag(sa²) + shared²·11ᵀ = L Lᵀ (sa: each α's own
+        σ, in the solver's order): whitened residuals L⁻¹ (α − α_meas) are independent
+        with unit variance.  Without a shared part, diag(1/sa)."""
+        if self.shared_alpha_deg == 0.0:
+            return np.diag(1.0 / sa)
+        cov = np.diag(sa**2) + self.shared_alpha_deg**2
+        return np.linalg.inv(np.linalg.cholesky(cov))
+
     def describe(self) -> str:
         """The σ's in words: α in degrees, d_total in % of d_total."""
         pair = lambda s: f"{s.alpha_deg:.3g}°, {100 * s.d_total_rel:.3g} %"  # noqa: E731
+        shared = (f"; an α offset shared by every image, σ {self.shared_alpha_deg:.3g}°"
+                  if self.shared_alpha_deg else "")
         if self.beacons == (self.target,):
-            return f"σ ({pair(self.target)})"
+            return f"σ ({pair(self.target)}){shared}"
         bs = "; ".join(pair(b) for b in dict.fromkeys(self.beacons))
-        return f"σ target ({pair(self.target)}), beacon ({bs})"
+        return f"σ target ({pair(self.target)}), beacon ({bs}){shared}"
 
     def arrays(self, n_beacons: int, n_targets: int) -> tuple[np.ndarray, np.ndarray]:
         """σ_α (deg) and relative σ_d of each observation, beacons first then targets
@@ -73,7 +89,8 @@ class ObjectSigmas:
         sa = np.array([s.alpha_deg for s in every], float)
         sd = np.array([s.d_total_rel for s in every], float)
         if not (np.all(sa > 0) and np.all(sd > 0) and np.all(np.isfinite(sa))
-                and np.all(np.isfinite(sd))):
+                and np.all(np.isfinite(sd)) and np.isfinite(self.shared_alpha_deg)
+                and self.shared_alpha_deg >= 0):
             raise SolverError(f"sigmas must be positive and finite, got {self}")
         return sa, sd
 
@@ -152,7 +169,8 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
         raise SolverError("least squares needs at least one beacon and one target observation")
     check_nuisances(nuisances, len(beacons), len(targets))
     o = np.asarray(observer, float)
-    sa, sd = as_object_sigmas(sigma or Sigma()).arrays(len(beacons), len(targets))
+    sig = as_object_sigmas(sigma or Sigma())
+    sa, sd = sig.arrays(len(beacons), len(targets))
     bpos, meas_a, meas_d = _measurement_arrays(beacons, targets)
     if initial is None and (nuisances or position_sigma):
         # start from the plain fit: from the one-beacon closed form, a pan offset and a
@@ -166,18 +184,20 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
     nb, nt, k = len(beacons), len(targets), len(nuisances)
     x0 = np.array([init.mirror.yaw_deg, init.mirror.rho, *init.target,
                    *(NUISANCES[n][1] for n in nuisances), *np.zeros(2 * nb if free else 0)])
-    w_a = 1.0 / sa
+    # the α residuals whitened (a shared offset makes them correlated; each whitened
+    # residual is then mostly its own image's, which the Huber loss names)
+    w_a = sig.alpha_whitener(sa)
     w_d = 1.0 / (sd * meas_d)
     prior = np.eye(len(x0))[4 + k:] / position_sigma if free else np.zeros((0, len(x0)))
 
     def fun(x):
         a, d, _, _ = _forward(x, o, bpos, nt, nuisances, free)
-        return np.concatenate([w_a * wrap_bearing(a - meas_a), w_d * (d - meas_d),
+        return np.concatenate([w_a @ wrap_bearing(a - meas_a), w_d * (d - meas_d),
                                prior @ x])
 
     def jac(x):
         _, _, da, dd = _forward(x, o, bpos, nt, nuisances, free)
-        return np.vstack([w_a[:, None] * da, w_d[:, None] * dd, prior])
+        return np.vstack([w_a @ da, w_d[:, None] * dd, prior])
 
     from scipy.optimize import least_squares  # scipy is slow to import: only when used
 
@@ -312,8 +332,9 @@ def crlb(observer: ArrayLike, beacons: ArrayLike, mirror_yaw_deg: float, mirror_
     x = np.array([mirror_yaw_deg, mirror_rho, *np.asarray(target, float),
                   *(NUISANCES[n][1] for n in nuisances)])
     _, d, da, dd = _forward(x, o, B, n_targets, nuisances)
-    sa, sr = as_object_sigmas(sigma).arrays(len(B), n_targets)
-    J = np.vstack([da / sa[:, None], dd / (sr * d)[:, None]])
+    sig = as_object_sigmas(sigma)
+    sa, sr = sig.arrays(len(B), n_targets)
+    J = np.vstack([sig.alpha_whitener(sa) @ da, dd / (sr * d)[:, None]])
     info = J.T @ J
     if np.linalg.cond(info) > 1e14:
         raise SolverError("the geometry does not determine the mirror and the target "
@@ -340,13 +361,18 @@ def solve_measurements(observer, beacons: list[BeaconMeasurement],
         pts = np.vstack([np.asarray(b.position, float), sol.target])
         _, d, da, dd = predict(params, o, pts)
         J = np.array([[*da[0, :2], 0, 0], [*dd[0, :2], 0, 0], da[1], dd[1]])
-        sa, sr = as_object_sigmas(sigma).arrays(1, 1)
+        sig = as_object_sigmas(sigma)
+        sa, sr = sig.arrays(1, 1)
         sd = np.array([sa[0], sr[0] * b.d_total, sa[1], sr[1] * targets[0][1]])
         if abs(np.linalg.det(J)) < 1e-12:
             raise SolverError("the measurements do not determine the mirror and the target "
                               "(singular Jacobian)")
         Jinv = np.linalg.inv(J)
-        cov = Jinv @ np.diag(sd**2) @ Jinv.T
+        S = np.diag(sd**2)
+        S[0, 2] = S[2, 0] = sig.shared_alpha_deg**2  # the two α's shared offset
+        S[0, 0] += sig.shared_alpha_deg**2
+        S[2, 2] += sig.shared_alpha_deg**2
+        cov = Jinv @ S @ Jinv.T
         return replace(sol, covariance=cov, method="closed form with covariance")
     return solve_lsq(observer, beacons, targets, sigma, nuisances=nuisances,
                      position_sigma=position_sigma)

@@ -44,8 +44,11 @@ def sigma_json(sigma: ObjectSigmas) -> dict:
     """A ``sigma`` block: one pair where every observation shares it, else the target's
     and the beacons' (d_total_rel a fraction: 0.002 = 0.2 %)."""
     pair = lambda s: {"alpha_deg": s.alpha_deg, "d_total_rel": s.d_total_rel}  # noqa: E731
-    if sigma.beacons == (sigma.target,):
+    if sigma.beacons == (sigma.target,) and not sigma.shared_alpha_deg:
         return pair(sigma.target)
     beacons = pair(sigma.beacons[0]) if len(sigma.beacons) == 1 else [pair(b) for b in
                                                                       sigma.beacons]
-    return {"target": pair(sigma.target), "beacons": beacons}
+    out = {"target": pair(sigma.target), "beacons": beacons}
+    if sigma.shared_alpha_deg:
+        out["shared_alpha_deg"] = sigma.shared_alpha_deg
+    return out

@@ -81,6 +81,8 @@ class Table1Row:
     ours: RowErrors
     # the beacon's (σ_α, σ_d) where they differ from the target's (an error model's row)
     beacon_sigma: tuple[float, float] | None = None
+    # σ (deg) of an α offset both images share (an error model's pan spread)
+    shared_alpha_deg: float = 0.0
 
     def to_json(self) -> dict:
         """The row as ``montecarlo --json`` writes it."""
@@ -90,6 +92,8 @@ class Table1Row:
                **asdict(self.ours)}
         if self.beacon_sigma is not None:
             out["beacon_sigma_alpha_deg"], out["beacon_sigma_d"] = self.beacon_sigma
+        if self.shared_alpha_deg:
+            out["shared_alpha_deg"] = self.shared_alpha_deg
         return out
 
 
@@ -114,10 +118,12 @@ class Table1:
 def run_row(sigma_alpha_deg: float, sigma_d: float, iterations: int = 200,
             geometry: Table1Geometry | None = None,
             rng: int | np.random.Generator | None = 0,
-            beacon_sigma: tuple[float, float] | None = None) -> RowErrors:
+            beacon_sigma: tuple[float, float] | None = None,
+            shared_alpha_deg: float = 0.0) -> RowErrors:
     """One row: RMSE of the reflector (the target's reflection point), its yaw, and the
     target, over ``iterations`` noisy draws of all four measurements (vectorized); σ_d
-    absolute; ``beacon_sigma``: the beacon's (σ_α, σ_d) where they differ."""
+    absolute; ``beacon_sigma``: the beacon's (σ_α, σ_d) where they differ;
+    ``shared_alpha_deg``: σ of an offset added to both α's alike."""
     g = (geometry or Table1Geometry()).layout()
     rng = np.random.default_rng(rng)
     k = iterations
@@ -126,6 +132,9 @@ def run_row(sigma_alpha_deg: float, sigma_d: float, iterations: int = 200,
     db = g["beacon_d"] + rng.normal(0, sdb, k)
     at = g["target_alpha"] + rng.normal(0, sigma_alpha_deg, k)
     dt = g["target_d"] + rng.normal(0, sigma_d, k)
+    if shared_alpha_deg:  # drawn after the others: rows without it draw as before
+        delta = rng.normal(0, shared_alpha_deg, k)
+        ab, at = ab + delta, at + delta
     est = closed_form_unchecked(np.zeros(2), g["beacon"], ab, db, at, dt)
     ok = np.isfinite(est.target).all(axis=1) & np.isfinite(
         est.target_reflection_point).all(axis=1)
@@ -146,8 +155,8 @@ def table1(iterations: int = 200, geometry: Table1Geometry | None = None,
     rng = np.random.default_rng(rng)
     g = geometry or Table1Geometry()
     return Table1(g, iterations, tuple(
-        Table1Row(sa, sd, p_ref, p_tar, run_row(sa, sd, iterations, g, rng, *beacon), *beacon)
-        for sa, sd, p_ref, p_tar, *beacon in rows))
+        Table1Row(sa, sd, p_ref, p_tar, run_row(sa, sd, iterations, g, rng, *extra), *extra)
+        for sa, sd, p_ref, p_tar, *extra in rows))
 
 
 def table_rows(sigmas: list[tuple[float, float]] | None = None,
@@ -164,5 +173,5 @@ def table_rows(sigmas: list[tuple[float, float]] | None = None,
     if relative is not None:
         t, b = relative.target, relative.beacons[0]
         rows = (*rows, (t.alpha_deg, t.d_total_rel * d_t, nan, nan,
-                        (b.alpha_deg, b.d_total_rel * d_b)))
+                        (b.alpha_deg, b.d_total_rel * d_b), relative.shared_alpha_deg))
     return rows

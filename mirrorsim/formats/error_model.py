@@ -101,6 +101,10 @@ class ErrorModel:
     bias_features: tuple[str, ...] = ()
     provenance: dict | None = None  # how it was made (dataset, seed, n, command)
     fx_px: float | None = None  # the training frames' median focal length (px)
+    # σ (deg) of an α offset every image of a frame shares (a bench's pan reading), from
+    # the training rows' covariance of target and beacon α errors; the α laws are then
+    # each image's own part.  A mechanical angle: it does not scale with fx.
+    shared_alpha_deg: float = 0.0
 
     def fx_scale(self, fx_px):
         """The factor on σ for frames of focal length ``fx_px`` (broadcasts; 1 where it
@@ -131,14 +135,15 @@ class ErrorModel:
         """Each observation's σ's: the target's (α, d_total) and each beacon's."""
         return ObjectSigmas(self.sigma("target", target[1], target[0], pan_deg, fx_px),
                             tuple(self.sigma("beacon", d, a, pan_deg, fx_px)
-                                  for a, d in beacons))
+                                  for a, d in beacons), self.shared_alpha_deg)
 
     def typical_at(self, fx_px: float | None) -> ObjectSigmas:
         """:attr:`typical` for a camera of focal length ``fx_px`` (None: the training's)."""
         t = self.typical
         scale = self.fx_scale(fx_px)
         pair = lambda s: Sigma(s.alpha_deg * scale, s.d_total_rel * scale)  # noqa: E731
-        return ObjectSigmas(pair(t.target), tuple(pair(b) for b in t.beacons))
+        return ObjectSigmas(pair(t.target), tuple(pair(b) for b in t.beacons),
+                            t.shared_alpha_deg)
 
     @property
     def typical(self) -> ObjectSigmas:
@@ -146,11 +151,12 @@ class ErrorModel:
         measurements (Monte Carlo tables, beacon placement)."""
         pair = lambda k: Sigma(self.fits[k]["alpha"].typical_sigma,  # noqa: E731
                                self.fits[k]["d_rel"].typical_sigma)
-        return ObjectSigmas(pair("target"), (pair("beacon"),))
+        return ObjectSigmas(pair("target"), (pair("beacon"),), self.shared_alpha_deg)
 
     def to_json(self) -> dict:
         """The model file."""
         out = {"format": FORMAT, "version": VERSION, "units": UNITS, "fx_px": self.fx_px,
+               "shared_alpha_deg": self.shared_alpha_deg,
                "sigma_features": list(SIGMA_FEATURES), "bias_features": list(self.bias_features),
                "objects": {k: {q: f.to_json() for q, f in qs.items()}
                            for k, qs in self.fits.items()}}
@@ -164,7 +170,8 @@ def model_from_dict(data: Any, source: str | Path) -> ErrorModel:
     the key)."""
     r = Reader(source, ErrorModelError)
     top = r.mapping(data, "", ("format", "version", "objects"),
-                    ("units", "sigma_features", "bias_features", "provenance", "fx_px"))
+                    ("units", "sigma_features", "bias_features", "provenance", "fx_px",
+                     "shared_alpha_deg"))
     if top["format"] != FORMAT or top["version"] != VERSION:
         raise r.fail("version", f"{top['version']!r}: not a version-{VERSION} {FORMAT}; fit it "
                                 "again with this mirrorsim (`mirrorsim errormodel DATASET`)")
@@ -182,7 +189,10 @@ def model_from_dict(data: Any, source: str | Path) -> ErrorModel:
     prov = top.get("provenance")
     fx = top.get("fx_px")
     fx = None if fx is None else r.number(fx, "fx_px", positive=True, high=1e6)
-    return ErrorModel(fits, tuple(bias_features), prov if isinstance(prov, dict) else None, fx)
+    shared = r.number(top.get("shared_alpha_deg", 0.0), "shared_alpha_deg", low=0,
+                      high=SIGMA_ALPHA_MAX_DEG)
+    return ErrorModel(fits, tuple(bias_features), prov if isinstance(prov, dict) else None, fx,
+                      shared)
 
 
 def _quantity(r: Reader, value: Any, key: str, q: str) -> QuantityFit:

@@ -61,7 +61,7 @@ def read_sigmas(r: Reader, value: Any, n_beacons: int, key: str = "sigma") -> Ob
     """A ``sigma`` block: one pair for every observation, or ``target`` and ``beacons``
     (one pair for all beacons, or a list of one per beacon)."""
     if isinstance(value, dict) and "target" in value:
-        s = r.mapping(value, key, ("target", "beacons"))
+        s = r.mapping(value, key, ("target", "beacons"), ("shared_alpha_deg",))
         raw = s["beacons"]
         if isinstance(raw, list):
             if len(raw) != n_beacons:
@@ -69,7 +69,9 @@ def read_sigmas(r: Reader, value: Any, n_beacons: int, key: str = "sigma") -> Ob
             beacons = tuple(read_sigma(r, b, f"{key}.beacons[{i}]") for i, b in enumerate(raw))
         else:
             beacons = (read_sigma(r, raw, f"{key}.beacons"),)
-        return ObjectSigmas(read_sigma(r, s["target"], f"{key}.target"), beacons)
+        shared = r.number(s.get("shared_alpha_deg", 0.0), f"{key}.shared_alpha_deg", low=0.0,
+                          high=SIGMA_ALPHA_MAX_DEG)
+        return ObjectSigmas(read_sigma(r, s["target"], f"{key}.target"), beacons, shared)
     return ObjectSigmas.same(read_sigma(r, value, key))
 
 

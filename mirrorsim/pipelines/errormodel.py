@@ -41,6 +41,9 @@ FEATURES = ("1", "d_total_cm", "off_axis_deg", "incidence_deg", "inv_height_px")
 BENCH_FEATURES = {f.name: f for f in imperfections.FEATURES}
 QUANTITY_COLUMNS = {"alpha": "alpha_err", "d_rel": "d_rel_err"}
 GROSS = 6.0  # errors beyond this many σ's are gross errors, counted apart
+# a shared α error is taken as there when its mean product is this many standard
+# errors above 0 (by chance: about 1 dataset in 700)
+SHARED_T = 3.0
 
 
 def _feature(cols: dict, kind: str, name: str) -> np.ndarray:
@@ -104,11 +107,13 @@ def _robust_fit(X: np.ndarray, y: np.ndarray, cut: float = 1.345) -> np.ndarray:
     return np.r_[w[0] - np.sum(bz * mu / sd), bz / sd]
 
 
-def fit_log_sigma(X: np.ndarray, y: np.ndarray, ridge: float = 1e-3) -> LogSigma:
-    """σ = exp(w·z) by maximum likelihood of y ~ N(0, σ²) (z: [1, standardized X]), with
-    a small ridge on the slopes so that a feature the rows barely vary in stays flat.
-    σ is the spread about the truth (a bias is part of it: a measurement cannot be
-    corrected for a bias its features do not predict)."""
+def fit_log_sigma(X: np.ndarray, y: np.ndarray, ridge: float = 1e-3,
+                  shared_var: float = 0.0) -> LogSigma:
+    """σ = exp(w·z) by maximum likelihood of y ~ N(0, σ² + shared_var) (z: [1,
+    standardized X]), with a small ridge on the slopes so that a feature the rows barely
+    vary in stays flat.  σ is the spread about the truth (a bias is part of it: a
+    measurement cannot be corrected for a bias its features do not predict);
+    ``shared_var``: the variance of an error every image of a frame shares, known."""
     from scipy.optimize import minimize
 
     mu = X.mean(axis=0)
@@ -120,24 +125,34 @@ def fit_log_sigma(X: np.ndarray, y: np.ndarray, ridge: float = 1e-3) -> LogSigma
 
     def nll(w):
         eta = Z @ w
-        e = y2 * np.exp(-2.0 * eta)
-        value = np.sum(eta + 0.5 * e) + ridge * n * np.sum(w[1:] ** 2)
-        grad = Z.T @ (1.0 - e) + np.r_[0.0, 2.0 * ridge * n * w[1:]]
+        if shared_var == 0.0:
+            e = y2 * np.exp(-2.0 * eta)
+            value = np.sum(eta + 0.5 * e)
+            g = 1.0 - e
+        else:  # v = σ² + shared: d/dη of ½ log v + ½ y²/v is (σ²/v)(1 − y²/v)
+            own = np.exp(2.0 * eta)
+            v = own + shared_var
+            value = np.sum(0.5 * np.log(v) + 0.5 * y2 / v)
+            g = own / v * (1.0 - y2 / v)
+        value += ridge * n * np.sum(w[1:] ** 2)
+        grad = Z.T @ g + np.r_[0.0, 2.0 * ridge * n * w[1:]]
         return value, grad
 
-    w0 = np.r_[0.5 * np.log(np.mean(y2)), np.zeros(X.shape[1])]
+    own0 = max(np.mean(y2) - shared_var, 0.01 * np.mean(y2))
+    w0 = np.r_[0.5 * np.log(own0), np.zeros(X.shape[1])]
     w = minimize(nll, w0, jac=True, method="BFGS").x
     return LogSigma(float(w[0]), tuple(w[1:].tolist()), tuple(mu.tolist()), tuple(sc.tolist()))
 
 
-def _sigma_fit(X: np.ndarray, y: np.ndarray) -> tuple[LogSigma, np.ndarray]:
+def _sigma_fit(X: np.ndarray, y: np.ndarray, shared_var: float = 0.0
+               ) -> tuple[LogSigma, np.ndarray]:
     """The σ law fitted on the rows that are not gross errors, and which rows are (more
     than GROSS predicted σ's off): a gross error is a detector fault, counted apart."""
     scale = 1.4826 * float(np.median(np.abs(y))) or float(np.std(y)) or 1.0
     keep = np.abs(y) <= GROSS * scale
     for _ in range(4):  # the gross rows by the fitted σ's, until they settle
-        law = fit_log_sigma(X[keep], y[keep])
-        now = np.abs(y) <= GROSS * law(X)
+        law = fit_log_sigma(X[keep], y[keep], shared_var=shared_var)
+        now = np.abs(y) <= GROSS * np.sqrt(law(X) ** 2 + shared_var)
         if np.array_equal(now, keep):
             break
         keep = now
@@ -181,6 +196,7 @@ def fit(cols: dict, provenance: dict | None = None) -> ErrorModel:
     fx = np.asarray(cols["fx_px"], float) if "fx_px" in cols else np.full(len(ok), np.nan)
     fx_px = float(np.median(fx[ok & np.isfinite(fx)])) if np.any(ok & np.isfinite(fx)) else None
     at_fx = np.where(np.isfinite(fx), fx / (fx_px or 1.0), 1.0)
+    shared = shared_alpha(cols, ok)
     for kind in KINDS:
         X_all = _design(cols, kind, names)
         S_all = sigma_features_of(cols, kind)
@@ -191,14 +207,34 @@ def fit(cols: dict, provenance: dict | None = None) -> ErrorModel:
             if m.sum() < need:
                 raise ValueError(f"too few usable rows ({int(m.sum())}) to fit {kind} {q}: "
                                  f"{need} needed")
-            law, gross = _sigma_fit(S_all[m], (y * at_fx)[m])
+            law, gross = _sigma_fit(S_all[m], (y * at_fx)[m],
+                                    shared**2 if q == "alpha" else 0.0)
             bias = _robust_fit(X_all[m][~gross], y[m][~gross])
             fits[kind][q] = QuantityFit(
                 log_sigma=law, n=int(m.sum()), gross_errors=int(gross.sum()),
                 rms=float(np.sqrt(np.mean((y * at_fx)[m] ** 2))),
                 typical_sigma=float(np.sqrt(np.mean(law(S_all[m][~gross]) ** 2))),
                 bias=tuple(bias.tolist()))
-    return ErrorModel(fits, tuple(names), provenance, fx_px)
+    return ErrorModel(fits, tuple(names), provenance, fx_px, shared)
+
+
+def shared_alpha(cols: dict, ok: np.ndarray) -> float:
+    """σ (deg) of the α error every image of a frame shares (a bench's pan reading):
+    √ of the mean product of each frame's target and beacon α errors (independent errors
+    average to 0), gross pairs left out; 0 unless the mean is positive by more than
+    SHARED_T of its standard errors (an ideal bench's errors are independent)."""
+    et = np.asarray(cols[table.object_column("target", "alpha_err")], float)
+    eb = np.asarray(cols[table.object_column("beacon", "alpha_err")], float)
+    m = ok & np.isfinite(et) & np.isfinite(eb)
+    p = et[m] * eb[m]
+    if p.size < 3:
+        return 0.0
+    med = float(np.median(np.abs(p)))
+    p = p[np.abs(p) <= GROSS**2 * 1.4826**2 * med] if med > 0 else p  # gross pairs out
+    if p.size < 3 or np.std(p) == 0:
+        return 0.0
+    t = np.mean(p) / (np.std(p, ddof=1) / np.sqrt(p.size))
+    return float(np.sqrt(np.mean(p))) if t > SHARED_T else 0.0
 
 
 def bias_of(model: ErrorModel, kind: str, quantity: str, features: np.ndarray) -> np.ndarray:
@@ -243,6 +279,10 @@ def summary(model: ErrorModel) -> str:
             lines.append(f"  {kind:6s} {q:5s}: n={m.n} ({m.gross_errors} gross left out), "
                          f"RMS error {scale * m.rms:.4f}{unit}, typical σ "
                          f"{scale * m.typical_sigma:.4f}{unit}; log σ slopes: {w}")
+    lines.append(f"  an α offset shared by every image of a frame (the pan reading): σ "
+                 f"{model.shared_alpha_deg:.4f}°" + (
+                     " (each α law above is the image's own part)" if model.shared_alpha_deg
+                     else " (none found: the images' α errors are independent)"))
     return "\n".join(lines)
 
 
