@@ -90,16 +90,6 @@ def main() -> None:
               f"{np.median(b[:, k]):.3f} | {np.percentile(b[:, k], 90):.3f} |")
 
 
-def _nees(f: MovingBeaconFilter, rho: float) -> float:
-    """eᵀ C⁻¹ e of the mirror's (yaw, offset) under the particles' weighted covariance."""
-    w, m = f.weights, f.particles.mirror
-    mean = w @ m
-    d = m - mean
-    cov = (w[:, None] * d).T @ d
-    e = np.array([YAW, rho]) - mean
-    return float(e @ np.linalg.solve(cov, e))
-
-
 def nees_table(args, params: PFParams, path: np.ndarray, rho: float) -> None:
     """Mean NEES and 95 % coverage per step over the seeds."""
     from scipy.stats import chi2
@@ -112,7 +102,7 @@ def nees_table(args, params: PFParams, path: np.ndarray, rho: float) -> None:
         per = []
         for c, z in zip(controls, obs, strict=True):
             f.step(c, z)
-            per.append(_nees(f, rho))
+            per.append(f.nees(MIRROR, YAW))
         rows.append(per)
     v = np.array(rows)
     n = v.shape[0]

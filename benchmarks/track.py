@@ -2,7 +2,7 @@
 
     python benchmarks/track.py [--scenes default exp1 exp2 exp3] [--steps 20] [--spp N]
                           [--odometry-sigma CM] [--out renders/bench_track]
-                          [--plot docs/track_paths.png]
+                          [--plot docs/track_paths.png] [--coverage SEEDS]
 
 For each scene, `mirrorsim track` is run (full size, seed 0, default odometry noise)
 with the beacon on each of the paper's three paths (eqs 19–21), then standing still at
@@ -13,29 +13,40 @@ the poses seen, and after 5, 10 and the last step the commanded path length, the
 yaw error and the target error; the wall time of each run; and plots the target error
 against the step (one panel per scene).  Frames are kept in --out, so a second call
 only re-detects.
+
+With --coverage N: instead, the rectangular path on each scene with N fresh seeds (each
+its own renders and odometry), and per step the filter's honesty on rendered frames:
+the share of runs whose true mirror lies inside the filter's 95 % region (NEES ≤ 5.99,
+with a Clopper–Pearson interval) and the mean NEES (2 for an honest filter).
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import platform
 import sys
 import time
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from stamp import stamp  # noqa: E402
 
 from mirrorsim.formats.scenefile import load_scene  # noqa: E402
 from mirrorsim.pipelines.planning import plan_scene  # noqa: E402
 from mirrorsim.pipelines.track import TrackReport, run_track  # noqa: E402
 from mirrorsim.scene.model import Beacon  # noqa: E402
 
+CHI2_2_95 = 5.991  # χ²₂'s 95 % point
 RUNS = ("rectangular", "linear", "sawtooth", "fixed", "plan's best")
 
 
-def one_run(name: str, run: str, steps: int, spp: int | None, sigma: float, out: Path
-            ) -> tuple[TrackReport, float]:
+def one_run(name: str, run: str, steps: int, spp: int | None, sigma: float, out: Path,
+            seed: int = 0) -> tuple[TrackReport, float]:
     """One track of ``scene`` with the beacon on ``run``; its report and wall time."""
     scene = load_scene(Path("scenes") / f"{name}.yaml")
     kind = run
@@ -48,7 +59,7 @@ def one_run(name: str, run: str, steps: int, spp: int | None, sigma: float, out:
     if spp is not None:
         scene = scene.with_render(spp=spp)
     rep = run_track(scene, out / name / run.replace("'", "").replace(" ", "_"), kind=kind,
-                    steps=steps, odometry_sigma=sigma)
+                    steps=steps, odometry_sigma=sigma, seed=seed)
     return rep, time.perf_counter() - t0
 
 
@@ -60,7 +71,11 @@ def main() -> None:
     ap.add_argument("--odometry-sigma", type=float, default=0.1)
     ap.add_argument("--out", type=Path, default=Path("renders/bench_track"))
     ap.add_argument("--plot", type=Path, default=Path("docs/track_paths.png"))
+    ap.add_argument("--coverage", type=int, default=0, metavar="SEEDS")
     args = ap.parse_args()
+    if args.coverage:
+        coverage(args)
+        return
     marks = sorted({min(5, args.steps), min(10, args.steps), args.steps})
     print(f"machine: {platform.machine()}, {platform.system()}; {args.steps} moves, "
           f"seed 0, odometry σ {args.odometry_sigma:g} cm\n")
@@ -81,6 +96,33 @@ def main() -> None:
                   flush=True)
     plot(reports, args.plot)
     print(f"\nplot: {args.plot}")
+
+
+def coverage(args: argparse.Namespace) -> None:
+    """The filter's 95 % region against the true mirror on rendered frames, per step."""
+    from mirrorsim.pipelines.uncertainty import binomial_interval
+
+    first = int.from_bytes(os.urandom(3), "big")  # fresh: no test's seed
+    nees: list[list[float]] = []
+    for name in args.scenes:
+        for k in range(args.coverage):
+            rep, wall = one_run(name, "rectangular", args.steps, args.spp,
+                                args.odometry_sigma, args.out / "coverage", first + k)
+            nees.append([s.mirror_nees for s in rep.steps])
+            print(f"{name} seed {first + k}: final NEES {nees[-1][-1]:.2f}, {wall:.0f} s",
+                  file=sys.stderr, flush=True)
+    v = np.array(nees)
+    print(f"{stamp()}; seeds {first}–{first + args.coverage - 1} on each of "
+          f"{', '.join(args.scenes)}; rectangular path, {args.steps} moves, odometry σ "
+          f"{args.odometry_sigma:g} cm\n")
+    print("| step | runs | true mirror inside the 95 % region (interval) | mean NEES (honest: 2) |")
+    print("|---|---|---|---|")
+    for k in range(v.shape[1]):
+        col = v[:, k][np.isfinite(v[:, k])]
+        inside = int(np.sum(col <= CHI2_2_95))
+        lo, hi = binomial_interval(inside, len(col))
+        print(f"| {k} | {len(col)} | {inside}/{len(col)} = {inside / len(col):.2f} "
+              f"({lo:.2f}–{hi:.2f}) | {np.mean(col):.2f} |")
 
 
 def plot(reports: dict[str, dict[str, TrackReport]], out: Path) -> None:

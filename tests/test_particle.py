@@ -1,4 +1,7 @@
+from dataclasses import replace
+
 import numpy as np
+import pytest
 
 from solver.geometry import line_normal
 from solver.particle import (
@@ -142,3 +145,19 @@ def test_a_mean_yaw_just_below_zero_keeps_the_line_where_it_is():
     est = f.estimate()
     assert abs(est.yaw_deg - 179.995) < 1e-6
     assert np.allclose(est.point, [0.0, 68.0], atol=0.01)
+
+
+def test_nees_is_the_truths_mahalanobis_distance_in_the_particles_spread():
+    """Hypotheses drawn around (yaw 30°, ρ 50 cm) with SDs 1° and 2 cm, equal weights: a
+    true mirror 1° and 2 cm away (one SD each, in a spread without correlation) is at
+    NEES ≈ 2, and one at the mean at ≈ 0 (computed apart from the filter's code)."""
+    rng = np.random.default_rng(3)
+    f = MovingBeaconFilter(OBS, (20.0, 0.0), (20.0, 40.0), (40.0, 60.0), n=20000, rng=0)
+    f.particles = replace(f.particles, mirror=np.column_stack(
+        [rng.normal(30.0, 1.0, 20000), rng.normal(50.0, 2.0, 20000)]))
+    f.weights = np.full(20000, 1 / 20000)
+    point = lambda yaw, rho: rho * line_normal(yaw)  # noqa: E731
+    assert f.nees(point(31.0, 52.0), 31.0) == pytest.approx(2.0, rel=0.05)
+    assert f.nees(point(30.0, 50.0), 30.0) < 0.01
+    # the same line given by its yaw + 180° (a line's angle is modulo 180°)
+    assert f.nees(point(31.0, 52.0), 211.0) == pytest.approx(2.0, rel=0.05)

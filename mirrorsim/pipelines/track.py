@@ -63,6 +63,9 @@ class TrackStep:
     target_error_cm: float
     yaw_spread_deg: float
     offset_spread_cm: float
+    # the true mirror's squared Mahalanobis distance in the filter's (yaw, offset)
+    # spread: χ²₂ (≤ 5.99 in 95 % of steps) where the filter's spread is honest
+    mirror_nees: float = float("nan")
 
     def to_json(self) -> dict:
         """The step as INTERFACE.md's track report writes it."""
@@ -74,7 +77,8 @@ class TrackStep:
                 "mirror_offset_error_cm": self.mirror_offset_error_cm,
                 "target": list(self.target), "target_error_cm": self.target_error_cm,
                 "particle_spread": {"yaw_deg": self.yaw_spread_deg,
-                                    "offset_cm": self.offset_spread_cm}}
+                                    "offset_cm": self.offset_spread_cm},
+                "mirror_nees": self.mirror_nees}
 
 
 @dataclass(frozen=True)
@@ -276,8 +280,10 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
             if target_obs is not None:
                 targets.append(target_obs)
         pf.step(np.zeros(2) if k == 0 else moves[k - 1], obs)
-        records.append(_step_record(scene, k, pf.estimate(), np.mean(targets, axis=0),
-                                    commanded[k], moves[:k], true[k], obs is not None, why))
+        records.append(replace(
+            _step_record(scene, k, pf.estimate(), np.mean(targets, axis=0), commanded[k],
+                         moves[:k], true[k], obs is not None, why),
+            mirror_nees=pf.nees(scene.mirror.center, scene.mirror.yaw)))
         snapshots.append(_snapshot(pf, rng))
     return TrackReport(scene=scene.name, path=kind, heading=heading,
                        odometry_sigma=odometry_sigma, seed=seed, steps=tuple(records),
