@@ -6,7 +6,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test test-fast lint bench setup llvm clean error-model
+.PHONY: demo test test-fast lint bench setup llvm clean error-model docs docs-build
 
 # the error model shipped in mirrorsim/data: fitted on the project's own dataset of the
 # default spec (ideal bench, default render settings); tests/test_uncertainty.py makes
@@ -36,9 +36,27 @@ llvm:
 demo: setup
 	$(BIN)/mirrorsim evaluate scenes/default.yaml --keep plot annotated
 
-test: setup
+test: setup docs-build
 	$(BIN)/python -m pytest
 	$(BIN)/ruff check .
+
+# the documentation site, built strictly (a broken include or reference fails it)
+DOCS_STAMP := $(VENV)/.docs-installed
+$(DOCS_STAMP): pyproject.toml $(STAMP)
+	$(BIN)/pip install -q -e '.[docs]'
+	touch $@
+
+docs-build: setup $(DOCS_STAMP)
+	$(BIN)/python docs/gen_reference.py --check
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet
+
+# re-run every command that feeds a table or figure in the README and the docs (about
+# an hour on 2 cores; throughput figures want a quiet machine), then build the site
+docs: setup $(DOCS_STAMP)
+	$(BIN)/python docs/regenerate.py
+	$(BIN)/python docs/gen_reference.py
+	$(BIN)/python docs/make_images.py
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet
 
 test-fast: setup
 	$(BIN)/python -m pytest -m "not slow"

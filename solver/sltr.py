@@ -158,7 +158,7 @@ class Solution:
         return None if cov is None else error_ellipse(cov, 0.95)
 
     def to_json(self) -> dict:
-        """The solution document of INTERFACE.md."""
+        """The solution document of docs/files.md."""
         out = {
             "mirror": {"yaw_deg": self.mirror.yaw_deg, "point": self.mirror.point.tolist()},
             "target": {"position": self.target.tolist(),

@@ -125,7 +125,7 @@ def test_full_size_end_to_end(name, tmp_path, capsys):
 
 
 def test_bundled_scenes_evaluate_contract_fields():
-    """The report's error keys are INTERFACE.md's (checked on the score function)."""
+    """The report's error keys are docs/files.md's (checked on the score function)."""
     from mirrorsim.pipelines.score import score
     from mirrorsim.truth import groundtruth
     from solver.lsq import solve_measurements

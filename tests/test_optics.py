@@ -47,7 +47,7 @@ def test_virtual_image_properties(cx, cy, mx, my, yaw, px, py):
 
 
 def test_ground_truth_matches_interface_figures():
-    """INTERFACE.md quotes exp1's geometry: alpha and d_total of target and beacon."""
+    """The documented contract quotes exp1's geometry: alpha and d_total of target and beacon."""
     s = scene_from_dict(scene_dict("exp1"))
     gt = groundtruth.ground_truth(s).to_json()
     assert gt["target"]["alpha_deg"] == pytest.approx(66.678, abs=1e-3)

@@ -57,7 +57,7 @@ def test_closed_form_solves_eqs_6a_6c():
 
 
 def test_interface_example_solution():
-    """INTERFACE.md's solution example for exp1: mirror point (29.08, 66.24)."""
+    """The documented solution example for exp1: mirror point (29.08, 66.24)."""
     o = np.zeros(2)
     ob = observe(o, (27.5, 65), 38.0, (32, 62.5))
     ot = observe(o, (27.5, 65), 38.0, (55, 70))

@@ -74,7 +74,7 @@ def test_bad_options_are_refused(tmp_path, capsys, args, flag):
 
 
 def test_track_command_writes_report_plot_and_animation(tmp_path, capsys):
-    """The command on a half-size scene file: table, JSON (INTERFACE.md's keys), PNG, GIF."""
+    """The command on a half-size scene file: table, JSON (docs/files.md's keys), PNG, GIF."""
     import yaml
 
     d = yaml.safe_load((SCENES / "exp1.yaml").read_text())

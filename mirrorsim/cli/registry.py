@@ -152,7 +152,7 @@ def common(p: argparse.ArgumentParser, *, scene: bool = True, out: str | None = 
     """Add the shared options: SCENE, --out, --json, --spp/--seed, --variant, --quiet,
     --error-model."""
     if scene:
-        p.add_argument("scene", type=Path, help="scene file (YAML, see INTERFACE.md)")
+        p.add_argument("scene", type=Path, help="scene file (YAML, see docs/scenes.md)")
         inputs(p, ("scene", "SCENE", "file"))
     if out:  # every such --out defaults to a place in renders/<name>/
         output(p, "--out", out_kind, type=Path, help=out,

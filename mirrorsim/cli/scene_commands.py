@@ -219,7 +219,7 @@ def _budget_options(p):
 @command("budget", "error budget of a bench: each imperfection alone, then all",
          "Render, detect, solve and score SCENE on an ideal bench, with each of its bench "
          "imperfections alone (camera.pan_error, camera.pitch, mirror.curvature_radius, "
-         "calibration.distance_error, beacons[i].known_position... see INTERFACE.md) and with "
+         "calibration.distance_error, beacons[i].known_position... see docs/scenes.md) and with "
          "all of them.  Prints each source's measurement deltas and target error beside the "
          "first-order prediction (the solver's Jacobian times the measured deltas); writes "
          "DIR/budget.json and a tornado chart DIR/budget.png; each run's frames in its own "
@@ -242,7 +242,7 @@ def _budget(args) -> int:
     found = sources(scene)
     if not found:
         print(f"{scene.name}: no bench imperfections in {args.scene}: only the ideal bench "
-              "is evaluated (see INTERFACE.md, Bench imperfections)", file=sys.stderr)
+              "is evaluated (see docs/scenes.md, Bench imperfections)", file=sys.stderr)
     out = out_folder(args, scene, "budget")
     step = (None if args.quiet else lambda label, k, runs: print(f"[{k}/{runs}] {label}",
                                                                  file=sys.stderr, flush=True))

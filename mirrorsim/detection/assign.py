@@ -69,7 +69,7 @@ def assign_beacons(pencils: list[ImageMeasurement], view: CaptureRecord
 REFLECTION_EXCESS = 0.05
 MISPLACED_DISTANCE = 0.02  # within this of a beacon's own distance: its direct view
 # how far off its believed bearing a real bench shows a beacon's direct view: a mount's
-# pan reading and a pencil placed by hand (INTERFACE.md Bench imperfections)
+# pan reading and a pencil placed by hand (docs/scenes.md Bench imperfections)
 BENCH_BEARING_DEG = 2.0
 
 

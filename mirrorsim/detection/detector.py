@@ -185,7 +185,7 @@ class Detection:
                 for b, m in self.beacons]
 
     def to_json(self) -> dict:
-        """The measurements of INTERFACE.md plus a ``detector`` block with each image's
+        """The measurements of docs/files.md plus a ``detector`` block with each image's
         pixels (axis column, edges, bbox, clipping, direct or mirror)."""
         t = self.target
         out = Measurements(observer=self.observer, targets=[(t.alpha_deg, t.d_total)],

@@ -1,4 +1,4 @@
-"""The capture record: what the experimenter knows about a frame (INTERFACE.md).
+"""The capture record: what the experimenter knows about a frame (docs/files.md).
 
 ``render`` writes ``<name>.capture.json`` beside each frame; the detector reads only it
 and the pixels.  It holds the camera as its mount reports it (position, height, pan,

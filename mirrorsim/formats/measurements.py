@@ -1,4 +1,4 @@
-"""The measurement JSON of INTERFACE.md (``detect`` writes it, ``solve`` reads it);
+"""The measurement JSON of docs/files.md (``detect`` writes it, ``solve`` reads it);
 usable for real measurements as well as simulated ones."""
 
 from __future__ import annotations

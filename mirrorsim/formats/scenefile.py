@@ -90,7 +90,7 @@ def read_render(r: Reader, block: Any, key: str = "render", seed: bool = True
 
 
 def scene_from_dict(data: Any, source: str = "<scene>", default_name: str = "scene") -> Scene:
-    """Build and validate a :class:`Scene` from parsed YAML (see INTERFACE.md)."""
+    """Build and validate a :class:`Scene` from parsed YAML (see docs/scenes.md)."""
     r = Reader(source, SceneError)
     top = r.mapping(
         data, "",
@@ -151,7 +151,7 @@ MIRROR_IMPERFECTIONS = _leaves("mirror")
 
 def _bench(r: Reader, cam: dict, m: dict, cal: Any, mirror: Mirror,
            resolution: tuple[int, int], hfov: float) -> Bench:
-    """The bench imperfections (INTERFACE.md), each read in its registry form; every key
+    """The bench imperfections (docs/scenes.md), each read in its registry form; every key
     optional, absent = ideal."""
     blocks = {"camera": cam, "mirror": m,
               "calibration": r.mapping(cal, "calibration", set(), set(_leaves("calibration")))}

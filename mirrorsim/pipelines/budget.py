@@ -33,7 +33,7 @@ STEPS = (1e-4, 1e-3, 1e-3)
 
 @dataclass(frozen=True)
 class Delta:
-    """A source's measurements minus the ideal frame's (INTERFACE.md ``delta``)."""
+    """A source's measurements minus the ideal frame's (docs/files.md ``delta``)."""
 
     target_alpha_deg: float
     target_d_total_pct: float
@@ -81,7 +81,7 @@ class Contribution:
 
 @dataclass(frozen=True)
 class Budget:
-    """``mirrorsim budget``'s result (INTERFACE.md *Error budget*)."""
+    """``mirrorsim budget``'s result (docs/files.md *Error budget*)."""
 
     scene: str
     ideal_cm: float

@@ -127,7 +127,7 @@ def calibrate(camera: Camera, target_size, pencil_height: float, *, variant: str
     """K for the target and the pencil with this camera (cached).
 
     ``distance_error``: a bench's reference objects stood this much farther than the
-    D_REF that K assumes (INTERFACE.md ``calibration.distance_error``), so every K, and
+    D_REF that K assumes (docs/scenes.md ``calibration.distance_error``), so every K, and
     every d_total measured with it, comes out too small by about that fraction.
     """
     key = calibration_key(camera, target_size, pencil_height, distance_error)

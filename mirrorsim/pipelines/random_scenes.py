@@ -366,7 +366,7 @@ def _sample(spec: dict, rng: int | np.random.Generator | None, name: str,
 
 
 def to_yaml(scene: Scene) -> str:
-    """The scene as a scene file (INTERFACE.md's format)."""
+    """The scene as a scene file (docs/scenes.md's format)."""
     c, m, t = scene.camera, scene.mirror, scene.target
     d = {"name": scene.name,
          "board": {"size": list(scene.board.size), "hole_pitch": scene.board.hole_pitch},

@@ -1,6 +1,6 @@
 """Scores against the ground truth and the evaluation report, with their JSON.
 
-Each class has one ``to_json`` (the documents of INTERFACE.md) and one ``from_json``.
+Each class has one ``to_json`` (the documents of docs/files.md) and one ``from_json``.
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ class Score:
     target_crlb_cm: float | None = None
 
     def to_json(self) -> dict:
-        """INTERFACE.md's ``errors`` block."""
+        """docs/files.md's ``errors`` block."""
         return {"target_cm": self.target_cm, "mirror_yaw_deg": self.mirror_yaw_deg,
                 "mirror_offset_cm": self.mirror_offset_cm,
                 "reflection_point_cm": self.reflection_point_cm,
@@ -59,7 +59,7 @@ class Score:
 
 
 def score(truth: GroundTruth, measurements: Measurements, sol: Solution) -> Score:
-    """Errors of measurements and estimate against the ground truth (INTERFACE.md)."""
+    """Errors of measurements and estimate against the ground truth (docs/files.md)."""
     t_true = np.asarray(truth.target.position, float)
     rp_true = np.asarray(truth.target.reflection_point, float)
     n = line_normal(sol.mirror.yaw_deg)
@@ -142,7 +142,7 @@ class Report:
         return all(f.reused for f in self.frames)
 
     def to_json(self) -> dict:
-        """The evaluation report of INTERFACE.md (plus frames, render, calibration)."""
+        """The evaluation report of docs/files.md (plus frames, render, calibration)."""
         out = {"scene": self.scene, "truth": self.truth.to_json(),
                "measurements": self.measurements.to_json(),
                "solution": self.solution.to_json(), "errors": self.errors.to_json(),

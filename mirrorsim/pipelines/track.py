@@ -68,7 +68,7 @@ class TrackStep:
     mirror_nees: float = float("nan")
 
     def to_json(self) -> dict:
-        """The step as INTERFACE.md's track report writes it."""
+        """The step as docs/files.md's track report writes it."""
         return {"step": self.step, "beacon_position": list(self.beacon_position),
                 "commanded_position": list(self.commanded),
                 "path_length_cm": self.path_length_cm, "seen": self.seen,
@@ -99,7 +99,7 @@ class TrackReport:
         return self.steps[-1]
 
     def to_json(self) -> dict:
-        """INTERFACE.md's track report."""
+        """docs/files.md's track report."""
         f = self.final
         return {"scene": self.scene, "path": self.path, "heading": self.heading,
                 "odometry_sigma_cm": self.odometry_sigma,

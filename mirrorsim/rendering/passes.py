@@ -96,9 +96,15 @@ def render_frame(scene: Scene, *, variant: str = "auto", progress: bool = True
     with variant_scope(chosen):
         tiles = tuple(sorted({t for *_, t in passes}))
         mi_scene = mi.load_dict(build_scene_dict(pinhole, tiles), optimize=False)
-        with tqdm(total=(spp if box is None else background) + sum(n for _, n, _, _ in passes),
-                  unit="spp", disable=not progress, leave=False,
-                  desc=f"rendering {scene.name} ({chosen})") as bar:
+        # the bar counts the samples path-traced (millions): the whole film's, then
+        # each box's tiles' (a box's pixels take more samples than the film's)
+        film = pinhole.camera.width * pinhole.camera.height_px
+        total = film * (spp if box is None else background) + sum(
+            n * t * t * _tiles(region, t) for region, n, _, t in passes)
+        with tqdm(total=total / 1e6, unit="M samples", disable=not progress,
+                  leave=False, desc=f"rendering {scene.name} ({chosen})",
+                  bar_format="{l_bar}{bar}| {n:.1f}/{total:.1f} M samples "
+                             "[{elapsed}<{remaining}, {rate_fmt}]") as bar:
             linear = _render_regions(mi_scene, pinhole.camera,
                                      spp if box is None else background, passes, seed,
                                      bar.update)
@@ -136,23 +142,29 @@ def _regions(pinhole: Scene, spp: int) -> tuple[Region | None, int, int, list[Re
     return box, background, beacon_spp, boxes, passes
 
 
+def _tiles(region: Region, t: int) -> int:
+    """How many tiles of t px cover ``region``."""
+    u0, v0, u1, v1 = region
+    return -(-(u1 - u0) // t) * -(-(v1 - v0) // t)
+
+
 def _render_regions(mi_scene, cam: Camera, whole_spp: int,
                     passes: list[tuple[Region, int, int, int]], seed: int,
                     step: Callable[[float], object]) -> np.ndarray:
     """The whole film at ``whole_spp``, then each pass's region over it, tile by tile
     (each tile with its own seed stream)."""
     sensors = {s.id(): s for s in mi_scene.sensors()}
-    linear = _accumulate(mi_scene, sensors["sensor"], whole_spp, (seed, 0), step)
-    H, W = linear.shape[:2]
+    H, W = cam.height_px, cam.width
+    linear = _accumulate(mi_scene, sensors["sensor"], whole_spp, (seed, 0),
+                         lambda m: step(m * W * H / 1e6))
     for (u0, v0, u1, v1), n, stream, t in passes:
         sensor = sensors[f"sensor_tile{t}"]
         params = mi.traverse(sensor)
         corners = [(u, v) for v in range(v0, v1, t) for u in range(u0, u1, t)]
-        share = 1.0 / len(corners)  # the progress bar counts a region's spp once
         for k, (u, v) in enumerate(corners):
             aim_tile(params, cam, t, u, v)
             img = _accumulate(mi_scene, sensor, n, (seed, stream, k),
-                              lambda m, f=share: step(m * f), _tile_pass(n, t))
+                              lambda m, px=t * t: step(m * px / 1e6), _tile_pass(n, t))
             # the tile's part inside the region (a tile may reach past it, or the film)
             h, w = min(t, v1 - v, H - v), min(t, u1 - u, W - u)
             linear[v:v + h, u:u + w] = img[:h, :w]

@@ -127,7 +127,7 @@ def _linear(name: str, column: str, doc: str) -> tuple[Feature, ...]:
     return (Feature(name, doc, lambda col, _obj: col(column)),)
 
 
-# In INTERFACE.md's order, which is also the dataset's column order and the order a spec's
+# In docs/scenes.md's order, which is also the dataset's column order and the order a spec's
 # bench block is drawn in (so the same seed draws the same scenes).
 REGISTRY: tuple[Imperfection, ...] = (
     Imperfection(
@@ -246,7 +246,7 @@ class Source:
 
 
 def sources(scene: Scene) -> list[Source]:
-    """The imperfections present in ``scene``, in INTERFACE.md's order.
+    """The imperfections present in ``scene``, in docs/scenes.md's order.
 
     ``camera.distortion_known`` is not a source of its own: it says whether the
     ``camera.distortion`` source is corrected by the detector.

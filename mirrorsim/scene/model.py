@@ -208,7 +208,7 @@ class SensorNoise:
 
 @dataclass(frozen=True)
 class Bench:
-    """The imperfections of a real bench (INTERFACE.md *Bench imperfections*); the
+    """The imperfections of a real bench (docs/scenes.md *Bench imperfections*); the
     defaults are the ideal bench.  The beacons' believed positions live on
     :class:`Beacon`.  None of this reaches :mod:`mirrorsim.truth.optics`' truth: it changes
     what is rendered, or what the capture record says, or the calibration."""

@@ -1,6 +1,6 @@
 """The exact ground truth of a scene and its JSON (``render``'s ``<name>.json``).
 
-Each class has one ``to_json`` (the documents of INTERFACE.md) and one ``from_json``.
+Each class has one ``to_json`` (the documents of docs/files.md) and one ``from_json``.
 Every consumer (the CLI's tables, the plots, the dataset's rows) reads attributes.
 """
 
@@ -45,7 +45,7 @@ class ObjectTruth:
     visible_px: int | None = None
 
     def to_json(self) -> dict:
-        """INTERFACE.md's ``target`` / ``beacons[i]`` entry."""
+        """docs/files.md's ``target`` / ``beacons[i]`` entry."""
         out = {"position": list(self.position), "virtual": list(self.virtual),
                "alpha_deg": self.alpha_deg, "d_total": self.d_total, "d1": self.d1,
                "d2": self.d2, "reflection_point": list(self.reflection_point),
@@ -145,7 +145,7 @@ class GroundTruth:
         return round(float(wrap_yaw(self.mirror.yaw)), 9)
 
     def to_json(self) -> dict:
-        """The ground-truth document of INTERFACE.md."""
+        """The ground-truth document of docs/files.md."""
         cam, mir = self.camera, self.mirror
         mirror = {"center": list(mir.center), "yaw_deg": self.mirror_yaw_deg,
                   "size": list(mir.size)}
