@@ -4,11 +4,12 @@ cannot drift from it.
     python docs/gen_reference.py          # rewrite docs/generated/*.md
     python docs/gen_reference.py --check  # exit 1, naming the file, where one differs
 
-Generated: the bench imperfections' scene keys (from their registry), the dataset's
-columns (from the table's declarations), the render settings' defaults and bounds, and
-worked examples of the JSON documents made by the code on the bundled default scene (its
-capture record, its exact measurements, the solver's solution of them).  The pages
-include these files (``--8<--``); ``tests/test_docs.py`` runs ``--check``.
+Generated: the template scene (``mirrorsim new``), the bench imperfections' scene keys
+(from their registry), the dataset's columns (from the table's declarations), the render
+settings' defaults and bounds, and worked examples of the JSON documents made by the
+code on the bundled default scene (its ground truth, capture record, exact measurements
+and the solver's solution of them).  The pages include these files (``--8<--``);
+``tests/test_docs.py`` checks them.
 """
 
 from __future__ import annotations
@@ -98,10 +99,18 @@ def _rounded(doc):
     return doc
 
 
+def scene_template() -> str:
+    """The template scene ``mirrorsim new`` writes (named my_bench)."""
+    from mirrorsim.formats.scenefile import scene_template as template
+
+    return "```yaml\n" + template("my_bench.yaml") + "```\n"
+
+
 def pages() -> dict[str, str]:
     """Every generated file's text."""
-    out = {"bench_keys.md": bench_keys(), "dataset_columns.md": dataset_columns(),
-           "render_settings.md": render_settings(), **examples()}
+    out = {"scene_template.md": scene_template(), "bench_keys.md": bench_keys(),
+           "dataset_columns.md": dataset_columns(), "render_settings.md": render_settings(),
+           **examples()}
     return {name: HEADER + text for name, text in out.items()}
 
 

@@ -115,3 +115,30 @@ def test_make_demo_prints_the_readme_table(tmp_path):
     keep = lambda text: [ln for ln in text.splitlines()  # noqa: E731
                          if not ln.startswith(("report:", "top view:", "annotated:"))]
     assert keep(p.stdout) == keep(want)
+
+
+def test_every_key_of_the_template_scene_is_in_the_scene_reference():
+    """The reference table names every key the template (`mirrorsim new`) writes, and
+    every bench key of the registry (its own generated table)."""
+    import yaml
+
+    from mirrorsim.formats.scenefile import scene_template
+
+    doc = re.sub(r'^--8<-- "([^"]+)"',
+                 lambda m: (DOCS / m.group(1)).read_text(encoding="utf-8"),
+                 (DOCS / "scenes.md").read_text(encoding="utf-8"), flags=re.M)
+    data = yaml.safe_load(scene_template("x.yaml"))
+
+    def paths(value, prefix=""):
+        if isinstance(value, dict):
+            for k, v in value.items():
+                yield from paths(v, f"{prefix}.{k}" if prefix else k)
+        elif isinstance(value, list) and value and isinstance(value[0], dict):
+            for item in value:
+                yield from paths(item, prefix)
+        else:
+            yield prefix
+
+    for key in set(paths(data)):
+        leaf = key.split(".")[-1]
+        assert f"`{key}`" in doc or f".{leaf}`" in doc or f"`{leaf}`" in doc, key

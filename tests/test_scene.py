@@ -189,3 +189,19 @@ def test_calibrate_command_gives_the_pinhole_constant(capsys):
     k = json.loads(out)  # `--json -`: the JSON alone on stdout, the table on stderr
     assert k["target_k"] == pytest.approx(scene.camera.fx * 15.25, rel=0.003)
     assert "px at 1 m" in err
+
+
+def test_new_writes_a_template_that_check_accepts_and_never_writes_over(tmp_path, capsys):
+    from mirrorsim.cli.main import main
+
+    path = tmp_path / "my_bench.yaml"
+    assert main(["new", str(path)]) == 0
+    scene = load_scene(path)
+    assert scene.name == "my_bench" and len(scene.beacons) == 2
+    assert main(["check", str(path)]) == 0
+    before = path.read_bytes()
+    capsys.readouterr()
+    assert main(["new", str(path)]) == 2
+    assert "exists" in capsys.readouterr().err and path.read_bytes() == before
+    assert main(["new", str(tmp_path / "bad name.yaml")]) == 2
+    assert not (tmp_path / "bad name.yaml").exists()

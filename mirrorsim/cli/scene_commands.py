@@ -46,6 +46,33 @@ def _render(args) -> int:
     return 0
 
 
+def _new_options(p):
+    p.add_argument("scene", type=Path, help="the scene file to write (YAML; must not exist)")
+
+
+@command("new", "write a commented template scene",
+         "Write SCENE: a complete scene with every key commented (a camera at the board's "
+         "corner, a mirror, a target behind a wall, two pencil beacons), named after the "
+         "file, that `mirrorsim check` accepts.  Edit it from there; docs/scenes.md lists "
+         "every key.  An existing file is never written over.",
+         _new_options)
+def _new(args) -> int:
+    from mirrorsim.formats.files import write_text
+    from mirrorsim.formats.scenefile import scene_template
+
+    path = Path(args.scene)
+    text = scene_template(path)  # refuses a name that cannot be a scene's
+    if path.exists() or path.is_symlink():
+        raise BadArgument("SCENE", f"{str(path)!r} exists: mirrorsim new never writes over a "
+                                   "file; give a new name")
+    from mirrorsim.formats.files import check_output_file
+
+    check_output_file(path, "SCENE")
+    write_text(path, text)
+    print(f"{path}: a template scene; check it with `mirrorsim check {path}`")
+    return 0
+
+
 def _check_options(p):
     common(p, json="the exact ground truth")
     output(p, "--measurements", "file", metavar="FILE",

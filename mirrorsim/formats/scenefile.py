@@ -46,6 +46,9 @@ EDGE_ON_LIMIT_DEG = 5.0  # a mirror seen at a more grazing angle than this is ed
 DEFAULT_RESOLUTION = (1920, 1088)
 
 
+# a scene's name: a plain file name
+NAME_PATTERN = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")
+
 def load_scene(path: str | Path) -> Scene:
     """Read and validate a scene file.
 
@@ -98,7 +101,7 @@ def scene_from_dict(data: Any, source: str = "<scene>", default_name: str = "sce
         optional={"name", "beacon", "beacons", "occluders", "render", "calibration"},
     )
     name = top.get("name", default_name)
-    if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}", name):
+    if not isinstance(name, str) or not NAME_PATTERN.fullmatch(name):
         rule = "letters, digits, '.', '_', '-'; no path"
         if "name" not in top:  # the file's own name stands in: say so, not blame a key
             raise r.fail("", f"has no `name:` and its file name {show(name)} cannot stand in "
@@ -364,3 +367,21 @@ def _check_overlaps(scene: Scene, r: Reader, bkey) -> None:
 
 def _fmt(p) -> str:
     return "[" + ", ".join(f"{float(v):g}" for v in p) + "]"
+
+
+def scene_template(path: str | Path) -> str:
+    """The commented template scene (``mirrorsim new``), named after ``path``'s stem.
+
+    Raises
+    ------
+    SceneError
+        When the file's name cannot be a scene's name.
+    """
+    from importlib import resources
+
+    name = Path(path).stem
+    if not NAME_PATTERN.fullmatch(name):
+        raise SceneError(str(path), "", f"{name!r} cannot name a scene (letters, digits, "
+                                        "'.', '_', '-'; starting with a letter or digit)")
+    text = (resources.files("mirrorsim") / "data" / "template.yaml").read_text(encoding="utf-8")
+    return text.replace("name: NAME ", f"name: {name} ", 1)
