@@ -22,7 +22,10 @@ __all__ = ["InputError", "SolverError", "SceneError", "BadParameter", "BadArgume
 
 
 class SceneError(InputError):
-    """A bad scene or dataset-spec file."""
+    """A bad scene or dataset-spec file.  ``others``: the further failures found in the
+    same file (independent of this one; ``mirrorsim check`` lists them all)."""
+
+    others: tuple[SceneError, ...] = ()
 
 
 class BadParameter(InputError):

@@ -205,3 +205,53 @@ def test_new_writes_a_template_that_check_accepts_and_never_writes_over(tmp_path
     assert "exists" in capsys.readouterr().err and path.read_bytes() == before
     assert main(["new", str(tmp_path / "bad name.yaml")]) == 2
     assert not (tmp_path / "bad name.yaml").exists()
+
+
+def _scene_text(**changes) -> str:
+    base = {"board": "{size: [80, 80]}",
+            "camera": "{position: [0, 0], height: 6, hfov: 65.2, pan: mirror}",
+            "mirror": "{center: [30, 62], yaw: 20, size: [18.2, 13.25]}",
+            "target": "{position: [57, 50], size: [9.9, 15.25]}",
+            "beacon": "{position: [36, 56], height: 4.2}"}
+    base.update(changes)
+    return "name: s\n" + "".join(f"{k}: {v}\n" for k, v in base.items())
+
+
+def test_check_lists_every_failure_and_other_commands_count_them(tmp_path, capsys):
+    """Three independent failures (a negative height, spp 0, a beacon off the board are
+    in blocks read apart): check prints each on its own line; evaluate prints the first
+    and says how many more, and renders nothing."""
+    path = tmp_path / "s.yaml"
+    path.write_text(_scene_text(beacon="{position: [36, 56], height: -4.2}",
+                                render="{spp: 0}"))
+    assert main(["check", str(path)]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 2 and "beacon.height" in lines[0] and "render.spp" in lines[1]
+    path.write_text(_scene_text(target="{position: [57, 95], size: [9.9, 15.25]}",
+                                beacon="{position: [90, 56], height: 4.2}"))
+    assert main(["check", str(path)]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert [ln.split(": ")[2] for ln in lines] == ["target.position", "beacon.position"]
+    assert main(["evaluate", str(path), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "(and 1 more: `mirrorsim check` lists them)" in err[0]
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("change, hint", [
+    ({"camera": "{position: [0, 0], height: 6, hfov: 1.138, pan: mirror}"},
+     "camera.hfov is in degrees: 1.138 looks like radians (65.2°)?"),
+    ({"mirror": "{center: [30, 62], yaw: 0.349, size: [18.2, 13.25]}"},
+     "mirror.yaw is in degrees: 0.349 looks like radians (20.0°)?"),
+    ({"mirror": "{center: [30, 62], yaw: 20, size: [182, 132.5]}"},
+     "mirror.size is in cm: [182, 132.5] looks like mm?"),
+    ({"target": "{position: [570, 500], size: [9.9, 15.25]}"}, "target.position in cm: mm?"),
+])
+def test_a_value_in_other_units_gets_a_hint_where_a_check_fails(tmp_path, change, hint):
+    path = tmp_path / "s.yaml"
+    path.write_text(_scene_text(**change))
+    with pytest.raises(SceneError) as info:
+        load_scene(path)
+    assert hint in str(info.value)
+    path.write_text(_scene_text())  # the same scene in the right units: valid, no hint
+    load_scene(path)

@@ -124,7 +124,13 @@ def _run(args: argparse.Namespace) -> int:
         if status is None:
             raise
         what = "cannot solve: " if isinstance(exc, SolverError) else ""
-        print(f"error: {what}{exc}", file=sys.stderr)
+        others = getattr(exc, "others", ())  # a scene file's further failures
+        if others and args.command == "check":  # check lists every failure, a line each
+            for e in (exc, *others):
+                print(f"error: {e}", file=sys.stderr)
+            return status
+        more = (f" (and {len(others)} more: `mirrorsim check` lists them)" if others else "")
+        print(f"error: {what}{exc}{more}", file=sys.stderr)
         return status
 
 

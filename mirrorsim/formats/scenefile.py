@@ -93,13 +93,116 @@ def read_render(r: Reader, block: Any, key: str = "render", seed: bool = True
 
 
 def scene_from_dict(data: Any, source: str = "<scene>", default_name: str = "scene") -> Scene:
-    """Build and validate a :class:`Scene` from parsed YAML (see docs/scenes.md)."""
+    """Build and validate a :class:`Scene` from parsed YAML (see docs/scenes.md).
+
+    Raises
+    ------
+    SceneError
+        The first failure, with every other one found in the file in ``others``: the
+        blocks are read independently, and the checks between objects (on the board,
+        in front of the mirror, overlaps, sight) each run where their blocks were read.
+    """
     r = Reader(source, SceneError)
     top = r.mapping(
         data, "",
         required={"board", "camera", "mirror", "target"},
         optional={"name", "beacon", "beacons", "occluders", "render", "calibration"},
     )
+    f = _Failures()
+    name = f.attempt(_name, r, top, default_name)
+    board = f.attempt(_board, r, top["board"])
+    cam = f.attempt(r.mapping, top["camera"], "camera", {"position", "height", "hfov", "pan"},
+                    {"resolution", *CAMERA_IMPERFECTIONS})
+    pan = position = model = None
+    if cam is not None:
+        pan = f.attempt(read_pan, r, cam["pan"], "camera.pan")
+        position = f.attempt(r.pair, cam["position"], "camera.position")
+        model = f.attempt(read_camera_model, r, cam, "camera")
+    m = f.attempt(r.mapping, top["mirror"], "mirror", {"center", "yaw", "size"},
+                  set(MIRROR_IMPERFECTIONS))
+    mirror = None if m is None else f.attempt(_mirror, r, m)
+    target_position, target_size = f.attempt(_target, r, top["target"], default=(None, None))
+    beacons, bkey = f.attempt(_beacons, r, top, default=(None, None))
+    occluders = f.attempt(_occluders, r, top.get("occluders", []))
+    rs = f.attempt(read_render, r, top.get("render", {}))
+    f.raise_any()  # a block that cannot be read leaves nothing to check between them
+
+    height, hfov, resolution = model
+    hint = _unit_hints(board, mirror, hfov, [
+        ("camera.position", position), ("mirror.center", mirror.center),
+        ("target.position", target_position),
+        *((f"{bkey(i)}.position", b.position) for i, b in enumerate(beacons))])
+    on_board = _board_check(r, board)
+    bench = f.attempt(_bench, r, cam, m, top.get("calibration", {}), mirror, resolution, hfov)
+    _check_all_on_board(f, on_board, position, mirror, target_position, beacons, bkey,
+                        occluders)
+    f.raise_any(hint)
+    f.attempt(_check_mirror_faces, f, r, position, mirror, target_position, beacons, bkey)
+    f.raise_any(hint)
+
+    # derived values, computed once here: the panel faces the camera's virtual image
+    target = Target(target_position, target_size,
+                    optics.target_facing(position, mirror, target_position))
+    for end in target.ends():
+        f.attempt(on_board, end, "target.position", f"the target panel's edge {_fmt(end)}")
+    f.raise_any(hint)
+    pan_deg = optics.resolve_pan(position, pan, mirror, target_position, beacons[0].position)
+    camera = Camera(position, height, resolution, hfov, pan, pan_deg)
+    scene = Scene(name=name, board=board, camera=camera, mirror=mirror, target=target,
+                  beacons=beacons, occluders=occluders, render=rs, bench=bench, source=source)
+    _check_overlaps(f, scene, r, bkey)
+    warnings = _check_sight(f, scene, r, bkey)
+    f.raise_any(hint)
+    return replace(scene, warnings=warnings)
+
+
+class _Failures:
+    """The failures found so far in one file: each independent check is attempted, and
+    the first failure is raised with the others attached (``SceneError.others``)."""
+
+    def __init__(self):
+        self.found: list[SceneError] = []
+
+    def attempt(self, fn: Callable, *args, default: Any = None) -> Any:
+        """``fn(*args)``, or ``default`` with its SceneError recorded."""
+        try:
+            return fn(*args)
+        except SceneError as exc:
+            self.found.append(exc)
+            return default
+
+    def raise_any(self, hint: str = "") -> None:
+        """Raise the first failure found, the others attached (and ``hint`` added to
+        its line: a value in the wrong units is blamed on another key)."""
+        if self.found:
+            first = self.found[0]
+            if hint:
+                first = SceneError(first.file, first.key, f"{first.message} ({hint})")
+            first.others = tuple(self.found[1:])
+            raise first
+
+
+def _unit_hints(board: Board, mirror: Mirror, hfov: float, positions) -> str:
+    """Why a geometric check may have failed: a length given in mm, an angle in radians.
+    Only said once a check has failed, since each such value is also a valid one."""
+    W, H = board.size
+    hints = []
+    if hfov <= math.pi:
+        hints.append(f"camera.hfov is in degrees: {hfov:g} looks like radians "
+                     f"({math.degrees(hfov):.1f}°)?")
+    if 0 < abs(mirror.yaw) <= 2 * math.pi and mirror.yaw != round(mirror.yaw):
+        hints.append(f"mirror.yaw is in degrees: {mirror.yaw:g} looks like radians "
+                     f"({math.degrees(mirror.yaw):.1f}°)?")
+    if max(mirror.size) > max(W, H) >= max(mirror.size) / 10:
+        hints.append(f"mirror.size is in cm: {_fmt(mirror.size)} looks like mm?")
+    off = [k for k, p in positions if not (0 <= p[0] <= W and 0 <= p[1] <= H)
+           and 0 <= p[0] / 10 <= W and 0 <= p[1] / 10 <= H]
+    if off:
+        hints.append(f"{', '.join(off)} in cm: mm?")
+    return "; ".join(hints)
+
+
+def _name(r: Reader, top: dict, default_name: str) -> str:
     name = top.get("name", default_name)
     if not isinstance(name, str) or not NAME_PATTERN.fullmatch(name):
         rule = "letters, digits, '.', '_', '-'; no path"
@@ -107,40 +210,19 @@ def scene_from_dict(data: Any, source: str = "<scene>", default_name: str = "sce
             raise r.fail("", f"has no `name:` and its file name {show(name)} cannot stand in "
                          f"for one ({rule}): add a `name:` key")
         raise r.fail("name", f"{show(name)} is not a plain file name ({rule})")
-    board = _board(r, top["board"])
-    cam = r.mapping(top["camera"], "camera", {"position", "height", "hfov", "pan"},
-                    {"resolution", *CAMERA_IMPERFECTIONS})
-    pan = read_pan(r, cam["pan"], "camera.pan")
-    position = r.pair(cam["position"], "camera.position")
-    height, hfov, resolution = read_camera_model(r, cam, "camera")
+    return name
 
-    m = r.mapping(top["mirror"], "mirror", {"center", "yaw", "size"}, set(MIRROR_IMPERFECTIONS))
-    mirror = Mirror(center=r.pair(m["center"], "mirror.center"),
-                    yaw=r.number(m["yaw"], "mirror.yaw"),
-                    size=r.pair(m["size"], "mirror.size", positive=True, high=MAX_BOARD_CM))
-    t = r.mapping(top["target"], "target", {"position", "size"})
-    target_position = r.pair(t["position"], "target.position")
-    target_size = r.pair(t["size"], "target.size", positive=True, high=MAX_BOARD_CM)
-    beacons, bkey = _beacons(r, top)
-    occluders = _occluders(r, top.get("occluders", []))
-    rs = read_render(r, top.get("render", {}))
 
-    on_board = _board_check(r, board)
-    bench = _bench(r, cam, m, top.get("calibration", {}), mirror, resolution, hfov)
-    _check_all_on_board(on_board, position, mirror, target_position, beacons, bkey, occluders)
-    _check_mirror_faces(r, position, mirror, target_position, beacons, bkey)
+def _mirror(r: Reader, m: dict) -> Mirror:
+    return Mirror(center=r.pair(m["center"], "mirror.center"),
+                  yaw=r.number(m["yaw"], "mirror.yaw"),
+                  size=r.pair(m["size"], "mirror.size", positive=True, high=MAX_BOARD_CM))
 
-    # derived values, computed once here: the panel faces the camera's virtual image
-    target = Target(target_position, target_size,
-                    optics.target_facing(position, mirror, target_position))
-    for end in target.ends():
-        on_board(end, "target.position", f"the target panel's edge {_fmt(end)}")
-    pan_deg = optics.resolve_pan(position, pan, mirror, target_position, beacons[0].position)
-    camera = Camera(position, height, resolution, hfov, pan, pan_deg)
-    scene = Scene(name=name, board=board, camera=camera, mirror=mirror, target=target,
-                  beacons=beacons, occluders=occluders, render=rs, bench=bench, source=source)
-    _check_overlaps(scene, r, bkey)
-    return replace(scene, warnings=_check_sight(scene, r, bkey))
+
+def _target(r: Reader, raw: Any) -> tuple[tuple[float, float], tuple[float, float]]:
+    t = r.mapping(raw, "target", {"position", "size"})
+    return (r.pair(t["position"], "target.position"),
+            r.pair(t["size"], "target.size", positive=True, high=MAX_BOARD_CM))
 
 
 def _leaves(block: str) -> tuple[str, ...]:
@@ -278,21 +360,25 @@ def read_pan(r: Reader, raw: Any, key: str) -> float | str:
     return r.number(raw, key)
 
 
-def _check_all_on_board(on_board, position, mirror: Mirror, target_position, beacons,
-                        bkey, occluders) -> None:
+def _check_all_on_board(f: _Failures, on_board, position, mirror: Mirror, target_position,
+                        beacons, bkey, occluders) -> None:
     """Every object stands on the board (the mirror's ends, believed positions too)."""
-    on_board(position, "camera.position", "the camera")
-    on_board(mirror.center, "mirror.center", "the mirror")
-    for end in mirror.ends():
-        on_board(end, "mirror.center", f"the mirror's end {_fmt(end)}")
-    on_board(target_position, "target.position", "the target")
+    f.attempt(on_board, position, "camera.position", "the camera")
+    if f.attempt(on_board, mirror.center, "mirror.center", "the mirror", default=False) \
+            is None:  # the mirror's ends only where its centre is on the board
+        for end in mirror.ends():
+            if f.attempt(on_board, end, "mirror.center", f"the mirror's end {_fmt(end)}",
+                         default=False) is False:
+                break
+    f.attempt(on_board, target_position, "target.position", "the target")
     for i, b in enumerate(beacons):
-        on_board(b.position, f"{bkey(i)}.position", "the beacon")
+        f.attempt(on_board, b.position, f"{bkey(i)}.position", "the beacon")
         if b.known_position is not None:
-            on_board(b.known_position, f"{bkey(i)}.known_position", "the believed position")
+            f.attempt(on_board, b.known_position, f"{bkey(i)}.known_position",
+                      "the believed position")
     for i, o in enumerate(occluders):
-        on_board(o.start, f"occluders[{i}].start", "the wall's start")
-        on_board(o.end, f"occluders[{i}].end", "the wall's end")
+        f.attempt(on_board, o.start, f"occluders[{i}].start", "the wall's start")
+        f.attempt(on_board, o.end, f"occluders[{i}].end", "the wall's end")
 
 
 def _board_check(r: Reader, board: Board):
@@ -306,8 +392,8 @@ def _board_check(r: Reader, board: Board):
     return on_board
 
 
-def _check_mirror_faces(r: Reader, camera_position, mirror: Mirror, target_position,
-                        beacons, bkey) -> None:
+def _check_mirror_faces(f: _Failures, r: Reader, camera_position, mirror: Mirror,
+                        target_position, beacons, bkey) -> None:
     """The camera must see the mirror's face, and the objects stand in front of it."""
     # The reflective face is the one turned towards the camera; a camera on the line
     # (or nearly so) sees the mirror edge-on.
@@ -325,12 +411,12 @@ def _check_mirror_faces(r: Reader, camera_position, mirror: Mirror, target_posit
             raise r.fail(key, f"{_fmt(p)}: the {what} stands behind the mirror (on its back, "
                          f"{abs(s):.2f} cm from its surface line), so the mirror cannot show it")
 
-    in_front(target_position, "target.position", "target")
+    f.attempt(in_front, target_position, "target.position", "target")
     for i, b in enumerate(beacons):
-        in_front(b.position, f"{bkey(i)}.position", "beacon")
+        f.attempt(in_front, b.position, f"{bkey(i)}.position", "beacon")
 
 
-def _check_sight(scene: Scene, r: Reader, bkey) -> tuple[str, ...]:
+def _check_sight(f: _Failures, scene: Scene, r: Reader, bkey) -> tuple[str, ...]:
     """Refuse images that do not reach the camera; warn of clipped or direct views."""
     sighted = [("target.position", scene.target, "target")] + [
         (f"{bkey(i)}.position", b, "beacon") for i, b in enumerate(scene.beacons)]
@@ -338,8 +424,9 @@ def _check_sight(scene: Scene, r: Reader, bkey) -> tuple[str, ...]:
     for key, obj, what in sighted:
         vis = visibility.visibility(scene, obj)
         if vis.axis_fraction == 0.0:
-            raise r.fail(key, f"{_fmt(obj.position)}: the {what}'s image does not reach the "
-                         f"camera through the mirror: {vis.reason}")
+            f.found.append(r.fail(key, f"{_fmt(obj.position)}: the {what}'s image does not "
+                                  f"reach the camera through the mirror: {vis.reason}"))
+            continue
         if vis.clipped:
             warnings.append(f"{key}: the {what}'s image is clipped ({vis.reason})")
     direct = visibility.direct_view_fraction(scene, scene.target)
@@ -349,7 +436,7 @@ def _check_sight(scene: Scene, r: Reader, bkey) -> tuple[str, ...]:
     return tuple(warnings)
 
 
-def _check_overlaps(scene: Scene, r: Reader, bkey) -> None:
+def _check_overlaps(f: _Failures, scene: Scene, r: Reader, bkey) -> None:
     fps = footprints(scene, bkey)
     for j in range(len(fps)):
         for i in range(j):
@@ -358,11 +445,13 @@ def _check_overlaps(scene: Scene, r: Reader, bkey) -> None:
             gap = segment_distance(a0, a1, b0, b1) - ra - rb
             if gap < 0.0:
                 what_i = ki.split(".")[0]
-                raise r.fail(kj, f"overlaps {what_i} (footprints intersect by {-gap:.2f} cm)")
+                f.found.append(r.fail(kj, f"overlaps {what_i} (footprints intersect by "
+                                          f"{-gap:.2f} cm)"))
     cam = np.asarray(scene.camera.position, float)
     for k, a0, a1, ra in fps:
         if segment_distance(cam, cam, a0, a1) < ra:
-            raise r.fail("camera.position", f"{_fmt(cam)}: the camera stands inside {k}")
+            f.found.append(r.fail("camera.position",
+                                  f"{_fmt(cam)}: the camera stands inside {k}"))
 
 
 def _fmt(p) -> str:
