@@ -1,7 +1,7 @@
 """Particle filter convergence on a simulated moving-beacon run (EXP1's mirror).
 
     python benchmarks/particle.py [--seeds 20] [--particles 4000] [--sigma-trs 0.1]
-                             [--sigma-alpha 0.05] [--sigma-d 0.005]
+                             [--sigma-alpha 0.05] [--sigma-d 0.5]
 
 A pencil follows the rectangular path (paper eq 20) in front of the mirror; commands
 are corrupted by σ_trs = 0.1 cm per step, observations by σ = (0.05°, 0.5 %).  The filter
@@ -58,11 +58,11 @@ def main() -> None:
     ap.add_argument("--particles", type=int, default=4000)
     ap.add_argument("--sigma-trs", type=float, default=0.1, help="odometry σ per move, cm")
     ap.add_argument("--sigma-alpha", type=float, default=0.05, help="σ of α, degrees")
-    ap.add_argument("--sigma-d", type=float, default=0.005, help="relative σ of d_total")
+    ap.add_argument("--sigma-d", type=float, default=0.5, help="σ of d_total, in %% of d_total")
     ap.add_argument("--nees", action="store_true",
                     help="the filter's consistency (NEES) instead of its convergence")
     args = ap.parse_args()
-    params = PFParams(Sigma(args.sigma_alpha, args.sigma_d), args.sigma_trs)
+    params = PFParams(Sigma(args.sigma_alpha, args.sigma_d / 100), args.sigma_trs)
     path = path_points("rectangular", (30.0, 60.0), 66.7, 4.0, 1.0, 12)
     rho = line_normal(YAW) @ MIRROR
     if args.nees:
@@ -80,7 +80,7 @@ def main() -> None:
                       for k in range(1, len(controls) + 1)])
     y, o, b = np.array(yaw_errs), np.array(off_errs), np.array(batch)
     print(f"{args.seeds} runs, {args.particles} particles, {y.shape[1]} steps, σ_trs "
-          f"{args.sigma_trs:g} cm, σ = ({args.sigma_alpha:g}°, {100 * args.sigma_d:g} %)\n")
+          f"{args.sigma_trs:g} cm, σ = ({args.sigma_alpha:g}°, {args.sigma_d:g} %)\n")
     print("| step | yaw error median (°) | p90 (°) | offset error median (cm) | p90 (cm) "
           "| batch smoother's yaw error median (°) | p90 (°) |")
     print("|---|---|---|---|---|---|---|")
@@ -108,7 +108,7 @@ def nees_table(args, params: PFParams, path: np.ndarray, rho: float) -> None:
     n = v.shape[0]
     lo, hi = chi2.ppf(0.025, 2 * n) / n, chi2.ppf(0.975, 2 * n) / n
     print(f"filter consistency: {n} seeds, {args.particles} particles, σ_trs "
-          f"{args.sigma_trs:g} cm, σ = ({args.sigma_alpha:g}°, {100 * args.sigma_d:g} %); "
+          f"{args.sigma_trs:g} cm, σ = ({args.sigma_alpha:g}°, {args.sigma_d:g} %); "
           f"a consistent filter's mean NEES lies in {lo:.2f}–{hi:.2f} (95 %)\n")
     print("| step | mean NEES (2 if consistent) | median | truth in the 95 % region |")
     print("|---|---|---|---|")

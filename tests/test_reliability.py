@@ -299,7 +299,8 @@ def test_error_model_files_are_checked_as_measurement_files_are(tmp_path, capsys
     (["montecarlo", "--sigma", "nan", "0.1"], "--sigma"),
     (["montecarlo", "--beacon-depth", "-1"], "geometry"),
     (["plan", DEFAULT, "--d1-spread", "-2"], "--d1-spread"),
-    (["plan", DEFAULT, "--sigma-d", "2"], "--sigma-d"),
+    (["plan", DEFAULT, "--sigma-d", "200"], "--sigma-d"),
+    (["plan", DEFAULT, "--sigma-alpha", "0.01", "--sigma-d", "0"], "--sigma-d"),
 ])
 def test_options_out_of_their_domain_are_refused(capsys, argv, says):
     _refused(capsys, argv, says=(says,))

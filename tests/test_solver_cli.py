@@ -152,8 +152,8 @@ def test_montecarlo_command(capsys):
     """Noise-free draws recover the truth exactly; small noise gives the RMSE that
     first-order propagation through the checked closed form predicts (an oracle apart
     from the Monte Carlo's batch arithmetic); the JSON is strict (paper columns null)."""
-    sa, sd = 0.05, 0.005  # σ_d absolute at d_total 5: --sigma takes it relative
-    assert main(["montecarlo", "--sigma", "0", "0", "--sigma", str(sa), str(sd / 5.0),
+    sa, sd = 0.05, 0.005  # σ_d absolute at d_total 5: --sigma takes it in % of d_total
+    assert main(["montecarlo", "--sigma", "0", "0", "--sigma", str(sa), str(100 * sd / 5.0),
                  "--iterations", "4000", "--seed", "9", "--json", "-"]) == 0
     out = capsys.readouterr().out
     res = json.loads(out[out.index("{"):])

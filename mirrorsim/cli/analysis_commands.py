@@ -85,9 +85,9 @@ def _montecarlo_options(p):
                    help="beacon's distance in front of the mirror")
     p.add_argument("--beacon-along", type=float, default=0.3,
                    help="beacon's offset along the mirror from the reflection point")
-    p.add_argument("--sigma", nargs=2, type=float, action="append", metavar=("ALPHA", "DREL"),
-                   help="a row of your own: σ_α in degrees, σ_d relative, a fraction of "
-                   "d_total (0.002 = 0.2 %%); repeatable")
+    p.add_argument("--sigma", nargs=2, type=float, action="append", metavar=("ALPHA", "DPCT"),
+                   help="a row of your own: σ_α in degrees and σ_d in %% of d_total (0.2 = "
+                   "0.2 %%; files hold it as a fraction, 0.002); repeatable")
     common(p, scene=False, json="the table", error_model="add a row with its typical σ's "
            "(relative σ_d times --d-total; the target's and the beacon's)")
 
@@ -108,10 +108,11 @@ def _montecarlo(args) -> int:
         raise BadArgument("--iterations", f"{args.iterations} must be ≤ {MAX_ITERATIONS}")
     finite(args, "alpha", "d_total", "d1", "incidence", "beacon_depth", "beacon_along", "sigma")
     for a, d in args.sigma or []:
-        if not (0 <= a <= SIGMA_ALPHA_MAX_DEG and 0 <= d <= 1):
+        if not (0 <= a <= SIGMA_ALPHA_MAX_DEG and 0 <= d <= 100):
             raise BadArgument("--sigma", f"{a:g} {d:g}: need 0 ≤ σ_α ≤ "
-                              f"{SIGMA_ALPHA_MAX_DEG:g}° and 0 ≤ σ_d ≤ 1 (a fraction of "
-                              "d_total)")
+                              f"{SIGMA_ALPHA_MAX_DEG:g}° and 0 ≤ σ_d ≤ 100 (% of d_total)")
+    # the command line's σ_d is in %; the solver's a fraction
+    args.sigma = [(a, d / 100.0) for a, d in args.sigma or []] or None
     try:
         geometry = Table1Geometry(args.alpha, args.d_total, args.d1, args.incidence,
                                   args.beacon_depth, args.beacon_along)
@@ -131,8 +132,9 @@ def _plan_options(p):
            json="the analysis")
     p.add_argument("--sigma-alpha", type=float, help="σ_α, deg, for every measurement "
                    "(with --sigma-d; default: the error model's typical σ's per object)")
-    p.add_argument("--sigma-d", type=float, help="σ_d, relative: a fraction of d_total "
-                   "(0.002 = 0.2 %%)")
+    p.add_argument("--sigma-d", type=float, metavar="PCT",
+                   help="σ_d in %% of d_total (0.2 = 0.2 %%; files hold it as a fraction, "
+                   "0.002)")
     p.add_argument("--eps", type=float, default=5.0, help="orientation range ±eps (deg)")
     p.add_argument("--yaw-spread", type=float, default=3.0, help="prior yaw ± (deg)")
     p.add_argument("--d1-spread", type=float, default=2.0, help="prior mirror distance ± (cm)")
@@ -157,6 +159,7 @@ def _plan(args) -> int:
     from mirrorsim.formats.error_model import default_error_model
     from mirrorsim.pipelines.planning import plan_scene
     from solver.lsq import ObjectSigmas, Sigma
+    from solver.measurements import SIGMA_D_REL_MAX
 
     finite(args, "sigma_alpha", "sigma_d", "eps", "yaw_spread", "d1_spread", "step")
     if (args.sigma_alpha is None) != (args.sigma_d is None):
@@ -164,8 +167,11 @@ def _plan(args) -> int:
                           "give --sigma-alpha and --sigma-d together")
     if args.sigma_alpha is not None and args.error_model:
         raise BadArgument("--error-model", "give either it or --sigma-alpha/--sigma-d")
+    if args.sigma_d is not None and not 0 < args.sigma_d <= 100 * SIGMA_D_REL_MAX:
+        raise BadArgument("--sigma-d", f"{args.sigma_d:g}: need 0 < σ_d ≤ "
+                          f"{100 * SIGMA_D_REL_MAX:g} (% of d_total)")
     scene = load(args.scene)
-    sigma = (ObjectSigmas.same(Sigma(args.sigma_alpha, args.sigma_d))
+    sigma = (ObjectSigmas.same(Sigma(args.sigma_alpha, args.sigma_d / 100.0))
              if args.sigma_alpha is not None
              else (error_model_of(args) or default_error_model()).typical)
     plan = plan_scene(scene, sigma, args.eps, args.yaw_spread, args.d1_spread, args.step,
