@@ -497,3 +497,27 @@ def test_load_dataset_gives_a_dataframe_with_the_files(one_worker):
     plain = pd.read_parquet(out / "dataset.parquet")
     assert set(plain.columns) <= set(df.columns)
     assert df["target_mahalanobis"].notna().all()
+
+
+def test_resume_with_a_larger_n_extends_the_dataset_with_the_same_scenes(one_worker,
+                                                                         tmp_path):
+    """The 3-scene dataset's first two rows, resumed with n = 3, compute only the third,
+    whose row is the one a 3-scene run made; a smaller n is refused, and the folder's
+    description records the new n."""
+    import json
+    import shutil
+
+    from mirrorsim.formats.dataset_folder import DatasetError
+
+    out, _ = one_worker
+    dst = tmp_path / "grow"
+    shutil.copytree(out, dst)
+    (dst / "rows" / "scene000002.json").unlink()
+    meta = json.loads((dst / "dataset.json").read_text())
+    (dst / "dataset.json").write_text(json.dumps({**meta, "n": 2}))  # as a 2-scene run left it
+    run = run_dataset(3, 3, dst, workers=1, spec_path=SPEC, progress=False, resume=True)
+    assert (run.computed, run.already_done, run.rows) == (1, 2, 3)
+    assert json.loads((dst / "dataset.json").read_text())["n"] == 3
+    assert _stable(collect_rows(dst, 3)) == _stable(collect_rows(out, 3))
+    with pytest.raises(DatasetError, match="holds 3 scenes: resume it with n ≥ 3"):
+        run_dataset(2, 3, dst, workers=1, spec_path=SPEC, progress=False, resume=True)

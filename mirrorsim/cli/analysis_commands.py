@@ -204,7 +204,9 @@ def _dataset_options(p):
                    "and truth: ids (the id labels), annotated (the detections drawn); "
                    "default none")
     common(p, scene=False, variant=True, quiet=True)
-    p.add_argument("--resume", action="store_true", help="finish an interrupted run")
+    p.add_argument("--resume", action="store_true",
+                   help="finish an interrupted run, or extend one to a larger --n (the same "
+                   "seed and settings: the added scenes are those a run of that --n makes)")
     p.add_argument("--executor", default="local", choices=["local", "dask"])
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help="Dask scheduler (tcp://host:8786); default: a local cluster")

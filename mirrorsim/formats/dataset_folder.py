@@ -44,8 +44,10 @@ def make_folders(out: Path, meta: dict) -> None:
         if (out / sub).exists() and not (out / sub).is_dir():
             raise DatasetError(out / sub, "is not a folder: this is not a dataset's layout")
         (out / sub).mkdir(parents=True, exist_ok=True)
-    if not (out / "dataset.json").exists():
-        write_json(out / "dataset.json", meta)
+    meta_path = out / "dataset.json"
+    # a resume that extends the dataset (claim_folder checked the rest) records its n
+    if not meta_path.exists() or json.loads(meta_path.read_text()).get("n") != meta["n"]:
+        write_json(meta_path, meta)
 
 
 
@@ -77,9 +79,14 @@ def claim_folder(out: Path, meta: dict, resume: bool) -> None:
         raise DatasetError(out, "was made with another error model (its rows' σ's would "
                            "mix two models): resume it with the model it was made with, or "
                            "choose another folder")
-    if {k: old[k] for k in keys} != {k: meta[k] for k in keys}:
+    same = ("seed", "spp", "spec")  # n may grow: scene i is drawn from (seed, i) alone,
+    # so the added scenes are the ones a dataset of the larger n would have had
+    if {k: old[k] for k in same} != {k: meta[k] for k in same}:
         raise DatasetError(out, f"holds a dataset made with other settings "
-                           f"(n={old['n']}, seed={old['seed']}, spp={old['spp']})")
+                           f"(seed={old['seed']}, spp={old['spp']}, its own spec)")
+    if not isinstance(old["n"], int) or meta["n"] < old["n"]:
+        raise DatasetError(out, f"holds {old['n']} scenes: resume it with n ≥ {old['n']} "
+                           f"(more scenes extend it), not {meta['n']}")
     reject_bad_rows(out, meta["n"], meta["seed"])
 
 
