@@ -362,3 +362,15 @@ def test_a_new_scene_compiles_no_new_kernel(jit_variant):
     finally:
         dr.set_flag(dr.JitFlag.KernelHistory, False)
     assert new == [], (shift, [h["size"] for h in new])
+
+
+def test_the_id_preview_colours_each_label_apart():
+    """The preview gives each label its own colour, what the mirror shows lighter than
+    the same object seen directly, and the labels file stays the labels."""
+    from mirrorsim.rendering.passes import IN_MIRROR, colourise_ids
+
+    labels = np.array([[0, 2, IN_MIRROR + 2, 3, IN_MIRROR + 3, 4, IN_MIRROR, 7]], np.uint8)
+    rgb = colourise_ids(labels, n_beacons=2)[0]
+    assert len({tuple(c) for c in rgb}) == len(labels[0])  # all apart
+    assert rgb[2].sum() > rgb[1].sum() and rgb[4].sum() > rgb[3].sum()  # mirror: lighter
+    assert tuple(rgb[7]) == (128, 128, 128)  # an occluder (label 3 + beacons): grey

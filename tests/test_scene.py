@@ -172,7 +172,8 @@ def test_render_command_takes_its_settings_once(tmp_path, capsys):
                  "--quiet", "--json", "-"]) == 0
     truth = json.loads(capsys.readouterr().out)  # `--json -`: the JSON alone
     assert sorted(p.name for p in out.iterdir()) == [  # .mirrorsim: the folder is its own
-        ".mirrorsim", "default.capture.json", "default.ids.png", "default.json", "default.png"]
+        ".mirrorsim", "default.capture.json", "default.ids.png", "default.ids.preview.png",
+        "default.json", "default.png"]
     assert (truth["render"]["spp"], truth["render"]["seed"]) == (1, 3)
     assert json.loads((out / "default.json").read_text())["render"]["seed"] == 3
     assert main(["render", str(path), "--out", str(tmp_path / "x"), "--spp", "0"]) == 2

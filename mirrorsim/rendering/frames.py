@@ -31,6 +31,7 @@ from mirrorsim.rendering.passes import (
     IN_MIRROR,
     RENDER_METHOD,
     RenderedFrame,
+    colourise_ids,
     encode_ids,
     render_frame,
 )
@@ -104,7 +105,10 @@ def write_frame(scene: Scene, frame: RenderedFrame, out: Path,
     files = {image: encode_png(srgb) if quality is None else encode_jpeg(srgb, quality),
              cap: dumps(capture.to_json()).encode()}
     if ids:
-        files[ids_png] = encode_png(encode_ids(frame.first, frame.in_mirror))
+        labels = encode_ids(frame.first, frame.in_mirror)
+        files[ids_png] = encode_png(labels)
+        files[ids_png.with_suffix(".preview.png")] = encode_png(
+            colourise_ids(labels, len(scene.beacons)))
     truth = replace(truth, render=replace(truth.render, files={
         p.name: hashlib.sha256(data).hexdigest() for p, data in files.items()}))
     files[js] = dumps(seal(truth.to_json())).encode()
