@@ -167,6 +167,8 @@ def _plan_region(ax, scene: Scene, plan: Plan) -> None:
     ax.set_title(f"where a beacon is seen for every mirror orientation within ±{plan.eps_deg:g}°"
                  "\n(blue: exact; orange: the paper's triangle)", fontsize=9)
     ax.set_aspect("equal")
+    ax.set_xlabel("x (cm)")
+    ax.set_ylabel("y (cm)")
     ax.legend(fontsize=7, loc="upper left")
     zoom = 1.6 * scene.mirror.size[0]
     ax.set_xlim(R[0] - zoom, R[0] + zoom)
@@ -181,6 +183,8 @@ def _plan_paths(ax, plan: Plan) -> None:
         ax.plot(pts[:, 0] + shift[0], pts[:, 1], "-o", ms=2, color=colours[kind],
                 label=f"{kind}: {plan.path_lengths[kind]:.1f} cm")
     ax.set_aspect("equal")
+    ax.set_xlabel("along the path's side steps (cm; paths drawn apart)")
+    ax.set_ylabel("along the path (cm)")
     ax.set_title(f"moving-beacon paths (eqs 19–21), {plan.n_steps} steps of b = "
                  f"{geo.b:.2f} cm, a = {2 * geo.half_a:.2f} cm", fontsize=9)
     ax.legend(fontsize=7)
@@ -189,16 +193,18 @@ def _plan_paths(ax, plan: Plan) -> None:
 def _plan_error_map(fig, ax, scene: Scene, plan: Plan) -> None:
     best = plan.best
     err = np.where(np.isfinite(best.map), best.map, np.nan)
-    im = ax.pcolormesh(best.xs, best.ys, np.log10(err), cmap="viridis_r", shading="auto",
-                       vmin=np.log10(max(np.nanmin(err), 1e-3)),
-                       vmax=np.log10(max(np.nanmin(err), 1e-3)) + 2)
+    from matplotlib.colors import LogNorm
+
+    low = max(np.nanmin(err), 1e-3)
+    im = ax.pcolormesh(best.xs, best.ys, err, cmap="viridis_r", shading="auto",
+                       norm=LogNorm(vmin=low, vmax=100 * low))
     cb = fig.colorbar(im, ax=ax, shrink=0.8)
-    cb.set_label("expected target RMSE of a beacon there alone (log10 of cm)")
+    cb.set_label("expected target RMSE of a beacon there alone (cm, log scale)")
     for o in scene.occluders:
         ax.plot(*zip(o.start, o.end, strict=True), color="#555", lw=4)
     m0, m1 = scene.mirror.ends()
     ax.plot(*zip(m0, m1, strict=True), color="#2a7fbf", lw=3)
-    ax.plot(*scene.target.position, "r*", ms=12, mec="k")
+    ax.plot(*scene.target.position, "r*", ms=12, mec="k", label="target")
     for i, (b, (e, _)) in enumerate(zip(scene.beacons, plan.scene_beacons, strict=True)):
         ax.plot(*b.position, "o", color="#d4a017", mec="k",
                 label=f"scene beacon {i} alone: {e:.2f} cm")

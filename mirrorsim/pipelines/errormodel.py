@@ -306,6 +306,8 @@ def plot(cols: dict, model: ErrorModel, out: str | Path) -> Path:
             m = ok & np.isfinite(y) & np.isfinite(S).all(axis=1)
             fx = np.asarray(cols.get("fx_px", np.full(len(ok), np.nan)), float)[m]
             sd = model.fits[kind][q].log_sigma(S[m]) * model.fx_scale(fx)
+            if q == "alpha":  # an α error holds the frame's shared offset too
+                sd = np.sqrt(sd**2 + model.shared_alpha_deg**2)
             for c, (x, name) in enumerate(((np.exp(S[m, 0]), "measured d_total (cm)"),
                                            (S[m, 1], "|off-axis bearing| (°)"))):
                 axes[r, c].errorbar(x + 0.15 * k, y[m] * scale, yerr=2 * sd * scale, fmt="o",
