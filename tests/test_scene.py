@@ -256,3 +256,22 @@ def test_a_value_in_other_units_gets_a_hint_where_a_check_fails(tmp_path, change
     assert hint in str(info.value)
     path.write_text(_scene_text())  # the same scene in the right units: valid, no hint
     load_scene(path)
+
+
+def test_plot_draws_an_invalid_scene_with_its_failures_marked(tmp_path, capsys):
+    """A scene whose blocks read but whose objects fail their checks is drawn (exit 2
+    still), every failure listed on stderr; one whose blocks cannot be read is not."""
+    path = tmp_path / "s.yaml"
+    path.write_text(_scene_text(target="{position: [57, 95], size: [9.9, 15.25]}",
+                                beacon="{position: [90, 56], height: 4.2}"))
+    out = tmp_path / "s.png"
+    assert main(["plot", str(path), "--out", str(out)]) == 2
+    captured = capsys.readouterr()
+    assert out.exists() and "invalid" in captured.out
+    err = captured.err.strip().splitlines()
+    assert len(err) >= 2 and all(line.startswith("error: ") for line in err)
+    assert any("target.position" in line for line in err)
+    assert any("beacon.position" in line for line in err)
+    path.write_text(_scene_text(beacon="{position: [36, 56], height: -4.2}"))
+    assert main(["plot", str(path), "--out", str(tmp_path / "t.png")]) == 2
+    assert not (tmp_path / "t.png").exists()

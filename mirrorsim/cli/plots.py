@@ -23,12 +23,67 @@ if TYPE_CHECKING:  # the budget and the track run renders: no Mitsuba import to 
     from mirrorsim.pipelines.track import TrackReport
 
 
-def plot_top_view(scene: Scene, out: str | Path, *, dpi: int = 150) -> Path:
+def plot_top_view(scene: Scene, out: str | Path, *, dpi: int = 150,
+                  failures: tuple = ()) -> Path:
     """Draw board, camera and field of view, occluders, mirror, target, beacons,
-    virtual images and the rays camera → mirror → object; write a PNG atomically."""
-    fig, ax = plt.subplots(figsize=(7.5, 7.5))
+    virtual images and the rays camera → mirror → object; write a PNG atomically.
+    ``failures`` (SceneErrors of an invalid scene): each marked in red where its key's
+    object stands, and listed under the view."""
+    if not failures:
+        fig, ax = plt.subplots(figsize=(7.5, 7.5))
+        _draw_top_view(ax, scene)
+        return _save(fig, Path(out), dpi)
+    lines = 0.2 * sum(1 + len(f"{e.key}: {e.message}") // 110 for e in failures)
+    fig, (ax, listing) = plt.subplots(2, 1, figsize=(7.5, 7.5 + lines),
+                                      gridspec_kw={"height_ratios": [7.5, lines]})
     _draw_top_view(ax, scene)
+    _mark_failures(ax, listing, scene, failures)
     return _save(fig, Path(out), dpi)
+
+
+def _failure_place(scene: Scene, key: str):
+    """Where a failing key's object stands (None where it has no place)."""
+    head = key.split(".")[0]
+    if head == "target":
+        return scene.target.position
+    if head.startswith("beacon"):
+        i = int(head[len("beacons["):-1]) if head.startswith("beacons[") else 0
+        return scene.beacons[i].position if i < len(scene.beacons) else None
+    if head == "mirror":
+        return scene.mirror.center
+    if head == "camera":
+        return scene.camera.position
+    if head.startswith("occluders["):
+        o = scene.occluders[int(head[len("occluders["):-1])]
+        return (np.asarray(o.start, float) + np.asarray(o.end, float)) / 2
+    return None
+
+
+def _mark_failures(ax, listing, scene: Scene, failures: tuple) -> None:
+    import textwrap
+
+    places: dict[tuple[float, float], list[str]] = {}
+    for k, e in enumerate(failures, 1):
+        place = _failure_place(scene, e.key)
+        if place is not None:
+            places.setdefault(tuple(map(float, place)), []).append(str(k))
+    for place, numbers in places.items():
+        ax.plot(*place, "x", color="red", ms=16, mew=3, zorder=10)
+        ax.annotate(",".join(numbers), place, textcoords="offset points", xytext=(9, -14),
+                    color="red", weight="bold", fontsize=10, zorder=10,
+                    bbox={"boxstyle": "round,pad=0.15", "fc": "w", "ec": "red", "alpha": 0.8})
+    # every marked object in view, however far off the board it stands
+    xs = [*ax.get_xlim(), *(p[0] for p in places)]
+    ys = [*ax.get_ylim(), *(p[1] for p in places)]
+    ax.set_xlim(min(xs) - 3, max(xs) + 3)
+    ax.set_ylim(min(ys) - 3, max(ys) + 3)
+    ax.set_title(f"{scene.name}: INVALID, {len(failures)} failure(s) marked", color="red")
+    listing.axis("off")
+    text = "\n".join(textwrap.fill(f"{k}. {e.key}: {e.message}", 110,
+                                    subsequent_indent="    ")
+                      for k, e in enumerate(failures, 1))
+    listing.text(0.0, 1.0, text, color="red", fontsize=7, va="top", ha="left",
+                 transform=listing.transAxes)
 
 
 def _save(fig, out: Path, dpi: int) -> Path:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 from mirrorsim.cli.registry import (
@@ -108,8 +109,23 @@ def _plot_options(p):
          _plot_options)
 def _plot(args) -> int:
     from mirrorsim.cli.plots import plot_top_view
+    from mirrorsim.errors import SceneError, exit_status
+    from mirrorsim.formats.scenefile import scene_and_failures
 
-    scene = load(args.scene)
+    try:
+        scene = load(args.scene)
+    except SceneError as exc:
+        # an invalid scene is drawn where its blocks can be read, its failures marked on
+        # it, so that the user sees what is wrong; the exit status stays 2
+        scene, failures = scene_and_failures(args.scene)
+        if scene is None:
+            raise
+        for e in failures:
+            print(f"error: {e}", file=sys.stderr)
+        out = out_file(args, scene, f"{scene.name}.top.png")
+        print(f"{plot_top_view(scene, out, failures=failures)} (the scene is invalid: "
+              f"{len(failures)} failure(s) marked)")
+        return exit_status(exc)
     print(plot_top_view(scene, out_file(args, scene, f"{scene.name}.top.png")))
     return 0
 

@@ -102,13 +102,29 @@ def scene_from_dict(data: Any, source: str = "<scene>", default_name: str = "sce
         blocks are read independently, and the checks between objects (on the board,
         in front of the mirror, overlaps, sight) each run where their blocks were read.
     """
+    return _build(data, source, default_name, _Failures())
+
+
+def scene_and_failures(path: str | Path) -> tuple[Scene | None, tuple[SceneError, ...]]:
+    """A scene file read as far as it goes: the scene (None where a block cannot be read)
+    and every failure found, for ``mirrorsim plot`` to draw an invalid scene with its
+    failures marked.  Never raises SceneError."""
+    path = Path(path)
+    f = _Failures(lenient=True)
+    try:
+        scene = _build(read_yaml(path), str(path), path.stem, f)
+    except SceneError as exc:
+        return None, (exc, *exc.others)
+    return scene, tuple(f.found)
+
+
+def _build(data: Any, source: str, default_name: str, f: _Failures) -> Scene:
     r = Reader(source, SceneError)
     top = r.mapping(
         data, "",
         required={"board", "camera", "mirror", "target"},
         optional={"name", "beacon", "beacons", "occluders", "render", "calibration"},
     )
-    f = _Failures()
     name = f.attempt(_name, r, top, default_name)
     board = f.attempt(_board, r, top["board"])
     cam = f.attempt(r.mapping, top["camera"], "camera", {"position", "height", "hfov", "pan"},
@@ -125,7 +141,7 @@ def scene_from_dict(data: Any, source: str = "<scene>", default_name: str = "sce
     beacons, bkey = f.attempt(_beacons, r, top, default=(None, None))
     occluders = f.attempt(_occluders, r, top.get("occluders", []))
     rs = f.attempt(read_render, r, top.get("render", {}))
-    f.raise_any()  # a block that cannot be read leaves nothing to check between them
+    f.raise_any(structural=True)  # a block that cannot be read leaves nothing to check
 
     height, hfov, resolution = model
     hint = _unit_hints(board, mirror, hfov, [
@@ -160,8 +176,10 @@ class _Failures:
     """The failures found so far in one file: each independent check is attempted, and
     the first failure is raised with the others attached (``SceneError.others``)."""
 
-    def __init__(self):
+    def __init__(self, lenient: bool = False):
         self.found: list[SceneError] = []
+        # lenient: only a block that cannot be read stops the scene being built (plot)
+        self.lenient = lenient
 
     def attempt(self, fn: Callable, *args, default: Any = None) -> Any:
         """``fn(*args)``, or ``default`` with its SceneError recorded."""
@@ -171,9 +189,15 @@ class _Failures:
             self.found.append(exc)
             return default
 
-    def raise_any(self, hint: str = "") -> None:
+    def raise_any(self, hint: str = "", structural: bool = False) -> None:
         """Raise the first failure found, the others attached (and ``hint`` added to
-        its line: a value in the wrong units is blamed on another key)."""
+        its line: a value in the wrong units is blamed on another key); when lenient,
+        only ``structural`` failures (a block not read) are raised."""
+        if self.found and self.lenient and not structural:
+            if hint and hint not in self.found[0].message:
+                first = self.found[0]
+                self.found[0] = SceneError(first.file, first.key, f"{first.message} ({hint})")
+            return
         if self.found:
             first = self.found[0]
             if hint:
@@ -195,7 +219,8 @@ def _unit_hints(board: Board, mirror: Mirror, hfov: float, positions) -> str:
                      f"({math.degrees(mirror.yaw):.1f}°)?")
     if max(mirror.size) > max(W, H) >= max(mirror.size) / 10:
         hints.append(f"mirror.size is in cm: {_fmt(mirror.size)} looks like mm?")
-    off = [k for k, p in positions if not (0 <= p[0] <= W and 0 <= p[1] <= H)
+    # far off the board (3× its size), yet on it at a tenth: millimetres
+    off = [k for k, p in positions if max(abs(p[0]) / W, abs(p[1]) / H) > 3
            and 0 <= p[0] / 10 <= W and 0 <= p[1] / 10 <= H]
     if off:
         hints.append(f"{', '.join(off)} in cm: mm?")
