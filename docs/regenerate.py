@@ -67,17 +67,19 @@ RESULTS: tuple[Result, ...] = (
            markdown=True, about="the default scene's own ellipse over fresh renders"),
     Result("heldout_ideal",
            (f"{MS} dataset --n 200 --seed 734211 --out renders/ideal_test --workers 2 "
-            "--resume --quiet",
+            "--quiet",
             f"{MS} errormodel --test renders/ideal_test --plot docs/reliability_ideal.png"),
-           about="the shipped error model on 200 held-out scenes of the ideal bench"),
+           about="the shipped error model on 200 held-out scenes of the ideal bench",
+           fresh=("renders/ideal_test",)),
     Result("heldout_bench",
            (f"{MS} dataset --n 100 --seed 515151 --spec scenes/dataset_spec_bench.yaml "
-            "--out renders/bench_train --workers 2 --resume --quiet",
-            f"{MS} dataset --n 60 --seed 626262 --spec scenes/dataset_spec_bench.yaml "
-            "--out renders/bench_test --workers 2 --resume --quiet",
-            f"{MS} errormodel renders/bench_train --out renders/bench_train/error_model.json "
-            "--test renders/bench_test --plot docs/reliability_bench.png"),
-           about="a bench-fitted error model on 60 held-out bench scenes"),
+            "--out renders/bench_train --workers 2 --quiet",
+            f"{MS} dataset --n 100 --seed 818181 --spec scenes/dataset_spec_bench.yaml "
+            "--out renders/bench_test --workers 2 --quiet",
+            f"{MS} errormodel renders/bench_train --test renders/bench_test "
+            "--plot docs/reliability_bench.png"),
+           about="a bench-fitted error model on 100 held-out bench scenes",
+           fresh=("renders/bench_train", "renders/bench_test")),
     Result("track_coverage", (f"{PY} benchmarks/track.py --coverage 3 --steps 8",),
            markdown=True, about="the particle filter's 95 % region on rendered frames"),
     Result("throughput_dataset", (f"{PY} benchmarks/dataset.py --n 24 --workers 2",),
