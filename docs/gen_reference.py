@@ -33,7 +33,7 @@ def bench_keys() -> str:
     rows = ["| key | units | what it means | bounds |", "|---|---|---|---|"]
     for imp in REGISTRY:
         if imp.bound is not None:
-            bounds = f"\\|value\\| ≤ {imp.bound:g}"
+            bounds = f"\\|value\\| < {imp.bound:g}"
         elif imp.low is not None and imp.high is not None:
             bounds = f"{imp.low:g} … {imp.high:g}"
         else:

@@ -62,7 +62,8 @@ class ObjectSigmas:
     def alpha_whitener(self, sa: np.ndarray) -> np.ndarray:
         """L⁻¹ for the α's covariance diag(sa²) + shared²·11ᵀ = L Lᵀ (sa: each α's own
         σ, in the solver's order): whitened residuals L⁻¹ (α − α_meas) are independent
-        with unit variance.  Without a shared part, diag(1/sa)."""
+        with unit variance (the Cramér–Rao bound's information).  Without a shared part,
+        diag(1/sa)."""
         if self.shared_alpha_deg == 0.0:
             return np.diag(1.0 / sa)
         cov = np.diag(sa**2) + self.shared_alpha_deg**2
@@ -172,32 +173,40 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
     sig = as_object_sigmas(sigma or Sigma())
     sa, sd = sig.arrays(len(beacons), len(targets))
     bpos, meas_a, meas_d = _measurement_arrays(beacons, targets)
-    if initial is None and (nuisances or position_sigma):
+    shared = sig.shared_alpha_deg
+    if initial is None and (nuisances or position_sigma or shared):
         # start from the plain fit: from the one-beacon closed form, a pan offset and a
         # range scale let the fit wander to a mirror on the far side of a beacon
-        initial = solve_lsq(observer, beacons, targets, sigma)
+        initial = solve_lsq(observer, beacons, targets,
+                            replace(sig, shared_alpha_deg=0.0) if shared else sigma)
     init = initial or solve_single(o, bpos[0], beacons[0].alpha_deg, beacons[0].d_total,
                                    targets[0][0], targets[0][1])
     if not (np.isfinite(position_sigma) and position_sigma >= 0):
         raise SolverError(f"position_sigma must be ≥ 0, got {position_sigma}")
     free = position_sigma > 0
-    nb, nt, k = len(beacons), len(targets), len(nuisances)
+    # a shared α offset (a bench's pan reading) is an unknown δ on every α with the prior
+    # N(0, shared²): for Gaussian errors the same estimate and covariance as correlated
+    # α's, while each image keeps its own residual row for the Huber loss to weigh and
+    # name (whitened rows would mix a bad image into every later one)
+    implicit = bool(shared) and "pan" not in nuisances
+    unknown = nuisances + (("pan",) if implicit else ())
+    nb, nt, k = len(beacons), len(targets), len(unknown)
     x0 = np.array([init.mirror.yaw_deg, init.mirror.rho, *init.target,
-                   *(NUISANCES[n][1] for n in nuisances), *np.zeros(2 * nb if free else 0)])
-    # the α residuals whitened (a shared offset makes them correlated; each whitened
-    # residual is then mostly its own image's, which the Huber loss names)
-    w_a = sig.alpha_whitener(sa)
+                   *(NUISANCES[n][1] for n in unknown), *np.zeros(2 * nb if free else 0)])
+    w_a = 1.0 / sa
     w_d = 1.0 / (sd * meas_d)
-    prior = np.eye(len(x0))[4 + k:] / position_sigma if free else np.zeros((0, len(x0)))
+    eye = np.eye(len(x0))
+    prior = np.vstack([eye[[4 + unknown.index("pan")]] / shared if shared else eye[:0],
+                       eye[4 + k:] / position_sigma if free else eye[:0]])
 
     def fun(x):
-        a, d, _, _ = _forward(x, o, bpos, nt, nuisances, free)
-        return np.concatenate([w_a @ wrap_bearing(a - meas_a), w_d * (d - meas_d),
+        a, d, _, _ = _forward(x, o, bpos, nt, unknown, free)
+        return np.concatenate([w_a * wrap_bearing(a - meas_a), w_d * (d - meas_d),
                                prior @ x])
 
     def jac(x):
-        _, _, da, dd = _forward(x, o, bpos, nt, nuisances, free)
-        return np.vstack([w_a @ da, w_d[:, None] * dd, prior])
+        _, _, da, dd = _forward(x, o, bpos, nt, unknown, free)
+        return np.vstack([w_a[:, None] * da, w_d[:, None] * dd, prior])
 
     from scipy.optimize import least_squares  # scipy is slow to import: only when used
 
@@ -214,15 +223,18 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
     if np.linalg.cond(jtj) > 1e14:
         raise SolverError(_undetermined(nuisances))
     cov = np.linalg.inv(jtj) if sigma is not None else None
-    names = _residual_names(nb, nt) + [f"beacon {i} believed {c}" for i in range(nb)
-                                       for c in "xy"][:len(prior)]
+    names = (_residual_names(nb, nt) + (["the shared α offset's prior"] if shared else [])
+             + [f"beacon {i} believed {c}" for i in range(nb) for c in "xy"])
     down = tuple(f"{names[i]} ({abs(r[i]):.1f} σ off)" for i in np.flatnonzero(w < 1.0))
     sol = _solution(o, res.x[:4], bpos, targets, cov)
     return replace(sol, downweighted=down,
                    nuisances={NUISANCES[n][0]: float(v)
-                              for n, v in zip(nuisances, res.x[4:4 + k], strict=True)},
+                              for n, v in zip(nuisances, res.x[4:4 + len(nuisances)],
+                                              strict=True)},
                    method=sol.method + (f", self-calibrated ({', '.join(nuisances)})"
-                                        if nuisances else ""))
+                                        if nuisances else "")
+                   + (f", a shared α offset of prior σ {shared:.3g}° estimated" if implicit
+                      else ""))
 
 
 def _forward(x: np.ndarray, o: np.ndarray, bpos: np.ndarray, nt: int,

@@ -360,7 +360,10 @@ class MovingBeaconFilter:
         rho_true = float(n_true @ np.asarray(mirror_point, float)) * float(n_true @ n_mean)
         e = np.array([(mirror_yaw_deg - est.yaw_deg + 90.0) % 180.0 - 90.0,
                       rho_true - est.rho])
-        return float(e @ np.linalg.solve(cov, e))
+        try:
+            return float(e @ np.linalg.solve(cov, e))
+        except np.linalg.LinAlgError:  # the hypotheses collapsed onto one line
+            return float("nan")
 
 
 def simulate_run(observer, mirror_point, mirror_yaw_deg: float, path: np.ndarray,

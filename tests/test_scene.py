@@ -275,3 +275,18 @@ def test_plot_draws_an_invalid_scene_with_its_failures_marked(tmp_path, capsys):
     path.write_text(_scene_text(beacon="{position: [36, 56], height: -4.2}"))
     assert main(["plot", str(path), "--out", str(tmp_path / "t.png")]) == 2
     assert not (tmp_path / "t.png").exists()
+
+
+@pytest.mark.parametrize("name", ["123", "yes", "null", "1.5"])
+def test_new_quotes_a_name_yaml_would_read_as_another_type(tmp_path, name):
+    path = tmp_path / f"{name}.yaml"
+    assert main(["new", str(path)]) == 0
+    assert load_scene(path).name == name
+
+
+def test_plot_draws_a_scene_whose_bench_key_is_out_of_bounds(tmp_path, capsys):
+    path = tmp_path / "s.yaml"
+    path.write_text(_scene_text(camera="{position: [0, 0], height: 6, hfov: 65.2, "
+                                       "pan: mirror, pan_error: 50}"))
+    assert main(["plot", str(path), "--out", str(tmp_path / "s.png")]) == 2
+    assert (tmp_path / "s.png").exists() and "camera.pan_error" in capsys.readouterr().err

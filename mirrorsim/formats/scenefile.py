@@ -8,6 +8,7 @@ images that do not reach the camera) use :mod:`mirrorsim.truth.optics`.
 
 from __future__ import annotations
 
+import json
 import math
 import re
 from collections.abc import Callable
@@ -150,6 +151,8 @@ def _build(data: Any, source: str, default_name: str, f: _Failures) -> Scene:
         *((f"{bkey(i)}.position", b.position) for i, b in enumerate(beacons))])
     on_board = _board_check(r, board)
     bench = f.attempt(_bench, r, cam, m, top.get("calibration", {}), mirror, resolution, hfov)
+    f.raise_any()  # a bench key out of its bounds is said as it is, without a unit hint
+    bench = bench or Bench()  # (lenient, for plot: a bad bench key drawn as the ideal)
     _check_all_on_board(f, on_board, position, mirror, target_position, beacons, bkey,
                         occluders)
     f.raise_any(hint)
@@ -446,7 +449,10 @@ def _check_sight(f: _Failures, scene: Scene, r: Reader, bkey) -> tuple[str, ...]
     sighted = [("target.position", scene.target, "target")] + [
         (f"{bkey(i)}.position", b, "beacon") for i, b in enumerate(scene.beacons)]
     warnings = []
+    failed = {e.key for e in f.found}  # (lenient) an object already refused: once
     for key, obj, what in sighted:
+        if key in failed:
+            continue
         vis = visibility.visibility(scene, obj)
         if vis.axis_fraction == 0.0:
             f.found.append(r.fail(key, f"{_fmt(obj.position)}: the {what}'s image does not "
@@ -498,4 +504,5 @@ def scene_template(path: str | Path) -> str:
         raise SceneError(str(path), "", f"{name!r} cannot name a scene (letters, digits, "
                                         "'.', '_', '-'; starting with a letter or digit)")
     text = (resources.files("mirrorsim") / "data" / "template.yaml").read_text(encoding="utf-8")
-    return text.replace("name: NAME ", f"name: {name} ", 1)
+    # quoted: a name such as 123, yes or null would read as another type
+    return text.replace("name: NAME ", f"name: {json.dumps(name)} ", 1)

@@ -18,6 +18,7 @@ error):
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -197,6 +198,7 @@ def fit(cols: dict, provenance: dict | None = None) -> ErrorModel:
     fx_px = float(np.median(fx[ok & np.isfinite(fx)])) if np.any(ok & np.isfinite(fx)) else None
     at_fx = np.where(np.isfinite(fx), fx / (fx_px or 1.0), 1.0)
     shared = shared_alpha(cols, ok)
+    alpha_rows = {}  # per kind: the α rows used and which were gross, for the pair fit
     for kind in KINDS:
         X_all = _design(cols, kind, names)
         S_all = sigma_features_of(cols, kind)
@@ -210,12 +212,61 @@ def fit(cols: dict, provenance: dict | None = None) -> ErrorModel:
             law, gross = _sigma_fit(S_all[m], (y * at_fx)[m],
                                     shared**2 if q == "alpha" else 0.0)
             bias = _robust_fit(X_all[m][~gross], y[m][~gross])
+            if q == "alpha":
+                keep = m.copy()
+                keep[np.flatnonzero(m)[gross]] = False
+                alpha_rows[kind] = (keep, S_all, y * at_fx)
             fits[kind][q] = QuantityFit(
                 log_sigma=law, n=int(m.sum()), gross_errors=int(gross.sum()),
                 rms=float(np.sqrt(np.mean((y * at_fx)[m] ** 2))),
                 typical_sigma=float(np.sqrt(np.mean(law(S_all[m][~gross]) ** 2))),
                 bias=tuple(bias.tolist()))
+    if shared:
+        # each kind's own α law is nearly free in its own likelihood when the shared
+        # part dominates (a bench's pan): both laws and the shared σ from the pair's
+        # likelihood, where the difference of the two errors holds the own parts
+        (kt, St, yt), (kb, Sb, yb) = (alpha_rows[k] for k in KINDS)
+        both = kt & kb
+        law_t, law_b, shared = fit_alpha_pair(St[both], yt[both], Sb[both], yb[both], shared)
+        for kind, law, S in (("target", law_t, St), ("beacon", law_b, Sb)):
+            keep = alpha_rows[kind][0]
+            fits[kind]["alpha"] = replace(
+                fits[kind]["alpha"], log_sigma=law,
+                typical_sigma=float(np.sqrt(np.mean(law(S[keep]) ** 2))))
     return ErrorModel(fits, tuple(names), provenance, fx_px, shared)
+
+
+def fit_alpha_pair(St: np.ndarray, yt: np.ndarray, Sb: np.ndarray, yb: np.ndarray,
+                   shared0: float, ridge: float = 1e-3) -> tuple[LogSigma, LogSigma, float]:
+    """The target's and the beacon's own α laws and the shared σ, by maximum likelihood
+    of each frame's pair of α errors ~ N(0, [[σt² + s², s²], [s², σb² + s²]]) (z's
+    standardized as :func:`fit_log_sigma`'s, a small ridge on the slopes); ``shared0``
+    starts s."""
+    from scipy.optimize import minimize
+
+    def standardized(S):
+        mu, sc = S.mean(axis=0), S.std(axis=0)
+        sc[sc == 0] = 1.0
+        return np.column_stack([np.ones(len(S)), (S - mu) / sc]), mu, sc
+
+    Zt, mt, ct = standardized(St)
+    Zb, mb, cb = standardized(Sb)
+    k = Zt.shape[1]
+    n = len(yt)
+
+    def nll(w):
+        a, b, c = np.exp(2 * (Zt @ w[:k])), np.exp(2 * (Zb @ w[k:2 * k])), np.exp(2 * w[-1])
+        det = a * b + c * (a + b)
+        q = ((b + c) * yt**2 - 2 * c * yt * yb + (a + c) * yb**2) / det
+        return (0.5 * np.sum(np.log(det) + q)
+                + ridge * n * (np.sum(w[1:k] ** 2) + np.sum(w[k + 1:2 * k] ** 2)))
+
+    own = lambda y: 0.5 * np.log(max(np.mean(y**2) - shared0**2, 0.01 * np.mean(y**2)))  # noqa: E731
+    w0 = np.r_[own(yt), np.zeros(k - 1), own(yb), np.zeros(k - 1), np.log(shared0)]
+    w = minimize(nll, w0, method="BFGS").x
+    law = lambda v, mu, sc: LogSigma(float(v[0]), tuple(v[1:].tolist()),  # noqa: E731
+                                     tuple(mu.tolist()), tuple(sc.tolist()))
+    return law(w[:k], mt, ct), law(w[k:2 * k], mb, cb), float(np.exp(w[-1]))
 
 
 def shared_alpha(cols: dict, ok: np.ndarray) -> float:
