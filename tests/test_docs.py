@@ -58,6 +58,13 @@ def test_every_included_result_comes_from_a_registered_command_with_its_stamp():
             assert re.search(r"commit [0-9a-f]{7,}, \d{4}-\d\d-\d\d, ", stamp_line), f
 
 
+def test_every_registered_result_is_shown_somewhere():
+    reg = _module("regenerate")
+    included = {Path(f).stem for fs in _includes().values() for f in fs
+                if f.startswith("results/")}
+    assert set(reg.BY_NAME) <= included, set(reg.BY_NAME) - included
+
+
 def test_the_readme_quick_start_table_is_the_demos():
     reg = _module("regenerate")
     readme = (ROOT / "README.md").read_text(encoding="utf-8")
