@@ -116,6 +116,7 @@ README_BEGIN, README_END = "<!-- begin demo -->", "<!-- end demo -->"
 def render_result(r: Result, stdout: str, stamped: str) -> str:
     """The result file's text: a header, the commands and stamp, and what they printed."""
     cmds = " && ".join(f"`{c}`" for c in r.commands)
+    stdout = stdout.replace(f"{ROOT}/", "")  # paths as the repository names them
     body = stdout.rstrip() + "\n" if r.markdown else f"```text\n{stdout.rstrip()}\n```\n"
     return f"{HEADER.format(name=r.name)}\n*{cmds} · {stamped}*\n\n{body}"
 
