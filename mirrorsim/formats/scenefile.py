@@ -21,6 +21,16 @@ import numpy as np
 from mirrorsim.errors import BadParameter, SceneError
 from mirrorsim.formats.capture import read_distortion
 from mirrorsim.formats.reader import Reader, read_resolution, read_yaml, show
+from mirrorsim.formats.scene_checks import (
+    Failures,
+    board_check,
+    check_all_on_board,
+    check_mirror_faces,
+    check_overlaps,
+    check_sight,
+    fmt,
+    unit_hints,
+)
 from mirrorsim.scene.imperfections import REGISTRY, Imperfection, check_bounds, radius_bound
 from mirrorsim.scene.model import (
     MAX_BOARD_CM,
@@ -38,12 +48,9 @@ from mirrorsim.scene.model import (
     Scene,
     SensorNoise,
     Target,
-    footprints,
 )
-from mirrorsim.truth import optics, visibility
-from solver.geometry import segment_distance, signed_distance
+from mirrorsim.truth import optics
 
-EDGE_ON_LIMIT_DEG = 5.0  # a mirror seen at a more grazing angle than this is edge-on
 DEFAULT_RESOLUTION = (1920, 1088)
 
 
@@ -103,7 +110,7 @@ def scene_from_dict(data: Any, source: str = "<scene>", default_name: str = "sce
         blocks are read independently, and the checks between objects (on the board,
         in front of the mirror, overlaps, sight) each run where their blocks were read.
     """
-    return _build(data, source, default_name, _Failures())
+    return _build(data, source, default_name, Failures())
 
 
 def scene_and_failures(path: str | Path) -> tuple[Scene | None, tuple[SceneError, ...]]:
@@ -111,7 +118,7 @@ def scene_and_failures(path: str | Path) -> tuple[Scene | None, tuple[SceneError
     and every failure found, for ``mirrorsim plot`` to draw an invalid scene with its
     failures marked.  Never raises SceneError."""
     path = Path(path)
-    f = _Failures(lenient=True)
+    f = Failures(lenient=True)
     try:
         scene = _build(read_yaml(path), str(path), path.stem, f)
     except SceneError as exc:
@@ -119,7 +126,7 @@ def scene_and_failures(path: str | Path) -> tuple[Scene | None, tuple[SceneError
     return scene, tuple(f.found)
 
 
-def _build(data: Any, source: str, default_name: str, f: _Failures) -> Scene:
+def _build(data: Any, source: str, default_name: str, f: Failures) -> Scene:
     r = Reader(source, SceneError)
     top = r.mapping(
         data, "",
@@ -145,89 +152,34 @@ def _build(data: Any, source: str, default_name: str, f: _Failures) -> Scene:
     f.raise_any(structural=True)  # a block that cannot be read leaves nothing to check
 
     height, hfov, resolution = model
-    hint = _unit_hints(board, mirror, hfov, [
+    hint = unit_hints(board, mirror, hfov, [
         ("camera.position", position), ("mirror.center", mirror.center),
         ("target.position", target_position),
         *((f"{bkey(i)}.position", b.position) for i, b in enumerate(beacons))])
-    on_board = _board_check(r, board)
+    on_board = board_check(r, board)
     bench = f.attempt(_bench, r, cam, m, top.get("calibration", {}), mirror, resolution, hfov)
     f.raise_any()  # a bench key out of its bounds is said as it is, without a unit hint
     bench = bench or Bench()  # (lenient, for plot: a bad bench key drawn as the ideal)
-    _check_all_on_board(f, on_board, position, mirror, target_position, beacons, bkey,
+    check_all_on_board(f, on_board, position, mirror, target_position, beacons, bkey,
                         occluders)
     f.raise_any(hint)
-    f.attempt(_check_mirror_faces, f, r, position, mirror, target_position, beacons, bkey)
+    f.attempt(check_mirror_faces, f, r, position, mirror, target_position, beacons, bkey)
     f.raise_any(hint)
 
     # derived values, computed once here: the panel faces the camera's virtual image
     target = Target(target_position, target_size,
                     optics.target_facing(position, mirror, target_position))
     for end in target.ends():
-        f.attempt(on_board, end, "target.position", f"the target panel's edge {_fmt(end)}")
+        f.attempt(on_board, end, "target.position", f"the target panel's edge {fmt(end)}")
     f.raise_any(hint)
     pan_deg = optics.resolve_pan(position, pan, mirror, target_position, beacons[0].position)
     camera = Camera(position, height, resolution, hfov, pan, pan_deg)
     scene = Scene(name=name, board=board, camera=camera, mirror=mirror, target=target,
                   beacons=beacons, occluders=occluders, render=rs, bench=bench, source=source)
-    _check_overlaps(f, scene, r, bkey)
-    warnings = _check_sight(f, scene, r, bkey)
+    check_overlaps(f, scene, r, bkey)
+    warnings = check_sight(f, scene, r, bkey)
     f.raise_any(hint)
     return replace(scene, warnings=warnings)
-
-
-class _Failures:
-    """The failures found so far in one file: each independent check is attempted, and
-    the first failure is raised with the others attached (``SceneError.others``)."""
-
-    def __init__(self, lenient: bool = False):
-        self.found: list[SceneError] = []
-        # lenient: only a block that cannot be read stops the scene being built (plot)
-        self.lenient = lenient
-
-    def attempt(self, fn: Callable, *args, default: Any = None) -> Any:
-        """``fn(*args)``, or ``default`` with its SceneError recorded."""
-        try:
-            return fn(*args)
-        except SceneError as exc:
-            self.found.append(exc)
-            return default
-
-    def raise_any(self, hint: str = "", structural: bool = False) -> None:
-        """Raise the first failure found, the others attached (and ``hint`` added to
-        its line: a value in the wrong units is blamed on another key); when lenient,
-        only ``structural`` failures (a block not read) are raised."""
-        if self.found and self.lenient and not structural:
-            if hint and hint not in self.found[0].message:
-                first = self.found[0]
-                self.found[0] = SceneError(first.file, first.key, f"{first.message} ({hint})")
-            return
-        if self.found:
-            first = self.found[0]
-            if hint:
-                first = SceneError(first.file, first.key, f"{first.message} ({hint})")
-            first.others = tuple(self.found[1:])
-            raise first
-
-
-def _unit_hints(board: Board, mirror: Mirror, hfov: float, positions) -> str:
-    """Why a geometric check may have failed: a length given in mm, an angle in radians.
-    Only said once a check has failed, since each such value is also a valid one."""
-    W, H = board.size
-    hints = []
-    if hfov <= math.pi:
-        hints.append(f"camera.hfov is in degrees: {hfov:g} looks like radians "
-                     f"({math.degrees(hfov):.1f}°)?")
-    if 0 < abs(mirror.yaw) <= 2 * math.pi and mirror.yaw != round(mirror.yaw):
-        hints.append(f"mirror.yaw is in degrees: {mirror.yaw:g} looks like radians "
-                     f"({math.degrees(mirror.yaw):.1f}°)?")
-    if max(mirror.size) > max(W, H) >= max(mirror.size) / 10:
-        hints.append(f"mirror.size is in cm: {_fmt(mirror.size)} looks like mm?")
-    # far off the board (3× its size), yet on it at a tenth: millimetres
-    off = [k for k, p in positions if max(abs(p[0]) / W, abs(p[1]) / H) > 3
-           and 0 <= p[0] / 10 <= W and 0 <= p[1] / 10 <= H]
-    if off:
-        hints.append(f"{', '.join(off)} in cm: mm?")
-    return "; ".join(hints)
 
 
 def _name(r: Reader, top: dict, default_name: str) -> str:
@@ -386,107 +338,6 @@ def read_pan(r: Reader, raw: Any, key: str) -> float | str:
                          f"{', '.join(PAN_WORDS)}")
         return raw
     return r.number(raw, key)
-
-
-def _check_all_on_board(f: _Failures, on_board, position, mirror: Mirror, target_position,
-                        beacons, bkey, occluders) -> None:
-    """Every object stands on the board (the mirror's ends, believed positions too)."""
-    f.attempt(on_board, position, "camera.position", "the camera")
-    if f.attempt(on_board, mirror.center, "mirror.center", "the mirror", default=False) \
-            is None:  # the mirror's ends only where its centre is on the board
-        for end in mirror.ends():
-            if f.attempt(on_board, end, "mirror.center", f"the mirror's end {_fmt(end)}",
-                         default=False) is False:
-                break
-    f.attempt(on_board, target_position, "target.position", "the target")
-    for i, b in enumerate(beacons):
-        f.attempt(on_board, b.position, f"{bkey(i)}.position", "the beacon")
-        if b.known_position is not None:
-            f.attempt(on_board, b.known_position, f"{bkey(i)}.known_position",
-                      "the believed position")
-    for i, o in enumerate(occluders):
-        f.attempt(on_board, o.start, f"occluders[{i}].start", "the wall's start")
-        f.attempt(on_board, o.end, f"occluders[{i}].end", "the wall's end")
-
-
-def _board_check(r: Reader, board: Board):
-    W, H = board.size
-
-    def on_board(p, key: str, what: str) -> None:
-        tol = 1e-9
-        if not (-tol <= p[0] <= W + tol and -tol <= p[1] <= H + tol):
-            raise r.fail(key, f"{_fmt(p)}: {what} lies off the board [0, {W:g}] × [0, {H:g}]")
-
-    return on_board
-
-
-def _check_mirror_faces(f: _Failures, r: Reader, camera_position, mirror: Mirror,
-                        target_position, beacons, bkey) -> None:
-    """The camera must see the mirror's face, and the objects stand in front of it."""
-    # The reflective face is the one turned towards the camera; a camera on the line
-    # (or nearly so) sees the mirror edge-on.
-    cam = np.asarray(camera_position, float)
-    cam_side = float(signed_distance(cam, mirror.center, mirror.yaw))
-    dist = float(np.hypot(*(np.asarray(mirror.center, float) - cam)))
-    graze = math.degrees(math.asin(min(1.0, abs(cam_side) / dist))) if dist > 0 else 0.0
-    if graze < EDGE_ON_LIMIT_DEG:
-        raise r.fail("mirror.yaw", f"{mirror.yaw:g}: the camera sees the mirror edge-on "
-                     f"(line of sight {graze:.2f}° off its surface; need ≥ {EDGE_ON_LIMIT_DEG:g}°)")
-
-    def in_front(p, key: str, what: str) -> None:
-        s = float(signed_distance(p, mirror.center, mirror.yaw))
-        if s * cam_side <= 0.0:
-            raise r.fail(key, f"{_fmt(p)}: the {what} stands behind the mirror (on its back, "
-                         f"{abs(s):.2f} cm from its surface line), so the mirror cannot show it")
-
-    f.attempt(in_front, target_position, "target.position", "target")
-    for i, b in enumerate(beacons):
-        f.attempt(in_front, b.position, f"{bkey(i)}.position", "beacon")
-
-
-def _check_sight(f: _Failures, scene: Scene, r: Reader, bkey) -> tuple[str, ...]:
-    """Refuse images that do not reach the camera; warn of clipped or direct views."""
-    sighted = [("target.position", scene.target, "target")] + [
-        (f"{bkey(i)}.position", b, "beacon") for i, b in enumerate(scene.beacons)]
-    warnings = []
-    failed = {e.key for e in f.found}  # (lenient) an object already refused: once
-    for key, obj, what in sighted:
-        if key in failed:
-            continue
-        vis = visibility.visibility(scene, obj)
-        if vis.axis_fraction == 0.0:
-            f.found.append(r.fail(key, f"{_fmt(obj.position)}: the {what}'s image does not "
-                                  f"reach the camera through the mirror: {vis.reason}"))
-            continue
-        if vis.clipped:
-            warnings.append(f"{key}: the {what}'s image is clipped ({vis.reason})")
-    direct = visibility.direct_view_fraction(scene, scene.target)
-    if direct > 0.0:
-        warnings.append(f"target.position: the camera also sees the target directly "
-                        f"({100 * direct:.0f}% of its axis unobstructed): not an NLOS set-up")
-    return tuple(warnings)
-
-
-def _check_overlaps(f: _Failures, scene: Scene, r: Reader, bkey) -> None:
-    fps = footprints(scene, bkey)
-    for j in range(len(fps)):
-        for i in range(j):
-            ki, a0, a1, ra = fps[i]
-            kj, b0, b1, rb = fps[j]
-            gap = segment_distance(a0, a1, b0, b1) - ra - rb
-            if gap < 0.0:
-                what_i = ki.split(".")[0]
-                f.found.append(r.fail(kj, f"overlaps {what_i} (footprints intersect by "
-                                          f"{-gap:.2f} cm)"))
-    cam = np.asarray(scene.camera.position, float)
-    for k, a0, a1, ra in fps:
-        if segment_distance(cam, cam, a0, a1) < ra:
-            f.found.append(r.fail("camera.position",
-                                  f"{_fmt(cam)}: the camera stands inside {k}"))
-
-
-def _fmt(p) -> str:
-    return "[" + ", ".join(f"{float(v):g}" for v in p) + "]"
 
 
 def scene_template(path: str | Path) -> str:

@@ -1,0 +1,181 @@
+"""The checks between a scene's objects, once each block of its file has been read: on
+the board, in front of the mirror's face, not overlapping, seen through the mirror; and
+the failures found, collected so that ``mirrorsim check`` lists them all and ``plot``
+can draw an invalid scene.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from mirrorsim.errors import SceneError
+from mirrorsim.formats.reader import Reader
+from mirrorsim.scene.model import Board, Mirror, Scene, footprints
+from mirrorsim.truth import visibility
+from solver.geometry import segment_distance, signed_distance
+
+EDGE_ON_LIMIT_DEG = 5.0  # a mirror seen at a more grazing angle than this is edge-on
+
+
+class Failures:
+    """The failures found so far in one file: each independent check is attempted, and
+    the first failure is raised with the others attached (``SceneError.others``)."""
+
+    def __init__(self, lenient: bool = False):
+        self.found: list[SceneError] = []
+        # lenient: only a block that cannot be read stops the scene being built (plot)
+        self.lenient = lenient
+
+    def attempt(self, fn: Callable, *args, default: Any = None) -> Any:
+        """``fn(*args)``, or ``default`` with its SceneError recorded."""
+        try:
+            return fn(*args)
+        except SceneError as exc:
+            self.found.append(exc)
+            return default
+
+    def raise_any(self, hint: str = "", structural: bool = False) -> None:
+        """Raise the first failure found, the others attached (and ``hint`` added to
+        its line: a value in the wrong units is blamed on another key); when lenient,
+        only ``structural`` failures (a block not read) are raised."""
+        if self.found and self.lenient and not structural:
+            if hint and hint not in self.found[0].message:
+                first = self.found[0]
+                self.found[0] = SceneError(first.file, first.key, f"{first.message} ({hint})")
+            return
+        if self.found:
+            first = self.found[0]
+            if hint:
+                first = SceneError(first.file, first.key, f"{first.message} ({hint})")
+            first.others = tuple(self.found[1:])
+            raise first
+
+
+def unit_hints(board: Board, mirror: Mirror, hfov: float, positions) -> str:
+    """Why a geometric check may have failed: a length given in mm, an angle in radians.
+    Only said once a check has failed, since each such value is also a valid one."""
+    W, H = board.size
+    hints = []
+    if hfov <= math.pi:
+        hints.append(f"camera.hfov is in degrees: {hfov:g} looks like radians "
+                     f"({math.degrees(hfov):.1f}°)?")
+    if 0 < abs(mirror.yaw) <= 2 * math.pi and mirror.yaw != round(mirror.yaw):
+        hints.append(f"mirror.yaw is in degrees: {mirror.yaw:g} looks like radians "
+                     f"({math.degrees(mirror.yaw):.1f}°)?")
+    if max(mirror.size) > max(W, H) >= max(mirror.size) / 10:
+        hints.append(f"mirror.size is in cm: {fmt(mirror.size)} looks like mm?")
+    # far off the board (3× its size), yet on it at a tenth: millimetres
+    off = [k for k, p in positions if max(abs(p[0]) / W, abs(p[1]) / H) > 3
+           and 0 <= p[0] / 10 <= W and 0 <= p[1] / 10 <= H]
+    if off:
+        hints.append(f"{', '.join(off)} in cm: mm?")
+    return "; ".join(hints)
+
+
+def check_all_on_board(f: Failures, on_board, position, mirror: Mirror, target_position,
+                        beacons, bkey, occluders) -> None:
+    """Every object stands on the board (the mirror's ends, believed positions too)."""
+    f.attempt(on_board, position, "camera.position", "the camera")
+    if f.attempt(on_board, mirror.center, "mirror.center", "the mirror", default=False) \
+            is None:  # the mirror's ends only where its centre is on the board
+        for end in mirror.ends():
+            if f.attempt(on_board, end, "mirror.center", f"the mirror's end {fmt(end)}",
+                         default=False) is False:
+                break
+    f.attempt(on_board, target_position, "target.position", "the target")
+    for i, b in enumerate(beacons):
+        f.attempt(on_board, b.position, f"{bkey(i)}.position", "the beacon")
+        if b.known_position is not None:
+            f.attempt(on_board, b.known_position, f"{bkey(i)}.known_position",
+                      "the believed position")
+    for i, o in enumerate(occluders):
+        f.attempt(on_board, o.start, f"occluders[{i}].start", "the wall's start")
+        f.attempt(on_board, o.end, f"occluders[{i}].end", "the wall's end")
+
+
+def board_check(r: Reader, board: Board) -> Callable[[Any, str, str], None]:
+    """``on_board(point, key, what)``: raises, naming the key, where the point lies off
+    ``board``."""
+    W, H = board.size
+
+    def on_board(p, key: str, what: str) -> None:
+        tol = 1e-9
+        if not (-tol <= p[0] <= W + tol and -tol <= p[1] <= H + tol):
+            raise r.fail(key, f"{fmt(p)}: {what} lies off the board [0, {W:g}] × [0, {H:g}]")
+
+    return on_board
+
+
+def check_mirror_faces(f: Failures, r: Reader, camera_position, mirror: Mirror,
+                        target_position, beacons, bkey) -> None:
+    """The camera must see the mirror's face, and the objects stand in front of it."""
+    # The reflective face is the one turned towards the camera; a camera on the line
+    # (or nearly so) sees the mirror edge-on.
+    cam = np.asarray(camera_position, float)
+    cam_side = float(signed_distance(cam, mirror.center, mirror.yaw))
+    dist = float(np.hypot(*(np.asarray(mirror.center, float) - cam)))
+    graze = math.degrees(math.asin(min(1.0, abs(cam_side) / dist))) if dist > 0 else 0.0
+    if graze < EDGE_ON_LIMIT_DEG:
+        raise r.fail("mirror.yaw", f"{mirror.yaw:g}: the camera sees the mirror edge-on "
+                     f"(line of sight {graze:.2f}° off its surface; need ≥ {EDGE_ON_LIMIT_DEG:g}°)")
+
+    def in_front(p, key: str, what: str) -> None:
+        s = float(signed_distance(p, mirror.center, mirror.yaw))
+        if s * cam_side <= 0.0:
+            raise r.fail(key, f"{fmt(p)}: the {what} stands behind the mirror (on its back, "
+                         f"{abs(s):.2f} cm from its surface line), so the mirror cannot show it")
+
+    f.attempt(in_front, target_position, "target.position", "target")
+    for i, b in enumerate(beacons):
+        f.attempt(in_front, b.position, f"{bkey(i)}.position", "beacon")
+
+
+def check_sight(f: Failures, scene: Scene, r: Reader, bkey) -> tuple[str, ...]:
+    """Refuse images that do not reach the camera; warn of clipped or direct views."""
+    sighted = [("target.position", scene.target, "target")] + [
+        (f"{bkey(i)}.position", b, "beacon") for i, b in enumerate(scene.beacons)]
+    warnings = []
+    failed = {e.key for e in f.found}  # (lenient) an object already refused: once
+    for key, obj, what in sighted:
+        if key in failed:
+            continue
+        vis = visibility.visibility(scene, obj)
+        if vis.axis_fraction == 0.0:
+            f.found.append(r.fail(key, f"{fmt(obj.position)}: the {what}'s image does not "
+                                  f"reach the camera through the mirror: {vis.reason}"))
+            continue
+        if vis.clipped:
+            warnings.append(f"{key}: the {what}'s image is clipped ({vis.reason})")
+    direct = visibility.direct_view_fraction(scene, scene.target)
+    if direct > 0.0:
+        warnings.append(f"target.position: the camera also sees the target directly "
+                        f"({100 * direct:.0f}% of its axis unobstructed): not an NLOS set-up")
+    return tuple(warnings)
+
+
+def check_overlaps(f: Failures, scene: Scene, r: Reader, bkey) -> None:
+    """Record footprints that intersect, and a camera standing inside one."""
+    fps = footprints(scene, bkey)
+    for j in range(len(fps)):
+        for i in range(j):
+            ki, a0, a1, ra = fps[i]
+            kj, b0, b1, rb = fps[j]
+            gap = segment_distance(a0, a1, b0, b1) - ra - rb
+            if gap < 0.0:
+                what_i = ki.split(".")[0]
+                f.found.append(r.fail(kj, f"overlaps {what_i} (footprints intersect by "
+                                          f"{-gap:.2f} cm)"))
+    cam = np.asarray(scene.camera.position, float)
+    for k, a0, a1, ra in fps:
+        if segment_distance(cam, cam, a0, a1) < ra:
+            f.found.append(r.fail("camera.position",
+                                  f"{fmt(cam)}: the camera stands inside {k}"))
+
+
+def fmt(p) -> str:
+    """A point as the messages show it: ``[57, 95]``."""
+    return "[" + ", ".join(f"{float(v):g}" for v in p) + "]"
