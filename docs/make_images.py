@@ -66,6 +66,7 @@ def curved_mirrors(radius: float = 300.0) -> None:
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(yaml.safe_dump(d))
         out = ROOT / "renders" / "docs" / label
+        out.parent.mkdir(parents=True, exist_ok=True)  # render makes its folder, not above
         run("render", str(path), "--quiet", "--out", str(out))
         img = np.asarray(Image.open(out / f"default_{label}.png").convert("RGB"))
         crops.append(img[360:700, 800:1120])
