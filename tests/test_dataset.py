@@ -363,8 +363,12 @@ def test_error_model_fits_bias_against_bench_imperfections():
         assert a.bias[names.index("pan_error_deg")] == pytest.approx(1.0, abs=0.01)
         assert d.bias[names.index("calibration_error_cm")] == pytest.approx(-0.0102, abs=5e-4)
         assert d.bias[names.index("mirror_power")] == pytest.approx(-1.0, abs=0.1)
-    # the σ's about the truth hold the bench's spread (pan error uniform in ±0.5°)
-    assert model.typical.target.alpha_deg == pytest.approx(0.5 / 3**0.5, rel=0.1)
+    # the σ's about the truth hold the bench's spread: the pan error (uniform in ±0.5°)
+    # moves both α's of a row alike, so the model holds it as the shared offset, and each
+    # image's own α σ is the rows' own noise (0.003°)
+    assert model.shared_alpha_deg == pytest.approx(0.5 / 3**0.5, rel=0.1)
+    assert model.typical.target.alpha_deg == pytest.approx(0.003, rel=0.5)
+    assert model.typical.beacons[0].alpha_deg == pytest.approx(0.003, rel=0.5)
 
 
 @pytest.mark.parametrize("damage", ["misspelt column", "edited value", "truncated",
