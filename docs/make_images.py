@@ -1,4 +1,5 @@
-"""Regenerate the pictures the README shows (run from the repository root):
+"""Regenerate the pictures of the README and the docs (run from the repository root;
+``make docs`` runs it after ``docs/regenerate.py``):
 
     python docs/make_images.py
 

@@ -53,11 +53,13 @@ RESULTS: tuple[Result, ...] = (
     Result("demo", (f"{MS} evaluate scenes/default.yaml --keep plot annotated",),
            about="make demo: the default scene end to end", fresh=("renders/default",)),
     Result("budget_exp1", (f"{MS} budget scenes/bench/exp1.yaml",),
-           about="the paper's EXP1 on a hand-built bench: the error budget"),
+           about="the paper's EXP1 on a hand-built bench: the error budget",
+           fresh=("renders/exp1_bench",)),
     Result("budget_exp1_3beacons",
            (f"{MS} budget scenes/bench/exp1_3beacons.yaml --calibrate pan,scale "
             "--beacon-sigma 0.115",),
-           about="EXP1's bench with three planned beacons, plain and self-calibrated"),
+           about="EXP1's bench with three planned beacons, plain and self-calibrated",
+           fresh=("renders/exp1_bench_3beacons",)),
     Result("detect_accuracy",
            (f"{PY} benchmarks/detect.py --spec scenes/dataset_spec.yaml --frames 40 "
             "--seed 4320",), markdown=True,
@@ -65,8 +67,8 @@ RESULTS: tuple[Result, ...] = (
     Result("detect_offaxis",
            (f"{PY} benchmarks/detect.py --offaxis --plot docs/detect_offaxis.png",),
            markdown=True, about="the detector against the off-axis angle"),
-    Result("edges", (f"{PY} benchmarks/edges.py --spp 512",), markdown=True,
-           about="each edge against its exact projection, default scene, 512 spp"),
+    Result("edges", (f"{PY} benchmarks/edges.py --spp 576",), markdown=True,
+           about="each edge against its exact projection, default scene, 576 spp"),
     Result("pencil_edges", (f"{PY} benchmarks/pencil_edges.py --spp 1024",), markdown=True,
            about="the pencil's top and foot against the truth, 12 scenes"),
     Result("plan_exp3", (f"{MS} plan scenes/exp3.yaml --out docs/plan_exp3.png",),
@@ -74,7 +76,7 @@ RESULTS: tuple[Result, ...] = (
     Result("montecarlo", (f"{MS} montecarlo --iterations 2000",),
            about="the paper's Table 1 protocol"),
     Result("paper", (f"{PY} benchmarks/paper.py",), markdown=True,
-           about="the paper's experiments side by side"),
+           about="the paper's experiments side by side", fresh=("renders/paper",)),
     Result("crlb", (f"{PY} benchmarks/uncertainty.py --scenes 40 --draws 1000",),
            markdown=True, about="estimator efficiency against the Cramér–Rao bound"),
     Result("default_ellipse", (f"{PY} benchmarks/uncertainty.py --renders 20",),
@@ -97,7 +99,8 @@ RESULTS: tuple[Result, ...] = (
     Result("particle", (f"{PY} benchmarks/particle.py",), markdown=True,
            about="the particle filter against the batch smoother, synthetic"),
     Result("track_paths", (f"{PY} benchmarks/track.py",), markdown=True,
-           about="the moving beacon's paths on rendered frames (about 20 min)"),
+           about="the moving beacon's paths on rendered frames (about 20 min)",
+           fresh=("renders/bench_track",)),
     Result("particle_nees",
            (f"{PY} benchmarks/particle.py --nees --seeds 20 --particles 2000",),
            markdown=True, about="the particle filter's consistency on synthetic measurements"),
@@ -121,6 +124,10 @@ def render_result(r: Result, stdout: str, stamped: str) -> str:
     """The result file's text: a header, the commands and stamp, and what they printed."""
     cmds = " && ".join(f"`{c}`" for c in r.commands)
     stdout = stdout.replace(f"{ROOT}/", "")  # paths as the repository names them
+    stdout = re.sub(r"\x1b\[[0-9;]*m", "", stdout)  # a terminal's colours
+    # Mitsuba's own log lines ("2026-12-02 ... WARN ...") are not the result
+    stdout = "\n".join(ln for ln in stdout.split("\n")
+                       if not re.match(r"\d{4}-\d\d-\d\d \d\d:\d\d:\d\d", ln))
     body = stdout.rstrip() + "\n" if r.markdown else f"```text\n{stdout.rstrip()}\n```\n"
     return f"{HEADER.format(name=r.name)}\n*{cmds} · {stamped}*\n\n{body}"
 
@@ -174,7 +181,8 @@ def main() -> int:
     for name in a.names or BY_NAME:
         r = BY_NAME[name]
         t0 = time.perf_counter()
-        text = render_result(r, run(r), stamp())
+        stamped = stamp()  # the code the run starts from (a commit during it is not it)
+        text = render_result(r, run(r), stamped)
         tmp = OUT / f".{name}.md.tmp"
         tmp.write_text(text, encoding="utf-8")
         tmp.replace(OUT / f"{name}.md")

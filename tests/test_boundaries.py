@@ -68,7 +68,7 @@ def test_the_detector_never_loads_the_truth():
     # reader (so it cannot read a scene's mirror or target), no Mitsuba
     loaded = _loaded_by("mirrorsim.detection.detector")
     forbidden = [m for m in loaded if m.startswith((
-        "mirrorsim.truth", "mirrorsim.formats.scenefile", "mirrorsim.pipelines", "mitsuba",
+        "mirrorsim.truth", "mirrorsim.formats.scene", "mirrorsim.pipelines", "mitsuba",
         "drjit"))]
     assert "mirrorsim.detection.detector" in loaded
     assert forbidden == []
@@ -76,7 +76,7 @@ def test_the_detector_never_loads_the_truth():
 
 def test_the_detection_wing_names_no_truth_even_lazily():
     bad = [(p.name, m) for p in _modules(PACKAGE / "detection") for m in _imports(p)
-           if m.startswith(("mirrorsim.truth", "mirrorsim.formats.scenefile"))]
+           if m.startswith(("mirrorsim.truth", "mirrorsim.formats.scene"))]
     assert bad == []
 
 

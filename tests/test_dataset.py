@@ -330,8 +330,9 @@ def test_bad_bench_ranges_are_refused_with_their_key(tmp_path, capsys, bench, ke
 def test_error_model_fits_bias_against_bench_imperfections():
     """Synthetic rows on a bench: α error = pan error + N(0, 0.003°); d_total error =
     −0.0102·(calibration error) − mirror power + N(0, 0.002).  The fit recovers the
-    coefficients 1, −0.0102 and −1 by the features' names, and the σ's grow to the
-    bench's (pan error uniform in ±0.5°: σ ≈ 0.29°)."""
+    coefficients 1, −0.0102 and −1 by the features' names; the pan error, shared by a
+    row's two α's, is the model's shared offset (uniform in ±0.5°: σ ≈ 0.29°), and each
+    image's own α σ the rows' own noise."""
     rng = np.random.default_rng(2)
     n = 3000
     cols = synthetic_columns(n, 2)

@@ -55,7 +55,10 @@ def test_every_included_result_comes_from_a_registered_command_with_its_stamp():
             stamp_line = text.split("\n")[2]
             for c in r.commands:
                 assert f"`{c}`" in stamp_line, f"{f} was made by another command than {c}"
+            # a commit, not a dirty tree's "-dirty": the result is of committed code
             assert re.search(r"commit [0-9a-f]{7,}, \d{4}-\d\d-\d\d, ", stamp_line), f
+            # no terminal colours, log lines or machine paths in what the pages show
+            assert "\x1b" not in text and not re.search(r"(^|\s)/(tmp|home|root|work)/", text), f
 
 
 def test_every_registered_result_is_shown_somewhere():
