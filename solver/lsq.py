@@ -59,15 +59,23 @@ class ObjectSigmas:
         """One pair for every observation."""
         return cls(sigma, (sigma,))
 
+    def alpha_covariance(self, sa: np.ndarray) -> np.ndarray:
+        """The α's covariance diag(sa²) + shared²·11ᵀ (sa: each α's own σ)."""
+        return np.diag(sa**2) + self.shared_alpha_deg**2
+
     def alpha_whitener(self, sa: np.ndarray) -> np.ndarray:
-        """L⁻¹ for the α's covariance diag(sa²) + shared²·11ᵀ = L Lᵀ (sa: each α's own
-        σ, in the solver's order): whitened residuals L⁻¹ (α − α_meas) are independent
-        with unit variance (the Cramér–Rao bound's information).  Without a shared part,
-        diag(1/sa)."""
-        if self.shared_alpha_deg == 0.0:
-            return np.diag(1.0 / sa)
-        cov = np.diag(sa**2) + self.shared_alpha_deg**2
-        return np.linalg.inv(np.linalg.cholesky(cov))
+        """L⁻¹ for :meth:`alpha_covariance` = L Lᵀ: whitened residuals L⁻¹ (α − α_meas)
+        are independent with unit variance (the Cramér–Rao bound's information)."""
+        return np.linalg.inv(np.linalg.cholesky(self.alpha_covariance(sa)))
+
+    def independent(self) -> ObjectSigmas:
+        """The same σ's with the shared α offset folded into each α (as if independent:
+        for analyses that take independent errors, a conservative choice)."""
+        if not self.shared_alpha_deg:
+            return self
+        whole = lambda s: Sigma(float(np.hypot(s.alpha_deg, self.shared_alpha_deg)),  # noqa: E731
+                                s.d_total_rel)
+        return ObjectSigmas(whole(self.target), tuple(whole(b) for b in self.beacons))
 
     def describe(self) -> str:
         """The σ's in words: α in degrees, d_total in % of d_total."""
@@ -264,8 +272,9 @@ def _forward(x: np.ndarray, o: np.ndarray, bpos: np.ndarray, nt: int,
     return a, d, np.hstack([da, ea, oa]), np.hstack([dd, ed, od])
 
 
-def check_nuisances(nuisances: tuple[str, ...], nb: int, nt: int) -> None:
-    """Refuse unknown nuisances, and more unknowns than measurements."""
+def check_nuisances(nuisances: tuple[str, ...], nb: int | None, nt: int) -> None:
+    """Refuse unknown nuisances, and more unknowns than measurements (``nb`` None: the
+    beacons are not known yet, the names only)."""
     bad = [n for n in nuisances if n not in NUISANCES]
     if bad or len(set(nuisances)) != len(nuisances):
         raise SolverError(f"unknown or repeated nuisance(s) {', '.join(bad) or nuisances}: "
@@ -273,7 +282,7 @@ def check_nuisances(nuisances: tuple[str, ...], nb: int, nt: int) -> None:
     unknowns = 4 + len(nuisances)
     # the target's observations (one per frame) repeat one image's measurement: they
     # count once
-    if nuisances and 2 * (nb + min(nt, 1)) < unknowns:
+    if nuisances and nb is not None and 2 * (nb + min(nt, 1)) < unknowns:
         need = -(-(unknowns - 2) // 2)
         raise SolverError(f"calibrating {' and '.join(nuisances)} needs at least {need} beacon "
                           f"observations ({nb} given): each image gives 2 measurements, and "
@@ -381,9 +390,7 @@ def solve_measurements(observer, beacons: list[BeaconMeasurement],
                               "(singular Jacobian)")
         Jinv = np.linalg.inv(J)
         S = np.diag(sd**2)
-        S[0, 2] = S[2, 0] = sig.shared_alpha_deg**2  # the two α's shared offset
-        S[0, 0] += sig.shared_alpha_deg**2
-        S[2, 2] += sig.shared_alpha_deg**2
+        S[np.ix_([0, 2], [0, 2])] = sig.alpha_covariance(sa)  # rows (α_b, d_b, α_t, d_t)
         cov = Jinv @ S @ Jinv.T
         return replace(sol, covariance=cov, method="closed form with covariance")
     return solve_lsq(observer, beacons, targets, sigma, nuisances=nuisances,

@@ -326,40 +326,43 @@ class MovingBeaconFilter:
                                                self.rng, self.prior, self.history)
         self.history = (*self.history, (np.asarray(control, float), observation))
 
+    def _spread(self) -> tuple[float, float, np.ndarray]:
+        """The hypotheses' weighted mean yaw (a line angle, in [0, 180)) and offset along
+        its normal, and each hypothesis' (yaw, offset) deviation from them."""
+        w, m = self.weights, self.particles.mirror
+        th = np.radians(m[:, 0])
+        # line angles are modulo 180°: average the doubled angle
+        # (in [0, 180) before ρ is taken along its normal: a mean yaw of −0.005° returned
+        # as 179.995° turned the normal round, and the line stood 2ρ away)
+        yaw = float(np.degrees(0.5 * np.arctan2(w @ np.sin(2 * th), w @ np.cos(2 * th)))
+                    % 180.0)
+        # express ρ in the mean yaw's normal
+        rhos = (m[:, 1, None] * line_normal(m[:, 0])) @ line_normal(yaw)
+        rho = float(w @ rhos)
+        dev = np.column_stack([(m[:, 0] - yaw + 90.0) % 180.0 - 90.0, rhos - rho])
+        return yaw, rho, dev
+
     def estimate(self) -> MirrorEstimate:
         """Weighted means of the beacon and the mirror (yaw averaged as a line angle), and
         the spread of the mirror hypotheses (weighted SD of yaw and offset)."""
         w = self.weights
-        th = np.radians(self.particles.mirror[:, 0])
-        # line angles are modulo 180°: average the doubled angle
-        # (in [0, 180) before ρ is taken along its normal: a mean yaw of −0.005° returned
-        # as 179.995° turned the normal round, and the line stood 2ρ away)
-        yaw = np.degrees(0.5 * np.arctan2(w @ np.sin(2 * th), w @ np.cos(2 * th))) % 180.0
-        # express ρ in the mean yaw's normal
-        n_mean = line_normal(yaw)
-        foot = self.particles.mirror[:, 1, None] * line_normal(self.particles.mirror[:, 0])
-        rhos = foot @ n_mean
-        rho = float(w @ rhos)
-        dyaw = (self.particles.mirror[:, 0] - yaw + 90.0) % 180.0 - 90.0
-        return MirrorEstimate(beacon=w @ self.particles.beacon, yaw_deg=float(yaw),
-                              rho=rho, yaw_sd_deg=float(np.sqrt(w @ dyaw**2)),
-                              rho_sd=float(np.sqrt(w @ (rhos - rho) ** 2)))
+        yaw, rho, dev = self._spread()
+        yaw_sd, rho_sd = np.sqrt(w @ dev**2)
+        return MirrorEstimate(beacon=w @ self.particles.beacon, yaw_deg=yaw, rho=rho,
+                              yaw_sd_deg=float(yaw_sd), rho_sd=float(rho_sd))
 
     def nees(self, mirror_point, mirror_yaw_deg: float) -> float:
         """eᵀ C⁻¹ e: the true mirror line's squared Mahalanobis distance from the
         hypotheses' weighted mean, in their weighted covariance of (yaw, offset) (the
         offsets along the mean yaw's normal, as :meth:`estimate` takes them).  χ²₂ for
         a consistent filter: 2 on average, ≤ 5.99 95 % of the time."""
-        w, m = self.weights, self.particles.mirror
-        est = self.estimate()
-        n_mean = line_normal(est.yaw_deg)
-        dev = np.column_stack([(m[:, 0] - est.yaw_deg + 90.0) % 180.0 - 90.0,
-                               (m[:, 1, None] * line_normal(m[:, 0])) @ n_mean - est.rho])
+        w = self.weights
+        yaw, rho, dev = self._spread()
         cov = (w[:, None] * dev).T @ dev
         n_true = line_normal(mirror_yaw_deg)
-        rho_true = float(n_true @ np.asarray(mirror_point, float)) * float(n_true @ n_mean)
-        e = np.array([(mirror_yaw_deg - est.yaw_deg + 90.0) % 180.0 - 90.0,
-                      rho_true - est.rho])
+        rho_true = float(n_true @ np.asarray(mirror_point, float)) * float(
+            n_true @ line_normal(yaw))
+        e = np.array([(mirror_yaw_deg - yaw + 90.0) % 180.0 - 90.0, rho_true - rho])
         try:
             return float(e @ np.linalg.solve(cov, e))
         except np.linalg.LinAlgError:  # the hypotheses collapsed onto one line

@@ -101,7 +101,8 @@ def test_two_beacon_orientation_of_known_reflector():
 
 
 def test_expected_error_matches_least_squares_and_best_is_much_better():
-    """DESIGN.md: EXP3's own beacon ≈ 2.4 cm at σ = (0.01°, 0.2 %); good positions ≈ 0.2."""
+    """EXP3's own beacon ≈ 2.4 cm at σ = (0.01°, 0.2 %), good positions ≈ 0.2 (figures
+    fixed before this code was written)."""
     o, m, yaw = np.zeros(2), np.array([16.0, 34.5]), 38.3
     ot = observe(o, m, yaw, (65.5, 42.7))
     sig = Sigma(0.01, 0.002)

@@ -105,7 +105,7 @@ def test_solve_with_sigma_reports_covariance(tmp_path, capsys):
     printed = capsys.readouterr().out
     sol = json.loads(printed[printed.index("{"):])
     cov = np.array(sol["covariance"]["target"])
-    assert np.sqrt(np.trace(cov)) == pytest.approx(2.4, abs=0.1)  # DESIGN.md's EXP3 figure
+    assert np.sqrt(np.trace(cov)) == pytest.approx(2.4, abs=0.1)  # EXP3's figure, fixed in advance
 
 
 def test_paper_table3_inputs_do_not_reproduce_its_outputs(capsys):

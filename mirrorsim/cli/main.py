@@ -76,6 +76,10 @@ def _interrupted() -> int:
     return 128 + signum
 
 
+# the commands that say every failure found in a scene file (the others say the first
+# and count the rest)
+LISTS_EVERY_FAILURE = ("check", "plot")
+
 def main(argv: list[str] | None = None) -> int:
     """Run one command; return its exit status (130 after Ctrl-C, 143 after SIGTERM)."""
     _Interrupt.signum = None
@@ -125,7 +129,7 @@ def _run(args: argparse.Namespace) -> int:
             raise
         what = "cannot solve: " if isinstance(exc, SolverError) else ""
         others = getattr(exc, "others", ())  # a scene file's further failures
-        if others and args.command == "check":  # check lists every failure, a line each
+        if others and args.command in LISTS_EVERY_FAILURE:  # a line each
             for e in (exc, *others):
                 print(f"error: {e}", file=sys.stderr)
             return status

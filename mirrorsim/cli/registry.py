@@ -215,7 +215,7 @@ def nuisances_of(args: argparse.Namespace, n_beacons: int | None = None,
 
     names = tuple(n.strip() for n in args.calibrate.split(",") if n.strip())
     try:  # the names always; the count only where the beacons are known
-        check_nuisances(names, n_beacons if n_beacons is not None else 2**31, n_targets)
+        check_nuisances(names, n_beacons, n_targets)
     except SolverError as exc:
         raise BadArgument("--calibrate", str(exc)) from None
     return names

@@ -58,7 +58,7 @@ def _new_options(p):
          "every key.  An existing file is never written over.",
          _new_options)
 def _new(args) -> int:
-    from mirrorsim.formats.files import write_text
+    from mirrorsim.formats.files import check_output_file, write_text
     from mirrorsim.formats.scenefile import scene_template
 
     path = Path(args.scene)
@@ -66,8 +66,6 @@ def _new(args) -> int:
     if path.exists() or path.is_symlink():
         raise BadArgument("SCENE", f"{str(path)!r} exists: mirrorsim new never writes over a "
                                    "file; give a new name")
-    from mirrorsim.formats.files import check_output_file
-
     check_output_file(path, "SCENE")
     write_text(path, text)
     print(f"{path}: a template scene; check it with `mirrorsim check {path}`")
@@ -109,23 +107,24 @@ def _plot_options(p):
          _plot_options)
 def _plot(args) -> int:
     from mirrorsim.cli.plots import plot_top_view
-    from mirrorsim.errors import SceneError, exit_status
+    from mirrorsim.errors import SceneError
     from mirrorsim.formats.scenefile import scene_and_failures
 
     try:
         scene = load(args.scene)
-    except SceneError as exc:
+    except SceneError:
         # an invalid scene is drawn where its blocks can be read, its failures marked on
-        # it, so that the user sees what is wrong; the exit status stays 2
+        # it, so that the user sees what is wrong; then they are raised as check's are
+        # (each listed, exit 2)
         scene, failures = scene_and_failures(args.scene)
         if scene is None:
             raise
-        for e in failures:
-            print(f"error: {e}", file=sys.stderr)
         out = out_file(args, scene, f"{scene.name}.top.png")
         print(f"{plot_top_view(scene, out, failures=failures)} (the scene is invalid: "
               f"{len(failures)} failure(s) marked)")
-        return exit_status(exc)
+        first, *rest = failures
+        first.others = tuple(rest)
+        raise first from None
     print(plot_top_view(scene, out_file(args, scene, f"{scene.name}.top.png")))
     return 0
 
@@ -269,8 +268,6 @@ def _budget_options(p):
          "sub-folder.",
          _budget_options)
 def _budget(args) -> int:
-    import sys
-
     from mirrorsim.cli.plots import plot_budget
     from mirrorsim.cli.tables import budget_table
     from mirrorsim.formats.files import write_json
@@ -340,8 +337,6 @@ def _track_options(p):
          "step) and DIR/track.gif (the top view with the filter's mirror lines), the frames "
          "in DIR/poses/.", _track_options)
 def _track(args) -> int:
-    import sys
-
     from mirrorsim.cli.plots import animate_track, plot_track
     from mirrorsim.cli.registry import at_least
     from mirrorsim.cli.tables import track_table

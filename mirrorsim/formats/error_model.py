@@ -114,6 +114,12 @@ class ErrorModel:
         scale = np.where(ok, (self.fx_px or 1.0) / np.where(ok, fx, 1.0), 1.0)
         return float(scale) if scale.ndim == 0 else scale
 
+    def whole_sigma(self, kind: str, quantity: str, features: np.ndarray, fx_px) -> np.ndarray:
+        """Each row's whole σ of ``kind``'s ``quantity`` at feature rows and focal lengths:
+        its own law scaled to fx, and for α the frame's shared offset besides."""
+        own = self.fits[kind][quantity].log_sigma(features) * self.fx_scale(fx_px)
+        return np.hypot(own, self.shared_alpha_deg) if quantity == "alpha" else own
+
     def sigma(self, kind: str, d_total: float, alpha_deg: float, pan_deg: float | None,
               fx_px: float | None = None) -> Sigma:
         """The σ pair of one measurement of a ``kind`` image (``pan_deg`` None: the pan

@@ -39,20 +39,19 @@ class Failures:
             return default
 
     def raise_any(self, hint: str = "", structural: bool = False) -> None:
-        """Raise the first failure found, the others attached (and ``hint`` added to
-        its line: a value in the wrong units is blamed on another key); when lenient,
-        only ``structural`` failures (a block not read) are raised."""
-        if self.found and self.lenient and not structural:
-            if hint and hint not in self.found[0].message:
-                first = self.found[0]
-                self.found[0] = SceneError(first.file, first.key, f"{first.message} ({hint})")
+        """Raise the first failure found, the others attached, with ``hint`` added to its
+        line (a value in the wrong units is blamed on another key); when lenient, only
+        ``structural`` failures (a block not read) are raised."""
+        if not self.found:
             return
-        if self.found:
-            first = self.found[0]
-            if hint:
-                first = SceneError(first.file, first.key, f"{first.message} ({hint})")
-            first.others = tuple(self.found[1:])
-            raise first
+        first = self.found[0]
+        if hint and hint not in first.message:
+            first = self.found[0] = SceneError(first.file, first.key,
+                                               f"{first.message} ({hint})")
+        if self.lenient and not structural:
+            return
+        first.others = tuple(self.found[1:])
+        raise first
 
 
 def unit_hints(board: Board, mirror: Mirror, hfov: float, positions) -> str:
@@ -80,11 +79,10 @@ def check_all_on_board(f: Failures, on_board, position, mirror: Mirror, target_p
                         beacons, bkey, occluders) -> None:
     """Every object stands on the board (the mirror's ends, believed positions too)."""
     f.attempt(on_board, position, "camera.position", "the camera")
-    if f.attempt(on_board, mirror.center, "mirror.center", "the mirror", default=False) \
-            is None:  # the mirror's ends only where its centre is on the board
+    # the mirror's ends only where its centre is on the board, and one end off is enough
+    if f.attempt(on_board, mirror.center, "mirror.center", "the mirror"):
         for end in mirror.ends():
-            if f.attempt(on_board, end, "mirror.center", f"the mirror's end {fmt(end)}",
-                         default=False) is False:
+            if not f.attempt(on_board, end, "mirror.center", f"the mirror's end {fmt(end)}"):
                 break
     f.attempt(on_board, target_position, "target.position", "the target")
     for i, b in enumerate(beacons):
@@ -97,15 +95,16 @@ def check_all_on_board(f: Failures, on_board, position, mirror: Mirror, target_p
         f.attempt(on_board, o.end, f"occluders[{i}].end", "the wall's end")
 
 
-def board_check(r: Reader, board: Board) -> Callable[[Any, str, str], None]:
-    """``on_board(point, key, what)``: raises, naming the key, where the point lies off
-    ``board``."""
+def board_check(r: Reader, board: Board) -> Callable[[Any, str, str], bool]:
+    """``on_board(point, key, what)``: True, or raises naming the key where the point
+    lies off ``board``."""
     W, H = board.size
 
-    def on_board(p, key: str, what: str) -> None:
+    def on_board(p, key: str, what: str) -> bool:
         tol = 1e-9
         if not (-tol <= p[0] <= W + tol and -tol <= p[1] <= H + tol):
             raise r.fail(key, f"{fmt(p)}: {what} lies off the board [0, {W:g}] × [0, {H:g}]")
+        return True
 
     return on_board
 

@@ -117,10 +117,7 @@ def fit_log_sigma(X: np.ndarray, y: np.ndarray, ridge: float = 1e-3,
     ``shared_var``: the variance of an error every image of a frame shares, known."""
     from scipy.optimize import minimize
 
-    mu = X.mean(axis=0)
-    sc = X.std(axis=0)
-    sc[sc == 0] = 1.0
-    Z = np.column_stack([np.ones(len(y)), (X - mu) / sc])
+    Z, mu, sc = _standardized(X)
     y2 = np.maximum(y**2, 1e-300)
     n = len(y)
 
@@ -143,6 +140,13 @@ def fit_log_sigma(X: np.ndarray, y: np.ndarray, ridge: float = 1e-3,
     w0 = np.r_[0.5 * np.log(own0), np.zeros(X.shape[1])]
     w = minimize(nll, w0, jac=True, method="BFGS").x
     return LogSigma(float(w[0]), tuple(w[1:].tolist()), tuple(mu.tolist()), tuple(sc.tolist()))
+
+
+def _standardized(X: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The design z = [1, (X − mean)/SD] (an SD of 0 taken as 1), the means and SDs."""
+    mu, sc = X.mean(axis=0), X.std(axis=0)
+    sc[sc == 0] = 1.0
+    return np.column_stack([np.ones(len(X)), (X - mu) / sc]), mu, sc
 
 
 def _sigma_fit(X: np.ndarray, y: np.ndarray, shared_var: float = 0.0
@@ -244,13 +248,8 @@ def fit_alpha_pair(St: np.ndarray, yt: np.ndarray, Sb: np.ndarray, yb: np.ndarra
     starts s."""
     from scipy.optimize import minimize
 
-    def standardized(S):
-        mu, sc = S.mean(axis=0), S.std(axis=0)
-        sc[sc == 0] = 1.0
-        return np.column_stack([np.ones(len(S)), (S - mu) / sc]), mu, sc
-
-    Zt, mt, ct = standardized(St)
-    Zb, mb, cb = standardized(Sb)
+    Zt, mt, ct = _standardized(St)
+    Zb, mb, cb = _standardized(Sb)
     k = Zt.shape[1]
     n = len(yt)
 
@@ -356,9 +355,7 @@ def plot(cols: dict, model: ErrorModel, out: str | Path) -> Path:
             S = sigma_features_of(cols, kind)
             m = ok & np.isfinite(y) & np.isfinite(S).all(axis=1)
             fx = np.asarray(cols.get("fx_px", np.full(len(ok), np.nan)), float)[m]
-            sd = model.fits[kind][q].log_sigma(S[m]) * model.fx_scale(fx)
-            if q == "alpha":  # an α error holds the frame's shared offset too
-                sd = np.sqrt(sd**2 + model.shared_alpha_deg**2)
+            sd = model.whole_sigma(kind, q, S[m], fx)
             for c, (x, name) in enumerate(((np.exp(S[m, 0]), "measured d_total (cm)"),
                                            (S[m, 1], "|off-axis bearing| (°)"))):
                 axes[r, c].errorbar(x + 0.15 * k, y[m] * scale, yerr=2 * sd * scale, fmt="o",

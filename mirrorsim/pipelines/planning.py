@@ -135,13 +135,9 @@ def plan_scene(scene: Scene, sigma: Sigma | ObjectSigmas | None = None, eps_deg:
     BadParameter
         For a σ, ε or step that is not > 0, ε ≥ 45° or a negative spread.
     """
-    sigma = as_object_sigmas(sigma or Sigma())
-    if sigma.shared_alpha_deg:
-        # the placement's Fisher information takes independent errors: a shared α
-        # offset enters each α whole (the conservative choice; see docs/limitations.md)
-        whole = lambda p: Sigma(float(np.hypot(p.alpha_deg, sigma.shared_alpha_deg)),  # noqa: E731
-                                p.d_total_rel)
-        sigma = ObjectSigmas(whole(sigma.target), tuple(whole(b) for b in sigma.beacons))
+    # the placement's Fisher information takes independent errors: a shared α offset
+    # enters each α whole (the conservative choice; see docs/limitations.md)
+    sigma = as_object_sigmas(sigma or Sigma()).independent()
     _check_parameters(sigma, eps_deg, step, yaw_spread_deg, d1_spread)
     if not 1 <= n_beacons <= MAX_PLANNED_BEACONS:
         raise BadParameter("n_beacons", f"{n_beacons} must be within 1..{MAX_PLANNED_BEACONS}")

@@ -252,14 +252,12 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
     b0, cam = scene.beacons[0], scene.camera
     start = np.asarray(b0.believed, float)
     model = error_model or default_error_model()
-    sig = model.typical_at(cam.fx)
-    typical = sig.beacons[0]
     # the filter takes each pose's α error whole: its own part and the shared offset
     # (a bench's pan), which the filter does not model apart
-    alpha = float(np.hypot(typical.alpha_deg, sig.shared_alpha_deg))
+    typical = model.typical_at(cam.fx).independent().beacons[0]
     # a particle filter cannot follow a likelihood much narrower than its particles'
     # spread (they all but one get weight 0): no narrower than FILTER_SIGMA_FLOOR
-    params = PFParams(sigma=Sigma(max(alpha, FILTER_SIGMA_FLOOR.alpha_deg),
+    params = PFParams(sigma=Sigma(max(typical.alpha_deg, FILTER_SIGMA_FLOOR.alpha_deg),
                                   max(typical.d_total_rel, FILTER_SIGMA_FLOOR.d_total_rel)),
                       sigma_trs=max(odometry_sigma if kind != "fixed" else 0.0, 1e-3))
     pose = _Poses(scene, out / "poses", seed, variant, on_pose, steps + 1)

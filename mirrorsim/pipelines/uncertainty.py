@@ -136,10 +136,7 @@ def _within(model: ErrorModel, cols: dict, ok: np.ndarray, pan: np.ndarray, fx: 
         for q, col in (("alpha", "alpha_err"), ("d_rel", "d_rel_err")):
             err = _col(cols, table.object_column(kind, col))
             m = ok & np.isfinite(err) & np.isfinite(x).all(axis=1)
-            own = model.fits[kind][q].log_sigma(x[m]) * model.fx_scale(fx[m])
-            # an α error holds the frame's shared offset besides the image's own part
-            shared = model.shared_alpha_deg if q == "alpha" else 0.0
-            z = np.abs(err[m]) / np.sqrt(own**2 + shared**2)
+            z = np.abs(err[m]) / model.whole_sigma(kind, q, x[m], fx[m])
             out[kind][q] = (float(np.mean(z <= 1.0)), float(np.mean(z <= 2.0))) if z.size \
                 else (math.nan, math.nan)
     return out

@@ -292,24 +292,23 @@ def encode_ids(first: np.ndarray, in_mirror: np.ndarray) -> np.ndarray:
     return np.where(first == MIRROR_LABEL, IN_MIRROR + in_mirror, first).astype(np.uint8)
 
 
-# colours of the id preview (RGB): the room dark, the glass blue, the target orange,
-# each beacon its own hue; what the mirror shows lighter than the same object seen
-# directly
-_ID_COLOURS = {BACKGROUND_LABEL: (40, 40, 40), MIRROR_LABEL: (30, 60, 120),
-               TARGET_LABEL: (230, 120, 20)}
+# colours of the id preview (RGB): the room dark, the target orange, each beacon its own
+# hue, occluders grey; what the mirror shows lighter than the same object seen directly,
+# the glass where it shows the room blue (encode_ids never leaves MIRROR_LABEL itself)
+_ID_COLOURS = {BACKGROUND_LABEL: (40, 40, 40), TARGET_LABEL: (230, 120, 20)}
 _BEACON_COLOURS = ((240, 220, 40), (60, 200, 80), (220, 60, 200), (60, 200, 220),
                    (200, 60, 60), (150, 110, 240))
+_GLASS_COLOUR = (70, 110, 190)
 
 
 def colourise_ids(ids: np.ndarray, n_beacons: int) -> np.ndarray:
     """An RGB picture of :func:`encode_ids`' labels for a viewer (``<name>.ids.preview
-    .png``): the labels themselves (0…~110) look black.  Occluders grey; labels seen in
-    the mirror lighter, with the glass that shows the room in blue."""
+    .png``): the labels themselves (0…~110) look black."""
     rgb = np.full((*ids.shape, 3), 128, np.uint8)  # occluders and anything unlisted
     colours = {**_ID_COLOURS, **{BEACON_LABEL + i: _BEACON_COLOURS[i % len(_BEACON_COLOURS)]
                                  for i in range(n_beacons)}}
     for label, colour in colours.items():
         rgb[ids == label] = colour
-        lighter = tuple(min(255, int(c * 0.6 + 255 * 0.4)) for c in colour)
-        rgb[ids == IN_MIRROR + label] = lighter if label != BACKGROUND_LABEL else (70, 110, 190)
+        rgb[ids == IN_MIRROR + label] = tuple(min(255, int(0.6 * c + 102)) for c in colour)
+    rgb[ids == IN_MIRROR + BACKGROUND_LABEL] = _GLASS_COLOUR
     return rgb
