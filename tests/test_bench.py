@@ -460,6 +460,7 @@ def test_budget_measures_each_source_and_predicts_it(tmp_path, capsys):
     assert doc["all"]["target_cm"] > 0 and doc["ideal"]["target_cm"] >= 0
     for name in ("ideal", "camera.pan_error", "beacons0.known_position", "all"):
         assert (out / name / "default.png").exists()
+        assert not (out / name / "default.annotated.png").exists()  # only with --keep
 
 
 def test_truth_names_the_bench_it_was_rendered_with(ideal):
@@ -487,3 +488,61 @@ def test_a_bench_scene_written_as_a_file_reads_back_the_same():
     again = scene_from_dict(yaml.safe_load(to_yaml(s)), source="again.yaml")
     assert again.bench == s.bench and again.beacons == s.beacons
     assert yaml.safe_load(to_yaml(bench_scene())).get("calibration") is None
+
+
+# ---------------------------------------------------------------- shared renders
+
+SMALL = {"resolution": [480, 272]}
+
+
+def test_every_imperfection_says_where_it_acts():
+    stages = {imp.field: imp.stage for imp in imperfections.REGISTRY}
+    assert set(stages.values()) <= {"optics", "sensor", "record"}
+    # fixed in advance from what each one is on a bench: light paths, the sensor, beliefs
+    assert stages == {"pan_error": "record", "pitch": "optics", "roll": "optics",
+                      "distortion": "optics", "distortion_known": "record",
+                      "noise": "sensor", "jpeg_quality": "sensor",
+                      "curvature_radius": "optics", "tilt": "optics",
+                      "calibration_distance_error": "record", "known_position": "record"}
+
+
+def test_frames_that_differ_after_the_render_share_it_bit_for_bit(monkeypatch):
+    from mirrorsim.rendering import passes
+
+    after = bench_scene(camera={**SMALL, "pan_error": 0.7, "jpeg_quality": 80,
+                                "noise": {"full_well": 3000, "read_noise": 5}},
+                        calibration={"distance_error": 2.0},
+                        beacon={"known_position": [36.4, 56.0]})
+    tilted = bench_scene(camera=SMALL, mirror={"tilt": 1.0})
+    fresh = passes.render_frame(after, progress=False)  # outside the scope: its own render
+    rendered = []
+    real = passes._render_optics
+    monkeypatch.setattr(passes, "_render_optics",
+                        lambda s, *a: rendered.append(s.name) or real(s, *a))
+    with passes.reusing_renders(1):
+        passes.render_frame(imperfections.ideal(after), progress=False)
+        shared = passes.render_frame(after, progress=False)
+        other = passes.render_frame(tilted, progress=False)
+    assert len(rendered) == 2  # the ideal bench's and the tilted mirror's, not `after`'s
+    for a, b in ((shared.linear, fresh.linear), (shared.first, fresh.first),
+                 (shared.in_mirror, fresh.in_mirror)):
+        np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(other.in_mirror, fresh.in_mirror)  # the glass moved
+    with pytest.raises(ValueError):
+        shared.first[0, 0] = 1  # a kept render cannot be drawn on by one of its users
+    assert passes._KEPT is None  # nothing kept past the scope
+
+
+def test_a_frame_measured_while_it_is_written_matches_one_read_back(tmp_path):
+    from mirrorsim.pipelines.frame import measure_frame
+    from mirrorsim.rendering.frames import render_to_files
+
+    scene = bench_scene(camera=SMALL)
+    m = render_and_measure(scene, tmp_path / "a", progress=False)
+    files = render_to_files(scene, tmp_path / "b", progress=False)
+    for name in ("default.png", "default.capture.json", "default.ids.png"):
+        assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes()
+    back = measure_frame(files.image, files.capture)  # decoded from the file
+    assert back.detection.to_json() == m.detection.to_json()
+    again = render_and_measure(scene, tmp_path / "a", progress=False)  # reused, verified
+    assert again.files.reused and again.detection.to_json() == m.detection.to_json()

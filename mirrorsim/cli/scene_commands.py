@@ -256,6 +256,12 @@ def _budget_options(p):
            variant=True, quiet=True, error_model="each measurement's σ's (the solver's "
            "weights)")
     calibrate_option(p)
+    from mirrorsim.pipelines.score import EXTRA_FILES
+
+    p.add_argument("--keep", nargs="*", default=[], choices=EXTRA_FILES,
+                   help="files to write beside each run's frame besides its image, capture "
+                   "record and truth: ids (the id labels), annotated (the detections drawn); "
+                   "default none")
 
 
 @command("budget", "error budget of a bench: each imperfection alone, then all",
@@ -288,7 +294,7 @@ def _budget(args) -> int:
                                                                  file=sys.stderr, flush=True))
     budget = run_budget(scene, out, variant=args.variant, progress=not args.quiet,
                         on_step=step, error_model=error_model_of(args), nuisances=nuisances,
-                        position_sigma=beacon_sigma_of(args))
+                        position_sigma=beacon_sigma_of(args), keep=tuple(args.keep))
     print(budget_table(budget))
     path = write_json(out / "budget.json", budget.to_json())
     fig = plot_budget(budget, out / "budget.png")

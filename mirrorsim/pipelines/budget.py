@@ -21,6 +21,7 @@ from mirrorsim.errors import DetectionError, SolverError
 from mirrorsim.formats.error_model import ErrorModel
 from mirrorsim.pipelines.evaluate import evaluate_scene
 from mirrorsim.pipelines.score import Report
+from mirrorsim.rendering.passes import reusing_renders
 from mirrorsim.scene import imperfections
 from mirrorsim.scene.model import Scene
 from solver.lsq import BeaconMeasurement, solve_measurements
@@ -178,10 +179,12 @@ def contribution(source: str, value: Any, ideal: Report, report: Report,
 def run_budget(scene: Scene, out: str | Path, *, variant: str = "auto", progress: bool = True,
                on_step: Callable[[str, int, int], None] | None = None,
                error_model: ErrorModel | None = None,
-               nuisances: tuple[str, ...] = (), position_sigma: float = 0.0) -> Budget:
+               nuisances: tuple[str, ...] = (), position_sigma: float = 0.0,
+               keep: tuple[str, ...] = ()) -> Budget:
     """Evaluate ``scene`` ideal, with each imperfection alone and with all; frames and
-    reports go to ``out/<ideal|source key|all>/``.  ``on_step(label, k, runs)`` is called
-    before run k of ``runs``.
+    reports go to ``out/<ideal|source key|all>/`` (with the extra files ``keep`` names,
+    as :func:`~mirrorsim.pipelines.evaluate.evaluate_scene`'s).  ``on_step(label, k,
+    runs)`` is called before run k of ``runs``.
 
     Raises
     ------
@@ -197,7 +200,7 @@ def run_budget(scene: Scene, out: str | Path, *, variant: str = "auto", progress
         if on_step is not None:
             on_step(label, next(done), runs)
         return evaluate_scene(sub, out / _folder(label), variant=variant, progress=progress,
-                              keep=("annotated",), error_model=error_model)
+                              keep=keep, error_model=error_model)
 
     def measured(label: str, value: Any, sub: Scene) -> Contribution:
         # a bench error can make a frame unmeasurable (an image taken for the wrong one
@@ -208,14 +211,18 @@ def run_budget(scene: Scene, out: str | Path, *, variant: str = "auto", progress
         except (DetectionError, SolverError) as exc:
             return Contribution(label, value, None, None, None, None, None, failed=str(exc))
 
-    try:
-        ideal = run("ideal", imperfections.ideal(scene))
-    except DetectionError as exc:
-        raise DetectionError(f"the ideal bench: {exc}") from None
-    J = jacobian(ideal.measurements)
-    contributions = tuple(measured(s.key, s.value, imperfections.only(scene, s.key))
-                          for s in found)
-    everything = measured("all", None, scene) if len(found) > 1 else None
+    # the ideal bench's frames (one per beacon) stay in memory: a source that acts after
+    # the render or only on beliefs (noise, JPEG, pan reading, calibration, a beacon's
+    # believed position) takes its render from them instead of rendering it again
+    with reusing_renders(len(scene.beacons)):
+        try:
+            ideal = run("ideal", imperfections.ideal(scene))
+        except DetectionError as exc:
+            raise DetectionError(f"the ideal bench: {exc}") from None
+        J = jacobian(ideal.measurements)
+        contributions = tuple(measured(s.key, s.value, imperfections.only(scene, s.key))
+                              for s in found)
+        everything = measured("all", None, scene) if len(found) > 1 else None
     return Budget(scene=scene.name, ideal_cm=ideal.errors.target_cm, all=everything,
                   sources=contributions, nuisances=nuisances,
                   ideal_calibrated_cm=calibrated_error(ideal, nuisances, position_sigma),

@@ -8,7 +8,9 @@ record (what the experimenter knows), never the scene.
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -18,7 +20,15 @@ from mirrorsim.detection.image_geometry import Calibration
 from mirrorsim.errors import DetectionError
 from mirrorsim.formats.capture import CaptureRecord
 from mirrorsim.pipelines.calibrate import calibrate
-from mirrorsim.rendering.frames import FrameFiles, render_to_files
+from mirrorsim.rendering.frames import (
+    FrameFiles,
+    capture_of,
+    render_to_files,
+    reused_frame,
+    write_frame,
+)
+from mirrorsim.rendering.passes import render_frame, scene_fingerprint
+from mirrorsim.rendering.sensor import to_srgb8
 from mirrorsim.scene.model import Scene
 
 
@@ -84,9 +94,24 @@ def render_and_measure(scene: Scene, out: str | Path, *, variant: str = "auto",
                        progress: bool = True, reuse: bool = True, ids: bool = True,
                        calibration: Calibration | None = None) -> MeasuredFrame:
     """Render ``scene`` into ``out`` (or reuse its render), then :func:`measure_frame`."""
-    files = render_to_files(scene, out, variant=variant, progress=progress, reuse=reuse,
-                            ids=ids)
-    m = measure_frame(files.image, files.capture, calibration=calibration, variant=variant,
-                      distance_error=scene.bench.calibration_distance_error,
-                      pixels=files.pixels)
-    return replace(m, files=files)
+    out = Path(out)
+    measure = partial(measure_frame, calibration=calibration, variant=variant,
+                      distance_error=scene.bench.calibration_distance_error)
+    files = reused_frame(scene, out, ids) if reuse else None
+    if files is None and scene.bench.jpeg_quality is None:
+        # a lossless frame is measured from its pixels in memory while a second thread
+        # encodes and writes its files (PNG encoding and detection each hold one core)
+        frame = render_frame(scene, variant=variant, progress=progress)
+        srgb = to_srgb8(frame.linear)
+        capture = capture_of(scene, out)
+        with ThreadPoolExecutor(1) as pool:
+            writing = pool.submit(write_frame, scene, frame, out, scene_fingerprint(scene),
+                                  ids, srgb)
+            try:
+                m = measure(out / capture.frame, capture, pixels=srgb)
+            finally:
+                files = writing.result()  # the files are whole, measured or not
+        return replace(m, files=files)
+    if files is None:  # a JPEG frame: the detector must see it as decoded
+        files = render_to_files(scene, out, variant=variant, progress=progress, ids=ids)
+    return replace(measure(files.image, files.capture, pixels=files.pixels), files=files)

@@ -13,7 +13,7 @@ import contextlib
 import hashlib
 import json
 import warnings
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -29,11 +29,11 @@ from mirrorsim.rendering.mitsuba_scene import (
 )
 from mirrorsim.rendering.passes import (
     IN_MIRROR,
-    RENDER_METHOD,
     RenderedFrame,
     colourise_ids,
     encode_ids,
     render_frame,
+    scene_fingerprint,
 )
 from mirrorsim.rendering.sensor import to_srgb8
 from mirrorsim.scene.model import Scene
@@ -64,14 +64,6 @@ class FrameFiles:
         return 0.0 if self.reused or r is None or r.seconds_total is None else r.seconds_total
 
 
-def scene_fingerprint(scene: Scene) -> str:
-    """What a render depends on: the scene's content with its render settings (not the
-    file it came from) and the way frames are rendered."""
-    d = asdict(replace(scene, source="", warnings=()))
-    text = json.dumps(d, sort_keys=True, default=str) + f"|{RENDER_METHOD}"
-    return hashlib.sha256(text.encode()).hexdigest()[:16]
-
-
 def truth_of(scene: Scene, frame: RenderedFrame, fingerprint: str | None) -> GroundTruth:
     """The exact ground truth with what the id pass saw of each object."""
     truth = groundtruth.ground_truth(scene)
@@ -93,14 +85,16 @@ def truth_of(scene: Scene, frame: RenderedFrame, fingerprint: str | None) -> Gro
 
 
 def write_frame(scene: Scene, frame: RenderedFrame, out: Path,
-                fingerprint: str | None = None, ids: bool = True) -> FrameFiles:
+                fingerprint: str | None = None, ids: bool = True,
+                srgb: np.ndarray | None = None) -> FrameFiles:
     """Write the frame, its capture record, its truth and (``ids``) its id labels into
-    ``out``; they appear together."""
+    ``out``; they appear together.  ``srgb``: the frame's 8-bit pixels, if the caller
+    has converted them already."""
     out.mkdir(parents=True, exist_ok=True)
     truth = truth_of(scene, frame, fingerprint)
     image, ids_png, js, cap = _paths(scene, out)
-    capture = CaptureRecord.from_scene(scene, frame=image.name)
-    srgb = to_srgb8(frame.linear)
+    capture = capture_of(scene, out)
+    srgb = to_srgb8(frame.linear) if srgb is None else srgb
     quality = scene.bench.jpeg_quality
     files = {image: encode_png(srgb) if quality is None else encode_jpeg(srgb, quality),
              cap: dumps(capture.to_json()).encode()}
@@ -120,6 +114,11 @@ def write_frame(scene: Scene, frame: RenderedFrame, out: Path,
                       pixels=srgb if quality is None else None)
 
 
+def capture_of(scene: Scene, out: Path) -> CaptureRecord:
+    """The capture record of ``scene``'s frame written into ``out``."""
+    return CaptureRecord.from_scene(scene, frame=_paths(scene, out)[0].name)
+
+
 def _paths(scene: Scene, out: Path) -> tuple[Path, Path, Path, Path]:
     """The frame (PNG, or JPEG for a bench that stores JPEG), its ids, its truth and its
     capture record."""
@@ -135,13 +134,18 @@ def render_to_files(scene: Scene, out: str | Path | None = None, *, variant: str
     exactly this scene already in ``out``) and write its files (default folder
     ``renders/<name>/``; the id labels only with ``ids``)."""
     out = Path(out) if out is not None else default_out(scene.name)
-    fp = scene_fingerprint(scene)
-    if reuse:
-        found = _reusable(scene, out, fp)
-        if found is not None and (found.ids_png is not None or not ids):  # ids asked: kept
-            return found
+    found = reused_frame(scene, out, ids) if reuse else None
+    if found is not None:
+        return found
     frame = render_frame(scene, variant=variant, progress=progress)
-    return write_frame(scene, frame, out, fp, ids)
+    return write_frame(scene, frame, out, scene_fingerprint(scene), ids)
+
+
+def reused_frame(scene: Scene, out: Path, ids: bool) -> FrameFiles | None:
+    """The verified frame of exactly this scene already in ``out`` (with its id labels
+    where ``ids`` asks for them), or None."""
+    found = _reusable(scene, out, scene_fingerprint(scene))
+    return found if found is not None and (found.ids_png is not None or not ids) else None
 
 
 def _reusable(scene: Scene, out: Path, fingerprint: str) -> FrameFiles | None:

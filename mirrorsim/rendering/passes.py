@@ -10,9 +10,11 @@ is :mod:`mirrorsim.rendering.frames`' job.
 from __future__ import annotations
 
 import contextlib
+import hashlib
+import json
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
 
 import drjit as dr
 import mitsuba as mi
@@ -31,6 +33,7 @@ from mirrorsim.rendering.mitsuba_scene import (
     label_of,
 )
 from mirrorsim.rendering.sensor import add_noise, distort, distortion_canvas, to_srgb8
+from mirrorsim.scene.imperfections import optics_of
 from mirrorsim.scene.model import Beacon, Board, Camera, Scene, Target
 from mirrorsim.truth import optics
 from mirrorsim.truth.groundtruth import RenderInfo
@@ -65,6 +68,48 @@ class RenderedFrame:
     info: RenderInfo  # how it was rendered (the truth file's ``render`` block)
 
 
+@dataclass(frozen=True)
+class _Optics:
+    """What Mitsuba rendered of a scene, before the sensor: linear RGB (after the lens),
+    the id pass's labels and how it was sampled."""
+
+    linear: np.ndarray
+    first: np.ndarray
+    in_mirror: np.ndarray
+    background_spp: int | None
+    beacon_spp: int | None
+    seconds: float
+
+
+# the renders kept by :func:`reusing_renders` (None: outside its scope, nothing kept)
+_KEPT: dict[str, _Optics] | None = None
+_CAPACITY = 0
+
+
+@contextlib.contextmanager
+def reusing_renders(capacity: int) -> Iterator[None]:
+    """Within this scope, the first ``capacity`` renders are kept in memory, and a later
+    frame whose optics are the same (:func:`~mirrorsim.scene.imperfections.optics_of`: it
+    differs only in sensor noise, JPEG, or what the experimenter believes) takes its
+    render from there: bit for bit the render it would have made.  The error budget keeps
+    the ideal bench's frames, which half of its sources share."""
+    global _KEPT, _CAPACITY
+    before = _KEPT, _CAPACITY
+    _KEPT, _CAPACITY = {}, capacity
+    try:
+        yield
+    finally:
+        _KEPT, _CAPACITY = before
+
+
+def scene_fingerprint(scene: Scene) -> str:
+    """What a render depends on: the scene's content with its render settings (not the
+    file it came from) and the way frames are rendered."""
+    d = asdict(replace(scene, source="", warnings=()))
+    text = json.dumps(d, sort_keys=True, default=str) + f"|{RENDER_METHOD}"
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
 @contextlib.contextmanager
 def variant_scope(name: str) -> Iterator[None]:
     """Scope the process-global Mitsuba variant (variant_context needs a previous one)."""
@@ -87,10 +132,31 @@ def render_frame(scene: Scene, *, variant: str = "auto", progress: bool = True
     progress : bool
         Show a progress bar on stderr.
     """
-    spp, seed = scene.render.spp, scene.render.seed
+    seed = scene.render.seed
     chosen = choose_variant(variant)
     t0 = time.perf_counter()
-    bench, k = scene.bench, scene.bench.distortion
+    key = f"{scene_fingerprint(optics_of(scene))}|{chosen}"
+    optical = _KEPT.get(key) if _KEPT is not None else None
+    if optical is None:
+        optical = _render_optics(scene, chosen, progress)
+        if _KEPT is not None and len(_KEPT) < _CAPACITY:
+            _KEPT[key] = optical
+    linear = optical.linear
+    if scene.bench.noise is not None:
+        linear = add_noise(linear, scene.bench.noise, seed)
+    info = RenderInfo(variant=chosen, spp=scene.render.spp, seed=seed,
+                      sampler=scene.render.sampler, background_spp=optical.background_spp,
+                      beacon_spp=optical.beacon_spp, seconds_render=optical.seconds,
+                      seconds_total=round(time.perf_counter() - t0, 3), mitsuba=MITSUBA_VERSION)
+    return RenderedFrame(linear=linear, first=optical.first, in_mirror=optical.in_mirror,
+                         info=info)
+
+
+def _render_optics(scene: Scene, chosen: str, progress: bool) -> _Optics:
+    """Render what the camera's lens puts on the sensor, and the id pass."""
+    spp, seed = scene.render.spp, scene.render.seed
+    t0 = time.perf_counter()
+    k = scene.bench.distortion
     lens = k != (0.0, 0.0)
     # a distorting lens: the pinhole render of a wider canvas, warped onto the sensor
     pinhole = replace(scene, camera=distortion_canvas(scene.camera, k)[0]) if lens else scene
@@ -115,14 +181,10 @@ def render_frame(scene: Scene, *, variant: str = "auto", progress: bool = True
     if lens:
         linear = distort(linear, scene.camera, k)
         first, in_mirror = (distort(a, scene.camera, k, nearest=True) for a in (first, in_mirror))
-    if bench.noise is not None:
-        linear = add_noise(linear, bench.noise, seed)
-    info = RenderInfo(variant=chosen, spp=spp, seed=seed, sampler=scene.render.sampler,
-                      background_spp=None if box is None else background,
-                      beacon_spp=beacon_spp if boxes else None,
-                      seconds_render=round(t_render, 3),
-                      seconds_total=round(time.perf_counter() - t0, 3), mitsuba=MITSUBA_VERSION)
-    return RenderedFrame(linear=linear, first=first, in_mirror=in_mirror, info=info)
+    for a in (linear, first, in_mirror):
+        a.flags.writeable = False  # a kept render is shared: nobody may draw on it
+    return _Optics(linear, first, in_mirror, None if box is None else background,
+                   beacon_spp if boxes else None, round(t_render, 3))
 
 
 Region = tuple[int, int, int, int]

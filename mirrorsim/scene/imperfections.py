@@ -75,6 +75,7 @@ class Imperfection:
     spec_key: str = ""  # the spec's bench-block key path when it differs from ``key``
     source: bool = True
     why: str = ""  # what the bounds mean, for the error message
+    stage: str = "optics"
 
     @property
     def block(self) -> str:
@@ -134,7 +135,8 @@ REGISTRY: tuple[Imperfection, ...] = (
         "pan_error", "camera.pan_error", "deg", "the mount reports pan + pan_error",
         "angle", bound=10.0,
         columns=_plain("pan_error", "bench_pan_error_deg", "deg", "pan error"),
-        features=_linear("pan_error_deg", "bench_pan_error_deg", "pan error (deg)")),
+        features=_linear("pan_error_deg", "bench_pan_error_deg", "pan error (deg)"),
+        stage="record"),
     Imperfection(
         "pitch", "camera.pitch", "deg", "the optical axis raised from level", "angle",
         bound=20.0, columns=_plain("pitch", "bench_pitch_deg", "deg", "camera pitch"),
@@ -157,7 +159,7 @@ REGISTRY: tuple[Imperfection, ...] = (
     Imperfection(
         "distortion_known", "camera.distortion_known", "bool",
         "the capture record holds the lens's coefficients (the detector undistorts)", "flag",
-        source=False,
+        source=False, stage="record",
         columns=_plain("distortion_known", "bench_distortion_known", "bool",
                        "lens coefficients in the capture record")),
     Imperfection(
@@ -172,7 +174,8 @@ REGISTRY: tuple[Imperfection, ...] = (
                           lambda col, _obj: _where_noise(col, lambda fw: 1.0 / np.sqrt(fw))),
                   Feature("read_noise_rel", "read noise / full well",
                           lambda col, _obj: _where_noise(
-                              col, lambda fw: col("bench_read_noise") / fw)))),
+                              col, lambda fw: col("bench_read_noise") / fw))),
+        stage="sensor"),
     Imperfection(
         "jpeg_quality", "camera.jpeg_quality", "1", "the frame stored as JPEG at this quality",
         "quality", low=1, high=100,
@@ -181,7 +184,8 @@ REGISTRY: tuple[Imperfection, ...] = (
         features=(Feature("jpeg_loss", "(100 − quality)/100",
                           lambda col, _obj: np.where(col("bench_jpeg_quality") > 0,
                                                    (100.0 - col("bench_jpeg_quality")) / 100,
-                                                   0.0)),)),
+                                                   0.0)),),
+        stage="sensor"),
     Imperfection(
         "curvature_radius", "mirror.curvature_radius", "cm",
         "a spherical mirror of this radius (> 0 concave); |radius| ≥ the mirror's diagonal",
@@ -201,7 +205,8 @@ REGISTRY: tuple[Imperfection, ...] = (
         columns=_plain("calibration_distance_error", "bench_calibration_error_cm", "cm",
                        "calibration reference's distance error"),
         features=_linear("calibration_error_cm", "bench_calibration_error_cm",
-                         "calibration distance error (cm)")),
+                         "calibration distance error (cm)"),
+        stage="record"),
     Imperfection(
         "known_position", "beacons.known_position", "cm",
         "where the experimenter believes a beacon stands", "offset",
@@ -209,7 +214,8 @@ REGISTRY: tuple[Imperfection, ...] = (
         columns=(Column("bench_beacon_dx_cm", "cm", "believed − true x of beacon 0",
                         lambda s: _beacon_offset(s, 0)),
                  Column("bench_beacon_dy_cm", "cm", "believed − true y of beacon 0",
-                        lambda s: _beacon_offset(s, 1)))),
+                        lambda s: _beacon_offset(s, 1))),
+        stage="record"),
 )
 # Bench field → the key path a scene file writes it under (the budget's sources)
 KEYS = {imp.field: imp.key for imp in REGISTRY if imp.source and imp.block != "beacons"}
@@ -277,6 +283,17 @@ def ideal(scene: Scene) -> Scene:
     """The same scene on an ideal bench."""
     return replace(scene, bench=Bench(),
                    beacons=tuple(replace(b, known_position=None) for b in scene.beacons))
+
+
+def optics_of(scene: Scene) -> Scene:
+    """What Mitsuba renders of ``scene``: the scene with its ``sensor`` and ``record``
+    imperfections made ideal (those act after the render or only on beliefs)."""
+    after = {imp.field for imp in REGISTRY if imp.stage != "optics"}
+    kept = {f.name: getattr(_IDEAL, f.name) for f in fields(Bench) if f.name in after}
+    beacons = scene.beacons
+    if "known_position" in after:
+        beacons = tuple(replace(b, known_position=None) for b in beacons)
+    return replace(scene, bench=replace(scene.bench, **kept), beacons=beacons)
 
 
 def only(scene: Scene, key: str) -> Scene:
