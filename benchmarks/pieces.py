@@ -93,12 +93,16 @@ def main() -> None:
         for d in ("rows", "scenes", "frames"):
             (tmp / "ds" / d).mkdir(parents=True)
         print("\n| dataset scenes done in this process | resident memory (MiB) |\n|---|---|")
+        rss = []
         for i in range(a.rss):
             process_one(i, 0, spec, str(tmp / "ds"), None, "auto")
             with open("/proc/self/statm") as f:
-                mib = int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+                rss.append(int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20)
             if i in (0, 1, 4, 9) or i == a.rss - 1 or (i + 1) % 10 == 0:
-                print(f"| {i + 1} | {mib:.0f} |")
+                print(f"| {i + 1} | {rss[-1]:.0f} |")
+        if a.rss > 2:  # the first scene loads Mitsuba's and the kernels' memory
+            print(f"\ngrowth after the first scene: "
+                  f"{(rss[-1] - rss[0]) / (a.rss - 1):.2f} MiB a scene")
     if a.ratio:
         _ratio(spec, a.ratio, tmp / "ratio")
 
