@@ -106,6 +106,9 @@ RESULTS: tuple[Result, ...] = (
            markdown=True, about="the particle filter's consistency on synthetic measurements"),
     Result("track_coverage", (f"{PY} benchmarks/track.py --coverage 3 --steps 8",),
            markdown=True, about="the particle filter's 95 % region on rendered frames"),
+    Result("selfcal_bench", (f"{PY} benchmarks/selfcal.py --scenes 40 --seed 4417001",),
+           markdown=True, about="self-calibration on 40 rendered bench scenes with three "
+                                "planned beacons (about 10 min)"),
     Result("throughput_commands", (f"{PY} benchmarks/commands.py --repeat 3",),
            markdown=True, about="whole commands as a user waits for them (quiet machine)"),
     Result("render_variants", (f"{PY} benchmarks/render.py --repeat 2",), markdown=True,
