@@ -1,7 +1,7 @@
 """Benchmark: self-calibrating SLTR on rendered frames of a real bench's imperfections.
 
     python benchmarks/selfcal.py [--scenes 40] [--seed S] [--spec scenes/dataset_spec_bench.yaml]
-                                 [--beacons 3] [--out DIR]
+                                 [--beacons 3] [--out DIR] [--lossless]
 
 For each random scene of the spec (its bench imperfections drawn as the spec draws
 them: pan error, calibration error, curvature, JPEG…), `plan --beacons N --calibrate
@@ -11,7 +11,9 @@ pan,scale` places N beacons; each beacon's believed position is off by the spec'
 plain least squares and self-calibrated (pan and scale; the beacons known to the
 offsets' σ, (hi − lo)/√12, as the experimenter would say), with the believed beacon
 positions and with the exact ones (then known exactly).  The plan is made with the same
-σ.  Prints each scene's target errors and the medians.
+σ.  Prints each scene's target errors and the medians.  ``--lossless``: the same scenes
+(the same draws) with each frame stored as PNG instead of the JPEG the spec draws, to
+tell JPEG's part from the rest.
 """
 
 from __future__ import annotations
@@ -63,6 +65,8 @@ def main() -> None:
     ap.add_argument("--beacons", type=int, default=3)
     ap.add_argument("--step", type=float, default=2.0, help="the plan's grid step (cm)")
     ap.add_argument("--out", type=Path, help="keep the frames here (default: a temp folder)")
+    ap.add_argument("--lossless", action="store_true",
+                    help="store every frame as PNG (the same scenes otherwise)")
     a = ap.parse_args()
     seed = a.seed if a.seed is not None else int.from_bytes(os.urandom(3), "big")
     spec = load_spec(a.spec)
@@ -70,7 +74,7 @@ def main() -> None:
     position_sigma = (hi - lo) / np.sqrt(12)  # a uniform offset's σ
     print(f"self-calibration on rendered frames: {a.scenes} scenes of {a.spec.name}, seed "
           f"{seed}, {a.beacons} planned beacons, believed positions off by U({lo}, {hi}) cm "
-          f"per axis; {stamp()}\n")
+          f"per axis{'; frames stored as PNG, not JPEG' if a.lossless else ''}; {stamp()}\n")
     print("| scene | plain (cm) | self-calibrated | plain, exact positions | self-calibrated, "
           "exact positions | pan error ° | calibration error cm |\n|---|---|---|---|---|---|---|")
     rows, skipped = [], []
@@ -80,6 +84,8 @@ def main() -> None:
         for i in range(a.scenes):
             scene = sample_scene(spec, np.random.default_rng(np.random.SeedSequence(
                 seed, spawn_key=(i,))), f"sc{i:03d}")
+            if a.lossless:  # after the draw: the same scenes, their frames stored as PNG
+                scene = replace(scene, bench=replace(scene.bench, jpeg_quality=None))
             try:
                 plan = plan_scene(scene, n_beacons=a.beacons, nuisances=NUISANCES, step=a.step,
                                   position_sigma=position_sigma)

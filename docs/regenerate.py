@@ -109,6 +109,9 @@ RESULTS: tuple[Result, ...] = (
     Result("selfcal_bench", (f"{PY} benchmarks/selfcal.py --scenes 40 --seed 4417001",),
            markdown=True, about="self-calibration on 40 rendered bench scenes with three "
                                 "planned beacons (about 10 min)"),
+    Result("selfcal_bench_png",
+           (f"{PY} benchmarks/selfcal.py --scenes 40 --seed 4417001 --lossless",),
+           markdown=True, about="the same 40 benches with their frames stored as PNG"),
     Result("throughput_commands", (f"{PY} benchmarks/commands.py --repeat 3",),
            markdown=True, about="whole commands as a user waits for them (quiet machine)"),
     Result("render_variants", (f"{PY} benchmarks/render.py --repeat 2",), markdown=True,
