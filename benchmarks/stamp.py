@@ -13,8 +13,13 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def stamp() -> str:
     """``commit abc1234, 2026-12-02, host (x86_64, 2 cores)``."""
-    # --dirty: a result of code not yet committed says so
-    commit = subprocess.run(["git", "describe", "--always", "--dirty"], cwd=ROOT,
+    commit = subprocess.run(["git", "describe", "--always"], cwd=ROOT,
                             capture_output=True, text=True).stdout.strip()
+    # a result of code not yet committed says so; the results a `regenerate.py` run has
+    # written before this one are its outputs, not code, and do not count
+    changed = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--",
+                              ".", ":(exclude)docs/results"], cwd=ROOT,
+                             capture_output=True, text=True).stdout.strip()
+    commit += "-dirty" if changed else ""
     return (f"commit {commit}, {datetime.date.today()}, {platform.node()} "
             f"({platform.machine()}, {os.cpu_count()} cores)")
