@@ -357,3 +357,12 @@ def test_a_pencil_beside_the_frame_is_not_measured_on_its_other_side(monkeypatch
     assert m.u_left is None and m.u_right == pytest.approx(64.5, abs=0.6)
     monkeypatch.setattr(edges, "SIDE_MAX_OFF_PX", None)
     assert edges.measure_region(img, (47, 40, 64, 179), "beacon").u_left > 60
+
+
+def test_channel_extremes_are_numpys_reductions():
+    from mirrorsim.detection.detector import _channel_max, _channel_min
+
+    rng = np.random.default_rng(5)
+    img = rng.normal(100, 50, (37, 41, 3)).astype(np.float32)
+    np.testing.assert_array_equal(_channel_max(img), img.max(axis=2))
+    np.testing.assert_array_equal(_channel_min(img), img.min(axis=2))

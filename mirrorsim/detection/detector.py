@@ -81,11 +81,22 @@ def _components(mask: np.ndarray, min_area: int):
     return labels, out
 
 
+def _channel_max(img: np.ndarray) -> np.ndarray:
+    """The largest of an (H, W, 3) image's channels at each pixel: the same values as
+    ``img.max(axis=2)``, several times faster (a reduction over a last axis of 3 is
+    numpy's slow case)."""
+    return np.maximum(np.maximum(img[..., 0], img[..., 1]), img[..., 2])
+
+
+def _channel_min(img: np.ndarray) -> np.ndarray:
+    """The smallest of an (H, W, 3) image's channels at each pixel."""
+    return np.minimum(np.minimum(img[..., 0], img[..., 1]), img[..., 2])
+
+
 def find_target(img: np.ndarray, ratio: float) -> tuple[int, int, int, int] | None:
     """Bounding box (u0, v0, u1, v1) of the grey panel's image, or None."""
     blur = cv2.GaussianBlur(img, (5, 5), 0)
-    vmax, vmin = cv2.max(cv2.max(blur[..., 0], blur[..., 1]), blur[..., 2]), \
-        cv2.min(cv2.min(blur[..., 0], blur[..., 1]), blur[..., 2])
+    vmax, vmin = _channel_max(blur), _channel_min(blur)
     neutral = (vmax - vmin) < 0.12 * vmax + 6
     mask = neutral & (vmax > 20) & (vmax < 135)
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (FRAME_OPEN_PX, FRAME_OPEN_PX))
@@ -127,7 +138,7 @@ def _regrow(blur, neutral, labels, k, box, whole: bool, ratio: float, kernel,
     win = (slice(v0, v1), slice(u0, u1))
     mine = labels[win] == k
     med = np.median(blur[win][mine], axis=0)
-    similar = (np.abs(blur[win] - med).max(axis=2) < 22) & neutral[win]
+    similar = (_channel_max(np.abs(blur[win] - med)) < 22) & neutral[win]
     similar = cv2.morphologyEx(similar.astype(np.uint8), cv2.MORPH_OPEN, kernel)
     lab2, comps2 = _components(similar, 300)
     seed = lab2[y + h // 2 - v0, x + w // 2 - u0]
@@ -152,7 +163,7 @@ def find_pencils(img: np.ndarray) -> list[tuple[int, int, int, int]]:
     """Bounding boxes of painted (yellow) pencil bands."""
     blur = cv2.GaussianBlur(img, (3, 3), 0)
     r, g, b = blur[..., 0], blur[..., 1], blur[..., 2]
-    vmax, vmin = cv2.max(cv2.max(r, g), b), cv2.min(cv2.min(r, g), b)
+    vmax, vmin = _channel_max(blur), _channel_min(blur)
     sat = (vmax - vmin) / np.maximum(vmax, 1.0)
     yellow = (r + g) / 2 - b
     mask = (sat > 0.55) & (yellow > 30) & (vmax > 40)
