@@ -48,9 +48,7 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
     out = Path(out_dir) if out_dir is not None else default_out(scene.name)
     cam = scene.camera
 
-    per_beacon = [scene] if len(scene.beacons) == 1 else [
-        replace(scene, name=f"{scene.name}_b{i}", beacons=(b,))
-        for i, b in enumerate(scene.beacons)]
+    per_beacon = frames_of(scene)
     measured = [render_and_measure(sub, out, variant=variant, progress=progress, reuse=True,
                                    ids="ids" in keep)
                 for sub in per_beacon]
@@ -102,6 +100,15 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
                   render=RenderInfo(done.variant, done.spp, done.seed, done.sampler),
                   calibration={"target_k": cal.target_k, "pencil_k": cal.pencil_k},
                   error_vs_beacons=by_count)
+
+
+def frames_of(scene: Scene) -> list[Scene]:
+    """The frames :func:`evaluate_scene` renders of ``scene``: the scene itself, or with
+    several beacons one frame per beacon (``<name>_b<i>``, that beacon alone)."""
+    if len(scene.beacons) == 1:
+        return [scene]
+    return [replace(scene, name=f"{scene.name}_b{i}", beacons=(b,))
+            for i, b in enumerate(scene.beacons)]
 
 
 def _frame_record(m: MeasuredFrame, annotated_path: Path, annotate_it: bool) -> FrameRecord:
