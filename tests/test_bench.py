@@ -548,21 +548,19 @@ def test_a_frame_measured_while_it_is_written_matches_one_read_back(tmp_path):
     assert again.files.reused and again.detection.to_json() == m.detection.to_json()
 
 
-def test_budget_renders_on_its_own_thread_once_per_optics(tmp_path, monkeypatch):
-    import threading
-
+def test_budget_renders_once_per_optics(tmp_path, monkeypatch):
     from mirrorsim.pipelines.budget import run_budget
     from mirrorsim.rendering import passes
 
     scene = bench_scene(camera={**SMALL, "pan_error": 0.5}, mirror={"tilt": 0.5},
                         calibration={"distance_error": 1.0})
-    threads = []
+    rendered = []
     real = passes._render_optics
-    monkeypatch.setattr(passes, "_render_optics", lambda s, *a: threads.append(
-        threading.current_thread() is threading.main_thread()) or real(s, *a))
+    monkeypatch.setattr(passes, "_render_optics",
+                        lambda s, *a: rendered.append(s.name) or real(s, *a))
     budget = run_budget(scene, tmp_path / "b", progress=False)
     # ideal, pan and calibration share the ideal's optics; tilt and all have their own
-    assert threads == [True, True, True]
+    assert len(rendered) == 3
     assert [c.source for c in budget.sources] == ["camera.pan_error", "mirror.tilt",
                                                   "calibration.distance_error"]
     assert budget.sources[0].delta.target_alpha_deg == pytest.approx(0.5, abs=1e-9)
@@ -577,7 +575,6 @@ def test_budget_says_when_the_ideal_bench_cannot_be_measured(tmp_path, monkeypat
         raise DetectionError("no target (grey upright panel) found in the frame")
 
     monkeypatch.setattr(budget, "evaluate_scene", refuse)
-    monkeypatch.setattr(budget, "render_ahead", lambda *_a, **_k: None)
     scene = bench_scene(camera={**SMALL, "pan_error": 0.5}, mirror={"tilt": 0.5})
     with pytest.raises(DetectionError, match="^the ideal bench: no target"):
         budget.run_budget(scene, tmp_path / "b", progress=False)

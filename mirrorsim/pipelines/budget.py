@@ -11,7 +11,6 @@ part, the effect is not first order (or the solver's conditioning amplifies nois
 from __future__ import annotations
 
 from collections.abc import Callable
-from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -20,11 +19,9 @@ import numpy as np
 
 from mirrorsim.errors import DetectionError, SolverError
 from mirrorsim.formats.error_model import ErrorModel
-from mirrorsim.pipelines.evaluate import evaluate_scene, frames_of
-from mirrorsim.pipelines.frame import calibration_for
+from mirrorsim.pipelines.evaluate import evaluate_scene
 from mirrorsim.pipelines.score import Report
-from mirrorsim.rendering.frames import capture_of, reused_frame
-from mirrorsim.rendering.passes import render_ahead, reusing_renders
+from mirrorsim.rendering.passes import reusing_renders
 from mirrorsim.scene import imperfections
 from mirrorsim.scene.model import Scene
 from solver.lsq import BeaconMeasurement, solve_measurements
@@ -196,23 +193,16 @@ def run_budget(scene: Scene, out: str | Path, *, variant: str = "auto", progress
     """
     out = Path(out)
     found = imperfections.sources(scene)
-    runs = [("ideal", None, imperfections.ideal(scene))]
-    runs += [(s.key, s.value, imperfections.only(scene, s.key)) for s in found]
-    runs += [("all", None, scene)] if len(found) > 1 else []
+    runs = 1 + len(found) + (len(found) > 1)  # ideal, each source alone, all of them
+    done = iter(range(1, runs + 1))
 
     def run(label: str, sub: Scene) -> Report:
+        if on_step is not None:
+            on_step(label, next(done), runs)
         return evaluate_scene(sub, out / _folder(label), variant=variant, progress=progress,
                               keep=keep, error_model=error_model)
 
-    def ideal_run(sub: Scene) -> tuple[Report, np.ndarray]:
-        try:
-            ideal = run("ideal", sub)
-        except DetectionError as exc:
-            raise DetectionError(f"the ideal bench: {exc}") from None
-        return ideal, jacobian(ideal.measurements)
-
     def measured(label: str, value: Any, sub: Scene) -> Contribution:
-        ideal, J = first.result()  # the thread measures the runs in order: it is done
         # a bench error can make a frame unmeasurable (an image taken for the wrong one
         # is refused) or unsolvable (no mirror fits): that is its effect, recorded
         try:
@@ -221,48 +211,22 @@ def run_budget(scene: Scene, out: str | Path, *, variant: str = "auto", progress
         except (DetectionError, SolverError) as exc:
             return Contribution(label, value, None, None, None, None, None, failed=str(exc))
 
-    # This thread renders each run's frames (Mitsuba's work, kept in memory) while a
-    # second thread measures the run before (detection, writing, solving), so that the
-    # two share the cores.  The ideal bench's frames (one per beacon) stay in memory: a
-    # source that acts after the render or only on beliefs (noise, JPEG, pan reading,
-    # calibration, a beacon's believed position) takes its render from them.
-    pending: list[Future] = []
-    with reusing_renders(len(scene.beacons)), ThreadPoolExecutor(1) as pool:
+    # the ideal bench's frames (one per beacon) stay in memory: a source that acts after
+    # the render or only on beliefs (noise, JPEG, pan reading, calibration, a beacon's
+    # believed position) takes its render from them instead of rendering it again
+    with reusing_renders(len(scene.beacons)):
         try:
-            for k, (label, value, sub) in enumerate(runs, 1):
-                if on_step is not None:
-                    on_step(label, k, len(runs))
-                for frame in frames_of(sub):
-                    _prepare(frame, out / _folder(label), variant, progress)
-                if k == 1:
-                    first = pool.submit(ideal_run, sub)
-                    pending.append(first)
-                else:
-                    pending.append(pool.submit(measured, label, value, sub))
-                # at most one run rendered ahead of the one being measured
-                if len(pending) > 1:
-                    pending[-2].result()
-            results = [f.result() for f in pending]
-        except BaseException:
-            for f in pending:
-                f.cancel()
-            raise
-    ideal, contributions = results[0][0], tuple(results[1:len(found) + 1])
-    everything = results[-1] if len(found) > 1 else None
+            ideal = run("ideal", imperfections.ideal(scene))
+        except DetectionError as exc:
+            raise DetectionError(f"the ideal bench: {exc}") from None
+        J = jacobian(ideal.measurements)
+        contributions = tuple(measured(s.key, s.value, imperfections.only(scene, s.key))
+                              for s in found)
+        everything = measured("all", None, scene) if len(found) > 1 else None
     return Budget(scene=scene.name, ideal_cm=ideal.errors.target_cm, all=everything,
                   sources=contributions, nuisances=nuisances,
                   ideal_calibrated_cm=calibrated_error(ideal, nuisances, position_sigma),
                   position_sigma=position_sigma)
-
-
-def _prepare(frame: Scene, folder: Path, variant: str, progress: bool) -> None:
-    """Render a frame ahead (unless its folder holds it already) and make sure its
-    calibration is at hand, both on this thread: the measuring thread then never calls
-    Mitsuba."""
-    if reused_frame(frame, folder, ids=False) is None:
-        render_ahead(frame, variant=variant, progress=progress)
-    calibration_for(capture_of(frame, folder), variant=variant,
-                    distance_error=frame.bench.calibration_distance_error)
 
 
 def _folder(label: str) -> str:

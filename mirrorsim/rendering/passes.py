@@ -81,10 +81,8 @@ class _Optics:
     seconds: float
 
 
-# the renders kept by :func:`reusing_renders` (None: outside its scope, nothing kept),
-# and those made ahead by :func:`render_ahead`, each taken once
+# the renders kept by :func:`reusing_renders` (None: outside its scope, nothing kept)
 _KEPT: dict[str, _Optics] | None = None
-_AHEAD: dict[str, _Optics] = {}
 _CAPACITY = 0
 
 
@@ -102,31 +100,6 @@ def reusing_renders(capacity: int) -> Iterator[None]:
         yield
     finally:
         _KEPT, _CAPACITY = before
-        _AHEAD.clear()
-
-
-def render_ahead(scene: Scene, *, variant: str = "auto", progress: bool = True) -> None:
-    """Render ``scene``'s optics now, for a :func:`render_frame` of it to take later (in
-    :func:`reusing_renders`' scope; nothing is rendered if it is kept there already).
-
-    The error budget renders its next run here, on the main thread (Mitsuba's), while a
-    second thread measures the run before: detection and rendering then share the cores.
-    """
-    if _KEPT is None:
-        raise RuntimeError("render_ahead outside reusing_renders")
-    chosen = choose_variant(variant)
-    key = _optics_key(scene, chosen)
-    if key in _KEPT or key in _AHEAD:
-        return
-    optical = _render_optics(scene, chosen, progress)
-    if len(_KEPT) < _CAPACITY:
-        _KEPT[key] = optical
-    else:
-        _AHEAD[key] = optical
-
-
-def _optics_key(scene: Scene, chosen: str) -> str:
-    return f"{scene_fingerprint(optics_of(scene))}|{chosen}"
 
 
 def scene_fingerprint(scene: Scene) -> str:
@@ -162,8 +135,8 @@ def render_frame(scene: Scene, *, variant: str = "auto", progress: bool = True
     seed = scene.render.seed
     chosen = choose_variant(variant)
     t0 = time.perf_counter()
-    key = _optics_key(scene, chosen)
-    optical = (_KEPT.get(key) or _AHEAD.pop(key, None)) if _KEPT is not None else None
+    key = f"{scene_fingerprint(optics_of(scene))}|{chosen}"
+    optical = _KEPT.get(key) if _KEPT is not None else None
     if optical is None:
         optical = _render_optics(scene, chosen, progress)
         if _KEPT is not None and len(_KEPT) < _CAPACITY:
