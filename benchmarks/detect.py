@@ -44,7 +44,7 @@ from mirrorsim.errors import DetectionError, SceneError  # noqa: E402
 from mirrorsim.formats.error_model import default_error_model  # noqa: E402
 from mirrorsim.formats.scenefile import load_scene, scene_from_dict  # noqa: E402
 from mirrorsim.pipelines.calibrate import calibrate  # noqa: E402
-from mirrorsim.pipelines.frame import render_and_measure  # noqa: E402
+from mirrorsim.pipelines.frame import render_and_measure, subsampled  # noqa: E402
 from mirrorsim.pipelines.random_scenes import load_spec, sample_scene  # noqa: E402
 from mirrorsim.rendering.frames import render_to_files  # noqa: E402
 from mirrorsim.truth import optics, visibility  # noqa: E402
@@ -103,11 +103,13 @@ def measure(scene, tmp: Path) -> dict:
     # is timed
     spp = label(scene)
     res = render_to_files(scene, tmp / scene.name, progress=False)
-    cal = calibrate(scene.camera, scene.target.size, scene.beacons[0].height)
+    lossy = subsampled(res.image)
+    cal = calibrate(scene.camera, scene.target.size, scene.beacons[0].height,
+                    subsampled=lossy)
     img = read_frame(res.image)
     t0 = time.perf_counter()
     try:
-        out = detect_frame(img, res.capture, cal)
+        out = detect_frame(img, res.capture, cal, lossy)
     except DetectionError as exc:
         return {"scene": scene.name, "spp": spp, "error": str(exc)}
     dt = time.perf_counter() - t0

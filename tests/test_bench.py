@@ -578,3 +578,40 @@ def test_budget_says_when_the_ideal_bench_cannot_be_measured(tmp_path, monkeypat
     scene = bench_scene(camera={**SMALL, "pan_error": 0.5}, mirror={"tilt": 0.5})
     with pytest.raises(DetectionError, match="^the ideal bench: no target"):
         budget.run_budget(scene, tmp_path / "b", progress=False)
+
+
+@pytest.mark.parametrize("hfov", [65.2, 60.0])
+def test_a_jpeg_frame_is_measured_on_the_colour_jpeg_keeps_whole(tmp_path, hfov):
+    """JPEG keeps luma at full resolution and chroma at half: the tops and feet measured
+    on chroma move by up to 2.5 px (benchmarks/jpeg_edges.py).  The same render, stored
+    both ways: the JPEG's d_total's stay near the lossless frame's."""
+    from mirrorsim.detection.detector import detect_frame
+    from mirrorsim.pipelines.frame import calibration_for
+
+    lossless = bench_scene(camera={"hfov": hfov})
+    jpeg = bench_scene(camera={"hfov": hfov, "jpeg_quality": 90})
+    _, det0 = measure(lossless, tmp_path, "png")
+    with pytest.warns(RuntimeWarning, match="JPEG"):
+        files, det = measure(jpeg, tmp_path, "jpg")
+    with pytest.warns(RuntimeWarning, match="JPEG"):
+        pixels = read_frame(files.image)
+
+    def errors(d):
+        return (100 * abs(d.target.d_total / det0.target.d_total - 1),
+                100 * abs(d.beacons[0][1].d_total / det0.beacons[0][1].d_total - 1))
+
+    target, beacon = errors(det)
+    assert target < 0.15 and beacon < 1.0
+    # measured on chroma as a lossless frame is, the same JPEG errs more
+    chroma = detect_frame(pixels, files.capture, calibration_for(files.capture),
+                          subsampled=False)
+    assert max(errors(chroma)) > 2.0
+    assert det.target.alpha_deg == pytest.approx(det0.target.alpha_deg, abs=0.005)
+
+
+def test_jpeg_frames_have_their_own_calibration():
+    from mirrorsim.pipelines.calibrate import calibration_key
+
+    cam = bench_scene().camera
+    keys = {calibration_key(cam, (9.9, 15.25), 4.2, 0.0, sub) for sub in (False, True)}
+    assert len(keys) == 2

@@ -191,7 +191,8 @@ def _calibrate(args) -> int:
     cam = scene.camera
     cal = calibrate(cam, scene.target.size, scene.beacons[0].height, variant=args.variant,
                     refresh=args.refresh,
-                    distance_error=scene.bench.calibration_distance_error)
+                    distance_error=scene.bench.calibration_distance_error,
+                    subsampled=scene.bench.jpeg_quality is not None)  # for its JPEG frames
     print(f"camera {cam.width}×{cam.height_px}, hfov {cam.hfov:g}°, height {cam.height:g} cm "
           f"(fx {cam.fx:.2f} px)")
     print(f"  target {scene.target.size[1]:g} cm high: K = {cal.target_k:.1f} px·cm "

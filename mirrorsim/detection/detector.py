@@ -210,11 +210,14 @@ class Detection:
 
 
 def measure_object(img: np.ndarray, kind: str, target_ratio: float | None = None,
-                   linear: np.ndarray | None = None) -> ImageMeasurement:
+                   linear: np.ndarray | None = None, subsampled: bool = False
+                   ) -> ImageMeasurement:
     """Find and measure the largest image of the target (``kind="target"``, with its
     width/height ``target_ratio``) or of a pencil in an 8-bit RGB image, exactly as
     :func:`detect_frame` measures it (calibration uses this on its reference renders).
     ``linear``: the image already converted by :func:`to_linear`, if the caller has it.
+    ``subsampled``: measured as a frame whose colour was stored at half resolution
+    (:func:`~mirrorsim.detection.edges.measure_region`).
 
     Raises
     ------
@@ -227,16 +230,18 @@ def measure_object(img: np.ndarray, kind: str, target_ratio: float | None = None
         box = find_target(img, target_ratio)
         if box is None:
             raise DetectionError("no target (grey upright panel) found in the frame")
-        return measure_region(linear, box, "target")
+        return measure_region(linear, box, "target", subsampled)
     boxes = find_pencils(img)
     if not boxes:
         raise DetectionError("no pencil (yellow upright band) found in the frame")
     box = max(boxes, key=lambda b: (b[2] - b[0]) * (b[3] - b[1]))
-    return measure_region(linear, box, "beacon")
+    return measure_region(linear, box, "beacon", subsampled)
 
 
-def detect_frame(image: np.ndarray, view: CaptureRecord, calibration: Calibration) -> Detection:
-    """Measure the target and each beacon in an RGB uint8 frame.
+def detect_frame(image: np.ndarray, view: CaptureRecord, calibration: Calibration,
+                 subsampled: bool = False) -> Detection:
+    """Measure the target and each beacon in an RGB uint8 frame (``subsampled``: one
+    whose colour was stored at half resolution, a JPEG; ``calibration`` measured so).
 
     Raises
     ------
@@ -253,9 +258,9 @@ def detect_frame(image: np.ndarray, view: CaptureRecord, calibration: Calibratio
     img = img.astype(np.float32)
     linear = to_linear(img)
     target = target_geometry(cam, measure_object(img, "target", view.target_size[0]
-                                                 / view.target_size[1], linear),
+                                                 / view.target_size[1], linear, subsampled),
                              view.target_size, calibration.target_k)
-    pencils = [measure_region(linear, b, "beacon") for b in find_pencils(img)]
+    pencils = [measure_region(linear, b, "beacon", subsampled) for b in find_pencils(img)]
     paint = pencil_paint_height(view.beacons[0].height)
     pencils = [pencil_geometry(cam, p, paint, calibration.pencil_k) for p in pencils
                if p.height_px and (p.u_left, p.u_right) != (None, None)]

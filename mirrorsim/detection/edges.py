@@ -227,8 +227,8 @@ def to_linear(srgb: np.ndarray) -> np.ndarray:
 _LINEAR_LUT = (255.0 * LINEAR_OF_CODE).astype(np.float32)
 
 
-def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str
-                   ) -> ImageMeasurement:
+def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str,
+                   subsampled: bool = False) -> ImageMeasurement:
     """Sub-pixel edges of an object's image in ``box``: top and bottom, left and right,
     with the radiance just outside each (pixels only: :mod:`mirrorsim.detection.detector` turns them
     into a bearing and a distance with the camera's geometry).
@@ -242,12 +242,20 @@ def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str
     the board's: the board's contact shadow and the pegboard's dark holes in front of
     the foot only scale the board's colour, and drop out (in the blue channel a hole is
     as dark as the paint, and the pencil's foot moved with the holes in front of it).
+
+    ``subsampled``: the frame stored its colour at half resolution (a JPEG's 4:2:0
+    chroma), which smears the colour across an edge over 2–4 px and moves an edge
+    measured on it by up to 2.5 px (``benchmarks/jpeg_edges.py``); the tops and feet are
+    then measured on the image's colour, which JPEG keeps at full resolution in its
+    luma.
     """
     u0, v0, u1, v1 = box
+    on_chroma = not subsampled
     if kind == "beacon":
         blue = np.ascontiguousarray(img[..., 2:3])
-        top, bottom, out_top, out_bottom = _median_edges((blue, img), v0, v1, u0, u1, axis=0,
-                                                         chroma=(False, True),
+        top, bottom, out_top, out_bottom = _median_edges((img if subsampled else blue, img),
+                                                         v0, v1, u0, u1, axis=0,
+                                                         chroma=(False, on_chroma),
                                                          slope=(True, True))
         # a pencil 3 px from the frame's bar: the bar is the coarse pass's outside, the
         # board between reads as coverage and a side lands on the other (14 px in)
@@ -256,7 +264,8 @@ def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str
                                                          drop_off=SIDE_MAX_OFF_PX)
     else:
         top, bottom, out_top, out_bottom = _median_edges((img, img), v0, v1, u0, u1, axis=0,
-                                                         chroma=(False, True), near=(False, True))
+                                                         chroma=(False, on_chroma),
+                                                         near=(False, True))
         # a side 2-3 px from the mirror frame's inner edge leaves a bright strip of glass
         # between them: the coarse pass's outside level then falls on the dark frame bar,
         # the strip reads as coverage far above 1 and the edge is pushed 9-13 px out.  The

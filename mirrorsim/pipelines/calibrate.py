@@ -43,13 +43,15 @@ METHOD = "foot-chroma|target-foot-chroma|front-0.338|slope8|seeds-ss"
 
 
 def calibration_key(camera: Camera, target_size, pencil_height: float,
-                    distance_error: float = 0.0) -> str:
-    """What K depends on: the camera model, the objects' sizes, the method, and where
-    the reference really stood (a bench's error; absent from the key when 0)."""
+                    distance_error: float = 0.0, subsampled: bool = False) -> str:
+    """What K depends on: the camera model, the objects' sizes, the method (and whether
+    its edges are measured as in a frame of half-resolution colour), and where the
+    reference really stood (a bench's error; absent from the key when 0)."""
     key = (f"{camera.width}x{camera.height_px}|hfov={camera.hfov:.9g}|h={camera.height:.9g}|"
            f"target={target_size[0]:.9g}x{target_size[1]:.9g}|pencil={pencil_height:.9g}|"
            f"spp={CALIBRATION_SPP['target']},{CALIBRATION_SPP['beacon']}|{METHOD}|"
            f"code={code_fingerprint()}")
+    key += "|subsampled" if subsampled else ""
     return key + (f"|reference_error={distance_error:.9g}" if distance_error else "")
 
 
@@ -103,8 +105,9 @@ def reference_crop(camera: Camera, obj: Target | Beacon) -> tuple[int, int, int,
 
 
 def measure_reference(camera: Camera, kind: str, size, variant: str = "auto",
-                      distance: float = D_REF) -> float:
-    """Pixel height of the object standing at ``distance``, as the detector measures it."""
+                      distance: float = D_REF, subsampled: bool = False) -> float:
+    """Pixel height of the object standing at ``distance``, as the detector measures it
+    (``subsampled``: as it measures a JPEG frame)."""
     from mirrorsim.rendering.passes import render_direct  # Mitsuba only when a render is needed
 
     cam = reference_camera(camera)
@@ -114,7 +117,7 @@ def measure_reference(camera: Camera, kind: str, size, variant: str = "auto",
                         spp=CALIBRATION_SPP[kind], crop=reference_crop(cam, obj), variant=variant)
     ratio = size[0] / size[1] if kind == "target" else None
     try:
-        m = measure_object(img, kind, ratio)
+        m = measure_object(img, kind, ratio, subsampled=subsampled)
     except DetectionError as exc:
         raise DetectionError(f"calibration: {exc} (the {kind}'s reference render)") from None
     if m.height_px is None:
@@ -123,20 +126,23 @@ def measure_reference(camera: Camera, kind: str, size, variant: str = "auto",
 
 
 def calibrate(camera: Camera, target_size, pencil_height: float, *, variant: str = "auto",
-              refresh: bool = False, distance_error: float = 0.0) -> Calibration:
+              refresh: bool = False, distance_error: float = 0.0,
+              subsampled: bool = False) -> Calibration:
     """K for the target and the pencil with this camera (cached).
 
     ``distance_error``: a bench's reference objects stood this much farther than the
     D_REF that K assumes (docs/scenes.md ``calibration.distance_error``), so every K, and
     every d_total measured with it, comes out too small by about that fraction.
+    ``subsampled``: K for JPEG frames, whose edges the detector measures otherwise; the
+    references are measured that way, so that a bias of that way common to both cancels.
     """
-    key = calibration_key(camera, target_size, pencil_height, distance_error)
+    key = calibration_key(camera, target_size, pencil_height, distance_error, subsampled)
     found = None if refresh else read_entry("calibration", key, _check_entry)
     if found is not None:
         return Calibration(target_k=found["target_k"], pencil_k=found["pencil_k"], key=key)
     where = D_REF + distance_error
-    s_t = measure_reference(camera, "target", tuple(target_size), variant, where)
-    s_p = measure_reference(camera, "beacon", pencil_height, variant, where)
+    s_t = measure_reference(camera, "target", tuple(target_size), variant, where, subsampled)
+    s_p = measure_reference(camera, "beacon", pencil_height, variant, where, subsampled)
     cal = Calibration(target_k=s_t * (D_REF - FRONT_OFFSET["target"]),
                       pencil_k=s_p * (D_REF - FRONT_OFFSET["beacon"]), key=key)
     write_entry("calibration", key, {"target_k": cal.target_k, "pencil_k": cal.pencil_k,

@@ -53,14 +53,21 @@ class MeasuredFrame:
 
 
 def calibration_for(capture: CaptureRecord, *, variant: str = "auto",
-                    distance_error: float = 0.0) -> Calibration:
-    """The size-constancy constants for the camera and objects a capture record names.
+                    distance_error: float = 0.0, subsampled: bool = False) -> Calibration:
+    """The size-constancy constants for the camera and objects a capture record names
+    (``subsampled``: for its JPEG frames, see :func:`subsampled`).
 
     ``distance_error``: the bench's calibration error (cm), which a capture record cannot
     know; the simulator renders its calibration with it.
     """
     return calibrate(capture.camera, capture.target_size, capture.beacons[0].height,
-                     variant=variant, distance_error=distance_error)
+                     variant=variant, distance_error=distance_error, subsampled=subsampled)
+
+
+def subsampled(image_path: str | Path) -> bool:
+    """Whether a frame file stores its colour at half resolution (a JPEG's 4:2:0 chroma),
+    which the detector measures otherwise."""
+    return Path(image_path).suffix.lower() in (".jpg", ".jpeg")
 
 
 def measure_frame(image_path: str | Path, capture: CaptureRecord, *,
@@ -80,10 +87,11 @@ def measure_frame(image_path: str | Path, capture: CaptureRecord, *,
     cam = capture.camera
     image = pixels if pixels is not None else read_frame(image_path,
                                                            (cam.width, cam.height_px))
+    lossy = subsampled(image_path)
     cal = calibration or calibration_for(capture, variant=variant,
-                                         distance_error=distance_error)
+                                         distance_error=distance_error, subsampled=lossy)
     try:
-        det = detect_frame(image, capture, cal)  # the record, never the scene
+        det = detect_frame(image, capture, cal, lossy)  # the record, never the scene
     except DetectionError as exc:
         where = f"{image_path} ({source})" if source else str(image_path)
         raise FrameNotMeasured(where, str(exc)) from None
