@@ -15,10 +15,11 @@ def stamp() -> str:
     """``commit abc1234, 2026-12-02, host (x86_64, 2 cores)``."""
     commit = subprocess.run(["git", "describe", "--always"], cwd=ROOT,
                             capture_output=True, text=True).stdout.strip()
-    # a result of code not yet committed says so; the results a `regenerate.py` run has
-    # written before this one are its outputs, not code, and do not count
+    # a result of code not yet committed says so; the docs' prose and the results and
+    # figures a `regenerate.py` run has written before this one are not code
     changed = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--",
-                              ".", ":(exclude)docs/results"], cwd=ROOT,
+                              ".", ":(exclude)docs/results", ":(exclude,glob)docs/*.md",
+                              ":(exclude,glob)docs/*.png"], cwd=ROOT,
                              capture_output=True, text=True).stdout.strip()
     commit += "-dirty" if changed else ""
     return (f"commit {commit}, {datetime.date.today()}, {platform.node()} "
