@@ -615,3 +615,12 @@ def test_jpeg_frames_have_their_own_calibration():
     cam = bench_scene().camera
     keys = {calibration_key(cam, (9.9, 15.25), 4.2, 0.0, sub) for sub in (False, True)}
     assert len(keys) == 2
+
+
+def test_a_jpeg_is_told_by_its_bytes(tmp_path):
+    from mirrorsim.pipelines.frame import subsampled
+
+    (tmp_path / "named.png").write_bytes(b"\xff\xd8\xff\xe0 a JPEG named .png")
+    (tmp_path / "frame.jpg").write_bytes(b"\x89PNG\r\n\x1a\n a PNG named .jpg")
+    assert subsampled(tmp_path / "named.png") and not subsampled(tmp_path / "frame.jpg")
+    assert subsampled(tmp_path / "not_yet.JPG") and not subsampled(tmp_path / "not_yet.png")

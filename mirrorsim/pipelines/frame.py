@@ -66,8 +66,14 @@ def calibration_for(capture: CaptureRecord, *, variant: str = "auto",
 
 def subsampled(image_path: str | Path) -> bool:
     """Whether a frame file stores its colour at half resolution (a JPEG's 4:2:0 chroma),
-    which the detector measures otherwise."""
-    return Path(image_path).suffix.lower() in (".jpg", ".jpeg")
+    which the detector measures otherwise: by its first bytes, as the frame reader tells
+    a JPEG, or by its name where it is not written yet."""
+    path = Path(image_path)
+    try:
+        with open(path, "rb") as f:
+            return f.read(3) == b"\xff\xd8\xff"
+    except OSError:
+        return path.suffix.lower() in (".jpg", ".jpeg")
 
 
 def measure_frame(image_path: str | Path, capture: CaptureRecord, *,
