@@ -524,6 +524,7 @@ def test_frames_that_differ_after_the_render_share_it_bit_for_bit(monkeypatch):
         shared = passes.render_frame(after, progress=False)
         other = passes.render_frame(tilted, progress=False)
     assert len(rendered) == 2  # the ideal bench's and the tilted mirror's, not `after`'s
+    assert shared.info.seconds_render == 0.0 and fresh.info.seconds_render > 0
     for a, b in ((shared.linear, fresh.linear), (shared.first, fresh.first),
                  (shared.in_mirror, fresh.in_mirror)):
         np.testing.assert_array_equal(a, b)

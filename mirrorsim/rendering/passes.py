@@ -137,7 +137,9 @@ def render_frame(scene: Scene, *, variant: str = "auto", progress: bool = True
     t0 = time.perf_counter()
     key = f"{scene_fingerprint(optics_of(scene))}|{chosen}"
     optical = _KEPT.get(key) if _KEPT is not None else None
-    if optical is None:
+    if optical is not None:  # this frame rendered nothing: its render time is none
+        optical = replace(optical, seconds=0.0)
+    else:
         optical = _render_optics(scene, chosen, progress)
         if _KEPT is not None and len(_KEPT) < _CAPACITY:
             _KEPT[key] = optical
