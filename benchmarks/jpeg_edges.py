@@ -26,16 +26,15 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from exact import front_face  # noqa: E402
 from stamp import stamp  # noqa: E402
 
 from mirrorsim.detection import detector, edges  # noqa: E402
-from mirrorsim.detection.image_geometry import FRONT_OFFSET  # noqa: E402
 from mirrorsim.formats.files import decode_image, encode_jpeg  # noqa: E402
 from mirrorsim.pipelines.random_scenes import load_spec, sample_scene  # noqa: E402
 from mirrorsim.rendering.passes import render_frame  # noqa: E402
 from mirrorsim.rendering.sensor import to_srgb8  # noqa: E402
 from mirrorsim.scene.model import pencil_paint_height  # noqa: E402
-from mirrorsim.truth import optics  # noqa: E402
 
 # (target foot on chroma, pencil top on blue, pencil foot on chroma): True is the
 # detector's way (edges.measure_region), False the image's colour
@@ -47,10 +46,7 @@ WAYS = {"the detector's": (True, True, True),
 
 def _exact(scene, obj, height: float, kind: str) -> tuple[float, float]:
     """Rows of the front face's top and foot in the mirror image."""
-    img = optics.mirror_image(scene.camera.position, scene.mirror, obj.position)
-    ray = (img.virtual - np.asarray(scene.camera.position)) / img.d_total
-    front = img.virtual - ray * FRONT_OFFSET[kind]
-    _, v, _ = optics.project(scene.camera, np.array([[*front, 0.0], [*front, height]]))
+    _, v = front_face(scene, obj, height, kind)
     return v[1], v[0]
 
 

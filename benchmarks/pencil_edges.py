@@ -21,11 +21,11 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-
 from dataclasses import replace  # noqa: E402
 
+from exact import front_face  # noqa: E402
+
 from mirrorsim.detection.detector import detect_frame  # noqa: E402
-from mirrorsim.detection.image_geometry import FRONT_OFFSET  # noqa: E402
 from mirrorsim.formats.capture import CaptureRecord  # noqa: E402
 from mirrorsim.pipelines.calibrate import calibrate  # noqa: E402
 from mirrorsim.pipelines.random_scenes import load_spec, sample_scene  # noqa: E402
@@ -55,10 +55,7 @@ def main() -> None:
         cap = CaptureRecord.from_scene(s, frame=f"{s.name}.png")
         b = s.beacons[0]
         img = optics.mirror_image(s.camera.position, s.mirror, b.position)
-        ray = (img.virtual - np.asarray(s.camera.position)) / img.d_total
-        front = img.virtual - ray * FRONT_OFFSET["beacon"]
-        _, v, _ = optics.project(s.camera, np.array(
-            [[*front, 0.0], [*front, pencil_paint_height(b.height)]]))
+        _, v = front_face(s, b, pencil_paint_height(b.height), "beacon")
         errs = []
         for f in (sharp, frame):
             m = detect_frame(to_srgb8(f.linear), cap, cal).beacons[0][1]

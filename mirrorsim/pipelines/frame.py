@@ -20,13 +20,7 @@ from mirrorsim.detection.image_geometry import Calibration
 from mirrorsim.errors import DetectionError
 from mirrorsim.formats.capture import CaptureRecord
 from mirrorsim.pipelines.calibrate import calibrate
-from mirrorsim.rendering.frames import (
-    FrameFiles,
-    capture_of,
-    render_to_files,
-    reused_frame,
-    write_frame,
-)
+from mirrorsim.rendering.frames import FrameFiles, capture_of, reused_frame, write_frame
 from mirrorsim.rendering.passes import render_frame, scene_fingerprint
 from mirrorsim.rendering.sensor import to_srgb8
 from mirrorsim.scene.model import Scene
@@ -93,7 +87,7 @@ def measure_frame(image_path: str | Path, capture: CaptureRecord, *,
     cam = capture.camera
     image = pixels if pixels is not None else read_frame(image_path,
                                                            (cam.width, cam.height_px))
-    lossy = subsampled(image_path)
+    lossy = pixels is None and subsampled(image_path)  # pixels: a lossless PNG just made
     cal = calibration or calibration_for(capture, variant=variant,
                                          distance_error=distance_error, subsampled=lossy)
     try:
@@ -112,20 +106,21 @@ def render_and_measure(scene: Scene, out: str | Path, *, variant: str = "auto",
     measure = partial(measure_frame, calibration=calibration, variant=variant,
                       distance_error=scene.bench.calibration_distance_error)
     files = reused_frame(scene, out, ids) if reuse else None
-    if files is None and scene.bench.jpeg_quality is None:
-        # a lossless frame is measured from its pixels in memory while a second thread
-        # encodes and writes its files (PNG encoding and detection each hold one core)
-        frame = render_frame(scene, variant=variant, progress=progress)
-        srgb = to_srgb8(frame.linear)
-        capture = capture_of(scene, out)
-        with ThreadPoolExecutor(1) as pool:
-            writing = pool.submit(write_frame, scene, frame, out, scene_fingerprint(scene),
-                                  ids, srgb)
-            try:
-                m = measure(out / capture.frame, capture, pixels=srgb)
-            finally:
-                files = writing.result()  # the files are whole, measured or not
-        return replace(m, files=files)
-    if files is None:  # a JPEG frame: the detector must see it as decoded
-        files = render_to_files(scene, out, variant=variant, progress=progress, ids=ids)
-    return replace(measure(files.image, files.capture, pixels=files.pixels), files=files)
+    if files is not None:
+        return replace(measure(files.image, files.capture), files=files)
+    frame = render_frame(scene, variant=variant, progress=progress)
+    write = partial(write_frame, scene, frame, out, scene_fingerprint(scene), ids)
+    if scene.bench.jpeg_quality is not None:  # the detector must see a JPEG as decoded
+        files = write()
+        return replace(measure(files.image, files.capture), files=files)
+    # a lossless frame is measured from its pixels in memory while a second thread
+    # encodes and writes its files (PNG encoding and detection each hold one core)
+    srgb = to_srgb8(frame.linear)
+    capture = capture_of(scene, out)
+    with ThreadPoolExecutor(1) as pool:
+        writing = pool.submit(write, srgb=srgb)
+        try:
+            m = measure(out / capture.frame, capture, pixels=srgb)
+        finally:
+            files = writing.result()  # the files are whole, measured or not
+    return replace(m, files=files)
