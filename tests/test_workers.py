@@ -53,6 +53,42 @@ def test_a_warm_worker_takes_every_job_without_a_limit():
     assert len({pid for _, pid in got}) == 1  # one process did them all
 
 
+def _mark_setup() -> None:
+    os.environ["MIRRORSIM_TEST_SETUP"] = str(os.getpid())
+
+
+def _setup_seen(i: int) -> tuple[int, str, int]:
+    return i, os.environ.get("MIRRORSIM_TEST_SETUP", ""), os.getpid()
+
+
+def test_each_worker_runs_its_setup_before_its_first_job():
+    """Two workers, each with its own setup: every job sees its own process's mark, and
+    the parent's environment is untouched."""
+    got = []
+    run_local(_setup_seen, [(i,) for i in range(4)], 2, lambda i: any(g[0] == i for g in got),
+              got.append, setup=_mark_setup)
+    assert sorted(i for i, *_ in got) == list(range(4))
+    assert all(mark == str(pid) for _, mark, pid in got)
+    assert "MIRRORSIM_TEST_SETUP" not in os.environ
+
+
+def test_workers_share_the_cores_dr_jit_renders_on():
+    """share_cores gives each of N processes its cores // N render threads, one at least."""
+    import drjit as dr
+
+    from mirrorsim.rendering.backend import share_cores
+
+    before = dr.thread_count()
+    cores = len(os.sched_getaffinity(0))
+    try:
+        share_cores(1)
+        assert dr.thread_count() == cores
+        share_cores(2 * cores)
+        assert dr.thread_count() == 1
+    finally:
+        dr.set_thread_count(before)
+
+
 def test_a_worker_retires_after_its_bounded_number_of_jobs():
     """Memory or not, a worker retires after max_jobs (Dr.Jit's kernels of new scenes
     pile up): 7 jobs at 3 a worker take 3 processes, in order, none lost."""

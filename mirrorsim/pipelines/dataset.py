@@ -32,6 +32,7 @@ import traceback
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -292,6 +293,9 @@ def _run_jobs(jobs: list[tuple], executor: str, workers: int, scheduler: str | N
     if executor == "dask":
         run_dask(process_one, jobs, scheduler, on_result)
     else:  # one worker too: a worker process retires, this process could not
-        run_local(process_one, jobs, workers, is_done, on_result, max_rss_mb)
+        from mirrorsim.rendering.backend import share_cores
+
+        run_local(process_one, jobs, workers, is_done, on_result, max_rss_mb,
+                  setup=partial(share_cores, workers))
 
 

@@ -99,11 +99,13 @@ def max_workers() -> tuple[int, str]:
 
 
 def _worker(conn: Connection, fn: Callable, max_rss_mb: float, parent: int,
-            max_jobs: int) -> None:
-    """A worker's life: jobs in, (ok, value, retiring) out, until told to stop (None), its
-    memory passes the limit or it has done ``max_jobs`` jobs."""
+            max_jobs: int, setup: Callable[[], None] | None) -> None:
+    """A worker's life: ``setup()``, then jobs in, (ok, value, retiring) out, until told to
+    stop (None), its memory passes the limit or it has done ``max_jobs`` jobs."""
     _die_with(parent)
     _ignore_sigint()
+    if setup is not None:
+        setup()
     warnings.showwarning = one_line_warning  # as the parent shows them
     done = 0
     while True:
@@ -127,10 +129,11 @@ def _worker(conn: Connection, fn: Callable, max_rss_mb: float, parent: int,
 class _Slot:
     """One worker process, its pipe and the job it holds."""
 
-    def __init__(self, ctx, fn: Callable, max_rss_mb: float, max_jobs: int):
+    def __init__(self, ctx, fn: Callable, max_rss_mb: float, max_jobs: int,
+                 setup: Callable[[], None] | None):
         self.conn, child = ctx.Pipe()
-        self.proc = ctx.Process(target=_worker, args=(child, fn, max_rss_mb, os.getpid(), max_jobs),
-                                daemon=True)
+        self.proc = ctx.Process(target=_worker, args=(child, fn, max_rss_mb, os.getpid(), max_jobs,
+                                                      setup), daemon=True)
         self.proc.start()
         child.close()
         self.job: tuple | None = None
@@ -138,12 +141,13 @@ class _Slot:
 
 def run_local(fn: Callable, jobs: list[tuple], workers: int, is_done: Callable[[int], bool],
               on_result: Callable[[object], None], max_rss_mb: float = 0.0,
-              max_jobs: int = MAX_JOBS_PER_WORKER) -> None:
-    """Call ``fn(*job)`` for each job in ``workers`` warm processes; ``on_result`` gets
-    each return value.  A worker past ``max_rss_mb`` MiB (0: no limit) or ``max_jobs``
-    jobs retires after its job; one that dies is replaced and its job, unless
-    ``is_done(index)`` (the index is a job's first element), given to the next free
-    worker."""
+              max_jobs: int = MAX_JOBS_PER_WORKER,
+              setup: Callable[[], None] | None = None) -> None:
+    """Call ``fn(*job)`` for each job in ``workers`` warm processes, each of which first
+    calls ``setup()`` (picklable); ``on_result`` gets each return value.  A worker past
+    ``max_rss_mb`` MiB (0: no limit) or ``max_jobs`` jobs retires after its job; one that
+    dies is replaced and its job, unless ``is_done(index)`` (the index is a job's first
+    element), given to the next free worker."""
     ctx = mp.get_context("spawn")  # a fresh interpreter: no inherited Mitsuba state
     pending = deque(jobs)
     slots: list[_Slot] = []
@@ -151,7 +155,7 @@ def run_local(fn: Callable, jobs: list[tuple], workers: int, is_done: Callable[[
 
     def start() -> None:
         with _sigint_held():
-            slots.append(_Slot(ctx, fn, max_rss_mb, max_jobs))
+            slots.append(_Slot(ctx, fn, max_rss_mb, max_jobs, setup))
 
     try:
         for _ in range(min(workers, len(pending))):
