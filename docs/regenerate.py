@@ -114,6 +114,8 @@ RESULTS: tuple[Result, ...] = (
            markdown=True, about="the same 40 benches with their frames stored as PNG"),
     Result("jpeg_edges", (f"{PY} benchmarks/jpeg_edges.py --scenes 12",), markdown=True,
            about="what JPEG does to each measured edge, against the exact projections"),
+    Result("jpeg_reference", (f"{PY} benchmarks/jpeg_reference.py",), markdown=True,
+           about="the calibration's references recorded as JPEG"),
     Result("throughput_commands", (f"{PY} benchmarks/commands.py --repeat 3",),
            markdown=True, about="whole commands as a user waits for them (quiet machine)"),
     Result("render_variants", (f"{PY} benchmarks/render.py --repeat 2",), markdown=True,
