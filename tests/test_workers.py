@@ -72,18 +72,17 @@ def test_each_worker_runs_its_setup_before_its_first_job():
     assert "MIRRORSIM_TEST_SETUP" not in os.environ
 
 
-def test_workers_share_the_cores_dr_jit_renders_on():
-    """share_cores gives each of N processes its cores // N render threads, one at least."""
+def test_renders_run_on_the_threads_they_are_given():
+    """set_render_threads sets Dr.Jit's thread pool, one thread at least."""
     import drjit as dr
 
-    from mirrorsim.rendering.backend import share_cores
+    from mirrorsim.rendering.backend import set_render_threads
 
     before = dr.thread_count()
-    cores = len(os.sched_getaffinity(0))
     try:
-        share_cores(1)
-        assert dr.thread_count() == cores
-        share_cores(2 * cores)
+        set_render_threads(3)
+        assert dr.thread_count() == 3
+        set_render_threads(0)  # more workers than cores
         assert dr.thread_count() == 1
     finally:
         dr.set_thread_count(before)

@@ -54,7 +54,7 @@ from mirrorsim.formats.error_model import ErrorModel, default_error_model
 from mirrorsim.formats.files import dumps, write_json, write_text
 from mirrorsim.pipelines.random_scenes import DatasetSpec, NoValidScene
 from mirrorsim.pipelines.score import Report
-from mirrorsim.pipelines.workers import run_dask, run_local
+from mirrorsim.pipelines.workers import run_dask, run_local, usable_cores
 from mirrorsim.scene import imperfections
 from mirrorsim.scene.model import Scene
 from mirrorsim.truth.groundtruth import ObjectTruth
@@ -293,9 +293,10 @@ def _run_jobs(jobs: list[tuple], executor: str, workers: int, scheduler: str | N
     if executor == "dask":
         run_dask(process_one, jobs, scheduler, on_result)
     else:  # one worker too: a worker process retires, this process could not
-        from mirrorsim.rendering.backend import share_cores
+        from mirrorsim.rendering.backend import set_render_threads
 
+        # each worker renders on its share of the cores
         run_local(process_one, jobs, workers, is_done, on_result, max_rss_mb,
-                  setup=partial(share_cores, workers))
+                  setup=partial(set_render_threads, usable_cores() // workers))
 
 

@@ -85,11 +85,16 @@ def available_mb() -> float | None:
         return None
 
 
+def usable_cores() -> int:
+    """The cores this process may use (affinity, cpusets)."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (
+        os.cpu_count() or 1)
+
+
 def max_workers() -> tuple[int, str]:
     """How many local workers this machine runs usefully: one per core, and no more
     than its available memory holds (WORKER_MEMORY_MB each); and why."""
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (
-        os.cpu_count() or 1)  # the cores this process may use (affinity, cpusets)
+    cores = usable_cores()
     free_mb = available_mb()
     if free_mb is None:
         return cores, f"{cores} cores"

@@ -173,19 +173,16 @@ def choose_variant(requested: str = "auto") -> str:
     return VARIANTS["scalar"]
 
 
-def share_cores(processes: int) -> None:
-    """Give this process's renders its share of the machine's cores, when ``processes``
-    worker processes render at once.
+def set_render_threads(threads: int) -> None:
+    """Have this process's renders run on ``threads`` threads (at least one).
 
-    Dr.Jit's LLVM backend runs one thread per core in every process: two workers on two
-    cores ran four render threads, which contend (a new dataset of 24 scenes, 2 workers:
-    about 7 % faster with one thread each, benchmarks/dataset.py).
+    Dr.Jit's LLVM backend runs one thread per core in every process: two dataset
+    workers on two cores ran four render threads, which contend (a new dataset of 24
+    scenes, 2 workers: about 6 % faster with one thread each, benchmarks/dataset.py).
     """
     import drjit as dr  # a worker's first scene imports it anyway
 
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (
-        os.cpu_count() or 1)
-    dr.set_thread_count(max(1, cores // max(1, processes)))
+    dr.set_thread_count(max(1, threads))
 
 
 def _maybe_gpu() -> bool:
