@@ -26,12 +26,11 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-from exact import front_face  # noqa: E402
+from exact import front_face, spec_scenes  # noqa: E402
 from stamp import stamp  # noqa: E402
 
 from mirrorsim.detection import detector, edges  # noqa: E402
 from mirrorsim.formats.files import decode_image, encode_jpeg  # noqa: E402
-from mirrorsim.pipelines.random_scenes import load_spec, sample_scene  # noqa: E402
 from mirrorsim.rendering.passes import render_frame  # noqa: E402
 from mirrorsim.rendering.sensor import to_srgb8  # noqa: E402
 from mirrorsim.scene.model import pencil_paint_height  # noqa: E402
@@ -72,12 +71,10 @@ def main() -> None:
     ap.add_argument("--scenes", type=int, default=12)
     ap.add_argument("--quality", type=int, default=90)
     a = ap.parse_args()
-    spec = load_spec(ROOT / "scenes" / "dataset_spec.yaml")
     print(f"edges against their exact projections, lossless and JPEG at quality {a.quality}, "
           f"scenes 0–{a.scenes - 1} of dataset_spec.yaml; {stamp()}\n")
     got = {(w, f): [] for w in WAYS for f in ("PNG", "JPEG")}
-    for i in range(a.scenes):
-        s = sample_scene(spec, np.random.SeedSequence(0, spawn_key=(i,)), f"spec{i:03d}")
+    for s in spec_scenes(a.scenes):
         png = to_srgb8(render_frame(s.with_render(seed=0), progress=False).linear)
         frames = {"PNG": png, "JPEG": decode_image(encode_jpeg(png, a.quality))}
         t_true = _exact(s, s.target, s.target.size[1], "target")

@@ -23,12 +23,11 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 from dataclasses import replace  # noqa: E402
 
-from exact import front_face  # noqa: E402
+from exact import front_face, spec_scenes  # noqa: E402
 
 from mirrorsim.detection.detector import detect_frame  # noqa: E402
 from mirrorsim.formats.capture import CaptureRecord  # noqa: E402
 from mirrorsim.pipelines.calibrate import calibrate  # noqa: E402
-from mirrorsim.pipelines.random_scenes import load_spec, sample_scene  # noqa: E402
 from mirrorsim.rendering.passes import render_frame  # noqa: E402
 from mirrorsim.rendering.sensor import to_srgb8  # noqa: E402
 from mirrorsim.scene.model import pencil_paint_height  # noqa: E402
@@ -40,14 +39,12 @@ def main() -> None:
     ap.add_argument("--scenes", type=int, default=12)
     ap.add_argument("--spp", type=int, default=128)
     a = ap.parse_args()
-    spec = load_spec(ROOT / "scenes" / "dataset_spec.yaml")
     print(f"pencil edges, scenes 0–{a.scenes - 1} of the spec, 1920×1088, the box at "
           f"{a.spp} spp; {platform.machine()}\n")
     print("| scene | top px | foot px | Δd/d % (box at spp) | Δd/d % (spec's settings) |\n"
           "|---|---|---|---|---|")
     rows = []
-    for i in range(a.scenes):
-        s = sample_scene(spec, np.random.SeedSequence(0, spawn_key=(i,)), f"spec{i:03d}")
+    for s in spec_scenes(a.scenes):
         cal = calibrate(s.camera, s.target.size, s.beacons[0].height)
         frame = render_frame(s.with_render(spp=s.render.spp, seed=0), progress=False)
         many = replace(s, render=replace(s.render, beacon_spp=a.spp))

@@ -64,6 +64,10 @@ from mirrorsim.scene.model import (
 from solver.lsq import BeaconMeasurement
 from solver.measurements import Measurements
 
+# a frame file's first bytes: PNG's signature, and JPEG's start-of-image marker and the
+# next marker's 0xFF (a JPEG stores its colour at half resolution: see measure_region)
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+JPEG_MAGIC = b"\xff\xd8\xff"
 FRAME_OPEN_PX = 13  # wider than the mirror frame's bars at the distances of our scenes
 MERGED_MIN_AREA = 2000  # px: a grey region this large that is no panel may hold one
 
@@ -379,7 +383,7 @@ def read_frame(path, size: tuple[int, int] | None = None) -> np.ndarray:
     except OSError as exc:
         raise InputError(path, "", f"cannot read: {exc.strerror or exc}") from None
     head = raw[:8]
-    if not (head.startswith(b"\x89PNG\r\n\x1a\n") or head.startswith(b"\xff\xd8\xff")):
+    if not (head.startswith(PNG_MAGIC) or head.startswith(JPEG_MAGIC)):
         raise InputError(path, "", "not a PNG or JPEG image")
     found = header_size(raw)
     if found is None:
@@ -393,7 +397,7 @@ def read_frame(path, size: tuple[int, int] | None = None) -> np.ndarray:
     rgb = decode_image(raw)
     if rgb is None:
         raise InputError(path, "", "a damaged image that cannot be decoded")
-    if head.startswith(b"\xff\xd8\xff"):
+    if head.startswith(JPEG_MAGIC):
         warnings.warn(f"{path}: a JPEG frame: compression blurs the edges the detector "
                       "measures; expect larger errors", RuntimeWarning, stacklevel=2)
     return rgb
@@ -402,7 +406,7 @@ def read_frame(path, size: tuple[int, int] | None = None) -> np.ndarray:
 def header_size(data: bytes) -> tuple[int, int] | None:
     """(width, height) from a PNG's IHDR or a JPEG's start-of-frame marker, without
     decoding; None if the header is damaged."""
-    if data.startswith(b"\x89PNG\r\n\x1a\n"):
+    if data.startswith(PNG_MAGIC):
         if len(data) < 24 or data[12:16] != b"IHDR":
             return None
         return int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")

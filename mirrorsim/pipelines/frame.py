@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mirrorsim.detection.detector import Detection, detect_frame, read_frame
+from mirrorsim.detection.detector import JPEG_MAGIC, Detection, detect_frame, read_frame
 from mirrorsim.detection.image_geometry import Calibration
 from mirrorsim.errors import DetectionError
 from mirrorsim.formats.capture import CaptureRecord
@@ -65,7 +65,7 @@ def subsampled(image_path: str | Path) -> bool:
     path = Path(image_path)
     try:
         with open(path, "rb") as f:
-            return f.read(3) == b"\xff\xd8\xff"
+            return f.read(len(JPEG_MAGIC)) == JPEG_MAGIC
     except OSError:
         return path.suffix.lower() in (".jpg", ".jpeg")
 

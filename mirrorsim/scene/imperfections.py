@@ -75,6 +75,8 @@ class Imperfection:
     spec_key: str = ""  # the spec's bench-block key path when it differs from ``key``
     source: bool = True
     why: str = ""  # what the bounds mean, for the error message
+    # where it acts: "optics" (what Mitsuba renders), "sensor" (after the render: noise,
+    # JPEG) or "record" (only what the experimenter believes); see optics_of
     stage: str = "optics"
 
     @property
