@@ -9,7 +9,10 @@ JPEG at ``--quality`` (OpenCV's libjpeg, 4:2:0 chroma) and decoded.  The target'
 the mirror pencil's top and foot are measured in the detector's box around each image,
 in four ways (each edge on the image's colour, or as the detector does: the target's
 foot and the pencil's foot on the colour across the board's, the pencil's top on the
-blue channel), and compared with the exact projection of each object's front face.
+blue channel; or as it measures a frame of half-resolution colour, a JPEG: the pencil's
+foot on the colour across the board's of the 8-bit values as stored, every other edge
+on the image's colour), and compared with the exact projection of each object's front
+face.
 Prints the mean and spread over the scenes of each edge's offset (px, + is down) and of
 the image height's error as a d_total error (%).  Chroma is what JPEG stores at half
 resolution; a bias that differs between the two kinds is what a self-calibrated range
@@ -36,11 +39,13 @@ from mirrorsim.rendering.sensor import to_srgb8  # noqa: E402
 from mirrorsim.scene.model import pencil_paint_height  # noqa: E402
 
 # (target foot on chroma, pencil top on blue, pencil foot on chroma): True is the
-# detector's way (edges.measure_region), False the image's colour
-WAYS = {"the detector's": (True, True, True),
+# detector's way for a lossless frame (edges.measure_region), False the image's colour,
+# "stored" the chroma of the 8-bit values as stored
+WAYS = {"the detector's, lossless": (True, True, True),
         "target foot on colour": (False, True, True),
         "pencil top on colour": (True, False, True),
-        "every edge on colour": (False, False, False)}
+        "every edge on colour": (False, False, False),
+        "the detector's, half-resolution colour": (False, False, "stored")}
 
 
 def _exact(scene, obj, height: float, kind: str) -> tuple[float, float]:
@@ -61,8 +66,13 @@ def _measure(srgb: np.ndarray, scene, way, pencil_rows) -> tuple[tuple, tuple]:
     p0, q0, p1, q1 = min(detector.find_pencils(img), key=lambda b: abs(b[1] - pencil_rows[0])
                          + abs(b[3] - pencil_rows[1]))
     top_img = np.ascontiguousarray(lin[..., 2:3]) if pencil_top_blue else lin
-    pencil = edges._median_edges((top_img, lin), q0, q1, p0, p1, axis=0,
-                                 chroma=(False, pencil_foot_chroma), slope=(True, True))[:2]
+    foot_img = img if pencil_foot_chroma == "stored" else lin
+    pencil = edges._median_edges((top_img, foot_img), q0, q1, p0, p1, axis=0,
+                                 chroma=(False, bool(pencil_foot_chroma)), slope=(True, True),
+                                 half=(1, 2 if pencil_foot_chroma == "stored" else 1))[:2]
+    if pencil_foot_chroma == "stored":  # the row is the detector's own, not a copy of it
+        m = edges.measure_region(lin, (p0, q0, p1, q1), "beacon", subsampled=True, stored=img)
+        assert (m.v_top, m.v_bottom) == pencil, (m.v_top, m.v_bottom, pencil)
     return target, pencil
 
 

@@ -306,6 +306,36 @@ def test_pencil_foot_ignores_holes_and_contact_shadow(holes, shadow):
     assert m.v_top == pytest.approx(top, abs=0.03)
 
 
+def test_a_jpeg_pencils_foot_is_measured_on_its_stored_chroma():
+    """JPEG stores colour at half resolution: averaged over 2×2 pixels and interpolated
+    back, which moves chroma between neighbours without changing its sum over the
+    window.  The pencil's foot measured on the colour across the board's of the 8-bit
+    values as stored stays within a fraction of a pixel of the area-weighted truth, with
+    or without a contact shadow or a hole under it, at the qualities a bench uses.  (On
+    rendered frames, whose shadows and holes this band does not copy, measuring on
+    linear colour erred far more: benchmarks/jpeg_edges.py.)"""
+    from mirrorsim.detection.edges import measure_region, to_linear
+    from mirrorsim.formats.files import decode_image, encode_jpeg
+    from mirrorsim.rendering.sensor import to_srgb8
+
+    new = []
+    for shadow in (1.0, 0.6):
+        for holes in ((), (63,)):
+            for foot in (60.2, 60.6, 61.0, 61.4, 61.8):
+                srgb = to_srgb8(_pencil_on_board(20.3, foot, holes, shadow) / 255.0)
+                for q in (85, 90, 95):
+                    jpeg = decode_image(encode_jpeg(srgb, q)).astype(np.float32)
+                    box = (20, 20, 39, int(foot))
+                    m = measure_region(to_linear(jpeg), box, "beacon", subsampled=True,
+                                       stored=jpeg)
+                    new.append(m.v_bottom - foot)
+                    # the stored values are found from the linear image alike
+                    assert measure_region(to_linear(jpeg), box, "beacon",
+                                          subsampled=True).v_bottom == m.v_bottom
+    err = np.abs(new)
+    assert err.mean() < 0.2 and err.max() < 0.6, (err.mean(), err.max())
+
+
 def test_pencil_front_depth_is_the_mean_near_side_of_the_measured_columns():
     """FRONT_OFFSET['beacon'] is where the hexagon's near side lies, averaged over the
     middle 60 % of its silhouette's columns and over its turn (computed here afresh by

@@ -239,7 +239,7 @@ def measure_object(img: np.ndarray, kind: str, target_ratio: float | None = None
     if not boxes:
         raise DetectionError("no pencil (yellow upright band) found in the frame")
     box = max(boxes, key=lambda b: (b[2] - b[0]) * (b[3] - b[1]))
-    return measure_region(linear, box, "beacon", subsampled)
+    return measure_region(linear, box, "beacon", subsampled, stored=img)
 
 
 def detect_frame(image: np.ndarray, view: CaptureRecord, calibration: Calibration,
@@ -264,7 +264,8 @@ def detect_frame(image: np.ndarray, view: CaptureRecord, calibration: Calibratio
     target = target_geometry(cam, measure_object(img, "target", view.target_size[0]
                                                  / view.target_size[1], linear, subsampled),
                              view.target_size, calibration.target_k)
-    pencils = [measure_region(linear, b, "beacon", subsampled) for b in find_pencils(img)]
+    pencils = [measure_region(linear, b, "beacon", subsampled, stored=img)
+               for b in find_pencils(img)]
     paint = pencil_paint_height(view.beacons[0].height)
     pencils = [pencil_geometry(cam, p, paint, calibration.pencil_k) for p in pencils
                if p.height_px and (p.u_left, p.u_right) != (None, None)]

@@ -151,7 +151,8 @@ def _mean_level(level: np.ndarray) -> np.ndarray:
 
 def _median_edges(imgs, lo, hi, cross_lo, cross_hi, axis, band_px=3,
                   chroma=(False, False), slope=(False, False), near=(False, False),
-                  max_off: float | None = None, drop_off: float | None = None):
+                  max_off: float | None = None, drop_off: float | None = None,
+                  half=(1, 1)):
     """Edges at both ends of an object spanning [lo, hi] along ``axis`` (0: top and
     bottom, 1: left and right), robust and precise; ``imgs`` and ``chroma``: the image
     each end is measured in, and whether on its colour across the outside's; ``slope``:
@@ -166,6 +167,7 @@ def _median_edges(imgs, lo, hi, cross_lo, cross_hi, axis, band_px=3,
     than half the bands remain is not measured (None): the region's boundary is then not
     the object's (see :func:`measure_region`).  ``drop_off``: such bands are dropped
     without that rule (where many bands find no contrast at all, as on a pencil's side).
+    ``half``: each end's final window, 2·half + 1 px about the edge.
     Returns (edge_lo, edge_hi, outside_lo, outside_hi).
     """
     span = cross_hi - cross_lo + 1
@@ -203,8 +205,8 @@ def _median_edges(imgs, lo, hi, cross_lo, cross_hi, axis, band_px=3,
             continue
         keep = np.concatenate([band for band, _ in kept]) if kept else np.concatenate(bands)
         # round(m) is the pixel the edge crosses: the window is centred on it
-        e, out = _local_edge(img, keep, axis, m, end == 1, reach, chroma=flat,
-                             slope=slope[end])
+        e, out = _local_edge(img, keep, axis, m, end == 1, reach, half=half[end],
+                             chroma=flat, slope=slope[end])
         final.append(e)
         outs.append(out)
     return final[0], final[1], outs[0], outs[1]
@@ -227,8 +229,15 @@ def to_linear(srgb: np.ndarray) -> np.ndarray:
 _LINEAR_LUT = (255.0 * LINEAR_OF_CODE).astype(np.float32)
 
 
+def _codes(linear: np.ndarray) -> np.ndarray:
+    """The 8-bit values (as float32) of an image converted by :func:`to_linear`: each
+    linear value is one of the table's, found by its place in it."""
+    return np.searchsorted(_LINEAR_LUT, linear).astype(np.float32)
+
+
 def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str,
-                   subsampled: bool = False) -> ImageMeasurement:
+                   subsampled: bool = False, stored: np.ndarray | None = None
+                   ) -> ImageMeasurement:
     """Sub-pixel edges of an object's image in ``box``: top and bottom, left and right,
     with the radiance just outside each (pixels only: :mod:`mirrorsim.detection.detector` turns them
     into a bearing and a distance with the camera's geometry).
@@ -245,18 +254,30 @@ def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str,
 
     ``subsampled``: the frame stored its colour at half resolution (a JPEG's 4:2:0
     chroma), which smears the colour across an edge over 2–4 px and moves an edge
-    measured on it by up to 2.5 px (``benchmarks/jpeg_edges.py``); the tops and feet are
-    then measured on the image's colour, which JPEG keeps at full resolution in its
-    luma.
+    measured on linear colour by up to 2.5 px (``benchmarks/jpeg_edges.py``).  The
+    target's edges and the pencil's top are then measured on the image's colour, which
+    JPEG keeps at full resolution in its luma.  The pencil's foot stays on the colour
+    across the board's, but of the 8-bit values as stored (``stored``; from ``img`` if
+    not given): JPEG averages and interpolates chroma in those values, which moves
+    chroma between neighbouring pixels without changing its sum over the window, so the
+    area method still finds the edge (measured on its colour, the foot's contact shadow
+    and holes moved it by +0.4 ± 0.4 px; on the stored chroma −0.1 ± 0.2 px, the
+    −0.16 px of measuring coverage on gamma-encoded values included).
     """
     u0, v0, u1, v1 = box
     on_chroma = not subsampled
     if kind == "beacon":
         blue = np.ascontiguousarray(img[..., 2:3])
-        top, bottom, out_top, out_bottom = _median_edges((img if subsampled else blue, img),
+        foot_img = img
+        if subsampled:
+            foot_img = np.asarray(stored, np.float32) if stored is not None else _codes(img)
+        top, bottom, out_top, out_bottom = _median_edges((img if subsampled else blue, foot_img),
                                                          v0, v1, u0, u1, axis=0,
-                                                         chroma=(False, on_chroma),
-                                                         slope=(True, True))
+                                                         chroma=(False, True),
+                                                         slope=(True, True),
+                                                         half=(1, 2 if subsampled else 1))
+        if subsampled:  # the board's level below the foot, as linear radiance like the rest
+            out_bottom = _LINEAR_LUT[np.clip(np.rint(out_bottom), 0, 255).astype(np.uint8)]
         # a pencil 3 px from the frame's bar: the bar is the coarse pass's outside, the
         # board between reads as coverage and a side lands on the other (14 px in)
         left, right, out_left, out_right = _median_edges((blue, blue), u0, u1, v0, v1, axis=1,
