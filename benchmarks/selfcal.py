@@ -33,6 +33,7 @@ sys.path.insert(0, str(ROOT))
 from stamp import stamp  # noqa: E402
 
 from mirrorsim.errors import DetectionError  # noqa: E402
+from mirrorsim.formats.error_model import load_error_model  # noqa: E402
 from mirrorsim.pipelines.evaluate import evaluate_scene  # noqa: E402
 from mirrorsim.pipelines.planning import plan_scene  # noqa: E402
 from mirrorsim.pipelines.random_scenes import load_spec, sample_scene  # noqa: E402
@@ -67,14 +68,18 @@ def main() -> None:
     ap.add_argument("--out", type=Path, help="keep the frames here (default: a temp folder)")
     ap.add_argument("--lossless", action="store_true",
                     help="store every frame as PNG (the same scenes otherwise)")
+    ap.add_argument("--error-model", type=Path,
+                    help="the σ's that weight every fit (default: the ideal bench's model)")
     a = ap.parse_args()
+    model = load_error_model(a.error_model) if a.error_model else None
     seed = a.seed if a.seed is not None else int.from_bytes(os.urandom(3), "big")
     spec = load_spec(a.spec)
     lo, hi = spec.data.get("bench", {}).get("beacon", {}).get("known_position_offset", [0, 0])
     position_sigma = (hi - lo) / np.sqrt(12)  # a uniform offset's σ
     print(f"self-calibration on rendered frames: {a.scenes} scenes of {a.spec.name}, seed "
           f"{seed}, {a.beacons} planned beacons, believed positions off by U({lo}, {hi}) cm "
-          f"per axis{'; frames stored as PNG, not JPEG' if a.lossless else ''}; {stamp()}\n")
+          f"per axis{'; frames stored as PNG, not JPEG' if a.lossless else ''}; σ's of "
+          f"{a.error_model or 'the ideal bench’s error model'}; {stamp()}\n")
     print("| scene | plain (cm) | self-calibrated | plain, exact positions | self-calibrated, "
           "exact positions | pan error ° | calibration error cm |\n|---|---|---|---|---|---|---|")
     rows, skipped = [], []
@@ -99,7 +104,8 @@ def main() -> None:
                             for p in plan.beacon_set.positions)
             scene = replace(scene, beacons=beacons)
             try:
-                rep = evaluate_scene(scene, out / scene.name, progress=False, keep=())
+                rep = evaluate_scene(scene, out / scene.name, progress=False, keep=(),
+                                     error_model=model)
                 e = _errors(rep, scene, position_sigma)
             except (DetectionError, SolverError) as exc:
                 skipped.append(f"{scene.name}: {exc}")
