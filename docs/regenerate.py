@@ -112,6 +112,9 @@ RESULTS: tuple[Result, ...] = (
     Result("selfcal_bench", (f"{PY} benchmarks/selfcal.py --scenes 40 --seed 4417001",),
            markdown=True, about="self-calibration on 40 rendered bench scenes with three "
                                 "planned beacons (about 10 min)"),
+    Result("selfcal_bench_fresh", (f"{PY} benchmarks/selfcal.py --scenes 40",),
+           markdown=True, about="self-calibration on 40 benches of a fresh seed (printed), "
+                                "drawn anew at each regeneration (about 10 min)"),
     Result("selfcal_bench_png",
            (f"{PY} benchmarks/selfcal.py --scenes 40 --seed 4417001 --lossless",),
            markdown=True, about="the same 40 benches with their frames stored as PNG"),
