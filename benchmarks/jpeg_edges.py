@@ -7,7 +7,7 @@ For scenes 0..N−1 of ``scenes/dataset_spec.yaml`` (an ideal bench), each frame
 rendered once and measured twice: as the lossless PNG, and as the same pixels stored as
 JPEG at ``--quality`` (OpenCV's libjpeg, 4:2:0 chroma) and decoded.  The target's and
 the mirror pencil's top and foot are measured in the detector's box around each image,
-in four ways (each edge on the image's colour, or as the detector does: the target's
+in five ways (each edge on the image's colour, or as the detector does: the target's
 foot and the pencil's foot on the colour across the board's, the pencil's top on the
 blue channel; or as it measures a frame of half-resolution colour, a JPEG: the pencil's
 foot on the colour across the board's of the 8-bit values as stored, every other edge

@@ -6,7 +6,7 @@ its JPEG camera would record them.
 For each camera model of ``scenes/dataset_spec_bench.yaml``, the calibration's two
 reference objects (the target panel and the pencil, in direct view at 100 cm, as
 :mod:`mirrorsim.pipelines.calibrate` renders them) are measured as a lossless frame, as
-a JPEG frame is measured (``subsampled``: tops and feet on the image's colour), and
+a JPEG frame is measured (``subsampled``: see ``edges.measure_region``), and
 stored as JPEG at each quality (OpenCV's libjpeg, 4:2:0 chroma; the crop's corner on the
 frame's 16 px block grid) and decoded, then measured the JPEG way.  Prints each pixel
 height and its difference from the lossless one (%): a K calibrated through JPEG carries

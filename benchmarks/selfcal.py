@@ -69,7 +69,8 @@ def main() -> None:
     ap.add_argument("--lossless", action="store_true",
                     help="store every frame as PNG (the same scenes otherwise)")
     ap.add_argument("--error-model", type=Path,
-                    help="the σ's that weight every fit (default: the ideal bench's model)")
+                    help="the σ's that weight every fit and the plan (default: the ideal "
+                         "bench's model)")
     a = ap.parse_args()
     model = load_error_model(a.error_model) if a.error_model else None
     seed = a.seed if a.seed is not None else int.from_bytes(os.urandom(3), "big")
@@ -79,7 +80,8 @@ def main() -> None:
     print(f"self-calibration on rendered frames: {a.scenes} scenes of {a.spec.name}, seed "
           f"{seed}, {a.beacons} planned beacons, believed positions off by U({lo}, {hi}) cm "
           f"per axis{'; frames stored as PNG, not JPEG' if a.lossless else ''}; σ's of "
-          f"{a.error_model or 'the ideal bench’s error model'}; {stamp()}\n")
+          f"{a.error_model.name if a.error_model else 'the ideal bench’s error model'}; "
+          f"{stamp()}\n")
     print("| scene | plain (cm) | self-calibrated | plain, exact positions | self-calibrated, "
           "exact positions | pan error ° | calibration error cm |\n|---|---|---|---|---|---|---|")
     rows, skipped = [], []
@@ -92,7 +94,8 @@ def main() -> None:
             if a.lossless:  # after the draw: the same scenes, their frames stored as PNG
                 scene = replace(scene, bench=replace(scene.bench, jpeg_quality=None))
             try:
-                plan = plan_scene(scene, n_beacons=a.beacons, nuisances=NUISANCES, step=a.step,
+                plan = plan_scene(scene, None if model is None else model.typical,
+                                  n_beacons=a.beacons, nuisances=NUISANCES, step=a.step,
                                   position_sigma=position_sigma)
             except (SolverError, ValueError) as exc:
                 skipped.append(f"{scene.name}: plan: {exc}")
