@@ -54,7 +54,7 @@ def _edge_by_area(profile: np.ndarray, start: int, inside: np.ndarray, outside: 
     ``inside`` and ``outside``: one colour each, or one per row of ``profile``."""
     d = inside - outside
     dd = np.sum(d * d, axis=-1)
-    if float(np.mean(dd)) < 5.0**2:  # linear 0–255 scale
+    if float(np.mean(dd)) < 5.0**2:  # a 0–255 scale (linear, or a JPEG's stored values)
         return None
     # not clipped to [0, 1]: clipping noise on the flat parts would bias the sum inwards
     c = np.sum((profile - outside) * d, axis=-1) / dd
@@ -258,11 +258,13 @@ def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str,
     target's edges and the pencil's top are then measured on the image's colour, which
     JPEG keeps at full resolution in its luma.  The pencil's foot stays on the colour
     across the board's, but of the 8-bit values as stored (``stored``; from ``img`` if
-    not given): JPEG averages and interpolates chroma in those values, which moves
-    chroma between neighbouring pixels without changing its sum over the window, so the
-    area method still finds the edge (measured on its colour, the foot's contact shadow
-    and holes moved it by +0.4 ± 0.4 px; on the stored chroma −0.1 ± 0.2 px, the
-    −0.16 px of measuring coverage on gamma-encoded values included).
+    not given), over a 5-px window: JPEG averages and interpolates chroma in those
+    values, which moves chroma between neighbouring pixels without changing its sum over
+    the window, so the area method still finds the edge.  On 12 rendered scenes at
+    quality 90 the foot measured so lies −0.15 ± 0.20 px from the geometry (on the image's
+    colour, where the contact shadow and holes count, +0.26 ± 0.35 px); the −0.15 px is
+    coverage summed on gamma-encoded values, and a lossless frame measured so (the
+    calibration's reference) reads −0.15 ± 0.06 px, so it nearly cancels.
     """
     u0, v0, u1, v1 = box
     on_chroma = not subsampled
