@@ -278,8 +278,10 @@ def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str,
                                                          chroma=(False, True),
                                                          slope=(True, True),
                                                          half=(1, 2 if subsampled else 1))
-        if subsampled:  # the board's level below the foot, as linear radiance like the rest
-            out_bottom = _LINEAR_LUT[np.clip(np.rint(out_bottom), 0, 255).astype(np.uint8)]
+        if subsampled:  # the board's level below the foot (a mean of stored values) as
+            # linear radiance like the rest: the radiance of that value, within a code's
+            # step of the mean radiance
+            out_bottom = np.interp(out_bottom, np.arange(256), _LINEAR_LUT)
         # a pencil 3 px from the frame's bar: the bar is the coarse pass's outside, the
         # board between reads as coverage and a side lands on the other (14 px in)
         left, right, out_left, out_right = _median_edges((blue, blue), u0, u1, v0, v1, axis=1,
