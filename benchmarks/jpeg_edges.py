@@ -39,8 +39,8 @@ from mirrorsim.rendering.sensor import to_srgb8  # noqa: E402
 from mirrorsim.scene.model import pencil_paint_height  # noqa: E402
 
 # (target foot on chroma, pencil top on blue, pencil foot on chroma): True is the
-# detector's way for a lossless frame (edges.measure_region), False the image's colour,
-# "stored" the chroma of the 8-bit values as stored
+# detector's way for a lossless frame (edges.measure_region), False the image's colour;
+# the pencil's foot may also be "stored": on the chroma of the 8-bit values as stored
 WAYS = {"the detector's, lossless": (True, True, True),
         "target foot on colour": (False, True, True),
         "pencil top on colour": (True, False, True),

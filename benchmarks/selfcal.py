@@ -2,6 +2,7 @@
 
     python benchmarks/selfcal.py [--scenes 40] [--seed S] [--spec scenes/dataset_spec_bench.yaml]
                                  [--beacons 3] [--out DIR] [--lossless]
+                                 [--error-model FILE]
 
 For each random scene of the spec (its bench imperfections drawn as the spec draws
 them: pan error, calibration error, curvature, JPEG…), `plan --beacons N --calibrate
@@ -69,8 +70,9 @@ def main() -> None:
     ap.add_argument("--lossless", action="store_true",
                     help="store every frame as PNG (the same scenes otherwise)")
     ap.add_argument("--error-model", type=Path,
-                    help="the σ's that weight every fit and the plan (default: the ideal "
-                         "bench's model)")
+                    help="the σ's that weight every fit, and its typical σ's the plan "
+                         "(default: the ideal bench's model for the fits, the plan's "
+                         "own default σ's)")
     a = ap.parse_args()
     model = load_error_model(a.error_model) if a.error_model else None
     seed = a.seed if a.seed is not None else int.from_bytes(os.urandom(3), "big")

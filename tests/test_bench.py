@@ -582,10 +582,11 @@ def test_budget_says_when_the_ideal_bench_cannot_be_measured(tmp_path, monkeypat
 
 
 @pytest.mark.parametrize("hfov", [65.2, 60.0])
-def test_a_jpeg_frame_is_measured_on_the_colour_jpeg_keeps_whole(tmp_path, hfov):
+def test_a_jpeg_frame_is_measured_its_own_way(tmp_path, hfov):
     """JPEG keeps luma at full resolution and chroma at half: the tops and feet measured
-    on chroma move by up to 2.5 px (benchmarks/jpeg_edges.py).  The same render, stored
-    both ways: the JPEG's d_total's stay near the lossless frame's."""
+    on linear chroma move by up to 2.5 px (benchmarks/jpeg_edges.py).  The same render,
+    stored both ways: measured the JPEG way (edges.measure_region), the JPEG's d_total's
+    stay near the lossless frame's."""
     from mirrorsim.detection.detector import detect_frame
     from mirrorsim.pipelines.frame import calibration_for
 

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from mirrorsim.rendering.sensor import LINEAR_OF_CODE
+from mirrorsim.rendering.sensor import LINEAR_OF_CODE, to_srgb8
 
 
 @dataclass(frozen=True)
@@ -152,7 +152,7 @@ def _mean_level(level: np.ndarray) -> np.ndarray:
 def _median_edges(imgs, lo, hi, cross_lo, cross_hi, axis, band_px=3,
                   chroma=(False, False), slope=(False, False), near=(False, False),
                   max_off: float | None = None, drop_off: float | None = None,
-                  half=(1, 1)):
+                  half: tuple[int, int] = (1, 1)):
     """Edges at both ends of an object spanning [lo, hi] along ``axis`` (0: top and
     bottom, 1: left and right), robust and precise; ``imgs`` and ``chroma``: the image
     each end is measured in, and whether on its colour across the outside's; ``slope``:
@@ -229,12 +229,6 @@ def to_linear(srgb: np.ndarray) -> np.ndarray:
 _LINEAR_LUT = (255.0 * LINEAR_OF_CODE).astype(np.float32)
 
 
-def _codes(linear: np.ndarray) -> np.ndarray:
-    """The 8-bit values (as float32) of an image converted by :func:`to_linear`: each
-    linear value is one of the table's, found by its place in it."""
-    return np.searchsorted(_LINEAR_LUT, linear).astype(np.float32)
-
-
 def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str,
                    subsampled: bool = False, stored: np.ndarray | None = None
                    ) -> ImageMeasurement:
@@ -272,7 +266,8 @@ def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str,
         blue = np.ascontiguousarray(img[..., 2:3])
         foot_img = img
         if subsampled:
-            foot_img = np.asarray(stored, np.float32) if stored is not None else _codes(img)
+            foot_img = np.asarray(stored if stored is not None else to_srgb8(img / 255.0),
+                                  np.float32)
         top, bottom, out_top, out_bottom = _median_edges((img if subsampled else blue, foot_img),
                                                          v0, v1, u0, u1, axis=0,
                                                          chroma=(False, True),
