@@ -65,14 +65,12 @@ def _measure(srgb: np.ndarray, scene, way, pencil_rows) -> tuple[tuple, tuple]:
     # the mirror pencil's box: the one whose rows are nearest its exact image's
     p0, q0, p1, q1 = min(detector.find_pencils(img), key=lambda b: abs(b[1] - pencil_rows[0])
                          + abs(b[3] - pencil_rows[1]))
-    top_img = np.ascontiguousarray(lin[..., 2:3]) if pencil_top_blue else lin
-    foot_img = img if pencil_foot_chroma == "stored" else lin
-    pencil = edges._median_edges((top_img, foot_img), q0, q1, p0, p1, axis=0,
-                                 chroma=(False, bool(pencil_foot_chroma)), slope=(True, True),
-                                 half=(1, 2 if pencil_foot_chroma == "stored" else 1))[:2]
-    if pencil_foot_chroma == "stored":  # the row is the detector's own, not a copy of it
+    if pencil_foot_chroma == "stored":  # the detector's own JPEG way, not a copy of it
         m = edges.measure_region(lin, (p0, q0, p1, q1), "beacon", subsampled=True, stored=img)
-        assert (m.v_top, m.v_bottom) == pencil, (m.v_top, m.v_bottom, pencil)
+        return target, (m.v_top, m.v_bottom)
+    top_img = np.ascontiguousarray(lin[..., 2:3]) if pencil_top_blue else lin
+    pencil = edges._median_edges((top_img, lin), q0, q1, p0, p1, axis=0,
+                                 chroma=(False, pencil_foot_chroma), slope=(True, True))[:2]
     return target, pencil
 
 
