@@ -12,7 +12,11 @@ pan,scale` places N beacons; each beacon's believed position is off by the spec'
 plain least squares and self-calibrated (pan and scale; the beacons known to the
 offsets' σ, (hi − lo)/√12, as the experimenter would say), with the believed beacon
 positions and with the exact ones (then known exactly).  The plan is made with the same
-σ.  Prints each scene's target errors and the medians.  ``--lossless``: the same scenes
+σ.  A fifth fit is the floor of any pan-and-scale calibration: plain least squares with
+the exact positions on the measurements with the frame's own shared errors taken out
+exactly (the mean of its four images' α errors, and of their relative d_total errors,
+against the truth): what is left is each image's own error.  Prints each scene's target
+errors and the medians.  ``--lossless``: the same scenes
 (the same draws) with each frame stored as PNG instead of the JPEG the spec draws, to
 tell JPEG's part from the rest.
 """
@@ -45,8 +49,9 @@ from solver.lsq import BeaconMeasurement, solve_measurements  # noqa: E402
 NUISANCES = ("pan", "scale")
 
 
-def _errors(rep, scene, position_sigma: float) -> tuple[float, float, float, float]:
-    """Target error: plain and self-calibrated, with believed and with exact positions."""
+def _errors(rep, scene, position_sigma: float) -> tuple[float, ...]:
+    """Target error: plain and self-calibrated, with believed and with exact positions,
+    then the floor (plain, exact positions, the frame's shared errors taken out)."""
     m, truth = rep.measurements, np.asarray(rep.truth.target.position, float)
     exact = [BeaconMeasurement(tuple(b.position), mb.alpha_deg, mb.d_total)
              for b, mb in zip(scene.beacons, m.beacons, strict=True)]
@@ -56,6 +61,23 @@ def _errors(rep, scene, position_sigma: float) -> tuple[float, float, float, flo
             sol = solve_measurements(m.observer, beacons, m.targets, m.sigma, nu,
                                      ps if nu else 0.0)
             out.append(float(np.linalg.norm(sol.target - truth)))
+    # the shared errors as the truth has them: every image's α error and relative
+    # d_total error, averaged (the target's image counts once, as the beacons' do)
+    measured = [(b.alpha_deg, b.d_total) for b in m.beacons] + [m.targets[0]]
+    true = [(t.alpha_deg, t.d_total) for t in (*rep.truth.beacons, rep.truth.target)]
+    delta = float(np.mean([a - ta for (a, _), (ta, _) in zip(measured, true, strict=True)]))
+    scale = float(np.mean([d / td for (_, d), (_, td) in zip(measured, true, strict=True)]))
+    # the floor, then its two parts: each image's own α error alone (every d_total
+    # true) and its own d_total error alone (every α true)
+    for keep_a, keep_d in ((True, True), (True, False), (False, True)):
+        def pick(a, d, ta, td, keep_a=keep_a, keep_d=keep_d):
+            return a - delta if keep_a else ta, d / scale if keep_d else td
+
+        known = [BeaconMeasurement(b.position, *pick(b.alpha_deg, b.d_total, *t))
+                 for b, t in zip(exact, true[:-1], strict=True)]
+        targets = [pick(a, d, *true[-1]) for a, d in m.targets]
+        sol = solve_measurements(m.observer, known, targets, m.sigma)
+        out.append(float(np.linalg.norm(sol.target - truth)))
     return tuple(out)
 
 
@@ -85,7 +107,8 @@ def main() -> None:
           f"{a.error_model.name if a.error_model else 'the ideal bench’s error model'}; "
           f"{stamp()}\n")
     print("| scene | plain (cm) | self-calibrated | plain, exact positions | self-calibrated, "
-          "exact positions | pan error ° | calibration error cm |\n|---|---|---|---|---|---|---|")
+          "exact positions | floor: shared errors known | pan error ° | calibration error cm |"
+          "\n|---|---|---|---|---|---|---|---|")
     rows, skipped = [], []
     rng = np.random.default_rng(seed)
     with tempfile.TemporaryDirectory() as tmp:
@@ -117,14 +140,19 @@ def main() -> None:
                 continue
             rows.append(e)
             print(f"| {scene.name} | {e[0]:.3f} | {e[1]:.3f} | {e[2]:.3f} | {e[3]:.3f} | "
+                  f"{e[4]:.3f} | "
                   f"{scene.bench.pan_error:+.2f} | {scene.bench.calibration_distance_error:+.2f} |",
                   flush=True)
     v = np.array(rows)
-    med = [statistics.median(v[:, k]) for k in range(4)]
+    med = [statistics.median(v[:, k]) for k in range(5)]
     print(f"| **median** ({len(rows)} scenes) | **{med[0]:.3f}** | **{med[1]:.3f}** | "
-          f"**{med[2]:.3f}** | **{med[3]:.3f}** | | |")
+          f"**{med[2]:.3f}** | **{med[3]:.3f}** | **{med[4]:.3f}** | | |")
     print(f"\nself-calibrated / plain, medians: {med[1] / med[0]:.2f} (believed positions), "
-          f"{med[3] / med[2]:.2f} (exact positions)")
+          f"{med[3] / med[2]:.2f} (exact positions); the floor / plain: "
+          f"{med[4] / med[0]:.2f} (believed), {med[4] / med[2]:.2f} (exact)")
+    print(f"\nthe floor's parts, medians: each image's own α error alone (every d_total "
+          f"true) {statistics.median(v[:, 5]):.3f} cm, its own d_total error alone (every α "
+          f"true) {statistics.median(v[:, 6]):.3f} cm")
     for s in skipped:
         print(f"skipped {s}")
 
