@@ -1,18 +1,19 @@
 """Benchmark: self-calibrating SLTR on rendered frames of a real bench's imperfections.
 
     python benchmarks/selfcal.py [--scenes 40] [--seed S] [--spec scenes/dataset_spec_bench.yaml]
-                                 [--beacons 3] [--out DIR] [--lossless]
-                                 [--error-model FILE]
+                                 [--beacons 3] [--calibrate pan,scale,power] [--out DIR]
+                                 [--lossless] [--error-model FILE]
 
 For each random scene of the spec (its bench imperfections drawn as the spec draws
 them: pan error, calibration error, curvature, JPEG…), `plan --beacons N --calibrate
-pan,scale` places N beacons; each beacon's believed position is off by the spec's
+NUISANCES` places N beacons; each beacon's believed position is off by the spec's
 `beacon.known_position_offset` range (drawn per beacon and axis); the scene is rendered
 (one frame per beacon), detected, and solved four ways from the same measurements:
-plain least squares and self-calibrated (pan and scale; the beacons known to the
-offsets' σ, (hi − lo)/√12, as the experimenter would say), with the believed beacon
+plain least squares and self-calibrated (``--calibrate``'s nuisances, by default the
+pan, the scale and the mirror's power; the beacons known to the offsets' σ,
+(hi − lo)/√12, as the experimenter would say), with the believed beacon
 positions and with the exact ones (then known exactly).  The plan is made with the same
-σ.  A fifth fit is the floor of any pan-and-scale calibration: plain least squares with
+σ.  A fifth fit is the floor of a pan-and-scale calibration: plain least squares with
 the exact positions on the measurements with the frame's own shared errors taken out
 exactly (the mean of its four images' α errors, and of their relative d_total errors,
 against the truth): what is left is each image's own error.  Prints each scene's target
@@ -44,12 +45,11 @@ from mirrorsim.pipelines.planning import plan_scene  # noqa: E402
 from mirrorsim.pipelines.random_scenes import load_spec, sample_scene  # noqa: E402
 from mirrorsim.scene.model import Beacon  # noqa: E402
 from solver.errors import SolverError  # noqa: E402
-from solver.lsq import BeaconMeasurement, solve_measurements  # noqa: E402
-
-NUISANCES = ("pan", "scale")
+from solver.lsq import BeaconMeasurement, power_terms, solve_measurements  # noqa: E402
 
 
-def _errors(rep, scene, position_sigma: float) -> tuple[float, ...]:
+def _errors(rep, scene, position_sigma: float, nuisances: tuple[str, ...]
+            ) -> tuple[float, ...]:
     """Target error: plain and self-calibrated, with believed and with exact positions,
     then the floor (plain, exact positions, the frame's shared errors taken out)."""
     m, truth = rep.measurements, np.asarray(rep.truth.target.position, float)
@@ -57,7 +57,7 @@ def _errors(rep, scene, position_sigma: float) -> tuple[float, ...]:
              for b, mb in zip(scene.beacons, m.beacons, strict=True)]
     out = []
     for beacons, ps in ((m.beacons, position_sigma), (exact, 0.0)):
-        for nu in ((), NUISANCES):
+        for nu in ((), nuisances):
             sol = solve_measurements(m.observer, beacons, m.targets, m.sigma, nu,
                                      ps if nu else 0.0)
             out.append(float(np.linalg.norm(sol.target - truth)))
@@ -81,6 +81,25 @@ def _errors(rep, scene, position_sigma: float) -> tuple[float, ...]:
     return tuple(out)
 
 
+def _power_check(rep, scene) -> tuple[np.ndarray, np.ndarray]:
+    """Each image's own α error (after the frame's mean) beside what the mirror's power
+    moves it by to first order (power_terms with the true 1/R, the vertex at the
+    mirror's centre, the frame's mean taken out too)."""
+    m, t = rep.measurements, rep.truth
+    objs = [*t.beacons, t.target]
+    err = np.array([b.alpha_deg for b in m.beacons] + [m.targets[0][0]]) - np.array(
+        [o.alpha_deg for o in objs])
+    R = scene.bench.curvature_radius
+    yaw = scene.mirror.yaw
+    n = np.array([-np.sin(np.radians(yaw)), np.cos(np.radians(yaw))])
+    centre = np.asarray(scene.mirror.center, float)
+    pts = np.array([o.position for o in objs], float)
+    A, _ = power_terms(np.array([yaw, n @ centre, 0.0, 0.0]), np.asarray(m.observer, float),
+                       pts, centre)
+    pred = A / R if R else np.zeros(len(objs))
+    return err - err.mean(), pred - pred.mean()
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenes", type=int, default=40)
@@ -88,6 +107,8 @@ def main() -> None:
     ap.add_argument("--spec", type=Path, default=ROOT / "scenes" / "dataset_spec_bench.yaml")
     ap.add_argument("--beacons", type=int, default=3)
     ap.add_argument("--step", type=float, default=2.0, help="the plan's grid step (cm)")
+    ap.add_argument("--calibrate", default="pan,scale,power",
+                    help="the nuisances the plan and the self-calibrated fits estimate")
     ap.add_argument("--out", type=Path, help="keep the frames here (default: a temp folder)")
     ap.add_argument("--lossless", action="store_true",
                     help="store every frame as PNG (the same scenes otherwise)")
@@ -96,20 +117,23 @@ def main() -> None:
                          "(default: the ideal bench's model for the fits, the plan's "
                          "own default σ's)")
     a = ap.parse_args()
+    nuisances = tuple(n.strip() for n in a.calibrate.split(",") if n.strip())
     model = load_error_model(a.error_model) if a.error_model else None
     seed = a.seed if a.seed is not None else int.from_bytes(os.urandom(3), "big")
     spec = load_spec(a.spec)
     lo, hi = spec.data.get("bench", {}).get("beacon", {}).get("known_position_offset", [0, 0])
     position_sigma = (hi - lo) / np.sqrt(12)  # a uniform offset's σ
     print(f"self-calibration on rendered frames: {a.scenes} scenes of {a.spec.name}, seed "
-          f"{seed}, {a.beacons} planned beacons, believed positions off by U({lo}, {hi}) cm "
+          f"{seed}, {a.beacons} beacons planned and self-calibrated for "
+          f"{', '.join(nuisances)}, believed positions off by U({lo}, {hi}) cm "
           f"per axis{'; frames stored as PNG, not JPEG' if a.lossless else ''}; σ's of "
           f"{a.error_model.name if a.error_model else 'the ideal bench’s error model'}; "
           f"{stamp()}\n")
     print("| scene | plain (cm) | self-calibrated | plain, exact positions | self-calibrated, "
-          "exact positions | floor: shared errors known | pan error ° | calibration error cm |"
+          "exact positions | pan and scale known (their floor) | pan error ° | "
+          "calibration error cm |"
           "\n|---|---|---|---|---|---|---|---|")
-    rows, skipped = [], []
+    rows, skipped, own, moved = [], [], [], []
     rng = np.random.default_rng(seed)
     with tempfile.TemporaryDirectory() as tmp:
         out = a.out or Path(tmp)
@@ -120,7 +144,7 @@ def main() -> None:
                 scene = replace(scene, bench=replace(scene.bench, jpeg_quality=None))
             try:
                 plan = plan_scene(scene, None if model is None else model.typical,
-                                  n_beacons=a.beacons, nuisances=NUISANCES, step=a.step,
+                                  n_beacons=a.beacons, nuisances=nuisances, step=a.step,
                                   position_sigma=position_sigma)
             except (SolverError, ValueError) as exc:
                 skipped.append(f"{scene.name}: plan: {exc}")
@@ -134,11 +158,14 @@ def main() -> None:
             try:
                 rep = evaluate_scene(scene, out / scene.name, progress=False, keep=(),
                                      error_model=model)
-                e = _errors(rep, scene, position_sigma)
+                e = _errors(rep, scene, position_sigma, nuisances)
             except (DetectionError, SolverError) as exc:
                 skipped.append(f"{scene.name}: {exc}")
                 continue
             rows.append(e)
+            o, p = _power_check(rep, scene)
+            own.append(o)
+            moved.append(p)
             print(f"| {scene.name} | {e[0]:.3f} | {e[1]:.3f} | {e[2]:.3f} | {e[3]:.3f} | "
                   f"{e[4]:.3f} | "
                   f"{scene.bench.pan_error:+.2f} | {scene.bench.calibration_distance_error:+.2f} |",
@@ -148,11 +175,18 @@ def main() -> None:
     print(f"| **median** ({len(rows)} scenes) | **{med[0]:.3f}** | **{med[1]:.3f}** | "
           f"**{med[2]:.3f}** | **{med[3]:.3f}** | **{med[4]:.3f}** | | |")
     print(f"\nself-calibrated / plain, medians: {med[1] / med[0]:.2f} (believed positions), "
-          f"{med[3] / med[2]:.2f} (exact positions); the floor / plain: "
+          f"{med[3] / med[2]:.2f} (exact positions); pan and scale known / plain: "
           f"{med[4] / med[0]:.2f} (believed), {med[4] / med[2]:.2f} (exact)")
-    print(f"\nthe floor's parts, medians: each image's own α error alone (every d_total "
-          f"true) {statistics.median(v[:, 5]):.3f} cm, its own d_total error alone (every α "
-          f"true) {statistics.median(v[:, 6]):.3f} cm")
+    print(f"\npan and scale known, its parts, medians: each image's own α error alone "
+          f"(every d_total true) {statistics.median(v[:, 5]):.3f} cm, its own d_total error "
+          f"alone (every α true) {statistics.median(v[:, 6]):.3f} cm")
+    own, moved = np.concatenate(own), np.concatenate(moved)
+    slope = float(moved @ own / (moved @ moved))
+    print(f"\nthe images' own α errors (each frame's mean taken out), {len(own)} images, "
+          f"against the mirror's power to first order (solver.lsq.power_terms, the true "
+          f"1/R, the vertex at the mirror's centre): slope {slope:.2f}, correlation "
+          f"{np.corrcoef(moved, own)[0, 1]:.2f}; RMS {np.sqrt(np.mean(own**2)):.3f}°, "
+          f"{np.sqrt(np.mean((own - moved)**2)):.3f}° with it taken out")
     for s in skipped:
         print(f"skipped {s}")
 

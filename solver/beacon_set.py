@@ -18,7 +18,14 @@ import numpy as np
 
 from solver.errors import SolverError
 from solver.geometry import point_segment_distance
-from solver.lsq import NUISANCES, ObjectSigmas, Sigma, as_object_sigmas, predict
+from solver.lsq import (
+    NUISANCES,
+    ObjectSigmas,
+    Sigma,
+    as_object_sigmas,
+    power_terms,
+    predict,
+)
 from solver.placement import implied_target, seen_in_mirror
 
 # an expected variance beyond this (cm²) is no estimate: the set cannot determine it
@@ -57,8 +64,12 @@ def _information(o: np.ndarray, B: np.ndarray, t_alpha: float, t_d: float, point
     for j, name in enumerate(nuisances):
         if name == "pan":
             ra[:, 4 + j], ta[4 + j] = 1.0, 1.0
-        else:
+        elif name == "scale":
             rd[:, 4 + j], td[4 + j] = d_b, d_t[0]
+        else:  # power: the mirror curved about the pose's point (its centre)
+            pts = np.vstack([B, tgt[None]])
+            A, D = power_terms(np.r_[params, 0, 0], o, pts, np.asarray(point, float))
+            ra[:, 4 + j], rd[:, 4 + j], ta[4 + j], td[4 + j] = A[:-1], D[:-1], A[-1], D[-1]
     sb, st = sig.beacons[0], sig.target
     R = np.stack([ra, rd], axis=1)  # (K, 2, P): each candidate's α and d rows
     C = np.zeros((len(B), 2, 2))

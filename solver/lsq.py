@@ -18,8 +18,11 @@ ArrayLike = np.typing.ArrayLike
 HUBER_K = 3.0
 # nuisances a bench shares across its measurements, estimated with the mirror when asked
 # (self-calibration): "pan", an offset δ (deg) on every α (the mount's pan reading);
-# "scale", a factor s on every d_total (the calibration's K): α_meas = α + δ, d_meas = s·d
-NUISANCES = {"pan": ("pan_offset_deg", 0.0), "scale": ("range_scale", 1.0)}
+# "scale", a factor s on every d_total (the calibration's K); "power", the mirror's
+# curvature c = 1/R (1/cm, > 0 concave), which moves each image by its own amount
+# (:func:`power_terms`): α_meas = α + c·A + δ, d_meas = s·(d + c·D)
+NUISANCES = {"pan": ("pan_offset_deg", 0.0), "scale": ("range_scale", 1.0),
+             "power": ("mirror_power_per_cm", 0.0)}
 
 
 @dataclass(frozen=True)
@@ -261,15 +264,69 @@ def _forward(x: np.ndarray, o: np.ndarray, bpos: np.ndarray, nt: int,
     da[:nb, 2:] = 0.0  # a beacon's image does not move with the target
     dd[:nb, 2:] = 0.0
     ea, ed = np.zeros((len(a), k)), np.zeros((len(a), k))
-    for j, name in enumerate(nuisances):
-        v = x[4 + j]
-        if name == "pan":
-            a = a + v
-            ea[:, j] = 1.0
-        else:  # scale: every d_total, and its derivatives, times s
-            ed[:, j] = d
-            d, dd, od = d * v, dd * v, od * v
+    where = {name: 4 + j for j, name in enumerate(nuisances)}
+    if "power" in where:  # the mirror's curvature first: the pan and the scale act after it
+        j = where["power"]
+        # the vertex: the middle of the images' reflection points (the target's once)
+        A, D = power_terms(x[:4], o, pts, vertex=np.mean(_reflection_points(x, o, pts[:nb + 1]),
+                                                           axis=0))
+        a, d = a + x[j] * A, d + x[j] * D
+        # the power's terms move with the mirror and the target only at second order
+        # (c times a small angle): their derivatives there are left out
+        ea[:, j - 4], ed[:, j - 4] = A, D
+    if "pan" in where:
+        a = a + x[where["pan"]]
+        ea[:, where["pan"] - 4] = 1.0
+    if "scale" in where:  # every d_total, and its derivatives, times s
+        j, v = where["scale"], x[where["scale"]]
+        dd, od, ed = dd * v, od * v, ed * v
+        ed[:, j - 4] = d
+        d = d * v
     return a, d, np.hstack([da, ea, oa]), np.hstack([dd, ed, od])
+
+
+def _reflection_points(x: np.ndarray, o: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Where the camera's ray to each point's virtual image meets the mirror (θ, ρ) =
+    x[:2]."""
+    th = np.radians(x[0])
+    n = np.array([-np.sin(th), np.cos(th)])
+    rel = points - 2.0 * (points @ n - x[1])[:, None] * n - o
+    return o + ((x[1] - o @ n) / (rel @ n))[:, None] * rel
+
+
+def power_terms(params: np.ndarray, observer: np.ndarray, points: np.ndarray,
+                vertex: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """First-order change of each point's image per unit of the mirror's power c = 1/R
+    (1/cm, > 0 concave), the mirror (θ, ρ) = params[:2] curved about ``vertex`` (a point
+    on its line).
+
+    At a reflection point u cm along the line from the vertex the surface is turned by
+    c·u and stands c·u²/2 nearer the camera, which moves the virtual image by
+    c·(2u·((q·a)·n + (q·n)·a) + u²·n) (q: the point from the reflection point, a along
+    the line, n its normal toward the camera): that is its α's change.  Its size is
+    that of an image magnified by the mirror's sagittal power 2·c·cos i, which is
+    d_total's change −2·c·cos i·d1·d2 (the mirror equation; size constancy sees the
+    magnified image as nearer).
+
+    Returns
+    -------
+    dalpha_deg, dd : (k,)
+        α's change (deg) and d_total's change (cm) per unit c.
+    """
+    th = np.radians(params[0])
+    a = np.array([np.cos(th), np.sin(th)])
+    n = np.array([-np.sin(th), np.cos(th)])
+    P = _reflection_points(params, observer, points)
+    rel = points - 2.0 * (points @ n - params[1])[:, None] * n - observer  # to the image
+    dist = np.hypot(rel[:, 0], rel[:, 1])
+    nc = n if observer @ n > params[1] else -n  # the normal on the camera's side
+    q = points - P
+    u = ((P - vertex) @ a)[:, None]
+    dv = 2.0 * u * ((q @ a)[:, None] * nc + (q @ nc)[:, None] * a) + u**2 * nc
+    dalpha = np.degrees((rel[:, 0] * dv[:, 1] - rel[:, 1] * dv[:, 0]) / dist**2)
+    d1 = np.hypot(*(P - observer).T)
+    cos_i = np.abs(rel @ n) / dist
+    return dalpha, -2.0 * cos_i * d1 * (dist - d1)
 
 
 def check_nuisances(nuisances: tuple[str, ...], nb: int | None, nt: int) -> None:
@@ -295,7 +352,8 @@ def _undetermined(nuisances: tuple[str, ...]) -> str:
         return "the measurements do not determine the mirror and the target (singular Jacobian)"
     return (f"the beacons do not separate {' and '.join(nuisances)} from the mirror (singular "
             "Jacobian): their virtual images are too close together or in line with the "
-            "camera; spread the beacons along the mirror")
+            "camera" + (", or their reflection points too close together along the mirror"
+                        if "power" in nuisances else "") + "; spread the beacons along the mirror")
 
 
 def _residual_names(nb: int, nt: int) -> list[str]:

@@ -125,8 +125,8 @@ class Solution:
     covariance: np.ndarray | None = None  # of params_order: (θ [deg], ρ, x_t, y_t, …)
     method: str = "closed form"
     downweighted: tuple[str, ...] = ()  # measurements the robust fit trusted less
-    # self-calibration's estimates (pan_offset_deg, range_scale), after θ, ρ, x_t, y_t in
-    # the covariance
+    # self-calibration's estimates (pan_offset_deg, range_scale, mirror_power_per_cm),
+    # after θ, ρ, x_t, y_t in the covariance
     nuisances: dict[str, float] = field(default_factory=dict)
 
     @property

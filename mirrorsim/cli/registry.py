@@ -182,12 +182,13 @@ def common(p: argparse.ArgumentParser, *, scene: bool = True, out: str | None = 
 
 
 def calibrate_option(p: argparse.ArgumentParser) -> None:
-    """``--calibrate pan,scale``: self-calibration's nuisances."""
-    p.add_argument("--calibrate", default="", metavar="pan,scale",
+    """``--calibrate pan,scale[,power]``: self-calibration's nuisances."""
+    p.add_argument("--calibrate", default="", metavar="pan,scale[,power]",
                    help="estimate bench errors shared by every measurement with the mirror "
-                   "(self-calibration; needs 2+ beacons): pan, an offset on every alpha (the "
-                   "mount's pan reading); scale, a factor on every d_total (the "
-                   "calibration); comma-separated")
+                   "(self-calibration; needs 2+ beacons, 3+ with power): pan, an offset on "
+                   "every alpha (the mount's pan reading); scale, a factor on every d_total "
+                   "(the calibration); power, the mirror's curvature 1/R, which moves each "
+                   "image by its own amount; comma-separated")
     p.add_argument("--beacon-sigma", type=float, default=0.0, metavar="CM",
                    help="how well each beacon's position is known, cm per axis (default 0: "
                    "exactly); each beacon's offset is then estimated with that prior, and the "

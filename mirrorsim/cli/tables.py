@@ -120,11 +120,13 @@ def nuisance_text(sol: Solution) -> str:
     k = len(sol.nuisances)
     sd = (np.sqrt(np.diag(sol.covariance))[4:4 + k] if sol.covariance is not None
           else [None] * k)
-    words = {"pan_offset_deg": ("pan offset", "°"), "range_scale": ("range scale", "")}
+    words = {"pan_offset_deg": ("pan offset", "°", ".4f"),
+             "range_scale": ("range scale", "", ".4f"),
+             "mirror_power_per_cm": ("mirror power 1/R", " /cm", ".2e")}
     out = []
     for (name, v), e in zip(sol.nuisances.items(), sd, strict=True):
-        label, unit = words.get(name, (name, ""))
-        out.append(f"{label} {v:.4f}{unit}" + ("" if e is None else f" ± {e:.4f}{unit}"))
+        label, unit, f = words.get(name, (name, "", ".4g"))
+        out.append(f"{label} {v:{f}}{unit}" + ("" if e is None else f" ± {e:{f}}{unit}"))
     return ", ".join(out)
 
 
