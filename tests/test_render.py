@@ -249,6 +249,23 @@ def test_fewer_samples_outside_the_mirror(name, fast_variant):
     assert mixed.info.background_spp == 1 and np.array_equal(mixed.first, plain16.first)
 
 
+def test_the_mirrors_box_does_not_depend_on_the_background(fast_variant):
+    """Every measurement is made in the mirror's box, whose tiles take their own seed
+    streams: its pixels are the same, bit for bit, whatever the background's spp (why a
+    dataset spec can spend 1 there)."""
+    from dataclasses import replace
+
+    from mirrorsim.rendering.passes import render_frame
+
+    scene = small_scene("default", 480, 272).with_render(spp=8, seed=5)
+    frames = [render_frame(replace(scene, render=replace(scene.render, background_spp=b)),
+                           variant=fast_variant, progress=False) for b in (1, 2)]
+    u0, v0, u1, v1 = optics.mirror_box(scene)
+    box = [f.linear[v0:v1, u0:u1] for f in frames]
+    assert np.array_equal(box[0], box[1])
+    assert not np.array_equal(frames[0].linear, frames[1].linear)  # outside it differs
+
+
 def test_more_samples_in_the_beacons_image(fast_variant):
     """beacon_spp: the beacon's image box is rendered at beacon_spp (its own seed
     stream), the rest of the frame exactly as without it; the box holds every pixel of
