@@ -326,6 +326,7 @@ def _id_pass_jit(mi_scene, sensor, shapes, W, H):
     on_glass = first == MIRROR_LABEL
     si2 = mi_scene.ray_intersect(_reflected_ray(ray, si), on_glass)
     second = dr.select(on_glass, labels(si2), BACKGROUND_LABEL)
+    dr.eval(first, second)  # one kernel for both: evaluated apart, the second recasts the first ray
     to_np = lambda a: np.asarray(a, dtype=np.uint8).reshape(H, W)  # noqa: E731
     return to_np(first), to_np(second)
 
