@@ -13,11 +13,12 @@ plain least squares and self-calibrated (``--calibrate``'s nuisances, by default
 pan, the scale and the mirror's power; the beacons known to the offsets' σ,
 (hi − lo)/√12, as the experimenter would say), with the believed beacon
 positions and with the exact ones (then known exactly).  The plan is made with the same
-σ.  A fifth fit is the floor of a pan-and-scale calibration: plain least squares with
-the exact positions on the measurements with the frame's own shared errors taken out
-exactly (the mean of its four images' α errors, and of their relative d_total errors,
-against the truth): what is left is each image's own error.  Prints each scene's target
-errors and the medians.  ``--lossless``: the same scenes
+σ.  Beside them: the believed positions self-calibrated for pan and scale only (what
+the other nuisances add), and a reference: plain least squares with the exact
+positions on the measurements with the frame's shared errors taken out by the truth
+(the mean of its images' α errors, and of their relative d_total errors), which leaves
+each image's own error.  Prints each scene's target errors, the medians, and the
+images' own α errors beside the mirror's power's first-order move.  ``--lossless``: the same scenes
 (the same draws) with each frame stored as PNG instead of the JPEG the spec draws, to
 tell JPEG's part from the rest.
 """
@@ -45,13 +46,19 @@ from mirrorsim.pipelines.planning import plan_scene  # noqa: E402
 from mirrorsim.pipelines.random_scenes import load_spec, sample_scene  # noqa: E402
 from mirrorsim.scene.model import Beacon  # noqa: E402
 from solver.errors import SolverError  # noqa: E402
-from solver.lsq import BeaconMeasurement, power_terms, solve_measurements  # noqa: E402
+from solver.lsq import (  # noqa: E402
+    BeaconMeasurement,
+    check_nuisances,
+    power_terms,
+    solve_measurements,
+)
 
 
 def _errors(rep, scene, position_sigma: float, nuisances: tuple[str, ...]
             ) -> tuple[float, ...]:
-    """Target error: plain and self-calibrated, with believed and with exact positions,
-    then the floor (plain, exact positions, the frame's shared errors taken out)."""
+    """Target error: plain and self-calibrated, with believed and with exact positions;
+    the reference (plain, exact positions, the frame's shared errors taken out) and its
+    two parts; self-calibrated for pan and scale only (believed positions)."""
     m, truth = rep.measurements, np.asarray(rep.truth.target.position, float)
     exact = [BeaconMeasurement(tuple(b.position), mb.alpha_deg, mb.d_total)
              for b, mb in zip(scene.beacons, m.beacons, strict=True)]
@@ -67,7 +74,7 @@ def _errors(rep, scene, position_sigma: float, nuisances: tuple[str, ...]
     true = [(t.alpha_deg, t.d_total) for t in (*rep.truth.beacons, rep.truth.target)]
     delta = float(np.mean([a - ta for (a, _), (ta, _) in zip(measured, true, strict=True)]))
     scale = float(np.mean([d / td for (_, d), (_, td) in zip(measured, true, strict=True)]))
-    # the floor, then its two parts: each image's own α error alone (every d_total
+    # the reference, then its two parts: each image's own α error alone (every d_total
     # true) and its own d_total error alone (every α true)
     for keep_a, keep_d in ((True, True), (True, False), (False, True)):
         def pick(a, d, ta, td, keep_a=keep_a, keep_d=keep_d):
@@ -78,6 +85,9 @@ def _errors(rep, scene, position_sigma: float, nuisances: tuple[str, ...]
         targets = [pick(a, d, *true[-1]) for a, d in m.targets]
         sol = solve_measurements(m.observer, known, targets, m.sigma)
         out.append(float(np.linalg.norm(sol.target - truth)))
+    sol = solve_measurements(m.observer, m.beacons, m.targets, m.sigma, ("pan", "scale"),
+                             position_sigma)
+    out.append(float(np.linalg.norm(sol.target - truth)))
     return tuple(out)
 
 
@@ -94,7 +104,7 @@ def _power_check(rep, scene) -> tuple[np.ndarray, np.ndarray]:
     n = np.array([-np.sin(np.radians(yaw)), np.cos(np.radians(yaw))])
     centre = np.asarray(scene.mirror.center, float)
     pts = np.array([o.position for o in objs], float)
-    A, _ = power_terms(np.array([yaw, n @ centre, 0.0, 0.0]), np.asarray(m.observer, float),
+    A, _ = power_terms((yaw, float(n @ centre)), np.asarray(m.observer, float),
                        pts, centre)
     pred = A / R if R else np.zeros(len(objs))
     return err - err.mean(), pred - pred.mean()
@@ -118,6 +128,7 @@ def main() -> None:
                          "own default σ's)")
     a = ap.parse_args()
     nuisances = tuple(n.strip() for n in a.calibrate.split(",") if n.strip())
+    check_nuisances(nuisances, a.beacons, 1)
     model = load_error_model(a.error_model) if a.error_model else None
     seed = a.seed if a.seed is not None else int.from_bytes(os.urandom(3), "big")
     spec = load_spec(a.spec)
@@ -129,10 +140,9 @@ def main() -> None:
           f"per axis{'; frames stored as PNG, not JPEG' if a.lossless else ''}; σ's of "
           f"{a.error_model.name if a.error_model else 'the ideal bench’s error model'}; "
           f"{stamp()}\n")
-    print("| scene | plain (cm) | self-calibrated | plain, exact positions | self-calibrated, "
-          "exact positions | pan and scale known (their floor) | pan error ° | "
-          "calibration error cm |"
-          "\n|---|---|---|---|---|---|---|---|")
+    print("| scene | plain (cm) | self-calibrated | pan and scale only | plain, exact "
+          "positions | self-calibrated, exact positions | reference: pan and scale known | "
+          "pan error ° | calibration error cm |\n|---|---|---|---|---|---|---|---|---|")
     rows, skipped, own, moved = [], [], [], []
     rng = np.random.default_rng(seed)
     with tempfile.TemporaryDirectory() as tmp:
@@ -166,27 +176,28 @@ def main() -> None:
             o, p = _power_check(rep, scene)
             own.append(o)
             moved.append(p)
-            print(f"| {scene.name} | {e[0]:.3f} | {e[1]:.3f} | {e[2]:.3f} | {e[3]:.3f} | "
-                  f"{e[4]:.3f} | "
+            print(f"| {scene.name} | {e[0]:.3f} | {e[1]:.3f} | {e[7]:.3f} | {e[2]:.3f} | "
+                  f"{e[3]:.3f} | {e[4]:.3f} | "
                   f"{scene.bench.pan_error:+.2f} | {scene.bench.calibration_distance_error:+.2f} |",
                   flush=True)
     v = np.array(rows)
-    med = [statistics.median(v[:, k]) for k in range(5)]
+    med = [statistics.median(v[:, k]) for k in range(v.shape[1])]
     print(f"| **median** ({len(rows)} scenes) | **{med[0]:.3f}** | **{med[1]:.3f}** | "
-          f"**{med[2]:.3f}** | **{med[3]:.3f}** | **{med[4]:.3f}** | | |")
+          f"**{med[7]:.3f}** | **{med[2]:.3f}** | **{med[3]:.3f}** | **{med[4]:.3f}** | | |")
     print(f"\nself-calibrated / plain, medians: {med[1] / med[0]:.2f} (believed positions), "
-          f"{med[3] / med[2]:.2f} (exact positions); pan and scale known / plain: "
-          f"{med[4] / med[0]:.2f} (believed), {med[4] / med[2]:.2f} (exact)")
-    print(f"\npan and scale known, its parts, medians: each image's own α error alone "
-          f"(every d_total true) {statistics.median(v[:, 5]):.3f} cm, its own d_total error "
-          f"alone (every α true) {statistics.median(v[:, 6]):.3f} cm")
+          f"{med[3] / med[2]:.2f} (exact positions); pan and scale only: "
+          f"{med[7] / med[0]:.2f} (believed); the reference / plain: {med[4] / med[2]:.2f} "
+          f"(exact)")
+    print(f"\nthe reference's parts, medians: each image's own α error alone (every d_total "
+          f"true) {med[5]:.3f} cm, its own d_total error alone (every α true) {med[6]:.3f} cm")
     own, moved = np.concatenate(own), np.concatenate(moved)
-    slope = float(moved @ own / (moved @ moved))
-    print(f"\nthe images' own α errors (each frame's mean taken out), {len(own)} images, "
-          f"against the mirror's power to first order (solver.lsq.power_terms, the true "
-          f"1/R, the vertex at the mirror's centre): slope {slope:.2f}, correlation "
-          f"{np.corrcoef(moved, own)[0, 1]:.2f}; RMS {np.sqrt(np.mean(own**2)):.3f}°, "
-          f"{np.sqrt(np.mean((own - moved)**2)):.3f}° with it taken out")
+    if moved.any():  # a spec with a curved mirror
+        slope = float(moved @ own / (moved @ moved))
+        print(f"\nthe images' own α errors (each frame's mean taken out), {len(own)} images, "
+              f"against the mirror's power to first order (solver.lsq.power_terms, the "
+              f"true 1/R, the vertex at the mirror's centre): slope {slope:.2f}, correlation "
+              f"{np.corrcoef(moved, own)[0, 1]:.2f}; RMS {np.sqrt(np.mean(own**2)):.3f}°, "
+              f"{np.sqrt(np.mean((own - moved)**2)):.3f}° with it taken out")
     for s in skipped:
         print(f"skipped {s}")
 

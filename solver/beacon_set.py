@@ -1,7 +1,7 @@
 """Where to put N beacons: a greedy choice over the board's grid that minimises the
 expected target error with the chosen nuisances estimated alongside the mirror
 (self-calibration; the paper's "number of needed beacons and their locations", for a
-bench with a pan and a calibration error).
+bench with a pan and a calibration error, and a curved mirror).
 
 The expected error of a set is the Cramér–Rao bound's target block (√trace), from the
 Fisher information of every beacon's and the target's α and d_total, averaged over the
@@ -36,7 +36,7 @@ UNDETERMINED_CM2 = 1e6
 class BeaconSet:
     """:func:`best_beacon_set`'s answer: the positions in the order chosen, and after
     each, the expected target RMSE with the nuisances estimated (inf: not yet
-    observable) and without nuisances (a bench without pan or scale error)."""
+    observable) and without nuisances (a bench without those errors)."""
 
     positions: np.ndarray  # (n, 2)
     rmse: tuple[float, ...]
@@ -68,7 +68,7 @@ def _information(o: np.ndarray, B: np.ndarray, t_alpha: float, t_d: float, point
             rd[:, 4 + j], td[4 + j] = d_b, d_t[0]
         else:  # power: the mirror curved about the pose's point (its centre)
             pts = np.vstack([B, tgt[None]])
-            A, D = power_terms(np.r_[params, 0, 0], o, pts, np.asarray(point, float))
+            A, D = power_terms((params[0], params[1]), o, pts, np.asarray(point, float))
             ra[:, 4 + j], rd[:, 4 + j], ta[4 + j], td[4 + j] = A[:-1], D[:-1], A[-1], D[-1]
     sb, st = sig.beacons[0], sig.target
     R = np.stack([ra, rd], axis=1)  # (K, 2, P): each candidate's α and d rows
@@ -103,9 +103,10 @@ def best_beacon_set(observer, target_alpha_deg: float, target_d_total: float, po
     lowers the expected target error most (with ``nuisances`` estimated), among
     positions every pose shows, clear of ``keep_out`` segments (start, end, clearance)
     and ``clearance`` from the beacons already chosen, vetted by ``accept(position)``.
-    While the set cannot yet carry the nuisances (one beacon for pan and scale), the
-    choice is by the error without them.  ``position_sigma``: how well a placed beacon's
-    position is known (cm per axis): clustered beacons then buy less.
+    While the set cannot yet carry the nuisances (one beacon for pan and scale, two for
+    pan, scale and power), the choice is by the error without them.  ``position_sigma``:
+    how well a placed beacon's position is known (cm per axis): clustered beacons then
+    buy less.
 
     Raises
     ------

@@ -10,7 +10,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from solver.errors import SolverError
-from solver.geometry import line_normal, wrap_bearing
+from solver.geometry import line_normal, unit, wrap_bearing
 from solver.sltr import MirrorLine, Solution, observe, ray_hits_line, solve_single
 
 ArrayLike = np.typing.ArrayLike
@@ -163,7 +163,7 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
     initial : Solution, optional
         Start point (default: the closed form of the first beacon; with nuisances or a
         position σ, the plain fit's).
-    nuisances : tuple of {'pan', 'scale'}
+    nuisances : tuple of {'pan', 'scale', 'power'}
         Bench errors shared by every measurement, estimated jointly (self-calibration,
         :data:`NUISANCES`); the target comes out corrected for them.
     position_sigma : float
@@ -268,8 +268,9 @@ def _forward(x: np.ndarray, o: np.ndarray, bpos: np.ndarray, nt: int,
     if "power" in where:  # the mirror's curvature first: the pan and the scale act after it
         j = where["power"]
         # the vertex: the middle of the images' reflection points (the target's once)
-        A, D = power_terms(x[:4], o, pts, vertex=np.mean(_reflection_points(x, o, pts[:nb + 1]),
-                                                           axis=0))
+        middle = observe(o, x[1] * line_normal(x[0]), x[0], pts[:nb + 1],
+                         strict=False).reflection_point
+        A, D = power_terms((x[0], x[1]), o, pts, vertex=middle.mean(axis=0))
         a, d = a + x[j] * A, d + x[j] * D
         # the power's terms move with the mirror and the target only at second order
         # (c times a small angle): their derivatives there are left out
@@ -285,48 +286,39 @@ def _forward(x: np.ndarray, o: np.ndarray, bpos: np.ndarray, nt: int,
     return a, d, np.hstack([da, ea, oa]), np.hstack([dd, ed, od])
 
 
-def _reflection_points(x: np.ndarray, o: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Where the camera's ray to each point's virtual image meets the mirror (θ, ρ) =
-    x[:2]."""
-    th = np.radians(x[0])
-    n = np.array([-np.sin(th), np.cos(th)])
-    rel = points - 2.0 * (points @ n - x[1])[:, None] * n - o
-    return o + ((x[1] - o @ n) / (rel @ n))[:, None] * rel
-
-
-def power_terms(params: np.ndarray, observer: np.ndarray, points: np.ndarray,
+def power_terms(mirror: tuple[float, float], observer: np.ndarray, points: np.ndarray,
                 vertex: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """First-order change of each point's image per unit of the mirror's power c = 1/R
-    (1/cm, > 0 concave), the mirror (θ, ρ) = params[:2] curved about ``vertex`` (a point
-    on its line).
+    (1/cm, > 0 concave), the mirror (θ, ρ) curved about ``vertex`` (a point on its
+    line).
 
-    At a reflection point u cm along the line from the vertex the surface is turned by
+    At a reflection point u cm along the line from the vertex the glass is turned by
     c·u and stands c·u²/2 nearer the camera, which moves the virtual image by
     c·(2u·((q·a)·n + (q·n)·a) + u²·n) (q: the point from the reflection point, a along
-    the line, n its normal toward the camera): that is its α's change.  Its size is
-    that of an image magnified by the mirror's sagittal power 2·c·cos i, which is
-    d_total's change −2·c·cos i·d1·d2 (the mirror equation; size constancy sees the
-    magnified image as nearer).
+    the line, n its normal toward the camera): across the line of sight that is its
+    α's change, along it a shorter path (c·u²·cos i).  The image is also magnified by
+    the mirror's sagittal power 2·c·cos i, which size constancy reads as nearer
+    (−2·c·cos i·d1·d2, the mirror equation).  To first order a vertex elsewhere on the
+    line is a turn and a shift of the line: it changes (θ, ρ), not the target.
 
     Returns
     -------
     dalpha_deg, dd : (k,)
         α's change (deg) and d_total's change (cm) per unit c.
     """
-    th = np.radians(params[0])
-    a = np.array([np.cos(th), np.sin(th)])
-    n = np.array([-np.sin(th), np.cos(th)])
-    P = _reflection_points(params, observer, points)
-    rel = points - 2.0 * (points @ n - params[1])[:, None] * n - observer  # to the image
-    dist = np.hypot(rel[:, 0], rel[:, 1])
-    nc = n if observer @ n > params[1] else -n  # the normal on the camera's side
+    theta, rho = mirror
+    a, n = unit(theta), line_normal(theta)
+    obs = observe(observer, rho * n, theta, points, strict=False)
+    P = obs.reflection_point
+    rel = obs.virtual - observer  # the line of sight to each image
+    dist = np.asarray(obs.d_total)
+    nc = n if observer @ n > rho else -n  # the normal on the camera's side
     q = points - P
     u = ((P - vertex) @ a)[:, None]
     dv = 2.0 * u * ((q @ a)[:, None] * nc + (q @ nc)[:, None] * a) + u**2 * nc
     dalpha = np.degrees((rel[:, 0] * dv[:, 1] - rel[:, 1] * dv[:, 0]) / dist**2)
-    d1 = np.hypot(*(P - observer).T)
     cos_i = np.abs(rel @ n) / dist
-    return dalpha, -2.0 * cos_i * d1 * (dist - d1)
+    return dalpha, np.sum(rel * dv, axis=1) / dist - 2.0 * cos_i * obs.d1 * obs.d2
 
 
 def check_nuisances(nuisances: tuple[str, ...], nb: int | None, nt: int) -> None:

@@ -1,5 +1,6 @@
 """Self-calibrating SLTR: a pan offset and a range scale shared by every measurement,
-estimated with the mirror from several beacons at known positions."""
+and the mirror's power, estimated with the mirror from several beacons at known
+positions."""
 
 import numpy as np
 import pytest
@@ -130,11 +131,11 @@ def test_commands_refuse_self_calibration_they_cannot_do(tmp_path, capsys):
     assert not (tmp_path / "t").exists()
 
 
-def _arc_alpha(p, vertex, radius):
+def _arc(p, vertex, radius):
     """The bearing (deg) at which the camera sees ``p`` in a circular mirror of
-    ``radius`` (> 0 concave) tangent to MIRROR's line at ``vertex``: the reflection point
-    found by Fermat's principle (the path's length stationary), not by the first-order
-    formula under test."""
+    ``radius`` (> 0 concave) tangent to MIRROR's line at ``vertex``, and the light's path
+    length: the reflection point found by Fermat's principle (the path's length
+    stationary), not by the first-order formula under test."""
     from scipy.optimize import brentq
 
     th = np.radians(MIRROR[1])
@@ -146,40 +147,71 @@ def _arc_alpha(p, vertex, radius):
     def point(phi):
         return centre - radius * (np.cos(phi) * nc - np.sin(phi) * a)
 
+    def length(phi):
+        return np.hypot(*(point(phi) - OBS)) + np.hypot(*(p - point(phi)))
+
     def slope(phi, h=1e-7):
-        length = lambda f: np.hypot(*(point(f) - OBS)) + np.hypot(*(p - point(f)))  # noqa: E731
         return (length(phi + h) - length(phi - h)) / (2 * h)
 
     flat = observe(OBS, *MIRROR, p).reflection_point
     phi0 = ((flat - vertex) @ a) / radius
     phi = brentq(slope, phi0 - 0.01, phi0 + 0.01, xtol=1e-15)
     x = point(phi) - OBS
-    return float(np.degrees(np.arctan2(x[1], x[0])))
+    return float(np.degrees(np.arctan2(x[1], x[0]))), float(length(phi))
 
 
 @pytest.mark.parametrize("radius", [2000.0, -2000.0, 5000.0])
 @pytest.mark.parametrize("shift", [10.0, -10.0])
 def test_the_mirror_power_moves_each_image_as_a_curved_mirror_does(radius, shift):
-    """power_terms' α change against Fermat's reflection off a circular arc (the vertex
-    5–15 cm from the reflection points): equal to first order, the rest within 80/|R|
-    of it (second order in c: 4 % at R = 2000 cm)."""
+    """power_terms against Fermat's reflection off a circular arc (the vertex 5–15 cm
+    from the reflection points): the α change, and d_total's change less the sagittal
+    magnification's (the light's shorter path), equal to first order, the rest within
+    80/|R| of them (second order in c: 4 % at R = 2000 cm)."""
     from solver.lsq import power_terms
 
     th = np.radians(MIRROR[1])
-    params = np.array([MIRROR[1], RHO, 0.0, 0.0])
     pts = np.vstack([*BEACONS, TARGET])
     flat = np.array([observe(OBS, *MIRROR, p).reflection_point for p in pts])
     vertex = flat.mean(axis=0) + shift * np.array([np.cos(th), np.sin(th)])
-    dalpha, _ = power_terms(params, OBS, pts, vertex)
+    dalpha, dd = power_terms((MIRROR[1], RHO), OBS, pts, vertex)
     for k, p in enumerate(pts):
-        exact = _arc_alpha(p, vertex, radius) - observe(OBS, *MIRROR, p).alpha_deg
-        assert abs(exact) > 0.002  # the effect is there to be measured
-        assert dalpha[k] / radius == pytest.approx(exact, rel=80 / abs(radius))
+        o = observe(OBS, *MIRROR, p)
+        alpha, path = _arc(p, vertex, radius)
+        cos_i = abs(np.cos(np.radians(o.alpha_deg - MIRROR[1] - 90.0)))
+        magnified = -2.0 * cos_i * o.d1 * o.d2
+        assert abs(alpha - o.alpha_deg) > 0.002  # the effects are there to be measured
+        assert abs(path - o.d_total) > 0.001
+        assert dalpha[k] / radius == pytest.approx(alpha - o.alpha_deg, rel=80 / abs(radius))
+        assert (dd[k] - magnified) / radius == pytest.approx(path - o.d_total,
+                                                             rel=80 / abs(radius))
+
+
+def test_the_powers_vertex_changes_the_mirror_not_the_target():
+    """To first order a vertex elsewhere on the line is a turn and a shift of the line:
+    the target's Cramér–Rao bound with pan, scale and power is the same for vertices
+    10 and 30 cm apart (the plan's vertex, the pose's point, and the solver's, the
+    middle of the reflection points, then agree)."""
+    from solver.beacon_set import _information
+
+    o = observe(OBS, *MIRROR, TARGET)
+    th = np.radians(MIRROR[1])
+    along = np.array([np.cos(th), np.sin(th)])
+    bounds = []
+    for shift in (0.0, 10.0, -30.0):
+        info_b, info_t, _ = _information(OBS, np.array(BEACONS), float(o.alpha_deg),
+                                         float(o.d_total), MIRROR[0] + shift * along,
+                                         MIRROR[1], SIG, ("pan", "scale", "power"))
+        cov = np.linalg.inv(info_t + info_b.sum(axis=0))
+        bounds.append(np.trace(cov[2:4, 2:4]))
+    assert bounds[0] > 0
+    assert bounds[1] == pytest.approx(bounds[0], rel=1e-6)
+    assert bounds[2] == pytest.approx(bounds[0], rel=1e-6)
 
 
 def test_self_calibration_removes_a_curved_mirrors_error():
     """A curved mirror (R = 1500 cm), a pan offset and a range scale on three beacons,
-    the images seen as the arc reflects them and sized by the sagittal mirror equation:
+    the images seen as the arc reflects them (bearing and path) and magnified by the
+    sagittal mirror equation:
     with the power estimated too, the target comes out within a tenth of the error pan
     and scale alone leave (1.2 cm), and the power within 5 % of 1/R."""
     radius, delta, scale = 1500.0, 0.3, 1.006
@@ -190,13 +222,14 @@ def test_self_calibration_removes_a_curved_mirrors_error():
     for p in pts:
         o = observe(OBS, *MIRROR, p)
         cos_i = abs(np.cos(np.radians(o.alpha_deg - MIRROR[1] - 90.0)))
-        d = o.d1 + o.d2 - 2.0 * cos_i * o.d1 * o.d2 / radius  # the sagittal image's
-        meas.append((_arc_alpha(p, vertex, radius) + delta, d * scale))
+        alpha, path = _arc(p, vertex, radius)
+        d = path - 2.0 * cos_i * o.d1 * o.d2 / radius  # the sagittal image's
+        meas.append((alpha + delta, d * scale))
     bs = [BeaconMeasurement(tuple(b), *m) for b, m in zip(BEACONS, meas[:3], strict=True)]
     two = solve_measurements(OBS, bs, meas[3:], SIG, nuisances=("pan", "scale"))
     three = solve_measurements(OBS, bs, meas[3:], SIG, nuisances=("pan", "scale", "power"))
     e2, e3 = (np.linalg.norm(s.target - TARGET) for s in (two, three))
-    assert e2 > 0.02
+    assert e2 > 0.5
     assert e3 < e2 / 10
     assert three.nuisances["mirror_power_per_cm"] == pytest.approx(1 / radius, rel=0.05)
     # δ takes the images' second-order part (0.03°, a tenth of its own σ here)
@@ -212,9 +245,8 @@ def test_the_powers_covariance_holds_and_too_few_beacons_are_refused():
     rng = np.random.default_rng(11)
     c = 1 / 2000
     pts = np.vstack([*BEACONS, TARGET])
-    params = np.array([MIRROR[1], RHO, 0.0, 0.0])
     flat = np.array([observe(OBS, *MIRROR, p).reflection_point for p in pts])
-    A, D = power_terms(params, OBS, pts, flat.mean(axis=0))
+    A, D = power_terms((MIRROR[1], RHO), OBS, pts, flat.mean(axis=0))
     z = []
     for _ in range(300):
         bs, ts = _measure(rng)
@@ -226,7 +258,3 @@ def test_the_powers_covariance_holds_and_too_few_beacons_are_refused():
     assert 0.92 < np.mean(np.abs(z) < 2) < 0.98
     with pytest.raises(SolverError, match="at least 3 beacon observations"):
         solve_measurements(OBS, moved[:2], ts, SIG, nuisances=("pan", "scale", "power"))
-    plain = crlb(OBS, BEACONS, 20.0, RHO, TARGET, SIG, nuisances=("pan", "scale"))[2:4, 2:4]
-    cal = crlb(OBS, BEACONS, 20.0, RHO, TARGET, SIG,
-               nuisances=("pan", "scale", "power"))[2:4, 2:4]
-    assert np.all(np.linalg.eigvalsh(cal - plain) > -1e-12)

@@ -185,7 +185,7 @@ def calibrate_option(p: argparse.ArgumentParser) -> None:
     """``--calibrate pan,scale[,power]``: self-calibration's nuisances."""
     p.add_argument("--calibrate", default="", metavar="pan,scale[,power]",
                    help="estimate bench errors shared by every measurement with the mirror "
-                   "(self-calibration; needs 2+ beacons, 3+ with power): pan, an offset on "
+                   "(self-calibration; needs 2+ beacons, 3+ for all three): pan, an offset on "
                    "every alpha (the mount's pan reading); scale, a factor on every d_total "
                    "(the calibration); power, the mirror's curvature 1/R, which moves each "
                    "image by its own amount; comma-separated")

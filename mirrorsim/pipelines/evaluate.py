@@ -37,7 +37,8 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
     its error ellipse (default: the model shipped for the ideal bench at the default
     render settings).  ``keep``: which of EXTRA_FILES to write beside each frame (the id
     labels, the annotated frame).  ``nuisances``: bench errors to estimate with the mirror
-    (self-calibration, :data:`solver.lsq.NUISANCES`; needs two beacons or more).
+    (self-calibration, :data:`solver.lsq.NUISANCES`; needs two beacons or more, three
+    for pan, scale and power together).
     ``position_sigma``: how well the beacons' positions are known (cm; 0: exactly).
 
     Raises
@@ -82,12 +83,15 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
     by_count = ()
     if len(beacons) > 1:
         def first(k: int):
-            # self-calibration from the first k beacons where they can carry it
-            try:
-                check_nuisances(nuisances, k, 1)
-                nu = nuisances
-            except SolverError:
-                nu = ()
+            # self-calibration from the first k beacons, of as many of the nuisances (in
+            # their order) as k beacons can carry
+            nu = nuisances
+            while nu:
+                try:
+                    check_nuisances(nu, k, 1)
+                    break
+                except SolverError:
+                    nu = nu[:-1]
             return solve_measurements(cam.position, beacons[:k], target,
                                       replace(sigma, beacons=sigma.beacons[:k]), nu,
                                       position_sigma)
