@@ -85,9 +85,12 @@ def _errors(rep, scene, position_sigma: float, nuisances: tuple[str, ...]
         targets = [pick(a, d, *true[-1]) for a, d in m.targets]
         sol = solve_measurements(m.observer, known, targets, m.sigma)
         out.append(float(np.linalg.norm(sol.target - truth)))
-    sol = solve_measurements(m.observer, m.beacons, m.targets, m.sigma, ("pan", "scale"),
-                             position_sigma)
-    out.append(float(np.linalg.norm(sol.target - truth)))
+    if {"pan", "scale"} < set(nuisances):  # what the nuisances beyond them add
+        sol = solve_measurements(m.observer, m.beacons, m.targets, m.sigma, ("pan", "scale"),
+                                 position_sigma)
+        out.append(float(np.linalg.norm(sol.target - truth)))
+    else:
+        out.append(float("nan"))
     return tuple(out)
 
 
@@ -180,6 +183,8 @@ def main() -> None:
                   f"{e[3]:.3f} | {e[4]:.3f} | "
                   f"{scene.bench.pan_error:+.2f} | {scene.bench.calibration_distance_error:+.2f} |",
                   flush=True)
+    if not rows:
+        sys.exit("no scene was measured: " + "; ".join(skipped[:3]))
     v = np.array(rows)
     med = [statistics.median(v[:, k]) for k in range(v.shape[1])]
     print(f"| **median** ({len(rows)} scenes) | **{med[0]:.3f}** | **{med[1]:.3f}** | "

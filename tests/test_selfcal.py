@@ -203,9 +203,16 @@ def test_the_powers_vertex_changes_the_mirror_not_the_target():
                                          MIRROR[1], SIG, ("pan", "scale", "power"))
         cov = np.linalg.inv(info_t + info_b.sum(axis=0))
         bounds.append(np.trace(cov[2:4, 2:4]))
-    assert bounds[0] > 0
+    # the power costs information (its bound above pan and scale's), the same at each
+    # vertex, and the solver's vertex (crlb: the middle of the reflection points) agrees
+    two = crlb(OBS, BEACONS, 20.0, RHO, TARGET, SIG, nuisances=("pan", "scale"))[2:4, 2:4]
+    three = crlb(OBS, BEACONS, 20.0, RHO, TARGET, SIG,
+                 nuisances=("pan", "scale", "power"))[2:4, 2:4]
+    assert np.all(np.linalg.eigvalsh(three - two) > -1e-12)
+    assert bounds[0] > 1.5 * np.trace(two)
     assert bounds[1] == pytest.approx(bounds[0], rel=1e-6)
     assert bounds[2] == pytest.approx(bounds[0], rel=1e-6)
+    assert np.trace(three) == pytest.approx(bounds[0], rel=1e-6)
 
 
 def test_self_calibration_removes_a_curved_mirrors_error():

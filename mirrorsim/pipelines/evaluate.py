@@ -92,9 +92,12 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
                     break
                 except SolverError:
                     nu = nu[:-1]
-            return solve_measurements(cam.position, beacons[:k], target,
-                                      replace(sigma, beacons=sigma.beacons[:k]), nu,
-                                      position_sigma)
+            sig_k = replace(sigma, beacons=sigma.beacons[:k])
+            try:
+                return solve_measurements(cam.position, beacons[:k], target, sig_k, nu,
+                                          position_sigma)
+            except SolverError:  # k beacons too close to separate them: plain
+                return solve_measurements(cam.position, beacons[:k], target, sig_k)
 
         by_count = tuple(score(truth, measurements, first(k))
                          for k in range(1, len(beacons) + 1))
