@@ -46,6 +46,7 @@ from mirrorsim.pipelines.planning import plan_scene  # noqa: E402
 from mirrorsim.pipelines.random_scenes import load_spec, sample_scene  # noqa: E402
 from mirrorsim.scene.model import Beacon  # noqa: E402
 from solver.errors import SolverError  # noqa: E402
+from solver.geometry import line_normal  # noqa: E402
 from solver.lsq import (  # noqa: E402
     BeaconMeasurement,
     check_nuisances,
@@ -103,12 +104,10 @@ def _power_check(rep, scene) -> tuple[np.ndarray, np.ndarray]:
     err = np.array([b.alpha_deg for b in m.beacons] + [m.targets[0][0]]) - np.array(
         [o.alpha_deg for o in objs])
     R = scene.bench.curvature_radius
-    yaw = scene.mirror.yaw
-    n = np.array([-np.sin(np.radians(yaw)), np.cos(np.radians(yaw))])
-    centre = np.asarray(scene.mirror.center, float)
+    yaw, centre = scene.mirror.yaw, np.asarray(scene.mirror.center, float)
     pts = np.array([o.position for o in objs], float)
-    A, _ = power_terms((yaw, float(n @ centre)), np.asarray(m.observer, float),
-                       pts, centre)
+    A, _ = power_terms((yaw, float(line_normal(yaw) @ centre)),
+                       np.asarray(m.observer, float), pts, centre)
     pred = A / R if R else np.zeros(len(objs))
     return err - err.mean(), pred - pred.mean()
 

@@ -23,6 +23,7 @@ from solver.lsq import (
     ObjectSigmas,
     Sigma,
     as_object_sigmas,
+    nuisance_columns,
     power_terms,
     predict,
 )
@@ -61,15 +62,12 @@ def _information(o: np.ndarray, B: np.ndarray, t_alpha: float, t_d: float, point
     ra[:, :2], rd[:, :2] = da_b[:, :2], dd_b[:, :2]
     ta, td = np.zeros(P), np.zeros(P)
     ta[:4], td[:4] = da_t[0], dd_t[0]
-    for j, name in enumerate(nuisances):
-        if name == "pan":
-            ra[:, 4 + j], ta[4 + j] = 1.0, 1.0
-        elif name == "scale":
-            rd[:, 4 + j], td[4 + j] = d_b, d_t[0]
-        else:  # power: the mirror curved about the pose's point (its centre)
-            pts = np.vstack([B, tgt[None]])
-            A, D = power_terms((params[0], params[1]), o, pts, np.asarray(point, float))
-            ra[:, 4 + j], rd[:, 4 + j], ta[4 + j], td[4 + j] = A[:-1], D[:-1], A[-1], D[-1]
+    # the power's mirror curved about the pose's point (its centre; to first order the
+    # vertex changes the mirror, not the target)
+    power = (power_terms((params[0], params[1]), o, np.vstack([B, tgt[None]]),
+                         np.asarray(point, float)) if "power" in nuisances else None)
+    ea, ed = nuisance_columns(nuisances, np.r_[d_b, d_t[0]], power)
+    ra[:, 4:], rd[:, 4:], ta[4:], td[4:] = ea[:-1], ed[:-1], ea[-1], ed[-1]
     sb, st = sig.beacons[0], sig.target
     R = np.stack([ra, rd], axis=1)  # (K, 2, P): each candidate's α and d rows
     C = np.zeros((len(B), 2, 2))

@@ -263,27 +263,41 @@ def _forward(x: np.ndarray, o: np.ndarray, bpos: np.ndarray, nt: int,
             oa[i, 2 * i:2 * i + 2], od[i, 2 * i:2 * i + 2] = da[i, 2:], dd[i, 2:]
     da[:nb, 2:] = 0.0  # a beacon's image does not move with the target
     dd[:nb, 2:] = 0.0
-    ea, ed = np.zeros((len(a), k)), np.zeros((len(a), k))
     where = {name: 4 + j for j, name in enumerate(nuisances)}
+    power = None
     if "power" in where:  # the mirror's curvature first: the pan and the scale act after it
-        j = where["power"]
         # the vertex: the middle of the images' reflection points (the target's once)
         middle = observe(o, x[1] * line_normal(x[0]), x[0], pts[:nb + 1],
                          strict=False).reflection_point
-        A, D = power_terms((x[0], x[1]), o, pts, vertex=middle.mean(axis=0))
-        a, d = a + x[j] * A, d + x[j] * D
-        # the power's terms move with the mirror and the target only at second order
-        # (c times a small angle): their derivatives there are left out
-        ea[:, j - 4], ed[:, j - 4] = A, D
+        power = power_terms((x[0], x[1]), o, pts, vertex=middle.mean(axis=0))
+        a, d = a + x[where["power"]] * power[0], d + x[where["power"]] * power[1]
+    ea, ed = nuisance_columns(nuisances, d, power)
     if "pan" in where:
         a = a + x[where["pan"]]
-        ea[:, where["pan"] - 4] = 1.0
     if "scale" in where:  # every d_total, and its derivatives, times s
         j, v = where["scale"], x[where["scale"]]
         dd, od, ed = dd * v, od * v, ed * v
         ed[:, j - 4] = d
         d = d * v
     return a, d, np.hstack([da, ea, oa]), np.hstack([dd, ed, od])
+
+
+def nuisance_columns(nuisances: tuple[str, ...], d: np.ndarray,
+                     power: tuple[np.ndarray, np.ndarray] | None = None
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """How each observation's α and d_total move per unit of each nuisance (at s = 1):
+    the pan moves every α by 1, the scale every d_total by itself, the power each image
+    by :func:`power_terms`' (A, D), given as ``power`` (derivatives with respect to the
+    mirror and the target that the power's terms carry are second order, left out)."""
+    ea, ed = np.zeros((len(d), len(nuisances))), np.zeros((len(d), len(nuisances)))
+    for j, name in enumerate(nuisances):
+        if name == "pan":
+            ea[:, j] = 1.0
+        elif name == "scale":
+            ed[:, j] = d
+        else:
+            ea[:, j], ed[:, j] = power
+    return ea, ed
 
 
 def power_terms(mirror: tuple[float, float], observer: np.ndarray, points: np.ndarray,

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from solver.errors import SolverError
+from solver.geometry import line_normal, unit
 from solver.lsq import BeaconMeasurement, ObjectSigmas, Sigma, crlb, solve_measurements
 from solver.sltr import observe
 
@@ -14,7 +15,7 @@ MIRROR = (np.array([40.0, 40.0]), 20.0)
 TARGET = np.array([52.0, 20.0])
 BEACONS = [np.array([30.0, 25.0]), np.array([45.0, 28.0]), np.array([20.0, 30.0])]
 SIG = ObjectSigmas(Sigma(0.002, 0.0005), (Sigma(0.003, 0.002),))
-RHO = float(np.array([-np.sin(np.radians(20)), np.cos(np.radians(20))]) @ MIRROR[0])
+RHO = float(line_normal(MIRROR[1]) @ MIRROR[0])
 
 
 def _measure(rng, delta=0.0, scale=1.0, beacons=BEACONS):
@@ -131,6 +132,15 @@ def test_commands_refuse_self_calibration_they_cannot_do(tmp_path, capsys):
     assert not (tmp_path / "t").exists()
 
 
+def _flat_reflection_points(pts) -> np.ndarray:
+    return np.array([observe(OBS, *MIRROR, p).reflection_point for p in pts])
+
+
+def _cos_incidence(o) -> float:
+    """cos of the angle between the camera's ray to an image and MIRROR's normal."""
+    return abs(float(line_normal(MIRROR[1]) @ unit(o.alpha_deg)))
+
+
 def _arc(p, vertex, radius):
     """The bearing (deg) at which the camera sees ``p`` in a circular mirror of
     ``radius`` (> 0 concave) tangent to MIRROR's line at ``vertex``, and the light's path
@@ -138,9 +148,7 @@ def _arc(p, vertex, radius):
     stationary), not by the first-order formula under test."""
     from scipy.optimize import brentq
 
-    th = np.radians(MIRROR[1])
-    a = np.array([np.cos(th), np.sin(th)])
-    n = np.array([-a[1], a[0]])
+    a, n = unit(MIRROR[1]), line_normal(MIRROR[1])
     nc = n if (OBS - MIRROR[0]) @ n > 0 else -n  # toward the camera
     centre = vertex + radius * nc
 
@@ -169,16 +177,13 @@ def test_the_mirror_power_moves_each_image_as_a_curved_mirror_does(radius, shift
     80/|R| of them (second order in c: 4 % at R = 2000 cm)."""
     from solver.lsq import power_terms
 
-    th = np.radians(MIRROR[1])
     pts = np.vstack([*BEACONS, TARGET])
-    flat = np.array([observe(OBS, *MIRROR, p).reflection_point for p in pts])
-    vertex = flat.mean(axis=0) + shift * np.array([np.cos(th), np.sin(th)])
+    vertex = _flat_reflection_points(pts).mean(axis=0) + shift * unit(MIRROR[1])
     dalpha, dd = power_terms((MIRROR[1], RHO), OBS, pts, vertex)
     for k, p in enumerate(pts):
         o = observe(OBS, *MIRROR, p)
         alpha, path = _arc(p, vertex, radius)
-        cos_i = abs(np.cos(np.radians(o.alpha_deg - MIRROR[1] - 90.0)))
-        magnified = -2.0 * cos_i * o.d1 * o.d2
+        magnified = -2.0 * _cos_incidence(o) * o.d1 * o.d2
         assert abs(alpha - o.alpha_deg) > 0.002  # the effects are there to be measured
         assert abs(path - o.d_total) > 0.001
         assert dalpha[k] / radius == pytest.approx(alpha - o.alpha_deg, rel=80 / abs(radius))
@@ -194,8 +199,7 @@ def test_the_powers_vertex_changes_the_mirror_not_the_target():
     from solver.beacon_set import _information
 
     o = observe(OBS, *MIRROR, TARGET)
-    th = np.radians(MIRROR[1])
-    along = np.array([np.cos(th), np.sin(th)])
+    along = unit(MIRROR[1])
     bounds = []
     for shift in (0.0, 10.0, -30.0):
         info_b, info_t, _ = _information(OBS, np.array(BEACONS), float(o.alpha_deg),
@@ -223,14 +227,13 @@ def test_self_calibration_removes_a_curved_mirrors_error():
     and scale alone leave (1.2 cm), and the power within 5 % of 1/R."""
     radius, delta, scale = 1500.0, 0.3, 1.006
     pts = [*BEACONS, TARGET]
-    flat = np.array([observe(OBS, *MIRROR, p).reflection_point for p in pts])
-    vertex = flat.mean(axis=0)  # the solver's vertex: the middle of the reflection points
+    # the solver's vertex: the middle of the reflection points
+    vertex = _flat_reflection_points(pts).mean(axis=0)
     meas = []
     for p in pts:
         o = observe(OBS, *MIRROR, p)
-        cos_i = abs(np.cos(np.radians(o.alpha_deg - MIRROR[1] - 90.0)))
         alpha, path = _arc(p, vertex, radius)
-        d = path - 2.0 * cos_i * o.d1 * o.d2 / radius  # the sagittal image's
+        d = path - 2.0 * _cos_incidence(o) * o.d1 * o.d2 / radius  # the sagittal image's
         meas.append((alpha + delta, d * scale))
     bs = [BeaconMeasurement(tuple(b), *m) for b, m in zip(BEACONS, meas[:3], strict=True)]
     two = solve_measurements(OBS, bs, meas[3:], SIG, nuisances=("pan", "scale"))
@@ -252,8 +255,7 @@ def test_the_powers_covariance_holds_and_too_few_beacons_are_refused():
     rng = np.random.default_rng(11)
     c = 1 / 2000
     pts = np.vstack([*BEACONS, TARGET])
-    flat = np.array([observe(OBS, *MIRROR, p).reflection_point for p in pts])
-    A, D = power_terms((MIRROR[1], RHO), OBS, pts, flat.mean(axis=0))
+    A, D = power_terms((MIRROR[1], RHO), OBS, pts, _flat_reflection_points(pts).mean(axis=0))
     z = []
     for _ in range(300):
         bs, ts = _measure(rng)

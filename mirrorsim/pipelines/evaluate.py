@@ -22,7 +22,7 @@ from mirrorsim.pipelines.score import EXTRA_FILES, FrameRecord, Report, score
 from mirrorsim.scene.model import Scene
 from mirrorsim.truth.groundtruth import RenderInfo
 from solver.errors import SolverError
-from solver.lsq import check_nuisances, solve_measurements
+from solver.lsq import solve_measurements
 from solver.measurements import Measurements
 
 
@@ -83,21 +83,16 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
     by_count = ()
     if len(beacons) > 1:
         def first(k: int):
-            # self-calibration from the first k beacons, of as many of the nuisances (in
-            # their order) as k beacons can carry
-            nu = nuisances
-            while nu:
-                try:
-                    check_nuisances(nu, k, 1)
-                    break
-                except SolverError:
-                    nu = nu[:-1]
+            # self-calibration from the first k beacons with as many of the nuisances
+            # (in their order) as they can carry and separate; plain at the least
             sig_k = replace(sigma, beacons=sigma.beacons[:k])
-            try:
-                return solve_measurements(cam.position, beacons[:k], target, sig_k, nu,
-                                          position_sigma)
-            except SolverError:  # k beacons too close to separate them: plain
-                return solve_measurements(cam.position, beacons[:k], target, sig_k)
+            for m in range(len(nuisances), -1, -1):
+                try:
+                    return solve_measurements(cam.position, beacons[:k], target, sig_k,
+                                              nuisances[:m], position_sigma)
+                except SolverError:
+                    if not m:
+                        raise
 
         by_count = tuple(score(truth, measurements, first(k))
                          for k in range(1, len(beacons) + 1))
