@@ -435,3 +435,32 @@ def test_channel_extremes_are_numpys_reductions():
     img = rng.normal(100, 50, (37, 41, 3)).astype(np.float32)
     np.testing.assert_array_equal(_channel_max(img), img.max(axis=2))
     np.testing.assert_array_equal(_channel_min(img), img.min(axis=2))
+
+
+def test_lookups_done_by_opencv_give_numpy_values():
+    """The detector's two OpenCV shortcuts against the numpy they replace: sRGB codes to
+    linear radiance (every code, grey and colour images), and the grown region's colour
+    test max_c |x − c| < r, on random values and on values a float32 step either side
+    of the reach."""
+    from mirrorsim.detection.detector import SAME_GREY, _within
+    from mirrorsim.detection.edges import to_linear
+    from mirrorsim.rendering.sensor import LINEAR_OF_CODE
+
+    codes = np.arange(256, dtype=np.uint8)
+    expected = (255.0 * LINEAR_OF_CODE).astype(np.float32)
+    rgb = np.stack([codes, codes[::-1], np.roll(codes, 7)], axis=-1).reshape(16, 16, 3)
+    assert np.array_equal(to_linear(codes.reshape(16, 16)), expected.reshape(16, 16))
+    assert np.array_equal(to_linear(rgb), expected[rgb])
+    assert np.array_equal(to_linear(rgb.astype(np.float32)), expected[rgb])
+
+    rng = np.random.default_rng(3)
+    centre = rng.uniform(30, 200, 3).astype(np.float32)
+    x = (centre + rng.uniform(-30, 30, (64, 64, 3))).astype(np.float32)
+    edge = np.float32(SAME_GREY)
+    for k, sign in ((0, 1), (1, -1), (2, 1)):  # a float32 step inside, on, and past the reach
+        for j, step in enumerate((-1, 0, 1)):
+            x[k, j, :] = centre
+            x[k, j, k] = centre[k] + sign * np.nextafter(edge, edge + step)
+    numpy_says = np.max(np.abs(x - centre), axis=2) < SAME_GREY
+    assert np.array_equal(_within(x, centre, SAME_GREY) > 0, numpy_says)
+    assert 0.2 < numpy_says.mean() < 0.8

@@ -126,13 +126,24 @@ def to_srgb8(linear: np.ndarray) -> np.ndarray:
     and both sides of every step's edge).
     """
     x = np.ascontiguousarray(linear, np.float32)
-    bits = x.view(np.int32).ravel()
-    # a table by the upper 16 bits (values beyond [0, 1] clipped, as the steps do)
-    clipped = np.clip(bits, 0, _ONE_BITS)
-    bucket = clipped >> 16
-    codes = _BUCKET_CODE[bucket]
-    codes += clipped >= _BUCKET_EDGE[bucket]
-    return codes.reshape(x.shape)
+    bits = x.view(np.int32).reshape(-1)
+    out = np.empty(bits.shape, np.uint8)
+    # in chunks that stay in the cache, into buffers made once: twice as fast on a
+    # full-size frame as whole-frame temporaries (benchmarks/pieces.py, "linear → sRGB")
+    step = max(1, min(bits.size, SRGB_CHUNK))
+    clipped, bucket = np.empty(step, np.int32), np.empty(step, np.int32)
+    edge, past = np.empty(step, np.int32), np.empty(step, bool)
+    for start in range(0, bits.size, step):
+        n = min(step, bits.size - start)
+        c, b, e, p, o = clipped[:n], bucket[:n], edge[:n], past[:n], out[start:start + n]
+        # a table by the upper 16 bits (values beyond [0, 1] clipped, as the steps do)
+        np.clip(bits[start:start + n], 0, _ONE_BITS, out=c)
+        np.right_shift(c, 16, out=b)
+        np.take(_BUCKET_CODE, b, out=o)
+        np.take(_BUCKET_EDGE, b, out=e)
+        np.greater_equal(c, e, out=p)
+        o += p
+    return out.reshape(x.shape)
 
 
 def _srgb_steps() -> np.ndarray:
@@ -146,6 +157,7 @@ def _srgb_steps() -> np.ndarray:
 
 
 _SRGB_STEP_BITS = _srgb_steps()
+SRGB_CHUNK = 1 << 15  # values converted at a time: 160 KiB of buffers, in L2
 _ONE_BITS = int(np.float32(1.0).view(np.int32))
 _BUCKET_STARTS = np.arange((_ONE_BITS >> 16) + 1, dtype=np.int64) << 16
 _BUCKET_CODE = np.searchsorted(_SRGB_STEP_BITS, _BUCKET_STARTS, side="right").astype(np.uint8)
