@@ -526,3 +526,100 @@ def test_resume_with_a_larger_n_extends_the_dataset_with_the_same_scenes(one_wor
     assert _stable(collect_rows(dst, 3)) == _stable(collect_rows(out, 3))
     with pytest.raises(DatasetError, match="holds 3 scenes: resume it with n ≥ 3"):
         run_dataset(2, 3, dst, workers=1, spec_path=SPEC, progress=False, resume=True)
+
+
+def _spec_with(tmp_path, **beacon) -> Path:
+    import yaml
+
+    d = yaml.safe_load(SPEC.read_text())
+    d["beacon"].update(beacon)
+    d["max_tries"] = 30000  # three beacons apart and whole: ~1000 draws a scene here
+    path = tmp_path / f"spec_{'_'.join(f'{k}{v}' for k, v in beacon.items())}.yaml"
+    path.write_text(yaml.safe_dump(d))
+    return path
+
+
+def test_a_spec_draws_several_beacons_apart_and_whole(tmp_path):
+    from mirrorsim.pipelines.random_scenes import load_spec, sample_scene
+    from mirrorsim.truth import optics, visibility
+
+    plain, one, three = (load_spec(p) for p in (SPEC, _spec_with(tmp_path, count=1),
+                                                  _spec_with(tmp_path, count=3, along=[-8, 8])))
+    for i in range(4):
+        rng = lambda i=i: np.random.default_rng(np.random.SeedSequence(8, spawn_key=(i,)))  # noqa: E731
+        # a spec of one beacon draws the scenes it drew before the key existed
+        assert sample_scene(one, rng(), "s") == sample_scene(plain, rng(), "s")
+        s = sample_scene(three, rng(), "s")
+        assert len(s.beacons) == 3 and len({b.height for b in s.beacons}) == 1
+        assert all(visibility.visibility(s, b).fraction == 1.0 for b in s.beacons)
+        outlines = sorted(optics.beacon_boxes(s, margin_px=0))
+        assert all(b[0] - a[2] >= 16 for a, b in zip(outlines, outlines[1:], strict=False))
+
+
+@pytest.fixture(scope="module")
+def three_beacons(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("ds3")
+    out = tmp / "d"
+    res = run_dataset(2, 5, out, workers=1, spec_path=_spec_with(tmp, count=3, along=[-8, 8]),
+                      progress=False, nuisances=("pan", "scale"))
+    return out, res
+
+
+def test_a_dataset_of_several_beacons_self_calibrated(three_beacons):
+    from mirrorsim.formats.dataset_folder import read_table
+    from mirrorsim.formats.error_model import default_error_model
+    from mirrorsim.pipelines.uncertainty import validate
+
+    out, res = three_beacons
+    assert res.failed == 0
+    cols = read_table(out)
+    for i in range(2):
+        scene = load_scene(out / "scenes" / f"scene{i:06d}.yaml")
+        assert cols["beacons"][i] == 3 and cols["calibrate"][i] == "pan,scale"
+        for k, kind in enumerate(("beacon", "beacon2", "beacon3")):
+            # each beacon's columns are its own: its position, and its own measurement
+            assert (cols[f"{kind}_pos_x"][i], cols[f"{kind}_pos_y"][i]) == pytest.approx(
+                scene.beacons[k].position)
+            assert abs(cols[f"{kind}_alpha_err"][i]) < 0.05
+            assert abs(cols[f"{kind}_d_rel_err"][i]) < 0.02
+        # an ideal bench: the self-calibration finds no pan offset and no scale
+        assert abs(cols["est_pan_offset_deg"][i]) < 0.05
+        assert abs(cols["est_range_scale"][i] - 1) < 0.01
+        assert cols["est_mirror_power_per_cm"][i] is None  # not estimated: null
+    # the validation solves each row again as the dataset did: all three beacons,
+    # self-calibrated, with the same σ's
+    v = validate(default_error_model(), cols)
+    assert v.n_failed == 0
+    assert v.mahalanobis == pytest.approx(cols["target_mahalanobis"], rel=1e-6)
+    # and the frames: one per beacon
+    assert sorted(p.name for p in (out / "frames" / "scene000000").glob("*.png")) == [
+        f"scene000000_b{k}.png" for k in range(3)]
+
+
+def test_error_model_fits_every_beacon_image_and_the_target_once():
+    from mirrorsim.formats import dataset_table as table
+
+    n = 60
+    cols = synthetic_columns(n, 4, sigma_alpha=(0.003, 0.003), sigma_d=(0.002, 0.005))
+    other = synthetic_columns(n, 5, sigma_alpha=(0.003, 0.003), sigma_d=(0.002, 0.005))
+    cols["beacons"] = [2] * (n - 10) + [1] * 10
+    for name in table.PER_OBJECT:
+        values = np.asarray(other[f"beacon_{name.name}"], float) if \
+            f"beacon_{name.name}" in other else np.full(n, np.nan)
+        cols[f"beacon2_{name.name}"] = np.where(np.arange(n) < n - 10, values, np.nan)
+    for name in ("known_x", "known_y"):
+        cols[f"beacon2_{name}"] = np.zeros(n)
+    model = errormodel.fit(cols)
+    assert model.fits["target"]["alpha"].n == n
+    assert model.fits["beacon"]["alpha"].n == 2 * n - 10
+    assert model.fits["beacon"]["d_rel"].typical_sigma == pytest.approx(0.005, rel=0.2)
+
+
+def test_calibrate_needs_a_spec_whose_beacons_carry_it(tmp_path, capsys):
+    out = tmp_path / "d"
+    code = main(["dataset", "--n", "1", "--seed", "1", "--out", str(out), "--spec", str(SPEC),
+                 "--calibrate", "pan,scale", "--quiet"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1
+    assert "--calibrate" in err and "beacon.count" in err and str(SPEC) in err
+    assert not out.exists()

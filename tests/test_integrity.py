@@ -356,7 +356,9 @@ def test_ctrl_c_during_a_calibration_render_exits_130(tmp_path):
     from .conftest import scene_dict
 
     d = scene_dict("default")
-    d["camera"]["resolution"] = [3840, 2176]  # 4× the pixels: renders of ~10 s here
+    # the largest film a scene takes: ~8 s of calibration renders on a 2-core machine
+    # (at 4× the pixels, ~3 s: the interrupt raced the process's exit)
+    d["camera"]["resolution"] = [7680, 4320]
     big = tmp_path / "big.yaml"
     big.write_text(yaml.safe_dump(d))
     proc = _cli("calibrate", str(big), "--variant", "llvm",

@@ -203,6 +203,7 @@ def _dataset_options(p):
                    help="files to write beside each frame besides its PNG, capture record "
                    "and truth: ids (the id labels), annotated (the detections drawn); "
                    "default none")
+    calibrate_option(p)  # needs a spec whose beacon.count carries the nuisances
     common(p, scene=False, variant=True, quiet=True)
     p.add_argument("--resume", action="store_true",
                    help="finish an interrupted run, or extend one to a larger --n (the same "
@@ -222,8 +223,10 @@ def _dataset(args) -> int:
     from mirrorsim.formats.dataset_folder import DatasetError
     from mirrorsim.pipelines.dataset import run_dataset
     from mirrorsim.pipelines.workers import max_workers
+    from solver.errors import SolverError
 
     at_least(("--n", args.n, 1), ("--seed", args.seed, 0), ("--workers", args.workers, 1))
+    nuisances, position_sigma = nuisances_of(args), beacon_sigma_of(args)
     if args.spp is not None:  # checked as every scene's render settings are
         from mirrorsim.scene.model import RenderSettings
 
@@ -239,7 +242,11 @@ def _dataset(args) -> int:
                           spec_path=args.spec, spp=args.spp, sampler=args.sampler,
                           variant=args.variant, keep=tuple(args.keep), resume=args.resume,
                           executor=args.executor, scheduler=args.scheduler,
-                          progress=not args.quiet)
+                          progress=not args.quiet, nuisances=nuisances,
+                          position_sigma=position_sigma)
+    except SolverError as exc:  # the spec's beacons cannot carry --calibrate's nuisances
+        spec = args.spec or "the default spec"
+        raise BadArgument("--calibrate", f"{exc} (beacon.count of {spec})") from None
     except DatasetError as exc:
         if not exc.resumable:
             raise

@@ -252,7 +252,9 @@ def load_dataset(folder: str | Path):
         return "" if failed or not p.exists() else str(p)
 
     failed = df["error"].astype(bool)
-    df["frame"] = [path_of(n, ".png", f) or path_of(n, ".jpg", f)
+    # a scene of several beacons has a frame per beacon (<scene>_b<k>): the first's
+    df["frame"] = [path_of(n, ".png", f) or path_of(n, ".jpg", f) or path_of(n, "_b0.png", f)
+                   or path_of(n, "_b0.jpg", f)
                    for n, f in zip(df["scene"], failed, strict=True)]
     df["scene_file"] = [str(folder / "scenes" / f"{n}.yaml") for n in df["scene"]]
     df["measurements_file"] = [path_of(n, ".measurements.json", f)
@@ -264,7 +266,9 @@ def card_columns() -> str:
     """The table's columns as the card lists them, from their declaration."""
     groups = (("the run", table.RUN, ""), ("scene parameters", table.SCENE, ""),
               ("what the solver was given besides the images", table.KNOWN, ""),
-              ("for `target_*` and `beacon_*`", table.PER_OBJECT, "<object>_"),
+              ("for `target_*` and `beacon_*` (and, in a scene of several beacons, "
+               "`beacon2_*`, `beacon3_*`… with `known_x` and `known_y` besides)",
+               table.PER_OBJECT, "<object>_"),
               ("solution", table.SOLUTION, ""),
               ("bench imperfections (the spec's `bench:` block; ideal values when absent)",
                table.BENCH, ""), ("timings", table.TIMING, ""))

@@ -3,7 +3,10 @@ lists them, :mod:`mirrorsim.pipelines.errormodel` reads them by these names and 
 holds every row to them.
 
 A column for each of the target and the beacon is named ``<object>_<name>``
-(:func:`object_column`); the bench imperfections' columns come from their registry.
+(:func:`object_column`); the bench imperfections' columns come from their registry.  A
+scene with several beacons has the same columns for its second, third… beacon, named
+``beacon2_<name>``, ``beacon3_<name>``… (:func:`beacon_kind`); :func:`image_rows` turns
+such a table into one row per beacon image, as the error model reads it.
 """
 
 from __future__ import annotations
@@ -11,7 +14,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from mirrorsim.scene.imperfections import REGISTRY
+from solver.lsq import NUISANCES
 
 
 @dataclass(frozen=True)
@@ -24,6 +30,7 @@ class Column:
 
 
 OBJECTS = ("target", "beacon")
+MAX_BEACONS = 4  # a dataset spec's most beacons a scene (its ``beacon.count``)
 
 RUN = (
     Column("index", "", "the scene's number"), Column("scene", "", "its name"),
@@ -34,6 +41,8 @@ RUN = (
     Column("background_spp", "", "samples per pixel outside it"),
     Column("beacon_spp", "", "samples per pixel in each beacon's image"),
     Column("sampler", "", "Mitsuba sampler"),
+    Column("calibrate", "", "the nuisances the solver estimated (`--calibrate`; empty: "
+                            "plain least squares)"),
     Column("error", "", "why the scene failed (empty if fine)"),
 )
 SCENE = (
@@ -45,6 +54,8 @@ SCENE = (
     Column("mirror_yaw_deg", "deg", "mirror line direction, [0, 180)"),
     Column("mirror_width", "cm", "mirror width"), Column("mirror_height", "cm", "mirror height"),
     Column("target_x", "cm", "target position"), Column("target_y", "cm", "target position"),
+    Column("beacons", "", "how many beacons the scene has (columns `beacon_*` for the first, "
+                          "`beacon2_*`… for the others)"),
 )
 # what the solver was given besides the images (the capture record's: believed values)
 KNOWN = (
@@ -54,7 +65,12 @@ KNOWN = (
     Column("fx_px", "px", "the camera's focal length"),
     Column("beacon_known_x", "cm", "beacon position the solver was given"),
     Column("beacon_known_y", "cm", "beacon position the solver was given"),
+    Column("beacon_sigma", "cm", "how well the solver took each beacon's position to be "
+                                 "known, per axis (`--beacon-sigma`; 0: exactly)"),
 )
+# for each beacon after the first, as beacon<k>_<name> (KNOWN's beacon columns' names)
+BEACON_KNOWN = tuple(Column(c.name.removeprefix("beacon_"), c.units, c.doc)
+                     for c in KNOWN if c.name.startswith("beacon_known_"))
 # for each of OBJECTS, as <object>_<name>
 PER_OBJECT = (
     Column("pos_x", "cm", "position"), Column("pos_y", "cm", "position"),
@@ -87,15 +103,36 @@ SOLUTION = (
     Column("target_cov_yy", "cm²", "the estimated target's covariance"),
     Column("target_mahalanobis", "1",
            "true target's distance from the estimate in σ's of that covariance"),
+    # the nuisances self-calibration estimates (null where not estimated)
+    *(Column(f"est_{key}", units, f"estimated {doc} (null unless `calibrate` names it)")
+      for key, units, doc in (("pan_offset_deg", "deg", "pan offset δ"),
+                              ("range_scale", "1", "range scale s"),
+                              ("mirror_power_per_cm", "1/cm", "mirror's power 1/R"))),
 )
+assert {f"est_{key}" for key, _ in NUISANCES.values()} <= {c.name for c in SOLUTION}
 BENCH = tuple(Column(c.name, c.units, c.doc) for imp in REGISTRY for c in imp.columns)
 TIMING = (Column("seconds_sample", "s", "drawing the scene"),
           Column("seconds_total", "s", "the whole scene"))
 
 
 def object_column(kind: str, name: str) -> str:
-    """The column of ``name`` (one of PER_OBJECT's) for ``kind`` (target or beacon)."""
+    """The column of ``name`` (one of PER_OBJECT's) for ``kind`` (target, beacon, or
+    :func:`beacon_kind`'s beacon2…)."""
     return f"{kind}_{name}"
+
+
+def beacon_kind(k: int) -> str:
+    """The column prefix of a scene's beacon k (0-based): ``beacon``, ``beacon2``…"""
+    return "beacon" if k == 0 else f"beacon{k + 1}"
+
+
+def _slot_columns(k: int) -> tuple[Column, ...]:
+    """The columns of beacon k ≥ 1 (0-based): its known position and its PER_OBJECT's."""
+    kind = beacon_kind(k)
+    return (*(Column(object_column(kind, c.name), c.units, f"{kind}: {c.doc}")
+              for c in BEACON_KNOWN),
+            *(Column(object_column(kind, c.name), c.units, f"{kind}: {c.doc}")
+              for c in PER_OBJECT))
 
 
 # every column of a row, in declaration order (a failed scene's row has RUN's, and TIMING's)
@@ -104,15 +141,19 @@ COLUMNS = (*RUN, *SCENE, *KNOWN,
              for k in OBJECTS for c in PER_OBJECT),
            *SOLUTION, *BENCH, *TIMING)
 NAMES = tuple(c.name for c in COLUMNS)
+# the columns of the second, third… beacon: in a row exactly when its scene has them
+SLOT_NAMES = {k: tuple(c.name for c in _slot_columns(k)) for k in range(1, MAX_BEACONS)}
 
 
 def checked_row(row: dict) -> dict:
     """``row`` if it holds declared columns only (and, when the scene did not fail, all of
-    them): a misspelt or forgotten column fails here, where the row is made, not in a
-    reader of the table far from the change."""
+    them, with its beacons' slots): a misspelt or forgotten column fails here, where the
+    row is made, not in a reader of the table far from the change."""
     names = set(row) - {"traceback"}
-    unknown = names - set(NAMES)
-    missing = set() if row.get("error") else set(NAMES) - names
+    count = 1 if row.get("error") else int(row.get("beacons") or 1)
+    slots = {n for k in range(1, count) for n in SLOT_NAMES.get(k, ())}
+    unknown = names - set(NAMES) - slots
+    missing = set() if row.get("error") else (set(NAMES) | slots) - names
     if unknown or missing:
         raise ValueError(f"dataset row off its declared columns: unknown {sorted(unknown)}, "
                          f"missing {sorted(missing)}")
@@ -158,3 +199,32 @@ def card_section(group: tuple[Column, ...], prefix: str = "") -> str:
     """A group of columns as the card lists them."""
     return "; ".join(f"`{prefix}{c.name}`" + (f" ({c.units})" if c.units else "")
                      + f": {c.doc}" for c in group)
+
+
+def image_rows(cols: dict) -> tuple[dict, np.ndarray, np.ndarray]:
+    """A table's columns with one row per beacon image; and each row's beacon (0-based)
+    and scene (its row in ``cols``).
+
+    A row's ``beacon_*`` columns hold its beacon's, every other column its scene's (the
+    target's repeated beside each of its beacons); the first beacons of every scene come
+    first, in the table's order.  A table of one beacon a scene comes back as it is.
+    """
+    n = len(cols["index"])
+    slots = [k for k in range(1, MAX_BEACONS) if SLOT_NAMES[k][0] in cols]
+    scene = np.tile(np.arange(n), 1 + len(slots))
+    if not slots:
+        return cols, np.zeros(n, int), scene
+    count = np.asarray([c or 1 for c in cols.get("beacons", [1] * n)])
+    keep = np.concatenate([np.ones(n, bool)] + [count > k for k in slots])
+    out = {}
+    for name, values in cols.items():
+        if any(name in SLOT_NAMES[k] for k in slots):
+            continue
+        stacked = list(values)
+        for k in slots:  # beacon k's own column where it has one, else the scene's
+            own = f"{beacon_kind(k)}_{name.removeprefix('beacon_')}"
+            stacked += list(cols[own] if name.startswith("beacon_") and own in cols
+                            else values)
+        out[name] = [v for v, ok in zip(stacked, keep, strict=True) if ok]
+    which = np.concatenate([np.zeros(n, int)] + [np.full(n, k) for k in slots])
+    return out, which[keep], scene[keep]

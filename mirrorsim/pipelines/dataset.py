@@ -59,8 +59,9 @@ from mirrorsim.scene import imperfections
 from mirrorsim.scene.model import Scene
 from mirrorsim.truth.groundtruth import ObjectTruth
 from solver.geometry import yaw_difference
+from solver.lsq import NUISANCES, check_nuisances
 
-ROW_SCHEMA_VERSION = 2
+ROW_SCHEMA_VERSION = 3  # 3: the beacon count, each beacon's columns, self-calibration
 # a worker retires past this resident memory; measured on llvm_ad_rgb, a warm worker
 # holds ~500 MiB after its first full-size scene and no more after 30 (README
 # "Throughput"), so this only stops a leak that another Mitsuba might bring
@@ -83,10 +84,12 @@ class SceneResult:
 
 def process_one(i: int, seed: int, spec: DatasetSpec, out: str, spp: int | None,
                 variant: str, keep: tuple[str, ...] = (),
-                error_model: ErrorModel | None = None) -> SceneResult:
+                error_model: ErrorModel | None = None,
+                nuisances: tuple[str, ...] = (), position_sigma: float = 0.0) -> SceneResult:
     """Draw, render, detect, solve and score scene i; write its files, the measurements
     the solver saw (``frames/<scene>/<scene>.measurements.json``, for ``solve``) and its
-    row."""
+    row.  ``nuisances``, ``position_sigma``: self-calibration, as
+    :func:`~mirrorsim.pipelines.evaluate.evaluate_scene` takes them."""
     from mirrorsim.pipelines.evaluate import evaluate_scene
     from mirrorsim.pipelines.random_scenes import sample_scene, to_yaml
 
@@ -103,10 +106,11 @@ def process_one(i: int, seed: int, spec: DatasetSpec, out: str, spp: int | None,
         with warnings.catch_warnings():  # a spec that draws JPEG frames knows it does
             warnings.filterwarnings("ignore", message=".*a JPEG frame")
             rep = evaluate_scene(scene, out_dir / "frames" / name, variant=variant,
-                                 progress=False, keep=keep, error_model=error_model)
+                                 progress=False, keep=keep, error_model=error_model,
+                                 nuisances=nuisances, position_sigma=position_sigma)
         write_json(out_dir / "frames" / name / f"{name}.measurements.json",
                    rep.measurements.to_json())
-        row.update(_flatten(scene, rep))
+        row.update(_flatten(scene, rep, nuisances, position_sigma))
         row["seconds_sample"] = t1 - t0
         row["error"] = ""
     except SCENE_FAILURES as exc:  # the scene's own: recorded, one bad scene must not stop a run
@@ -120,8 +124,10 @@ def process_one(i: int, seed: int, spec: DatasetSpec, out: str, spp: int | None,
     return SceneResult(i, done)
 
 
-def _flatten(scene: Scene, rep: Report) -> dict:
-    """The row's columns: scene parameters, truth, measurements, solution, errors."""
+def _flatten(scene: Scene, rep: Report, nuisances: tuple[str, ...] = (),
+             position_sigma: float = 0.0) -> dict:
+    """The row's columns: scene parameters, truth, measurements, solution, errors (each
+    beacon's under its own prefix, :func:`~mirrorsim.formats.dataset_table.beacon_kind`)."""
     cam, mir, t = scene.camera, scene.mirror, rep.truth
     meas, sol, err = rep.measurements, rep.solution, rep.errors
     cov = sol.target_covariance
@@ -131,22 +137,28 @@ def _flatten(scene: Scene, rep: Report) -> dict:
         "mirror_x": mir.center[0], "mirror_y": mir.center[1], "mirror_yaw_deg": mir.yaw % 180,
         "mirror_width": mir.size[0], "mirror_height": mir.size[1],
         "target_x": scene.target.position[0], "target_y": scene.target.position[1],
+        "beacons": len(scene.beacons), "calibrate": ",".join(nuisances),
         "variant": rep.render.variant, "spp": rep.render.spp, "sampler": rep.render.sampler,
         "background_spp": min(scene.render.background_spp, scene.render.spp),
         "beacon_spp": max(scene.render.beacon_spp, scene.render.spp),
         "render_seed": rep.render.seed,
         **imperfections.row_values(scene),
     }
-    b, frame = meas.beacons[0], rep.frames[0]
     row.update({"observer_x": meas.observer[0], "observer_y": meas.observer[1],
                 "observer_pan_deg": meas.observer_pan_deg,  # the capture record's
-                "fx_px": scene.camera.fx,
-                "beacon_known_x": b.position[0], "beacon_known_y": b.position[1]})
+                "fx_px": scene.camera.fx, "beacon_sigma": position_sigma})
     sig = meas.sigma
-    for kind, truth, (alpha, d), clipped, s in (
-            ("target", t.target, meas.targets[0], frame.target_clipped, sig.target),
-            ("beacon", t.beacons[0], (b.alpha_deg, b.d_total), frame.beacon_clipped,
-             sig.beacons[0])):
+    # the target as measured (its mean over the frames), clipped as in the first frame;
+    # each beacon from its own frame
+    objects = [("target", t.target, meas.targets[0], rep.frames[0].target_clipped,
+                sig.target)]
+    for k, (b, frame) in enumerate(zip(meas.beacons, rep.frames, strict=True)):
+        kind = table.beacon_kind(k)
+        row.update({table.object_column(kind, "known_x"): b.position[0],
+                    table.object_column(kind, "known_y"): b.position[1]})
+        objects.append((kind, t.beacons[k], (b.alpha_deg, b.d_total), frame.beacon_clipped,
+                        sig.beacons[k]))
+    for kind, truth, (alpha, d), clipped, s in objects:
         values = {
             "pos_x": truth.position[0], "pos_y": truth.position[1],
             "alpha_true": truth.alpha_deg, "d_true": truth.d_total,
@@ -171,6 +183,7 @@ def _flatten(scene: Scene, rep: Report) -> dict:
                                       else err.target_ellipse95_major_cm),
         "target_cov_xx": float(cov[0, 0]), "target_cov_xy": float(cov[0, 1]),
         "target_cov_yy": float(cov[1, 1]), "target_mahalanobis": err.target_mahalanobis,
+        **{f"est_{key}": sol.nuisances.get(key, math.nan) for key, _ in NUISANCES.values()},
     })
     return row
 
@@ -224,11 +237,14 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
                 keep: tuple[str, ...] = (), executor: str = "local",
                 scheduler: str | None = None, progress: bool = True,
                 max_rss_mb: float = MAX_WORKER_RSS_MB,
-                error_model: ErrorModel | None = None) -> DatasetRun:
+                error_model: ErrorModel | None = None, nuisances: tuple[str, ...] = (),
+                position_sigma: float = 0.0) -> DatasetRun:
     """Make (or finish) a dataset of ``n`` scenes; return a summary.
 
     ``error_model`` gives each row's measurements their σ's (default: the model shipped
     for the ideal bench); a dataset is resumed only with the model it was started with.
+    ``nuisances``, ``position_sigma``: each scene solved self-calibrated (its rows'
+    ``est_*`` columns), which needs the spec's ``beacon.count`` to carry them.
 
     Raises
     ------
@@ -237,6 +253,8 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
         command's datasets made with the same settings.
     BadParameter
         For ``n`` outside 1..MAX_SCENES.
+    SolverError
+        For nuisances the spec's beacons cannot carry.
     """
     from mirrorsim.pipelines.random_scenes import load_spec
     from mirrorsim.rendering.backend import choose_variant
@@ -247,9 +265,12 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
     spec = load_spec(spec_path)
     if sampler is not None:  # part of the spec, so that --resume checks it
         spec = spec.with_sampler(sampler)
+    check_nuisances(nuisances, spec.beacon_count, 1)  # before anything is written
     model = error_model or default_error_model()
     meta = {"format": DATASET_FORMAT, "n": n, "seed": seed, "spp": spp, "spec": spec.data,
             "error_model_sha256": hashlib.sha256(dumps(model.to_json()).encode()).hexdigest()}
+    if nuisances or position_sigma:  # (absent otherwise: a dataset made before resumes)
+        meta["calibrate"] = {"nuisances": list(nuisances), "position_sigma": position_sigma}
     claim_folder(out, meta, resume)
     make_folders(out, meta)
     chosen = choose_variant(variant)  # the probe runs once here rather than in every worker
@@ -269,7 +290,8 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
             retry[result.index] = result.retry
         bar.update()
 
-    jobs = [(i, seed, spec, str(out), spp, chosen, tuple(keep), model) for i in todo]
+    jobs = [(i, seed, spec, str(out), spp, chosen, tuple(keep), model, tuple(nuisances),
+             position_sigma) for i in todo]
     try:
         _run_jobs(jobs, executor, workers, scheduler, is_done, on_result, max_rss_mb)
     finally:

@@ -195,7 +195,11 @@ def fit(cols: dict, provenance: dict | None = None) -> ErrorModel:
     """
     names = features_of(cols)
     fits: dict[str, dict[str, QuantityFit]] = {}
+    # a row per beacon image: every beacon of a scene is fitted, its target once (the
+    # pair fit and the shared α take the target beside each of its beacons)
+    cols, beacon_of, scene_of = table.image_rows(cols)
     ok = np.array([not e for e in cols.get("error", [""] * len(cols["index"]))])
+    once = {"target": beacon_of == 0, "beacon": np.ones(len(ok), bool)}
     need = min_rows(names)
     # pixel errors scale as 1/fx: each row's errors as at the rows' median focal length
     fx = np.asarray(cols["fx_px"], float) if "fx_px" in cols else np.full(len(ok), np.nan)
@@ -209,7 +213,8 @@ def fit(cols: dict, provenance: dict | None = None) -> ErrorModel:
         fits[kind] = {}
         for q, col in QUANTITY_COLUMNS.items():
             y = np.asarray(cols[table.object_column(kind, col)], float)
-            m = ok & np.isfinite(y) & np.isfinite(X_all).all(axis=1) & np.isfinite(S_all).all(1)
+            m = (ok & once[kind] & np.isfinite(y) & np.isfinite(X_all).all(axis=1)
+                 & np.isfinite(S_all).all(1))
             if m.sum() < need:
                 raise ValueError(f"too few usable rows ({int(m.sum())}) to fit {kind} {q}: "
                                  f"{need} needed")
@@ -219,7 +224,9 @@ def fit(cols: dict, provenance: dict | None = None) -> ErrorModel:
             if q == "alpha":
                 keep = m.copy()
                 keep[np.flatnonzero(m)[gross]] = False
-                alpha_rows[kind] = (keep, S_all, y * at_fx)
+                # the target's rows as its scene's first (the target fitted once)
+                alpha_rows[kind] = (keep[scene_of] if kind == "target" else keep, S_all,
+                                    y * at_fx)
             fits[kind][q] = QuantityFit(
                 log_sigma=law, n=int(m.sum()), gross_errors=int(gross.sum()),
                 rms=float(np.sqrt(np.mean((y * at_fx)[m] ** 2))),
@@ -233,7 +240,7 @@ def fit(cols: dict, provenance: dict | None = None) -> ErrorModel:
         both = kt & kb
         law_t, law_b, shared = fit_alpha_pair(St[both], yt[both], Sb[both], yb[both], shared)
         for kind, law, S in (("target", law_t, St), ("beacon", law_b, Sb)):
-            keep = alpha_rows[kind][0]
+            keep = alpha_rows[kind][0] & once[kind]
             fits[kind]["alpha"] = replace(
                 fits[kind]["alpha"], log_sigma=law,
                 typical_sigma=float(np.sqrt(np.mean(law(S[keep]) ** 2))))
@@ -346,14 +353,16 @@ def plot(cols: dict, model: ErrorModel, out: str | Path) -> Path:
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(2, 3, figsize=(16, 8.5))
+    cols, beacon_of, _ = table.image_rows(cols)  # every beacon's image; the target once
     ok = np.array([not e for e in cols.get("error", [""] * len(cols["index"]))])
+    once = {"target": beacon_of == 0, "beacon": np.ones(len(ok), bool)}
     grid = np.linspace(-5, 5, 201)
     for r, (q, col, scale, unit) in enumerate((("alpha", "alpha_err", 1.0, "°"),
                                                 ("d_rel", "d_rel_err", 100.0, "% of d_total"))):
         for k, (kind, colour) in enumerate((("target", "#c0392b"), ("beacon", "#b8860b"))):
             y = np.asarray(cols[table.object_column(kind, col)], float)
             S = sigma_features_of(cols, kind)
-            m = ok & np.isfinite(y) & np.isfinite(S).all(axis=1)
+            m = ok & once[kind] & np.isfinite(y) & np.isfinite(S).all(axis=1)
             fx = np.asarray(cols.get("fx_px", np.full(len(ok), np.nan)), float)[m]
             sd = model.whole_sigma(kind, q, S[m], fx)
             for c, (x, name) in enumerate(((np.exp(S[m, 0]), "measured d_total (cm)"),

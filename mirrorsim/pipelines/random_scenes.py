@@ -17,6 +17,7 @@ import numpy as np
 import yaml
 
 from mirrorsim.errors import RunFailed, SceneError
+from mirrorsim.formats.dataset_table import MAX_BEACONS
 from mirrorsim.formats.reader import Reader, read_resolution, read_yaml, show
 from mirrorsim.formats.scenefile import (
     DEFAULT_RESOLUTION,
@@ -27,13 +28,19 @@ from mirrorsim.formats.scenefile import (
 )
 from mirrorsim.scene.imperfections import REGISTRY, as_keys
 from mirrorsim.scene.model import MAX_BOARD_CM, Camera, Scene
-from mirrorsim.truth import visibility
+from mirrorsim.truth import optics, visibility
 
 DEFAULT_SPEC = Path(__file__).resolve().parents[2] / "scenes" / "dataset_spec.yaml"
 
 
 MAX_TRIES = 100_000  # a documented bound on a spec's max_tries
-PROBE_TRIES = 300  # a spec that gives no valid scene in this many draws is refused at once
+# a spec that gives no valid scene in this many draws is refused at once; one of several
+# beacons is probed with all its max_tries (each beacon's image must be whole and apart
+# from the others': ~17× the draws for three beacons on the default spec's ranges)
+PROBE_TRIES = 300
+# the fewest pixels between two beacons' images in a frame (the outlines of their
+# pencils' cylinders): the detector's edge windows reach 9 px past an edge
+IMAGE_GAP_PX = 16
 
 
 class NoValidScene(RunFailed):
@@ -61,6 +68,11 @@ class DatasetSpec:
     def beacon_height(self) -> float | list[float]:
         """The pencil's height (cm): a value, or a [lo, hi] range drawn per scene."""
         return self.data["beacon"]["height"]
+
+    @property
+    def beacon_count(self) -> int:
+        """How many beacons each scene has (the spec's ``beacon.count``, default 1)."""
+        return int(self.data["beacon"].get("count", 1))
 
     @property
     def calibration_error(self) -> float | list[float]:
@@ -114,7 +126,8 @@ def load_spec(path: str | Path | None = None) -> DatasetSpec:
     r.mapping(spec["mirror"], "mirror", {"x", "y", "yaw", "width", "height"})
     r.mapping(spec["target"], "target", {"x", "y", "size"})
     r.pair(spec["target"]["size"], "target.size", positive=True)
-    r.mapping(spec["beacon"], "beacon", {"depth", "along", "height"})
+    r.mapping(spec["beacon"], "beacon", {"depth", "along", "height"}, {"count"})
+    r.integer(spec["beacon"].get("count", 1), "beacon.count", low=1, high=MAX_BEACONS)
     r.mapping(spec["occluder"], "occluder", {"at", "length", "height"})
     read_render(r, spec.get("render", {}), seed=False)
     r.integer(spec.get("max_tries", 5000), "max_tries", low=1, high=MAX_TRIES)
@@ -123,7 +136,7 @@ def load_spec(path: str | Path | None = None) -> DatasetSpec:
     # which no usable scene exists
     _draw(spec, np.random.default_rng(0), path)
     try:
-        _sample(spec, 0, "probe", tries=min(PROBE_TRIES, spec.get("max_tries", 5000)))
+        _sample(spec, 0, "probe", tries=_probe_tries(spec))
     except NoValidScene as exc:
         raise r.fail("", str(exc)) from None
     _check_bench_ends(spec, r)
@@ -187,8 +200,13 @@ def _draw(spec: dict, rng: np.random.Generator, where="<spec>",
     if n @ (np.asarray(cam["position"]) - centre) < 0:
         n = -n
     along = np.array([math.cos(math.radians(yaw)), math.sin(math.radians(yaw))])
-    b = centre + g("beacon", "depth") * n + g("beacon", "along") * along
-    beacon = {"position": b.tolist(), "height": g("beacon", "height")}
+
+    def beacon(height: float | None = None) -> dict:
+        b = centre + g("beacon", "depth") * n + g("beacon", "along") * along
+        return {"position": b.tolist(),
+                "height": g("beacon", "height") if height is None else height}
+
+    beacons = [beacon()]
     # a wall across the direct line camera → target, perpendicular to it
     c, t = np.asarray(cam["position"]), np.asarray(target["position"])
     mid = c + g("occluder", "at") * (t - c)
@@ -196,14 +214,24 @@ def _draw(spec: dict, rng: np.random.Generator, where="<spec>",
     half = g("occluder", "length") / 2 * np.array([-u[1], u[0]])
     occ = {"start": (mid - half).tolist(), "end": (mid + half).tolist(),
            "height": g("occluder", "height")}
+    # the other beacons drawn after everything else: a spec of one beacon draws as before
+    # (one pencil height for all: the calibration and the detector take one)
+    beacons += [beacon(beacons[0]["height"])
+                for _ in range(int(spec["beacon"].get("count", 1)) - 1)]
     d = {"board": copy.deepcopy(spec["board"]), "camera": cam, "mirror": mirror,
-         "target": target, "beacon": beacon, "occluders": [occ],
+         "target": target, "beacons": beacons, "occluders": [occ],
          "render": dataclasses.asdict(read_render(Reader(where, SceneError),
                                                   spec.get("render", {}), seed=False))}
     # from their own stream, so that a bench block leaves the geometry drawn as without it
-    for path, value in _draw_bench(spec.get("bench") or {}, bench_rng or rng,
-                                   where).items():
+    bench_rng = bench_rng or rng
+    for path, value in _draw_bench(spec.get("bench") or {}, bench_rng, where).items():
         _set_key(d, path, value)
+    offset = (spec.get("bench") or {}).get("beacon", {}).get("known_position_offset")
+    for b in beacons[1:]:  # each beacon's believed position off by its own draw
+        if offset is not None:
+            key = "bench.beacon.known_position_offset"
+            b["known_position"] = [p + _draw_number(offset, key, bench_rng, where)
+                                   for p in b["position"]]
     return d
 
 
@@ -268,9 +296,9 @@ def _draw_bench(bench: dict, rng: np.random.Generator, where="<spec>") -> dict[s
 def _set_key(d: dict, path: str, value: Any) -> None:
     block, key = path.split(".")
     imp = _BY_SPEC_PATH.get(path)
-    if imp is not None and imp.form == "offset":
-        d["beacon"]["known_position"] = [p + o for p, o in
-                                         zip(d["beacon"]["position"], value, strict=True)]
+    if imp is not None and imp.form == "offset":  # the first beacon's (_draw: the others')
+        first = d["beacons"][0] if "beacons" in d else d["beacon"]
+        first["known_position"] = [p + o for p, o in zip(first["position"], value, strict=True)]
     else:
         d.setdefault(block, {})[key] = value
 
@@ -293,7 +321,7 @@ def _check_bench_ends(spec: dict, r: Reader) -> None:
     if bench is None:
         return
     ideal = _sample({**spec, "bench": None}, 0, "probe",
-                         tries=min(PROBE_TRIES, spec.get("max_tries", 5000)))
+                         tries=_probe_tries(spec))
     base = yaml.safe_load(to_yaml(ideal))
     for block in BENCH_SPEC_KEYS:
         for key, raw in (bench.get(block) or {}).items():
@@ -356,13 +384,32 @@ def _sample(spec: dict, rng: int | np.random.Generator | None, name: str,
             why = "an image clipped or the target seen directly"
             reasons[why] = reasons.get(why, 0) + 1
             continue
-        if all(visibility.visibility(s, o).fraction == 1.0 for o in (s.target, *s.beacons)):
+        if not all(visibility.visibility(s, o).fraction == 1.0
+                   for o in (s.target, *s.beacons)):
+            why = "an image not whole in the mirror"
+        elif _images_overlap(s):
+            why = "two beacons' images overlapping in the frame"
+        else:
             return s
-        why = "an image not whole in the mirror"
         reasons[why] = reasons.get(why, 0) + 1
-    common = max(reasons, key=reasons.get) if reasons else "nothing"
-    raise NoValidScene(f"no usable scene in {tries} draws (refused most often for "
-                       f"{common}: {reasons.get(common, 0)} times); widen the spec's ranges")
+    common = sorted(reasons, key=reasons.get, reverse=True)[:2] or ["nothing"]
+    why = ", then ".join(f"{c}: {reasons.get(c, 0)} times" for c in common)
+    raise NoValidScene(f"no usable scene in {tries} draws (refused most often for {why}); "
+                       "widen the spec's ranges")
+
+
+def _probe_tries(spec: dict) -> int:
+    """Draws a spec's probe allows (see PROBE_TRIES)."""
+    tries = int(spec.get("max_tries", 5000))
+    return tries if int(spec["beacon"].get("count", 1)) > 1 else min(PROBE_TRIES, tries)
+
+
+def _images_overlap(scene: Scene) -> bool:
+    """Whether two beacons' images in the mirror come within IMAGE_GAP_PX columns of each
+    other, where the detector could take them for one pencil or read one's edge
+    against the other."""
+    boxes = sorted(b for b in optics.beacon_boxes(scene, IMAGE_GAP_PX // 2) if b is not None)
+    return any(b[0] < a[2] for a, b in zip(boxes, boxes[1:], strict=False))
 
 
 def to_yaml(scene: Scene) -> str:

@@ -103,19 +103,26 @@ def validate(model: ErrorModel, cols: dict) -> Validation:
     ok = np.array([not e for e in cols.get("error", [""] * n)])
     pan = _col(cols, "observer_pan_deg")
     fx = np.asarray(cols["fx_px"], float) if "fx_px" in cols else np.full(n, np.nan)
-    meas = {(k, q): _col(cols, table.object_column(k, q)) for k in KINDS
-            for q in ("alpha_meas", "d_meas")}
     obs = np.column_stack([_col(cols, "observer_x"), _col(cols, "observer_y")])
-    known = np.column_stack([_col(cols, "beacon_known_x"), _col(cols, "beacon_known_y")])
     truth = np.column_stack([_col(cols, "target_x"), _col(cols, "target_y")])
+    target = np.column_stack([_col(cols, "target_alpha_meas"), _col(cols, "target_d_meas")])
+    # each scene's beacons as its row has them, solved as the dataset solved them
+    images, beacon_of, scene_of = table.image_rows(cols)
+    beacon = np.column_stack([_col(images, f"beacon_{q}") for q in
+                              ("known_x", "known_y", "alpha_meas", "d_meas")])
+    calibrate = cols.get("calibrate") or [""] * n
+    beacon_sigma = cols.get("beacon_sigma") or [0.0] * n
     dist, failed = [], 0
     for i in np.flatnonzero(ok):
-        t = (meas["target", "alpha_meas"][i], meas["target", "d_meas"][i])
-        b = (meas["beacon", "alpha_meas"][i], meas["beacon", "d_meas"][i])
+        t = tuple(target[i])
+        rows = beacon[scene_of == i][np.argsort(beacon_of[scene_of == i])]
+        beacons = [BeaconMeasurement((x, y), a, d) for x, y, a, d in rows]
+        nuisances = tuple(x for x in (calibrate[i] or "").split(",") if x)
         try:
-            sigma = model.sigmas(t, [b], pan[i], fx[i] if np.isfinite(fx[i]) else None)
-            sol = solve_measurements(obs[i], [BeaconMeasurement(tuple(known[i]), *b)], [t],
-                                     sigma)
+            sigma = model.sigmas(t, [(b.alpha_deg, b.d_total) for b in beacons], pan[i],
+                                 fx[i] if np.isfinite(fx[i]) else None)
+            sol = solve_measurements(obs[i], beacons, [t], sigma, nuisances,
+                                     float(beacon_sigma[i] or 0.0))
             dist.append(sol.mahalanobis(truth[i]))
         except (SolverError, np.linalg.LinAlgError):
             failed += 1
@@ -129,13 +136,16 @@ def _within(model: ErrorModel, cols: dict, ok: np.ndarray, pan: np.ndarray, fx: 
             ) -> dict[str, dict[str, tuple[float, float]]]:
     """Each measurement's errors in the model's σ's: the fractions within 1σ and 2σ."""
     out: dict[str, dict[str, tuple[float, float]]] = {}
+    cols, beacon_of, scene_of = table.image_rows(cols)  # every beacon's image, the target once
+    ok, pan, fx = ok[scene_of], pan[scene_of], fx[scene_of]
+    once = {"target": beacon_of == 0, "beacon": np.ones(len(ok), bool)}
     for kind in KINDS:
         x = measured_features(_col(cols, table.object_column(kind, "d_meas")),
                               _col(cols, table.object_column(kind, "alpha_meas")), pan)
         out[kind] = {}
         for q, col in (("alpha", "alpha_err"), ("d_rel", "d_rel_err")):
             err = _col(cols, table.object_column(kind, col))
-            m = ok & np.isfinite(err) & np.isfinite(x).all(axis=1)
+            m = ok & once[kind] & np.isfinite(err) & np.isfinite(x).all(axis=1)
             z = np.abs(err[m]) / model.whole_sigma(kind, q, x[m], fx[m])
             out[kind][q] = (float(np.mean(z <= 1.0)), float(np.mean(z <= 2.0))) if z.size \
                 else (math.nan, math.nan)
