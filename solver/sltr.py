@@ -135,6 +135,14 @@ class Solution:
         return None if self.covariance is None else self.covariance[2:4, 2:4]
 
     @property
+    def nuisance_sd(self) -> dict[str, float]:
+        """Each estimated nuisance's σ, from the covariance (empty without σ's)."""
+        if self.covariance is None:
+            return {}
+        sd = np.sqrt(np.diag(self.covariance))[4:4 + len(self.nuisances)]
+        return {name: float(e) for name, e in zip(self.nuisances, sd, strict=True)}
+
+    @property
     def params_order(self) -> list[str]:
         """The covariance's parameters: the mirror, the target, the nuisances, then each
         beacon's offset from its believed position where those were estimated."""

@@ -223,7 +223,6 @@ def _dataset(args) -> int:
     from mirrorsim.formats.dataset_folder import DatasetError
     from mirrorsim.pipelines.dataset import run_dataset
     from mirrorsim.pipelines.workers import max_workers
-    from solver.errors import SolverError
 
     at_least(("--n", args.n, 1), ("--seed", args.seed, 0), ("--workers", args.workers, 1))
     nuisances, position_sigma = nuisances_of(args), beacon_sigma_of(args)
@@ -244,9 +243,6 @@ def _dataset(args) -> int:
                           executor=args.executor, scheduler=args.scheduler,
                           progress=not args.quiet, nuisances=nuisances,
                           position_sigma=position_sigma)
-    except SolverError as exc:  # the spec's beacons cannot carry --calibrate's nuisances
-        spec = args.spec or "the default spec"
-        raise BadArgument("--calibrate", f"{exc} (beacon.count of {spec})") from None
     except DatasetError as exc:
         if not exc.resumable:
             raise

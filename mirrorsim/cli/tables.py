@@ -117,14 +117,12 @@ def solution_summary(source: str, sol: Solution) -> str:
 
 def nuisance_text(sol: Solution) -> str:
     """Self-calibration's estimates with their σ's (from the covariance, where there)."""
-    k = len(sol.nuisances)
-    sd = (np.sqrt(np.diag(sol.covariance))[4:4 + k] if sol.covariance is not None
-          else [None] * k)
     words = {"pan_offset_deg": ("pan offset", "°", ".4f"),
              "range_scale": ("range scale", "", ".4f"),
              "mirror_power_per_cm": ("mirror power 1/R", " /cm", ".2e")}
     out = []
-    for (name, v), e in zip(sol.nuisances.items(), sd, strict=True):
+    for name, v in sol.nuisances.items():
+        e = sol.nuisance_sd.get(name)
         label, unit, f = words.get(name, (name, "", ".4g"))
         out.append(f"{label} {v:{f}}{unit}" + ("" if e is None else f" ± {e:{f}}{unit}"))
     return ", ".join(out)

@@ -101,10 +101,12 @@ def _channel_min(img: np.ndarray) -> np.ndarray:
 
 
 def _within(img: np.ndarray, centre: np.ndarray, reach: float) -> np.ndarray:
-    """uint8 mask, nonzero where every channel of an (H, W, 3) float32 image lies less
-    than ``reach`` from ``centre`` (float32 RGB): ``max_c |img - centre| < reach``, the
-    same float32 arithmetic done by OpenCV, five times faster than numpy's."""
+    """uint8 mask, nonzero where every channel of an (H, W, 3) image lies less than
+    ``reach`` from ``centre`` (RGB): ``max_c |img - centre| < reach`` in float32, the
+    same arithmetic done by OpenCV, five times faster than numpy's."""
+    img = np.asarray(img, np.float32)  # OpenCV rounds a scalar to an integer image's type
     below = float(np.nextafter(np.float32(reach), np.float32(0)))  # < reach, as ≤
+    centre = np.asarray(centre, np.float32)
     return cv2.inRange(cv2.absdiff(img, (*(float(c) for c in centre), 0.0)),
                        (0.0, 0.0, 0.0), (below, below, below))
 

@@ -79,6 +79,10 @@ def claim_folder(out: Path, meta: dict, resume: bool) -> None:
         raise DatasetError(out, "was made with another error model (its rows' σ's would "
                            "mix two models): resume it with the model it was made with, or "
                            "choose another folder")
+    if old.get("calibrate") != meta.get("calibrate"):
+        raise DatasetError(out, f"was made with other self-calibration settings "
+                           f"({old.get('calibrate') or 'none'}): resume it with the same "
+                           "nuisances and beacon σ, or choose another folder")
     same = ("seed", "spp", "spec")  # n may grow: scene i is drawn from (seed, i) alone,
     # so the added scenes are the ones a dataset of the larger n would have had
     if {k: old[k] for k in same} != {k: meta[k] for k in same}:
@@ -277,6 +281,15 @@ def card_columns() -> str:
                       for title, cols, prefix in groups)
 
 
+def _calibrated(meta: dict) -> str:
+    """The self-calibration options a dataset was made with, as its command had them."""
+    cal = meta.get("calibrate")
+    if not cal:
+        return ""
+    return (f" --calibrate {','.join(cal['nuisances'])}" if cal["nuisances"] else "") + (
+        f" --beacon-sigma {cal['position_sigma']:g}" if cal["position_sigma"] else "")
+
+
 def write_card(out: Path, meta: dict, rows: list[table.DatasetRow], variant: str) -> None:
     """Write the dataset card DIR/README.md."""
     ok = [r for r in rows if not r.error]
@@ -284,8 +297,9 @@ def write_card(out: Path, meta: dict, rows: list[table.DatasetRow], variant: str
     columns = card_columns()
     text = f"""# mirrorsim dataset
 
-Made with `mirrorsim dataset --n {meta['n']} --seed {meta['seed']}`
-({'scene spp' if meta['spp'] is None else f"--spp {meta['spp']}"}; backend {variant}).
+Made with `mirrorsim dataset --n {meta['n']} --seed {meta['seed']}{_calibrated(meta)}`
+({'scene spp' if meta['spp'] is None else f"--spp {meta['spp']}"}; backend {variant};
+{(meta['spec'].get('beacon') or {}).get('count', 1)} beacon(s) a scene).
 {len(rows)} rows, {len(rows) - len(ok)} failed (their `error` column says why).
 
 Each row is one random scene (`scenes/<scene>.yaml`, a normal scene file: rerun it with

@@ -104,10 +104,11 @@ SOLUTION = (
     Column("target_mahalanobis", "1",
            "true target's distance from the estimate in σ's of that covariance"),
     # the nuisances self-calibration estimates (null where not estimated)
-    *(Column(f"est_{key}", units, f"estimated {doc} (null unless `calibrate` names it)")
+    *(Column(f"est_{key}{sd}", units, f"{what} {doc} (null unless `calibrate` names it)")
       for key, units, doc in (("pan_offset_deg", "deg", "pan offset δ"),
                               ("range_scale", "1", "range scale s"),
-                              ("mirror_power_per_cm", "1/cm", "mirror's power 1/R"))),
+                              ("mirror_power_per_cm", "1/cm", "mirror's power 1/R"))
+      for sd, what in (("", "estimated"), ("_sd", "σ of the estimated"))),
 )
 assert {f"est_{key}" for key, _ in NUISANCES.values()} <= {c.name for c in SOLUTION}
 BENCH = tuple(Column(c.name, c.units, c.doc) for imp in REGISTRY for c in imp.columns)
@@ -143,6 +144,10 @@ COLUMNS = (*RUN, *SCENE, *KNOWN,
 NAMES = tuple(c.name for c in COLUMNS)
 # the columns of the second, third… beacon: in a row exactly when its scene has them
 SLOT_NAMES = {k: tuple(c.name for c in _slot_columns(k)) for k in range(1, MAX_BEACONS)}
+# what a row of schema 2 (before several beacons and self-calibration) had for them
+SCHEMA_2_VALUES = {"beacons": 1, "calibrate": "", "beacon_sigma": 0.0,
+                   **{f"est_{key}{sd}": None for key, _ in NUISANCES.values()
+                      for sd in ("", "_sd")}}
 
 
 def checked_row(row: dict) -> dict:
@@ -191,7 +196,10 @@ class DatasetRow:
 
     @classmethod
     def from_json(cls, d: dict) -> DatasetRow:
-        """Inverse of :meth:`to_json`."""
+        """Inverse of :meth:`to_json`; a row of an older layout (schema 2: one beacon, no
+        self-calibration) takes the values its scene had for the columns added since."""
+        if d.get("schema") == 2 and not d.get("error"):
+            d = {**SCHEMA_2_VALUES, **d}
         return cls({k: v for k, v in d.items() if k != "traceback"}, d.get("traceback", ""))
 
 

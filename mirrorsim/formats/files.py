@@ -235,8 +235,10 @@ def encode_png(pixels: np.ndarray) -> bytes:
     """
     import cv2
 
-    return _encode(pixels, ".png", [cv2.IMWRITE_PNG_COMPRESSION, 1,
-                                    cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_NONE])
+    params = [cv2.IMWRITE_PNG_COMPRESSION, 1]
+    if hasattr(cv2, "IMWRITE_PNG_FILTER"):  # OpenCV ≥ 4.12: older ones filter adaptively
+        params += [cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_NONE]
+    return _encode(pixels, ".png", params)
 
 
 def encode_jpeg(pixels: np.ndarray, quality: int) -> bytes:

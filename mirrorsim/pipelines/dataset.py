@@ -184,6 +184,8 @@ def _flatten(scene: Scene, rep: Report, nuisances: tuple[str, ...] = (),
         "target_cov_xx": float(cov[0, 0]), "target_cov_xy": float(cov[0, 1]),
         "target_cov_yy": float(cov[1, 1]), "target_mahalanobis": err.target_mahalanobis,
         **{f"est_{key}": sol.nuisances.get(key, math.nan) for key, _ in NUISANCES.values()},
+        **{f"est_{key}_sd": sol.nuisance_sd.get(key, math.nan)
+           for key, _ in NUISANCES.values()},
     })
     return row
 
@@ -253,7 +255,6 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
         command's datasets made with the same settings.
     BadParameter
         For ``n`` outside 1..MAX_SCENES.
-    SolverError
         For nuisances the spec's beacons cannot carry.
     """
     from mirrorsim.pipelines.random_scenes import load_spec
@@ -265,11 +266,15 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
     spec = load_spec(spec_path)
     if sampler is not None:  # part of the spec, so that --resume checks it
         spec = spec.with_sampler(sampler)
-    check_nuisances(nuisances, spec.beacon_count, 1)  # before anything is written
+    try:  # before anything is written
+        check_nuisances(nuisances, spec.beacon_count, 1)
+    except SolverError as exc:
+        raise BadParameter("nuisances", f"{exc} (beacon.count is {spec.beacon_count} in "
+                           f"{spec_path or 'the default spec'})") from None
     model = error_model or default_error_model()
     meta = {"format": DATASET_FORMAT, "n": n, "seed": seed, "spp": spp, "spec": spec.data,
             "error_model_sha256": hashlib.sha256(dumps(model.to_json()).encode()).hexdigest()}
-    if nuisances or position_sigma:  # (absent otherwise: a dataset made before resumes)
+    if nuisances or position_sigma:  # (absent otherwise, as in datasets without them)
         meta["calibrate"] = {"nuisances": list(nuisances), "position_sigma": position_sigma}
     claim_folder(out, meta, resume)
     make_folders(out, meta)

@@ -28,19 +28,13 @@ from mirrorsim.formats.scenefile import (
 )
 from mirrorsim.scene.imperfections import REGISTRY, as_keys
 from mirrorsim.scene.model import MAX_BOARD_CM, Camera, Scene
-from mirrorsim.truth import optics, visibility
+from mirrorsim.truth import visibility
 
 DEFAULT_SPEC = Path(__file__).resolve().parents[2] / "scenes" / "dataset_spec.yaml"
 
 
 MAX_TRIES = 100_000  # a documented bound on a spec's max_tries
-# a spec that gives no valid scene in this many draws is refused at once; one of several
-# beacons is probed with all its max_tries (each beacon's image must be whole and apart
-# from the others': ~17× the draws for three beacons on the default spec's ranges)
-PROBE_TRIES = 300
-# the fewest pixels between two beacons' images in a frame (the outlines of their
-# pencils' cylinders): the detector's edge windows reach 9 px past an edge
-IMAGE_GAP_PX = 16
+PROBE_TRIES = 300  # a spec that gives no valid scene in this many draws is refused at once
 
 
 class NoValidScene(RunFailed):
@@ -136,7 +130,7 @@ def load_spec(path: str | Path | None = None) -> DatasetSpec:
     # which no usable scene exists
     _draw(spec, np.random.default_rng(0), path)
     try:
-        _sample(spec, 0, "probe", tries=_probe_tries(spec))
+        _sample(spec, 0, "probe", tries=min(PROBE_TRIES, spec.get("max_tries", 5000)))
     except NoValidScene as exc:
         raise r.fail("", str(exc)) from None
     _check_bench_ends(spec, r)
@@ -218,8 +212,10 @@ def _draw(spec: dict, rng: np.random.Generator, where="<spec>",
     # (one pencil height for all: the calibration and the detector take one)
     beacons += [beacon(beacons[0]["height"])
                 for _ in range(int(spec["beacon"].get("count", 1)) - 1)]
+    # one beacon under the scene file's "beacon" key: a refusal names the key a spec has
     d = {"board": copy.deepcopy(spec["board"]), "camera": cam, "mirror": mirror,
-         "target": target, "beacons": beacons, "occluders": [occ],
+         "target": target, **({"beacon": beacons[0]} if len(beacons) == 1 else
+                              {"beacons": beacons}), "occluders": [occ],
          "render": dataclasses.asdict(read_render(Reader(where, SceneError),
                                                   spec.get("render", {}), seed=False))}
     # from their own stream, so that a bench block leaves the geometry drawn as without it
@@ -321,7 +317,7 @@ def _check_bench_ends(spec: dict, r: Reader) -> None:
     if bench is None:
         return
     ideal = _sample({**spec, "bench": None}, 0, "probe",
-                         tries=_probe_tries(spec))
+                         tries=min(PROBE_TRIES, spec.get("max_tries", 5000)))
     base = yaml.safe_load(to_yaml(ideal))
     for block in BENCH_SPEC_KEYS:
         for key, raw in (bench.get(block) or {}).items():
@@ -384,32 +380,14 @@ def _sample(spec: dict, rng: int | np.random.Generator | None, name: str,
             why = "an image clipped or the target seen directly"
             reasons[why] = reasons.get(why, 0) + 1
             continue
-        if not all(visibility.visibility(s, o).fraction == 1.0
-                   for o in (s.target, *s.beacons)):
-            why = "an image not whole in the mirror"
-        elif _images_overlap(s):
-            why = "two beacons' images overlapping in the frame"
-        else:
+        if all(visibility.visibility(s, o).fraction == 1.0 for o in (s.target, *s.beacons)):
             return s
+        why = "an image not whole in the mirror"
         reasons[why] = reasons.get(why, 0) + 1
     common = sorted(reasons, key=reasons.get, reverse=True)[:2] or ["nothing"]
     why = ", then ".join(f"{c}: {reasons.get(c, 0)} times" for c in common)
     raise NoValidScene(f"no usable scene in {tries} draws (refused most often for {why}); "
                        "widen the spec's ranges")
-
-
-def _probe_tries(spec: dict) -> int:
-    """Draws a spec's probe allows (see PROBE_TRIES)."""
-    tries = int(spec.get("max_tries", 5000))
-    return tries if int(spec["beacon"].get("count", 1)) > 1 else min(PROBE_TRIES, tries)
-
-
-def _images_overlap(scene: Scene) -> bool:
-    """Whether two beacons' images in the mirror come within IMAGE_GAP_PX columns of each
-    other, where the detector could take them for one pencil or read one's edge
-    against the other."""
-    boxes = sorted(b for b in optics.beacon_boxes(scene, IMAGE_GAP_PX // 2) if b is not None)
-    return any(b[0] < a[2] for a, b in zip(boxes, boxes[1:], strict=False))
 
 
 def to_yaml(scene: Scene) -> str:

@@ -117,8 +117,9 @@ def _board_texture(board: Board) -> np.ndarray:
 @functools.lru_cache(maxsize=8)
 def _board_bitmap(board: Board) -> mi.Bitmap:
     """The pegboard texture as a Mitsuba bitmap, made once per board: making one copies
-    the 1920² texture (19 ms a scene); a bitmap texture copies its bitmap's data and
-    leaves the bitmap as it was, so scenes can share it."""
+    the 1920² texture (19 ms a scene).  A ``raw`` bitmap texture of an RGB variant (ours)
+    copies its bitmap's data and leaves the bitmap as it was (checked in Mitsuba 3.9), so
+    scenes can share it; a spectral variant's non-raw texture would convert it in place."""
     return mi.Bitmap(_board_texture(board))
 
 
