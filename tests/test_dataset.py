@@ -558,8 +558,9 @@ def test_a_spec_draws_several_beacons_each_whole(tmp_path):
 def three_beacons(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("ds3")
     out = tmp / "d"
-    res = run_dataset(2, 5, out, workers=1, spec_path=_spec_with(tmp, count=3),
-                      progress=False, nuisances=("pan", "scale"))
+    # three beacons by the parameter (a spec's beacon.count does the same: the draws' test)
+    res = run_dataset(2, 5, out, workers=1, spec_path=SPEC, beacons=3, progress=False,
+                      nuisances=("pan", "scale"))
     return out, res
 
 
@@ -605,11 +606,13 @@ def test_a_dataset_resumes_only_with_its_self_calibration(three_beacons, tmp_pat
     out, _ = three_beacons
     copy = tmp_path / "copy"
     shutil.copytree(out, copy)
-    spec = _spec_with(tmp_path, count=3)
     for nuisances in ((), ("pan",)):
         with pytest.raises(DatasetError, match="other self-calibration settings"):
-            run_dataset(3, 5, copy, workers=1, spec_path=spec, progress=False, resume=True,
-                        nuisances=nuisances)
+            run_dataset(3, 5, copy, workers=1, spec_path=SPEC, beacons=3, progress=False,
+                        resume=True, nuisances=nuisances)
+    with pytest.raises(DatasetError, match="other settings"):  # the beacon count is the spec's
+        run_dataset(3, 5, copy, workers=1, spec_path=SPEC, beacons=2, progress=False,
+                    resume=True, nuisances=("pan", "scale"))
 
 
 def test_a_row_of_the_older_layout_reads_as_one_plain_beacon():
@@ -652,4 +655,8 @@ def test_calibrate_needs_a_spec_whose_beacons_carry_it(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1
     assert "--calibrate" in err and "beacon.count" in err and str(SPEC) in err
+    assert not out.exists()
+    assert main(["dataset", "--n", "1", "--seed", "1", "--out", str(out), "--beacons", "5",
+                 "--quiet"]) == 2
+    assert "--beacons: 5 must be within 1..4" in capsys.readouterr().err
     assert not out.exists()

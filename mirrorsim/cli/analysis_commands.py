@@ -203,7 +203,10 @@ def _dataset_options(p):
                    help="files to write beside each frame besides its PNG, capture record "
                    "and truth: ids (the id labels), annotated (the detections drawn); "
                    "default none")
-    calibrate_option(p)  # needs a spec whose beacon.count carries the nuisances
+    p.add_argument("--beacons", type=int, metavar="N",
+                   help="beacons a scene, each drawn from the spec's beacon ranges and "
+                   "rendered in a frame of its own (default: the spec's beacon.count, 1)")
+    calibrate_option(p)  # needs --beacons (or a spec's beacon.count) that carries them
     common(p, scene=False, variant=True, quiet=True)
     p.add_argument("--resume", action="store_true",
                    help="finish an interrupted run, or extend one to a larger --n (the same "
@@ -242,7 +245,7 @@ def _dataset(args) -> int:
                           variant=args.variant, keep=tuple(args.keep), resume=args.resume,
                           executor=args.executor, scheduler=args.scheduler,
                           progress=not args.quiet, nuisances=nuisances,
-                          position_sigma=position_sigma)
+                          position_sigma=position_sigma, beacons=args.beacons)
     except DatasetError as exc:
         if not exc.resumable:
             raise

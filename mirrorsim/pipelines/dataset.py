@@ -240,13 +240,14 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
                 scheduler: str | None = None, progress: bool = True,
                 max_rss_mb: float = MAX_WORKER_RSS_MB,
                 error_model: ErrorModel | None = None, nuisances: tuple[str, ...] = (),
-                position_sigma: float = 0.0) -> DatasetRun:
+                position_sigma: float = 0.0, beacons: int | None = None) -> DatasetRun:
     """Make (or finish) a dataset of ``n`` scenes; return a summary.
 
     ``error_model`` gives each row's measurements their σ's (default: the model shipped
     for the ideal bench); a dataset is resumed only with the model it was started with.
     ``nuisances``, ``position_sigma``: each scene solved self-calibrated (its rows'
-    ``est_*`` columns), which needs the spec's ``beacon.count`` to carry them.
+    ``est_*`` columns), which needs the spec's ``beacon.count`` (or ``beacons``, which
+    replaces it) to carry them.
 
     Raises
     ------
@@ -266,11 +267,14 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
     spec = load_spec(spec_path)
     if sampler is not None:  # part of the spec, so that --resume checks it
         spec = spec.with_sampler(sampler)
+    if beacons is not None:  # likewise
+        spec = spec.with_beacon_count(beacons)
     try:  # before anything is written
         check_nuisances(nuisances, spec.beacon_count, 1)
     except SolverError as exc:
-        raise BadParameter("nuisances", f"{exc} (beacon.count is {spec.beacon_count} in "
-                           f"{spec_path or 'the default spec'})") from None
+        raise BadParameter("nuisances", f"{exc} (scenes of {spec.beacon_count} beacon(s) "
+                           f"drawn from {spec_path or 'the default spec'}: a spec's "
+                           "beacon.count, or the beacons parameter, draws more)") from None
     model = error_model or default_error_model()
     meta = {"format": DATASET_FORMAT, "n": n, "seed": seed, "spp": spp, "spec": spec.data,
             "error_model_sha256": hashlib.sha256(dumps(model.to_json()).encode()).hexdigest()}

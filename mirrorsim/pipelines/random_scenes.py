@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from mirrorsim.errors import RunFailed, SceneError
+from mirrorsim.errors import BadParameter, RunFailed, SceneError
 from mirrorsim.formats.dataset_table import MAX_BEACONS
 from mirrorsim.formats.reader import Reader, read_resolution, read_yaml, show
 from mirrorsim.formats.scenefile import (
@@ -73,6 +73,20 @@ class DatasetSpec:
         """The bench's calibration distance error (cm): a value or a range."""
         bench = self.data.get("bench") or {}
         return (bench.get("calibration") or {}).get("distance_error", 0.0)
+
+    def with_beacon_count(self, count: int) -> DatasetSpec:
+        """The spec with ``count`` beacons a scene (part of the spec, so that a resumed
+        dataset checks it).
+
+        Raises
+        ------
+        BadParameter
+            For a count outside 1..MAX_BEACONS.
+        """
+        if not 1 <= count <= MAX_BEACONS:
+            raise BadParameter("beacons", f"{count} must be within 1..{MAX_BEACONS}")
+        data = {**self.data, "beacon": {**self.data["beacon"], "count": count}}
+        return dataclasses.replace(self, data=data)
 
     def with_sampler(self, sampler: str) -> DatasetSpec:
         """The spec with its scenes rendered by ``sampler`` (part of the spec, so that a
