@@ -99,6 +99,16 @@ RESULTS: tuple[Result, ...] = (
             "--plot docs/reliability_bench.png"),
            about="a bench-fitted error model on 100 held-out bench scenes",
            fresh=("renders/bench_train", "renders/bench_test")),
+    Result("heldout_bench_3beacons",
+           (f"{MS} dataset --n 100 --seed 515151 --spec scenes/dataset_spec_bench.yaml "
+            "--out renders/bench_train3 --workers 2 --quiet",
+            f"{MS} dataset --n 60 --seed 929292 --spec scenes/dataset_spec_bench.yaml "
+            "--beacons 3 --calibrate pan,scale --beacon-sigma 0.115 "
+            "--out renders/bench3_test --workers 2 --quiet",
+            f"{MS} errormodel renders/bench_train3 --test renders/bench3_test"),
+           about="the bench-fitted model on 60 held-out benches of three random beacons, "
+                 "self-calibrated (about 12 min)",
+           fresh=("renders/bench_train3", "renders/bench3_test")),
     Result("particle", (f"{PY} benchmarks/particle.py",), markdown=True,
            about="the particle filter against the batch smoother, synthetic"),
     Result("track_paths", (f"{PY} benchmarks/track.py",), markdown=True,
