@@ -88,6 +88,12 @@ def test_reuse_and_several_beacons(tmp_path):
     assert all(f.reused for f in b.frames)
     assert a.errors == b.errors
     assert "first k beacons" in report_table(a)
+    # self-calibrated: each count says what it estimated (one beacon carries no nuisance)
+    s = evaluate_scene(scene.with_render(spp=8), tmp_path, progress=False,
+                       nuisances=("pan", "scale"))
+    assert s.errors.calibrated == ("pan", "scale") and a.errors.calibrated == ()
+    assert [r["calibrated"] for r in s.to_json()["error_vs_beacons"]] == [[], ["pan", "scale"]]
+    assert "2: " in report_table(s) and "(pan, scale)" in report_table(s)
     # a different seed is a different render
     c = evaluate_scene(scene.with_render(spp=8, seed=3), tmp_path, progress=False)
     assert not any(f.reused for f in c.frames)

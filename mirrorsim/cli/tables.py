@@ -170,7 +170,8 @@ def report_table(report: Report, report_scene: Scene | None = None) -> str:
                      f"(inside the 95 % ellipse below {chi2_2_radius(0.95):.2f}){bound}")
     if report.error_vs_beacons:
         lines.append("target error with the first k beacons: " + ", ".join(
-            f"{k + 1}: {r.target_cm:.3f} cm" for k, r in enumerate(report.error_vs_beacons)))
+            f"{k + 1}: {r.target_cm:.3f} cm ({', '.join(r.calibrated) or 'plain'})"
+            for k, r in enumerate(report.error_vs_beacons)))
     return "\n".join(lines)
 
 

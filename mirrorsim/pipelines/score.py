@@ -37,6 +37,8 @@ class Score:
     # √trace of the Cramér–Rao bound of the target at the true geometry for the
     # measurements' σ's: no unbiased estimate's RMS error is smaller
     target_crlb_cm: float | None = None
+    # the nuisances the scored solution estimated (solver.lsq.NUISANCES' names; none: plain)
+    calibrated: tuple[str, ...] = ()
 
     def to_json(self) -> dict:
         """docs/files.md's ``errors`` block."""
@@ -49,13 +51,14 @@ class Score:
                 "beacon_d_total_pct": list(self.beacon_d_total_pct),
                 "target_ellipse95_major_cm": self.target_ellipse95_major_cm,
                 "target_mahalanobis": self.target_mahalanobis,
-                "target_crlb_cm": self.target_crlb_cm}
+                "target_crlb_cm": self.target_crlb_cm, "calibrated": list(self.calibrated)}
 
     @classmethod
     def from_json(cls, d: dict) -> Score:
         """Inverse of :meth:`to_json`."""
         return cls(**{**d, "beacon_alpha_deg": tuple(d["beacon_alpha_deg"]),
-                      "beacon_d_total_pct": tuple(d["beacon_d_total_pct"])})
+                      "beacon_d_total_pct": tuple(d["beacon_d_total_pct"]),
+                      "calibrated": tuple(d.get("calibrated", ()))})
 
 
 def score(truth: GroundTruth, measurements: Measurements, sol: Solution) -> Score:
@@ -84,7 +87,13 @@ def score(truth: GroundTruth, measurements: Measurements, sol: Solution) -> Scor
         target_ellipse95_major_cm=None if ellipse is None else float(ellipse[0]),
         target_mahalanobis=sol.mahalanobis(t_true),
         target_crlb_cm=_crlb_cm(truth, measurements, sol),
+        calibrated=calibrated_of(sol),
     )
+
+
+def calibrated_of(sol: Solution) -> tuple[str, ...]:
+    """The nuisances (NUISANCES' names) a solution estimated."""
+    return tuple(n for n, (key, _) in NUISANCES.items() if key in sol.nuisances)
 
 
 def _crlb_cm(truth: GroundTruth, m: Measurements, sol: Solution) -> float | None:
@@ -95,7 +104,7 @@ def _crlb_cm(truth: GroundTruth, m: Measurements, sol: Solution) -> float | None
         return None
     yaw = truth.mirror_yaw_deg
     rho = float(line_normal(yaw) @ np.asarray(truth.target.reflection_point, float))
-    nuisances = tuple(n for n, (key, _) in NUISANCES.items() if key in sol.nuisances)
+    nuisances = calibrated_of(sol)
     try:
         bound = crlb(m.observer, [b.position for b in m.beacons], yaw, rho,
                      truth.target.position, m.sigma, len(m.targets), nuisances)
