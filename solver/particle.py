@@ -66,13 +66,24 @@ class MirrorEstimate:
 
 
 @dataclass(frozen=True)
+class FixedBeacon:
+    """A beacon that stands still at a known position beside the moving one, its image
+    observed once: (α_deg, d_total)."""
+
+    position: tuple[float, float]
+    observation: tuple[float, float]
+
+
+@dataclass(frozen=True)
 class Prior:
-    """What the filter starts from: the beacon's known start, and the uniform box of
-    mirror hypotheses."""
+    """What the filter starts from: the beacon's known start, the uniform box of mirror
+    hypotheses, and the fixed beacons' observations (each weighs every hypothesis once,
+    by its likelihood: a prior on the mirror before the moving beacon's first step)."""
 
     beacon_start: np.ndarray
     yaw_range: tuple[float, float]
     rho_range: tuple[float, float]
+    fixed: tuple[FixedBeacon, ...] = ()
 
     def contains(self, mirror: np.ndarray) -> np.ndarray:
         """Which of the (N, 2) hypotheses lie inside the box."""
@@ -137,14 +148,28 @@ def _advance(mirror: np.ndarray, mean: np.ndarray, cov: np.ndarray, control, obs
     return _update(mirror, mean, cov, observation, observer, params.sigma)
 
 
+def _fixed_loglik(mirror: np.ndarray, prior: Prior, observer, sigma: Sigma) -> np.ndarray:
+    """The fixed beacons' log likelihood of each hypothesis: each known position,
+    reflected in that mirror, against its observed virtual image (a Kalman update of a
+    beacon known exactly)."""
+    n = len(mirror)
+    loglik = np.zeros(n)
+    for f in prior.fixed:
+        known = np.tile(np.asarray(f.position, float), (n, 1))
+        loglik += _update(mirror, known, np.zeros((n, 2, 2)), f.observation,
+                          np.asarray(observer, float), sigma)[2]
+    return loglik
+
+
 def replay(mirror: np.ndarray, prior: Prior, history, observer, params: PFParams
            ) -> Particles:
     """The hypotheses ``mirror`` (N, 2) run through ``history`` ((control, observation or
-    None), …) from the prior's start: their beacons' Gaussians and log likelihoods."""
+    None), …) from the prior's start: their beacons' Gaussians and log likelihoods (the
+    fixed beacons' included)."""
     n = len(mirror)
     mean = np.tile(np.asarray(prior.beacon_start, float), (n, 1))
     cov = np.tile(params.sigma_trs**2 * np.eye(2), (n, 1, 1))
-    loglik = np.zeros(n)
+    loglik = _fixed_loglik(mirror, prior, observer, params.sigma)
     for control, observation in history:
         mean, cov, logl = _advance(mirror, mean, cov, control, observation, observer, params)
         if logl is not None:
@@ -168,23 +193,29 @@ def pf_step(particles: Particles, weights: np.ndarray, control: np.ndarray,
     history : the steps before this one, ((control, observation), …), which the move
         step replays
     """
-    n = len(weights)
     mean, cov, logl = _advance(particles.mirror, particles.beacon, particles.cov, control,
                                observation, observer, params)
     if logl is None:
         return Particles(particles.mirror, mean, cov, particles.loglik), weights
-    logw = np.log(np.maximum(weights, 1e-300)) + logl
+    return _reweigh(Particles(particles.mirror, mean, cov, particles.loglik + logl),
+                    np.log(np.maximum(weights, 1e-300)) + logl, prior,
+                    (*history, (control, observation)), observer, params, rng)
+
+
+def _reweigh(p: Particles, logw: np.ndarray, prior: Prior, history, observer,
+             params: PFParams, rng: np.random.Generator) -> tuple[Particles, np.ndarray]:
+    """The hypotheses weighted by ``logw``, resampled and moved (by the likelihood of
+    ``history``) when their effective size falls below half."""
+    n = len(logw)
     if not np.isfinite(logw).any():
         logw = np.zeros(n)
     w = np.exp(logw - logw.max())
     w /= w.sum()
-    out = Particles(particles.mirror, mean, cov, particles.loglik + logl)
     ess = 1.0 / np.sum(w**2)
     if ess < n / 2:
-        out = _move(_resample(out, w, rng), prior, (*history, (control, observation)),
-                    observer, params, rng, ess)
+        p = _move(_resample(p, w, rng), prior, history, observer, params, rng, ess)
         w = np.full(n, 1.0 / n)
-    return out, w
+    return p, w
 
 
 def _resample(p: Particles, w: np.ndarray, rng: np.random.Generator,
@@ -296,13 +327,14 @@ def _move(p: Particles, prior: Prior, history, observer, params: PFParams,
     return p
 
 
-def initial_particles(prior: Prior, n: int, params: PFParams, rng: np.random.Generator
-                      ) -> Particles:
+def initial_particles(prior: Prior, n: int, params: PFParams, rng: np.random.Generator,
+                      observer=None) -> Particles:
     """The mirror drawn from the prior's uniform box; the beacon at its known start (to
-    σ_trs)."""
+    σ_trs); each hypothesis' log likelihood of the fixed beacons (they need the
+    ``observer``)."""
     mirror = np.column_stack([rng.uniform(*prior.yaw_range, n),
                               rng.uniform(*prior.rho_range, n)])
-    return replay(mirror, prior, (), None, params)
+    return replay(mirror, prior, (), observer, params)
 
 
 class MovingBeaconFilter:
@@ -310,14 +342,20 @@ class MovingBeaconFilter:
     history that the move step replays."""
 
     def __init__(self, observer, beacon_start, yaw_range, rho_range, n: int = 4000,
-                 params: PFParams | None = None, rng: int | np.random.Generator | None = 0):
+                 params: PFParams | None = None, rng: int | np.random.Generator | None = 0,
+                 fixed: tuple[FixedBeacon, ...] = ()):
         self.observer = np.asarray(observer, float)
         self.params = params or PFParams()
         self.rng = np.random.default_rng(rng)
-        self.prior = Prior(np.asarray(beacon_start, float), tuple(yaw_range), tuple(rho_range))
-        self.particles = initial_particles(self.prior, n, self.params, self.rng)
+        self.prior = Prior(np.asarray(beacon_start, float), tuple(yaw_range), tuple(rho_range),
+                           tuple(fixed))
+        self.particles = initial_particles(self.prior, n, self.params, self.rng, observer)
         self.weights = np.full(n, 1.0 / n)
         self.history: tuple = ()
+        if fixed:  # the uniform draws weighed by the fixed beacons, as any observation
+            self.particles, self.weights = _reweigh(
+                self.particles, self.particles.loglik.copy(), self.prior, (), self.observer,
+                self.params, self.rng)
 
     def step(self, control, observation) -> None:
         """Move by ``control`` and weigh by ``observation`` (α, d_total; None: unseen)."""
@@ -392,9 +430,11 @@ def simulate_run(observer, mirror_point, mirror_yaw_deg: float, path: np.ndarray
 
 
 def track(observer, beacon_start, controls, observations, yaw_range, rho_range,
-          n: int = 4000, params: PFParams | None = None, rng=0) -> list[MirrorEstimate]:
-    """Run the filter over a whole run; the estimate after each step."""
-    f = MovingBeaconFilter(observer, beacon_start, yaw_range, rho_range, n, params, rng)
+          n: int = 4000, params: PFParams | None = None, rng=0,
+          fixed: tuple[FixedBeacon, ...] = ()) -> list[MirrorEstimate]:
+    """Run the filter over a whole run (beside the ``fixed`` beacons); the estimate after
+    each step."""
+    f = MovingBeaconFilter(observer, beacon_start, yaw_range, rho_range, n, params, rng, fixed)
     out = []
     for c, z in zip(controls, observations, strict=True):
         f.step(c, z)
@@ -412,5 +452,5 @@ def mirror_errors(estimates: list[MirrorEstimate], mirror_point, mirror_yaw_deg:
     return yaw_err, off
 
 
-__all__ = ["PFParams", "Prior", "MirrorEstimate", "pf_step", "replay", "MovingBeaconFilter",
-           "simulate_run", "track", "mirror_errors", "initial_particles"]
+__all__ = ["PFParams", "Prior", "FixedBeacon", "MirrorEstimate", "pf_step", "replay",
+           "MovingBeaconFilter", "simulate_run", "track", "mirror_errors", "initial_particles"]

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from solver.geometry import line_normal, wrap_bearing
-from solver.particle import PFParams
+from solver.particle import FixedBeacon, PFParams
 from solver.sltr import observe
 
 
@@ -24,25 +24,31 @@ class SmoothedRun:
 
 
 def smooth_run(observer, start, controls: np.ndarray, observations: np.ndarray,
-               params: PFParams, yaw_deg: float, rho: float, beacons: np.ndarray
-               ) -> SmoothedRun:
+               params: PFParams, yaw_deg: float, rho: float, beacons: np.ndarray,
+               fixed: tuple[FixedBeacon, ...] = ()) -> SmoothedRun:
     """Least squares over the odometry (σ_trs per move, the start as believed) and every
-    observation (α, d_total with ``params.sigma``), from the start point (``yaw_deg``,
-    ``rho``, ``beacons``): it finds the optimum nearest that point."""
+    observation (α, d_total with ``params.sigma``) of the moving beacon and of the
+    ``fixed`` ones, from the start point (``yaw_deg``, ``rho``, ``beacons``): it finds the
+    optimum nearest that point."""
     from scipy.optimize import least_squares  # scipy is slow to import: only when used
 
     k, s = len(controls), params.sigma
     obs = np.asarray(observations, float)
     o = np.asarray(observer, float)
+    known = np.array([f.position for f in fixed], float).reshape(-1, 2)
+    obs_fixed = np.array([f.observation for f in fixed], float).reshape(-1, 2)
 
     def residuals(x):
         b = x[2:].reshape(k + 1, 2)
-        seen = observe(o, x[1] * line_normal(x[0]), x[0], b[1:], strict=False)
+        seen = observe(o, x[1] * line_normal(x[0]), x[0], np.vstack([b[1:], known]),
+                       strict=False)
+        alpha, d = np.asarray(seen.alpha_deg), np.asarray(seen.d_total)
+        z = np.vstack([obs, obs_fixed])
         return np.concatenate([
             (b[0] - start) / params.sigma_trs,
             ((b[1:] - b[:-1] - controls) / params.sigma_trs).ravel(),
-            wrap_bearing(np.asarray(seen.alpha_deg) - obs[:, 0]) / s.alpha_deg,
-            (np.asarray(seen.d_total) - obs[:, 1]) / (s.d_total_rel * obs[:, 1])])
+            wrap_bearing(alpha - z[:, 0]) / s.alpha_deg,
+            (d - z[:, 1]) / (s.d_total_rel * z[:, 1])])
 
     x = least_squares(residuals, np.r_[yaw_deg, rho, np.asarray(beacons, float).ravel()]).x
     return SmoothedRun(float(x[0]), float(x[1]), x[2:].reshape(k + 1, 2))

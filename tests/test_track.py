@@ -182,3 +182,27 @@ def test_the_path_does_not_read_the_scene_s_mirror_or_target():
                     target=replace(scene.target, position=(60.0, 40.0), facing_deg=10.0))
     assert np.array_equal(beacon_path(scene, obs, tobs, "rectangular", 12, 4.0, 1.0),
                           beacon_path(moved, obs, tobs, "rectangular", 12, 4.0, 1.0))
+
+
+def test_fixed_beacons_beside_the_moving_one(tmp_path):
+    """A second beacon stands still: rendered alone once, its image measured where the
+    mirror puts it, and weighed into the filter from the first pose (a narrower cloud
+    than the moving beacon's alone); the report and the table name it."""
+    from dataclasses import replace
+
+    from mirrorsim.cli.tables import track_table
+    from mirrorsim.scene.model import Beacon
+    from mirrorsim.truth import optics
+
+    scene = small_scene("exp1", 960, 544, spp=8)
+    still = Beacon((26.0, 60.5), scene.beacons[0].height)
+    two = replace(scene, beacons=(scene.beacons[0], still))
+    alone = run_track(scene, tmp_path / "a", kind="fixed", steps=1, seed=2)
+    both = run_track(two, tmp_path / "b", kind="fixed", steps=1, seed=2)
+    assert [f.position for f in both.fixed] == [still.position]
+    image = optics.mirror_image(scene.camera.position, scene.mirror, still.position)
+    assert abs(both.fixed[0].observation[0] - image.alpha_deg) < 0.05
+    assert abs(both.fixed[0].observation[1] / image.d_total - 1) < 0.02
+    assert both.steps[0].yaw_spread_deg < 0.5 * alone.steps[0].yaw_spread_deg
+    assert both.to_json()["fixed_beacons"][0]["known_position"] == list(still.position)
+    assert "1 fixed beacon(s) beside it" in track_table(both)

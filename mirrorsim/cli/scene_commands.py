@@ -340,6 +340,8 @@ def _track_options(p):
          "commanded moves; the true one also carries --odometry-sigma of noise per move), "
          "and a particle filter estimates the mirror, then the target, step by step.  Poses "
          "where the beacon's mirror image is not found are recorded as unseen and skipped.  "
+         "The scene's other beacons stand still beside it: each is rendered alone and "
+         "measured once, and weighs the filter's mirror from the start.  "
          "Prints a table per step; writes DIR/track.json, DIR/track.png (errors against the "
          "step) and DIR/track.gif (the top view with the filter's mirror lines), the frames "
          "in DIR/poses/.", _track_options)
@@ -348,7 +350,7 @@ def _track(args) -> int:
     from mirrorsim.cli.registry import at_least
     from mirrorsim.cli.tables import track_table
     from mirrorsim.formats.files import write_json
-    from mirrorsim.pipelines.track import check_one_beacon, check_options, run_track
+    from mirrorsim.pipelines.track import check_options, run_track
 
     # before the scene is read (run_track checks again, for callers other than the CLI)
     check_options(args.path, args.steps, args.odometry_sigma, args.side, args.step,
@@ -359,7 +361,6 @@ def _track(args) -> int:
         scene = scene.with_render(spp=args.spp)
     check_options(args.path, args.steps, args.odometry_sigma, args.side, args.step,
                   args.heading, scene.board.size)  # side and step within the board
-    check_one_beacon(scene, args.scene)
     out = out_folder(args, scene, "track")
     from tqdm import tqdm
 

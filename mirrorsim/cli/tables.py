@@ -314,7 +314,9 @@ def track_table(report: TrackReport) -> str:
     seen = sum(s.seen for s in report.steps)
     return "\n".join([f"{report.scene}: {report.path} path (heading {report.heading}), "
                       f"{len(report.steps)} poses "
-                      f"({seen} seen), odometry σ {report.odometry_sigma:g} cm", *_columns(rows),
+                      f"({seen} seen), odometry σ {report.odometry_sigma:g} cm"
+                      + (f"; {len(report.fixed)} fixed beacon(s) beside it" if report.fixed
+                         else ""), *_columns(rows),
                       f"final: target ({f.target[0]:.2f}, {f.target[1]:.2f}), error "
                       f"{f.target_error_cm:.2f} cm; mirror yaw error "
                       f"{f.mirror_yaw_error_deg:.3f}°, offset error "

@@ -13,7 +13,9 @@ detected from its capture record (which holds the believed position), and fed to
 Rao-Blackwellized particle filter (:mod:`solver.particle`); a pose where the detector
 finds no usable mirror image of the beacon is recorded as unseen and the filter only
 predicts, as a real robot would.  The target, which does not move, is measured in every
-frame; its estimate is its mean measurement reflected in the filter's mirror.
+frame; its estimate is its mean measurement reflected in the filter's mirror.  The
+scene's other beacons stand still beside the moving one: each is rendered alone and
+measured once, and its likelihood weighs every mirror hypothesis from the start.
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ import numpy as np
 
 from mirrorsim.detection.detector import Detection
 from mirrorsim.detection.image_geometry import Calibration
-from mirrorsim.errors import BadParameter, DetectionError, SceneError
+from mirrorsim.errors import BadParameter, DetectionError
 from mirrorsim.formats.error_model import ErrorModel, default_error_model
 from mirrorsim.pipelines.frame import FrameNotMeasured, render_and_measure
 from mirrorsim.scene.model import Bench, Scene
@@ -35,7 +37,7 @@ from mirrorsim.truth.visibility import visibility
 from solver.errors import SolverError
 from solver.geometry import bearing_deg, line_normal, wrap_bearing
 from solver.lsq import Sigma
-from solver.particle import MovingBeaconFilter, PFParams, mirror_errors
+from solver.particle import FixedBeacon, MovingBeaconFilter, PFParams, mirror_errors
 from solver.placement import path_points
 from solver.sltr import locate, mirror_from_beacon, observe, ray_hits_line
 
@@ -92,6 +94,9 @@ class TrackReport:
     seed: int
     steps: tuple[TrackStep, ...]
     snapshots: tuple[np.ndarray, ...] = field(default=(), repr=False)
+    # the beacons that stood still beside the moving one: believed position and the
+    # observation (α_deg, d_total) the filter weighed once
+    fixed: tuple[FixedBeacon, ...] = ()
 
     @property
     def final(self) -> TrackStep:
@@ -104,6 +109,9 @@ class TrackReport:
         return {"scene": self.scene, "path": self.path, "heading": self.heading,
                 "odometry_sigma_cm": self.odometry_sigma,
                 "seed": self.seed, "steps": [s.to_json() for s in self.steps],
+                "fixed_beacons": [{"known_position": list(b.position),
+                                   "alpha_deg": b.observation[0], "d_total": b.observation[1]}
+                                  for b in self.fixed],
                 "final": {"target": list(f.target),
                           "mirror_yaw_error_deg": f.mirror_yaw_error_deg,
                           "mirror_offset_error_cm": f.mirror_offset_error_cm,
@@ -216,17 +224,6 @@ def check_options(kind: str, steps: int, sigma: float, side: float, step: float,
 FILTER_SIGMA_FLOOR = Sigma(alpha_deg=0.005, d_total_rel=0.006)
 
 
-def check_one_beacon(scene: Scene, source: str | Path | None = None) -> None:
-    """Refuse a scene of several beacons (``source``: its file, for the message): the
-    filter follows one moving beacon and cannot yet use fixed ones beside it, and
-    dropping them silently would mislead."""
-    if len(scene.beacons) > 1:
-        raise SceneError(source or scene.name, "beacons",
-                         f"{len(scene.beacons)} beacons: the moving-beacon filter follows one "
-                         "and cannot yet use fixed beacons beside it; give a scene with one "
-                         "beacon")
-
-
 def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps: int = 20,
               odometry_sigma: float = 0.1, seed: int = 0, side: float = 4.0,
               step: float = 1.0, heading: str = "view",
@@ -243,10 +240,14 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
     BadParameter
         For bad options.
     DetectionError
-        If the beacon or the target is not measured at the start pose (no prior, no path).
+        If the beacon or the target is not measured at the start pose (no prior, no path),
+        or a fixed beacon's image is not measured.
+
+    The scene's first beacon moves; any others stand still beside it, each rendered and
+    measured once (in a frame of its own, ``fixed<i>``) and weighed into the filter's
+    prior on the mirror (:class:`solver.particle.FixedBeacon`).
     """
     check_options(kind, steps, odometry_sigma, side, step, heading, scene.board.size)
-    check_one_beacon(scene)
     out = Path(out)
     rng = np.random.default_rng(seed)
     b0, cam = scene.beacons[0], scene.camera
@@ -265,9 +266,10 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
     if obs is None or target_obs is None:
         raise DetectionError(f"{scene.name}: the start pose gives the filter no prior and "
                              f"the path no heading: {why or 'the target was not measured'}")
+    fixed = tuple(pose.fixed(i) for i in range(1, len(scene.beacons)))
     try:
         commanded = beacon_path(scene, obs, target_obs, kind, steps, side, step, heading)
-        pf = _start_filter(cam.position, start, obs, params, particles, seed)
+        pf = _start_filter(cam.position, start, obs, params, particles, seed, fixed)
     except SolverError as exc:
         raise DetectionError(f"{scene.name}: the start pose's measurements give no mirror "
                              f"({exc})") from None
@@ -289,7 +291,7 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
         snapshots.append(_snapshot(pf, rng))
     return TrackReport(scene=scene.name, path=kind, heading=heading,
                        odometry_sigma=odometry_sigma, seed=seed, steps=tuple(records),
-                       snapshots=tuple(snapshots))
+                       snapshots=tuple(snapshots), fixed=fixed)
 
 
 class _Poses:
@@ -320,6 +322,29 @@ class _Poses:
             return None, None, exc.reason
         self.calibration = m.calibration
         return _observations(m.detection)
+
+    def fixed(self, i: int) -> FixedBeacon:
+        """The scene's beacon i, standing still: rendered alone once, its image measured
+        (at its believed position for the filter).
+
+        Raises
+        ------
+        DetectionError
+            If its image is not measured: a beacon dropped silently would mislead.
+        """
+        b = self.scene.beacons[i]
+        alone = replace(self.scene, name=f"{self.scene.name}_fixed{i}", beacons=(b,))
+        try:
+            m = render_and_measure(alone.with_render(seed=self.seed * 1000 + 999 - i),
+                                   self.out, variant=self.variant, progress=False,
+                                   reuse=True, ids=False, calibration=self.calibration)
+        except FrameNotMeasured as exc:
+            raise DetectionError(f"{self.scene.name}: fixed beacon {i}: {exc.reason}") from None
+        self.calibration = m.calibration
+        obs, _, why = _observations(m.detection)
+        if obs is None:
+            raise DetectionError(f"{self.scene.name}: fixed beacon {i}: {why}")
+        return FixedBeacon(tuple(map(float, b.believed)), obs)
 
 
 def _true_path(start: np.ndarray, moves: np.ndarray, sigma: float,
@@ -362,16 +387,17 @@ def _observations(det: Detection
     return (m.alpha_deg, m.d_total), target, ""
 
 
-def _start_filter(observer, start, obs, params: PFParams, n: int, seed: int
-                  ) -> MovingBeaconFilter:
+def _start_filter(observer, start, obs, params: PFParams, n: int, seed: int,
+                  fixed: tuple[FixedBeacon, ...] = ()) -> MovingBeaconFilter:
     """The filter with its prior centred on the mirror the first pose's beacon gives
-    (the perpendicular bisector of the beacon and its image)."""
+    (the perpendicular bisector of the beacon and its image), weighed by the fixed
+    beacons."""
     yaw, mid, _ = mirror_from_beacon(observer, start, *obs)
     yaw = float(yaw)
     rho = float(line_normal(yaw) @ mid)
     return MovingBeaconFilter(observer, start, (yaw - PRIOR_YAW_DEG, yaw + PRIOR_YAW_DEG),
                               (rho - PRIOR_OFFSET_CM, rho + PRIOR_OFFSET_CM), n=n,
-                              params=params, rng=seed)
+                              params=params, rng=seed, fixed=fixed)
 
 
 def _snapshot(pf: MovingBeaconFilter, rng: np.random.Generator, keep: int = 400) -> np.ndarray:
