@@ -67,11 +67,14 @@ class MirrorEstimate:
 
 @dataclass(frozen=True)
 class FixedBeacon:
-    """A beacon that stands still at a known position beside the moving one, its image
-    observed once: (α_deg, d_total)."""
+    """A beacon that stands still beside the moving one, its image observed once:
+    (α_deg, d_total); its believed ``position`` known to ``position_sigma`` cm per axis
+    (0: exactly).  A believed position off by more than its σ pins the mirror wrong: a
+    virtual image's σ across the line of sight is ~0.01 cm at the detector's σ's."""
 
     position: tuple[float, float]
     observation: tuple[float, float]
+    position_sigma: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -149,15 +152,18 @@ def _advance(mirror: np.ndarray, mean: np.ndarray, cov: np.ndarray, control, obs
 
 
 def _fixed_loglik(mirror: np.ndarray, prior: Prior, observer, sigma: Sigma) -> np.ndarray:
-    """The fixed beacons' log likelihood of each hypothesis: each known position,
+    """The fixed beacons' log likelihood of each hypothesis: each believed position,
     reflected in that mirror, against its observed virtual image (a Kalman update of a
-    beacon known exactly)."""
+    beacon known to its position σ)."""
     n = len(mirror)
     loglik = np.zeros(n)
+    if prior.fixed and observer is None:
+        raise ValueError("fixed beacons need the observer: their images are seen from it")
     for f in prior.fixed:
         known = np.tile(np.asarray(f.position, float), (n, 1))
-        loglik += _update(mirror, known, np.zeros((n, 2, 2)), f.observation,
-                          np.asarray(observer, float), sigma)[2]
+        cov = np.tile(f.position_sigma**2 * np.eye(2), (n, 1, 1))
+        loglik += _update(mirror, known, cov, f.observation, np.asarray(observer, float),
+                          sigma)[2]
     return loglik
 
 
@@ -331,7 +337,7 @@ def initial_particles(prior: Prior, n: int, params: PFParams, rng: np.random.Gen
                       observer=None) -> Particles:
     """The mirror drawn from the prior's uniform box; the beacon at its known start (to
     σ_trs); each hypothesis' log likelihood of the fixed beacons (they need the
-    ``observer``)."""
+    ``observer``), which :class:`MovingBeaconFilter` then weighs the draws by."""
     mirror = np.column_stack([rng.uniform(*prior.yaw_range, n),
                               rng.uniform(*prior.rho_range, n)])
     return replay(mirror, prior, (), observer, params)

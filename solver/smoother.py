@@ -37,18 +37,25 @@ def smooth_run(observer, start, controls: np.ndarray, observations: np.ndarray,
     o = np.asarray(observer, float)
     known = np.array([f.position for f in fixed], float).reshape(-1, 2)
     obs_fixed = np.array([f.observation for f in fixed], float).reshape(-1, 2)
+    # a fixed beacon known to a σ is a parameter with that prior, as in the filter
+    free = np.array([f.position_sigma > 0 for f in fixed], bool)
+    sd = np.array([f.position_sigma for f in fixed], float)[free]
+    z = np.vstack([obs, obs_fixed])
 
     def residuals(x):
-        b = x[2:].reshape(k + 1, 2)
-        seen = observe(o, x[1] * line_normal(x[0]), x[0], np.vstack([b[1:], known]),
+        b = x[2:2 + 2 * (k + 1)].reshape(k + 1, 2)
+        at = known.copy()
+        at[free] = x[2 + 2 * (k + 1):].reshape(-1, 2)
+        seen = observe(o, x[1] * line_normal(x[0]), x[0], np.vstack([b[1:], at]),
                        strict=False)
         alpha, d = np.asarray(seen.alpha_deg), np.asarray(seen.d_total)
-        z = np.vstack([obs, obs_fixed])
         return np.concatenate([
             (b[0] - start) / params.sigma_trs,
             ((b[1:] - b[:-1] - controls) / params.sigma_trs).ravel(),
+            ((at[free] - known[free]) / sd[:, None]).ravel(),
             wrap_bearing(alpha - z[:, 0]) / s.alpha_deg,
             (d - z[:, 1]) / (s.d_total_rel * z[:, 1])])
 
-    x = least_squares(residuals, np.r_[yaw_deg, rho, np.asarray(beacons, float).ravel()]).x
-    return SmoothedRun(float(x[0]), float(x[1]), x[2:].reshape(k + 1, 2))
+    x = least_squares(residuals, np.r_[yaw_deg, rho, np.asarray(beacons, float).ravel(),
+                                       known[free].ravel()]).x
+    return SmoothedRun(float(x[0]), float(x[1]), x[2:2 + 2 * (k + 1)].reshape(k + 1, 2))

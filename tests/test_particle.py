@@ -210,3 +210,29 @@ def test_fixed_beacons_weigh_the_mirror_as_the_smoother_does():
         batch.append(abs(run.yaw_deg - YAW))
     assert np.median(with_fixed) <= np.median(batch) + 0.1
     assert np.median(with_fixed) < np.median(without)
+
+
+def test_a_fixed_beacon_s_believed_position_is_weighed_with_its_sigma():
+    """Fixed beacons believed 0.2 cm (per axis) from where they stand: taken as exact,
+    the filter's mirror is confidently wrong (the true mirror's NEES, 2 on average for
+    an honest filter, above 30); known to 0.115 cm (the σ of ±0.2 cm offsets), the NEES
+    is below χ²₂'s 99.75 % point (12), and the filter's start is the smoother's with
+    the same prior on the positions."""
+    from solver.particle import FixedBeacon
+
+    params = PFParams(sigma=replace(PFParams().sigma, alpha_deg=0.005, d_total_rel=0.006))
+    rho = line_normal(YAW) @ M
+    box = (YAW - 15, YAW + 15), (rho - 8, rho + 8)
+    exact = _fixed_beacons(PFParams(sigma=replace(params.sigma, alpha_deg=1e-9,
+                                                  d_total_rel=1e-9)), np.random.default_rng(0))
+    start = np.array([30.0, 60.0])
+    for sd, ok in ((0.0, False), (0.115, True)):
+        off = tuple(FixedBeacon((b.position[0] + s * 0.2, b.position[1] - s * 0.2),
+                                b.observation, sd) for b, s in zip(exact, (1, -1), strict=True))
+        f = MovingBeaconFilter(OBS, start, *box, n=4000, params=params, rng=3, fixed=off)
+        e, nees = f.estimate(), f.nees(M, YAW)
+        assert (nees < 12) == ok and (nees > 30) != ok, (sd, nees, e)
+        if ok:
+            batch = smooth_run(OBS, start, np.zeros((0, 2)), np.zeros((0, 2)), params, YAW,
+                               rho, start[None], off)
+            assert abs(e.yaw_deg - batch.yaw_deg) < 0.2 * e.yaw_sd_deg

@@ -125,11 +125,6 @@ def test_commands_refuse_self_calibration_they_cannot_do(tmp_path, capsys):
         err = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("error:")]
         assert len(err) == 1 and "--calibrate" in err[0], err
     assert not (tmp_path / "e").exists() and not (tmp_path / "b").exists()
-    # the moving-beacon filter cannot use several beacons: refused, not the first taken
-    assert main(["track", str(SCENES / "bench" / "exp1_3beacons.yaml"), "--out",
-                 str(tmp_path / "t")]) == 2
-    assert "3 beacons" in capsys.readouterr().err
-    assert not (tmp_path / "t").exists()
 
 
 def _flat_reflection_points(pts) -> np.ndarray:

@@ -195,14 +195,41 @@ def test_fixed_beacons_beside_the_moving_one(tmp_path):
     from mirrorsim.truth import optics
 
     scene = small_scene("exp1", 960, 544, spp=8)
-    still = Beacon((26.0, 60.5), scene.beacons[0].height)
-    two = replace(scene, beacons=(scene.beacons[0], still))
+    h = scene.beacons[0].height
+    # the second as tall as the moving one, the third shorter: it takes its own
+    # calibration (a pencil's constant is of its height)
+    still = (Beacon((26.0, 60.5), h), Beacon((25.0, 61.0), 0.8 * h))
+    three = replace(scene, beacons=(scene.beacons[0], *still))
     alone = run_track(scene, tmp_path / "a", kind="fixed", steps=1, seed=2)
-    both = run_track(two, tmp_path / "b", kind="fixed", steps=1, seed=2)
-    assert [f.position for f in both.fixed] == [still.position]
-    image = optics.mirror_image(scene.camera.position, scene.mirror, still.position)
-    assert abs(both.fixed[0].observation[0] - image.alpha_deg) < 0.05
-    assert abs(both.fixed[0].observation[1] / image.d_total - 1) < 0.02
+    both = run_track(three, tmp_path / "b", kind="fixed", steps=1, seed=2)
+    assert [f.position for f in both.fixed] == [b.position for b in still]
+    for f, b in zip(both.fixed, still, strict=True):
+        image = optics.mirror_image(scene.camera.position, scene.mirror, b.position)
+        assert abs(f.observation[0] - image.alpha_deg) < 0.05
+        assert abs(f.observation[1] / image.d_total - 1) < 0.02
     assert both.steps[0].yaw_spread_deg < 0.5 * alone.steps[0].yaw_spread_deg
-    assert both.to_json()["fixed_beacons"][0]["known_position"] == list(still.position)
-    assert "1 fixed beacon(s) beside it" in track_table(both)
+    assert both.to_json()["fixed_beacons"][0]["known_position"] == list(still[0].position)
+    assert "2 fixed beacon(s) beside it" in track_table(both)
+
+
+def test_the_path_keeps_clear_of_fixed_beacons():
+    """A fixed beacon standing on the path the moving one would take: the path chosen
+    passes no nearer than two pencils and half a centimetre."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    from mirrorsim.formats.scenefile import load_scene
+    from mirrorsim.pipelines.track import beacon_path
+    from mirrorsim.scene.model import Beacon
+    from mirrorsim.truth.groundtruth import ground_truth
+
+    scene = load_scene(SCENES / "exp1.yaml")
+    gt = ground_truth(scene)
+    obs = (gt.beacons[0].alpha_deg, gt.beacons[0].d_total)
+    tobs = (gt.target.alpha_deg, gt.target.d_total)
+    free = beacon_path(scene, obs, tobs, "rectangular", 12, 4.0, 1.0)
+    blocker = Beacon(tuple(free[6]), scene.beacons[0].height)
+    path = beacon_path(replace(scene, beacons=(scene.beacons[0], blocker)), obs, tobs,
+                       "rectangular", 12, 4.0, 1.0)
+    assert np.min(np.linalg.norm(path - free[6], axis=1)) >= 2 * 0.4 + 0.5

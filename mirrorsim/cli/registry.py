@@ -189,10 +189,15 @@ def calibrate_option(p: argparse.ArgumentParser) -> None:
                    "every alpha (the mount's pan reading); scale, a factor on every d_total "
                    "(the calibration); power, the mirror's curvature 1/R, which moves each "
                    "image by its own amount; comma-separated")
+    beacon_sigma_option(p, "each beacon's offset is then estimated with that prior, and the "
+                        "ellipse includes it")
+
+
+def beacon_sigma_option(p: argparse.ArgumentParser, what: str) -> None:
+    """``--beacon-sigma CM``: how well the beacons' believed positions are known."""
     p.add_argument("--beacon-sigma", type=float, default=0.0, metavar="CM",
                    help="how well each beacon's position is known, cm per axis (default 0: "
-                   "exactly); each beacon's offset is then estimated with that prior, and the "
-                   "ellipse includes it (positions read off a pegboard by hand: ~0.1)")
+                   f"exactly); {what} (positions read off a pegboard by hand: ~0.1)")
 
 
 def beacon_sigma_of(args: argparse.Namespace) -> float:

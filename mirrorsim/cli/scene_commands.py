@@ -7,6 +7,7 @@ from pathlib import Path
 
 from mirrorsim.cli.registry import (
     beacon_sigma_of,
+    beacon_sigma_option,
     calibrate_option,
     command,
     common,
@@ -323,6 +324,8 @@ def _track_options(p):
     p.add_argument("--odometry-sigma", type=float, default=0.1, metavar="CM",
                    help="the beacon's motion error per move and axis, cm, 0.."
                         f"{MAX_ODOMETRY_SIGMA:g} (default 0.1)")
+    beacon_sigma_option(p, "the fixed beacons (the scene's beacons after the first, "
+                        "which stand still) weigh the filter's mirror with that σ")
     p.add_argument("--seed", type=int, default=0,
                    help="seeds the odometry noise, the filter and the renders (default 0)")
     p.add_argument("--side", type=float, default=4.0, metavar="CM",
@@ -371,7 +374,8 @@ def _track(args) -> int:
                            odometry_sigma=args.odometry_sigma, seed=args.seed, side=args.side,
                            step=args.step, heading=args.heading, variant=args.variant,
                            on_pose=lambda k, _n: bar.update(k - bar.n),  # pose k begins
-                           error_model=error_model_of(args))
+                           error_model=error_model_of(args),
+                           position_sigma=beacon_sigma_of(args))
         bar.update(bar.total - bar.n)
     print(track_table(report))
     path = write_json(out / "track.json", report.to_json())

@@ -31,7 +31,7 @@ from mirrorsim.detection.image_geometry import Calibration
 from mirrorsim.errors import BadParameter, DetectionError
 from mirrorsim.formats.error_model import ErrorModel, default_error_model
 from mirrorsim.pipelines.frame import FrameNotMeasured, render_and_measure
-from mirrorsim.scene.model import Bench, Scene
+from mirrorsim.scene.model import PENCIL_RADIUS, Bench, Scene
 from mirrorsim.truth.optics import target_facing
 from mirrorsim.truth.visibility import visibility
 from solver.errors import SolverError
@@ -47,6 +47,9 @@ PRIOR_YAW_DEG, PRIOR_OFFSET_CM = 15.0, 8.0
 MAX_STEPS = 500
 MAX_ODOMETRY_SIGMA = 10.0  # cm per move: a robot that errs more than this is not driving
 CLEARANCE_CM = 1.0  # the path's least distance in front of the start's mirror line
+# the path's least distance from a fixed beacon's believed position: two pencils apart,
+# with half a centimetre between them
+FIXED_CLEARANCE_CM = 2 * PENCIL_RADIUS + 0.5
 
 
 @dataclass(frozen=True)
@@ -110,6 +113,7 @@ class TrackReport:
                 "odometry_sigma_cm": self.odometry_sigma,
                 "seed": self.seed, "steps": [s.to_json() for s in self.steps],
                 "fixed_beacons": [{"known_position": list(b.position),
+                                   "position_sigma_cm": b.position_sigma,
                                    "alpha_deg": b.observation[0], "d_total": b.observation[1]}
                                   for b in self.fixed],
                 "final": {"target": list(f.target),
@@ -165,7 +169,9 @@ def beacon_path(scene: Scene, first_obs: tuple[float, float],
                               steps // 2 + 2)
             pts = (pts - pts[0] + s0)[: steps + 1]
             allowed = (bool(np.all((pts >= 0) & (pts <= size)))
-                       and float(np.min((pts - mid) @ front)) >= CLEARANCE_CM)
+                       and float(np.min((pts - mid) @ front)) >= CLEARANCE_CM
+                       and all(np.min(np.linalg.norm(pts - np.asarray(b.believed), axis=1))
+                               >= FIXED_CLEARANCE_CM for b in scene.beacons[1:]))
             seen = sum(_seen_in(believed, replace(b0, position=tuple(p))) for p in pts)
             alphas = observe(o, mid, yaw, pts, strict=False).alpha_deg
             spread = float(np.mean(np.abs(wrap_bearing(alphas - target_alpha_deg))))
@@ -174,8 +180,10 @@ def beacon_path(scene: Scene, first_obs: tuple[float, float],
                 best = (score, pts)
     if not best[0][0]:
         raise BadParameter("side", f"{side:g} cm (with a step of {step:g} cm, {steps} steps): "
-                           "every way to walk this path leaves the board or comes within "
-                           f"{CLEARANCE_CM:g} cm of the mirror; make the path smaller")
+                           "every way to walk this path leaves the board, comes within "
+                           f"{CLEARANCE_CM:g} cm of the mirror or within "
+                           f"{FIXED_CLEARANCE_CM:g} cm of a fixed beacon; make the path "
+                           "smaller")
     return best[1]
 
 
@@ -229,7 +237,8 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
               step: float = 1.0, heading: str = "view",
               variant: str = "auto", particles: int = 4000,
               on_pose: Callable[[int, int], None] | None = None,
-              error_model: ErrorModel | None = None) -> TrackReport:
+              error_model: ErrorModel | None = None,
+              position_sigma: float = 0.0) -> TrackReport:
     """Render, detect and filter every pose of the path; return the report.
 
     ``error_model``: the filter weighs each beacon observation with the model's typical
@@ -245,9 +254,12 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
 
     The scene's first beacon moves; any others stand still beside it, each rendered and
     measured once (in a frame of its own, ``fixed<i>``) and weighed into the filter's
-    prior on the mirror (:class:`solver.particle.FixedBeacon`).
+    prior on the mirror (:class:`solver.particle.FixedBeacon`), its believed position
+    known to ``position_sigma`` cm per axis (0: exactly).
     """
     check_options(kind, steps, odometry_sigma, side, step, heading, scene.board.size)
+    if not (np.isfinite(position_sigma) and position_sigma >= 0):
+        raise BadParameter("position_sigma", f"{position_sigma:g} must be ≥ 0 (cm per axis)")
     out = Path(out)
     rng = np.random.default_rng(seed)
     b0, cam = scene.beacons[0], scene.camera
@@ -266,7 +278,7 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
     if obs is None or target_obs is None:
         raise DetectionError(f"{scene.name}: the start pose gives the filter no prior and "
                              f"the path no heading: {why or 'the target was not measured'}")
-    fixed = tuple(pose.fixed(i) for i in range(1, len(scene.beacons)))
+    fixed = tuple(pose.fixed(i, position_sigma) for i in range(1, len(scene.beacons)))
     try:
         commanded = beacon_path(scene, obs, target_obs, kind, steps, side, step, heading)
         pf = _start_filter(cam.position, start, obs, params, particles, seed, fixed)
@@ -323,9 +335,10 @@ class _Poses:
         self.calibration = m.calibration
         return _observations(m.detection)
 
-    def fixed(self, i: int) -> FixedBeacon:
+    def fixed(self, i: int, position_sigma: float = 0.0) -> FixedBeacon:
         """The scene's beacon i, standing still: rendered alone once, its image measured
-        (at its believed position for the filter).
+        (at its believed position for the filter, known to ``position_sigma``); with the
+        poses' calibration where its pencil is as tall, else its own.
 
         Raises
         ------
@@ -334,17 +347,19 @@ class _Poses:
         """
         b = self.scene.beacons[i]
         alone = replace(self.scene, name=f"{self.scene.name}_fixed{i}", beacons=(b,))
+        # a calibration is of one pencil height (the moving beacon's, at the poses)
+        same = b.height == self.scene.beacons[0].height
         try:
             m = render_and_measure(alone.with_render(seed=self.seed * 1000 + 999 - i),
                                    self.out, variant=self.variant, progress=False,
-                                   reuse=True, ids=False, calibration=self.calibration)
+                                   reuse=True, ids=False,
+                                   calibration=self.calibration if same else None)
         except FrameNotMeasured as exc:
             raise DetectionError(f"{self.scene.name}: fixed beacon {i}: {exc.reason}") from None
-        self.calibration = m.calibration
         obs, _, why = _observations(m.detection)
         if obs is None:
             raise DetectionError(f"{self.scene.name}: fixed beacon {i}: {why}")
-        return FixedBeacon(tuple(map(float, b.believed)), obs)
+        return FixedBeacon(tuple(map(float, b.believed)), obs, position_sigma)
 
 
 def _true_path(start: np.ndarray, moves: np.ndarray, sigma: float,
