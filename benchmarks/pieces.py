@@ -1,12 +1,12 @@
 """Benchmark: what one dataset scene's pieces cost, in one warm process.
 
-    python benchmarks/pieces.py [--scenes 8] [--rss 0]
+    python benchmarks/pieces.py [--scenes 8] [--rss 0] [--ratio 0] [--seed S]
 
 Times (median over ``--scenes`` scenes of the default spec, after one warm-up scene):
 drawing a valid scene, the board texture, the render at the spec's settings, the id
 pass, linear → sRGB, PNG encoding, detection; then (``--rss N``) the process's resident
 memory after each of N whole dataset scenes; then (``--ratio N``) for N scenes of a
-fresh seed, a whole dataset scene's wall time against the bare render of its passes
+fresh seed (or ``--seed``'s: two versions compared on the same scenes), a whole dataset scene's wall time against the bare render of its passes
 (the scene loaded beforehand, the same ``mi.render`` calls, warm kernels) in the same
 process.  Runs on older checkouts too (it looks up
 what each has), so that before/after figures come from the same script.
@@ -53,6 +53,9 @@ def main() -> None:
     ap.add_argument("--scenes", type=int, default=8)
     ap.add_argument("--rss", type=int, default=0)
     ap.add_argument("--ratio", type=int, default=0)
+    ap.add_argument("--seed", type=int,
+                    help="the ratio's scenes (default: a fresh seed, printed; give one to "
+                         "compare two versions on the same scenes)")
     a = ap.parse_args()
     spec = load_spec(None)
     write_png = _png_writer()
@@ -104,7 +107,7 @@ def main() -> None:
             print(f"\ngrowth after the first scene: "
                   f"{(rss[-1] - rss[0]) / (a.rss - 1):.2f} MiB a scene")
     if a.ratio:
-        _ratio(spec, a.ratio, tmp / "ratio")
+        _ratio(spec, a.ratio, tmp / "ratio", a.seed)
 
 
 def _bare_render(scene) -> float:
@@ -136,13 +139,13 @@ def _bare_render(scene) -> float:
     return time.perf_counter() - t0
 
 
-def _ratio(spec, n: int, tmp: Path) -> None:
+def _ratio(spec, n: int, tmp: Path, seed: int | None = None) -> None:
     from mirrorsim.pipelines.dataset import process_one
     from mirrorsim.pipelines.random_scenes import sample_scene as draw
 
     for d in ("rows", "scenes", "frames"):
         (tmp / d).mkdir(parents=True)
-    seed = int.from_bytes(os.urandom(3), "big")
+    seed = int.from_bytes(os.urandom(3), "big") if seed is None else seed
     print(f"\nseed {seed}: a whole dataset scene (draw, render, detect, solve, score, "
           "write) against the bare render of its passes\n")
     print("| scene | whole (s) | bare render (s) | ratio |\n|---|---|---|---|")
