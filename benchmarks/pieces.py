@@ -6,10 +6,11 @@ Times (median over ``--scenes`` scenes of the default spec, after one warm-up sc
 drawing a valid scene, the board texture, the render at the spec's settings, the id
 pass, linear → sRGB, PNG encoding, detection; then (``--rss N``) the process's resident
 memory after each of N whole dataset scenes; then (``--ratio N``) for N scenes of a
-fresh seed (or ``--seed``'s: two versions compared on the same scenes), a whole dataset scene's wall time against the bare render of its passes
-(the scene loaded beforehand, the same ``mi.render`` calls, warm kernels) in the same
-process.  Runs on older checkouts too (it looks up
-what each has), so that before/after figures come from the same script.
+fresh seed (or ``--seed``'s: two versions compared on the same scenes), a whole dataset
+scene's wall time against the bare render of its passes (the scene loaded beforehand,
+the same ``mi.render`` calls, warm kernels) in the same process.  Runs on older
+checkouts too (it looks up what each has), so that before/after figures come from the
+same script.
 """
 
 from __future__ import annotations
