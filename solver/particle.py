@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from solver.geometry import line_normal, unit
-from solver.lsq import Sigma
+from solver.lsq import BeaconMeasurement, Sigma
 from solver.sltr import virtual_image
 
 SPREAD_FLOOR = (0.002, 0.001)  # the proposal's least spread: yaw (deg), offset (cm)
@@ -66,27 +66,20 @@ class MirrorEstimate:
 
 
 @dataclass(frozen=True)
-class FixedBeacon:
-    """A beacon that stands still beside the moving one, its image observed once:
-    (α_deg, d_total); its believed ``position`` known to ``position_sigma`` cm per axis
-    (0: exactly).  A believed position off by more than its σ pins the mirror wrong: a
-    virtual image's σ across the line of sight is ~0.01 cm at the detector's σ's."""
-
-    position: tuple[float, float]
-    observation: tuple[float, float]
-    position_sigma: float = 0.0
-
-
-@dataclass(frozen=True)
 class Prior:
     """What the filter starts from: the beacon's known start, the uniform box of mirror
-    hypotheses, and the fixed beacons' observations (each weighs every hypothesis once,
-    by its likelihood: a prior on the mirror before the moving beacon's first step)."""
+    hypotheses, and the fixed beacons: each stands still beside the moving one, its
+    image observed once, and weighs every hypothesis once by its likelihood (a prior on
+    the mirror before the moving beacon's first step), its believed position known to
+    ``fixed_sigma`` cm per axis (0: exactly; a position off by more than that pins the
+    mirror wrong: a virtual image's σ across the line of sight is ~0.01 cm at the
+    detector's σ's)."""
 
     beacon_start: np.ndarray
     yaw_range: tuple[float, float]
     rho_range: tuple[float, float]
-    fixed: tuple[FixedBeacon, ...] = ()
+    fixed: tuple[BeaconMeasurement, ...] = ()
+    fixed_sigma: float = 0.0
 
     def contains(self, mirror: np.ndarray) -> np.ndarray:
         """Which of the (N, 2) hypotheses lie inside the box."""
@@ -159,11 +152,11 @@ def _fixed_loglik(mirror: np.ndarray, prior: Prior, observer, sigma: Sigma) -> n
     loglik = np.zeros(n)
     if prior.fixed and observer is None:
         raise ValueError("fixed beacons need the observer: their images are seen from it")
+    cov = np.tile(prior.fixed_sigma**2 * np.eye(2), (n, 1, 1))
     for f in prior.fixed:
         known = np.tile(np.asarray(f.position, float), (n, 1))
-        cov = np.tile(f.position_sigma**2 * np.eye(2), (n, 1, 1))
-        loglik += _update(mirror, known, cov, f.observation, np.asarray(observer, float),
-                          sigma)[2]
+        loglik += _update(mirror, known, cov, (f.alpha_deg, f.d_total),
+                          np.asarray(observer, float), sigma)[2]
     return loglik
 
 
@@ -349,12 +342,12 @@ class MovingBeaconFilter:
 
     def __init__(self, observer, beacon_start, yaw_range, rho_range, n: int = 4000,
                  params: PFParams | None = None, rng: int | np.random.Generator | None = 0,
-                 fixed: tuple[FixedBeacon, ...] = ()):
+                 fixed: tuple[BeaconMeasurement, ...] = (), fixed_sigma: float = 0.0):
         self.observer = np.asarray(observer, float)
         self.params = params or PFParams()
         self.rng = np.random.default_rng(rng)
         self.prior = Prior(np.asarray(beacon_start, float), tuple(yaw_range), tuple(rho_range),
-                           tuple(fixed))
+                           tuple(fixed), fixed_sigma)
         self.particles = initial_particles(self.prior, n, self.params, self.rng, observer)
         self.weights = np.full(n, 1.0 / n)
         self.history: tuple = ()
@@ -437,10 +430,12 @@ def simulate_run(observer, mirror_point, mirror_yaw_deg: float, path: np.ndarray
 
 def track(observer, beacon_start, controls, observations, yaw_range, rho_range,
           n: int = 4000, params: PFParams | None = None, rng=0,
-          fixed: tuple[FixedBeacon, ...] = ()) -> list[MirrorEstimate]:
-    """Run the filter over a whole run (beside the ``fixed`` beacons); the estimate after
-    each step."""
-    f = MovingBeaconFilter(observer, beacon_start, yaw_range, rho_range, n, params, rng, fixed)
+          fixed: tuple[BeaconMeasurement, ...] = (), fixed_sigma: float = 0.0
+          ) -> list[MirrorEstimate]:
+    """Run the filter over a whole run (beside the ``fixed`` beacons, known to
+    ``fixed_sigma``); the estimate after each step."""
+    f = MovingBeaconFilter(observer, beacon_start, yaw_range, rho_range, n, params, rng, fixed,
+                           fixed_sigma)
     out = []
     for c, z in zip(controls, observations, strict=True):
         f.step(c, z)
@@ -458,5 +453,5 @@ def mirror_errors(estimates: list[MirrorEstimate], mirror_point, mirror_yaw_deg:
     return yaw_err, off
 
 
-__all__ = ["PFParams", "Prior", "FixedBeacon", "MirrorEstimate", "pf_step", "replay",
+__all__ = ["PFParams", "Prior", "MirrorEstimate", "pf_step", "replay",
            "MovingBeaconFilter", "simulate_run", "track", "mirror_errors", "initial_particles"]

@@ -10,7 +10,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from solver.geometry import line_normal, wrap_bearing
-from solver.particle import FixedBeacon, PFParams
+from solver.lsq import BeaconMeasurement
+from solver.particle import PFParams
 from solver.sltr import observe
 
 
@@ -25,21 +26,21 @@ class SmoothedRun:
 
 def smooth_run(observer, start, controls: np.ndarray, observations: np.ndarray,
                params: PFParams, yaw_deg: float, rho: float, beacons: np.ndarray,
-               fixed: tuple[FixedBeacon, ...] = ()) -> SmoothedRun:
+               fixed: tuple[BeaconMeasurement, ...] = (), fixed_sigma: float = 0.0
+               ) -> SmoothedRun:
     """Least squares over the odometry (σ_trs per move, the start as believed) and every
     observation (α, d_total with ``params.sigma``) of the moving beacon and of the
-    ``fixed`` ones, from the start point (``yaw_deg``, ``rho``, ``beacons``): it finds the
-    optimum nearest that point."""
+    ``fixed`` ones (their believed positions known to ``fixed_sigma``), from the start
+    point (``yaw_deg``, ``rho``, ``beacons``): it finds the optimum nearest that point."""
     from scipy.optimize import least_squares  # scipy is slow to import: only when used
 
     k, s = len(controls), params.sigma
     obs = np.asarray(observations, float)
     o = np.asarray(observer, float)
     known = np.array([f.position for f in fixed], float).reshape(-1, 2)
-    obs_fixed = np.array([f.observation for f in fixed], float).reshape(-1, 2)
-    # a fixed beacon known to a σ is a parameter with that prior, as in the filter
-    free = np.array([f.position_sigma > 0 for f in fixed], bool)
-    sd = np.array([f.position_sigma for f in fixed], float)[free]
+    obs_fixed = np.array([(f.alpha_deg, f.d_total) for f in fixed], float).reshape(-1, 2)
+    # fixed beacons known to a σ are parameters with that prior, as in the filter
+    free = np.full(len(fixed), fixed_sigma > 0)
     z = np.vstack([obs, obs_fixed])
 
     def residuals(x):
@@ -52,7 +53,7 @@ def smooth_run(observer, start, controls: np.ndarray, observations: np.ndarray,
         return np.concatenate([
             (b[0] - start) / params.sigma_trs,
             ((b[1:] - b[:-1] - controls) / params.sigma_trs).ravel(),
-            ((at[free] - known[free]) / sd[:, None]).ravel(),
+            ((at[free] - known[free]) / (fixed_sigma or 1.0)).ravel(),
             wrap_bearing(alpha - z[:, 0]) / s.alpha_deg,
             (d - z[:, 1]) / (s.d_total_rel * z[:, 1])])
 

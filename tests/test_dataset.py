@@ -660,3 +660,37 @@ def test_calibrate_needs_a_spec_whose_beacons_carry_it(tmp_path, capsys):
                  "--quiet"]) == 2
     assert "--beacons: 5 must be within 1..4" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_a_table_of_the_older_layout_is_read_and_fitted(one_worker, tmp_path):
+    """A dataset made before several beacons and self-calibration (rows of schema 2, its
+    table without their columns, sealed): read as one plain beacon; a table that says it
+    is of this layout without them is refused."""
+    import shutil
+
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from mirrorsim.formats.cache import checksum
+    from mirrorsim.formats.dataset_folder import TABLE_SEAL, read_table
+    from mirrorsim.formats.dataset_table import SCHEMA_2_VALUES
+    from mirrorsim.formats.files import jsonable
+
+    out, _ = one_worker
+    old = tmp_path / "old"
+    shutil.copytree(out, old)
+    cols = pq.read_table(old / "dataset.parquet").to_pydict()
+    cols = {k: v for k, v in cols.items() if k not in SCHEMA_2_VALUES}
+    cols["schema"] = [2] * len(cols["index"])
+    arrow = pa.table(cols)
+    arrow = arrow.replace_schema_metadata({TABLE_SEAL: checksum(jsonable(arrow.to_pydict()))})
+    pq.write_table(arrow, old / "dataset.parquet")
+    read = read_table(old)
+    assert read["beacons"] == [1, 1, 1] and read["calibrate"] == ["", "", ""]
+    assert read["est_range_scale"] == [None, None, None]
+    cols["schema"] = [3] * len(cols["index"])  # a table of this layout must have them
+    arrow = pa.table(cols)
+    arrow = arrow.replace_schema_metadata({TABLE_SEAL: checksum(jsonable(arrow.to_pydict()))})
+    pq.write_table(arrow, old / "dataset.parquet")
+    with pytest.raises(Exception, match="missing columns"):
+        read_table(old)

@@ -457,7 +457,9 @@ def test_lookups_done_by_opencv_give_numpy_values():
     centre = rng.uniform(30, 200, 3).astype(np.float32)
     x = (centre + rng.uniform(-30, 30, (64, 64, 3))).astype(np.float32)
     edge = np.float32(SAME_GREY)
-    for k, sign in ((0, 1), (1, -1), (2, 1)):  # a float32 step inside, on, and past the reach
+    # values a float32 step inside, on and past the reach from the centre (after the sum's
+    # rounding several land on it exactly: the comparison's edge)
+    for k, sign in ((0, 1), (1, -1), (2, 1)):
         for j, step in enumerate((-1, 0, 1)):
             x[k, j, :] = centre
             x[k, j, k] = centre[k] + sign * np.nextafter(edge, edge + step)

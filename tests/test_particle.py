@@ -166,7 +166,7 @@ def test_nees_is_the_truths_mahalanobis_distance_in_the_particles_spread():
 def _fixed_beacons(params, rng) -> tuple:
     """Two beacons standing still in front of the mirror, their images observed once
     with the filter's σ's."""
-    from solver.particle import FixedBeacon
+    from solver.lsq import BeaconMeasurement
     from solver.sltr import observe
 
     t, n = np.array([np.cos(np.radians(YAW)), np.sin(np.radians(YAW))]), line_normal(YAW)
@@ -174,7 +174,7 @@ def _fixed_beacons(params, rng) -> tuple:
     seen = observe(OBS, M, YAW, pts, strict=False)
     a = np.asarray(seen.alpha_deg) + rng.normal(0, params.sigma.alpha_deg, 2)
     d = np.asarray(seen.d_total) * (1 + rng.normal(0, params.sigma.d_total_rel, 2))
-    return tuple(FixedBeacon(tuple(p), (float(ai), float(di)))
+    return tuple(BeaconMeasurement(tuple(p), float(ai), float(di))
                  for p, ai, di in zip(pts, a, d, strict=True))
 
 
@@ -218,7 +218,7 @@ def test_a_fixed_beacon_s_believed_position_is_weighed_with_its_sigma():
     an honest filter, above 30); known to 0.115 cm (the σ of ±0.2 cm offsets), the NEES
     is below χ²₂'s 99.75 % point (12), and the filter's start is the smoother's with
     the same prior on the positions."""
-    from solver.particle import FixedBeacon
+    from solver.lsq import BeaconMeasurement
 
     params = PFParams(sigma=replace(PFParams().sigma, alpha_deg=0.005, d_total_rel=0.006))
     rho = line_normal(YAW) @ M
@@ -227,12 +227,14 @@ def test_a_fixed_beacon_s_believed_position_is_weighed_with_its_sigma():
                                                   d_total_rel=1e-9)), np.random.default_rng(0))
     start = np.array([30.0, 60.0])
     for sd, ok in ((0.0, False), (0.115, True)):
-        off = tuple(FixedBeacon((b.position[0] + s * 0.2, b.position[1] - s * 0.2),
-                                b.observation, sd) for b, s in zip(exact, (1, -1), strict=True))
-        f = MovingBeaconFilter(OBS, start, *box, n=4000, params=params, rng=3, fixed=off)
+        off = tuple(BeaconMeasurement((b.position[0] + s * 0.2, b.position[1] - s * 0.2),
+                                      b.alpha_deg, b.d_total)
+                    for b, s in zip(exact, (1, -1), strict=True))
+        f = MovingBeaconFilter(OBS, start, *box, n=4000, params=params, rng=3, fixed=off,
+                               fixed_sigma=sd)
         e, nees = f.estimate(), f.nees(M, YAW)
         assert (nees < 12) == ok and (nees > 30) != ok, (sd, nees, e)
         if ok:
             batch = smooth_run(OBS, start, np.zeros((0, 2)), np.zeros((0, 2)), params, YAW,
-                               rho, start[None], off)
+                               rho, start[None], off, sd)
             assert abs(e.yaw_deg - batch.yaw_deg) < 0.2 * e.yaw_sd_deg

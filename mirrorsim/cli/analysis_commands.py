@@ -23,7 +23,7 @@ from mirrorsim.cli.registry import (
     output,
     sampler_option,
 )
-from mirrorsim.errors import BadArgument, RunFailed
+from mirrorsim.errors import BadArgument, BadParameter, RunFailed
 
 MAX_ITERATIONS = 1_000_000  # draws per Monte Carlo row: about a second a row at the most
 
@@ -207,7 +207,9 @@ def _dataset_options(p):
                    help="beacons a scene, each drawn from the spec's beacon ranges and "
                    "rendered in a frame of its own (default: the spec's beacon.count, 1)")
     calibrate_option(p)  # needs --beacons (or a spec's beacon.count) that carries them
-    common(p, scene=False, variant=True, quiet=True)
+    common(p, scene=False, variant=True, quiet=True,
+           error_model="each row's measurement σ's, which weight its solve and make its "
+                       "ellipse (default: the model shipped for the ideal bench)")
     p.add_argument("--resume", action="store_true",
                    help="finish an interrupted run, or extend one to a larger --n (the same "
                    "seed and settings: the added scenes are those a run of that --n makes)")
@@ -245,7 +247,13 @@ def _dataset(args) -> int:
                           variant=args.variant, keep=tuple(args.keep), resume=args.resume,
                           executor=args.executor, scheduler=args.scheduler,
                           progress=not args.quiet, nuisances=nuisances,
-                          position_sigma=position_sigma, beacons=args.beacons)
+                          position_sigma=position_sigma, beacons=args.beacons,
+                          error_model=error_model_of(args))
+    except BadParameter as exc:
+        if exc.parameter != "nuisances":
+            raise
+        raise BadArgument("--calibrate", f"{exc.message}: draw more with --beacons or the "
+                          "spec's beacon.count") from None
     except DatasetError as exc:
         if not exc.resumable:
             raise

@@ -267,7 +267,7 @@ def sampler_option(p: argparse.ArgumentParser) -> None:
 
     p.add_argument("--sampler", choices=SAMPLERS,
                    help="Mitsuba sampler (default: the scene's render.sampler, else "
-                   f"{RenderSettings().sampler}); see README, Throughput")
+                   f"{RenderSettings().sampler}); see docs/performance.md")
 
 
 def render_options(args: argparse.Namespace, scene: Scene) -> Scene:

@@ -359,6 +359,7 @@ def _track(args) -> int:
     check_options(args.path, args.steps, args.odometry_sigma, args.side, args.step,
                   args.heading)
     at_least(("--seed", args.seed, 0))
+    position_sigma = beacon_sigma_of(args)
     scene = load(args.scene)
     if args.spp is not None:  # --seed is the run's (each pose's render seed follows it)
         scene = scene.with_render(spp=args.spp)
@@ -375,7 +376,7 @@ def _track(args) -> int:
                            step=args.step, heading=args.heading, variant=args.variant,
                            on_pose=lambda k, _n: bar.update(k - bar.n),  # pose k begins
                            error_model=error_model_of(args),
-                           position_sigma=beacon_sigma_of(args))
+                           position_sigma=position_sigma)
         bar.update(bar.total - bar.n)
     print(track_table(report))
     path = write_json(out / "track.json", report.to_json())

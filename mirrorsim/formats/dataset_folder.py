@@ -233,6 +233,11 @@ def read_table(folder: str | Path) -> dict[str, list]:
     if [r.index for r in collect_rows(folder, n_scenes, seed)] != cols["index"]:
         raise DatasetError(path, "its rows differ from the row files in rows/ (resuming the "
                            "dataset writes the table again)")
+    added = [c for c in table.SCHEMA_2_VALUES if c not in cols]
+    if added and all(s == 2 for s in cols.get("schema", [None])):
+        # a table of the older layout: the values its scenes had (one beacon, plain)
+        for c in added:
+            cols[c] = [None if e else table.SCHEMA_2_VALUES[c] for e in cols["error"]]
     missing = sorted(set(table.NAMES) - set(cols))
     if missing:
         raise DatasetError(path, f"missing columns {', '.join(missing[:4])}"

@@ -230,8 +230,7 @@ def encode_png(pixels: np.ndarray) -> bytes:
     """8-bit pixels (H, W, 3) RGB or (H, W) grey as PNG bytes.
 
     zlib level 1 and no row filter: on a rendered frame's sampling noise the filters
-    cost time and save nothing (full-size frames: 58 against 102 ms, and 2.2 against
-    2.7 MiB, with PNG's adaptive filters).
+    cost time and save no bytes (benchmarks/pieces.py's PNG piece; docs/performance.md).
     """
     import cv2
 

@@ -269,12 +269,13 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
         spec = spec.with_sampler(sampler)
     if beacons is not None:  # likewise
         spec = spec.with_beacon_count(beacons)
+    if not (math.isfinite(position_sigma) and position_sigma >= 0):
+        raise BadParameter("position_sigma", f"{position_sigma:g} must be ≥ 0 (cm per axis)")
     try:  # before anything is written
         check_nuisances(nuisances, spec.beacon_count, 1)
     except SolverError as exc:
         raise BadParameter("nuisances", f"{exc} (scenes of {spec.beacon_count} beacon(s) "
-                           f"drawn from {spec_path or 'the default spec'}: a spec's "
-                           "beacon.count, or the beacons parameter, draws more)") from None
+                           f"drawn from {spec_path or 'the default spec'})") from None
     model = error_model or default_error_model()
     meta = {"format": DATASET_FORMAT, "n": n, "seed": seed, "spp": spp, "spec": spec.data,
             "error_model_sha256": hashlib.sha256(dumps(model.to_json()).encode()).hexdigest()}

@@ -36,8 +36,8 @@ from mirrorsim.truth.optics import target_facing
 from mirrorsim.truth.visibility import visibility
 from solver.errors import SolverError
 from solver.geometry import bearing_deg, line_normal, wrap_bearing
-from solver.lsq import Sigma
-from solver.particle import FixedBeacon, MovingBeaconFilter, PFParams, mirror_errors
+from solver.lsq import BeaconMeasurement, Sigma
+from solver.particle import MovingBeaconFilter, PFParams, mirror_errors
 from solver.placement import path_points
 from solver.sltr import locate, mirror_from_beacon, observe, ray_hits_line
 
@@ -98,8 +98,10 @@ class TrackReport:
     steps: tuple[TrackStep, ...]
     snapshots: tuple[np.ndarray, ...] = field(default=(), repr=False)
     # the beacons that stood still beside the moving one: believed position and the
-    # observation (α_deg, d_total) the filter weighed once
-    fixed: tuple[FixedBeacon, ...] = ()
+    # observation (α_deg, d_total) the filter weighed once, the position known to
+    # fixed_sigma cm per axis
+    fixed: tuple[BeaconMeasurement, ...] = ()
+    fixed_sigma: float = 0.0
 
     @property
     def final(self) -> TrackStep:
@@ -113,8 +115,8 @@ class TrackReport:
                 "odometry_sigma_cm": self.odometry_sigma,
                 "seed": self.seed, "steps": [s.to_json() for s in self.steps],
                 "fixed_beacons": [{"known_position": list(b.position),
-                                   "position_sigma_cm": b.position_sigma,
-                                   "alpha_deg": b.observation[0], "d_total": b.observation[1]}
+                                   "position_sigma_cm": self.fixed_sigma,
+                                   "alpha_deg": b.alpha_deg, "d_total": b.d_total}
                                   for b in self.fixed],
                 "final": {"target": list(f.target),
                           "mirror_yaw_error_deg": f.mirror_yaw_error_deg,
@@ -254,7 +256,7 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
 
     The scene's first beacon moves; any others stand still beside it, each rendered and
     measured once (in a frame of its own, ``fixed<i>``) and weighed into the filter's
-    prior on the mirror (:class:`solver.particle.FixedBeacon`), its believed position
+    prior on the mirror (:class:`solver.particle.Prior`'s ``fixed``), its believed position
     known to ``position_sigma`` cm per axis (0: exactly).
     """
     check_options(kind, steps, odometry_sigma, side, step, heading, scene.board.size)
@@ -278,10 +280,11 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
     if obs is None or target_obs is None:
         raise DetectionError(f"{scene.name}: the start pose gives the filter no prior and "
                              f"the path no heading: {why or 'the target was not measured'}")
-    fixed = tuple(pose.fixed(i, position_sigma) for i in range(1, len(scene.beacons)))
+    fixed = tuple(pose.fixed(i) for i in range(1, len(scene.beacons)))
     try:
         commanded = beacon_path(scene, obs, target_obs, kind, steps, side, step, heading)
-        pf = _start_filter(cam.position, start, obs, params, particles, seed, fixed)
+        pf = _start_filter(cam.position, start, obs, params, particles, seed, fixed,
+                           position_sigma)
     except SolverError as exc:
         raise DetectionError(f"{scene.name}: the start pose's measurements give no mirror "
                              f"({exc})") from None
@@ -303,7 +306,7 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
         snapshots.append(_snapshot(pf, rng))
     return TrackReport(scene=scene.name, path=kind, heading=heading,
                        odometry_sigma=odometry_sigma, seed=seed, steps=tuple(records),
-                       snapshots=tuple(snapshots), fixed=fixed)
+                       snapshots=tuple(snapshots), fixed=fixed, fixed_sigma=position_sigma)
 
 
 class _Poses:
@@ -335,10 +338,10 @@ class _Poses:
         self.calibration = m.calibration
         return _observations(m.detection)
 
-    def fixed(self, i: int, position_sigma: float = 0.0) -> FixedBeacon:
+    def fixed(self, i: int) -> BeaconMeasurement:
         """The scene's beacon i, standing still: rendered alone once, its image measured
-        (at its believed position for the filter, known to ``position_sigma``); with the
-        poses' calibration where its pencil is as tall, else its own.
+        (at its believed position for the filter); with the poses' calibration where its
+        pencil is as tall, else its own.
 
         Raises
         ------
@@ -359,7 +362,7 @@ class _Poses:
         obs, _, why = _observations(m.detection)
         if obs is None:
             raise DetectionError(f"{self.scene.name}: fixed beacon {i}: {why}")
-        return FixedBeacon(tuple(map(float, b.believed)), obs, position_sigma)
+        return BeaconMeasurement(tuple(map(float, b.believed)), *obs)
 
 
 def _true_path(start: np.ndarray, moves: np.ndarray, sigma: float,
@@ -403,7 +406,8 @@ def _observations(det: Detection
 
 
 def _start_filter(observer, start, obs, params: PFParams, n: int, seed: int,
-                  fixed: tuple[FixedBeacon, ...] = ()) -> MovingBeaconFilter:
+                  fixed: tuple[BeaconMeasurement, ...] = (), fixed_sigma: float = 0.0
+                  ) -> MovingBeaconFilter:
     """The filter with its prior centred on the mirror the first pose's beacon gives
     (the perpendicular bisector of the beacon and its image), weighed by the fixed
     beacons."""
@@ -412,7 +416,7 @@ def _start_filter(observer, start, obs, params: PFParams, n: int, seed: int,
     rho = float(line_normal(yaw) @ mid)
     return MovingBeaconFilter(observer, start, (yaw - PRIOR_YAW_DEG, yaw + PRIOR_YAW_DEG),
                               (rho - PRIOR_OFFSET_CM, rho + PRIOR_OFFSET_CM), n=n,
-                              params=params, rng=seed, fixed=fixed)
+                              params=params, rng=seed, fixed=fixed, fixed_sigma=fixed_sigma)
 
 
 def _snapshot(pf: MovingBeaconFilter, rng: np.random.Generator, keep: int = 400) -> np.ndarray:

@@ -34,7 +34,7 @@ MAX_WORKER_DEATHS = 3
 # scene's kernels (~2 MiB a scene measured), so a long-lived worker grows without bound
 MAX_JOBS_PER_WORKER = 100
 # the memory a worker needs: ~500 MiB measured warm after a full-size scene
-# (README "Throughput"), doubled for the passes of larger frames
+# (docs/performance.md), doubled for the passes of larger frames
 WORKER_MEMORY_MB = 1024
 PR_SET_PDEATHSIG = 1  # <linux/prctl.h>
 

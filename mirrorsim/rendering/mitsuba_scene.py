@@ -85,10 +85,9 @@ def _v3(v2, z=0.0) -> np.ndarray:
     return np.array([v2[0], v2[1], z], dtype=float)
 
 
-@functools.lru_cache(maxsize=8)  # built once per worker for a dataset's board, not per scene
 def _board_texture(board: Board) -> np.ndarray:
-    """Pegboard albedo: a regular grid of dark round holes, anti-aliased (cached: the
-    caller must not modify it; mi.Bitmap copies it)."""
+    """Pegboard albedo: a regular grid of dark round holes, anti-aliased (made once per
+    board and process, as :func:`_board_bitmap`)."""
     sx, sy = board.size
     nx, ny = (max(2, round(s * BOARD_TEXELS_PER_CM)) for s in (sx, sy))
     base = np.broadcast_to(np.array(_COLOURS["board"], np.float32), (ny, nx, 3))

@@ -25,7 +25,7 @@ MIRROR_FRAME = 0.5  # frame width on the sides and top, outside the reflective a
 MIRROR_LIP = 0.05
 TARGET_THICKNESS = 0.4
 # Mitsuba samplers a scene may name: plain random, or stratified in every dimension
-# (any sample count; edges converge faster, see README "Throughput")
+# (any sample count; edges converge faster, see docs/performance.md)
 SAMPLERS = ("independent", "multijitter")
 MAX_SPP = 1 << 16  # a documented bound: more samples than this is a typo, not a render
 # Documented bounds on a scene's sizes, so that every scene `check` accepts renders:
@@ -168,19 +168,19 @@ class Occluder:
 class RenderSettings:
     """Samples per pixel, the sampler and its seed."""
 
-    # chosen by benchmarks/detect.py over 40 random scenes (README "Throughput"): multijitter
+    # chosen by benchmarks/detect.py over 40 random scenes (docs/performance.md): multijitter
     # at 8 spp measures as well as independent sampling at 16, in half the time
     spp: int = 8
     seed: int = 0
     sampler: str = "multijitter"
     # samples per pixel outside the mirror's image (renders use min(this, spp); set it
     # to spp for a uniform frame).  Every measurement is made in the mirror's image, so
-    # the samples are spent there (README "Throughput")
+    # the samples are spent there (docs/performance.md)
     background_spp: int = 2
     # samples per pixel in each beacon's image (renders use max(this, spp)): its painted
     # band is 45–95 px tall and its d_total rests on two of its edges, whose render noise
     # at 8 spp was the largest part of its error; the box costs 15 % of a dataset's
-    # throughput (README "Accuracy", "Throughput")
+    # throughput (docs/results.md, docs/performance.md)
     beacon_spp: int = 128
 
     def __post_init__(self):
