@@ -2,7 +2,7 @@
 
     python benchmarks/track.py [--scenes default exp1 exp2 exp3] [--steps 20] [--spp N]
                           [--odometry-sigma CM] [--out renders/bench_track]
-                          [--plot docs/track_paths.png] [--coverage SEEDS]
+                          [--plot docs/track_paths.png] [--coverage SEEDS] [--beside]
 
 For each scene, `mirrorsim track` is run (full size, seed 0, default odometry noise)
 with the beacon on each of the paper's three paths (eqs 19–21), then standing still at
@@ -18,6 +18,12 @@ With --coverage N: instead, the rectangular path on each scene with N fresh seed
 its own renders and odometry), and per step the filter's honesty on rendered frames:
 the share of runs whose true mirror lies inside the filter's 95 % region (NEES ≤ 5.99,
 with a Clopper–Pearson interval) and the mean NEES (2 for an honest filter).
+
+With --beside: instead, the rectangular path on each scene twice, from the same fresh
+seed: the moving beacon alone, and with a second beacon standing still where `plan`
+puts the best fixed beacon (`track` weighs it into the filter from the start); per run
+the mirror's yaw error, the filter's yaw spread and the true mirror's NEES at the first
+pose and the last, and the final target error.
 """
 
 from __future__ import annotations
@@ -72,9 +78,14 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=Path("renders/bench_track"))
     ap.add_argument("--plot", type=Path, default=Path("docs/track_paths.png"))
     ap.add_argument("--coverage", type=int, default=0, metavar="SEEDS")
+    ap.add_argument("--beside", action="store_true",
+                    help="the moving beacon alone and beside a fixed beacon at plan's best")
     args = ap.parse_args()
     if args.coverage:
         coverage(args)
+        return
+    if args.beside:
+        beside(args)
         return
     marks = sorted({min(5, args.steps), min(10, args.steps), args.steps})
     print(f"machine: {platform.machine()}, {platform.system()}; {args.steps} moves, "
@@ -123,6 +134,39 @@ def coverage(args: argparse.Namespace) -> None:
         lo, hi = binomial_interval(inside, len(col))
         print(f"| {k} | {len(col)} | {inside}/{len(col)} = {inside / len(col):.2f} "
               f"({lo:.2f}–{hi:.2f}) | {np.mean(col):.2f} |")
+
+
+def beside(args: argparse.Namespace) -> None:
+    """The moving beacon alone against the same run beside a fixed beacon at plan's best."""
+    seed = int.from_bytes(os.urandom(3), "big")  # fresh: no test's seed
+    print(f"{stamp()}; seed {seed}; rectangular path, {args.steps} moves, odometry σ "
+          f"{args.odometry_sigma:g} cm; the fixed beacon where `plan` puts the best one\n")
+    print("| scene | beacons | first pose: yaw error ° / spread ° / NEES | last pose: yaw "
+          "error ° / spread ° / NEES | final target error cm | wall s |")
+    print("|---|---|---|---|---|---|")
+    for name in args.scenes:
+        scene = load_scene(Path("scenes") / f"{name}.yaml")
+        if args.spp is not None:
+            scene = scene.with_render(spp=args.spp)
+        best = plan_scene(scene).best.position
+        still = Beacon((float(best[0]), float(best[1])), scene.beacons[0].height)
+        for label, s in (("moving alone", scene),
+                         ("moving + fixed at plan's best",
+                          replace(scene, beacons=(scene.beacons[0], still)))):
+            t0 = time.perf_counter()
+            try:
+                rep = run_track(s, args.out / "beside" / name / label.split()[-1],
+                                kind="rectangular", steps=args.steps,
+                                odometry_sigma=args.odometry_sigma, seed=seed)
+            except (ValueError, RuntimeError) as exc:  # a path through the fixed beacon…
+                print(f"| {name} | {label} | not run: {exc} | | | |", flush=True)
+                continue
+            a, z = rep.steps[0], rep.final
+            print(f"| {name} | {label} | {a.mirror_yaw_error_deg:.3f} / "
+                  f"{a.yaw_spread_deg:.3f} / {a.mirror_nees:.2f} | "
+                  f"{z.mirror_yaw_error_deg:.3f} / {z.yaw_spread_deg:.3f} / "
+                  f"{z.mirror_nees:.2f} | {z.target_error_cm:.2f} | "
+                  f"{time.perf_counter() - t0:.0f} |", flush=True)
 
 
 def plot(reports: dict[str, dict[str, TrackReport]], out: Path) -> None:
