@@ -30,7 +30,6 @@ from mirrorsim.detection.detector import (  # noqa: E402
     to_linear,
 )
 from mirrorsim.detection.edges import measure_region  # noqa: E402
-from mirrorsim.detection.image_geometry import FRONT_OFFSET  # noqa: E402
 from mirrorsim.formats.scenefile import scene_from_dict  # noqa: E402
 from mirrorsim.rendering.frames import render_to_files  # noqa: E402
 from mirrorsim.scene.model import (  # noqa: E402
@@ -67,11 +66,7 @@ def main() -> None:
     rows = [("target left", min(u[:4]), m.u_left), ("target right", max(u[:4]), m.u_right),
             ("target top", v[5], m.v_top), ("target foot", v[4], m.v_bottom)]
     b = s.beacons[0]
-    vb = optics.mirror_image(s.camera.position, s.mirror, b.position).virtual
-    ray = (vb - np.asarray(s.camera.position)) / np.linalg.norm(vb - s.camera.position)
-    fb = vb - ray * FRONT_OFFSET["beacon"]
-    ub, vvb, _ = optics.project(s.camera, np.array([[*fb, 0.0],
-                                                    [*fb, pencil_paint_height(b.height)]]))
+    ub, vvb = optics.front_face(s, b, pencil_paint_height(b.height), "beacon")
     lin = to_linear(img)
     pencils = [measure_region(lin, box, "beacon") for box in find_pencils(img)]
     p = min(pencils, key=lambda q: abs(np.nanmean([q.u_left or np.nan, q.u_right or np.nan])

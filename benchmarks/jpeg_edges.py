@@ -29,7 +29,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-from exact import front_face, spec_scenes  # noqa: E402
+from exact import spec_scenes  # noqa: E402
 from stamp import stamp  # noqa: E402
 
 from mirrorsim.detection import detector, edges  # noqa: E402
@@ -37,6 +37,7 @@ from mirrorsim.formats.files import decode_image, encode_jpeg  # noqa: E402
 from mirrorsim.rendering.passes import render_frame  # noqa: E402
 from mirrorsim.rendering.sensor import to_srgb8  # noqa: E402
 from mirrorsim.scene.model import pencil_paint_height  # noqa: E402
+from mirrorsim.truth.optics import front_face  # noqa: E402
 
 # (target foot on chroma, pencil top on blue, pencil foot on chroma): True is the
 # detector's way for a lossless frame (edges.measure_region), False the image's colour;

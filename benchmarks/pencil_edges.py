@@ -23,7 +23,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 from dataclasses import replace  # noqa: E402
 
-from exact import front_face, spec_scenes  # noqa: E402
+from exact import spec_scenes  # noqa: E402
 
 from mirrorsim.detection.detector import detect_frame  # noqa: E402
 from mirrorsim.formats.capture import CaptureRecord  # noqa: E402
@@ -32,6 +32,7 @@ from mirrorsim.rendering.passes import render_frame  # noqa: E402
 from mirrorsim.rendering.sensor import to_srgb8  # noqa: E402
 from mirrorsim.scene.model import pencil_paint_height  # noqa: E402
 from mirrorsim.truth import optics  # noqa: E402
+from mirrorsim.truth.optics import front_face  # noqa: E402
 
 
 def main() -> None:

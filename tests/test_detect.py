@@ -343,7 +343,6 @@ def test_a_jpeg_pencils_foot_on_rendered_frames_stands_where_the_geometry_puts_i
     exact projection of its front face on average; measured on linear colour, the
     rendered contact shadow and holes put it over 0.3 px low (the way this replaced)."""
     from mirrorsim.detection import detector, edges
-    from mirrorsim.detection.image_geometry import FRONT_OFFSET
     from mirrorsim.formats.files import decode_image, encode_jpeg
     from mirrorsim.pipelines.random_scenes import load_spec, sample_scene
     from mirrorsim.rendering.passes import render_frame
@@ -356,11 +355,8 @@ def test_a_jpeg_pencils_foot_on_rendered_frames_stands_where_the_geometry_puts_i
     for i in (0, 3, 6):
         scene = sample_scene(spec, np.random.SeedSequence(0, spawn_key=(i,)), f"spec{i:03d}")
         b = scene.beacons[0]
-        img = optics.mirror_image(scene.camera.position, scene.mirror, b.position)
-        ray = (img.virtual - np.asarray(scene.camera.position)) / img.d_total
-        front = img.virtual - ray * FRONT_OFFSET["beacon"]
-        _, (v_foot, v_top), _ = optics.project(
-            scene.camera, np.array([[*front, 0.0], [*front, pencil_paint_height(b.height)]]))
+        _, (v_foot, v_top) = optics.front_face(scene, b, pencil_paint_height(b.height),
+                                               "beacon")
         srgb = to_srgb8(render_frame(scene.with_render(seed=0), progress=False).linear)
         jpeg = decode_image(encode_jpeg(srgb, 90)).astype(np.float32)
         linear = edges.to_linear(jpeg)

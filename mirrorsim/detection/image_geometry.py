@@ -11,17 +11,9 @@ from dataclasses import dataclass, replace
 
 from mirrorsim.detection.edges import ImageMeasurement
 from mirrorsim.errors import DetectionError
-from mirrorsim.scene.model import PENCIL_RADIUS, TARGET_THICKNESS, Camera, Point2
+from mirrorsim.scene.model import FRONT_OFFSET, PENCIL_RADIUS, Camera, Point2
 from solver.geometry import wrap_bearing
 
-# The measured edges belong to the face nearest the camera: the panel's front (half its
-# thickness before its centre), the pencil's near side.  Size constancy holds for that
-# face's depth.  The pencil's top and foot are measured on the middle 60 % of its
-# silhouette's columns, where the hexagon's near side lies 0.336–0.341 cm before the
-# axis whatever the pencil's turn (0.338 on average: numerically, over turns 0–60°).  A
-# flat's 0.346 and a corner's 0.4 bound it; their mean, 0.373, would put every pencil
-# 0.035 cm too near (0.05 % at 70 cm, not cancelled by the calibration at 1 m).
-FRONT_OFFSET = {"target": TARGET_THICKNESS / 2, "beacon": 0.338 * PENCIL_RADIUS / 0.4}
 # the hexagon's silhouette half-width averaged over its turn: R·sin 30°/(π/6)
 PENCIL_HALF_WIDTH = PENCIL_RADIUS * 3 / math.pi
 

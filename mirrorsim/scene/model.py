@@ -39,6 +39,14 @@ MAX_READ_NOISE = 1e5  # electrons rms
 # a mirror flatter than this (100 km) is flat: leave `curvature_radius` out
 MAX_CURVATURE_RADIUS = 1e7
 PENCIL_RADIUS = 0.4  # circumradius of the hexagonal pencil (0.69 cm across flats)
+# The measured edges belong to the face nearest the camera: the panel's front (half its
+# thickness before its centre), the pencil's near side.  Size constancy holds for that
+# face's depth.  The pencil's top and foot are measured on the middle 60 % of its
+# silhouette's columns, where the hexagon's near side lies 0.336–0.341 cm before the
+# axis whatever the pencil's turn (0.338 on average: numerically, over turns 0–60°).  A
+# flat's 0.346 and a corner's 0.4 bound it; their mean, 0.373, would put every pencil
+# 0.035 cm too near (0.05 % at 70 cm, not cancelled by the calibration at 1 m).
+FRONT_OFFSET = {"target": TARGET_THICKNESS / 2, "beacon": 0.338 * PENCIL_RADIUS / 0.4}
 OCCLUDER_THICKNESS = 1.0
 
 PAN_WORDS = ("mirror", "target", "beacon")

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mirrorsim.scene.model import (
+    FRONT_OFFSET,
     MIRROR_FRAME,
     PENCIL_RADIUS,
     Beacon,
@@ -157,6 +158,19 @@ def film_box(cam: Camera, u: np.ndarray, v: np.ndarray, depth: np.ndarray, margi
     u1 = int(min(cam.width, math.ceil(u.max()) + margin_px + 1))
     v1 = int(min(cam.height_px, math.ceil(v.max()) + margin_px + 1))
     return (u0, v0, u1, v1) if u1 > u0 and v1 > v0 else None
+
+
+def front_face(scene: Scene, obj: Target | Beacon, height: float, kind: str
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """Columns and rows (u, v) of the foot and the top (in that order) of ``obj``'s
+    front face in its mirror image: the virtual image's axis moved towards the camera by
+    FRONT_OFFSET[kind] (``kind``: target or beacon), ``height`` cm high; what a measured
+    edge is held to."""
+    img = mirror_image(scene.camera.position, scene.mirror, obj.position)
+    ray = (img.virtual - np.asarray(scene.camera.position)) / img.d_total
+    front = img.virtual - ray * FRONT_OFFSET[kind]
+    u, v, _ = project(scene.camera, np.array([[*front, 0.0], [*front, height]]))
+    return u, v
 
 
 def beacon_boxes(scene: Scene, margin_px: int = 16) -> list[tuple[int, int, int, int] | None]:
