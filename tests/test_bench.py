@@ -14,7 +14,6 @@ import yaml
 
 from mirrorsim.cli.main import main
 from mirrorsim.detection.detector import read_frame
-from mirrorsim.detection.image_geometry import FRONT_OFFSET
 from mirrorsim.formats.capture import CaptureRecord
 from mirrorsim.formats.scenefile import scene_from_dict
 from mirrorsim.pipelines.frame import render_and_measure
@@ -23,7 +22,7 @@ from mirrorsim.rendering.mitsuba_scene import TARGET_LABEL
 from mirrorsim.rendering.passes import IN_MIRROR
 from mirrorsim.rendering.sensor import add_noise, undistort_points
 from mirrorsim.scene import imperfections
-from mirrorsim.scene.model import Bench, SensorNoise
+from mirrorsim.scene.model import FRONT_OFFSET, Bench, SensorNoise
 from mirrorsim.truth import groundtruth, optics, visibility
 
 from .conftest import scene_dict

@@ -269,7 +269,7 @@ def test_a_dataset_draws_bench_imperfections_and_its_rows_carry_them(one_worker,
     scale, −(d − f)/d · e/(100 + e − f) (K measured at 100 + e while 100 is assumed; f
     the face offset), within the calibration's own measurement error at half size (a
     pencil 100 cm off is a few dozen px: its K varies by ~0.5 % with the distance)."""
-    from mirrorsim.detection.image_geometry import FRONT_OFFSET
+    from mirrorsim.scene.model import FRONT_OFFSET
 
     ideal = collect_rows(one_worker[0], 3)
     spec = _bench_spec(tmp_path, {"camera": {"pan_error": [-0.5, 0.5]},

@@ -375,8 +375,8 @@ def test_pencil_front_depth_is_the_mean_near_side_of_the_measured_columns():
     """FRONT_OFFSET['beacon'] is where the hexagon's near side lies, averaged over the
     middle 60 % of its silhouette's columns and over its turn (computed here afresh by
     sampling the polygon)."""
-    from mirrorsim.detection.image_geometry import FRONT_OFFSET, PENCIL_HALF_WIDTH
-    from mirrorsim.scene.model import PENCIL_RADIUS
+    from mirrorsim.detection.image_geometry import PENCIL_HALF_WIDTH
+    from mirrorsim.scene.model import FRONT_OFFSET, PENCIL_RADIUS
 
     depths, widths = [], []
     for turn in np.linspace(0.0, 60.0, 121)[:-1]:

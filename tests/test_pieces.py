@@ -7,9 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from mirrorsim.detection.image_geometry import FRONT_OFFSET
 from mirrorsim.formats.scenefile import load_scene
-from mirrorsim.scene.model import Mirror, pencil_paint_height
+from mirrorsim.scene.model import FRONT_OFFSET, Mirror, pencil_paint_height
 from mirrorsim.truth import optics
 from solver.sltr import solve_single
 

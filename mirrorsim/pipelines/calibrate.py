@@ -1,7 +1,7 @@
 """Size-constancy calibration: K = s_px · d_ref per object and camera (paper eq 5).
 
 (Precisely, K = s_px · (d_ref − f) with f the measured face's offset before the object's
-centre, :data:`mirrorsim.detection.detector.FRONT_OFFSET`: the panel's half-thickness, the
+centre, :data:`mirrorsim.scene.model.FRONT_OFFSET`: the panel's half-thickness, the
 pencil's mean near-side radius.)
 
 Like the paper (229 px at 1 m for its target), each object is rendered in direct view
@@ -23,10 +23,10 @@ from pathlib import Path
 import numpy as np
 
 from mirrorsim.detection.detector import measure_object
-from mirrorsim.detection.image_geometry import FRONT_OFFSET, Calibration
+from mirrorsim.detection.image_geometry import Calibration
 from mirrorsim.errors import DetectionError
 from mirrorsim.formats.cache import read_entry, write_entry
-from mirrorsim.scene.model import PENCIL_RADIUS, Beacon, Board, Camera, Target
+from mirrorsim.scene.model import FRONT_OFFSET, PENCIL_RADIUS, Beacon, Board, Camera, Target
 from mirrorsim.truth import optics
 from solver.geometry import unit
 
