@@ -267,9 +267,9 @@ def _forward(x: np.ndarray, o: np.ndarray, bpos: np.ndarray, nt: int,
     power = None
     if "power" in where:  # the mirror's curvature first: the pan and the scale act after it
         # the vertex: the middle of the images' reflection points (the target's once)
-        middle = observe(o, x[1] * line_normal(x[0]), x[0], pts[:nb + 1],
-                         strict=False).reflection_point
-        power = power_terms((x[0], x[1]), o, pts, vertex=middle.mean(axis=0))
+        seen = observe(o, x[1] * line_normal(x[0]), x[0], pts, strict=False)
+        power = _power_of(seen, x[0], x[1], o, pts,
+                          vertex=seen.reflection_point[:nb + 1].mean(axis=0))
         a, d = a + x[where["power"]] * power[0], d + x[where["power"]] * power[1]
     ea, ed = nuisance_columns(nuisances, d, power)
     if "pan" in where:
@@ -321,8 +321,15 @@ def power_terms(mirror: tuple[float, float], observer: np.ndarray, points: np.nd
         α's change (deg) and d_total's change (cm) per unit c.
     """
     theta, rho = mirror
+    obs = observe(observer, rho * line_normal(theta), theta, points, strict=False)
+    return _power_of(obs, theta, rho, observer, points, vertex)
+
+
+def _power_of(obs, theta: float, rho: float, observer: np.ndarray, points: np.ndarray,
+              vertex: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`power_terms` from the points' images in the flat mirror, already
+    observed (the solver's forward model has them)."""
     a, n = unit(theta), line_normal(theta)
-    obs = observe(observer, rho * n, theta, points, strict=False)
     P = obs.reflection_point
     rel = obs.virtual - observer  # the line of sight to each image
     dist = np.asarray(obs.d_total)
