@@ -238,12 +238,12 @@ def _draw(spec: dict, rng: np.random.Generator, where="<spec>",
     bench_rng = bench_rng or rng
     for path, value in _draw_bench(spec.get("bench") or {}, bench_rng, where).items():
         _set_key(d, path, value)
-    offset = (spec.get("bench") or {}).get("beacon", {}).get("known_position_offset")
-    for b in beacons[1:]:  # each beacon's believed position off by its own draw
-        if offset is not None:
-            key = "bench.beacon.known_position_offset"
-            b["known_position"] = [p + _draw_number(offset, key, bench_rng, where)
-                                   for p in b["position"]]
+    block, key = _OFFSET.spec_path.split(".")
+    offset = ((spec.get("bench") or {}).get(block) or {}).get(key)
+    if offset is not None:  # each further beacon's believed position off by its own draw
+        for b in beacons[1:]:
+            b["known_position"] = [p + _draw_number(offset, f"bench.{_OFFSET.spec_path}",
+                                                    bench_rng, where) for p in b["position"]]
     return d
 
 
@@ -258,6 +258,7 @@ for _imp in REGISTRY:
     _block, _leaf = _imp.spec_path.split(".")
     BENCH_SPEC_KEYS.setdefault(_block, set()).add(_leaf)
 _BY_SPEC_PATH = {imp.spec_path: imp for imp in REGISTRY}
+_OFFSET = next(imp for imp in REGISTRY if imp.form == "offset")  # a believed position's
 
 
 def _draw_number(raw: Any, key: str, rng: np.random.Generator, where,
