@@ -192,8 +192,7 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
                             replace(sig, shared_alpha_deg=0.0) if shared else sigma)
     init = initial or solve_single(o, bpos[0], beacons[0].alpha_deg, beacons[0].d_total,
                                    targets[0][0], targets[0][1])
-    if not (np.isfinite(position_sigma) and position_sigma >= 0):
-        raise SolverError(f"position_sigma must be ≥ 0, got {position_sigma}")
+    check_position_sigma(position_sigma)
     free = position_sigma > 0
     # a shared α offset (a bench's pan reading) is an unknown δ on every α with the prior
     # N(0, shared²): for Gaussian errors the same estimate and covariance as correlated
@@ -340,6 +339,12 @@ def _power_of(obs, theta: float, rho: float, observer: np.ndarray, points: np.nd
     dalpha = np.degrees((rel[:, 0] * dv[:, 1] - rel[:, 1] * dv[:, 0]) / dist**2)
     cos_i = np.abs(rel @ n) / dist
     return dalpha, np.sum(rel * dv, axis=1) / dist - 2.0 * cos_i * obs.d1 * obs.d2
+
+
+def check_position_sigma(position_sigma: float) -> None:
+    """Refuse a beacon position σ that is not a finite length ≥ 0 (cm per axis)."""
+    if not (np.isfinite(position_sigma) and position_sigma >= 0):
+        raise SolverError(f"position_sigma must be ≥ 0, got {position_sigma}")
 
 
 def check_nuisances(nuisances: tuple[str, ...], nb: int | None, nt: int) -> None:

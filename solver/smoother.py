@@ -40,23 +40,22 @@ def smooth_run(observer, start, controls: np.ndarray, observations: np.ndarray,
     known = np.array([f.position for f in fixed], float).reshape(-1, 2)
     obs_fixed = np.array([(f.alpha_deg, f.d_total) for f in fixed], float).reshape(-1, 2)
     # fixed beacons known to a σ are parameters with that prior, as in the filter
-    free = np.full(len(fixed), fixed_sigma > 0)
+    free = fixed_sigma > 0
     z = np.vstack([obs, obs_fixed])
 
     def residuals(x):
         b = x[2:2 + 2 * (k + 1)].reshape(k + 1, 2)
-        at = known.copy()
-        at[free] = x[2 + 2 * (k + 1):].reshape(-1, 2)
+        at = x[2 + 2 * (k + 1):].reshape(-1, 2) if free else known
         seen = observe(o, x[1] * line_normal(x[0]), x[0], np.vstack([b[1:], at]),
                        strict=False)
         alpha, d = np.asarray(seen.alpha_deg), np.asarray(seen.d_total)
         return np.concatenate([
             (b[0] - start) / params.sigma_trs,
             ((b[1:] - b[:-1] - controls) / params.sigma_trs).ravel(),
-            ((at[free] - known[free]) / (fixed_sigma or 1.0)).ravel(),
+            ((at - known) / fixed_sigma).ravel() if free else [],
             wrap_bearing(alpha - z[:, 0]) / s.alpha_deg,
             (d - z[:, 1]) / (s.d_total_rel * z[:, 1])])
 
     x = least_squares(residuals, np.r_[yaw_deg, rho, np.asarray(beacons, float).ravel(),
-                                       known[free].ravel()]).x
+                                       known.ravel() if free else []]).x
     return SmoothedRun(float(x[0]), float(x[1]), x[2:2 + 2 * (k + 1)].reshape(k + 1, 2))

@@ -209,6 +209,12 @@ def card_section(group: tuple[Column, ...], prefix: str = "") -> str:
                      + f": {c.doc}" for c in group)
 
 
+def counted_once(beacon_of: np.ndarray) -> dict[str, np.ndarray]:
+    """Per kind, the image rows (:func:`image_rows`) that count: every beacon's, the
+    target's once a scene (its first beacon's row)."""
+    return {"target": beacon_of == 0, "beacon": np.ones(len(beacon_of), bool)}
+
+
 def image_rows(cols: dict) -> tuple[dict, np.ndarray, np.ndarray]:
     """A table's columns with one row per beacon image; and each row's beacon (0-based)
     and scene (its row in ``cols``).

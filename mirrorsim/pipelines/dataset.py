@@ -59,7 +59,7 @@ from mirrorsim.scene import imperfections
 from mirrorsim.scene.model import Scene
 from mirrorsim.truth.groundtruth import ObjectTruth
 from solver.geometry import yaw_difference
-from solver.lsq import NUISANCES, check_nuisances
+from solver.lsq import NUISANCES, check_nuisances, check_position_sigma
 
 ROW_SCHEMA_VERSION = 3  # 3: the beacon count, each beacon's columns, self-calibration
 # a worker retires past this resident memory; measured on llvm_ad_rgb, a warm worker
@@ -269,9 +269,11 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
         spec = spec.with_sampler(sampler)
     if beacons is not None:  # likewise
         spec = spec.with_beacon_count(beacons)
-    if not (math.isfinite(position_sigma) and position_sigma >= 0):
-        raise BadParameter("position_sigma", f"{position_sigma:g} must be ≥ 0 (cm per axis)")
     try:  # before anything is written
+        check_position_sigma(position_sigma)
+    except SolverError as exc:
+        raise BadParameter("position_sigma", str(exc)) from None
+    try:
         check_nuisances(nuisances, spec.beacon_count, 1)
     except SolverError as exc:
         raise BadParameter("nuisances", f"{exc} (scenes of {spec.beacon_count} beacon(s) "

@@ -199,7 +199,7 @@ def fit(cols: dict, provenance: dict | None = None) -> ErrorModel:
     # pair fit and the shared α take the target beside each of its beacons)
     cols, beacon_of, scene_of = table.image_rows(cols)
     ok = np.array([not e for e in cols.get("error", [""] * len(cols["index"]))])
-    once = {"target": beacon_of == 0, "beacon": np.ones(len(ok), bool)}
+    once = table.counted_once(beacon_of)
     need = min_rows(names)
     # pixel errors scale as 1/fx: each row's errors as at the rows' median focal length
     fx = np.asarray(cols["fx_px"], float) if "fx_px" in cols else np.full(len(ok), np.nan)
@@ -355,7 +355,7 @@ def plot(cols: dict, model: ErrorModel, out: str | Path) -> Path:
     fig, axes = plt.subplots(2, 3, figsize=(16, 8.5))
     cols, beacon_of, _ = table.image_rows(cols)  # every beacon's image; the target once
     ok = np.array([not e for e in cols.get("error", [""] * len(cols["index"]))])
-    once = {"target": beacon_of == 0, "beacon": np.ones(len(ok), bool)}
+    once = table.counted_once(beacon_of)
     grid = np.linspace(-5, 5, 201)
     for r, (q, col, scale, unit) in enumerate((("alpha", "alpha_err", 1.0, "°"),
                                                 ("d_rel", "d_rel_err", 100.0, "% of d_total"))):

@@ -80,6 +80,7 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
     # image shares its errors (bias included), so several would shrink its σ by √frames
     target = [mean_target]
     sol = solve_measurements(cam.position, beacons, target, sigma, nuisances, position_sigma)
+    errors = score(truth, measurements, sol)
     by_count = ()
     if len(beacons) > 1:
         def first(k: int):
@@ -94,11 +95,12 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
                     if not m:
                         raise
 
+        # all of them: the solution above
         by_count = tuple(score(truth, measurements, first(k))
-                         for k in range(1, len(beacons) + 1))
+                         for k in range(1, len(beacons))) + (errors,)
     done = truths[0].render  # how the frames were rendered, read back from the first
     return Report(scene=scene.name, truth=truth, measurements=measurements, solution=sol,
-                  errors=score(truth, measurements, sol), frames=tuple(frames),
+                  errors=errors, frames=tuple(frames),
                   render=RenderInfo(done.variant, done.spp, done.seed, done.sampler),
                   calibration={"target_k": cal.target_k, "pencil_k": cal.pencil_k},
                   error_vs_beacons=by_count)

@@ -227,7 +227,7 @@ def _draw(spec: dict, rng: np.random.Generator, where="<spec>",
     # the other beacons drawn after everything else: a spec of one beacon draws as before
     # (one pencil height for all: the calibration and the detector take one)
     beacons += [beacon(beacons[0]["height"])
-                for _ in range(int(spec["beacon"].get("count", 1)) - 1)]
+                for _ in range(DatasetSpec(spec).beacon_count - 1)]
     # one beacon under the scene file's "beacon" key: a refusal names the key a spec has
     d = {"board": copy.deepcopy(spec["board"]), "camera": cam, "mirror": mirror,
          "target": target, **({"beacon": beacons[0]} if len(beacons) == 1 else

@@ -36,7 +36,7 @@ from mirrorsim.truth.optics import target_facing
 from mirrorsim.truth.visibility import visibility
 from solver.errors import SolverError
 from solver.geometry import bearing_deg, line_normal, wrap_bearing
-from solver.lsq import BeaconMeasurement, Sigma
+from solver.lsq import BeaconMeasurement, Sigma, check_position_sigma
 from solver.particle import MovingBeaconFilter, PFParams, mirror_errors
 from solver.placement import path_points
 from solver.sltr import locate, mirror_from_beacon, observe, ray_hits_line
@@ -260,8 +260,10 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
     known to ``position_sigma`` cm per axis (0: exactly).
     """
     check_options(kind, steps, odometry_sigma, side, step, heading, scene.board.size)
-    if not (np.isfinite(position_sigma) and position_sigma >= 0):
-        raise BadParameter("position_sigma", f"{position_sigma:g} must be ≥ 0 (cm per axis)")
+    try:
+        check_position_sigma(position_sigma)
+    except SolverError as exc:
+        raise BadParameter("position_sigma", str(exc)) from None
     out = Path(out)
     rng = np.random.default_rng(seed)
     b0, cam = scene.beacons[0], scene.camera

@@ -107,7 +107,7 @@ def validate(model: ErrorModel, cols: dict) -> Validation:
     truth = np.column_stack([_col(cols, "target_x"), _col(cols, "target_y")])
     target = np.column_stack([_col(cols, "target_alpha_meas"), _col(cols, "target_d_meas")])
     # each scene's beacons as its row has them, solved as the dataset solved them
-    images, beacon_of, scene_of = table.image_rows(cols)
+    images, _, scene_of = table.image_rows(cols)
     beacon = np.column_stack([_col(images, f"beacon_{q}") for q in
                               ("known_x", "known_y", "alpha_meas", "d_meas")])
     calibrate = cols.get("calibrate") or [""] * n
@@ -115,8 +115,8 @@ def validate(model: ErrorModel, cols: dict) -> Validation:
     dist, failed = [], 0
     for i in np.flatnonzero(ok):
         t = tuple(target[i])
-        rows = beacon[scene_of == i][np.argsort(beacon_of[scene_of == i])]
-        beacons = [BeaconMeasurement((x, y), a, d) for x, y, a, d in rows]
+        # image_rows gives a scene's beacons in their order
+        beacons = [BeaconMeasurement((x, y), a, d) for x, y, a, d in beacon[scene_of == i]]
         nuisances = tuple(x for x in (calibrate[i] or "").split(",") if x)
         try:
             sigma = model.sigmas(t, [(b.alpha_deg, b.d_total) for b in beacons], pan[i],
@@ -138,7 +138,7 @@ def _within(model: ErrorModel, cols: dict, ok: np.ndarray, pan: np.ndarray, fx: 
     out: dict[str, dict[str, tuple[float, float]]] = {}
     cols, beacon_of, scene_of = table.image_rows(cols)  # every beacon's image, the target once
     ok, pan, fx = ok[scene_of], pan[scene_of], fx[scene_of]
-    once = {"target": beacon_of == 0, "beacon": np.ones(len(ok), bool)}
+    once = table.counted_once(beacon_of)
     for kind in KINDS:
         x = measured_features(_col(cols, table.object_column(kind, "d_meas")),
                               _col(cols, table.object_column(kind, "alpha_meas")), pan)
