@@ -220,7 +220,7 @@ def test_the_path_keeps_clear_of_fixed_beacons():
     import numpy as np
 
     from mirrorsim.formats.scenefile import load_scene
-    from mirrorsim.pipelines.track import beacon_path
+    from mirrorsim.pipelines.track import FIXED_CLEARANCE_CM, beacon_path
     from mirrorsim.scene.model import Beacon
     from mirrorsim.truth.groundtruth import ground_truth
 
@@ -228,8 +228,9 @@ def test_the_path_keeps_clear_of_fixed_beacons():
     gt = ground_truth(scene)
     obs = (gt.beacons[0].alpha_deg, gt.beacons[0].d_total)
     tobs = (gt.target.alpha_deg, gt.target.d_total)
+    assert FIXED_CLEARANCE_CM == pytest.approx(2 * 0.4 + 0.5)  # the docs' 1.3 cm
     free = beacon_path(scene, obs, tobs, "rectangular", 12, 4.0, 1.0)
     blocker = Beacon(tuple(free[6]), scene.beacons[0].height)
     path = beacon_path(replace(scene, beacons=(scene.beacons[0], blocker)), obs, tobs,
                        "rectangular", 12, 4.0, 1.0)
-    assert np.min(np.linalg.norm(path - free[6], axis=1)) >= 2 * 0.4 + 0.5
+    assert np.min(np.linalg.norm(path - free[6], axis=1)) >= FIXED_CLEARANCE_CM
