@@ -2,7 +2,7 @@
 
     python benchmarks/selfcal.py [--scenes 40] [--seed S] [--spec scenes/dataset_spec_bench.yaml]
                                  [--beacons 3] [--calibrate pan,scale,power] [--out DIR]
-                                 [--lossless] [--error-model FILE]
+                                 [--lossless] [--error-model FILE] [--priors]
 
 For each random scene of the spec (its bench imperfections drawn as the spec draws
 them: pan error, calibration error, curvature, JPEG…), `plan --beacons N --calibrate
@@ -20,7 +20,10 @@ positions on the measurements with the frame's shared errors taken out by the tr
 each image's own error.  Prints each scene's target errors, the medians, and the
 images' own α errors beside the mirror's power's first-order move.  ``--lossless``: the same scenes
 (the same draws) with each frame stored as PNG instead of the JPEG the spec draws, to
-tell JPEG's part from the rest.
+tell JPEG's part from the rest.  ``--priors``: two more columns, self-calibrated with
+the spec's ranges as what the bench knows of each nuisance (``nuisance_sigma``: a
+uniform draw's σ, (hi − lo)/√12; the calibration's distance error over D_REF as the
+scale's), with the believed and with the exact positions.
 """
 
 from __future__ import annotations
@@ -41,6 +44,7 @@ from stamp import stamp  # noqa: E402
 
 from mirrorsim.errors import DetectionError  # noqa: E402
 from mirrorsim.formats.error_model import load_error_model  # noqa: E402
+from mirrorsim.pipelines.calibrate import D_REF  # noqa: E402
 from mirrorsim.pipelines.evaluate import evaluate_scene  # noqa: E402
 from mirrorsim.pipelines.planning import plan_scene  # noqa: E402
 from mirrorsim.pipelines.random_scenes import load_spec, sample_scene  # noqa: E402
@@ -50,16 +54,18 @@ from solver.geometry import line_normal  # noqa: E402
 from solver.lsq import (  # noqa: E402
     BeaconMeasurement,
     check_nuisances,
+    describe_nuisance_sigma,
     power_terms,
     solve_measurements,
 )
 
 
-def _errors(rep, scene, position_sigma: float, nuisances: tuple[str, ...]
-            ) -> tuple[float, ...]:
+def _errors(rep, scene, position_sigma: float, nuisances: tuple[str, ...],
+            priors: dict[str, float]) -> tuple[float, ...]:
     """Target error: plain and self-calibrated, with believed and with exact positions;
     the reference (plain, exact positions, the frame's shared errors taken out) and its
-    two parts; self-calibrated for pan and scale only (believed positions)."""
+    two parts; self-calibrated for pan and scale only (believed positions); with
+    ``priors``, self-calibrated with them (believed, then exact positions)."""
     m, truth = rep.measurements, np.asarray(rep.truth.target.position, float)
     exact = [BeaconMeasurement(tuple(b.position), mb.alpha_deg, mb.d_total)
              for b, mb in zip(scene.beacons, m.beacons, strict=True)]
@@ -92,7 +98,26 @@ def _errors(rep, scene, position_sigma: float, nuisances: tuple[str, ...]
         out.append(float(np.linalg.norm(sol.target - truth)))
     else:
         out.append(float("nan"))
+    for beacons, ps in ((m.beacons, position_sigma), (exact, 0.0)) if priors else ():
+        sol = solve_measurements(m.observer, beacons, m.targets, m.sigma, nuisances, ps,
+                                 priors)
+        out.append(float(np.linalg.norm(sol.target - truth)))
     return tuple(out)
+
+
+def _priors(spec, nuisances: tuple[str, ...]) -> dict[str, float]:
+    """σ of each estimated nuisance from the spec's range for it (a uniform draw's):
+    what a bench built to those tolerances knows before its frames."""
+    bench = spec.data.get("bench", {})
+    ranges = {"pan": ((bench.get("camera") or {}).get("pan_error"), 1.0),
+              "scale": ((bench.get("calibration") or {}).get("distance_error"), 1 / D_REF),
+              "power": ((bench.get("mirror") or {}).get("curvature"), 1.0)}
+    out = {}
+    for n in nuisances:
+        r, per = ranges[n]
+        if isinstance(r, list) and r[1] > r[0]:
+            out[n] = (r[1] - r[0]) / np.sqrt(12) * per
+    return out
 
 
 def _power_check(rep, scene) -> tuple[np.ndarray, np.ndarray]:
@@ -128,6 +153,8 @@ def main() -> None:
                     help="the σ's that weight every fit, and its typical σ's the plan "
                          "(default: the ideal bench's model for the fits, the plan's "
                          "own default σ's)")
+    ap.add_argument("--priors", action="store_true",
+                    help="also self-calibrate with the spec's ranges as each nuisance's prior")
     a = ap.parse_args()
     nuisances = tuple(n.strip() for n in a.calibrate.split(",") if n.strip())
     check_nuisances(nuisances, a.beacons, 1)
@@ -136,15 +163,20 @@ def main() -> None:
     spec = load_spec(a.spec)
     lo, hi = spec.data.get("bench", {}).get("beacon", {}).get("known_position_offset", [0, 0])
     position_sigma = (hi - lo) / np.sqrt(12)  # a uniform offset's σ
+    priors = _priors(spec, nuisances) if a.priors else {}
     print(f"self-calibration on rendered frames: {a.scenes} scenes of {a.spec.name}, seed "
           f"{seed}, {a.beacons} beacons planned and self-calibrated for "
           f"{', '.join(nuisances)}, believed positions off by U({lo}, {hi}) cm "
           f"per axis{'; frames stored as PNG, not JPEG' if a.lossless else ''}; σ's of "
           f"{a.error_model.name if a.error_model else 'the ideal bench’s error model'}; "
           f"{stamp()}\n")
+    if a.priors:
+        print(f"priors (the spec's ranges): {describe_nuisance_sigma(priors)}\n")
+    extra = " self-calibrated with priors | … exact positions |" if a.priors else ""
     print("| scene | plain (cm) | self-calibrated | pan and scale only | plain, exact "
           "positions | self-calibrated, exact positions | reference: pan and scale known | "
-          "pan error ° | calibration error cm |\n|---|---|---|---|---|---|---|---|---|")
+          f"pan error ° | calibration error cm |{extra}\n|---|---|---|---|---|---|---|---|---|"
+          + "---|---|" * a.priors)
     rows, skipped, own, moved = [], [], [], []
     rng = np.random.default_rng(seed)
     with tempfile.TemporaryDirectory() as tmp:
@@ -170,7 +202,7 @@ def main() -> None:
             try:
                 rep = evaluate_scene(scene, out / scene.name, progress=False, keep=(),
                                      error_model=model)
-                e = _errors(rep, scene, position_sigma, nuisances)
+                e = _errors(rep, scene, position_sigma, nuisances, priors)
             except (DetectionError, SolverError) as exc:
                 skipped.append(f"{scene.name}: {exc}")
                 continue
@@ -180,18 +212,21 @@ def main() -> None:
             moved.append(p)
             print(f"| {scene.name} | {e[0]:.3f} | {e[1]:.3f} | {e[7]:.3f} | {e[2]:.3f} | "
                   f"{e[3]:.3f} | {e[4]:.3f} | "
-                  f"{scene.bench.pan_error:+.2f} | {scene.bench.calibration_distance_error:+.2f} |",
+                  f"{scene.bench.pan_error:+.2f} | {scene.bench.calibration_distance_error:+.2f} |"
+                  + "".join(f" {x:.3f} |" for x in e[8:]),
                   flush=True)
     if not rows:
         sys.exit("no scene was measured: " + "; ".join(skipped[:3]))
     v = np.array(rows)
     med = [statistics.median(v[:, k]) for k in range(v.shape[1])]
     print(f"| **median** ({len(rows)} scenes) | **{med[0]:.3f}** | **{med[1]:.3f}** | "
-          f"**{med[7]:.3f}** | **{med[2]:.3f}** | **{med[3]:.3f}** | **{med[4]:.3f}** | | |")
+          f"**{med[7]:.3f}** | **{med[2]:.3f}** | **{med[3]:.3f}** | **{med[4]:.3f}** | | |"
+          + "".join(f" **{x:.3f}** |" for x in med[8:]))
     print(f"\nself-calibrated / plain, medians: {med[1] / med[0]:.2f} (believed positions), "
           f"{med[3] / med[2]:.2f} (exact positions); pan and scale only: "
           f"{med[7] / med[0]:.2f} (believed); the reference / plain: {med[4] / med[2]:.2f} "
-          f"(exact)")
+          f"(exact)" + (f"; with priors: {med[8] / med[0]:.2f} (believed), "
+                        f"{med[9] / med[2]:.2f} (exact)" if a.priors else ""))
     print(f"\nthe reference's parts, medians: each image's own α error alone (every d_total "
           f"true) {med[5]:.3f} cm, its own d_total error alone (every α true) {med[6]:.3f} cm")
     own, moved = np.concatenate(own), np.concatenate(moved)

@@ -5,6 +5,7 @@ Jacobian; :func:`solve_measurements` is the solver's front door.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -147,7 +148,8 @@ def predict(params: np.ndarray, observer: np.ndarray, points: np.ndarray
 def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
               targets: list[tuple[float, float]], sigma: Sigma | ObjectSigmas | None = None,
               initial: Solution | None = None, nuisances: tuple[str, ...] = (),
-              position_sigma: float = 0.0) -> Solution:
+              position_sigma: float = 0.0,
+              nuisance_sigma: Mapping[str, float] | None = None) -> Solution:
     """Weighted nonlinear least squares for the mirror line and the target.
 
     Parameters
@@ -170,6 +172,12 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
         How well the beacons' positions are known (cm, each axis; 0: exactly).  Where
         > 0, each beacon's offset from its believed position is estimated too, with that
         prior: a misplaced beacon then moves its own image's fit, not the nuisances.
+    nuisance_sigma : mapping of nuisance name to σ, optional
+        What the bench knows of some of ``nuisances`` before the frames: each such
+        nuisance gets the prior N(neutral, σ²) (pan in degrees, scale as a fraction of 1,
+        power in 1/cm), as a bench whose pan reading is good to ±0.5° knows.  Where the
+        beacons barely separate the nuisances from the mirror, this keeps the estimate
+        from trading a large nuisance for the measurements' noise.
 
     Raises
     ------
@@ -193,6 +201,7 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
     init = initial or solve_single(o, bpos[0], beacons[0].alpha_deg, beacons[0].d_total,
                                    targets[0][0], targets[0][1])
     check_position_sigma(position_sigma)
+    check_nuisance_sigma(nuisance_sigma or {}, nuisances)
     free = position_sigma > 0
     # a shared α offset (a bench's pan reading) is an unknown δ on every α with the prior
     # N(0, shared²): for Gaussian errors the same estimate and covariance as correlated
@@ -206,13 +215,19 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
     w_a = 1.0 / sa
     w_d = 1.0 / (sd * meas_d)
     eye = np.eye(len(x0))
-    prior = np.vstack([eye[[4 + unknown.index("pan")]] / shared if shared else eye[:0],
+    # each prior is a row (x − neutral)/σ: the shared α offset's, the nuisances' the
+    # bench knows, each beacon's offset from its believed position
+    known = {"pan": shared} if shared else {}
+    known |= dict(nuisance_sigma or {})
+    prior = np.vstack([*(eye[[4 + unknown.index(n)]] / known[n] for n in unknown if n in known),
                        eye[4 + k:] / position_sigma if free else eye[:0]])
+    neutral = np.concatenate([np.zeros(4), [NUISANCES[n][1] for n in unknown],
+                              np.zeros(len(x0) - 4 - k)])
 
     def fun(x):
         a, d, _, _ = _forward(x, o, bpos, nt, unknown, free)
         return np.concatenate([w_a * wrap_bearing(a - meas_a), w_d * (d - meas_d),
-                               prior @ x])
+                               prior @ (x - neutral)])
 
     def jac(x):
         _, _, da, dd = _forward(x, o, bpos, nt, unknown, free)
@@ -233,7 +248,9 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
     if np.linalg.cond(jtj) > 1e14:
         raise SolverError(_undetermined(nuisances))
     cov = np.linalg.inv(jtj) if sigma is not None else None
-    names = (_residual_names(nb, nt) + (["the shared α offset's prior"] if shared else [])
+    names = (_residual_names(nb, nt)
+             + [f"the {n} prior" if n in (nuisance_sigma or {}) else "the shared α offset's prior"
+                for n in unknown if n in known]
              + [f"beacon {i} believed {c}" for i in range(nb) for c in "xy"])
     down = tuple(f"{names[i]} ({abs(r[i]):.1f} σ off)" for i in np.flatnonzero(w < 1.0))
     sol = _solution(o, res.x[:4], bpos, targets, cov)
@@ -243,6 +260,8 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
                                               strict=True)},
                    method=sol.method + (f", self-calibrated ({', '.join(nuisances)})"
                                         if nuisances else "")
+                   + (f", with priors ({describe_nuisance_sigma(nuisance_sigma)})"
+                      if nuisance_sigma else "")
                    + (f", a shared α offset of prior σ {shared:.3g}° estimated" if implicit
                       else ""))
 
@@ -347,6 +366,25 @@ def check_position_sigma(position_sigma: float) -> None:
         raise SolverError(f"position_sigma must be ≥ 0, got {position_sigma}")
 
 
+def check_nuisance_sigma(nuisance_sigma: Mapping[str, float],
+                         nuisances: tuple[str, ...]) -> None:
+    """Refuse a prior σ for a nuisance that is not estimated, or one that is not a
+    finite number > 0."""
+    for name, s in nuisance_sigma.items():
+        if name not in nuisances:
+            raise SolverError(f"a prior σ for {name!r}, which is not estimated (estimated: "
+                              f"{', '.join(nuisances) or 'none'})")
+        if not (isinstance(s, int | float) and np.isfinite(s) and s > 0):
+            raise SolverError(f"the prior σ of {name} must be a number > 0, got {s!r}")
+
+
+def describe_nuisance_sigma(nuisance_sigma: Mapping[str, float]) -> str:
+    """The priors in words with their units, e.g. "pan ±0.29°, scale ±0.58 %"."""
+    units = {"pan": lambda s: f"±{s:.3g}°", "scale": lambda s: f"±{100 * s:.3g} %",
+             "power": lambda s: f"±{s:.3g}/cm"}
+    return ", ".join(f"{n} {units[n](s)}" for n, s in nuisance_sigma.items())
+
+
 def check_nuisances(nuisances: tuple[str, ...], nb: int | None, nt: int) -> None:
     """Refuse unknown nuisances, and more unknowns than measurements (``nb`` None: the
     beacons are not known yet, the names only)."""
@@ -442,8 +480,8 @@ def crlb(observer: ArrayLike, beacons: ArrayLike, mirror_yaw_deg: float, mirror_
 def solve_measurements(observer, beacons: list[BeaconMeasurement],
                        targets: list[tuple[float, float]],
                        sigma: Sigma | ObjectSigmas | None = None,
-                       nuisances: tuple[str, ...] = (), position_sigma: float = 0.0
-                       ) -> Solution:
+                       nuisances: tuple[str, ...] = (), position_sigma: float = 0.0,
+                       nuisance_sigma: Mapping[str, float] | None = None) -> Solution:
     """The solver's front door: the closed form for one beacon and one target without
     σ's, weighted least squares (with covariance when σ's are given) otherwise."""
     if len(beacons) == 1 and len(targets) == 1 and not nuisances and not position_sigma:
@@ -470,4 +508,4 @@ def solve_measurements(observer, beacons: list[BeaconMeasurement],
         cov = Jinv @ S @ Jinv.T
         return replace(sol, covariance=cov, method="closed form with covariance")
     return solve_lsq(observer, beacons, targets, sigma, nuisances=nuisances,
-                     position_sigma=position_sigma)
+                     position_sigma=position_sigma, nuisance_sigma=nuisance_sigma)

@@ -21,6 +21,8 @@ from mirrorsim.cli.registry import (
     nuisances_of,
     out_file,
     output,
+    prior_option,
+    priors_of,
     sampler_option,
 )
 from mirrorsim.errors import BadArgument, BadParameter, RunFailed
@@ -34,6 +36,7 @@ def _solve_options(p):
     common(p, scene=False, json="the solution",
            error_model="each measurement's σ's; given, it replaces the file's `sigma`")
     calibrate_option(p)
+    prior_option(p)
 
 
 @command("solve", "localize the mirror and the target from measurements",
@@ -51,6 +54,7 @@ def _solve(args) -> int:
 
     m = load_measurements(args.measurements)
     nuisances = nuisances_of(args, len(m.beacons), len(m.targets))
+    priors = priors_of(args, nuisances)
     model = error_model_of(args)
     if model is not None and m.sigma is not None:
         print(f"note: --error-model {args.error_model} gives the σ's; the `sigma` of "
@@ -66,7 +70,7 @@ def _solve(args) -> int:
         if m.observer_pan_deg is None:
             source += "; no observer_pan_deg: images taken as off-axis as its training rows"
     sol = solve_measurements(m.observer, m.beacons, m.targets, sigma, nuisances,
-                             beacon_sigma_of(args))
+                             beacon_sigma_of(args), priors)
     print(f"σ's from {source}", file=sys.stderr)
     print(solution_summary(str(args.measurements), sol))
     emit(args, sol.to_json())

@@ -193,6 +193,36 @@ def calibrate_option(p: argparse.ArgumentParser) -> None:
                         "ellipse includes it")
 
 
+def prior_option(p: argparse.ArgumentParser) -> None:
+    """``--prior pan=σ,scale=σ,…``: what the bench knows of --calibrate's nuisances."""
+    p.add_argument("--prior", default="", metavar="NAME=SIGMA,...",
+                   help="what the bench knows of some of --calibrate's nuisances before the "
+                   "frames, as a σ each: pan in degrees, scale as a fraction (0.006: 0.6 %%), "
+                   "power in 1/cm; e.g. pan=0.3,scale=0.006 for a pan reading good to about "
+                   "±0.5° and a reference distance to ±1 cm at 100 cm.  Each such nuisance "
+                   "is then estimated with that prior (default: none, each free)")
+
+
+def priors_of(args: argparse.Namespace, nuisances: tuple[str, ...]) -> dict[str, float]:
+    """--prior's σ's, checked against --calibrate's nuisances."""
+    from solver.errors import SolverError
+    from solver.lsq import check_nuisance_sigma
+
+    out: dict[str, float] = {}
+    for item in (i.strip() for i in args.prior.split(",") if i.strip()):
+        name, _, value = item.partition("=")
+        try:
+            out[name.strip()] = float(value)
+        except ValueError:
+            raise BadArgument("--prior", f"{item!r} is not NAME=SIGMA, SIGMA a number") from None
+    try:
+        check_nuisance_sigma(out, nuisances)
+    except SolverError as exc:
+        raise BadArgument("--prior", f"{exc} (give it in --calibrate)" if "not estimated"
+                          in str(exc) else str(exc)) from None
+    return out
+
+
 def beacon_sigma_option(p: argparse.ArgumentParser, what: str) -> None:
     """``--beacon-sigma CM``: how well the beacons' believed positions are known."""
     p.add_argument("--beacon-sigma", type=float, default=0.0, metavar="CM",

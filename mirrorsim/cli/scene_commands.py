@@ -20,6 +20,8 @@ from mirrorsim.cli.registry import (
     out_folder,
     output,
     preload,
+    prior_option,
+    priors_of,
     render_options,
 )
 from mirrorsim.errors import BadArgument
@@ -209,6 +211,7 @@ def _evaluate_options(p):
             variant=True, quiet=True, error_model="each measurement's σ's, which weight the "
             "solver and make the 95 %% ellipse")
     calibrate_option(p)
+    prior_option(p)
     p.add_argument("--keep", nargs="*", default=[], choices=("ids", "annotated", "plot"),
                    help="write also: ids, each frame's object-id labels (<name>.ids.png); "
                         "annotated, each frame with its detections drawn "
@@ -232,13 +235,14 @@ def _evaluate(args) -> int:
 
     scene = render_options(args, load(args.scene))
     nuisances = nuisances_of(args, len(scene.beacons))  # before anything renders
+    priors = priors_of(args, nuisances)
     if "plot" in args.keep:
         preload("mirrorsim.cli.plots")  # matplotlib imports while the frame renders
     out = out_folder(args, scene)
     report = evaluate_scene(scene, out, variant=args.variant, progress=not args.quiet,
                             keep=tuple(k for k in args.keep if k != "plot"),
                             error_model=error_model_of(args), nuisances=nuisances,
-                            position_sigma=beacon_sigma_of(args))
+                            position_sigma=beacon_sigma_of(args), nuisance_sigma=priors)
     print(f"{scene.name}: {len(report.frames)} frame(s), {report.render.spp} spp, "
           f"{report.render.variant}{' (reused)' if report.reused else ''}")
     print(report_table(report, scene))

@@ -8,6 +8,7 @@ ground truth.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import replace
 from pathlib import Path
 
@@ -29,7 +30,8 @@ from solver.measurements import Measurements
 def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: str = "auto",
                    progress: bool = True, error_model: ErrorModel | None = None,
                    keep: tuple[str, ...] = EXTRA_FILES, nuisances: tuple[str, ...] = (),
-                   position_sigma: float = 0.0) -> Report:
+                   position_sigma: float = 0.0,
+                   nuisance_sigma: Mapping[str, float] | None = None) -> Report:
     """Render (or reuse) with the scene's render settings, detect, solve and score
     ``scene``; return the report.
 
@@ -40,6 +42,8 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
     (self-calibration, :data:`solver.lsq.NUISANCES`; needs two beacons or more, three
     for pan, scale and power together).
     ``position_sigma``: how well the beacons' positions are known (cm; 0: exactly).
+    ``nuisance_sigma``: what the bench knows of some of the nuisances (their priors'
+    σ's, :func:`solver.lsq.solve_lsq`).
 
     Raises
     ------
@@ -79,7 +83,9 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
     # the target once, at its mean over the frames: each frame's detection of the same
     # image shares its errors (bias included), so several would shrink its σ by √frames
     target = [mean_target]
-    sol = solve_measurements(cam.position, beacons, target, sigma, nuisances, position_sigma)
+    priors = dict(nuisance_sigma or {})
+    sol = solve_measurements(cam.position, beacons, target, sigma, nuisances, position_sigma,
+                             priors)
     errors = score(truth, measurements, sol)
     by_count = ()
     if len(beacons) > 1:
@@ -89,8 +95,9 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
             sig_k = replace(sigma, beacons=sigma.beacons[:k])
             for m in range(len(nuisances), -1, -1):
                 try:
-                    return solve_measurements(cam.position, beacons[:k], target, sig_k,
-                                              nuisances[:m], position_sigma)
+                    return solve_measurements(
+                        cam.position, beacons[:k], target, sig_k, nuisances[:m], position_sigma,
+                        {n: s for n, s in priors.items() if n in nuisances[:m]})
                 except SolverError:
                     if not m:
                         raise
