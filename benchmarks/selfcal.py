@@ -204,7 +204,8 @@ def main() -> None:
                                      error_model=model)
                 e = _errors(rep, scene, position_sigma, nuisances, priors)
             except (DetectionError, SolverError) as exc:
-                skipped.append(f"{scene.name}: {exc}")
+                # the frame's name without the (temporary) folder it was written to
+                skipped.append(f"{scene.name}: {str(exc).replace(str(out) + os.sep, '')}")
                 continue
             rows.append(e)
             o, p = _power_check(rep, scene)
