@@ -110,7 +110,7 @@ def _priors(spec, nuisances: tuple[str, ...]) -> dict[str, float]:
     what a bench built to those tolerances knows before its frames."""
     bench = spec.data.get("bench", {})
     ranges = {"pan": ((bench.get("camera") or {}).get("pan_error"), 1.0),
-              "scale": ((bench.get("calibration") or {}).get("distance_error"), 1 / D_REF),
+              "scale": (spec.calibration_error, 1 / D_REF),
               "power": ((bench.get("mirror") or {}).get("curvature"), 1.0)}
     out = {}
     for n in nuisances:
@@ -164,6 +164,8 @@ def main() -> None:
     lo, hi = spec.data.get("bench", {}).get("beacon", {}).get("known_position_offset", [0, 0])
     position_sigma = (hi - lo) / np.sqrt(12)  # a uniform offset's σ
     priors = _priors(spec, nuisances) if a.priors else {}
+    if a.priors and not priors:
+        sys.exit(f"--priors: {a.spec} draws none of {', '.join(nuisances)} from a range")
     print(f"self-calibration on rendered frames: {a.scenes} scenes of {a.spec.name}, seed "
           f"{seed}, {a.beacons} beacons planned and self-calibrated for "
           f"{', '.join(nuisances)}, believed positions off by U({lo}, {hi}) cm "

@@ -175,7 +175,8 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
     nuisance_sigma : mapping of nuisance name to σ, optional
         What the bench knows of some of ``nuisances`` before the frames: each such
         nuisance gets the prior N(neutral, σ²) (pan in degrees, scale as a fraction of 1,
-        power in 1/cm), as a bench whose pan reading is good to ±0.5° knows.  Where the
+        power in 1/cm), as a bench whose pan reading is good to ±0.5° knows.  A pan
+        prior adds to the σ's shared α offset (their variances add).  Where the
         beacons barely separate the nuisances from the mirror, this keeps the estimate
         from trading a large nuisance for the measurements' noise.
 
@@ -218,7 +219,9 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
     # each prior is a row (x − neutral)/σ: the shared α offset's, the nuisances' the
     # bench knows, each beacon's offset from its believed position
     known = {"pan": shared} if shared else {}
-    known |= dict(nuisance_sigma or {})
+    # a pan prior and the σ's shared α offset are independent errors of one reading (the
+    # bench's tolerance, the mount's scatter): their variances add
+    known |= {n: float(np.hypot(v, known.get(n, 0.0))) for n, v in (nuisance_sigma or {}).items()}
     prior = np.vstack([*(eye[[4 + unknown.index(n)]] / known[n] for n in unknown if n in known),
                        eye[4 + k:] / position_sigma if free else eye[:0]])
     neutral = np.concatenate([np.zeros(4), [NUISANCES[n][1] for n in unknown],
@@ -371,6 +374,9 @@ def check_nuisance_sigma(nuisance_sigma: Mapping[str, float],
     """Refuse a prior σ for a nuisance that is not estimated, or one that is not a
     finite number > 0."""
     for name, s in nuisance_sigma.items():
+        if name not in NUISANCES:
+            raise SolverError(f"a prior σ for an unknown nuisance {name!r}: choose from "
+                              f"{', '.join(NUISANCES)}")
         if name not in nuisances:
             raise SolverError(f"a prior σ for {name!r}, which is not estimated (estimated: "
                               f"{', '.join(nuisances) or 'none'})")
@@ -484,6 +490,7 @@ def solve_measurements(observer, beacons: list[BeaconMeasurement],
                        nuisance_sigma: Mapping[str, float] | None = None) -> Solution:
     """The solver's front door: the closed form for one beacon and one target without
     σ's, weighted least squares (with covariance when σ's are given) otherwise."""
+    check_nuisance_sigma(nuisance_sigma or {}, nuisances)
     if len(beacons) == 1 and len(targets) == 1 and not nuisances and not position_sigma:
         b = beacons[0]
         sol = solve_single(observer, b.position, b.alpha_deg, b.d_total, *targets[0])

@@ -200,7 +200,9 @@ def prior_option(p: argparse.ArgumentParser) -> None:
                    "frames, as a σ each: pan in degrees, scale as a fraction (0.006: 0.6 %%), "
                    "power in 1/cm; e.g. pan=0.3,scale=0.006 for a pan reading good to about "
                    "±0.5° and a reference distance to ±1 cm at 100 cm.  Each such nuisance "
-                   "is then estimated with that prior (default: none, each free)")
+                   "is then estimated with that prior (default: none, each free but pan, "
+                   "which takes the error model's shared α offset where it has one; a pan "
+                   "prior adds to it)")
 
 
 def priors_of(args: argparse.Namespace, nuisances: tuple[str, ...]) -> dict[str, float]:
@@ -211,6 +213,8 @@ def priors_of(args: argparse.Namespace, nuisances: tuple[str, ...]) -> dict[str,
     out: dict[str, float] = {}
     for item in (i.strip() for i in args.prior.split(",") if i.strip()):
         name, _, value = item.partition("=")
+        if name.strip() in out:
+            raise BadArgument("--prior", f"{name.strip()!r} is given twice")
         try:
             out[name.strip()] = float(value)
         except ValueError:

@@ -106,8 +106,8 @@ def solution_summary(source: str, sol: Solution) -> str:
         major, minor, angle = sol.ellipse95()
         lines.append(f"  95 % ellipse of the target: {major:.3f} × {minor:.3f} cm, major axis "
                      f"at {angle:.1f}°; RMS {np.sqrt(np.trace(sol.target_covariance)):.3f} cm "
-                     "(first order, at the estimate; without down-weighting or a position "
-                     "prior, the Cramér–Rao bound there)")
+                     "(first order, at the estimate; without down-weighting, a position "
+                     "prior or a nuisance prior, the Cramér–Rao bound there)")
     if sol.downweighted:
         lines.append("  trusted less (a Huber loss): " + ", ".join(sol.downweighted))
     if sol.nuisances:
@@ -165,7 +165,9 @@ def report_table(report: Report, report_scene: Scene | None = None) -> str:
         lines.append("self-calibration: " + nuisance_text(s))
     if e.target_mahalanobis is not None:
         bound = ("" if e.target_crlb_cm is None else "; Cramér–Rao bound of the target's "
-                 f"RMS error: {e.target_crlb_cm:.3f} cm")
+                 f"RMS error: {e.target_crlb_cm:.3f} cm"
+                 + (" (the nuisances free: the priors left out)" if "with priors" in s.method
+                    else ""))
         lines.append(f"the true target lies {e.target_mahalanobis:.2f} σ from the estimate "
                      f"(inside the 95 % ellipse below {chi2_2_radius(0.95):.2f}){bound}")
     if report.error_vs_beacons:
