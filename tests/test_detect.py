@@ -462,3 +462,30 @@ def test_lookups_done_by_opencv_give_numpy_values():
     numpy_says = np.max(np.abs(x - centre), axis=2) < SAME_GREY
     assert np.array_equal(_within(x, centre, SAME_GREY) > 0, numpy_says)
     assert 0.2 < numpy_says.mean() < 0.8
+
+
+def test_a_jpeg_pencil_between_the_frame_and_a_wall_keeps_a_side():
+    """A JPEG pencil pressed against the mirror frame's bar on its left, a wall 2 px
+    beyond a strip of board on its right (two of 40 planned benches): JPEG smears the
+    blue channel, mostly chroma, over 2-3 px, and neither side was found in it, so the
+    pencil was dropped.  Its sides are then measured on the image's colour, which keeps
+    them at full resolution in the luma: the left within 0.15 px, the right (no
+    contrast against the wall) dropped, not placed on the wall."""
+    from mirrorsim.detection import edges
+    from mirrorsim.formats.files import decode_image, encode_jpeg
+    from mirrorsim.rendering.sensor import to_srgb8
+
+    img = np.tile(np.array([120.0, 90.0, 51.0], np.float32), (220, 120, 1))  # the board
+    img[:, 28:44] = 6.0  # the frame's bar: the paint's left edge against it, at 43.5
+    img[40:180, 44:51] = (200.0, 150.0, 0.5)  # the lit face
+    img[40:180, 51:58] = (60.0, 45.0, 0.3)  # the shaded face
+    img[:, 60:] = (30.0, 28.0, 10.0)  # a wall 2 px beyond the right edge (57.5)
+    for q in (85, 90, 95):
+        jpeg = decode_image(encode_jpeg(to_srgb8(img / 255.0), q)).astype(np.float32)
+        lin = edges.to_linear(jpeg)
+        blue = np.ascontiguousarray(lin[..., 2:3])
+        assert edges._median_edges((blue, blue), 44, 57, 40, 179, axis=1, near=(True, True),
+                                   drop_off=edges.SIDE_MAX_OFF_PX)[:2] == (None, None)
+        m = edges.measure_region(lin, (44, 40, 57, 179), "beacon", subsampled=True,
+                                 stored=jpeg)
+        assert m.u_left == pytest.approx(43.5, abs=0.15) and m.u_right is None

@@ -282,6 +282,19 @@ def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str,
         left, right, out_left, out_right = _median_edges((blue, blue), u0, u1, v0, v1, axis=1,
                                                          near=(True, True),
                                                          drop_off=SIDE_MAX_OFF_PX)
+        if subsampled and left is None and right is None:
+            # JPEG smears the blue channel (mostly chroma) over 2-3 px: a pencil pressed
+            # against the mirror's frame on one side and 3 px from a wall on the other
+            # had neither side in it (2 of 40 planned benches), and was dropped.  The
+            # image's colour keeps its edges at full resolution in the luma
+            left, right, out_left, out_right = _median_edges((img, img), u0, u1, v0, v1,
+                                                             axis=1, near=(True, True),
+                                                             drop_off=SIDE_MAX_OFF_PX)
+            # a side against a grey wall has little contrast in the colour either, and
+            # lands beyond the (yellow) region: then the axis comes from the other side
+            left = left if left is not None and abs(left - (u0 - 0.5)) <= SIDE_MAX_OFF_PX else None
+            right = right if right is not None and abs(right - (u1 + 0.5)) <= SIDE_MAX_OFF_PX \
+                else None
     else:
         top, bottom, out_top, out_bottom = _median_edges((img, img), v0, v1, u0, u1, axis=0,
                                                          chroma=(False, on_chroma),
