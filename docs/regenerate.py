@@ -133,6 +133,9 @@ RESULTS: tuple[Result, ...] = (
            markdown=True, about="self-calibration with and without priors from the spec's "
                                 "ranges, on 40 benches of the seed the page reads, drawn "
                                 "afresh for it (about 15 min)"),
+    Result("selfcal_pooled", (f"{PY} benchmarks/selfcal_pooled.py",), markdown=True,
+           about="the three JPEG runs above, their ratios pooled with bootstrap intervals "
+                 "(after them: it reads their tables)"),
     Result("selfcal_bench_png",
            (f"{PY} benchmarks/selfcal.py --scenes 40 --seed 4417001 --lossless",),
            markdown=True, about="the same 40 benches with their frames stored as PNG"),

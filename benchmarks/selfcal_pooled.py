@@ -1,0 +1,93 @@
+"""The self-calibration benchmark's ratios pooled over its registered runs, with how far
+40 scenes let them move.
+
+    python benchmarks/selfcal_pooled.py [FILE.md ...] [--draws 4000] [--seed 0]
+
+Reads the per-scene tables that ``benchmarks/selfcal.py`` printed (by default the
+JPEG runs registered in ``docs/results/``: three seeds of 40 benches each), and prints
+for each run and for all of them pooled the ratios of medians the issue's targets are
+stated in (self-calibrated / plain, with the believed and with the exact positions; the
+reference / plain), each with a 90 % bootstrap interval: the scenes redrawn with
+replacement within each run, ``--draws`` times.  A ratio of medians over 40 scenes
+moves a lot with the scenes drawn; the interval says how much, so that a target met or
+missed on one run is not taken for more than it is.
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+from stamp import stamp  # noqa: E402
+
+RUNS = ("selfcal_bench", "selfcal_bench_fresh", "selfcal_bench_priors")
+# the per-scene table's columns read here (after the scene's name), as selfcal.py prints
+# them: plain, self-calibrated, …, plain exact, self-calibrated exact, reference
+COLUMNS = {"plain": 0, "selfcal": 1, "plain_exact": 3, "selfcal_exact": 4, "reference": 5}
+RATIOS = (("self-calibrated / plain, believed positions", "selfcal", "plain"),
+          ("self-calibrated / plain, exact positions", "selfcal_exact", "plain_exact"),
+          ("reference / plain, exact positions", "reference", "plain_exact"))
+
+
+def read_run(path: Path) -> tuple[str, np.ndarray]:
+    """The run's seed (as its header says) and its per-scene columns (scenes × COLUMNS)."""
+    text = path.read_text(encoding="utf-8")
+    found = re.search(r"\bseed (\d+)", text)
+    rows = [line.split("|")[2:] for line in text.splitlines() if re.match(r"\| sc\d", line)]
+    if not rows:
+        sys.exit(f"{path}: no per-scene rows (| scNNN | …) to read")
+    return (found.group(1) if found else "?",
+            np.array([[float(r[k]) for k in COLUMNS.values()] for r in rows]))
+
+
+def ratio(runs: list[np.ndarray], num: str, den: str) -> float:
+    """Median of ``num`` over median of ``den``, the runs' scenes pooled."""
+    v = np.vstack(runs)
+    i, j = list(COLUMNS).index(num), list(COLUMNS).index(den)
+    return float(np.median(v[:, i]) / np.median(v[:, j]))
+
+
+def interval(runs: list[np.ndarray], num: str, den: str, draws: int,
+             rng: np.random.Generator) -> tuple[float, float]:
+    """The ratio's 5th and 95th percentiles over bootstrap draws (scenes redrawn with
+    replacement within each run)."""
+    got = [ratio([r[rng.integers(0, len(r), len(r))] for r in runs], num, den)
+           for _ in range(draws)]
+    lo, hi = np.percentile(got, [5, 95])
+    return float(lo), float(hi)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("files", nargs="*", type=Path,
+                    default=[ROOT / "docs" / "results" / f"{n}.md" for n in RUNS])
+    ap.add_argument("--draws", type=int, default=4000)
+    ap.add_argument("--seed", type=int, default=0, help="the bootstrap's")
+    a = ap.parse_args()
+    runs = [(p.stem, *read_run(p)) for p in a.files]
+    rng = np.random.default_rng(a.seed)
+    print(f"self-calibration's ratios of medians per run and pooled, each with its 90 % "
+          f"bootstrap interval ({a.draws} draws); {stamp()}\n")
+    print("| run | seed | scenes | " + " | ".join(r[0] for r in RATIOS) + " |\n|---|---|---|"
+          + "---|" * len(RATIOS))
+    def cells(vs: list[np.ndarray], bold: str = "") -> str:
+        out = []
+        for _, n, d in RATIOS:
+            lo, hi = interval(vs, n, d, a.draws, rng)
+            out.append(f"{bold}{ratio(vs, n, d):.2f}{bold} ({lo:.2f}–{hi:.2f})")
+        return " | ".join(out)
+
+    for name, seed, v in runs:
+        print(f"| {name} | {seed} | {len(v)} | {cells([v])} |")
+    every = [v for _, _, v in runs]
+    print(f"| **pooled** | | {sum(len(v) for v in every)} | {cells(every, '**')} |")
+
+
+if __name__ == "__main__":
+    main()
