@@ -1,7 +1,7 @@
 """The self-calibration benchmark's ratios pooled over its registered runs, with how far
 40 scenes let them move.
 
-    python benchmarks/selfcal_pooled.py [FILE.md ...] [--draws 4000] [--seed 0]
+    python benchmarks/selfcal_pooled.py [TABLE ...] [--draws 4000] [--seed 0]
 
 Reads the per-scene tables that ``benchmarks/selfcal.py`` printed (by default the
 JPEG runs registered in ``docs/results/``: three seeds of 40 benches each), and prints
