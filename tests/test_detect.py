@@ -469,8 +469,8 @@ def test_a_jpeg_pencil_between_the_frame_and_a_wall_keeps_a_side():
     beyond a strip of board on its right (two of 40 planned benches): JPEG smears the
     blue channel, mostly chroma, over 2-3 px, and neither side was found in it, so the
     pencil was dropped.  Its sides are then measured on the image's colour, which keeps
-    them at full resolution in the luma: the left within 0.15 px, the right (no
-    contrast against the wall) dropped, not placed on the wall."""
+    them at full resolution in the luma: the left within 0.15 px; the right, with no
+    contrast against the wall, is not found (the axis then comes from the left)."""
     from mirrorsim.detection import edges
     from mirrorsim.formats.files import decode_image, encode_jpeg
     from mirrorsim.rendering.sensor import to_srgb8
@@ -489,3 +489,33 @@ def test_a_jpeg_pencil_between_the_frame_and_a_wall_keeps_a_side():
         m = edges.measure_region(lin, (44, 40, 57, 179), "beacon", subsampled=True,
                                  stored=jpeg)
         assert m.u_left == pytest.approx(43.5, abs=0.15) and m.u_right is None
+
+
+@pytest.mark.parametrize("region,used", [(1.05, True), (0.85, False)])
+def test_a_jpeg_pencil_kept_by_one_side_on_its_colour_is_not_used_when_partly_hidden(
+        region, used):
+    """A JPEG pencil measured by one side on the image's colour (the blue lost both)
+    may stand with that side against the mirror's frame hiding part of it: its yellow
+    region, ``region`` of the width its height implies (on the optical axis, 2·r̄·s/H
+    px, r̄ the mean silhouette half-width), is used when as wide (a whole one's: 1.03–1.12
+    of it) and marked clipped, not used, when 0.85 of it.  The same image measured in
+    the blue channel keeps its one-sided axis as before."""
+    from mirrorsim.detection.edges import SIDES_ON_COLOUR, ImageMeasurement
+    from mirrorsim.detection.image_geometry import PENCIL_HALF_WIDTH, pencil_geometry
+    from mirrorsim.scene.model import Camera, pencil_paint_height
+
+    cam = Camera(position=(0.0, 0.0), height=6.0, resolution=(1920, 1088), hfov=65.2,
+                 pan=45.0, pan_deg=45.0)
+    paint = pencil_paint_height(4.2)
+    height = 80.0
+    width = region * 2 * PENCIL_HALF_WIDTH * height / paint
+    u0 = round(cam.cx - width / 2)
+    u1 = round(u0 + width - 1)
+    m = ImageMeasurement(kind="beacon", source="mirror", bbox_px=[u0, 500, u1, 580],
+                         u_axis=float("nan"), v_top=500.0, v_bottom=580.0, height_px=height,
+                         width_px=None, u_left=u0 - 0.5, u_right=None,
+                         notes=(SIDES_ON_COLOUR,))
+    got = pencil_geometry(cam, m, paint, 5000.0)
+    assert (got.clipped == "") is used and (got.clipped == "left") is not used
+    plain = pencil_geometry(cam, replace(m, notes=()), paint, 5000.0)
+    assert plain.clipped == "" and (plain.alpha_deg == got.alpha_deg) is used

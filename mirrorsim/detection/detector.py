@@ -283,6 +283,7 @@ def detect_frame(image: np.ndarray, view: CaptureRecord, calibration: Calibratio
     paint = pencil_paint_height(view.beacons[0].height)
     pencils = [pencil_geometry(cam, p, paint, calibration.pencil_k) for p in pencils
                if p.height_px and (p.u_left, p.u_right) != (None, None)]
+    pencils = [p for p in pencils if not p.clipped]  # partly hidden: no bearing to trust
     for m in (target, *pencils):
         _check_stands_on_board(cam, m, view)
     images, mirror_imgs = assign_beacons(pencils, view)

@@ -212,6 +212,10 @@ def _median_edges(imgs, lo, hi, cross_lo, cross_hi, axis, band_px=3,
     return final[0], final[1], outs[0], outs[1]
 
 
+# the note of a JPEG pencil whose sides the blue channel lost and the colour measured
+# (its one side may then stand against what hides part of it: image_geometry checks)
+SIDES_ON_COLOUR = "sides on the image's colour: JPEG's smeared blue lost both"
+
 # how far a side edge may lie from its region's boundary (px): good images are within
 # 1.1 px (198 random scenes), a side measured on the mirror frame 8-17 px
 SIDE_MAX_OFF_PX = 2.5
@@ -282,19 +286,21 @@ def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str,
         left, right, out_left, out_right = _median_edges((blue, blue), u0, u1, v0, v1, axis=1,
                                                          near=(True, True),
                                                          drop_off=SIDE_MAX_OFF_PX)
+        sides_note = ()
         if subsampled and left is None and right is None:
             # JPEG smears the blue channel (mostly chroma) over 2-3 px: a pencil pressed
-            # against the mirror's frame on one side and 3 px from a wall on the other
+            # against the mirror's frame on one side and 2 px from a wall on the other
             # had neither side in it (2 of 40 planned benches), and was dropped.  The
             # image's colour keeps its edges at full resolution in the luma
             left, right, out_left, out_right = _median_edges((img, img), u0, u1, v0, v1,
                                                              axis=1, near=(True, True),
                                                              drop_off=SIDE_MAX_OFF_PX)
             # a side against a grey wall has little contrast in the colour either, and
-            # lands beyond the (yellow) region: then the axis comes from the other side
+            # can land off the (yellow) region: then the axis comes from the other side
             left = left if left is not None and abs(left - (u0 - 0.5)) <= SIDE_MAX_OFF_PX else None
             right = right if right is not None and abs(right - (u1 + 0.5)) <= SIDE_MAX_OFF_PX \
                 else None
+            sides_note = (SIDES_ON_COLOUR,)
     else:
         top, bottom, out_top, out_bottom = _median_edges((img, img), v0, v1, u0, u1, axis=0,
                                                          chroma=(False, on_chroma),
@@ -317,7 +323,8 @@ def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str,
         u_left=left, u_right=right,
         outside={k: float(np.mean(o)) for k, o in (("left", out_left), ("right", out_right),
                                                     ("top", out_top), ("bottom", out_bottom))},
-        inside=float(np.median(core.reshape(-1, img.shape[-1]).mean(axis=1))))
+        inside=float(np.median(core.reshape(-1, img.shape[-1]).mean(axis=1))),
+        notes=sides_note if kind == "beacon" else ())
     if left is not None and right is not None:
         m = replace(m, u_axis=(left + right) / 2)
     if top is None or bottom is None:

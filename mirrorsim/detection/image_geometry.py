@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
-from mirrorsim.detection.edges import ImageMeasurement
+from mirrorsim.detection.edges import SIDES_ON_COLOUR, ImageMeasurement
 from mirrorsim.errors import DetectionError
 from mirrorsim.scene.model import FRONT_OFFSET, PENCIL_RADIUS, Camera, Point2
 from solver.geometry import wrap_bearing
@@ -70,6 +70,8 @@ def distance_of(camera: Camera, u: float, height_px: float, k: float,
 # a pencil image's angular width over what its height implies: beyond this, one side is
 # wrong
 PENCIL_WIDTH_RATIO = (0.8, 1.25)
+# a JPEG pencil's yellow region narrower than this part of it is partly hidden
+PENCIL_REGION_MIN = 0.95
 
 
 def _half_angle(cam: Camera, half_width: float, height_px: float, height: float,
@@ -123,6 +125,18 @@ def pencil_geometry(cam: Camera, m: ImageMeasurement, paint_height: float, k: fl
         alpha = alpha_of(cam, u_axis)
         notes = (*notes, f"no edge on the {missing} (no contrast there, or not the "
                  "pencil's): axis from the other edge and the pencil's half-width")
+        if SIDES_ON_COLOUR in m.notes:
+            # its one edge, measured on the colour, may be where the mirror's frame hides
+            # part of it: a yellow region narrower than the height implies says so (a
+            # whole JPEG pencil's region: 1.03-1.12 of it, widened by the blur)
+            u0, _, u1, _ = m.bbox_px
+            phi = (_off_axis(cam, u1 + 0.5) + _off_axis(cam, u0 - 0.5)) / 2
+            r = ((_off_axis(cam, u1 + 0.5) - _off_axis(cam, u0 - 0.5)) / 2
+                 / _half_angle(cam, PENCIL_HALF_WIDTH, m.height_px, paint_height, phi))
+            if r < PENCIL_REGION_MIN:
+                return replace(m, clipped=side, notes=(
+                    *notes, f"its region {r:.2f} of the width its height implies: "
+                    f"partly hidden at its {side} edge, not used"))
     return replace(m, alpha_deg=alpha, u_axis=u_axis, notes=notes,
                    d_total=distance_of(cam, u_axis, m.height_px, k, FRONT_OFFSET["beacon"]))
 
