@@ -116,8 +116,13 @@ def _priors(spec, nuisances: tuple[str, ...]) -> dict[str, float]:
     for n in nuisances:
         r, per = ranges[n]
         if isinstance(r, list) and r[1] > r[0]:
-            out[n] = (r[1] - r[0]) / np.sqrt(12) * per
+            out[n] = _uniform_sd(*r) * per
     return out
+
+
+def _uniform_sd(lo: float, hi: float) -> float:
+    """The σ of a uniform draw in [lo, hi], as a spec's ranges draw."""
+    return (hi - lo) / np.sqrt(12)
 
 
 def _power_check(rep, scene) -> tuple[np.ndarray, np.ndarray]:
@@ -162,7 +167,7 @@ def main() -> None:
     seed = a.seed if a.seed is not None else int.from_bytes(os.urandom(3), "big")
     spec = load_spec(a.spec)
     lo, hi = spec.data.get("bench", {}).get("beacon", {}).get("known_position_offset", [0, 0])
-    position_sigma = (hi - lo) / np.sqrt(12)  # a uniform offset's σ
+    position_sigma = _uniform_sd(lo, hi)
     priors = _priors(spec, nuisances) if a.priors else {}
     if a.priors and not priors:
         sys.exit(f"--priors: {a.spec} draws none of {', '.join(nuisances)} from a range")

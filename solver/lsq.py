@@ -257,7 +257,7 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
              + [f"beacon {i} believed {c}" for i in range(nb) for c in "xy"])
     down = tuple(f"{names[i]} ({abs(r[i]):.1f} σ off)" for i in np.flatnonzero(w < 1.0))
     sol = _solution(o, res.x[:4], bpos, targets, cov)
-    return replace(sol, downweighted=down,
+    return replace(sol, downweighted=down, nuisance_sigma=dict(nuisance_sigma or {}),
                    nuisances={NUISANCES[n][0]: float(v)
                               for n, v in zip(nuisances, res.x[4:4 + len(nuisances)],
                                               strict=True)},

@@ -392,6 +392,12 @@ def test_priors_are_refused_for_nuisances_not_estimated_and_when_not_positive(tm
     assert main(["solve", str(path), "--calibrate", "pan,scale", "--prior",
                  "pan=0.3,scale=0.006"]) == 0
     assert "with priors (pan ±0.3°, scale ±0.6 %)" in capsys.readouterr().out
+    # the priors travel with the solution's document and back
+    from solver.sltr import Solution
+
+    sol = solve_measurements(OBS, bs, ts, SIG, ("pan", "scale"),
+                             nuisance_sigma={"pan": 0.3, "scale": 0.006})
+    assert Solution.from_json(sol.to_json()).nuisance_sigma == {"pan": 0.3, "scale": 0.006}
 
 
 def test_a_pan_prior_adds_to_the_shared_alpha_offset_of_the_sigmas():

@@ -212,18 +212,17 @@ def priors_of(args: argparse.Namespace, nuisances: tuple[str, ...]) -> dict[str,
 
     out: dict[str, float] = {}
     for item in (i.strip() for i in args.prior.split(",") if i.strip()):
-        name, _, value = item.partition("=")
-        if name.strip() in out:
-            raise BadArgument("--prior", f"{name.strip()!r} is given twice")
+        name, _, value = (part.strip() for part in item.partition("="))
+        if name in out:
+            raise BadArgument("--prior", f"{name!r} is given twice")
         try:
-            out[name.strip()] = float(value)
+            out[name] = float(value)
         except ValueError:
             raise BadArgument("--prior", f"{item!r} is not NAME=SIGMA, SIGMA a number") from None
     try:
         check_nuisance_sigma(out, nuisances)
     except SolverError as exc:
-        raise BadArgument("--prior", f"{exc} (give it in --calibrate)" if "not estimated"
-                          in str(exc) else str(exc)) from None
+        raise BadArgument("--prior", str(exc)) from None
     return out
 
 

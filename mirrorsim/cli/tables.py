@@ -166,8 +166,7 @@ def report_table(report: Report, report_scene: Scene | None = None) -> str:
     if e.target_mahalanobis is not None:
         bound = ("" if e.target_crlb_cm is None else "; Cramér–Rao bound of the target's "
                  f"RMS error: {e.target_crlb_cm:.3f} cm"
-                 + (" (the nuisances free: the priors left out)" if "with priors" in s.method
-                    else ""))
+                 + (" (the nuisances free: the priors left out)" if s.nuisance_sigma else ""))
         lines.append(f"the true target lies {e.target_mahalanobis:.2f} σ from the estimate "
                      f"(inside the 95 % ellipse below {chi2_2_radius(0.95):.2f}){bound}")
     if report.error_vs_beacons:

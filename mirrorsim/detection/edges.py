@@ -266,6 +266,7 @@ def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str,
     """
     u0, v0, u1, v1 = box
     on_chroma = not subsampled
+    sides_note: tuple[str, ...] = ()
     if kind == "beacon":
         blue = np.ascontiguousarray(img[..., 2:3])
         foot_img = img
@@ -286,7 +287,6 @@ def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str,
         left, right, out_left, out_right = _median_edges((blue, blue), u0, u1, v0, v1, axis=1,
                                                          near=(True, True),
                                                          drop_off=SIDE_MAX_OFF_PX)
-        sides_note = ()
         if subsampled and left is None and right is None:
             # JPEG smears the blue channel (mostly chroma) over 2-3 px: a pencil pressed
             # against the mirror's frame on one side and 2 px from a wall on the other
@@ -324,7 +324,7 @@ def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str,
         outside={k: float(np.mean(o)) for k, o in (("left", out_left), ("right", out_right),
                                                     ("top", out_top), ("bottom", out_bottom))},
         inside=float(np.median(core.reshape(-1, img.shape[-1]).mean(axis=1))),
-        notes=sides_note if kind == "beacon" else ())
+        notes=sides_note)
     if left is not None and right is not None:
         m = replace(m, u_axis=(left + right) / 2)
     if top is None or bottom is None:

@@ -94,6 +94,15 @@ def _axis_from_edge(cam: Camera, edge_u: float, side: str, half_width: float,
     return _column(cam, phi_edge + sign * beta)
 
 
+def _width_ratio(cam: Camera, left: float, right: float, height_px: float,
+                 paint_height: float) -> float:
+    """The angular width between columns ``left`` and ``right`` over a pencil's, as its
+    height implies."""
+    a, b = _off_axis(cam, left), _off_axis(cam, right)
+    return (b - a) / 2 / _half_angle(cam, PENCIL_HALF_WIDTH, height_px, paint_height,
+                                     (a + b) / 2)
+
+
 def pencil_geometry(cam: Camera, m: ImageMeasurement, paint_height: float, k: float
                     ) -> ImageMeasurement:
     """A pencil's bearing from its edges and its d_total from its height (K = ``k``);
@@ -106,9 +115,7 @@ def pencil_geometry(cam: Camera, m: ImageMeasurement, paint_height: float, k: fl
         # a backstop: a width far from what the height implies means one side is not the
         # pencil's (good mirror images: 0.91-1.05 of it); the side farther from its
         # region's edge is dropped
-        half = (_off_axis(cam, m.u_right) - _off_axis(cam, m.u_left)) / 2
-        phi = (_off_axis(cam, m.u_right) + _off_axis(cam, m.u_left)) / 2
-        r = half / _half_angle(cam, PENCIL_HALF_WIDTH, m.height_px, paint_height, phi)
+        r = _width_ratio(cam, m.u_left, m.u_right, m.height_px, paint_height)
         if not PENCIL_WIDTH_RATIO[0] <= r <= PENCIL_WIDTH_RATIO[1]:
             u0, _, u1, _ = m.bbox_px
             bad = "left" if abs(m.u_left - (u0 - 0.5)) > abs(m.u_right - (u1 + 0.5)) else "right"
@@ -130,9 +137,7 @@ def pencil_geometry(cam: Camera, m: ImageMeasurement, paint_height: float, k: fl
             # part of it: a yellow region narrower than the height implies says so (a
             # whole JPEG pencil's region: 1.03-1.12 of it, widened by the blur)
             u0, _, u1, _ = m.bbox_px
-            phi = (_off_axis(cam, u1 + 0.5) + _off_axis(cam, u0 - 0.5)) / 2
-            r = ((_off_axis(cam, u1 + 0.5) - _off_axis(cam, u0 - 0.5)) / 2
-                 / _half_angle(cam, PENCIL_HALF_WIDTH, m.height_px, paint_height, phi))
+            r = _width_ratio(cam, u0 - 0.5, u1 + 0.5, m.height_px, paint_height)
             if r < PENCIL_REGION_MIN:
                 return replace(m, clipped=side, notes=(
                     *notes, f"its region {r:.2f} of the width its height implies: "
