@@ -43,6 +43,7 @@ from mirrorsim.scene.model import Beacon  # noqa: E402
 from solver.geometry import yaw_difference  # noqa: E402
 from solver.lsq import solve_measurements  # noqa: E402
 from solver.montecarlo import PAPER_TABLE1, run_row, table1  # noqa: E402
+from solver.selfcal import SelfCalibration  # noqa: E402
 
 # Table 3's "Measured data" rows and RMSE(tar)
 PAPER = {
@@ -152,7 +153,7 @@ def several_beacons(args) -> None:
         except FrameNotMeasured as exc:  # as the paper table's bench column says it
             one = "no estimate (frame refused, below)"
             notes.append(f"{name.upper()}, one beacon: {exc.reason}")
-        plan = plan_scene(scene, n_beacons=args.beacons, nuisances=nu)
+        plan = plan_scene(scene, n_beacons=args.beacons, calibration=SelfCalibration(nu))
         h = scene.beacons[0].height
         beacons = tuple(Beacon((float(p[0]), float(p[1])), h,
                                (float(p[0] + dx), float(p[1] + dy)))
@@ -170,7 +171,8 @@ def several_beacons(args) -> None:
         # both fits take the believed positions as exact (told they are known to
         # 0.115 cm, as the budget's fits are, the self-calibrated fit of one of the
         # experiments puts a beacon behind the mirror and stops)
-        plain, cal = (solve_measurements(m.observer, m.beacons, m.targets, m.sigma, n)
+        plain, cal = (solve_measurements(m.observer, m.beacons, m.targets, m.sigma,
+                                         SelfCalibration(n))
                       for n in ((), nu))
         truth = np.asarray(scene.target.position, float)
         pan, scale = cal.nuisances["pan_offset_deg"], cal.nuisances["range_scale"]

@@ -21,7 +21,7 @@ each image's own error.  Prints each scene's target errors, the medians, and the
 images' own α errors beside the mirror's power's first-order move.  ``--lossless``: the same scenes
 (the same draws) with each frame stored as PNG instead of the JPEG the spec draws, to
 tell JPEG's part from the rest.  ``--priors``: two more columns, self-calibrated with
-the spec's ranges as what the bench knows of each nuisance (``nuisance_sigma``: a
+the spec's ranges as what the bench knows of each nuisance (``SelfCalibration.priors``: a
 uniform draw's σ, (hi − lo)/√12; the calibration's distance error over D_REF as the
 scale's), with the believed and with the exact positions.
 """
@@ -53,11 +53,10 @@ from solver.errors import SolverError  # noqa: E402
 from solver.geometry import line_normal  # noqa: E402
 from solver.lsq import (  # noqa: E402
     BeaconMeasurement,
-    check_nuisances,
-    describe_nuisance_sigma,
     power_terms,
     solve_measurements,
 )
+from solver.selfcal import PLAIN, SelfCalibration, check_nuisances  # noqa: E402
 
 
 def _errors(rep, scene, position_sigma: float, nuisances: tuple[str, ...],
@@ -72,8 +71,8 @@ def _errors(rep, scene, position_sigma: float, nuisances: tuple[str, ...],
     out = []
     for beacons, ps in ((m.beacons, position_sigma), (exact, 0.0)):
         for nu in ((), nuisances):
-            sol = solve_measurements(m.observer, beacons, m.targets, m.sigma, nu,
-                                     ps if nu else 0.0)
+            sol = solve_measurements(m.observer, beacons, m.targets, m.sigma,
+                                     SelfCalibration(nu, ps) if nu else PLAIN)
             out.append(float(np.linalg.norm(sol.target - truth)))
     # the shared errors as the truth has them: every image's α error and relative
     # d_total error, averaged (the target's image counts once, as the beacons' do)
@@ -93,14 +92,14 @@ def _errors(rep, scene, position_sigma: float, nuisances: tuple[str, ...],
         sol = solve_measurements(m.observer, known, targets, m.sigma)
         out.append(float(np.linalg.norm(sol.target - truth)))
     if {"pan", "scale"} < set(nuisances):  # what the nuisances beyond them add
-        sol = solve_measurements(m.observer, m.beacons, m.targets, m.sigma, ("pan", "scale"),
-                                 position_sigma)
+        sol = solve_measurements(m.observer, m.beacons, m.targets, m.sigma,
+                                 SelfCalibration(("pan", "scale"), position_sigma))
         out.append(float(np.linalg.norm(sol.target - truth)))
     else:
         out.append(float("nan"))
     for beacons, ps in ((m.beacons, position_sigma), (exact, 0.0)) if priors else ():
-        sol = solve_measurements(m.observer, beacons, m.targets, m.sigma, nuisances, ps,
-                                 priors)
+        sol = solve_measurements(m.observer, beacons, m.targets, m.sigma,
+                                 SelfCalibration(nuisances, ps, priors))
         out.append(float(np.linalg.norm(sol.target - truth)))
     return tuple(out)
 
@@ -178,7 +177,8 @@ def main() -> None:
           f"{a.error_model.name if a.error_model else 'the ideal bench’s error model'}; "
           f"{stamp()}\n")
     if a.priors:
-        print(f"priors (the spec's ranges): {describe_nuisance_sigma(priors)}\n")
+        print(f"priors (the spec's ranges): "
+              f"{SelfCalibration(nuisances, priors=priors).describe_priors()}\n")
     extra = " self-calibrated with priors | … exact positions |" if a.priors else ""
     print("| scene | plain (cm) | self-calibrated | pan and scale only | plain, exact "
           "positions | self-calibrated, exact positions | reference: pan and scale known | "
@@ -195,8 +195,8 @@ def main() -> None:
                 scene = replace(scene, bench=replace(scene.bench, jpeg_quality=None))
             try:
                 plan = plan_scene(scene, None if model is None else model.typical,
-                                  n_beacons=a.beacons, nuisances=nuisances, step=a.step,
-                                  position_sigma=position_sigma)
+                                  n_beacons=a.beacons, step=a.step,
+                                  calibration=SelfCalibration(nuisances, position_sigma))
             except (SolverError, ValueError) as exc:
                 skipped.append(f"{scene.name}: plan: {exc}")
                 continue

@@ -15,6 +15,8 @@ cheap)::
 ``load_capture(path)``    a capture record (what the experimenter knows)
 ``detect(frame, capture)``  measure a frame (:class:`MeasuredFrame`)
 ``solve(...)``            the mirror and the target from measurements
+``SelfCalibration(...)``  what ``solve``, ``evaluate``, ``budget``, ``plan`` and
+                          ``generate_dataset`` self-calibrate (``calibration=``)
 ``evaluate(scene, out)``  render → detect → solve → score (:class:`Report`)
 ``budget(scene, out)``    the error budget of a bench (:class:`Budget`)
 ``track(scene, out)``     the moving beacon on rendered frames (:class:`TrackReport`)
@@ -40,6 +42,7 @@ _API = {
     "load_capture": ("mirrorsim.formats.capture", "load_capture"),
     "detect": ("mirrorsim.pipelines.frame", "measure_frame"),
     "solve": ("solver.lsq", "solve_measurements"),
+    "SelfCalibration": ("solver.selfcal", "SelfCalibration"),
     "evaluate": ("mirrorsim.pipelines.evaluate", "evaluate_scene"),
     "budget": ("mirrorsim.pipelines.budget", "run_budget"),
     "track": ("mirrorsim.pipelines.track", "run_track"),

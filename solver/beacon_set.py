@@ -19,7 +19,6 @@ import numpy as np
 from solver.errors import SolverError
 from solver.geometry import point_segment_distance
 from solver.lsq import (
-    NUISANCES,
     ObjectSigmas,
     Sigma,
     as_object_sigmas,
@@ -28,6 +27,7 @@ from solver.lsq import (
     predict,
 )
 from solver.placement import implied_target, seen_in_mirror
+from solver.selfcal import PLAIN, SelfCalibration
 
 # an expected variance beyond this (cm²) is no estimate: the set cannot determine it
 UNDETERMINED_CM2 = 1e6
@@ -42,7 +42,7 @@ class BeaconSet:
     positions: np.ndarray  # (n, 2)
     rmse: tuple[float, ...]
     rmse_plain: tuple[float, ...]
-    nuisances: tuple[str, ...]
+    calibration: SelfCalibration  # the nuisances estimated, the priors and position σ
 
 
 def _information(o: np.ndarray, B: np.ndarray, t_alpha: float, t_d: float, point, yaw: float,
@@ -94,25 +94,25 @@ def _target_variance(info: np.ndarray, keep: int) -> np.ndarray:
 
 def best_beacon_set(observer, target_alpha_deg: float, target_d_total: float, poses,
                     sigma: Sigma | ObjectSigmas, mirror_size: float,
-                    board: tuple[float, float], n: int, nuisances: tuple[str, ...] = (),
-                    step: float = 1.0, keep_out=(), clearance: float = 1.0, accept=None,
-                    min_depth: float = 0.5, position_sigma: float = 0.0) -> BeaconSet:
+                    board: tuple[float, float], n: int,
+                    calibration: SelfCalibration = PLAIN, step: float = 1.0, keep_out=(),
+                    clearance: float = 1.0, accept=None, min_depth: float = 0.5) -> BeaconSet:
     """Choose ``n`` beacon positions on the board's grid one at a time, each the one that
-    lowers the expected target error most (with ``nuisances`` estimated), among
+    lowers the expected target error most (with ``calibration``'s nuisances estimated,
+    and its priors on them known), among
     positions every pose shows, clear of ``keep_out`` segments (start, end, clearance)
     and ``clearance`` from the beacons already chosen, vetted by ``accept(position)``.
     While the set cannot yet carry the nuisances (one beacon for pan and scale, two for
-    pan, scale and power), the choice is by the error without them.  ``position_sigma``:
-    how well a placed beacon's position is known (cm per axis): clustered beacons then
-    buy less.
+    pan, scale and power), the choice is by the error without them.  ``calibration``'s
+    position σ: how well a placed beacon's position is known (cm per axis): clustered
+    beacons then buy less.
 
     Raises
     ------
     SolverError
         No position is seen under every pose, or none passes ``accept``.
     """
-    if any(x not in NUISANCES for x in nuisances):
-        raise SolverError(f"unknown nuisance in {nuisances}: choose from {', '.join(NUISANCES)}")
+    nuisances, position_sigma = calibration.nuisances, calibration.position_sigma
     o = np.asarray(observer, float)
     sig = as_object_sigmas(sigma)
     xs = np.arange(step / 2, board[0], step)
@@ -131,7 +131,9 @@ def best_beacon_set(observer, target_alpha_deg: float, target_d_total: float, po
     if not allowed.any():
         raise SolverError("no beacon position on the board is seen under every mirror pose")
     P = 4 + len(nuisances)
-    base = [info_t.copy() for _, info_t in per_pose]
+    # a prior N(neutral, σ²) on a nuisance is information 1/σ² on its own parameter
+    prior = np.diag([0.0] * 4 + [calibration.priors.get(x, np.inf) ** -2.0 for x in nuisances])
+    base = [info_t + prior for _, info_t in per_pose]
     chosen, rmse, plain = [], [], []
     for _ in range(n):
         full = np.zeros(len(grid))
@@ -157,4 +159,4 @@ def best_beacon_set(observer, target_alpha_deg: float, target_d_total: float, po
         plain.append(float(only[pick]))
         for k, (info_b, _) in enumerate(per_pose):
             base[k] = base[k] + info_b[pick]
-    return BeaconSet(grid[chosen], tuple(rmse), tuple(plain), tuple(nuisances))
+    return BeaconSet(grid[chosen], tuple(rmse), tuple(plain), calibration)

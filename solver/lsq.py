@@ -5,25 +5,18 @@ Jacobian; :func:`solve_measurements` is the solver's front door.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from solver.errors import SolverError
 from solver.geometry import line_normal, unit, wrap_bearing
+from solver.selfcal import NUISANCES, PLAIN, SelfCalibration, check_nuisances
 from solver.sltr import MirrorLine, Solution, observe, ray_hits_line, solve_single
 
 ArrayLike = np.typing.ArrayLike
 # residuals beyond this many σ's weigh less (a Huber loss): a gross error in one image
 HUBER_K = 3.0
-# nuisances a bench shares across its measurements, estimated with the mirror when asked
-# (self-calibration): "pan", an offset δ (deg) on every α (the mount's pan reading);
-# "scale", a factor s on every d_total (the calibration's K); "power", the mirror's
-# curvature c = 1/R (1/cm, > 0 concave), which moves each image by its own amount
-# (:func:`power_terms`): α_meas = α + c·A + δ, d_meas = s·(d + c·D)
-NUISANCES = {"pan": ("pan_offset_deg", 0.0), "scale": ("range_scale", 1.0),
-             "power": ("mirror_power_per_cm", 0.0)}
 
 
 @dataclass(frozen=True)
@@ -147,9 +140,8 @@ def predict(params: np.ndarray, observer: np.ndarray, points: np.ndarray
 
 def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
               targets: list[tuple[float, float]], sigma: Sigma | ObjectSigmas | None = None,
-              initial: Solution | None = None, nuisances: tuple[str, ...] = (),
-              position_sigma: float = 0.0,
-              nuisance_sigma: Mapping[str, float] | None = None) -> Solution:
+              initial: Solution | None = None,
+              calibration: SelfCalibration = PLAIN) -> Solution:
     """Weighted nonlinear least squares for the mirror line and the target.
 
     Parameters
@@ -165,20 +157,15 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
     initial : Solution, optional
         Start point (default: the closed form of the first beacon; with nuisances or a
         position σ, the plain fit's).
-    nuisances : tuple of {'pan', 'scale', 'power'}
-        Bench errors shared by every measurement, estimated jointly (self-calibration,
-        :data:`NUISANCES`); the target comes out corrected for them.
-    position_sigma : float
-        How well the beacons' positions are known (cm, each axis; 0: exactly).  Where
-        > 0, each beacon's offset from its believed position is estimated too, with that
-        prior: a misplaced beacon then moves its own image's fit, not the nuisances.
-    nuisance_sigma : mapping of nuisance name to σ, optional
-        What the bench knows of some of ``nuisances`` before the frames: each such
-        nuisance gets the prior N(neutral, σ²) (pan in degrees, scale as a fraction of 1,
-        power in 1/cm), as a bench whose pan reading is good to ±0.5° knows.  A pan
-        prior adds to the σ's shared α offset (their variances add).  Where the
-        beacons barely separate the nuisances from the mirror, this keeps the estimate
-        from trading a large nuisance for the measurements' noise.
+    calibration : SelfCalibration, optional
+        What to self-calibrate: the nuisances estimated jointly with the mirror (the
+        target comes out corrected for them), how well the beacons' positions are known
+        (each beacon's offset from its believed position then estimated with that
+        prior: a misplaced beacon moves its own image's fit, not the nuisances), and
+        the nuisances' priors, as a bench whose pan reading is good to ±0.5° knows (a
+        pan prior adds to the σ's shared α offset: their variances add).  Where the
+        beacons barely separate the nuisances from the mirror, a prior keeps the
+        estimate from trading a large nuisance for the measurements' noise.
 
     Raises
     ------
@@ -188,6 +175,8 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
     """
     if not beacons or not targets:
         raise SolverError("least squares needs at least one beacon and one target observation")
+    nuisances, position_sigma = calibration.nuisances, calibration.position_sigma
+    priors = calibration.priors
     check_nuisances(nuisances, len(beacons), len(targets))
     o = np.asarray(observer, float)
     sig = as_object_sigmas(sigma or Sigma())
@@ -201,8 +190,6 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
                             replace(sig, shared_alpha_deg=0.0) if shared else sigma)
     init = initial or solve_single(o, bpos[0], beacons[0].alpha_deg, beacons[0].d_total,
                                    targets[0][0], targets[0][1])
-    check_position_sigma(position_sigma)
-    check_nuisance_sigma(nuisance_sigma or {}, nuisances)
     free = position_sigma > 0
     # a shared α offset (a bench's pan reading) is an unknown δ on every α with the prior
     # N(0, shared²): for Gaussian errors the same estimate and covariance as correlated
@@ -221,7 +208,7 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
     known = {"pan": shared} if shared else {}
     # a pan prior and the σ's shared α offset are independent errors of one reading (the
     # bench's tolerance, the mount's scatter): their variances add
-    known |= {n: float(np.hypot(v, known.get(n, 0.0))) for n, v in (nuisance_sigma or {}).items()}
+    known |= {n: float(np.hypot(v, known.get(n, 0.0))) for n, v in priors.items()}
     prior = np.vstack([*(eye[[4 + unknown.index(n)]] / known[n] for n in unknown if n in known),
                        eye[4 + k:] / position_sigma if free else eye[:0]])
     neutral = np.concatenate([np.zeros(4), [NUISANCES[n][1] for n in unknown],
@@ -252,19 +239,19 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
         raise SolverError(_undetermined(nuisances))
     cov = np.linalg.inv(jtj) if sigma is not None else None
     names = (_residual_names(nb, nt)
-             + [f"the {n} prior" if n in (nuisance_sigma or {}) else "the shared α offset's prior"
+             + [f"the {n} prior" if n in priors else "the shared α offset's prior"
                 for n in unknown if n in known]
              + [f"beacon {i} believed {c}" for i in range(nb) for c in "xy"])
     down = tuple(f"{names[i]} ({abs(r[i]):.1f} σ off)" for i in np.flatnonzero(w < 1.0))
     sol = _solution(o, res.x[:4], bpos, targets, cov)
-    return replace(sol, downweighted=down, nuisance_sigma=dict(nuisance_sigma or {}),
+    return replace(sol, downweighted=down, priors=dict(priors),
                    nuisances={NUISANCES[n][0]: float(v)
                               for n, v in zip(nuisances, res.x[4:4 + len(nuisances)],
                                               strict=True)},
                    method=sol.method + (f", self-calibrated ({', '.join(nuisances)})"
                                         if nuisances else "")
-                   + (f", with priors ({describe_nuisance_sigma(nuisance_sigma)})"
-                      if nuisance_sigma else "")
+                   + (f", with priors ({calibration.describe_priors()})"
+                      if priors else "")
                    + (f", a shared α offset of prior σ {shared:.3g}° estimated" if implicit
                       else ""))
 
@@ -363,52 +350,6 @@ def _power_of(obs, theta: float, rho: float, observer: np.ndarray, points: np.nd
     return dalpha, np.sum(rel * dv, axis=1) / dist - 2.0 * cos_i * obs.d1 * obs.d2
 
 
-def check_position_sigma(position_sigma: float) -> None:
-    """Refuse a beacon position σ that is not a finite length ≥ 0 (cm per axis)."""
-    if not (np.isfinite(position_sigma) and position_sigma >= 0):
-        raise SolverError(f"position_sigma must be ≥ 0, got {position_sigma}")
-
-
-def check_nuisance_sigma(nuisance_sigma: Mapping[str, float],
-                         nuisances: tuple[str, ...]) -> None:
-    """Refuse a prior σ for a nuisance that is not estimated, or one that is not a
-    finite number > 0."""
-    for name, s in nuisance_sigma.items():
-        if name not in NUISANCES:
-            raise SolverError(f"a prior σ for an unknown nuisance {name!r}: choose from "
-                              f"{', '.join(NUISANCES)}")
-        if name not in nuisances:
-            raise SolverError(f"a prior σ for {name!r}, which is not estimated (estimated: "
-                              f"{', '.join(nuisances) or 'none'})")
-        if not (isinstance(s, int | float) and np.isfinite(s) and s > 0):
-            raise SolverError(f"the prior σ of {name} must be a number > 0, got {s!r}")
-
-
-def describe_nuisance_sigma(nuisance_sigma: Mapping[str, float]) -> str:
-    """The priors in words with their units, e.g. "pan ±0.29°, scale ±0.58 %"."""
-    units = {"pan": lambda s: f"±{s:.3g}°", "scale": lambda s: f"±{100 * s:.3g} %",
-             "power": lambda s: f"±{s:.3g}/cm"}
-    return ", ".join(f"{n} {units[n](s)}" for n, s in nuisance_sigma.items())
-
-
-def check_nuisances(nuisances: tuple[str, ...], nb: int | None, nt: int) -> None:
-    """Refuse unknown nuisances, and more unknowns than measurements (``nb`` None: the
-    beacons are not known yet, the names only)."""
-    bad = [n for n in nuisances if n not in NUISANCES]
-    if bad or len(set(nuisances)) != len(nuisances):
-        raise SolverError(f"unknown or repeated nuisance(s) {', '.join(bad) or nuisances}: "
-                          f"choose from {', '.join(NUISANCES)}")
-    unknowns = 4 + len(nuisances)
-    # the target's observations (one per frame) repeat one image's measurement: they
-    # count once
-    if nuisances and nb is not None and 2 * (nb + min(nt, 1)) < unknowns:
-        need = -(-(unknowns - 2) // 2)
-        raise SolverError(f"calibrating {' and '.join(nuisances)} needs at least {need} beacon "
-                          f"observations ({nb} given): each image gives 2 measurements, and "
-                          f"the mirror, the target and {len(nuisances)} nuisance(s) are "
-                          f"{unknowns} unknowns")
-
-
 def _undetermined(nuisances: tuple[str, ...]) -> str:
     if not nuisances:
         return "the measurements do not determine the mirror and the target (singular Jacobian)"
@@ -486,12 +427,12 @@ def crlb(observer: ArrayLike, beacons: ArrayLike, mirror_yaw_deg: float, mirror_
 def solve_measurements(observer, beacons: list[BeaconMeasurement],
                        targets: list[tuple[float, float]],
                        sigma: Sigma | ObjectSigmas | None = None,
-                       nuisances: tuple[str, ...] = (), position_sigma: float = 0.0,
-                       nuisance_sigma: Mapping[str, float] | None = None) -> Solution:
+                       calibration: SelfCalibration = PLAIN) -> Solution:
     """The solver's front door: the closed form for one beacon and one target without
-    σ's, weighted least squares (with covariance when σ's are given) otherwise."""
-    check_nuisance_sigma(nuisance_sigma or {}, nuisances)
-    if len(beacons) == 1 and len(targets) == 1 and not nuisances and not position_sigma:
+    σ's and without self-calibration, weighted least squares (with covariance when σ's
+    are given) otherwise."""
+    if (len(beacons) == 1 and len(targets) == 1 and not calibration.nuisances
+            and not calibration.position_sigma):
         b = beacons[0]
         sol = solve_single(observer, b.position, b.alpha_deg, b.d_total, *targets[0])
         if sigma is None:
@@ -514,5 +455,4 @@ def solve_measurements(observer, beacons: list[BeaconMeasurement],
         S[np.ix_([0, 2], [0, 2])] = sig.alpha_covariance(sa)  # rows (α_b, d_b, α_t, d_t)
         cov = Jinv @ S @ Jinv.T
         return replace(sol, covariance=cov, method="closed form with covariance")
-    return solve_lsq(observer, beacons, targets, sigma, nuisances=nuisances,
-                     position_sigma=position_sigma, nuisance_sigma=nuisance_sigma)
+    return solve_lsq(observer, beacons, targets, sigma, calibration=calibration)

@@ -128,8 +128,8 @@ class Solution:
     # self-calibration's estimates (pan_offset_deg, range_scale, mirror_power_per_cm),
     # after θ, ρ, x_t, y_t in the covariance
     nuisances: dict[str, float] = field(default_factory=dict)
-    # the priors' σ's the bench gave some of them (solver.lsq.solve_lsq's nuisance_sigma)
-    nuisance_sigma: dict[str, float] = field(default_factory=dict)
+    # the priors' σ's the bench gave some of them (solver.selfcal.SelfCalibration's)
+    priors: dict[str, float] = field(default_factory=dict)
 
     @property
     def target_covariance(self) -> np.ndarray | None:
@@ -180,8 +180,8 @@ class Solution:
             out["downweighted"] = list(self.downweighted)
         if self.nuisances:
             out["self_calibration"] = dict(self.nuisances)
-        if self.nuisance_sigma:
-            out["self_calibration_priors"] = dict(self.nuisance_sigma)
+        if self.priors:
+            out["self_calibration_priors"] = dict(self.priors)
         if self.covariance is not None:
             major, minor, angle = self.ellipse95()
             out["covariance"] = {
@@ -203,7 +203,7 @@ class Solution:
                    covariance=None if cov is None else np.asarray(cov, float),
                    method=d["method"], downweighted=tuple(d.get("downweighted", ())),
                    nuisances=dict(d.get("self_calibration", {})),
-                   nuisance_sigma=dict(d.get("self_calibration_priors", {})))
+                   priors=dict(d.get("self_calibration_priors", {})))
 
 
 def chi2_2_radius(level: float) -> float:

@@ -31,6 +31,15 @@ def test_the_api_returns_the_typed_values_the_cli_prints():
     m = truth.exact_measurements()
     sol = ms.solve(m.observer, m.beacons, m.targets)
     assert sol.target == pytest.approx(scene.target.position, abs=1e-6)
+    # exact measurements of a flat mirror: self-calibration finds no pan and no scale
+    three = ms.load_scene(ROOT / "scenes" / "bench" / "exp1_3beacons.yaml")
+    many = ms.check(three).exact_measurements()  # at the beacons' true positions
+    assert len(many.beacons) == 3
+    cal = ms.solve(many.observer, many.beacons, many.targets, None,
+                   ms.SelfCalibration(("pan", "scale")))
+    assert cal.nuisances["pan_offset_deg"] == pytest.approx(0.0, abs=1e-6)
+    assert cal.nuisances["range_scale"] == pytest.approx(1.0, abs=1e-8)
+    assert cal.target == pytest.approx(three.target.position, abs=1e-6)
     assert ms.load_error_model(None).typical.target.alpha_deg > 0
 
 

@@ -16,6 +16,7 @@ from mirrorsim.cli.main import main
 from mirrorsim.formats.scenefile import load_scene
 from mirrorsim.pipelines import errormodel
 from mirrorsim.pipelines.dataset import collect_rows, run_dataset
+from solver.selfcal import SelfCalibration
 from tests.conftest import synthetic_columns
 
 SPEC = Path(__file__).parent / "data" / "tiny_spec.yaml"
@@ -560,7 +561,7 @@ def three_beacons(tmp_path_factory):
     out = tmp / "d"
     # three beacons by the parameter (a spec's beacon.count does the same: the draws' test)
     res = run_dataset(2, 5, out, workers=1, spec_path=SPEC, beacons=3, progress=False,
-                      nuisances=("pan", "scale"))
+                      calibration=SelfCalibration(("pan", "scale"), priors={"pan": 0.3}))
     return out, res
 
 
@@ -575,6 +576,7 @@ def test_a_dataset_of_several_beacons_self_calibrated(three_beacons):
     for i in range(2):
         scene = load_scene(out / "scenes" / f"scene{i:06d}.yaml")
         assert cols["beacons"][i] == 3 and cols["calibrate"][i] == "pan,scale"
+        assert cols["calibrate_priors"][i] == "pan=0.3"
         for k, kind in enumerate(("beacon", "beacon2", "beacon3")):
             # each beacon's columns are its own: its position, and its own measurement
             assert (cols[f"{kind}_pos_x"][i], cols[f"{kind}_pos_y"][i]) == pytest.approx(
@@ -588,14 +590,18 @@ def test_a_dataset_of_several_beacons_self_calibrated(three_beacons):
         assert 0 < cols["est_pan_offset_deg_sd"][i] < 0.5
         assert cols["est_mirror_power_per_cm"][i] is None  # not estimated: null
     # the validation solves each row again as the dataset did: all three beacons,
-    # self-calibrated, with the same σ's
+    # self-calibrated with the same prior, with the same σ's (without the prior the
+    # distances differ)
     v = validate(default_error_model(), cols)
     assert v.n_failed == 0
     assert v.mahalanobis == pytest.approx(cols["target_mahalanobis"], rel=1e-6)
+    unprimed = {**cols, "calibrate_priors": ["", ""]}
+    assert validate(default_error_model(), unprimed).mahalanobis != pytest.approx(
+        cols["target_mahalanobis"], rel=1e-6)
     # and the frames: one per beacon; the card says how the rows were solved
     assert sorted(p.name for p in (out / "frames" / "scene000000").glob("*.png")) == [
         f"scene000000_b{k}.png" for k in range(3)]
-    assert "--calibrate pan,scale`" in (out / "README.md").read_text()
+    assert "--calibrate pan,scale --prior pan=0.3`" in (out / "README.md").read_text()
 
 
 def test_a_dataset_resumes_only_with_its_self_calibration(three_beacons, tmp_path):
@@ -606,27 +612,37 @@ def test_a_dataset_resumes_only_with_its_self_calibration(three_beacons, tmp_pat
     out, _ = three_beacons
     copy = tmp_path / "copy"
     shutil.copytree(out, copy)
-    for nuisances in ((), ("pan",)):
+    same = SelfCalibration(("pan", "scale"), priors={"pan": 0.3})
+    for other in (SelfCalibration(), SelfCalibration(("pan",)),
+                  SelfCalibration(("pan", "scale")),
+                  SelfCalibration(("pan", "scale"), priors={"pan": 0.2})):
         with pytest.raises(DatasetError, match="other self-calibration settings"):
             run_dataset(3, 5, copy, workers=1, spec_path=SPEC, beacons=3, progress=False,
-                        resume=True, nuisances=nuisances)
+                        resume=True, calibration=other)
     with pytest.raises(DatasetError, match="other settings"):  # the beacon count is the spec's
         run_dataset(3, 5, copy, workers=1, spec_path=SPEC, beacons=2, progress=False,
-                    resume=True, nuisances=("pan", "scale"))
+                    resume=True, calibration=same)
 
 
 def test_a_row_of_the_older_layout_reads_as_one_plain_beacon():
     from mirrorsim.formats.dataset_table import NAMES, DatasetRow
 
     old = dict.fromkeys(NAMES, 0.0) | {"error": "", "schema": 2}
-    for name in ("beacons", "calibrate", "beacon_sigma", *(
+    for name in ("beacons", "calibrate", "calibrate_priors", "beacon_sigma", *(
             f"est_{k}{sd}" for k in ("pan_offset_deg", "range_scale", "mirror_power_per_cm")
             for sd in ("", "_sd"))):
         del old[name]
     row = DatasetRow.from_json(old)
     assert row["beacons"] == 1 and row["calibrate"] == "" and row["est_range_scale"] is None
+    assert row["calibrate_priors"] == ""
     with pytest.raises(ValueError, match="missing"):  # a row of this layout must have them
         DatasetRow.from_json(old | {"schema": 3})
+    # a row of schema 3 (self-calibration without priors) reads as one without them
+    three = dict.fromkeys(NAMES, 0.0) | {"error": "", "schema": 3, "calibrate": "pan,scale"}
+    del three["calibrate_priors"]
+    assert DatasetRow.from_json(three)["calibrate_priors"] == ""
+    with pytest.raises(ValueError, match="missing"):
+        DatasetRow.from_json(three | {"schema": 4})
 
 
 def test_error_model_fits_every_beacon_image_and_the_target_once():
@@ -673,14 +689,14 @@ def test_a_table_of_the_older_layout_is_read(one_worker, tmp_path):
 
     from mirrorsim.formats.cache import checksum
     from mirrorsim.formats.dataset_folder import TABLE_SEAL, DatasetError, read_table
-    from mirrorsim.formats.dataset_table import SCHEMA_2_VALUES
+    from mirrorsim.formats.dataset_table import older_values
     from mirrorsim.formats.files import jsonable
 
     out, _ = one_worker
     old = tmp_path / "old"
     shutil.copytree(out, old)
     cols = pq.read_table(old / "dataset.parquet").to_pydict()
-    cols = {k: v for k, v in cols.items() if k not in SCHEMA_2_VALUES}
+    cols = {k: v for k, v in cols.items() if k not in older_values(2)}
     cols["schema"] = [2] * len(cols["index"])
     arrow = pa.table(cols)
     arrow = arrow.replace_schema_metadata({TABLE_SEAL: checksum(jsonable(arrow.to_pydict()))})
@@ -688,6 +704,7 @@ def test_a_table_of_the_older_layout_is_read(one_worker, tmp_path):
     read = read_table(old)
     assert read["beacons"] == [1, 1, 1] and read["calibrate"] == ["", "", ""]
     assert read["est_range_scale"] == [None, None, None]
+    assert read["calibrate_priors"] == ["", "", ""]
     cols["schema"] = [3] * len(cols["index"])  # a table of this layout must have them
     arrow = pa.table(cols)
     arrow = arrow.replace_schema_metadata({TABLE_SEAL: checksum(jsonable(arrow.to_pydict()))})

@@ -12,6 +12,7 @@ from mirrorsim.formats.scenefile import load_scene, scene_from_dict
 from mirrorsim.pipelines.evaluate import evaluate_scene
 from mirrorsim.pipelines.score import Report
 from solver.geometry import yaw_difference
+from solver.selfcal import SelfCalibration
 from solver.sltr import solve_single
 
 from .conftest import SCENES, scene_dict
@@ -90,7 +91,7 @@ def test_reuse_and_several_beacons(tmp_path):
     assert "first k beacons" in report_table(a)
     # self-calibrated: each count says what it estimated (one beacon carries no nuisance)
     s = evaluate_scene(scene.with_render(spp=8), tmp_path, progress=False,
-                       nuisances=("pan", "scale"))
+                       calibration=SelfCalibration(("pan", "scale")))
     assert s.errors.calibrated == ("pan", "scale") and a.errors.calibrated == ()
     assert [r["calibrated"] for r in s.to_json()["error_vs_beacons"]] == [[], ["pan", "scale"]]
     assert "2: " in report_table(s) and "(pan, scale)" in report_table(s)

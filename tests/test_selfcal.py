@@ -8,6 +8,7 @@ import pytest
 from solver.errors import SolverError
 from solver.geometry import line_normal, unit
 from solver.lsq import BeaconMeasurement, ObjectSigmas, Sigma, crlb, solve_measurements
+from solver.selfcal import SelfCalibration
 from solver.sltr import observe
 
 OBS = np.zeros(2)
@@ -39,7 +40,7 @@ def test_self_calibration_removes_a_pan_offset_and_a_range_scale():
     for _ in range(300):
         bs, ts = _measure(rng, 0.4, 1.008)
         plain.append(np.linalg.norm(solve_measurements(OBS, bs, ts, SIG).target - TARGET))
-        sol = solve_measurements(OBS, bs, ts, SIG, nuisances=("pan", "scale"))
+        sol = solve_measurements(OBS, bs, ts, SIG, SelfCalibration(("pan", "scale")))
         cal.append(np.linalg.norm(sol.target - TARGET))
         sd = np.sqrt(np.diag(sol.covariance))
         z.append([(sol.nuisances["pan_offset_deg"] - 0.4) / sd[4],
@@ -61,13 +62,13 @@ def test_self_calibration_refuses_what_it_cannot_observe():
     rng = np.random.default_rng(0)
     bs, ts = _measure(rng)
     with pytest.raises(SolverError, match="at least 2 beacon observations"):
-        solve_measurements(OBS, bs[:1], ts, SIG, nuisances=("pan", "scale"))
+        solve_measurements(OBS, bs[:1], ts, SIG, SelfCalibration(("pan", "scale")))
     with pytest.raises(SolverError, match="unknown or repeated"):
-        solve_measurements(OBS, bs, ts, SIG, nuisances=("roll",))
+        solve_measurements(OBS, bs, ts, SIG, SelfCalibration(("roll",)))
     # two beacons standing at one place: their images cannot separate δ and s
     same = [bs[0], BeaconMeasurement(bs[0].position, bs[0].alpha_deg, bs[0].d_total)]
     with pytest.raises(SolverError, match="do not separate"):
-        solve_measurements(OBS, same, ts, SIG, nuisances=("pan", "scale"))
+        solve_measurements(OBS, same, ts, SIG, SelfCalibration(("pan", "scale")))
 
 
 def test_plan_places_several_beacons_and_says_what_each_buys(tmp_path):
@@ -98,16 +99,38 @@ def test_plan_places_several_beacons_and_says_what_each_buys(tmp_path):
                         yaw_spread_deg=3.0, n=5).poses(o, img.alpha_deg)
     sig = json.loads(js.read_text())["sigma"]
     s = ObjectSigmas(Sigma(**sig["target"]), (Sigma(**sig["beacons"]),))  # one for all
-    pos = np.array([b["position"] for b in bs])
-    var = []
-    for point, yaw in poses:
-        n = np.array([-np.sin(np.radians(yaw)), np.cos(np.radians(yaw))])
-        vt = o + img.d_total * np.array([np.cos(np.radians(img.alpha_deg)),
-                                         np.sin(np.radians(img.alpha_deg))])
-        t = vt - 2.0 * (n @ vt - n @ point) * n
-        bound = crlb(o, pos, yaw, n @ point, t, s, nuisances=("pan", "scale"))
-        var.append(np.trace(bound[2:4, 2:4]))
-    assert bs[2]["rmse_after"] == pytest.approx(np.sqrt(np.mean(var)), rel=1e-6)
+
+    def expected(beacons, prior_information) -> float:
+        """√ of the target block's trace of the bound at the planned positions,
+        averaged over the poses: the Fisher information of the measurements (from
+        solver.lsq.crlb) plus the priors'."""
+        pos = np.array([b["position"] for b in beacons])
+        var = []
+        for point, yaw in poses:
+            n = np.array([-np.sin(np.radians(yaw)), np.cos(np.radians(yaw))])
+            vt = o + img.d_total * np.array([np.cos(np.radians(img.alpha_deg)),
+                                             np.sin(np.radians(img.alpha_deg))])
+            t = vt - 2.0 * (n @ vt - n @ point) * n
+            info = np.linalg.inv(crlb(o, pos, yaw, n @ point, t, s, nuisances=("pan", "scale")))
+            var.append(np.trace(np.linalg.inv(info + prior_information)[2:4, 2:4]))
+        return float(np.sqrt(np.mean(var)))
+
+    assert bs[2]["rmse_after"] == pytest.approx(expected(bs, 0.0), rel=1e-6)
+    # with priors on the nuisances (--prior): the bound of the set it chose is the
+    # information above plus 1/σ² on each nuisance (the Bayesian bound), between the
+    # free set's and a bench without those errors
+    assert main(["plan", str(SCENES / "exp1.yaml"), "--beacons", "3", "--calibrate",
+                 "pan,scale", "--prior", "pan=0.3,scale=0.006", "--step", "2", "--out",
+                 str(tmp_path / "q.png"), "--json", str(js)]) == 0
+    planned = json.loads(js.read_text())["beacon_set"]
+    assert planned["priors"] == {"pan": 0.3, "scale": 0.006}
+    bp = planned["beacons"]
+    prior = np.diag([0, 0, 0, 0, 0.3**-2, 0.006**-2])
+    assert bp[2]["rmse_after"] == pytest.approx(expected(bp, prior), rel=1e-5)
+    assert bp[2]["rmse_after_plain"] <= bp[2]["rmse_after"] < bs[2]["rmse_after"]
+    # with one beacon the priors do not make the nuisances observable to the plan: it
+    # chooses the first by the error without them, as without priors
+    assert bp[0]["rmse_after"] is None
 
 
 def test_commands_refuse_self_calibration_they_cannot_do(tmp_path, capsys):
@@ -124,7 +147,32 @@ def test_commands_refuse_self_calibration_they_cannot_do(tmp_path, capsys):
         assert main(argv) == 2
         err = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("error:")]
         assert len(err) == 1 and "--calibrate" in err[0], err
-    assert not (tmp_path / "e").exists() and not (tmp_path / "b").exists()
+    # every command that self-calibrates takes --prior, and refuses a bad one first
+    for argv in (["budget", str(SCENES / "bench" / "exp1.yaml"), "--prior", "power=0.001",
+                  "--out", str(tmp_path / "b")],
+                 ["evaluate", str(SCENES / "exp1.yaml"), "--prior", "pan=0.3", "--out",
+                  str(tmp_path / "e")],
+                 ["plan", str(SCENES / "exp1.yaml"), "--calibrate", "scale", "--prior",
+                  "scale=-1", "--out", str(tmp_path / "p.png")],
+                 ["dataset", "--n", "1", "--seed", "1", "--beacons", "3", "--calibrate",
+                  "pan,scale", "--prior", "pan=0.3,pan=0.2", "--out", str(tmp_path / "d")]):
+        assert main(argv) == 2
+        err = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("error:")]
+        assert len(err) == 1 and "--prior" in err[0], err
+    for made in ("e", "b", "p.png", "d"):
+        assert not (tmp_path / made).exists()
+
+
+def test_a_budgets_document_says_how_it_self_calibrated():
+    from mirrorsim.pipelines.budget import Budget
+
+    cal = SelfCalibration(("pan", "scale"), 0.1, {"pan": 0.3})
+    doc = Budget("s", 1.0, None, (), cal, 0.5).to_json()
+    assert doc["self_calibration"] == {"nuisances": ["pan", "scale"],
+                                       "beacon_position_sigma_cm": 0.1,
+                                       "priors": {"pan": 0.3}}
+    assert doc["ideal"]["calibrated_target_cm"] == 0.5
+    assert "self_calibration" not in Budget("s", 1.0, None, ()).to_json()
 
 
 def _flat_reflection_points(pts) -> np.ndarray:
@@ -286,8 +334,9 @@ def test_self_calibration_removes_a_curved_mirrors_error():
         d = path - 2.0 * _cos_incidence(o) * o.d1 * o.d2 / radius  # the sagittal image's
         meas.append((alpha + delta, d * scale))
     bs = [BeaconMeasurement(tuple(b), *m) for b, m in zip(BEACONS, meas[:3], strict=True)]
-    two = solve_measurements(OBS, bs, meas[3:], SIG, nuisances=("pan", "scale"))
-    three = solve_measurements(OBS, bs, meas[3:], SIG, nuisances=("pan", "scale", "power"))
+    two = solve_measurements(OBS, bs, meas[3:], SIG, SelfCalibration(("pan", "scale")))
+    three = solve_measurements(OBS, bs, meas[3:], SIG,
+                               SelfCalibration(("pan", "scale", "power")))
     e2, e3 = (np.linalg.norm(s.target - TARGET) for s in (two, three))
     assert e2 > 0.5
     assert e3 < e2 / 10
@@ -312,11 +361,13 @@ def test_the_powers_covariance_holds_and_too_few_beacons_are_refused():
         moved = [BeaconMeasurement(b.position, b.alpha_deg + c * A[k], b.d_total + c * D[k])
                  for k, b in enumerate(bs)]
         ts = [(ts[0][0] + c * A[3], ts[0][1] + c * D[3])]
-        sol = solve_measurements(OBS, moved, ts, SIG, nuisances=("pan", "scale", "power"))
+        sol = solve_measurements(OBS, moved, ts, SIG,
+                                 SelfCalibration(("pan", "scale", "power")))
         z.append((sol.nuisances["mirror_power_per_cm"] - c) / np.sqrt(sol.covariance[6, 6]))
     assert 0.92 < np.mean(np.abs(z) < 2) < 0.98
     with pytest.raises(SolverError, match="at least 3 beacon observations"):
-        solve_measurements(OBS, moved[:2], ts, SIG, nuisances=("pan", "scale", "power"))
+        solve_measurements(OBS, moved[:2], ts, SIG,
+                           SelfCalibration(("pan", "scale", "power")))
 
 
 PRIORS = {"pan": 0.3, "scale": 0.006, "power": 0.0003}
@@ -340,8 +391,8 @@ def test_priors_on_the_nuisances_help_where_the_bench_draws_them_from_the_priors
               for k, b in enumerate(bs)]
         ts = [(ts[0][0] + c * A[3], ts[0][1] + s * c * D[3])]
         nu = ("pan", "scale", "power")
-        free.append(solve_measurements(OBS, bs, ts, SIG, nu).target - TARGET)
-        sol = solve_measurements(OBS, bs, ts, SIG, nu, nuisance_sigma=PRIORS)
+        free.append(solve_measurements(OBS, bs, ts, SIG, SelfCalibration(nu)).target - TARGET)
+        sol = solve_measurements(OBS, bs, ts, SIG, SelfCalibration(nu, priors=PRIORS))
         e = sol.target - TARGET
         known.append(e)
         inside.append(e @ np.linalg.solve(sol.covariance[2:4, 2:4], e) < 5.991)
@@ -357,11 +408,11 @@ def test_a_prior_tight_enough_is_the_plain_fit_and_a_wide_one_the_free_fit():
     bs, ts = _measure(rng, 0.2, 1.004)
     nu = ("pan", "scale")
     plain = solve_measurements(OBS, bs, ts, SIG).target
-    free = solve_measurements(OBS, bs, ts, SIG, nu).target
-    tight = solve_measurements(OBS, bs, ts, SIG, nu, nuisance_sigma={"pan": 1e-6,
-                                                                       "scale": 1e-8}).target
-    wide = solve_measurements(OBS, bs, ts, SIG, nu, nuisance_sigma={"pan": 1e6,
-                                                                      "scale": 1e6}).target
+    free = solve_measurements(OBS, bs, ts, SIG, SelfCalibration(nu)).target
+    tight = solve_measurements(OBS, bs, ts, SIG,
+                               SelfCalibration(nu, priors={"pan": 1e-6, "scale": 1e-8})).target
+    wide = solve_measurements(OBS, bs, ts, SIG,
+                              SelfCalibration(nu, priors={"pan": 1e6, "scale": 1e6})).target
     assert np.linalg.norm(free - plain) > 0.05  # the case tells the two apart
     assert tight == pytest.approx(plain, abs=1e-4)
     assert wide == pytest.approx(free, abs=1e-4)
@@ -374,9 +425,9 @@ def test_priors_are_refused_for_nuisances_not_estimated_and_when_not_positive(tm
     rng = np.random.default_rng(0)
     bs, ts = _measure(rng)
     with pytest.raises(SolverError, match="not estimated"):
-        solve_measurements(OBS, bs, ts, SIG, ("pan",), nuisance_sigma={"scale": 0.01})
+        SelfCalibration(("pan",), priors={"scale": 0.01})
     with pytest.raises(SolverError, match="must be a number > 0"):
-        solve_measurements(OBS, bs, ts, SIG, ("pan",), nuisance_sigma={"pan": 0.0})
+        SelfCalibration(("pan",), priors={"pan": 0.0})
     path = tmp_path / "m.json"
     import json
     path.write_text(json.dumps({
@@ -395,9 +446,9 @@ def test_priors_are_refused_for_nuisances_not_estimated_and_when_not_positive(tm
     # the priors travel with the solution's document and back
     from solver.sltr import Solution
 
-    sol = solve_measurements(OBS, bs, ts, SIG, ("pan", "scale"),
-                             nuisance_sigma={"pan": 0.3, "scale": 0.006})
-    assert Solution.from_json(sol.to_json()).nuisance_sigma == {"pan": 0.3, "scale": 0.006}
+    sol = solve_measurements(OBS, bs, ts, SIG, SelfCalibration(
+        ("pan", "scale"), priors={"pan": 0.3, "scale": 0.006}))
+    assert Solution.from_json(sol.to_json()).priors == {"pan": 0.3, "scale": 0.006}
 
 
 def test_a_pan_prior_adds_to_the_shared_alpha_offset_of_the_sigmas():
@@ -409,11 +460,11 @@ def test_a_pan_prior_adds_to_the_shared_alpha_offset_of_the_sigmas():
     rng = np.random.default_rng(8)
     bs, ts = _measure(rng, 0.1, 1.003)
     shared = replace(SIG, shared_alpha_deg=0.05)
-    both = solve_measurements(OBS, bs, ts, shared, ("pan", "scale"),
-                              nuisance_sigma={"pan": 0.2})
+    both = solve_measurements(OBS, bs, ts, shared,
+                              SelfCalibration(("pan", "scale"), priors={"pan": 0.2}))
     wider = replace(SIG, shared_alpha_deg=float(np.hypot(0.05, 0.2)))
-    added = solve_measurements(OBS, bs, ts, wider, ("pan", "scale"))
-    alone = solve_measurements(OBS, bs, ts, shared, ("pan", "scale"))
+    added = solve_measurements(OBS, bs, ts, wider, SelfCalibration(("pan", "scale")))
+    alone = solve_measurements(OBS, bs, ts, shared, SelfCalibration(("pan", "scale")))
     assert both.target == pytest.approx(added.target, abs=1e-9)
     assert both.covariance[4, 4] == pytest.approx(added.covariance[4, 4], rel=1e-6)
     assert both.covariance[4, 4] > alone.covariance[4, 4]

@@ -18,6 +18,7 @@ from mirrorsim.formats.error_model import (
 from mirrorsim.formats.measurements import measurements_from_dict
 from mirrorsim.pipelines import errormodel, uncertainty
 from solver.lsq import BeaconMeasurement, ObjectSigmas, Sigma, crlb, solve_measurements
+from solver.selfcal import SelfCalibration
 from solver.sltr import chi2_2_radius, observe
 
 from .conftest import SCENES, synthetic_columns
@@ -405,8 +406,8 @@ def test_beacon_position_sigma_widens_the_ellipse_and_names_the_offsets():
 
     sig = ObjectSigmas(Sigma(0.002, 0.0005), (Sigma(0.003, 0.002),))
     bs, ts = _noisy(np.random.default_rng(2), sig)
-    exact = solve_measurements(OBS, bs, ts, sig, ("pan", "scale"))
-    loose = solve_measurements(OBS, bs, ts, sig, ("pan", "scale"), position_sigma=0.2)
+    exact = solve_measurements(OBS, bs, ts, sig, SelfCalibration(("pan", "scale")))
+    loose = solve_measurements(OBS, bs, ts, sig, SelfCalibration(("pan", "scale"), 0.2))
     assert np.trace(loose.target_covariance) > np.trace(exact.target_covariance)
     assert loose.params_order[-1] == "beacon2_offset_y" and len(loose.params_order) == 12
     assert "pan offset" in solution_summary("m.json", loose)

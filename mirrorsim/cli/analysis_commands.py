@@ -8,8 +8,8 @@ from pathlib import Path
 
 from mirrorsim.cli.registry import (
     at_least,
-    beacon_sigma_of,
     calibrate_option,
+    calibration_of,
     command,
     common,
     default_workers,
@@ -18,11 +18,8 @@ from mirrorsim.cli.registry import (
     finite,
     inputs,
     load,
-    nuisances_of,
     out_file,
     output,
-    prior_option,
-    priors_of,
     sampler_option,
 )
 from mirrorsim.errors import BadArgument, BadParameter, RunFailed
@@ -36,7 +33,6 @@ def _solve_options(p):
     common(p, scene=False, json="the solution",
            error_model="each measurement's σ's; given, it replaces the file's `sigma`")
     calibrate_option(p)
-    prior_option(p)
 
 
 @command("solve", "localize the mirror and the target from measurements",
@@ -53,8 +49,7 @@ def _solve(args) -> int:
     from solver.lsq import solve_measurements
 
     m = load_measurements(args.measurements)
-    nuisances = nuisances_of(args, len(m.beacons), len(m.targets))
-    priors = priors_of(args, nuisances)
+    calibration = calibration_of(args, len(m.beacons), len(m.targets))
     model = error_model_of(args)
     if model is not None and m.sigma is not None:
         print(f"note: --error-model {args.error_model} gives the σ's; the `sigma` of "
@@ -69,8 +64,7 @@ def _solve(args) -> int:
                   else "the shipped error model (ideal bench)")
         if m.observer_pan_deg is None:
             source += "; no observer_pan_deg: images taken as off-axis as its training rows"
-    sol = solve_measurements(m.observer, m.beacons, m.targets, sigma, nuisances,
-                             beacon_sigma_of(args), priors)
+    sol = solve_measurements(m.observer, m.beacons, m.targets, sigma, calibration)
     print(f"σ's from {source}", file=sys.stderr)
     print(solution_summary(str(args.measurements), sol))
     emit(args, sol.to_json())
@@ -179,8 +173,7 @@ def _plan(args) -> int:
              if args.sigma_alpha is not None
              else (error_model_of(args) or default_error_model()).typical)
     plan = plan_scene(scene, sigma, args.eps, args.yaw_spread, args.d1_spread, args.step,
-                      n_beacons=args.beacons, nuisances=nuisances_of(args),
-                      position_sigma=beacon_sigma_of(args))
+                      n_beacons=args.beacons, calibration=calibration_of(args))
     summ = plan.to_json()
     print(plan_text(scene, summ))
     out = out_file(args, scene, f"{scene.name}.plan.png")
@@ -234,7 +227,7 @@ def _dataset(args) -> int:
     from mirrorsim.pipelines.workers import max_workers
 
     at_least(("--n", args.n, 1), ("--seed", args.seed, 0), ("--workers", args.workers, 1))
-    nuisances, position_sigma = nuisances_of(args), beacon_sigma_of(args)
+    calibration = calibration_of(args)
     if args.spp is not None:  # checked as every scene's render settings are
         from mirrorsim.scene.model import RenderSettings
 
@@ -250,8 +243,8 @@ def _dataset(args) -> int:
                           spec_path=args.spec, spp=args.spp, sampler=args.sampler,
                           variant=args.variant, keep=tuple(args.keep), resume=args.resume,
                           executor=args.executor, scheduler=args.scheduler,
-                          progress=not args.quiet, nuisances=nuisances,
-                          position_sigma=position_sigma, beacons=args.beacons,
+                          progress=not args.quiet, calibration=calibration,
+                          beacons=args.beacons,
                           error_model=error_model_of(args))
     except BadParameter as exc:
         if exc.parameter != "nuisances":

@@ -268,7 +268,8 @@ def _plan_error_map(fig, ax, scene: Scene, plan: Plan) -> None:
         bs = plan.beacon_set
         ax.plot(*bs.positions.T, "s", color="w", mec="k", ms=7,
                 label=f"{len(bs.positions)} planned: {bs.rmse[-1]:.2f} cm"
-                + (f" ({'+'.join(bs.nuisances)} estimated)" if bs.nuisances else ""))
+                + (f" ({'+'.join(bs.calibration.nuisances)} estimated)"
+                   if bs.calibration.nuisances else ""))
         for k, p in enumerate(bs.positions):
             ax.annotate(str(k), p, xytext=(4, 4), textcoords="offset points", fontsize=8,
                         color="k", weight="bold",

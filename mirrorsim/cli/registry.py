@@ -20,6 +20,7 @@ from mirrorsim.formats.files import (
 
 if TYPE_CHECKING:  # the rest is imported where used: `mirrorsim --help` needs none of it
     from mirrorsim.scene.model import Scene
+    from solver.selfcal import SelfCalibration
 
 VARIANT_CHOICES = ["auto", "cuda", "llvm", "scalar"]
 IMAGE_SUFFIXES = (".png", ".pdf", ".svg")  # what a plot may be written as
@@ -182,7 +183,8 @@ def common(p: argparse.ArgumentParser, *, scene: bool = True, out: str | None = 
 
 
 def calibrate_option(p: argparse.ArgumentParser) -> None:
-    """``--calibrate pan,scale[,power]``: self-calibration's nuisances."""
+    """``--calibrate pan,scale[,power]``, ``--beacon-sigma CM`` and ``--prior NAME=σ,…``:
+    self-calibration's settings (:func:`calibration_of`)."""
     p.add_argument("--calibrate", default="", metavar="pan,scale[,power]",
                    help="estimate bench errors shared by every measurement with the mirror "
                    "(self-calibration; needs 2+ beacons, 3+ for all three): pan, an offset on "
@@ -191,10 +193,6 @@ def calibrate_option(p: argparse.ArgumentParser) -> None:
                    "image by its own amount; comma-separated")
     beacon_sigma_option(p, "each beacon's offset is then estimated with that prior, and the "
                         "ellipse includes it")
-
-
-def prior_option(p: argparse.ArgumentParser) -> None:
-    """``--prior pan=σ,scale=σ,…``: what the bench knows of --calibrate's nuisances."""
     p.add_argument("--prior", default="", metavar="NAME=SIGMA,...",
                    help="what the bench knows of some of --calibrate's nuisances before the "
                    "frames, as a σ each: pan in degrees, scale as a fraction (0.006: 0.6 %%), "
@@ -205,25 +203,33 @@ def prior_option(p: argparse.ArgumentParser) -> None:
                    "prior adds to it)")
 
 
-def priors_of(args: argparse.Namespace, nuisances: tuple[str, ...]) -> dict[str, float]:
-    """--prior's σ's, checked against --calibrate's nuisances."""
+def calibration_of(args: argparse.Namespace, n_beacons: int | None = None,
+                   n_targets: int = 1) -> SelfCalibration:
+    """--calibrate, --beacon-sigma and --prior as one checked value (and, where
+    ``n_beacons`` is known, that the measurements can carry the nuisances), before any
+    work is done; a bad one names its flag."""
     from solver.errors import SolverError
-    from solver.lsq import check_nuisance_sigma
+    from solver.selfcal import SelfCalibration, check_nuisance_sigma, check_nuisances
 
-    out: dict[str, float] = {}
+    names = tuple(n.strip() for n in args.calibrate.split(",") if n.strip())
+    try:  # the names always; the count only where the beacons are known
+        check_nuisances(names, n_beacons, n_targets)
+    except SolverError as exc:
+        raise BadArgument("--calibrate", str(exc)) from None
+    priors: dict[str, float] = {}
     for item in (i.strip() for i in args.prior.split(",") if i.strip()):
         name, _, value = (part.strip() for part in item.partition("="))
-        if name in out:
+        if name in priors:
             raise BadArgument("--prior", f"{name!r} is given twice")
         try:
-            out[name] = float(value)
+            priors[name] = float(value)
         except ValueError:
             raise BadArgument("--prior", f"{item!r} is not NAME=SIGMA, SIGMA a number") from None
     try:
-        check_nuisance_sigma(out, nuisances)
+        check_nuisance_sigma(priors, names)
     except SolverError as exc:
         raise BadArgument("--prior", str(exc)) from None
-    return out
+    return SelfCalibration(names, beacon_sigma_of(args), priors)
 
 
 def beacon_sigma_option(p: argparse.ArgumentParser, what: str) -> None:
@@ -243,21 +249,6 @@ def beacon_sigma_of(args: argparse.Namespace) -> float:
 
 # a beacon known to worse than this is no known position
 MAX_BEACON_SIGMA = 10.0
-
-
-def nuisances_of(args: argparse.Namespace, n_beacons: int | None = None,
-                 n_targets: int = 1) -> tuple[str, ...]:
-    """--calibrate's nuisances, checked (and, where ``n_beacons`` is known, that the
-    measurements can carry them) before any work is done."""
-    from solver.errors import SolverError
-    from solver.lsq import check_nuisances
-
-    names = tuple(n.strip() for n in args.calibrate.split(",") if n.strip())
-    try:  # the names always; the count only where the beacons are known
-        check_nuisances(names, n_beacons, n_targets)
-    except SolverError as exc:
-        raise BadArgument("--calibrate", str(exc)) from None
-    return names
 
 
 def emit(args: argparse.Namespace, data) -> None:

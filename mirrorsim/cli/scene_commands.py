@@ -9,19 +9,17 @@ from mirrorsim.cli.registry import (
     beacon_sigma_of,
     beacon_sigma_option,
     calibrate_option,
+    calibration_of,
     command,
     common,
     emit,
     error_model_of,
     inputs,
     load,
-    nuisances_of,
     out_file,
     out_folder,
     output,
     preload,
-    prior_option,
-    priors_of,
     render_options,
 )
 from mirrorsim.errors import BadArgument
@@ -211,7 +209,6 @@ def _evaluate_options(p):
             variant=True, quiet=True, error_model="each measurement's σ's, which weight the "
             "solver and make the 95 %% ellipse")
     calibrate_option(p)
-    prior_option(p)
     p.add_argument("--keep", nargs="*", default=[], choices=("ids", "annotated", "plot"),
                    help="write also: ids, each frame's object-id labels (<name>.ids.png); "
                         "annotated, each frame with its detections drawn "
@@ -234,15 +231,13 @@ def _evaluate(args) -> int:
     from mirrorsim.pipelines.evaluate import evaluate_scene
 
     scene = render_options(args, load(args.scene))
-    nuisances = nuisances_of(args, len(scene.beacons))  # before anything renders
-    priors = priors_of(args, nuisances)
+    calibration = calibration_of(args, len(scene.beacons))  # before anything renders
     if "plot" in args.keep:
         preload("mirrorsim.cli.plots")  # matplotlib imports while the frame renders
     out = out_folder(args, scene)
     report = evaluate_scene(scene, out, variant=args.variant, progress=not args.quiet,
                             keep=tuple(k for k in args.keep if k != "plot"),
-                            error_model=error_model_of(args), nuisances=nuisances,
-                            position_sigma=beacon_sigma_of(args), nuisance_sigma=priors)
+                            error_model=error_model_of(args), calibration=calibration)
     print(f"{scene.name}: {len(report.frames)} frame(s), {report.render.spp} spp, "
           f"{report.render.variant}{' (reused)' if report.reused else ''}")
     print(report_table(report, scene))
@@ -287,8 +282,8 @@ def _budget(args) -> int:
     from mirrorsim.scene.imperfections import sources
 
     scene = render_options(args, load(args.scene))
-    nuisances = nuisances_of(args, len(scene.beacons))  # before anything renders
-    if beacon_sigma_of(args) and not nuisances:
+    calibration = calibration_of(args, len(scene.beacons))  # before anything renders
+    if calibration.position_sigma and not calibration.nuisances:
         raise BadArgument("--beacon-sigma", "the budget uses it in its self-calibrated "
                           "column only: give --calibrate too")
     found = sources(scene)
@@ -299,8 +294,8 @@ def _budget(args) -> int:
     step = (None if args.quiet else lambda label, k, runs: print(f"[{k}/{runs}] {label}",
                                                                  file=sys.stderr, flush=True))
     budget = run_budget(scene, out, variant=args.variant, progress=not args.quiet,
-                        on_step=step, error_model=error_model_of(args), nuisances=nuisances,
-                        position_sigma=beacon_sigma_of(args), keep=tuple(args.keep))
+                        on_step=step, error_model=error_model_of(args),
+                        calibration=calibration, keep=tuple(args.keep))
     print(budget_table(budget))
     path = write_json(out / "budget.json", budget.to_json())
     fig = plot_budget(budget, out / "budget.png")

@@ -11,6 +11,7 @@ from mirrorsim.pipelines.score import Report
 from mirrorsim.scene.model import Scene
 from mirrorsim.truth import optics, visibility
 from solver.montecarlo import Table1
+from solver.selfcal import SelfCalibration, describe_estimates
 from solver.sltr import Solution, chi2_2_radius
 
 if TYPE_CHECKING:  # renders, budgets and tracks: no Mitsuba import to print a table
@@ -117,15 +118,7 @@ def solution_summary(source: str, sol: Solution) -> str:
 
 def nuisance_text(sol: Solution) -> str:
     """Self-calibration's estimates with their σ's (from the covariance, where there)."""
-    words = {"pan_offset_deg": ("pan offset", "°", ".4f"),
-             "range_scale": ("range scale", "", ".4f"),
-             "mirror_power_per_cm": ("mirror power 1/R", " /cm", ".2e")}
-    out = []
-    for name, v in sol.nuisances.items():
-        e = sol.nuisance_sd.get(name)
-        label, unit, f = words.get(name, (name, "", ".4g"))
-        out.append(f"{label} {v:{f}}{unit}" + ("" if e is None else f" ± {e:{f}}{unit}"))
-    return ", ".join(out)
+    return describe_estimates(sol.nuisances, sol.nuisance_sd)
 
 
 def report_table(report: Report, report_scene: Scene | None = None) -> str:
@@ -166,7 +159,7 @@ def report_table(report: Report, report_scene: Scene | None = None) -> str:
     if e.target_mahalanobis is not None:
         bound = ("" if e.target_crlb_cm is None else "; Cramér–Rao bound of the target's "
                  f"RMS error: {e.target_crlb_cm:.3f} cm"
-                 + (" (the nuisances free: the priors left out)" if s.nuisance_sigma else ""))
+                 + (" (the nuisances free: the priors left out)" if s.priors else ""))
         lines.append(f"the true target lies {e.target_mahalanobis:.2f} σ from the estimate "
                      f"(inside the 95 % ellipse below {chi2_2_radius(0.95):.2f}){bound}")
     if report.error_vs_beacons:
@@ -196,7 +189,7 @@ def budget_table(budget: Budget) -> str:
 
     nb = max((len(c.delta.beacon_alpha_deg) for c in (*budget.sources, budget.all)
               if c is not None and c.delta is not None), default=1)
-    cal = bool(budget.nuisances)
+    cal = bool(budget.calibration.nuisances)
     rows = [("source", "value", "Δα_t (°)", "Δd_t (%)",
              *(h for i in range(nb) for h in (f"Δα_b{i} (°)", f"Δd_b{i} (%)")),
              "moved (cm)", "1st order", "target (cm)", "1st order",
@@ -221,9 +214,11 @@ def budget_table(budget: Budget) -> str:
     head = f"{budget.scene}: ideal bench {budget.ideal_cm:.2f} cm"
     if cal:
         head += (f" ({_cm(budget.ideal_calibrated_cm)} cm self-calibrated for "
-                 f"{' and '.join(budget.nuisances)}"
-                 + (f", beacons known to {budget.position_sigma:g} cm" if budget.position_sigma
-                    else "") + ")")
+                 f"{' and '.join(budget.calibration.nuisances)}"
+                 + (f", beacons known to {budget.calibration.position_sigma:g} cm"
+                    if budget.calibration.position_sigma else "")
+                 + (f", priors {budget.calibration.describe_priors()}"
+                    if budget.calibration.priors else "") + ")")
     lines.insert(0, head + "; each source alone" + (", then all together" if budget.all else ""))
     return "\n".join(lines + failures)
 
@@ -291,8 +286,11 @@ def _set_lines(bs: dict | None) -> list[str]:
     if not bs:
         return []
     nu = " and ".join(bs["self_calibration"])
+    priors = SelfCalibration(tuple(bs["self_calibration"]),
+                             priors=bs.get("priors", {})).describe_priors()
     out = [f"  {len(bs['beacons'])} beacons, chosen one at a time"
-           + (f" with {nu} estimated alongside (self-calibration)" if nu else "") + ":"]
+           + (f" with {nu} estimated alongside (self-calibration"
+              + (f"; priors {priors}" if priors else "") + ")" if nu else "") + ":"]
     for k, b in enumerate(bs["beacons"]):
         cal = ("not yet observable" if b["rmse_after"] is None
                else f"{b['rmse_after']:.3f} cm")

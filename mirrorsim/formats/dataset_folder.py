@@ -233,11 +233,13 @@ def read_table(folder: str | Path) -> dict[str, list]:
     if [r.index for r in collect_rows(folder, n_scenes, seed)] != cols["index"]:
         raise DatasetError(path, "its rows differ from the row files in rows/ (resuming the "
                            "dataset writes the table again)")
-    added = [c for c in table.SCHEMA_2_VALUES if c not in cols]
-    if added and all(s == 2 for s in cols.get("schema", [None])):
-        # a table of the older layout: the values its scenes had (one beacon, plain)
-        for c in added:
-            cols[c] = [None if e else table.SCHEMA_2_VALUES[c] for e in cols["error"]]
+    schemas = set(cols.get("schema", [None]))
+    if len(schemas) == 1 and (schema := schemas.pop()) in (2, 3):
+        # a table of an older layout: the values its scenes had for the columns added
+        # since (one beacon, plain; no priors)
+        for c, v in table.older_values(schema).items():
+            if c not in cols:
+                cols[c] = [None if e else v for e in cols["error"]]
     missing = sorted(set(table.NAMES) - set(cols))
     if missing:
         raise DatasetError(path, f"missing columns {', '.join(missing[:4])}"
@@ -291,8 +293,9 @@ def _calibrated(meta: dict) -> str:
     cal = meta.get("calibrate")
     if not cal:
         return ""
-    return (f" --calibrate {','.join(cal['nuisances'])}" if cal["nuisances"] else "") + (
-        f" --beacon-sigma {cal['position_sigma']:g}" if cal["position_sigma"] else "")
+    return ((f" --calibrate {','.join(cal['nuisances'])}" if cal["nuisances"] else "")
+            + (f" --beacon-sigma {cal['position_sigma']:g}" if cal["position_sigma"] else "")
+            + (f" --prior {table.priors_text(cal['priors'])}" if cal.get("priors") else ""))
 
 
 def write_card(out: Path, meta: dict, rows: list[table.DatasetRow], variant: str) -> None:

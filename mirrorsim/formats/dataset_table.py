@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from mirrorsim.scene.imperfections import REGISTRY
-from solver.lsq import NUISANCES
+from solver.selfcal import NUISANCES
 
 
 @dataclass(frozen=True)
@@ -43,6 +43,8 @@ RUN = (
     Column("sampler", "", "Mitsuba sampler"),
     Column("calibrate", "", "the nuisances the solver estimated (`--calibrate`; empty: "
                             "plain least squares)"),
+    Column("calibrate_priors", "", "the σ of each nuisance's prior, as `--prior` takes them "
+                                   "(`pan=0.3,scale=0.006`; empty: none)"),
     Column("error", "", "why the scene failed (empty if fine)"),
 )
 SCENE = (
@@ -144,10 +146,27 @@ COLUMNS = (*RUN, *SCENE, *KNOWN,
 NAMES = tuple(c.name for c in COLUMNS)
 # the columns of the second, third… beacon: in a row exactly when its scene has them
 SLOT_NAMES = {k: tuple(c.name for c in _slot_columns(k)) for k in range(1, MAX_BEACONS)}
-# what a row of schema 2 (before several beacons and self-calibration) had for them
-SCHEMA_2_VALUES = {"beacons": 1, "calibrate": "", "beacon_sigma": 0.0,
-                   **{f"est_{key}{sd}": None for key, _ in NUISANCES.values()
-                      for sd in ("", "_sd")}}
+# the columns each layout added, with the value a row of an older layout had for them:
+# schema 3 several beacons and self-calibration, schema 4 the self-calibration's priors
+ADDED_IN = {3: {"beacons": 1, "calibrate": "", "beacon_sigma": 0.0,
+                **{f"est_{key}{sd}": None for key, _ in NUISANCES.values()
+                   for sd in ("", "_sd")}},
+            4: {"calibrate_priors": ""}}
+
+
+def older_values(schema: int) -> dict[str, Any]:
+    """What a row of layout ``schema`` had for the columns added since."""
+    return {k: v for s, added in ADDED_IN.items() if s > schema for k, v in added.items()}
+
+
+def priors_text(priors: dict[str, float]) -> str:
+    """Self-calibration's priors as the ``calibrate_priors`` column holds them."""
+    return ",".join(f"{n}={s!r}" for n, s in priors.items())
+
+
+def priors_of_text(text: str) -> dict[str, float]:
+    """Inverse of :func:`priors_text`."""
+    return {n: float(s) for n, _, s in (i.partition("=") for i in text.split(",") if i)}
 
 
 def checked_row(row: dict) -> dict:
@@ -197,9 +216,10 @@ class DatasetRow:
     @classmethod
     def from_json(cls, d: dict) -> DatasetRow:
         """Inverse of :meth:`to_json`; a row of an older layout (schema 2: one beacon, no
-        self-calibration) takes the values its scene had for the columns added since."""
-        if d.get("schema") == 2 and not d.get("error"):
-            d = {**SCHEMA_2_VALUES, **d}
+        self-calibration; 3: no priors) takes the values its scene had for the columns
+        added since."""
+        if d.get("schema") in (2, 3) and not d.get("error"):
+            d = {**older_values(d["schema"]), **d}
         return cls({k: v for k, v in d.items() if k != "traceback"}, d.get("traceback", ""))
 
 

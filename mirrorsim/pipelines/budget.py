@@ -26,6 +26,7 @@ from mirrorsim.scene import imperfections
 from mirrorsim.scene.model import Scene
 from solver.lsq import BeaconMeasurement, solve_measurements
 from solver.measurements import Measurements
+from solver.selfcal import PLAIN, SelfCalibration
 
 # central-difference steps: α (deg), d_total (cm), beacon position (cm); the solver is
 # smooth on these scales and far from them its rounding noise (1e-12) is negligible
@@ -88,20 +89,18 @@ class Budget:
     ideal_cm: float
     all: Contribution | None  # None when the scene has a single source (or none)
     sources: tuple[Contribution, ...]
-    nuisances: tuple[str, ...] = ()  # self-calibration's, where asked
+    calibration: SelfCalibration = PLAIN  # the self-calibrated column's, where asked
     ideal_calibrated_cm: float | None = None
-    position_sigma: float = 0.0  # how well the self-calibration took the beacons as known
 
     def to_json(self) -> dict:
         """The budget document."""
         ideal = {"target_cm": self.ideal_cm}
-        if self.nuisances:
+        if self.calibration.nuisances:
             ideal["calibrated_target_cm"] = self.ideal_calibrated_cm
         out = {"scene": self.scene, "ideal": ideal,
                "sources": [c.to_json() for c in self.sources]}
-        if self.nuisances:
-            out["self_calibration"] = {"nuisances": list(self.nuisances),
-                                       "beacon_position_sigma_cm": self.position_sigma}
+        if self.calibration.nuisances:
+            out["self_calibration"] = self.calibration.to_json()
         if self.all is not None:
             out["all"] = {k: v for k, v in self.all.to_json().items()
                           if k not in ("source", "value", "delta")}
@@ -136,26 +135,23 @@ def jacobian(m: Measurements) -> np.ndarray:
     return np.column_stack(cols)
 
 
-def calibrated_error(report: Report, nuisances: tuple[str, ...], position_sigma: float = 0.0
-                     ) -> float | None:
+def calibrated_error(report: Report, calibration: SelfCalibration) -> float | None:
     """The target error of the report's measurements solved self-calibrated (None where
     not asked, or where the geometry cannot carry the nuisances)."""
-    if not nuisances:
+    if not calibration.nuisances:
         return None
     m = report.measurements
     try:
-        sol = solve_measurements(m.observer, m.beacons, m.targets, m.sigma, nuisances,
-                                 position_sigma)
+        sol = solve_measurements(m.observer, m.beacons, m.targets, m.sigma, calibration)
     except SolverError:
         return None
     return float(np.linalg.norm(sol.target - np.asarray(report.truth.target.position, float)))
 
 
 def contribution(source: str, value: Any, ideal: Report, report: Report,
-                 J: np.ndarray, nuisances: tuple[str, ...] = (),
-                 position_sigma: float = 0.0) -> Contribution:
+                 J: np.ndarray, calibration: SelfCalibration = PLAIN) -> Contribution:
     """Compare a source's report with the ideal one; predict its effect to first order;
-    with ``nuisances``, also solve its frames self-calibrated."""
+    with ``calibration``'s nuisances, also solve its frames self-calibrated."""
     v0, v1 = _vector(ideal.measurements), _vector(report.measurements)
     dv = v1 - v0
     truth = np.asarray(ideal.truth.target.position, float)
@@ -173,14 +169,13 @@ def contribution(source: str, value: Any, ideal: Report, report: Report,
                         shift_cm=float(np.linalg.norm(est1 - est0)),
                         predicted_cm=float(np.linalg.norm(est0 - truth + pred)),
                         predicted_shift_cm=float(np.linalg.norm(pred)), delta=delta,
-                        calibrated_cm=calibrated_error(report, nuisances, position_sigma))
+                        calibrated_cm=calibrated_error(report, calibration))
 
 
 def run_budget(scene: Scene, out: str | Path, *, variant: str = "auto", progress: bool = True,
                on_step: Callable[[str, int, int], None] | None = None,
                error_model: ErrorModel | None = None,
-               nuisances: tuple[str, ...] = (), position_sigma: float = 0.0,
-               keep: tuple[str, ...] = ()) -> Budget:
+               calibration: SelfCalibration = PLAIN, keep: tuple[str, ...] = ()) -> Budget:
     """Evaluate ``scene`` ideal, with each imperfection alone and with all; frames and
     reports go to ``out/<ideal|source key|all>/`` (with the extra files ``keep`` names,
     as :func:`~mirrorsim.pipelines.evaluate.evaluate_scene`'s).  ``on_step(label, k,
@@ -206,8 +201,7 @@ def run_budget(scene: Scene, out: str | Path, *, variant: str = "auto", progress
         # a bench error can make a frame unmeasurable (an image taken for the wrong one
         # is refused) or unsolvable (no mirror fits): that is its effect, recorded
         try:
-            return contribution(label, value, ideal, run(label, sub), J, nuisances,
-                                position_sigma)
+            return contribution(label, value, ideal, run(label, sub), J, calibration)
         except (DetectionError, SolverError) as exc:
             return Contribution(label, value, None, None, None, None, None, failed=str(exc))
 
@@ -224,9 +218,8 @@ def run_budget(scene: Scene, out: str | Path, *, variant: str = "auto", progress
                               for s in found)
         everything = measured("all", None, scene) if len(found) > 1 else None
     return Budget(scene=scene.name, ideal_cm=ideal.errors.target_cm, all=everything,
-                  sources=contributions, nuisances=nuisances,
-                  ideal_calibrated_cm=calibrated_error(ideal, nuisances, position_sigma),
-                  position_sigma=position_sigma)
+                  sources=contributions, calibration=calibration,
+                  ideal_calibrated_cm=calibrated_error(ideal, calibration))
 
 
 def _folder(label: str) -> str:

@@ -59,9 +59,10 @@ from mirrorsim.scene import imperfections
 from mirrorsim.scene.model import Scene
 from mirrorsim.truth.groundtruth import ObjectTruth
 from solver.geometry import yaw_difference
-from solver.lsq import NUISANCES, check_nuisances, check_position_sigma
+from solver.selfcal import NUISANCES, PLAIN, SelfCalibration, check_nuisances
 
-ROW_SCHEMA_VERSION = 3  # 3: the beacon count, each beacon's columns, self-calibration
+# 3: the beacon count, each beacon's columns, self-calibration; 4: its priors
+ROW_SCHEMA_VERSION = 4
 # a worker retires past this resident memory; measured on llvm_ad_rgb, a warm worker
 # holds ~500 MiB after its first full-size scene and no more after 30 (README
 # "Throughput"), so this only stops a leak that another Mitsuba might bring
@@ -85,11 +86,11 @@ class SceneResult:
 def process_one(i: int, seed: int, spec: DatasetSpec, out: str, spp: int | None,
                 variant: str, keep: tuple[str, ...] = (),
                 error_model: ErrorModel | None = None,
-                nuisances: tuple[str, ...] = (), position_sigma: float = 0.0) -> SceneResult:
+                calibration: SelfCalibration = PLAIN) -> SceneResult:
     """Draw, render, detect, solve and score scene i; write its files, the measurements
     the solver saw (``frames/<scene>/<scene>.measurements.json``, for ``solve``) and its
-    row.  ``nuisances``, ``position_sigma``: self-calibration, as
-    :func:`~mirrorsim.pipelines.evaluate.evaluate_scene` takes them."""
+    row.  ``calibration``: self-calibration, as
+    :func:`~mirrorsim.pipelines.evaluate.evaluate_scene` takes it."""
     from mirrorsim.pipelines.evaluate import evaluate_scene
     from mirrorsim.pipelines.random_scenes import sample_scene, to_yaml
 
@@ -107,10 +108,10 @@ def process_one(i: int, seed: int, spec: DatasetSpec, out: str, spp: int | None,
             warnings.filterwarnings("ignore", message=".*a JPEG frame")
             rep = evaluate_scene(scene, out_dir / "frames" / name, variant=variant,
                                  progress=False, keep=keep, error_model=error_model,
-                                 nuisances=nuisances, position_sigma=position_sigma)
+                                 calibration=calibration)
         write_json(out_dir / "frames" / name / f"{name}.measurements.json",
                    rep.measurements.to_json())
-        row.update(_flatten(scene, rep, nuisances, position_sigma))
+        row.update(_flatten(scene, rep, calibration))
         row["seconds_sample"] = t1 - t0
         row["error"] = ""
     except SCENE_FAILURES as exc:  # the scene's own: recorded, one bad scene must not stop a run
@@ -124,8 +125,7 @@ def process_one(i: int, seed: int, spec: DatasetSpec, out: str, spp: int | None,
     return SceneResult(i, done)
 
 
-def _flatten(scene: Scene, rep: Report, nuisances: tuple[str, ...] = (),
-             position_sigma: float = 0.0) -> dict:
+def _flatten(scene: Scene, rep: Report, calibration: SelfCalibration = PLAIN) -> dict:
     """The row's columns: scene parameters, truth, measurements, solution, errors (each
     beacon's under its own prefix, :func:`~mirrorsim.formats.dataset_table.beacon_kind`)."""
     cam, mir, t = scene.camera, scene.mirror, rep.truth
@@ -137,7 +137,8 @@ def _flatten(scene: Scene, rep: Report, nuisances: tuple[str, ...] = (),
         "mirror_x": mir.center[0], "mirror_y": mir.center[1], "mirror_yaw_deg": mir.yaw % 180,
         "mirror_width": mir.size[0], "mirror_height": mir.size[1],
         "target_x": scene.target.position[0], "target_y": scene.target.position[1],
-        "beacons": len(scene.beacons), "calibrate": ",".join(nuisances),
+        "beacons": len(scene.beacons), "calibrate": ",".join(calibration.nuisances),
+        "calibrate_priors": table.priors_text(calibration.priors),
         "variant": rep.render.variant, "spp": rep.render.spp, "sampler": rep.render.sampler,
         "background_spp": min(scene.render.background_spp, scene.render.spp),
         "beacon_spp": max(scene.render.beacon_spp, scene.render.spp),
@@ -146,7 +147,7 @@ def _flatten(scene: Scene, rep: Report, nuisances: tuple[str, ...] = (),
     }
     row.update({"observer_x": meas.observer[0], "observer_y": meas.observer[1],
                 "observer_pan_deg": meas.observer_pan_deg,  # the capture record's
-                "fx_px": scene.camera.fx, "beacon_sigma": position_sigma})
+                "fx_px": scene.camera.fx, "beacon_sigma": calibration.position_sigma})
     sig = meas.sigma
     # the target as measured (its mean over the frames), clipped as in the first frame;
     # each beacon from its own frame
@@ -239,15 +240,15 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
                 keep: tuple[str, ...] = (), executor: str = "local",
                 scheduler: str | None = None, progress: bool = True,
                 max_rss_mb: float = MAX_WORKER_RSS_MB,
-                error_model: ErrorModel | None = None, nuisances: tuple[str, ...] = (),
-                position_sigma: float = 0.0, beacons: int | None = None) -> DatasetRun:
+                error_model: ErrorModel | None = None,
+                calibration: SelfCalibration = PLAIN, beacons: int | None = None) -> DatasetRun:
     """Make (or finish) a dataset of ``n`` scenes; return a summary.
 
     ``error_model`` gives each row's measurements their σ's (default: the model shipped
     for the ideal bench); a dataset is resumed only with the model it was started with.
-    ``nuisances``, ``position_sigma``: each scene solved self-calibrated (its rows'
-    ``est_*`` columns), which needs the spec's ``beacon.count`` (or ``beacons``, which
-    replaces it) to carry them.
+    ``calibration``: each scene solved self-calibrated (its rows' ``est_*`` columns),
+    which needs the spec's ``beacon.count`` (or ``beacons``, which replaces it) to carry
+    its nuisances.
 
     Raises
     ------
@@ -270,19 +271,19 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
     if beacons is not None:  # likewise
         spec = spec.with_beacon_count(beacons)
     try:  # before anything is written
-        check_position_sigma(position_sigma)
-    except SolverError as exc:
-        raise BadParameter("position_sigma", str(exc)) from None
-    try:
-        check_nuisances(nuisances, spec.beacon_count, 1)
+        check_nuisances(calibration.nuisances, spec.beacon_count, 1)
     except SolverError as exc:
         raise BadParameter("nuisances", f"{exc} (scenes of {spec.beacon_count} beacon(s) "
                            f"drawn from {spec_path or 'the default spec'})") from None
     model = error_model or default_error_model()
     meta = {"format": DATASET_FORMAT, "n": n, "seed": seed, "spp": spp, "spec": spec.data,
             "error_model_sha256": hashlib.sha256(dumps(model.to_json()).encode()).hexdigest()}
-    if nuisances or position_sigma:  # (absent otherwise, as in datasets without them)
-        meta["calibrate"] = {"nuisances": list(nuisances), "position_sigma": position_sigma}
+    if calibration.nuisances or calibration.position_sigma:
+        # (absent otherwise, as in datasets without them; priors only where given)
+        meta["calibrate"] = {"nuisances": list(calibration.nuisances),
+                             "position_sigma": calibration.position_sigma,
+                             **({"priors": dict(calibration.priors)}
+                                if calibration.priors else {})}
     claim_folder(out, meta, resume)
     make_folders(out, meta)
     chosen = choose_variant(variant)  # the probe runs once here rather than in every worker
@@ -302,8 +303,8 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
             retry[result.index] = result.retry
         bar.update()
 
-    jobs = [(i, seed, spec, str(out), spp, chosen, tuple(keep), model, tuple(nuisances),
-             position_sigma) for i in todo]
+    jobs = [(i, seed, spec, str(out), spp, chosen, tuple(keep), model, calibration)
+            for i in todo]
     try:
         _run_jobs(jobs, executor, workers, scheduler, is_done, on_result, max_rss_mb)
     finally:

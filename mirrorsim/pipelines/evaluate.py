@@ -8,7 +8,6 @@ ground truth.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import replace
 from pathlib import Path
 
@@ -25,25 +24,23 @@ from mirrorsim.truth.groundtruth import RenderInfo
 from solver.errors import SolverError
 from solver.lsq import solve_measurements
 from solver.measurements import Measurements
+from solver.selfcal import PLAIN, SelfCalibration
 
 
 def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: str = "auto",
                    progress: bool = True, error_model: ErrorModel | None = None,
-                   keep: tuple[str, ...] = EXTRA_FILES, nuisances: tuple[str, ...] = (),
-                   position_sigma: float = 0.0,
-                   nuisance_sigma: Mapping[str, float] | None = None) -> Report:
+                   keep: tuple[str, ...] = EXTRA_FILES,
+                   calibration: SelfCalibration = PLAIN) -> Report:
     """Render (or reuse) with the scene's render settings, detect, solve and score
     ``scene``; return the report.
 
     ``error_model``: gives each measurement its σ's, which weight the solver and make
     its error ellipse (default: the model shipped for the ideal bench at the default
     render settings).  ``keep``: which of EXTRA_FILES to write beside each frame (the id
-    labels, the annotated frame).  ``nuisances``: bench errors to estimate with the mirror
-    (self-calibration, :data:`solver.lsq.NUISANCES`; needs two beacons or more, three
-    for pan, scale and power together).
-    ``position_sigma``: how well the beacons' positions are known (cm; 0: exactly).
-    ``nuisance_sigma``: what the bench knows of some of the nuisances (their priors'
-    σ's, :func:`solver.lsq.solve_lsq`).
+    labels, the annotated frame).  ``calibration``: the bench errors to estimate with
+    the mirror (self-calibration, :class:`solver.selfcal.SelfCalibration`; needs two
+    beacons or more, three for pan, scale and power together), how well the beacons'
+    positions are known and what the bench knows of the nuisances.
 
     Raises
     ------
@@ -83,9 +80,7 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
     # the target once, at its mean over the frames: each frame's detection of the same
     # image shares its errors (bias included), so several would shrink its σ by √frames
     target = [mean_target]
-    priors = dict(nuisance_sigma or {})
-    sol = solve_measurements(cam.position, beacons, target, sigma, nuisances, position_sigma,
-                             priors)
+    sol = solve_measurements(cam.position, beacons, target, sigma, calibration)
     errors = score(truth, measurements, sol)
     by_count = ()
     if len(beacons) > 1:
@@ -93,11 +88,10 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
             # self-calibration from the first k beacons with as many of the nuisances
             # (in their order) as they can carry and separate; plain at the least
             sig_k = replace(sigma, beacons=sigma.beacons[:k])
-            for m in range(len(nuisances), -1, -1):
+            for m in range(len(calibration.nuisances), -1, -1):
                 try:
-                    return solve_measurements(
-                        cam.position, beacons[:k], target, sig_k, nuisances[:m], position_sigma,
-                        {n: s for n, s in priors.items() if n in nuisances[:m]})
+                    return solve_measurements(cam.position, beacons[:k], target, sig_k,
+                                              calibration.first(m))
                 except SolverError:
                     if not m:
                         raise

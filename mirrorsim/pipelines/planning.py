@@ -35,6 +35,7 @@ from solver.placement import (
     region_area,
     visible_region,
 )
+from solver.selfcal import PLAIN, SelfCalibration
 
 AREA_DISTANCES = (25.0, 50.0, 100.0, 200.0, 400.0, 1000.0)
 # cm: finer grids take long without news (exp1 here: 1 cm 7 s, 0.5 cm 11 s, 0.25 cm 26 s)
@@ -112,23 +113,24 @@ class Plan:
 def _set_json(bs: BeaconSet) -> dict:
     """The planned set: positions in the order chosen, the expected RMSE after each."""
     inf = lambda x: None if not np.isfinite(x) else x  # noqa: E731  (strict JSON)
-    return {"self_calibration": list(bs.nuisances),
+    return {"self_calibration": list(bs.calibration.nuisances),
+            **({"priors": dict(bs.calibration.priors)} if bs.calibration.priors else {}),
             "beacons": [{"position": p.tolist(), "rmse_after": inf(r), "rmse_after_plain": q}
                         for p, r, q in zip(bs.positions, bs.rmse, bs.rmse_plain, strict=True)]}
 
 
 def plan_scene(scene: Scene, sigma: Sigma | ObjectSigmas | None = None, eps_deg: float = 5.0,
                yaw_spread_deg: float = 3.0, d1_spread: float = 2.0, step: float = 1.0,
-               n_poses: int = 5, n_beacons: int = 1, nuisances: tuple[str, ...] = (),
-               position_sigma: float = 0.0) -> Plan:
+               n_poses: int = 5, n_beacons: int = 1,
+               calibration: SelfCalibration = PLAIN) -> Plan:
     """Placement numbers, paths, the exact beacon region and the best beacon position.
 
     The target's α and d_total are taken as measured without error; the mirror prior is
     centred on the scene's mirror (its reflection point along the target's ray, its yaw)
-    with the given spreads.  With ``n_beacons`` > 1 or ``nuisances``: the best set of
-    that many beacons, chosen one at a time, with the nuisances estimated alongside
-    (:func:`solver.beacon_set.best_beacon_set`), each beacon's position known to
-    ``position_sigma`` cm.
+    with the given spreads.  With ``n_beacons`` > 1 or ``calibration``'s nuisances: the
+    best set of that many beacons, chosen one at a time, with the nuisances estimated
+    alongside and known to its priors (:func:`solver.beacon_set.best_beacon_set`), each
+    beacon's position known to its position σ.
 
     Raises
     ------
@@ -162,12 +164,11 @@ def plan_scene(scene: Scene, sigma: Sigma | ObjectSigmas | None = None, eps_deg:
     poses = prior.poses(o, img.alpha_deg)
     best = _best_position(scene, o, img.alpha_deg, img.d_total, poses, sigma, step)
     chosen = None
-    if n_beacons > 1 or nuisances or position_sigma:
+    if n_beacons > 1 or calibration.nuisances or calibration.position_sigma:
         keep_out, accept = _placement_rules(scene)
         chosen = best_beacon_set(o, img.alpha_deg, img.d_total, poses, sigma, s,
-                                 scene.board.size, n_beacons, nuisances, step=step,
-                                 keep_out=keep_out, accept=accept,
-                                 position_sigma=position_sigma)
+                                 scene.board.size, n_beacons, calibration, step=step,
+                                 keep_out=keep_out, accept=accept)
     scene_err, scene_seen = expected_target_error(
         o, img.alpha_deg, img.d_total, np.array([b.position for b in scene.beacons]), poses,
         sigma, s, min_depth=0.0)

@@ -13,8 +13,9 @@ from mirrorsim.formats.measurements import measurements_from_dict
 from mirrorsim.truth.groundtruth import GroundTruth, RenderInfo
 from solver.errors import SolverError
 from solver.geometry import line_normal, yaw_difference
-from solver.lsq import NUISANCES, crlb
+from solver.lsq import crlb
 from solver.measurements import Measurements
+from solver.selfcal import NUISANCES
 from solver.sltr import Solution
 
 
@@ -37,7 +38,7 @@ class Score:
     # √trace of the Cramér–Rao bound of the target at the true geometry for the
     # measurements' σ's: no unbiased estimate's RMS error is smaller
     target_crlb_cm: float | None = None
-    # the nuisances the scored solution estimated (solver.lsq.NUISANCES' names; none: plain)
+    # the nuisances the scored solution estimated (solver.selfcal.NUISANCES' names; none: plain)
     calibrated: tuple[str, ...] = ()
 
     def to_json(self) -> dict:

@@ -36,9 +36,10 @@ from mirrorsim.truth.optics import target_facing
 from mirrorsim.truth.visibility import visibility
 from solver.errors import SolverError
 from solver.geometry import bearing_deg, line_normal, wrap_bearing
-from solver.lsq import BeaconMeasurement, Sigma, check_position_sigma
+from solver.lsq import BeaconMeasurement, Sigma
 from solver.particle import MovingBeaconFilter, PFParams, mirror_errors
 from solver.placement import path_points
+from solver.selfcal import check_position_sigma
 from solver.sltr import locate, mirror_from_beacon, observe, ray_hits_line
 
 PATHS = ("rectangular", "linear", "sawtooth", "fixed")  # fixed: the baseline, standing still

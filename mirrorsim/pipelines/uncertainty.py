@@ -25,6 +25,7 @@ from mirrorsim.formats.error_model import KINDS, ErrorModel, measured_features
 from mirrorsim.formats.files import save_figure
 from solver.errors import SolverError
 from solver.lsq import BeaconMeasurement, solve_measurements
+from solver.selfcal import SelfCalibration
 from solver.sltr import chi2_2_radius
 
 LEVELS = (0.5, 0.9, 0.95)
@@ -112,17 +113,19 @@ def validate(model: ErrorModel, cols: dict) -> Validation:
                               ("known_x", "known_y", "alpha_meas", "d_meas")])
     calibrate = cols.get("calibrate") or [""] * n
     beacon_sigma = cols.get("beacon_sigma") or [0.0] * n
+    priors = cols.get("calibrate_priors") or [""] * n
     dist, failed = [], 0
     for i in np.flatnonzero(ok):
         t = tuple(target[i])
         # image_rows gives a scene's beacons in their order
         beacons = [BeaconMeasurement((x, y), a, d) for x, y, a, d in beacon[scene_of == i]]
-        nuisances = tuple(x for x in (calibrate[i] or "").split(",") if x)
         try:
+            calibration = SelfCalibration(tuple(x for x in (calibrate[i] or "").split(",") if x),
+                                          float(beacon_sigma[i] or 0.0),
+                                          table.priors_of_text(priors[i] or ""))
             sigma = model.sigmas(t, [(b.alpha_deg, b.d_total) for b in beacons], pan[i],
                                  fx[i] if np.isfinite(fx[i]) else None)
-            sol = solve_measurements(obs[i], beacons, [t], sigma, nuisances,
-                                     float(beacon_sigma[i] or 0.0))
+            sol = solve_measurements(obs[i], beacons, [t], sigma, calibration)
             dist.append(sol.mahalanobis(truth[i]))
         except (SolverError, np.linalg.LinAlgError):
             failed += 1

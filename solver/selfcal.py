@@ -1,0 +1,137 @@
+"""Self-calibration's settings, one typed value: which bench errors a solve estimates
+with the mirror (the nuisances), how well it knows the beacons' positions, and what it
+knows of each nuisance before the frames (its prior).  Every command and pipeline that
+solves self-calibrated passes one :class:`SelfCalibration`; it is checked once, where
+it is made.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from solver.errors import SolverError
+
+# nuisances a bench shares across its measurements, estimated with the mirror when asked
+# (self-calibration): "pan", an offset δ (deg) on every α (the mount's pan reading);
+# "scale", a factor s on every d_total (the calibration's K); "power", the mirror's
+# curvature c = 1/R (1/cm, > 0 concave), which moves each image by its own amount
+# (:func:`solver.lsq.power_terms`): α_meas = α + c·A + δ, d_meas = s·(d + c·D).
+# Each: its name in a solution, its neutral value, and how it is said (a label, how a
+# value is written, and its prior σ's unit: scale's σ is a fraction, said in %)
+NUISANCES = {"pan": ("pan_offset_deg", 0.0), "scale": ("range_scale", 1.0),
+             "power": ("mirror_power_per_cm", 0.0)}
+WORDS = {"pan_offset_deg": ("pan offset", "°", ".4f"),
+         "range_scale": ("range scale", "", ".4f"),
+         "mirror_power_per_cm": ("mirror power 1/R", " /cm", ".2e")}
+_PRIOR_UNITS = {"pan": lambda s: f"±{s:.3g}°", "scale": lambda s: f"±{100 * s:.3g} %",
+                "power": lambda s: f"±{s:.3g}/cm"}
+
+
+@dataclass(frozen=True)
+class SelfCalibration:
+    """How a solve self-calibrates (the default: it does not).
+
+    Attributes
+    ----------
+    nuisances : tuple of {'pan', 'scale', 'power'}
+        Bench errors shared by every measurement, estimated jointly with the mirror
+        (:data:`NUISANCES`); the target comes out corrected for them.
+    position_sigma : float
+        How well the beacons' positions are known (cm, each axis; 0: exactly).  Where
+        > 0, each beacon's offset from its believed position is estimated too, with that
+        prior: a misplaced beacon then moves its own image's fit, not the nuisances.
+    priors : mapping of nuisance name to σ
+        What the bench knows of some of ``nuisances`` before the frames: each gets the
+        prior N(neutral, σ²) (pan in degrees, scale as a fraction of 1, power in 1/cm).
+
+    Raises
+    ------
+    SolverError
+        An unknown or repeated nuisance, a position σ that is not a finite length ≥ 0,
+        or a prior for a nuisance not estimated or whose σ is not a number > 0.
+    """
+
+    nuisances: tuple[str, ...] = ()
+    position_sigma: float = 0.0
+    priors: Mapping[str, float] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "nuisances", tuple(self.nuisances))
+        object.__setattr__(self, "priors", dict(self.priors))
+        check_nuisances(self.nuisances, None, 1)
+        check_position_sigma(self.position_sigma)
+        check_nuisance_sigma(self.priors, self.nuisances)
+
+    def first(self, m: int) -> SelfCalibration:
+        """The first ``m`` nuisances (in their order) with their priors: what fewer
+        beacons can carry."""
+        kept = self.nuisances[:m]
+        return SelfCalibration(kept, self.position_sigma,
+                               {n: s for n, s in self.priors.items() if n in kept})
+
+    def describe_priors(self) -> str:
+        """The priors in words with their units, e.g. "pan ±0.29°, scale ±0.58 %"."""
+        return ", ".join(f"{n} {_PRIOR_UNITS[n](s)}" for n, s in self.priors.items())
+
+    def to_json(self) -> dict:
+        """As a document's ``self_calibration`` settings."""
+        return {"nuisances": list(self.nuisances),
+                "beacon_position_sigma_cm": self.position_sigma,
+                **({"priors": dict(self.priors)} if self.priors else {})}
+
+
+
+def describe_estimates(estimates: Mapping[str, float], sd: Mapping[str, float]) -> str:
+    """A solution's nuisance estimates (keyed by their solution names) with their σ's
+    where known, e.g. "pan offset 0.1234° ± 0.0100°"."""
+    out = []
+    for name, v in estimates.items():
+        e = sd.get(name)
+        label, unit, f = WORDS.get(name, (name, "", ".4g"))
+        out.append(f"{label} {v:{f}}{unit}" + ("" if e is None else f" ± {e:{f}}{unit}"))
+    return ", ".join(out)
+
+
+def check_position_sigma(position_sigma: float) -> None:
+    """Refuse a beacon position σ that is not a finite length ≥ 0 (cm per axis)."""
+    if not (isinstance(position_sigma, int | float) and np.isfinite(position_sigma)
+            and position_sigma >= 0):
+        raise SolverError(f"position_sigma must be ≥ 0, got {position_sigma}")
+
+
+def check_nuisance_sigma(priors: Mapping[str, float], nuisances: tuple[str, ...]) -> None:
+    """Refuse a prior σ for a nuisance that is not estimated, or one that is not a
+    finite number > 0."""
+    for name, s in priors.items():
+        if name not in NUISANCES:
+            raise SolverError(f"a prior σ for an unknown nuisance {name!r}: choose from "
+                              f"{', '.join(NUISANCES)}")
+        if name not in nuisances:
+            raise SolverError(f"a prior σ for {name!r}, which is not estimated (estimated: "
+                              f"{', '.join(nuisances) or 'none'})")
+        if not (isinstance(s, int | float) and np.isfinite(s) and s > 0):
+            raise SolverError(f"the prior σ of {name} must be a number > 0, got {s!r}")
+
+
+def check_nuisances(nuisances: tuple[str, ...], nb: int | None, nt: int) -> None:
+    """Refuse unknown nuisances, and more unknowns than measurements (``nb`` None: the
+    beacons are not known yet, the names only)."""
+    bad = [n for n in nuisances if n not in NUISANCES]
+    if bad or len(set(nuisances)) != len(nuisances):
+        raise SolverError(f"unknown or repeated nuisance(s) {', '.join(bad) or nuisances}: "
+                          f"choose from {', '.join(NUISANCES)}")
+    unknowns = 4 + len(nuisances)
+    # the target's observations (one per frame) repeat one image's measurement: they
+    # count once
+    if nuisances and nb is not None and 2 * (nb + min(nt, 1)) < unknowns:
+        need = -(-(unknowns - 2) // 2)
+        raise SolverError(f"calibrating {' and '.join(nuisances)} needs at least {need} beacon "
+                          f"observations ({nb} given): each image gives 2 measurements, and "
+                          f"the mirror, the target and {len(nuisances)} nuisance(s) are "
+                          f"{unknowns} unknowns")
+
+
+PLAIN = SelfCalibration()  # plain least squares: nothing estimated, positions exact
