@@ -24,12 +24,12 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from mirrorsim.detection.detector import (  # noqa: E402
-    find_pencils,
     measure_object,
     read_frame,
     to_linear,
 )
 from mirrorsim.detection.edges import measure_region  # noqa: E402
+from mirrorsim.detection.regions import find_pencils  # noqa: E402
 from mirrorsim.formats.scenefile import scene_from_dict  # noqa: E402
 from mirrorsim.rendering.frames import render_to_files  # noqa: E402
 from mirrorsim.scene.model import (  # noqa: E402

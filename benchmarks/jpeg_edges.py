@@ -32,7 +32,7 @@ sys.path.insert(0, str(ROOT))
 from exact import spec_scenes  # noqa: E402
 from stamp import stamp  # noqa: E402
 
-from mirrorsim.detection import detector, edges  # noqa: E402
+from mirrorsim.detection import edges, regions  # noqa: E402
 from mirrorsim.formats.files import decode_image, encode_jpeg  # noqa: E402
 from mirrorsim.rendering.passes import render_frame  # noqa: E402
 from mirrorsim.rendering.sensor import to_srgb8  # noqa: E402
@@ -60,11 +60,11 @@ def _measure(srgb: np.ndarray, scene, way, pencil_rows) -> tuple[tuple, tuple]:
     target_foot_chroma, pencil_top_blue, pencil_foot_chroma = way
     img = srgb.astype(np.float32)
     lin = edges.to_linear(img)
-    u0, v0, u1, v1 = detector.find_target(img, scene.target.size[0] / scene.target.size[1])
+    u0, v0, u1, v1 = regions.find_target(img, scene.target.size[0] / scene.target.size[1])
     target = edges._median_edges((lin, lin), v0, v1, u0, u1, axis=0,
                                  chroma=(False, target_foot_chroma), near=(False, True))[:2]
     # the mirror pencil's box: the one whose rows are nearest its exact image's
-    p0, q0, p1, q1 = min(detector.find_pencils(img), key=lambda b: abs(b[1] - pencil_rows[0])
+    p0, q0, p1, q1 = min(regions.find_pencils(img), key=lambda b: abs(b[1] - pencil_rows[0])
                          + abs(b[3] - pencil_rows[1]))
     if pencil_foot_chroma == "stored":  # the detector's own JPEG way, not a copy of it
         m = edges.measure_region(lin, (p0, q0, p1, q1), "beacon", subsampled=True, stored=img)

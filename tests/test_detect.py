@@ -342,7 +342,7 @@ def test_a_jpeg_pencils_foot_on_rendered_frames_stands_where_the_geometry_puts_i
     at quality 90, the pencil's foot measured the JPEG way lies within 0.25 px of the
     exact projection of its front face on average; measured on linear colour, the
     rendered contact shadow and holes put it over 0.3 px low (the way this replaced)."""
-    from mirrorsim.detection import detector, edges
+    from mirrorsim.detection import edges, regions
     from mirrorsim.formats.files import decode_image, encode_jpeg
     from mirrorsim.pipelines.random_scenes import load_spec, sample_scene
     from mirrorsim.rendering.passes import render_frame
@@ -360,7 +360,7 @@ def test_a_jpeg_pencils_foot_on_rendered_frames_stands_where_the_geometry_puts_i
         srgb = to_srgb8(render_frame(scene.with_render(seed=0), progress=False).linear)
         jpeg = decode_image(encode_jpeg(srgb, 90)).astype(np.float32)
         linear = edges.to_linear(jpeg)
-        box = min(detector.find_pencils(jpeg),
+        box = min(regions.find_pencils(jpeg),
                   key=lambda q: abs(q[1] - v_top) + abs(q[3] - v_foot))
         m = edges.measure_region(linear, box, "beacon", subsampled=True, stored=jpeg)
         new.append(m.v_bottom - v_foot)
@@ -425,7 +425,7 @@ def test_a_pencil_beside_the_frame_is_not_measured_on_its_other_side(monkeypatch
 
 
 def test_channel_extremes_are_numpys_reductions():
-    from mirrorsim.detection.detector import _channel_max, _channel_min
+    from mirrorsim.detection.regions import _channel_max, _channel_min
 
     rng = np.random.default_rng(5)
     img = rng.normal(100, 50, (37, 41, 3)).astype(np.float32)
@@ -438,8 +438,8 @@ def test_lookups_done_by_opencv_give_numpy_values():
     linear radiance (every code, grey and colour images), and the grown region's colour
     test max_c |x − c| < r, on random values and on values a float32 step either side
     of the reach."""
-    from mirrorsim.detection.detector import SAME_GREY, _within
     from mirrorsim.detection.edges import to_linear
+    from mirrorsim.detection.regions import SAME_GREY, _within
     from mirrorsim.rendering.sensor import LINEAR_OF_CODE
 
     codes = np.arange(256, dtype=np.uint8)

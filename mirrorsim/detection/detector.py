@@ -1,6 +1,7 @@
 """The detector: α and d_total of the target and the beacons, from a rendered frame.
 
-With :mod:`mirrorsim.detection.edges`, the detector; with
+With :mod:`mirrorsim.detection.edges` and :mod:`mirrorsim.detection.regions`, the
+detector; with
 :mod:`mirrorsim.rendering.sensor` (the lens model) and the image encoders, the only
 code that imports OpenCV.  What it may use: the image and its capture record
 (:class:`~mirrorsim.formats.capture.CaptureRecord`: the camera as its mount reports it, the
@@ -50,6 +51,7 @@ from mirrorsim.detection.image_geometry import (
     pencil_geometry,
     target_geometry,
 )
+from mirrorsim.detection.regions import find_pencils, find_target
 from mirrorsim.errors import DetectionError, InputError
 from mirrorsim.formats.capture import CaptureRecord
 from mirrorsim.formats.files import decode_image
@@ -68,127 +70,6 @@ from solver.measurements import Measurements
 # next marker's 0xFF (a JPEG stores its colour at half resolution: see measure_region)
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 JPEG_MAGIC = b"\xff\xd8\xff"
-FRAME_OPEN_PX = 13  # wider than the mirror frame's bars at the distances of our scenes
-# how far (in 0–255 sRGB, each channel) a pixel's colour may lie from the panel's own
-# and still belong to it when the panel's region is grown again
-SAME_GREY = 22.0
-MERGED_MIN_AREA = 2000  # px: a grey region this large that is no panel may hold one
-
-
-# ------------------------------------------------------------------ segmentation
-
-
-def _components(mask: np.ndarray, min_area: int):
-    n, labels, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), 8)
-    out = []
-    for k in range(1, n):
-        x, y, w, h, area = stats[k]
-        if area >= min_area:
-            out.append((k, int(x), int(y), int(w), int(h), int(area)))
-    return labels, out
-
-
-def _channel_max(img: np.ndarray) -> np.ndarray:
-    """The largest of an (H, W, 3) image's channels at each pixel: the same values as
-    ``img.max(axis=2)``, several times faster (a reduction over a last axis of 3 is
-    numpy's slow case)."""
-    return np.maximum(np.maximum(img[..., 0], img[..., 1]), img[..., 2])
-
-
-def _channel_min(img: np.ndarray) -> np.ndarray:
-    """The smallest of an (H, W, 3) image's channels at each pixel."""
-    return np.minimum(np.minimum(img[..., 0], img[..., 1]), img[..., 2])
-
-
-def _within(img: np.ndarray, centre: np.ndarray, reach: float) -> np.ndarray:
-    """uint8 mask, nonzero where every channel of an (H, W, 3) image lies less than
-    ``reach`` from ``centre`` (RGB): ``max_c |img - centre| < reach`` in float32, the
-    same arithmetic done by OpenCV, five times faster than numpy's."""
-    img = np.asarray(img, np.float32)  # OpenCV rounds a scalar to an integer image's type
-    below = float(np.nextafter(np.float32(reach), np.float32(0)))  # < reach, as ≤
-    centre = np.asarray(centre, np.float32)
-    return cv2.inRange(cv2.absdiff(img, (*(float(c) for c in centre), 0.0)),
-                       (0.0, 0.0, 0.0), (below, below, below))
-
-
-def find_target(img: np.ndarray, ratio: float) -> tuple[int, int, int, int] | None:
-    """Bounding box (u0, v0, u1, v1) of the grey panel's image, or None."""
-    blur = cv2.GaussianBlur(img, (5, 5), 0)
-    vmax, vmin = _channel_max(blur), _channel_min(blur)
-    neutral = (vmax - vmin) < 0.12 * vmax + 6
-    mask = neutral & (vmax > 20) & (vmax < 135)
-    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (FRAME_OPEN_PX, FRAME_OPEN_PX))
-    mask = cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_OPEN, kernel).astype(bool)
-    labels, comps = _components(mask, 300)
-    best = None
-    for k, x, y, w, h, area in comps:
-        whole = area / (w * h) >= 0.75 and 0.8 / ratio <= h / w <= 4.0
-        if not whole and area < MERGED_MIN_AREA:
-            continue
-        # re-grow around the region's own colour: separates a differently grey neighbour,
-        # also one that merged with the panel into a region no panel could be.  In a
-        # window around the region (the whole frame only where what matters reaches the
-        # window's edge: the same result, without rescanning the frame per region)
-        box = (x, y, w, h)
-        found = _regrow(blur, neutral, labels, k, box, whole, ratio, kernel, max(w, h))
-        if found is None:
-            found = _regrow(blur, neutral, labels, k, box, whole, ratio, kernel, None)
-        for cand in found:
-            if best is None or cand[4] > best[4]:
-                best = cand
-    return None if best is None else best[:4]
-
-
-def _regrow(blur, neutral, labels, k, box, whole: bool, ratio: float, kernel,
-            margin: int | None) -> list[tuple[int, int, int, int, int]] | None:
-    """The panel-shaped regions of region ``k``'s own colour that belong to it, as
-    (u0, v0, u1, v1, area), looked for within ``margin`` px of its box (None: the
-    whole frame); None if one that matters comes near the window's edge, where the
-    opening and the regions could differ from the whole frame's."""
-    x, y, w, h = box
-    H, W = labels.shape
-    near = 2 * FRAME_OPEN_PX  # the opening's reach, twice
-    if margin is None:
-        u0, v0, u1, v1 = 0, 0, W, H
-    else:
-        u0, v0 = max(0, x - margin - near), max(0, y - margin - near)
-        u1, v1 = min(W, x + w + margin + near), min(H, y + h + margin + near)
-    win = (slice(v0, v1), slice(u0, u1))
-    mine = labels[win] == k
-    med = np.median(blur[win][mine], axis=0)
-    similar = _within(blur[win], med, SAME_GREY) & neutral[win]
-    similar = cv2.morphologyEx(similar, cv2.MORPH_OPEN, kernel)
-    lab2, comps2 = _components(similar, 300)
-    seed = lab2[y + h // 2 - v0, x + w // 2 - u0]
-    out = []
-    for kk, x2, y2, w2, h2, area2 in comps2:
-        if whole and kk != seed:
-            continue
-        if not whole and np.count_nonzero((lab2 == kk) & mine) < 0.5 * area2:
-            continue
-        inner = ((x2 < near and u0 > 0) or (y2 < near and v0 > 0)
-                 or (x2 + w2 > (u1 - u0) - near and u1 < W)
-                 or (y2 + h2 > (v1 - v0) - near and v1 < H))
-        if inner:
-            return None
-        if area2 / (w2 * h2) < 0.75 or not 0.8 / ratio <= h2 / w2 <= 4.0:
-            continue
-        out.append((x2 + u0, y2 + v0, x2 + u0 + w2 - 1, y2 + v0 + h2 - 1, area2))
-    return out
-
-
-def find_pencils(img: np.ndarray) -> list[tuple[int, int, int, int]]:
-    """Bounding boxes of painted (yellow) pencil bands."""
-    blur = cv2.GaussianBlur(img, (3, 3), 0)
-    r, g, b = blur[..., 0], blur[..., 1], blur[..., 2]
-    vmax, vmin = _channel_max(blur), _channel_min(blur)
-    sat = (vmax - vmin) / np.maximum(vmax, 1.0)
-    yellow = (r + g) / 2 - b
-    mask = (sat > 0.55) & (yellow > 30) & (vmax > 40)
-    mask = cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
-    _, comps = _components(mask, 30)
-    return [(x, y, x + w - 1, y + h - 1) for _, x, y, w, h, _ in comps if h >= 2 * w * 0.8]
-
 @dataclass
 class Detection:
     """What the detector measured in one frame."""
