@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from numbers import Real
 
 import numpy as np
 
@@ -60,10 +61,13 @@ class SelfCalibration:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "nuisances", tuple(self.nuisances))
-        object.__setattr__(self, "priors", dict(self.priors))
         check_nuisances(self.nuisances, None, 1)
         check_position_sigma(self.position_sigma)
         check_nuisance_sigma(self.priors, self.nuisances)
+        # plain floats (a numpy number would write itself as "np.float64(0.3)" in a
+        # dataset's row and card)
+        object.__setattr__(self, "position_sigma", float(self.position_sigma))
+        object.__setattr__(self, "priors", {str(n): float(s) for n, s in self.priors.items()})
 
     def first(self, m: int) -> SelfCalibration:
         """The first ``m`` nuisances (in their order) with their priors: what fewer
@@ -97,9 +101,8 @@ def describe_estimates(estimates: Mapping[str, float], sd: Mapping[str, float]) 
 
 def check_position_sigma(position_sigma: float) -> None:
     """Refuse a beacon position σ that is not a finite length ≥ 0 (cm per axis)."""
-    if not (isinstance(position_sigma, int | float) and np.isfinite(position_sigma)
-            and position_sigma >= 0):
-        raise SolverError(f"position_sigma must be ≥ 0, got {position_sigma}")
+    if not (_number(position_sigma) and np.isfinite(position_sigma) and position_sigma >= 0):
+        raise SolverError(f"position_sigma must be a finite number ≥ 0 (cm), got {position_sigma!r}")
 
 
 def check_nuisance_sigma(priors: Mapping[str, float], nuisances: tuple[str, ...]) -> None:
@@ -112,8 +115,13 @@ def check_nuisance_sigma(priors: Mapping[str, float], nuisances: tuple[str, ...]
         if name not in nuisances:
             raise SolverError(f"a prior σ for {name!r}, which is not estimated (estimated: "
                               f"{', '.join(nuisances) or 'none'})")
-        if not (isinstance(s, int | float) and np.isfinite(s) and s > 0):
+        if not (_number(s) and np.isfinite(s) and s > 0):
             raise SolverError(f"the prior σ of {name} must be a number > 0, got {s!r}")
+
+
+def _number(x) -> bool:
+    """A real number (numpy's too), not a bool."""
+    return isinstance(x, Real) and not isinstance(x, bool | np.bool_)
 
 
 def check_nuisances(nuisances: tuple[str, ...], nb: int | None, nt: int) -> None:

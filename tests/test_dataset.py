@@ -711,3 +711,18 @@ def test_a_table_of_the_older_layout_is_read(one_worker, tmp_path):
     pq.write_table(arrow, old / "dataset.parquet")
     with pytest.raises(DatasetError, match="missing columns"):
         read_table(old)
+    # one resumed by the version after: its rows of schema 2 and 3 mixed, the table with
+    # every column but the priors (schema 4's): each row reads as its scene was solved
+    cols = pq.read_table(out / "dataset.parquet").to_pydict()
+    del cols["calibrate_priors"]
+    cols["schema"] = [2, 3, 3]
+    arrow = pa.table(cols)
+    arrow = arrow.replace_schema_metadata({TABLE_SEAL: checksum(jsonable(arrow.to_pydict()))})
+    pq.write_table(arrow, old / "dataset.parquet")
+    assert read_table(old)["calibrate_priors"] == ["", "", ""]
+    cols["schema"] = [2, 3, 4]  # a row of schema 4 must have it
+    arrow = pa.table(cols)
+    arrow = arrow.replace_schema_metadata({TABLE_SEAL: checksum(jsonable(arrow.to_pydict()))})
+    pq.write_table(arrow, old / "dataset.parquet")
+    with pytest.raises(DatasetError, match="missing columns calibrate_priors"):
+        read_table(old)

@@ -428,6 +428,16 @@ def test_priors_are_refused_for_nuisances_not_estimated_and_when_not_positive(tm
         SelfCalibration(("pan",), priors={"scale": 0.01})
     with pytest.raises(SolverError, match="must be a number > 0"):
         SelfCalibration(("pan",), priors={"pan": 0.0})
+    with pytest.raises(SolverError, match="must be a number > 0"):
+        SelfCalibration(("pan",), priors={"pan": True})
+    with pytest.raises(SolverError, match="position_sigma must be a finite number"):
+        SelfCalibration(("pan",), np.nan)
+    # numpy numbers are numbers, kept as plain floats (a dataset writes them as text)
+    cal = SelfCalibration(("pan",), np.int64(1), {"pan": np.float32(0.25)})
+    assert type(cal.position_sigma) is float and type(cal.priors["pan"]) is float
+    from mirrorsim.formats.dataset_table import priors_of_text, priors_text
+
+    assert priors_of_text(priors_text(cal.priors)) == {"pan": 0.25}
     path = tmp_path / "m.json"
     import json
     path.write_text(json.dumps({

@@ -82,7 +82,7 @@ def claim_folder(out: Path, meta: dict, resume: bool) -> None:
     if old.get("calibrate") != meta.get("calibrate"):
         raise DatasetError(out, f"was made with other self-calibration settings "
                            f"({old.get('calibrate') or 'none'}): resume it with the same "
-                           "nuisances and beacon σ, or choose another folder")
+                           "--calibrate, --beacon-sigma and --prior, or choose another folder")
     same = ("seed", "spp", "spec")  # n may grow: scene i is drawn from (seed, i) alone,
     # so the added scenes are the ones a dataset of the larger n would have had
     if {k: old[k] for k in same} != {k: meta[k] for k in same}:
@@ -233,13 +233,16 @@ def read_table(folder: str | Path) -> dict[str, list]:
     if [r.index for r in collect_rows(folder, n_scenes, seed)] != cols["index"]:
         raise DatasetError(path, "its rows differ from the row files in rows/ (resuming the "
                            "dataset writes the table again)")
-    schemas = set(cols.get("schema", [None]))
-    if len(schemas) == 1 and (schema := schemas.pop()) in (2, 3):
-        # a table of an older layout: the values its scenes had for the columns added
-        # since (one beacon, plain; no priors)
-        for c, v in table.older_values(schema).items():
-            if c not in cols:
-                cols[c] = [None if e else v for e in cols["error"]]
+    schemas = cols.get("schema") or [None]
+    if all(s in (2, 3) for s in schemas):
+        # a table of older layouts (one resumed by a later version mixes them): each row
+        # takes the values its scene had for the columns added since its layout (one
+        # beacon, plain; no priors); a column its own layout had stays missing
+        older = [table.older_values(s) for s in schemas]
+        for c in set().union(*older) - set(cols):
+            if all(c in o for o in older):
+                cols[c] = [None if e else o[c] for e, o in zip(cols["error"], older,
+                                                                strict=True)]
     missing = sorted(set(table.NAMES) - set(cols))
     if missing:
         raise DatasetError(path, f"missing columns {', '.join(missing[:4])}"
