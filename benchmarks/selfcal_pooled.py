@@ -6,11 +6,14 @@
 Reads the per-scene tables that ``benchmarks/selfcal.py`` printed (by default the
 JPEG runs registered in ``docs/results/``: three seeds of 40 benches each), and prints
 for each run and for all of them pooled the ratios of medians the issue's targets are
-stated in (self-calibrated / plain, with the believed and with the exact positions; the
-reference / plain), each with a 90 % bootstrap interval: the scenes redrawn with
+stated in (self-calibrated / plain, with the believed and with the exact positions;
+the same self-calibrated with priors, where every run pooled has them; the reference /
+plain), each with a 90 % bootstrap interval: the scenes redrawn with
 replacement within each run, ``--draws`` times.  A ratio of medians over 40 scenes
 moves a lot with the scenes drawn; the interval says how much, so that a target met or
-missed on one run is not taken for more than it is.
+missed on one run is not taken for more than it is.  The tables' values are printed to
+three decimals, so a run's ratio here may differ in its last digit from the one
+printed under its table.
 """
 
 from __future__ import annotations
@@ -31,18 +34,23 @@ RUNS = ("selfcal_bench", "selfcal_bench_fresh", "selfcal_bench_priors")
 HEADINGS = {"plain": "plain (cm)", "selfcal": "self-calibrated",
             "plain_exact": "plain, exact positions",
             "selfcal_exact": "self-calibrated, exact positions",
-            "reference": "reference: pan and scale known"}
+            "reference": "reference: pan and scale known",
+            # a run with --priors has these two more (NaN where a run has not)
+            "priors": "self-calibrated with priors", "priors_exact": "… exact positions"}
 COLUMNS = list(HEADINGS)
+OPTIONAL = ("priors", "priors_exact")
 # the run whose benches chose the JPEG foot's 5-px window (docs/results.md)
 TUNED = "selfcal_bench"
 RATIOS = (("self-calibrated / plain, believed positions", "selfcal", "plain"),
           ("self-calibrated / plain, exact positions", "selfcal_exact", "plain_exact"),
+          ("with priors / plain, believed positions", "priors", "plain"),
+          ("with priors / plain, exact positions", "priors_exact", "plain_exact"),
           ("reference / plain, exact positions", "reference", "plain_exact"))
 
 
 def read_run(path: Path) -> tuple[str, np.ndarray]:
     """The run's seed (as its header says) and its per-scene columns (scenes × COLUMNS),
-    each found by its heading."""
+    each found by its heading (an OPTIONAL one a run lacks: NaN)."""
     text = path.read_text(encoding="utf-8")
     if "frames stored as PNG" in text:
         sys.exit(f"{path}: a run of lossless frames; these ratios are the JPEG benches'")
@@ -52,14 +60,14 @@ def read_run(path: Path) -> tuple[str, np.ndarray]:
     if head is None:
         sys.exit(f"{path}: no table headed | scene | … to read")
     names = [c.strip() for c in head.split("|")[1:-1]]
-    try:
-        cols = [names.index(h) for h in HEADINGS.values()]
-    except ValueError as exc:
-        sys.exit(f"{path}: {exc}: its table lacks a column this reads")
+    missing = [h for k, h in HEADINGS.items() if h not in names and k not in OPTIONAL]
+    if missing:
+        sys.exit(f"{path}: its table lacks the column(s) {', '.join(missing)}")
+    cols = [names.index(h) if h in names else None for h in HEADINGS.values()]
     rows = [[c.strip() for c in line.split("|")[1:-1]] for line in lines
             if re.match(r"\| sc\d", line)]
     return (found.group(1) if found else "?",
-            np.array([[float(r[k]) for k in cols] for r in rows]))
+            np.array([[np.nan if k is None else float(r[k]) for k in cols] for r in rows]))
 
 
 def ratio(runs: list[np.ndarray], num: str, den: str) -> float:
@@ -95,6 +103,9 @@ def main() -> None:
     def cells(vs: list[np.ndarray], bold: str = "") -> str:
         out = []
         for _, n, d in RATIOS:
+            if any(np.isnan(v[:, COLUMNS.index(n)]).any() for v in vs):
+                out.append("–")  # a run without priors' columns: not pooled
+                continue
             lo, hi = interval(vs, n, d, a.draws, rng)
             out.append(f"{bold}{ratio(vs, n, d):.2f}{bold} ({lo:.2f}–{hi:.2f})")
         return " | ".join(out)

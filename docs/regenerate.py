@@ -122,12 +122,15 @@ RESULTS: tuple[Result, ...] = (
     Result("track_fixed", (f"{PY} benchmarks/track.py --beside --steps 10 --seed 8649690",),
            markdown=True, about="the moving beacon alone and beside a fixed beacon, on "
                                 "rendered frames (the seed the page reads)"),
-    Result("selfcal_bench", (f"{PY} benchmarks/selfcal.py --scenes 40 --seed 4417001",),
+    Result("selfcal_bench",
+           (f"{PY} benchmarks/selfcal.py --scenes 40 --seed 4417001 --priors",),
            markdown=True, about="self-calibration on 40 rendered bench scenes with three "
-                                "planned beacons (about 10 min)"),
-    Result("selfcal_bench_fresh", (f"{PY} benchmarks/selfcal.py --scenes 40",),
-           markdown=True, about="self-calibration on 40 benches of a fresh seed (printed), "
-                                "drawn anew at each regeneration (about 10 min)"),
+                                "planned beacons, without and with priors (about 10 min)"),
+    Result("selfcal_bench_fresh",
+           (f"{PY} benchmarks/selfcal.py --scenes 40 --seed 15482401 --priors",),
+           markdown=True, about="self-calibration on 40 benches of the seed drawn afresh "
+                                "for it on 2026-12-03, without and with priors (about 10 "
+                                "min)"),
     Result("selfcal_bench_priors",
            (f"{PY} benchmarks/selfcal.py --scenes 40 --priors --seed 3248510",),
            markdown=True, about="self-calibration with and without priors from the spec's "
