@@ -125,17 +125,17 @@ RESULTS: tuple[Result, ...] = (
     Result("selfcal_bench",
            (f"{PY} benchmarks/selfcal.py --scenes 40 --seed 4417001 --priors",),
            markdown=True, about="self-calibration on 40 rendered bench scenes with three "
-                                "planned beacons, without and with priors (about 10 min)"),
+                                "planned beacons, without and with priors (about 8 min)"),
     Result("selfcal_bench_fresh",
            (f"{PY} benchmarks/selfcal.py --scenes 40 --seed 15482401 --priors",),
            markdown=True, about="self-calibration on 40 benches of the seed drawn afresh "
-                                "for it on 2026-12-03, without and with priors (about 10 "
+                                "for it on 2026-12-03, without and with priors (about 8 "
                                 "min)"),
     Result("selfcal_bench_priors",
            (f"{PY} benchmarks/selfcal.py --scenes 40 --priors --seed 3248510",),
            markdown=True, about="self-calibration with and without priors from the spec's "
                                 "ranges, on 40 benches of the seed the page reads, drawn "
-                                "afresh for it (about 15 min)"),
+                                "afresh for it (about 8 min)"),
     Result("selfcal_pooled", (f"{PY} benchmarks/selfcal_pooled.py",), markdown=True,
            about="the three JPEG runs above, their ratios pooled with bootstrap intervals "
                  "(after them: it reads their tables)"),

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from numbers import Real
 
 import numpy as np
 
@@ -102,7 +101,8 @@ def describe_estimates(estimates: Mapping[str, float], sd: Mapping[str, float]) 
 def check_position_sigma(position_sigma: float) -> None:
     """Refuse a beacon position σ that is not a finite length ≥ 0 (cm per axis)."""
     if not (_number(position_sigma) and np.isfinite(position_sigma) and position_sigma >= 0):
-        raise SolverError(f"position_sigma must be a finite number ≥ 0 (cm), got {position_sigma!r}")
+        raise SolverError("position_sigma must be a finite number ≥ 0 (cm), got "
+                          f"{position_sigma!r}")
 
 
 def check_nuisance_sigma(priors: Mapping[str, float], nuisances: tuple[str, ...]) -> None:
@@ -121,7 +121,7 @@ def check_nuisance_sigma(priors: Mapping[str, float], nuisances: tuple[str, ...]
 
 def _number(x) -> bool:
     """A real number (numpy's too), not a bool."""
-    return isinstance(x, Real) and not isinstance(x, bool | np.bool_)
+    return isinstance(x, int | float | np.integer | np.floating) and not isinstance(x, bool)
 
 
 def check_nuisances(nuisances: tuple[str, ...], nb: int | None, nt: int) -> None:

@@ -82,7 +82,7 @@ def claim_folder(out: Path, meta: dict, resume: bool) -> None:
     if old.get("calibrate") != meta.get("calibrate"):
         raise DatasetError(out, f"was made with other self-calibration settings "
                            f"({old.get('calibrate') or 'none'}): resume it with the same "
-                           "--calibrate, --beacon-sigma and --prior, or choose another folder")
+                           "nuisances, beacon σ and priors, or choose another folder")
     same = ("seed", "spp", "spec")  # n may grow: scene i is drawn from (seed, i) alone,
     # so the added scenes are the ones a dataset of the larger n would have had
     if {k: old[k] for k in same} != {k: meta[k] for k in same}:
