@@ -56,7 +56,12 @@ from solver.lsq import (  # noqa: E402
     power_terms,
     solve_measurements,
 )
-from solver.selfcal import PLAIN, SelfCalibration, check_nuisances  # noqa: E402
+from solver.selfcal import (  # noqa: E402
+    PLAIN,
+    SelfCalibration,
+    check_nuisances,
+    describe_priors,
+)
 
 
 def _errors(rep, scene, position_sigma: float, nuisances: tuple[str, ...],
@@ -178,7 +183,7 @@ def main() -> None:
           f"{stamp()}\n")
     if a.priors:
         print(f"priors (the spec's ranges): "
-              f"{SelfCalibration(nuisances, priors=priors).describe_priors()}\n")
+              f"{describe_priors(priors)}\n")
     extra = " self-calibrated with priors | … exact positions |" if a.priors else ""
     print("| scene | plain (cm) | self-calibrated | pan and scale only | plain, exact "
           "positions | self-calibrated, exact positions | reference: pan and scale known | "

@@ -19,10 +19,11 @@ from solver.errors import SolverError
 # "scale", a factor s on every d_total (the calibration's K); "power", the mirror's
 # curvature c = 1/R (1/cm, > 0 concave), which moves each image by its own amount
 # (:func:`solver.lsq.power_terms`): α_meas = α + c·A + δ, d_meas = s·(d + c·D).
-# Each: its name in a solution, its neutral value, and how it is said (a label, how a
-# value is written, and its prior σ's unit: scale's σ is a fraction, said in %)
+# Each: its name in a solution and its neutral value
 NUISANCES = {"pan": ("pan_offset_deg", 0.0), "scale": ("range_scale", 1.0),
              "power": ("mirror_power_per_cm", 0.0)}
+# how an estimate is said (by its name in a solution: a label, its unit, its format),
+# and a prior's σ (scale's σ is a fraction, said in %)
 WORDS = {"pan_offset_deg": ("pan offset", "°", ".4f"),
          "range_scale": ("range scale", "", ".4f"),
          "mirror_power_per_cm": ("mirror power 1/R", " /cm", ".2e")}
@@ -76,8 +77,8 @@ class SelfCalibration:
                                {n: s for n, s in self.priors.items() if n in kept})
 
     def describe_priors(self) -> str:
-        """The priors in words with their units, e.g. "pan ±0.29°, scale ±0.58 %"."""
-        return ", ".join(f"{n} {_PRIOR_UNITS[n](s)}" for n, s in self.priors.items())
+        """The priors in words with their units (:func:`describe_priors`)."""
+        return describe_priors(self.priors)
 
     def to_json(self) -> dict:
         """As a document's ``self_calibration`` settings."""
@@ -85,6 +86,36 @@ class SelfCalibration:
                 "beacon_position_sigma_cm": self.position_sigma,
                 **({"priors": dict(self.priors)} if self.priors else {})}
 
+
+def describe_priors(priors: Mapping[str, float]) -> str:
+    """Priors in words with their units, e.g. "pan ±0.29°, scale ±0.58 %"."""
+    return ", ".join(f"{n} {_PRIOR_UNITS[n](s)}" for n, s in priors.items())
+
+
+def priors_text(priors: Mapping[str, float]) -> str:
+    """Priors as ``--prior`` takes them and a dataset's row and card hold them:
+    ``pan=0.3,scale=0.006`` (each σ exactly, as Python writes a float)."""
+    return ",".join(f"{n}={float(s)!r}" for n, s in priors.items())
+
+
+def parse_priors(text: str) -> dict[str, float]:
+    """Inverse of :func:`priors_text` (blank items skipped, spaces stripped).
+
+    Raises
+    ------
+    ValueError
+        An item that is not NAME=SIGMA with SIGMA a number, or a name given twice.
+    """
+    out: dict[str, float] = {}
+    for item in (i.strip() for i in text.split(",") if i.strip()):
+        name, _, value = (part.strip() for part in item.partition("="))
+        if name in out:
+            raise ValueError(f"{name!r} is given twice")
+        try:
+            out[name] = float(value)
+        except ValueError:
+            raise ValueError(f"{item!r} is not NAME=SIGMA, SIGMA a number") from None
+    return out
 
 
 def describe_estimates(estimates: Mapping[str, float], sd: Mapping[str, float]) -> str:

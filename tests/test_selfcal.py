@@ -435,9 +435,9 @@ def test_priors_are_refused_for_nuisances_not_estimated_and_when_not_positive(tm
     # numpy numbers are numbers, kept as plain floats (a dataset writes them as text)
     cal = SelfCalibration(("pan",), np.int64(1), {"pan": np.float32(0.25)})
     assert type(cal.position_sigma) is float and type(cal.priors["pan"]) is float
-    from mirrorsim.formats.dataset_table import priors_of_text, priors_text
+    from solver.selfcal import parse_priors, priors_text
 
-    assert priors_of_text(priors_text(cal.priors)) == {"pan": 0.25}
+    assert parse_priors(priors_text(cal.priors)) == {"pan": 0.25}
     path = tmp_path / "m.json"
     import json
     path.write_text(json.dumps({

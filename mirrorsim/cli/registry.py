@@ -209,25 +209,22 @@ def calibration_of(args: argparse.Namespace, n_beacons: int | None = None,
     ``n_beacons`` is known, that the measurements can carry the nuisances), before any
     work is done; a bad one names its flag."""
     from solver.errors import SolverError
-    from solver.selfcal import SelfCalibration, check_nuisance_sigma, check_nuisances
+    from solver.selfcal import (
+        SelfCalibration,
+        check_nuisance_sigma,
+        check_nuisances,
+        parse_priors,
+    )
 
     names = tuple(n.strip() for n in args.calibrate.split(",") if n.strip())
     try:  # the names always; the count only where the beacons are known
         check_nuisances(names, n_beacons, n_targets)
     except SolverError as exc:
         raise BadArgument("--calibrate", str(exc)) from None
-    priors: dict[str, float] = {}
-    for item in (i.strip() for i in args.prior.split(",") if i.strip()):
-        name, _, value = (part.strip() for part in item.partition("="))
-        if name in priors:
-            raise BadArgument("--prior", f"{name!r} is given twice")
-        try:
-            priors[name] = float(value)
-        except ValueError:
-            raise BadArgument("--prior", f"{item!r} is not NAME=SIGMA, SIGMA a number") from None
     try:
+        priors = parse_priors(args.prior)
         check_nuisance_sigma(priors, names)
-    except SolverError as exc:
+    except (ValueError, SolverError) as exc:
         raise BadArgument("--prior", str(exc)) from None
     return SelfCalibration(names, beacon_sigma_of(args), priors)
 

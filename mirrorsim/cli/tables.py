@@ -11,7 +11,7 @@ from mirrorsim.pipelines.score import Report
 from mirrorsim.scene.model import Scene
 from mirrorsim.truth import optics, visibility
 from solver.montecarlo import Table1
-from solver.selfcal import SelfCalibration, describe_estimates
+from solver.selfcal import describe_estimates, describe_priors
 from solver.sltr import Solution, chi2_2_radius
 
 if TYPE_CHECKING:  # renders, budgets and tracks: no Mitsuba import to print a table
@@ -286,8 +286,7 @@ def _set_lines(bs: dict | None) -> list[str]:
     if not bs:
         return []
     nu = " and ".join(bs["self_calibration"])
-    priors = SelfCalibration(tuple(bs["self_calibration"]),
-                             priors=bs.get("priors", {})).describe_priors()
+    priors = describe_priors(bs.get("priors", {}))
     out = [f"  {len(bs['beacons'])} beacons, chosen one at a time"
            + (f" with {nu} estimated alongside (self-calibration"
               + (f"; priors {priors}" if priors else "") + ")" if nu else "") + ":"]

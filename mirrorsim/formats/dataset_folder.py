@@ -17,6 +17,7 @@ from mirrorsim.errors import InputError
 from mirrorsim.formats import dataset_table as table
 from mirrorsim.formats.cache import checksum, unseal
 from mirrorsim.formats.files import atomic_path, jsonable, write_json, write_text
+from solver.selfcal import priors_text
 
 DATASET_FORMAT = "mirrorsim-dataset"
 TABLE_SEAL = "mirrorsim.sha256"  # the Parquet schema's metadata key of its checksum
@@ -298,7 +299,7 @@ def _calibrated(meta: dict) -> str:
         return ""
     return ((f" --calibrate {','.join(cal['nuisances'])}" if cal["nuisances"] else "")
             + (f" --beacon-sigma {cal['position_sigma']:g}" if cal["position_sigma"] else "")
-            + (f" --prior {table.priors_text(cal['priors'])}" if cal.get("priors") else ""))
+            + (f" --prior {priors_text(cal['priors'])}" if cal.get("priors") else ""))
 
 
 def write_card(out: Path, meta: dict, rows: list[table.DatasetRow], variant: str) -> None:

@@ -159,16 +159,6 @@ def older_values(schema: int) -> dict[str, Any]:
     return {k: v for s, added in ADDED_IN.items() if s > schema for k, v in added.items()}
 
 
-def priors_text(priors: dict[str, float]) -> str:
-    """Self-calibration's priors as the ``calibrate_priors`` column holds them."""
-    return ",".join(f"{n}={s!r}" for n, s in priors.items())
-
-
-def priors_of_text(text: str) -> dict[str, float]:
-    """Inverse of :func:`priors_text`."""
-    return {n: float(s) for n, _, s in (i.partition("=") for i in text.split(",") if i)}
-
-
 def checked_row(row: dict) -> dict:
     """``row`` if it holds declared columns only (and, when the scene did not fail, all of
     them, with its beacons' slots): a misspelt or forgotten column fails here, where the

@@ -59,7 +59,7 @@ from mirrorsim.scene import imperfections
 from mirrorsim.scene.model import Scene
 from mirrorsim.truth.groundtruth import ObjectTruth
 from solver.geometry import yaw_difference
-from solver.selfcal import NUISANCES, PLAIN, SelfCalibration, check_nuisances
+from solver.selfcal import NUISANCES, PLAIN, SelfCalibration, check_nuisances, priors_text
 
 # 3: the beacon count, each beacon's columns, self-calibration; 4: its priors
 ROW_SCHEMA_VERSION = 4
@@ -138,7 +138,7 @@ def _flatten(scene: Scene, rep: Report, calibration: SelfCalibration = PLAIN) ->
         "mirror_width": mir.size[0], "mirror_height": mir.size[1],
         "target_x": scene.target.position[0], "target_y": scene.target.position[1],
         "beacons": len(scene.beacons), "calibrate": ",".join(calibration.nuisances),
-        "calibrate_priors": table.priors_text(calibration.priors),
+        "calibrate_priors": priors_text(calibration.priors),
         "variant": rep.render.variant, "spp": rep.render.spp, "sampler": rep.render.sampler,
         "background_spp": min(scene.render.background_spp, scene.render.spp),
         "beacon_spp": max(scene.render.beacon_spp, scene.render.spp),

@@ -25,7 +25,7 @@ from mirrorsim.formats.error_model import KINDS, ErrorModel, measured_features
 from mirrorsim.formats.files import save_figure
 from solver.errors import SolverError
 from solver.lsq import BeaconMeasurement, solve_measurements
-from solver.selfcal import SelfCalibration
+from solver.selfcal import SelfCalibration, parse_priors
 from solver.sltr import chi2_2_radius
 
 LEVELS = (0.5, 0.9, 0.95)
@@ -122,7 +122,7 @@ def validate(model: ErrorModel, cols: dict) -> Validation:
         try:
             calibration = SelfCalibration(tuple(x for x in (calibrate[i] or "").split(",") if x),
                                           float(beacon_sigma[i] or 0.0),
-                                          table.priors_of_text(priors[i] or ""))
+                                          parse_priors(priors[i] or ""))
             sigma = model.sigmas(t, [(b.alpha_deg, b.d_total) for b in beacons], pan[i],
                                  fx[i] if np.isfinite(fx[i]) else None)
             sol = solve_measurements(obs[i], beacons, [t], sigma, calibration)
