@@ -530,7 +530,7 @@ def test_frames_that_differ_after_the_render_share_it_bit_for_bit(monkeypatch):
     assert not np.array_equal(other.in_mirror, fresh.in_mirror)  # the glass moved
     with pytest.raises(ValueError):
         shared.first[0, 0] = 1  # a kept render cannot be drawn on by one of its users
-    assert passes._KEPT is None  # nothing kept past the scope
+    assert passes._KEPT.get() is None  # nothing kept past the scope
 
 
 def test_a_frame_measured_while_it_is_written_matches_one_read_back(tmp_path):
@@ -625,3 +625,22 @@ def test_a_jpeg_is_told_by_its_bytes(tmp_path):
     (tmp_path / "frame.jpg").write_bytes(b"\x89PNG\r\n\x1a\n a PNG named .jpg")
     assert subsampled(tmp_path / "named.png") and not subsampled(tmp_path / "frame.jpg")
     assert subsampled(tmp_path / "not_yet.JPG") and not subsampled(tmp_path / "not_yet.png")
+
+
+def test_a_frame_and_its_kind_come_from_one_read(tmp_path):
+    import cv2
+
+    from mirrorsim.detection.detector import read_stored_frame
+
+    rgb = np.zeros((16, 24, 3), np.uint8)
+    rgb[4:12, 6:18] = (200, 180, 40)
+    ok_j, jpg = cv2.imencode(".jpg", rgb[..., ::-1])
+    ok_p, png = cv2.imencode(".png", rgb[..., ::-1])
+    assert ok_j and ok_p
+    (tmp_path / "named.png").write_bytes(jpg.tobytes())  # a JPEG whatever its name
+    (tmp_path / "named.jpg").write_bytes(png.tobytes())
+    with pytest.warns(RuntimeWarning, match="JPEG"):
+        j = read_stored_frame(tmp_path / "named.png", (24, 16))
+    p = read_stored_frame(tmp_path / "named.jpg", (24, 16))
+    assert j.subsampled and not p.subsampled
+    assert np.array_equal(p.pixels, rgb)

@@ -257,8 +257,24 @@ def annotate(image: np.ndarray, detection: Detection) -> np.ndarray:
     return out[..., ::-1]
 
 
+@dataclass(frozen=True)
+class StoredFrame:
+    """A frame's 8-bit RGB pixels and whether its file stored the colour at half
+    resolution (a JPEG's 4:2:0 chroma), which the detector measures otherwise: both
+    from one read of the file, so that a file replaced between two reads cannot pair
+    one file's pixels with the other's kind."""
+
+    pixels: np.ndarray
+    subsampled: bool
+
+
 def read_frame(path, size: tuple[int, int] | None = None) -> np.ndarray:
-    """An 8-bit RGB frame from a PNG or JPEG file.
+    """An 8-bit RGB frame from a PNG or JPEG file (see :func:`read_stored_frame`)."""
+    return read_stored_frame(path, size).pixels
+
+
+def read_stored_frame(path, size: tuple[int, int] | None = None) -> StoredFrame:
+    """An 8-bit RGB frame from a PNG or JPEG file, and whether it is a JPEG.
 
     Its size is read from the file's header before anything is decoded: a frame larger
     than ``MAX_RESOLUTION``, or (``size``: the capture record's camera, width × height)
@@ -294,10 +310,11 @@ def read_frame(path, size: tuple[int, int] | None = None) -> np.ndarray:
     rgb = decode_image(raw)
     if rgb is None:
         raise InputError(path, "", "a damaged image that cannot be decoded")
-    if head.startswith(JPEG_MAGIC):
+    jpeg = head.startswith(JPEG_MAGIC)
+    if jpeg:
         warnings.warn(f"{path}: a JPEG frame: compression blurs the edges the detector "
                       "measures; expect larger errors", RuntimeWarning, stacklevel=2)
-    return rgb
+    return StoredFrame(rgb, jpeg)
 
 
 def header_size(data: bytes) -> tuple[int, int] | None:

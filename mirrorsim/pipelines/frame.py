@@ -15,7 +15,12 @@ from pathlib import Path
 
 import numpy as np
 
-from mirrorsim.detection.detector import JPEG_MAGIC, Detection, detect_frame, read_frame
+from mirrorsim.detection.detector import (
+    JPEG_MAGIC,
+    Detection,
+    detect_frame,
+    read_stored_frame,
+)
 from mirrorsim.detection.image_geometry import Calibration
 from mirrorsim.errors import DetectionError
 from mirrorsim.formats.capture import CaptureRecord
@@ -85,9 +90,11 @@ def measure_frame(image_path: str | Path, capture: CaptureRecord, *,
         When the calibration's own references cannot be measured.
     """
     cam = capture.camera
-    image = pixels if pixels is not None else read_frame(image_path,
-                                                           (cam.width, cam.height_px))
-    lossy = pixels is None and subsampled(image_path)  # pixels: a lossless PNG just made
+    if pixels is None:
+        stored = read_stored_frame(image_path, (cam.width, cam.height_px))
+        image, lossy = stored.pixels, stored.subsampled
+    else:  # a lossless PNG just made
+        image, lossy = pixels, False
     cal = calibration or calibration_for(capture, variant=variant,
                                          distance_error=distance_error, subsampled=lossy)
     try:

@@ -10,11 +10,12 @@ is :mod:`mirrorsim.rendering.frames`' job.
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import hashlib
 import json
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, field, replace
 
 import drjit as dr
 import mitsuba as mi
@@ -81,9 +82,19 @@ class _Optics:
     seconds: float
 
 
-# the renders kept by :func:`reusing_renders` (None: outside its scope, nothing kept)
-_KEPT: dict[str, _Optics] | None = None
-_CAPACITY = 0
+@dataclass
+class _Kept:
+    """The renders kept by one :func:`reusing_renders` scope, at most ``capacity``."""
+
+    capacity: int
+    renders: dict[str, _Optics] = field(default_factory=dict)
+
+
+# the innermost reusing_renders scope of this thread or task (None: nothing is kept); a
+# context variable rather than a module global, so that a scope on one thread does not
+# hand its renders to another
+_KEPT: contextvars.ContextVar[_Kept | None] = contextvars.ContextVar("kept_renders",
+                                                                    default=None)
 
 
 @contextlib.contextmanager
@@ -93,13 +104,11 @@ def reusing_renders(capacity: int) -> Iterator[None]:
     differs only in sensor noise, JPEG, or what the experimenter believes) takes its
     render from there: bit for bit the render it would have made.  The error budget keeps
     the ideal bench's frames, which half of its sources share."""
-    global _KEPT, _CAPACITY
-    before = _KEPT, _CAPACITY
-    _KEPT, _CAPACITY = {}, capacity
+    token = _KEPT.set(_Kept(capacity))
     try:
         yield
     finally:
-        _KEPT, _CAPACITY = before
+        _KEPT.reset(token)
 
 
 def scene_fingerprint(scene: Scene) -> str:
@@ -136,13 +145,14 @@ def render_frame(scene: Scene, *, variant: str = "auto", progress: bool = True
     chosen = choose_variant(variant)
     t0 = time.perf_counter()
     key = f"{scene_fingerprint(optics_of(scene))}|{chosen}"
-    optical = _KEPT.get(key) if _KEPT is not None else None
+    kept = _KEPT.get()
+    optical = kept.renders.get(key) if kept is not None else None
     if optical is not None:  # this frame rendered nothing: its render time is none
         optical = replace(optical, seconds=0.0)
     else:
         optical = _render_optics(scene, chosen, progress)
-        if _KEPT is not None and len(_KEPT) < _CAPACITY:
-            _KEPT[key] = optical
+        if kept is not None and len(kept.renders) < kept.capacity:
+            kept.renders[key] = optical
     linear = optical.linear
     if scene.bench.noise is not None:
         linear = add_noise(linear, scene.bench.noise, seed)
