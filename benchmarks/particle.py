@@ -29,7 +29,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from solver.geometry import line_normal  # noqa: E402
-from solver.lsq import Sigma  # noqa: E402
+from solver.measurements import Sigma  # noqa: E402
 from solver.particle import (  # noqa: E402
     MovingBeaconFilter,
     PFParams,

@@ -51,11 +51,8 @@ from mirrorsim.pipelines.random_scenes import load_spec, sample_scene  # noqa: E
 from mirrorsim.scene.model import Beacon  # noqa: E402
 from solver.errors import SolverError  # noqa: E402
 from solver.geometry import line_normal  # noqa: E402
-from solver.lsq import (  # noqa: E402
-    BeaconMeasurement,
-    power_terms,
-    solve_measurements,
-)
+from solver.lsq import power_terms, solve_measurements  # noqa: E402
+from solver.measurements import BeaconMeasurement  # noqa: E402
 from solver.selfcal import (  # noqa: E402
     PLAIN,
     SelfCalibration,

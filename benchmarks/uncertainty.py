@@ -35,7 +35,8 @@ from mirrorsim.formats.error_model import default_error_model  # noqa: E402
 from mirrorsim.pipelines.random_scenes import load_spec, sample_scene  # noqa: E402
 from solver.errors import SolverError  # noqa: E402
 from solver.geometry import line_normal, yaw_difference  # noqa: E402
-from solver.lsq import BeaconMeasurement, crlb, solve_measurements  # noqa: E402
+from solver.lsq import crlb, solve_measurements  # noqa: E402
+from solver.measurements import BeaconMeasurement  # noqa: E402
 from solver.sltr import observe  # noqa: E402
 
 

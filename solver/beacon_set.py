@@ -18,14 +18,8 @@ import numpy as np
 
 from solver.errors import SolverError
 from solver.geometry import point_segment_distance
-from solver.lsq import (
-    ObjectSigmas,
-    Sigma,
-    as_object_sigmas,
-    nuisance_columns,
-    power_terms,
-    predict,
-)
+from solver.lsq import nuisance_columns, power_terms, predict
+from solver.measurements import ObjectSigmas, Sigma, as_object_sigmas
 from solver.placement import implied_target, seen_in_mirror
 from solver.selfcal import PLAIN, SelfCalibration
 

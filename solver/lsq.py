@@ -5,105 +5,19 @@ Jacobian; :func:`solve_measurements` is the solver's front door.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 
 from solver.errors import SolverError
 from solver.geometry import line_normal, unit, wrap_bearing
+from solver.measurements import BeaconMeasurement, ObjectSigmas, Sigma, as_object_sigmas
 from solver.selfcal import NUISANCES, PLAIN, SelfCalibration, check_nuisances
 from solver.sltr import MirrorLine, Solution, observe, ray_hits_line, solve_single
 
 ArrayLike = np.typing.ArrayLike
 # residuals beyond this many σ's weigh less (a Huber loss): a gross error in one image
 HUBER_K = 3.0
-
-
-@dataclass(frozen=True)
-class BeaconMeasurement:
-    """A beacon's known position and its image's measured α and d_total."""
-
-    position: tuple[float, float]
-    alpha_deg: float
-    d_total: float
-
-
-@dataclass(frozen=True)
-class Sigma:
-    """One measurement's standard deviations: α in degrees, d_total relative (a
-    fraction: 0.002 = 0.2 %)."""
-
-    alpha_deg: float = 0.01
-    d_total_rel: float = 0.002
-
-
-@dataclass(frozen=True)
-class ObjectSigmas:
-    """σ's per observation: the target's and each beacon observation's (a single beacon
-    σ serves every beacon observation).  The target's image and a pencil's are measured
-    with different accuracy, so one pair for both would over- or under-weight one."""
-
-    target: Sigma
-    beacons: tuple[Sigma, ...]
-    # σ (deg) of an α offset that every image of one frame shares (the mount's pan
-    # reading): on a bench it is most of each α's error, and counted as independent
-    # per image it would misplace the ellipse (errors that move every α alike largely
-    # cancel in the target); the α σ's above are then each image's own part
-    shared_alpha_deg: float = 0.0
-
-    @classmethod
-    def same(cls, sigma: Sigma) -> ObjectSigmas:
-        """One pair for every observation."""
-        return cls(sigma, (sigma,))
-
-    def alpha_covariance(self, sa: np.ndarray) -> np.ndarray:
-        """The α's covariance diag(sa²) + shared²·11ᵀ (sa: each α's own σ)."""
-        return np.diag(sa**2) + self.shared_alpha_deg**2
-
-    def alpha_whitener(self, sa: np.ndarray) -> np.ndarray:
-        """L⁻¹ for :meth:`alpha_covariance` = L Lᵀ: whitened residuals L⁻¹ (α − α_meas)
-        are independent with unit variance (the Cramér–Rao bound's information)."""
-        return np.linalg.inv(np.linalg.cholesky(self.alpha_covariance(sa)))
-
-    def independent(self) -> ObjectSigmas:
-        """The same σ's with the shared α offset folded into each α (as if independent:
-        for analyses that take independent errors, a conservative choice)."""
-        if not self.shared_alpha_deg:
-            return self
-        whole = lambda s: Sigma(float(np.hypot(s.alpha_deg, self.shared_alpha_deg)),  # noqa: E731
-                                s.d_total_rel)
-        return ObjectSigmas(whole(self.target), tuple(whole(b) for b in self.beacons))
-
-    def describe(self) -> str:
-        """The σ's in words: α in degrees, d_total in % of d_total."""
-        pair = lambda s: f"{s.alpha_deg:.3g}°, {100 * s.d_total_rel:.3g} %"  # noqa: E731
-        shared = (f"; an α offset shared by every image, σ {self.shared_alpha_deg:.3g}°"
-                  if self.shared_alpha_deg else "")
-        if self.beacons == (self.target,):
-            return f"σ ({pair(self.target)}){shared}"
-        bs = "; ".join(pair(b) for b in dict.fromkeys(self.beacons))
-        return f"σ target ({pair(self.target)}), beacon ({bs}){shared}"
-
-    def arrays(self, n_beacons: int, n_targets: int) -> tuple[np.ndarray, np.ndarray]:
-        """σ_α (deg) and relative σ_d of each observation, beacons first then targets
-        (the order of the solver's residuals)."""
-        if len(self.beacons) not in (1, n_beacons):
-            raise SolverError(f"{len(self.beacons)} beacon σ's for {n_beacons} beacon "
-                              "observations: give one, or one per observation")
-        bs = self.beacons * n_beacons if len(self.beacons) == 1 else self.beacons
-        every = [*bs, *([self.target] * n_targets)]
-        sa = np.array([s.alpha_deg for s in every], float)
-        sd = np.array([s.d_total_rel for s in every], float)
-        if not (np.all(sa > 0) and np.all(sd > 0) and np.all(np.isfinite(sa))
-                and np.all(np.isfinite(sd)) and np.isfinite(self.shared_alpha_deg)
-                and self.shared_alpha_deg >= 0):
-            raise SolverError(f"sigmas must be positive and finite, got {self}")
-        return sa, sd
-
-
-def as_object_sigmas(sigma: Sigma | ObjectSigmas) -> ObjectSigmas:
-    """Either form of σ's as :class:`ObjectSigmas`."""
-    return sigma if isinstance(sigma, ObjectSigmas) else ObjectSigmas.same(sigma)
 
 
 def predict(params: np.ndarray, observer: np.ndarray, points: np.ndarray

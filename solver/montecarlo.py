@@ -12,7 +12,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from solver.geometry import line_normal, unit, yaw_difference
-from solver.lsq import ObjectSigmas
+from solver.measurements import ObjectSigmas
 from solver.sltr import closed_form_unchecked, observe
 
 # v(α) [deg], v(d_total) [distance units], RMSE(ref), RMSE(tar): the paper's Table 1

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from solver.geometry import line_normal, unit
-from solver.lsq import BeaconMeasurement, Sigma
+from solver.measurements import BeaconMeasurement, Sigma
 from solver.sltr import virtual_image
 
 SPREAD_FLOOR = (0.002, 0.001)  # the proposal's least spread: yaw (deg), offset (cm)

@@ -11,7 +11,8 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from solver.geometry import line_normal, point_segment_distance, reflect, unit, wrap_bearing
-from solver.lsq import ObjectSigmas, Sigma, as_object_sigmas, predict
+from solver.lsq import predict
+from solver.measurements import ObjectSigmas, Sigma, as_object_sigmas
 from solver.sltr import SolverError, observe
 
 

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from solver.geometry import line_normal, wrap_bearing
-from solver.lsq import BeaconMeasurement
+from solver.measurements import BeaconMeasurement
 from solver.particle import PFParams
 from solver.sltr import observe
 

@@ -99,7 +99,7 @@ def test_a_sharp_likelihood_does_not_strand_the_filter():
     (0.005°, 0.6 %): the likelihood is far narrower than the prior's cloud.  Over 6 runs
     of 12 moves every final yaw error is within 0.05° of the batch smoother's (a kernel
     that works from the cloud alone leaves some runs degrees off)."""
-    from solver.lsq import Sigma
+    from solver.measurements import Sigma
 
     params = PFParams(sigma=Sigma(0.005, 0.006), sigma_trs=0.001)
     path = path_points("rectangular", (30.0, 60.0), 66.7, 4.0, 1.0, 7)[:13]
@@ -166,7 +166,7 @@ def test_nees_is_the_truths_mahalanobis_distance_in_the_particles_spread():
 def _fixed_beacons(params, rng) -> tuple:
     """Two beacons standing still in front of the mirror, their images observed once
     with the filter's σ's."""
-    from solver.lsq import BeaconMeasurement
+    from solver.measurements import BeaconMeasurement
     from solver.sltr import observe
 
     t, n = np.array([np.cos(np.radians(YAW)), np.sin(np.radians(YAW))]), line_normal(YAW)
@@ -218,7 +218,7 @@ def test_a_fixed_beacon_s_believed_position_is_weighed_with_its_sigma():
     an honest filter, above 30); known to 0.115 cm (the σ of ±0.2 cm offsets), the NEES
     is below χ²₂'s 99.75 % point (12), and the filter's start is the smoother's with
     the same prior on the positions."""
-    from solver.lsq import BeaconMeasurement
+    from solver.measurements import BeaconMeasurement
 
     params = PFParams(sigma=replace(PFParams().sigma, alpha_deg=0.005, d_total_rel=0.006))
     rho = line_normal(YAW) @ M

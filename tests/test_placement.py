@@ -5,7 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from solver.lsq import BeaconMeasurement, Sigma, solve_lsq, solve_measurements
+from solver.lsq import solve_lsq, solve_measurements
+from solver.measurements import BeaconMeasurement, Sigma
 from solver.placement import (
     MirrorPrior,
     algorithm1,

@@ -7,7 +7,8 @@ import pytest
 
 from solver.errors import SolverError
 from solver.geometry import line_normal, unit
-from solver.lsq import BeaconMeasurement, ObjectSigmas, Sigma, crlb, solve_measurements
+from solver.lsq import crlb, solve_measurements
+from solver.measurements import BeaconMeasurement, ObjectSigmas, Sigma
 from solver.selfcal import SelfCalibration
 from solver.sltr import observe
 

@@ -9,7 +9,8 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from solver.geometry import line_normal, signed_distance, unit
-from solver.lsq import BeaconMeasurement, Sigma, solve_lsq
+from solver.lsq import solve_lsq
+from solver.measurements import BeaconMeasurement, Sigma
 from solver.sltr import SolverError, locate, observe, solve_single
 
 c = st.floats(-100, 100, allow_nan=False)

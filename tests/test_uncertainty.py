@@ -17,7 +17,8 @@ from mirrorsim.formats.error_model import (
 )
 from mirrorsim.formats.measurements import measurements_from_dict
 from mirrorsim.pipelines import errormodel, uncertainty
-from solver.lsq import BeaconMeasurement, ObjectSigmas, Sigma, crlb, solve_measurements
+from solver.lsq import crlb, solve_measurements
+from solver.measurements import BeaconMeasurement, ObjectSigmas, Sigma
 from solver.selfcal import SelfCalibration
 from solver.sltr import chi2_2_radius, observe
 

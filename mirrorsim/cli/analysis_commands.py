@@ -156,8 +156,7 @@ def _plan(args) -> int:
     from mirrorsim.cli.tables import plan_text
     from mirrorsim.formats.error_model import default_error_model
     from mirrorsim.pipelines.planning import plan_scene
-    from solver.lsq import ObjectSigmas, Sigma
-    from solver.measurements import SIGMA_D_REL_MAX
+    from solver.measurements import SIGMA_D_REL_MAX, ObjectSigmas, Sigma
 
     finite(args, "sigma_alpha", "sigma_d", "eps", "yaw_spread", "d1_spread", "step")
     if (args.sigma_alpha is None) != (args.sigma_d is None):

@@ -63,8 +63,7 @@ from mirrorsim.scene.model import (
     Point2,
     pencil_paint_height,
 )
-from solver.lsq import BeaconMeasurement
-from solver.measurements import Measurements
+from solver.measurements import BeaconMeasurement, Measurements
 
 # a frame file's first bytes: PNG's signature, and JPEG's start-of-image marker and the
 # next marker's 0xFF (a JPEG stores its colour at half resolution: see measure_region)

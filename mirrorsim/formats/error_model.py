@@ -27,8 +27,7 @@ import numpy as np
 
 from mirrorsim.formats.reader import Reader, read_json
 from solver.errors import InputError
-from solver.lsq import ObjectSigmas, Sigma
-from solver.measurements import SIGMA_ALPHA_MAX_DEG, SIGMA_D_REL_MAX
+from solver.measurements import SIGMA_ALPHA_MAX_DEG, SIGMA_D_REL_MAX, ObjectSigmas, Sigma
 
 FORMAT = "mirrorsim error model"
 VERSION = 2

@@ -8,8 +8,14 @@ from typing import Any
 
 from mirrorsim.formats.reader import Reader, read_json
 from solver.errors import InputError
-from solver.lsq import BeaconMeasurement, ObjectSigmas, Sigma
-from solver.measurements import SIGMA_ALPHA_MAX_DEG, SIGMA_D_REL_MAX, Measurements
+from solver.measurements import (
+    SIGMA_ALPHA_MAX_DEG,
+    SIGMA_D_REL_MAX,
+    BeaconMeasurement,
+    Measurements,
+    ObjectSigmas,
+    Sigma,
+)
 
 # what detect adds beside the solver's inputs; the solver ignores it
 _DETECTOR_KEYS = ("bbox_px", "height_px", "u_axis", "clipped", "source")

@@ -24,8 +24,8 @@ from mirrorsim.pipelines.score import Report
 from mirrorsim.rendering.passes import reusing_renders
 from mirrorsim.scene import imperfections
 from mirrorsim.scene.model import Scene
-from solver.lsq import BeaconMeasurement, solve_measurements
-from solver.measurements import Measurements
+from solver.lsq import solve_measurements
+from solver.measurements import BeaconMeasurement, Measurements
 from solver.selfcal import PLAIN, SelfCalibration
 
 # central-difference steps: α (deg), d_total (cm), beacon position (cm); the solver is

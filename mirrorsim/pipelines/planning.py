@@ -20,8 +20,14 @@ from mirrorsim.scene.model import (
 )
 from mirrorsim.truth import optics, visibility
 from solver.beacon_set import BeaconSet, best_beacon_set
-from solver.lsq import ObjectSigmas, Sigma, as_object_sigmas
-from solver.measurements import SIGMA_ALPHA_MAX_DEG, SIGMA_D_REL_MAX, sigma_json
+from solver.measurements import (
+    SIGMA_ALPHA_MAX_DEG,
+    SIGMA_D_REL_MAX,
+    ObjectSigmas,
+    Sigma,
+    as_object_sigmas,
+    sigma_json,
+)
 from solver.placement import (
     BeaconSearch,
     MirrorPrior,

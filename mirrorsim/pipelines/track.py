@@ -36,7 +36,7 @@ from mirrorsim.truth.optics import target_facing
 from mirrorsim.truth.visibility import visibility
 from solver.errors import SolverError
 from solver.geometry import bearing_deg, line_normal, wrap_bearing
-from solver.lsq import BeaconMeasurement, Sigma
+from solver.measurements import BeaconMeasurement, Sigma
 from solver.particle import MovingBeaconFilter, PFParams, mirror_errors
 from solver.placement import path_points
 from solver.selfcal import check_position_sigma

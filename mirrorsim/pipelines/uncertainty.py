@@ -24,7 +24,8 @@ from mirrorsim.formats import dataset_table as table
 from mirrorsim.formats.error_model import KINDS, ErrorModel, measured_features
 from mirrorsim.formats.files import save_figure
 from solver.errors import SolverError
-from solver.lsq import BeaconMeasurement, solve_measurements
+from solver.lsq import solve_measurements
+from solver.measurements import BeaconMeasurement
 from solver.selfcal import SelfCalibration, parse_priors
 from solver.sltr import chi2_2_radius
 

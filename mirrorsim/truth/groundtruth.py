@@ -14,8 +14,7 @@ from mirrorsim.scene.model import Camera, Mirror, Occluder, Point2, Scene
 from mirrorsim.truth import optics, visibility
 from mirrorsim.truth.optics import ImagePx
 from solver.geometry import wrap_yaw
-from solver.lsq import BeaconMeasurement
-from solver.measurements import Measurements
+from solver.measurements import BeaconMeasurement, Measurements
 
 
 def _pt(v) -> Point2:
