@@ -85,10 +85,16 @@ class ObjectSigmas:
         every = [*bs, *([self.target] * n_targets)]
         sa = np.array([s.alpha_deg for s in every], float)
         sd = np.array([s.d_total_rel for s in every], float)
-        if not (np.all(sa > 0) and np.all(sd > 0) and np.all(np.isfinite(sa))
-                and np.all(np.isfinite(sd)) and np.isfinite(self.shared_alpha_deg)
-                and self.shared_alpha_deg >= 0):
-            raise SolverError(f"sigmas must be positive and finite, got {self}")
+        shared = self.shared_alpha_deg
+        if not (np.all(sa >= SIGMA_ALPHA_MIN_DEG) and np.all(sa <= SIGMA_ALPHA_MAX_DEG)
+                and np.all(sd >= SIGMA_D_REL_MIN) and np.all(sd <= SIGMA_D_REL_MAX)
+                and (shared == 0 or SIGMA_ALPHA_MIN_DEG <= shared <= SIGMA_ALPHA_MAX_DEG)):
+            raise SolverError(
+                f"each σ_α must be within [{SIGMA_ALPHA_MIN_DEG:g}, {SIGMA_ALPHA_MAX_DEG:g}]° "
+                f"(the shared one 0 or within them) and each σ_d within "
+                f"[{SIGMA_D_REL_MIN:g}, {SIGMA_D_REL_MAX:g}] of d_total; got σ_α "
+                f"{', '.join(f'{a:.3g}' for a in sa)}, σ_d "
+                f"{', '.join(f'{d:.3g}' for d in sd)}, shared {shared:.3g}")
         return sa, sd
 
 
@@ -100,6 +106,14 @@ def as_object_sigmas(sigma: Sigma | ObjectSigmas) -> ObjectSigmas:
 # σ's beyond these are no measurement: a bearing known to ±45° or a distance to ±100 %
 SIGMA_ALPHA_MAX_DEG = 45.0
 SIGMA_D_REL_MAX = 1.0
+# nor below these: a bearing to 1e-6° (3e-5 px on these cameras) or a distance to a
+# millionth of itself; the solver weighs each residual by 1/σ, and a σ of 1e-320 made
+# every weighted residual infinite (a crash, not an answer)
+SIGMA_ALPHA_MIN_DEG = 1e-6
+SIGMA_D_REL_MIN = 1e-6
+# a d_total beyond these is no bench's (cm): a path a kilometre long, or a tenth of a
+# millimetre; 1e300 overflowed the solver's arithmetic
+D_TOTAL_RANGE_CM = (0.01, 1e5)
 
 
 @dataclass(frozen=True)

@@ -27,6 +27,13 @@ NUISANCES = {"pan": ("pan_offset_deg", 0.0), "scale": ("range_scale", 1.0),
 WORDS = {"pan_offset_deg": ("pan offset", "°", ".4f"),
          "range_scale": ("range scale", "", ".4f"),
          "mirror_power_per_cm": ("mirror power 1/R", " /cm", ".2e")}
+# the smallest σ a prior or a beacon position may have: below, the prior's weight
+# swamps the measurements' by so much that the fit's information matrix is singular to
+# double precision (pan 1e-7°, scale 1e-7 and power 1e-7/cm still solved a three-beacon
+# exp1; scale 1e-8 and power 1e-8/cm did not).  A nuisance known better than this is
+# known: leave it out of the nuisances; a beacon known better, position_sigma 0
+PRIOR_MIN = {"pan": 1e-6, "scale": 1e-6, "power": 1e-6}
+POSITION_SIGMA_MIN_CM = 1e-4
 _PRIOR_UNITS = {"pan": lambda s: f"±{s:.3g}°", "scale": lambda s: f"±{100 * s:.3g} %",
                 "power": lambda s: f"±{s:.3g}/cm"}
 
@@ -51,8 +58,9 @@ class SelfCalibration:
     Raises
     ------
     SolverError
-        An unknown or repeated nuisance, a position σ that is not a finite length ≥ 0,
-        or a prior for a nuisance not estimated or whose σ is not a number > 0.
+        An unknown or repeated nuisance, a position σ that is neither 0 nor a finite
+        length ≥ :data:`POSITION_SIGMA_MIN_CM`, or a prior for a nuisance not estimated
+        or whose σ is below :data:`PRIOR_MIN`.
     """
 
     nuisances: tuple[str, ...] = ()
@@ -130,10 +138,12 @@ def describe_estimates(estimates: Mapping[str, float], sd: Mapping[str, float]) 
 
 
 def check_position_sigma(position_sigma: float) -> None:
-    """Refuse a beacon position σ that is not a finite length ≥ 0 (cm per axis)."""
-    if not (_number(position_sigma) and np.isfinite(position_sigma) and position_sigma >= 0):
-        raise SolverError("position_sigma must be a finite number ≥ 0 (cm), got "
-                          f"{position_sigma!r}")
+    """Refuse a beacon position σ that is not 0 (exactly known) or a finite length of at
+    least :data:`POSITION_SIGMA_MIN_CM` (cm per axis)."""
+    if not (_number(position_sigma) and np.isfinite(position_sigma)
+            and (position_sigma == 0 or position_sigma >= POSITION_SIGMA_MIN_CM)):
+        raise SolverError(f"position_sigma must be 0 (known exactly) or a finite number ≥ "
+                          f"{POSITION_SIGMA_MIN_CM:g} (cm), got {position_sigma!r}")
 
 
 def check_nuisance_sigma(priors: Mapping[str, float], nuisances: tuple[str, ...]) -> None:
@@ -146,8 +156,10 @@ def check_nuisance_sigma(priors: Mapping[str, float], nuisances: tuple[str, ...]
         if name not in nuisances:
             raise SolverError(f"a prior σ for {name!r}, which is not estimated (estimated: "
                               f"{', '.join(nuisances) or 'none'})")
-        if not (_number(s) and np.isfinite(s) and s > 0):
-            raise SolverError(f"the prior σ of {name} must be a number > 0, got {s!r}")
+        if not (_number(s) and np.isfinite(s) and s >= PRIOR_MIN[name]):
+            raise SolverError(f"the prior σ of {name} must be a number ≥ {PRIOR_MIN[name]:g} "
+                              f"(one known better is known: leave it out of the nuisances), "
+                              f"got {s!r}")
 
 
 def _number(x) -> bool:
@@ -159,9 +171,12 @@ def check_nuisances(nuisances: tuple[str, ...], nb: int | None, nt: int) -> None
     """Refuse unknown nuisances, and more unknowns than measurements (``nb`` None: the
     beacons are not known yet, the names only)."""
     bad = [n for n in nuisances if n not in NUISANCES]
-    if bad or len(set(nuisances)) != len(nuisances):
-        raise SolverError(f"unknown or repeated nuisance(s) {', '.join(bad) or nuisances}: "
-                          f"choose from {', '.join(NUISANCES)}")
+    if bad:
+        raise SolverError(f"unknown nuisance(s) {', '.join(map(str, bad))}: choose from "
+                          f"{', '.join(NUISANCES)}")
+    twice = sorted({n for n in nuisances if nuisances.count(n) > 1})
+    if twice:
+        raise SolverError(f"{', '.join(twice)} given twice: name each nuisance once")
     unknowns = 4 + len(nuisances)
     # the target's observations (one per frame) repeat one image's measurement: they
     # count once

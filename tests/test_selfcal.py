@@ -64,8 +64,10 @@ def test_self_calibration_refuses_what_it_cannot_observe():
     bs, ts = _measure(rng)
     with pytest.raises(SolverError, match="at least 2 beacon observations"):
         solve_measurements(OBS, bs[:1], ts, SIG, SelfCalibration(("pan", "scale")))
-    with pytest.raises(SolverError, match="unknown or repeated"):
+    with pytest.raises(SolverError, match="unknown nuisance"):
         solve_measurements(OBS, bs, ts, SIG, SelfCalibration(("roll",)))
+    with pytest.raises(SolverError, match=r"^pan given twice"):
+        SelfCalibration(("pan", "pan"))
     # two beacons standing at one place: their images cannot separate δ and s
     same = [bs[0], BeaconMeasurement(bs[0].position, bs[0].alpha_deg, bs[0].d_total)]
     with pytest.raises(SolverError, match="do not separate"):
@@ -411,7 +413,7 @@ def test_a_prior_tight_enough_is_the_plain_fit_and_a_wide_one_the_free_fit():
     plain = solve_measurements(OBS, bs, ts, SIG).target
     free = solve_measurements(OBS, bs, ts, SIG, SelfCalibration(nu)).target
     tight = solve_measurements(OBS, bs, ts, SIG,
-                               SelfCalibration(nu, priors={"pan": 1e-6, "scale": 1e-8})).target
+                               SelfCalibration(nu, priors={"pan": 1e-6, "scale": 1e-6})).target
     wide = solve_measurements(OBS, bs, ts, SIG,
                               SelfCalibration(nu, priors={"pan": 1e6, "scale": 1e6})).target
     assert np.linalg.norm(free - plain) > 0.05  # the case tells the two apart
@@ -427,11 +429,11 @@ def test_priors_are_refused_for_nuisances_not_estimated_and_when_not_positive(tm
     bs, ts = _measure(rng)
     with pytest.raises(SolverError, match="not estimated"):
         SelfCalibration(("pan",), priors={"scale": 0.01})
-    with pytest.raises(SolverError, match="must be a number > 0"):
+    with pytest.raises(SolverError, match="must be a number ≥ 1e-06"):
         SelfCalibration(("pan",), priors={"pan": 0.0})
-    with pytest.raises(SolverError, match="must be a number > 0"):
+    with pytest.raises(SolverError, match="must be a number ≥ 1e-06"):
         SelfCalibration(("pan",), priors={"pan": True})
-    with pytest.raises(SolverError, match="position_sigma must be a finite number"):
+    with pytest.raises(SolverError, match="position_sigma must be 0"):
         SelfCalibration(("pan",), np.nan)
     # numpy numbers are numbers, kept as plain floats (a dataset writes them as text)
     cal = SelfCalibration(("pan",), np.int64(1), {"pan": np.float32(0.25)})
@@ -445,8 +447,9 @@ def test_priors_are_refused_for_nuisances_not_estimated_and_when_not_positive(tm
         "observer": [0, 0], "target": {"alpha_deg": ts[0][0], "d_total": ts[0][1]},
         "beacons": [{"position": list(b.position), "alpha_deg": b.alpha_deg,
                      "d_total": b.d_total} for b in bs]}))
-    for prior, says in (("scale=0.01", "not estimated"), ("pan=-1", "> 0"),
-                        ("pan", "NAME=SIGMA"), ("pan=x", "NAME=SIGMA"), ("pan=nan", "> 0"),
+    for prior, says in (("scale=0.01", "not estimated"), ("pan=-1", "≥ 1e-06"),
+                        ("pan", "NAME=SIGMA"), ("pan=x", "NAME=SIGMA"), ("pan=nan", "≥ 1e-06"),
+                        ("pan=1e-320", "≥ 1e-06"),
                         ("pan=0.3,pan=0.4", "twice"), ("roll=1", "unknown nuisance")):
         assert main(["solve", str(path), "--calibrate", "pan", "--prior", prior]) == 2
         err = capsys.readouterr().err.strip().splitlines()
@@ -479,3 +482,56 @@ def test_a_pan_prior_adds_to_the_shared_alpha_offset_of_the_sigmas():
     assert both.target == pytest.approx(added.target, abs=1e-9)
     assert both.covariance[4, 4] == pytest.approx(added.covariance[4, 4], rel=1e-6)
     assert both.covariance[4, 4] > alone.covariance[4, 4]
+
+
+def test_sigmas_too_small_to_weigh_are_refused_before_the_solve(tmp_path, capsys):
+    """σ's of 1e-320 (a prior, a beacon position, a measurement's, the shared α offset,
+    an error model's) made every weighted residual infinite: a traceback.  Each is now
+    refused in one line, exit 2, naming its flag or key; the least σ's allowed solve."""
+    import json
+    from pathlib import Path
+
+    from mirrorsim.cli.main import main
+
+    bs, ts = _measure(np.random.default_rng(1))
+    doc = {"observer": [0, 0], "target": {"alpha_deg": ts[0][0], "d_total": ts[0][1]},
+           "beacons": [{"position": list(b.position), "alpha_deg": b.alpha_deg,
+                        "d_total": b.d_total} for b in bs]}
+    path = tmp_path / "m.json"
+    path.write_text(json.dumps(doc))
+    for extra, says in ((["--prior", "pan=1e-320"], "--prior"),
+                        (["--beacon-sigma", "1e-320"], "--beacon-sigma"),
+                        (["--prior", "pan=0.3", "--prior", "scale=0.01"], "given twice"),
+                        (["--calibrate", "scale"], "given twice")):
+        try:  # a repeated flag is argparse's usage error: SystemExit(2)
+            status = main(["solve", str(path), "--calibrate", "pan,scale", *extra])
+        except SystemExit as exc:
+            status = exc.code
+        err = capsys.readouterr().err.strip().splitlines()
+        assert status == 2 and says in err[-1], err
+    sigma = {"alpha_deg": 0.01, "d_total_rel": 0.002}
+    for key, block in (("sigma.alpha_deg", {**sigma, "alpha_deg": 1e-320}),
+                       ("sigma.d_total_rel", {**sigma, "d_total_rel": 1e-320}),
+                       ("sigma.shared_alpha_deg", {"target": sigma, "beacons": sigma,
+                                                   "shared_alpha_deg": 1e-320})):
+        bad = tmp_path / "s.json"
+        bad.write_text(json.dumps({**doc, "sigma": block}))
+        assert main(["solve", str(bad)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and key in err[0] and str(bad) in err[0], err
+    model = json.loads((Path(__file__).parents[1] / "mirrorsim" / "data"
+                        / "error_model.json").read_text())
+    tiny = tmp_path / "em.json"
+    tiny.write_text(json.dumps({**model, "shared_alpha_deg": 1e-320}))
+    assert main(["solve", str(path), "--error-model", str(tiny)]) == 2
+    assert "shared_alpha_deg" in capsys.readouterr().err
+    # the least σ's still solve (a nuisance or a beacon known to them is as good as known)
+    assert main(["solve", str(path), "--calibrate", "pan,scale,power", "--prior",
+                 "pan=1e-6,scale=1e-6,power=1e-6", "--beacon-sigma", "1e-4"]) == 0
+    least = {"alpha_deg": 1e-6, "d_total_rel": 1e-6}
+    path.write_text(json.dumps({**doc, "sigma": least}))
+    assert main(["solve", str(path), "--calibrate", "pan,scale"]) == 0
+    capsys.readouterr()
+    # a library caller gets the solver's one-line refusal, not an overflow
+    with pytest.raises(SolverError, match="each σ_α must be within"):
+        solve_measurements(OBS, bs, ts, ObjectSigmas.same(Sigma(1e-320, 0.002)))

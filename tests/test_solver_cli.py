@@ -129,6 +129,12 @@ def test_paper_table3_inputs_do_not_reproduce_its_outputs(capsys):
      '[{"position": [1, 2], "alpha_deg": 60, "d_total": 50}]}', "observer"),
     ('{"observer": [0, 0], "target": {"alpha_deg": "x", "d_total": 90}, "beacons": '
      '[{"position": [1, 2], "alpha_deg": 60, "d_total": 50}]}', "target.alpha_deg"),
+    # a d_total no bench has overflowed the solver; a key given twice was read as its last
+    ('{"observer": [0, 0], "target": {"alpha_deg": 60, "d_total": 90}, "beacons": '
+     '[{"position": [1, 2], "alpha_deg": 60, "d_total": 1e300}]}', "beacons[0].d_total"),
+    ('{"observer": [0, 0], "target": {"alpha_deg": 60, "d_total": 90}, "beacons": '
+     '[{"position": [1, 2], "alpha_deg": 60, "d_total": 50}], "observer": [5, 5]}',
+     "observer: given twice"),
 ])
 def test_bad_measurements_exit_2(tmp_path, capsys, content, key):
     f = tmp_path / "bad.json"
@@ -220,3 +226,39 @@ def test_json_to_stdout_pipes_alone(tmp_path, capsys):
         assert main(argv) == 0
         out, err = capsys.readouterr()
         assert isinstance(json.loads(out), dict) and err.strip()
+    # another JSON output given as - pipes alike; two outputs to stdout are refused
+    assert main(["check", str(SCENES / "exp1.yaml"), "--measurements", "-"]) == 0
+    out, err = capsys.readouterr()
+    assert "beacons" in json.loads(out) and err.strip()
+    assert main(["check", str(SCENES / "exp1.yaml"), "--measurements", "-", "--json",
+                 "-"]) == 2
+    out, err = capsys.readouterr()
+    assert not out and "--json writes to already" in err
+
+
+def test_an_input_inside_the_runs_own_output_folder_is_refused(tmp_path, capsys):
+    """A scene put into a folder mirrorsim marked as its own was overwritten by the
+    run's file of the same name (evaluate writes <name>.json there)."""
+    import shutil
+
+    from mirrorsim.formats.files import claim_output_folder
+
+    out = claim_output_folder(tmp_path / "o", "--out")
+    scene = out / "exp1.json"
+    shutil.copy(SCENES / "exp1.yaml", scene)
+    before = scene.read_bytes()
+    assert main(["evaluate", str(scene), "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert "holds this run's input SCENE" in err[-1], err
+    assert scene.read_bytes() == before and sorted(p.name for p in out.iterdir()) == sorted(
+        [scene.name, *(p.name for p in out.iterdir() if p.name.startswith("."))])
+
+
+def test_track_refuses_a_beacon_sigma_it_would_not_use(tmp_path, capsys):
+    """exp1's one beacon is the moving one: --beacon-sigma (for fixed beacons) would
+    change nothing, and was silently ignored."""
+    argv = ["track", str(SCENES / "exp1.yaml"), "--beacon-sigma", "0.5", "--out",
+            str(tmp_path / "t"), "--quiet"]
+    assert main(argv) == 2
+    assert "no fixed beacon" in capsys.readouterr().err
+    assert not (tmp_path / "t").exists()

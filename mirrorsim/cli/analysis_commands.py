@@ -156,7 +156,7 @@ def _plan(args) -> int:
     from mirrorsim.cli.tables import plan_text
     from mirrorsim.formats.error_model import default_error_model
     from mirrorsim.pipelines.planning import plan_scene
-    from solver.measurements import SIGMA_D_REL_MAX, ObjectSigmas, Sigma
+    from solver.measurements import SIGMA_D_REL_MAX, SIGMA_D_REL_MIN, ObjectSigmas, Sigma
 
     finite(args, "sigma_alpha", "sigma_d", "eps", "yaw_spread", "d1_spread", "step")
     if (args.sigma_alpha is None) != (args.sigma_d is None):
@@ -164,9 +164,10 @@ def _plan(args) -> int:
                           "give --sigma-alpha and --sigma-d together")
     if args.sigma_alpha is not None and args.error_model:
         raise BadArgument("--error-model", "give either it or --sigma-alpha/--sigma-d")
-    if args.sigma_d is not None and not 0 < args.sigma_d <= 100 * SIGMA_D_REL_MAX:
-        raise BadArgument("--sigma-d", f"{args.sigma_d:g}: need 0 < σ_d ≤ "
-                          f"{100 * SIGMA_D_REL_MAX:g} (% of d_total)")
+    if args.sigma_d is not None and not (100 * SIGMA_D_REL_MIN <= args.sigma_d
+                                         <= 100 * SIGMA_D_REL_MAX):
+        raise BadArgument("--sigma-d", f"{args.sigma_d:g}: need {100 * SIGMA_D_REL_MIN:g} ≤ "
+                          f"σ_d ≤ {100 * SIGMA_D_REL_MAX:g} (% of d_total)")
     scene = load(args.scene)
     sigma = (ObjectSigmas.same(Sigma(args.sigma_alpha, args.sigma_d / 100.0))
              if args.sigma_alpha is not None
@@ -205,7 +206,7 @@ def _dataset_options(p):
     calibrate_option(p)  # needs --beacons (or a spec's beacon.count) that carries them
     common(p, scene=False, variant=True, quiet=True,
            error_model="each row's measurement σ's, which weight its solve and make its "
-                       "ellipse (default: the model shipped for the ideal bench)")
+                       "ellipse")
     p.add_argument("--resume", action="store_true",
                    help="finish an interrupted run, or extend one to a larger --n (the same "
                    "seed and settings: the added scenes are those a run of that --n makes)")
@@ -282,7 +283,8 @@ def _errormodel_options(p):
     common(p, scene=False, json="the validation (with --test)",
            error_model="the model to --test, when no DATASET is fitted")
     output(p, "--plot", "file", type=Path, metavar="PNG", suffixes=(".png",),
-           help="the reliability diagram (with --test; default beside the model)")
+           help="the reliability diagram (with --test; default: beside a model fitted "
+           "here, none for a model given with --error-model, whose folder is yours)")
 
 
 @command("errormodel", "fit the detector's error model to a dataset, and test it on another",

@@ -17,7 +17,7 @@ import warnings
 
 from mirrorsim import __version__
 from mirrorsim.cli import analysis_commands, scene_commands  # noqa: F401 (they register)
-from mirrorsim.cli.registry import COMMANDS, check_outputs
+from mirrorsim.cli.registry import COMMANDS, check_outputs, stdout_output
 from mirrorsim.errors import (
     BadArgument,
     BadParameter,
@@ -106,10 +106,10 @@ def _run(args: argparse.Namespace) -> int:
     warnings.showwarning = one_line_warning
     try:
         check_outputs(args)
-        if str(getattr(args, "json", "")) != "-":
+        if not stdout_output(args):
             return args.handler(args)
-        # `--json -`: stdout carries the JSON alone (it pipes into jq); what the command
-        # prints for people goes to stderr
+        # `--json -` (or another JSON output given as -): stdout carries the JSON alone
+        # (it pipes into jq); what the command prints for people goes to stderr
         out = sys.stdout
         args.json_stdout = out
         with contextlib.redirect_stdout(sys.stderr):

@@ -73,6 +73,17 @@ def check_outputs(args: argparse.Namespace) -> None:
                           ) from None
 
 
+def stdout_output(args: argparse.Namespace) -> str | None:
+    """The flag of the one output given as ``-`` (stdout), or None; two are refused, as
+    their documents would run together."""
+    dashes = [flag for dest, flag, _kind in getattr(args, "outputs", None) or []
+              if str(getattr(args, dest, None)) == "-"]
+    if len(dashes) > 1:
+        raise BadArgument(dashes[1], f"- (stdout), which {dashes[0]} writes to already: "
+                          "give one of them a file")
+    return dashes[0] if dashes else None
+
+
 def _check_outputs(args: argparse.Namespace, checking: list[str]) -> None:
     files: dict[Path, str] = {}
     for dest, flag, kind in getattr(args, "outputs", None) or []:
@@ -82,6 +93,8 @@ def _check_outputs(args: argparse.Namespace, checking: list[str]) -> None:
             if value is None and getattr(args, "default_out", False):
                 check_output_dir(default_out("x").parent, flag, ours=False)
             check_output_dir(value, flag, ours=kind == "dir")
+            if kind == "dir" and value is not None:
+                _check_inputs_outside(args, Path(value), flag)
             continue
         check_output_file(value, flag)
         _check_not_an_input(args, value, flag)
@@ -112,11 +125,25 @@ def _check_files_outside(args: argparse.Namespace, folder: Path) -> None:
                               "whose file names the run gives: put it elsewhere")
 
 
+def _check_inputs_outside(args: argparse.Namespace, folder: Path, flag: str) -> None:
+    """No input file of the run inside ``folder``, the run's output folder: the run
+    names the files it writes there, and one of them may be the input's name."""
+    folder = folder.resolve()
+    for dest, name, kind in getattr(args, "inputs", None) or []:
+        source = getattr(args, dest, None)
+        if kind == "file" and source is not None and str(source) != "-" and \
+                Path(source).resolve().is_relative_to(folder):
+            raise OutputError(folder, f"{flag}: holds this run's input {name} "
+                              f"({str(source)!r}), and the run names the files it writes "
+                              "there: move the input out, or choose another folder")
+
+
 def out_folder(args: argparse.Namespace, scene: Scene, sub: str = "") -> Path:
     """The run's output folder, claimed (:func:`claim_output_folder`): ``--out``, else
     ``renders/<name>/<sub>``; no file output of the run may lie inside it."""
     out = args.out if args.out is not None else default_out(scene.name) / sub
     _check_files_outside(args, out)
+    _check_inputs_outside(args, out, "--out")
     return claim_output_folder(out, "--out")
 
 
@@ -182,18 +209,34 @@ def common(p: argparse.ArgumentParser, *, scene: bool = True, out: str | None = 
                        "settings)")
 
 
-def calibrate_option(p: argparse.ArgumentParser) -> None:
+class _Once(argparse.Action):
+    """Store an option's value, refusing the option a second time: for a list in one
+    value (``--prior pan=0.3,scale=0.006``), a repeat would otherwise drop the first
+    silently, where a name repeated inside the value is refused."""
+
+    def __call__(self, _parser, namespace, values, _option_string=None):
+        seen = f"_given_{self.dest}"
+        if getattr(namespace, seen, False):
+            raise argparse.ArgumentError(self, "given twice: give it once (a list in one "
+                                         "value, comma-separated)")
+        setattr(namespace, seen, True)
+        setattr(namespace, self.dest, values)
+
+
+def calibrate_option(p: argparse.ArgumentParser, beacon_sigma_alone: bool = True) -> None:
     """``--calibrate pan,scale[,power]``, ``--beacon-sigma CM`` and ``--prior NAME=σ,…``:
-    self-calibration's settings (:func:`calibration_of`)."""
-    p.add_argument("--calibrate", default="", metavar="pan,scale[,power]",
+    self-calibration's settings (:func:`calibration_of`); ``beacon_sigma_alone`` False:
+    the command takes --beacon-sigma only with --calibrate."""
+    p.add_argument("--calibrate", default="", metavar="pan,scale[,power]", action=_Once,
                    help="estimate bench errors shared by every measurement with the mirror "
                    "(self-calibration; needs 2+ beacons, 3+ for all three): pan, an offset on "
                    "every alpha (the mount's pan reading); scale, a factor on every d_total "
                    "(the calibration); power, the mirror's curvature 1/R, which moves each "
                    "image by its own amount; comma-separated")
-    beacon_sigma_option(p, "each beacon's offset is then estimated with that prior, and the "
+    beacon_sigma_option(p, ("" if beacon_sigma_alone else "with --calibrate only: ")
+                        + "each beacon's offset is then estimated with that prior, and the "
                         "ellipse includes it")
-    p.add_argument("--prior", default="", metavar="NAME=SIGMA,...",
+    p.add_argument("--prior", default="", metavar="NAME=SIGMA,...", action=_Once,
                    help="what the bench knows of some of --calibrate's nuisances before the "
                    "frames, as a σ each: pan in degrees, scale as a fraction (0.006: 0.6 %%), "
                    "power in 1/cm; e.g. pan=0.3,scale=0.006 for a pan reading good to about "
@@ -231,16 +274,20 @@ def calibration_of(args: argparse.Namespace, n_beacons: int | None = None,
 
 def beacon_sigma_option(p: argparse.ArgumentParser, what: str) -> None:
     """``--beacon-sigma CM``: how well the beacons' believed positions are known."""
-    p.add_argument("--beacon-sigma", type=float, default=0.0, metavar="CM",
+    p.add_argument("--beacon-sigma", type=float, default=0.0, metavar="CM", action=_Once,
                    help="how well each beacon's position is known, cm per axis (default 0: "
                    f"exactly); {what} (positions read off a pegboard by hand: ~0.1)")
 
 
 def beacon_sigma_of(args: argparse.Namespace) -> float:
-    """--beacon-sigma, checked: finite, 0..MAX_BEACON_SIGMA cm."""
+    """--beacon-sigma, checked: 0 (exactly known), or finite within
+    POSITION_SIGMA_MIN_CM..MAX_BEACON_SIGMA cm."""
+    from solver.selfcal import POSITION_SIGMA_MIN_CM
+
     v = args.beacon_sigma
-    if not (v == v and 0.0 <= v <= MAX_BEACON_SIGMA):  # v == v: not NaN
-        raise BadArgument("--beacon-sigma", f"{v:g} must be within 0..{MAX_BEACON_SIGMA:g} cm")
+    if not (v == 0 or POSITION_SIGMA_MIN_CM <= v <= MAX_BEACON_SIGMA):  # NaN fails both
+        raise BadArgument("--beacon-sigma", f"{v:g} must be 0 (known exactly) or within "
+                          f"{POSITION_SIGMA_MIN_CM:g}..{MAX_BEACON_SIGMA:g} cm")
     return float(v)
 
 

@@ -94,7 +94,8 @@ def _check(args) -> int:
     emit(args, truth.to_json())
     if args.measurements:
         emit_json(args.measurements, {**truth.exact_measurements().to_json(),
-                                      "source": "exact geometry (mirrorsim check)"})
+                                      "source": "exact geometry (mirrorsim check)"},
+                  getattr(args, "json_stdout", None))
     return 0
 
 
@@ -256,7 +257,7 @@ def _budget_options(p):
     common(p, out="output folder (default renders/<name>/budget/)", json="the budget", spp=True,
            variant=True, quiet=True, error_model="each measurement's σ's (the solver's "
            "weights)")
-    calibrate_option(p)
+    calibrate_option(p, beacon_sigma_alone=False)
     from mirrorsim.pipelines.score import EXTRA_FILES
 
     p.add_argument("--keep", nargs="*", default=[], choices=EXTRA_FILES,
@@ -360,6 +361,9 @@ def _track(args) -> int:
     at_least(("--seed", args.seed, 0))
     position_sigma = beacon_sigma_of(args)
     scene = load(args.scene)
+    if position_sigma and len(scene.beacons) < 2:  # it would change nothing, silently
+        raise BadArgument("--beacon-sigma", f"{args.scene} has no fixed beacon (its one "
+                          "beacon is the moving one, whose position is the odometry's)")
     if args.spp is not None:  # --seed is the run's (each pose's render seed follows it)
         scene = scene.with_render(spp=args.spp)
     check_options(args.path, args.steps, args.odometry_sigma, args.side, args.step,

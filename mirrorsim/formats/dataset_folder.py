@@ -10,6 +10,7 @@ import math
 import textwrap
 import warnings
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -82,17 +83,49 @@ def claim_folder(out: Path, meta: dict, resume: bool) -> None:
                            "choose another folder")
     if old.get("calibrate") != meta.get("calibrate"):
         raise DatasetError(out, f"was made with other self-calibration settings "
-                           f"({old.get('calibrate') or 'none'}): resume it with the same "
-                           "nuisances, beacon σ and priors, or choose another folder")
-    same = ("seed", "spp", "spec")  # n may grow: scene i is drawn from (seed, i) alone,
-    # so the added scenes are the ones a dataset of the larger n would have had
-    if {k: old[k] for k in same} != {k: meta[k] for k in same}:
-        raise DatasetError(out, f"holds a dataset made with other settings "
-                           f"(seed={old['seed']}, spp={old['spp']}, its own spec)")
+                           f"({_calibration_words(old.get('calibrate'))}): resume it with "
+                           "the same nuisances, beacon σ and priors, or choose another folder")
+    # n may grow: scene i is drawn from (seed, i) alone, so the added scenes are the
+    # ones a dataset of the larger n would have had
+    differ = [f"{k} {old[k]} (now {meta[k]})" for k in ("seed", "spp") if old[k] != meta[k]]
+    differ += [f"spec {d}" for d in _differences(old["spec"], meta["spec"])]
+    if differ:
+        raise DatasetError(out, f"holds a dataset made with other settings: "
+                           f"{'; '.join(differ)}: resume it with the same ones, or choose "
+                           "another folder")
     if not isinstance(old["n"], int) or meta["n"] < old["n"]:
         raise DatasetError(out, f"holds {old['n']} scenes: resume it with n ≥ {old['n']} "
                            f"(more scenes extend it), not {meta['n']}")
     reject_bad_rows(out, meta["n"], meta["seed"])
+
+
+def _calibration_words(cal: Any) -> str:
+    """A dataset's self-calibration settings in words (``none`` where it had none)."""
+    if not isinstance(cal, dict) or not cal:
+        return "none"
+    try:
+        return "; ".join(part for part in (
+            f"nuisances {', '.join(cal['nuisances'])}" if cal.get("nuisances") else "",
+            f"beacon σ {cal['position_sigma']:g} cm" if cal.get("position_sigma") else "",
+            f"priors {priors_text(cal['priors'])}" if cal.get("priors") else "") if part) \
+            or "none"
+    except (TypeError, ValueError, KeyError):  # a hand-edited record: shown as it is
+        return str(cal)
+
+
+def _differences(old: Any, new: Any, key: str = "", most: int = 3) -> list[str]:
+    """Where two specs differ, as ``key.path old (now new)``, at most ``most`` of them
+    (a spec's ``beacon.count`` is where ``--beacons`` goes, for one)."""
+    if isinstance(old, dict) and isinstance(new, dict):
+        out: list[str] = []
+        for k in sorted(set(old) | set(new), key=str):
+            path = f"{key}.{k}" if key else str(k)
+            if k not in old or k not in new:
+                out.append(f"{path} {old.get(k, 'absent')} (now {new.get(k, 'absent')})")
+            else:
+                out += _differences(old[k], new[k], path, most)
+        return out[:most]
+    return [] if old == new else [f"{key} {old} (now {new})"]
 
 
 def read_row(path: Path, index: int, seed: int) -> table.DatasetRow:

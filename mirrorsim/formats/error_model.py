@@ -25,9 +25,17 @@ from typing import Any
 
 import numpy as np
 
+from mirrorsim.formats.measurements import read_shared_alpha
 from mirrorsim.formats.reader import Reader, read_json
 from solver.errors import InputError
-from solver.measurements import SIGMA_ALPHA_MAX_DEG, SIGMA_D_REL_MAX, ObjectSigmas, Sigma
+from solver.measurements import (
+    SIGMA_ALPHA_MAX_DEG,
+    SIGMA_ALPHA_MIN_DEG,
+    SIGMA_D_REL_MAX,
+    SIGMA_D_REL_MIN,
+    ObjectSigmas,
+    Sigma,
+)
 
 FORMAT = "mirrorsim error model"
 VERSION = 2
@@ -127,13 +135,15 @@ class ErrorModel:
         q = self.fits[kind]
         scale = self.fx_scale(fx_px)
 
-        def at(law: LogSigma) -> float:
+        def at(law: LogSigma, low: float, high: float) -> float:
             x = measured_features(d_total, alpha_deg, 0.0 if pan_deg is None else pan_deg)
             if pan_deg is None:
                 x[..., 1] = law.mean[1]
-            return float(law(x)) * scale
+            # a law taken far beyond its training rows stays within what any σ must be
+            return float(np.clip(float(law(x)) * scale, low, high))
 
-        return Sigma(at(q["alpha"].log_sigma), at(q["d_rel"].log_sigma))
+        return Sigma(at(q["alpha"].log_sigma, SIGMA_ALPHA_MIN_DEG, SIGMA_ALPHA_MAX_DEG),
+                     at(q["d_rel"].log_sigma, SIGMA_D_REL_MIN, SIGMA_D_REL_MAX))
 
     def sigmas(self, target: tuple[float, float], beacons: list[tuple[float, float]],
                pan_deg: float | None, fx_px: float | None = None) -> ObjectSigmas:
@@ -194,8 +204,7 @@ def model_from_dict(data: Any, source: str | Path) -> ErrorModel:
     prov = top.get("provenance")
     fx = top.get("fx_px")
     fx = None if fx is None else r.number(fx, "fx_px", positive=True, high=1e6)
-    shared = r.number(top.get("shared_alpha_deg", 0.0), "shared_alpha_deg", low=0,
-                      high=SIGMA_ALPHA_MAX_DEG)
+    shared = read_shared_alpha(r, top.get("shared_alpha_deg", 0.0), "shared_alpha_deg")
     return ErrorModel(fits, tuple(bias_features), prov if isinstance(prov, dict) else None, fx,
                       shared)
 
@@ -212,8 +221,9 @@ def _quantity(r: Reader, value: Any, key: str, q: str) -> QuantityFit:
                    vec("weights"), vec("mean"), vec("scale"))
     if not all(s > 0 for s in law.scale):
         raise r.fail(f"{key}.log_sigma.scale", f"{list(law.scale)}: scales must be > 0")
-    high = SIGMA_ALPHA_MAX_DEG if q == "alpha" else SIGMA_D_REL_MAX
-    typical = r.number(f["typical_sigma"], f"{key}.typical_sigma", positive=True, high=high)
+    low, high = ((SIGMA_ALPHA_MIN_DEG, SIGMA_ALPHA_MAX_DEG) if q == "alpha"
+                 else (SIGMA_D_REL_MIN, SIGMA_D_REL_MAX))
+    typical = r.number(f["typical_sigma"], f"{key}.typical_sigma", low=low, high=high)
     bias = f.get("bias", [])
     return QuantityFit(law, int(r.number(f["n"], f"{key}.n", low=0)),
                        int(r.number(f.get("gross_errors", 0), f"{key}.gross_errors", low=0)),

@@ -9,8 +9,11 @@ from typing import Any
 from mirrorsim.formats.reader import Reader, read_json
 from solver.errors import InputError
 from solver.measurements import (
+    D_TOTAL_RANGE_CM,
     SIGMA_ALPHA_MAX_DEG,
+    SIGMA_ALPHA_MIN_DEG,
     SIGMA_D_REL_MAX,
+    SIGMA_D_REL_MIN,
     BeaconMeasurement,
     Measurements,
     ObjectSigmas,
@@ -46,7 +49,8 @@ def measurements_from_dict(data: Any, source: str | Path = "<measurements>") -> 
         key = f"target[{i}]" if listed else "target"
         t = r.mapping(t, key, ("alpha_deg", "d_total"), _DETECTOR_KEYS)
         targets.append((r.number(t["alpha_deg"], f"{key}.alpha_deg"),
-                        r.number(t["d_total"], f"{key}.d_total", positive=True)))
+                        r.number(t["d_total"], f"{key}.d_total", low=D_TOTAL_RANGE_CM[0],
+                                 high=D_TOTAL_RANGE_CM[1])))
     if not isinstance(top["beacons"], list) or not top["beacons"]:
         raise r.fail("beacons", "expected a non-empty list")
     beacons = []
@@ -56,7 +60,8 @@ def measurements_from_dict(data: Any, source: str | Path = "<measurements>") -> 
         beacons.append(BeaconMeasurement(
             r.pair(b["position"], f"{key}.position"),
             r.number(b["alpha_deg"], f"{key}.alpha_deg"),
-            r.number(b["d_total"], f"{key}.d_total", positive=True)))
+            r.number(b["d_total"], f"{key}.d_total", low=D_TOTAL_RANGE_CM[0],
+                     high=D_TOTAL_RANGE_CM[1])))
     sigma = read_sigmas(r, top["sigma"], len(beacons)) if "sigma" in top else None
     pan = (r.number(top["observer_pan_deg"], "observer_pan_deg", low=-360.0, high=360.0)
            if "observer_pan_deg" in top else None)
@@ -75,8 +80,8 @@ def read_sigmas(r: Reader, value: Any, n_beacons: int, key: str = "sigma") -> Ob
             beacons = tuple(read_sigma(r, b, f"{key}.beacons[{i}]") for i, b in enumerate(raw))
         else:
             beacons = (read_sigma(r, raw, f"{key}.beacons"),)
-        shared = r.number(s.get("shared_alpha_deg", 0.0), f"{key}.shared_alpha_deg", low=0.0,
-                          high=SIGMA_ALPHA_MAX_DEG)
+        shared = read_shared_alpha(r, s.get("shared_alpha_deg", 0.0),
+                                   f"{key}.shared_alpha_deg")
         return ObjectSigmas(read_sigma(r, s["target"], f"{key}.target"), beacons, shared)
     return ObjectSigmas.same(read_sigma(r, value, key))
 
@@ -84,7 +89,15 @@ def read_sigmas(r: Reader, value: Any, n_beacons: int, key: str = "sigma") -> Ob
 def read_sigma(r: Reader, value: Any, key: str = "sigma") -> Sigma:
     """A σ pair: α in degrees and d_total relative (a fraction), each > 0 and sensible."""
     s = r.mapping(value, key, ("alpha_deg", "d_total_rel"))
-    return Sigma(r.number(s["alpha_deg"], f"{key}.alpha_deg", positive=True,
+    return Sigma(r.number(s["alpha_deg"], f"{key}.alpha_deg", low=SIGMA_ALPHA_MIN_DEG,
                           high=SIGMA_ALPHA_MAX_DEG),
-                 r.number(s["d_total_rel"], f"{key}.d_total_rel", positive=True,
+                 r.number(s["d_total_rel"], f"{key}.d_total_rel", low=SIGMA_D_REL_MIN,
                           high=SIGMA_D_REL_MAX))
+
+
+def read_shared_alpha(r: Reader, value: Any, key: str) -> float:
+    """The σ (deg) of an α offset every image of a frame shares: 0 (none) or a σ_α."""
+    shared = r.number(value, key, low=0.0, high=SIGMA_ALPHA_MAX_DEG)
+    if 0 < shared < SIGMA_ALPHA_MIN_DEG:
+        raise r.fail(key, f"{shared:g} must be 0 (none) or ≥ {SIGMA_ALPHA_MIN_DEG:g}")
+    return shared

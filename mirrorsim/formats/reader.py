@@ -44,12 +44,32 @@ def read_input_text(path: str | Path, error_class: type[InputError] = InputError
         raise error_class(path, "", f"cannot read: {why}") from None
 
 
+class _DuplicateKey(ValueError):
+    def __init__(self, key: str):
+        super().__init__(key)
+        self.key = key
+
+
+def _unique_keys(pairs: list[tuple[str, Any]]) -> dict:
+    """A JSON object's pairs as a dict, refusing a key given twice (as the scene reader
+    refuses one in YAML)."""
+    out: dict = {}
+    for k, v in pairs:
+        if k in out:
+            raise _DuplicateKey(k)
+        out[k] = v
+    return out
+
+
 def read_json(path: str | Path, error_class: type[InputError] = InputError) -> Any:
     """Parse a JSON file, raising ``error_class`` with one line for a missing, unreadable,
     malformed or absurdly nested one."""
     text = read_input_text(path, error_class)
     try:
-        return json.loads(text)
+        return json.loads(text, object_pairs_hook=_unique_keys)
+    except _DuplicateKey as exc:
+        raise error_class(path, exc.key, "given twice in one object (JSON would keep the "
+                          "last silently): give it once") from None
     except json.JSONDecodeError as exc:
         raise error_class(path, "", f"malformed JSON: line {exc.lineno}, column "
                           f"{exc.colno}: {exc.msg}") from None

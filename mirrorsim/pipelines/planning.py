@@ -22,7 +22,9 @@ from mirrorsim.truth import optics, visibility
 from solver.beacon_set import BeaconSet, best_beacon_set
 from solver.measurements import (
     SIGMA_ALPHA_MAX_DEG,
+    SIGMA_ALPHA_MIN_DEG,
     SIGMA_D_REL_MAX,
+    SIGMA_D_REL_MIN,
     ObjectSigmas,
     Sigma,
     as_object_sigmas,
@@ -194,12 +196,15 @@ def plan_scene(scene: Scene, sigma: Sigma | ObjectSigmas | None = None, eps_deg:
 def _check_parameters(sigma: ObjectSigmas, eps_deg: float, step: float,
                       yaw_spread_deg: float, d1_spread: float) -> None:
     pairs = (sigma.target, *sigma.beacons)
-    for name, v, hi in (*(("sigma.alpha_deg", s.alpha_deg, SIGMA_ALPHA_MAX_DEG) for s in pairs),
-                        *(("sigma.d_total_rel", s.d_total_rel, SIGMA_D_REL_MAX) for s in pairs),
-                        ("eps_deg", eps_deg, 45)):
-        if not 0 < v < hi or (name != "eps_deg" and v == hi):
-            raise BadParameter(name, f"{v} must be > 0 and {'<' if name == 'eps_deg' else '≤'} "
-                               f"{hi:g}")
+    for name, v, lo, hi in (
+            *(("sigma.alpha_deg", s.alpha_deg, SIGMA_ALPHA_MIN_DEG, SIGMA_ALPHA_MAX_DEG)
+              for s in pairs),
+            *(("sigma.d_total_rel", s.d_total_rel, SIGMA_D_REL_MIN, SIGMA_D_REL_MAX)
+              for s in pairs)):
+        if not lo <= v <= hi:
+            raise BadParameter(name, f"{v} must be within [{lo:g}, {hi:g}]")
+    if not 0 < eps_deg < 45:
+        raise BadParameter("eps_deg", f"{eps_deg} must be > 0 and < 45")
     if not MIN_STEP <= step <= 20:
         raise BadParameter("step", f"{step} must be within [{MIN_STEP:g}, 20] cm")
     for name, v in (("yaw_spread_deg", yaw_spread_deg), ("d1_spread", d1_spread)):
