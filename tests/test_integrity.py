@@ -631,3 +631,30 @@ def test_a_cached_frame_without_its_ids_is_rendered_again_when_they_are_asked(tm
     again = render_to_files(scene, tmp_path, progress=False, reuse=True, ids=True)
     assert not again.reused and again.ids_png.exists()
     assert render_to_files(scene, tmp_path, progress=False, reuse=True, ids=True).reused
+
+
+def test_a_calibrations_key_covers_all_the_code_it_comes_out_of():
+    """The calibration cache's key holds a hash of the code a K comes out of.  That code
+    is read off the imports (a list kept by hand had missed detection/regions.py, where
+    the segmentation moved); held here against what a process actually loads to
+    calibrate, and without importing Mitsuba to make the key."""
+    import subprocess
+    import sys
+
+    from mirrorsim.pipelines.calibrate import code_modules
+
+    covered = code_modules()
+    assert {"mirrorsim.detection.regions", "mirrorsim.detection.edges",
+            "mirrorsim.scene.model", "mirrorsim.rendering.sensor",
+            "mirrorsim.rendering.passes"} <= set(covered)
+    assert all(p.is_file() for p in covered.values())
+    assert all(n.split(".")[0] in ("mirrorsim", "solver") for n in covered)
+    probe = ("import sys, mirrorsim.pipelines.calibrate as c; c.code_fingerprint(); "
+             "print('mitsuba' in sys.modules); "
+             "import mirrorsim.rendering.passes; "  # what a calibration's render imports
+             "print(' '.join(n for n, m in sys.modules.items() if n.split('.')[0] in "
+             "('mirrorsim', 'solver') and not hasattr(m, '__path__')))")
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                         check=True).stdout.split("\n")
+    assert out[0] == "False"  # the key is made without Mitsuba
+    assert set(out[1].split()) <= set(covered), set(out[1].split()) - set(covered)

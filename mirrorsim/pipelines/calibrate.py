@@ -15,6 +15,7 @@ an entry whose K does not follow from its measured pixel heights is measured aga
 
 from __future__ import annotations
 
+import ast
 import functools
 import hashlib
 import importlib.util
@@ -55,23 +56,59 @@ def calibration_key(camera: Camera, target_size, pencil_height: float,
     return key + (f"|reference_error={distance_error:.9g}" if distance_error else "")
 
 
-# the code a K comes out of: the reference render and the measurement.  A K measured by
-# other code is another K (a cache kept across a detector change served constants
-# 0.011 % (panel) and 0.019 % (pencil) off those this code measures), so the key holds a
-# hash of these modules' source rather than a version someone must remember to bump
-_CODE = ("mirrorsim.detection.edges", "mirrorsim.detection.image_geometry",
-         "mirrorsim.detection.detector", "mirrorsim.rendering.mitsuba_scene",
-         "mirrorsim.rendering.passes", "mirrorsim.rendering.sensor",
-         "mirrorsim.pipelines.calibrate")
+# the code a K comes out of: this module and every module of ours it imports, directly
+# or through others (found by reading their imports, not by what a process has loaded).
+# A K measured by other code is another K (a cache kept across a detector change served
+# constants 0.011 % (panel) and 0.019 % (pencil) off those this code measures), so the
+# key holds a hash of their source rather than a version someone must remember to bump,
+# or a list of modules someone must remember to extend (the segmentation's move to
+# detection/regions.py had left it out of such a list)
+_OURS = ("mirrorsim", "solver")
+
+
+def code_modules(root: str = __name__) -> dict[str, Path]:
+    """``root`` and every module of mirrorsim and the solver it imports, transitively,
+    with its source file: found by reading the ``import`` statements of their source
+    (lazy imports too), without importing anything (Mitsuba only when a render is
+    needed)."""
+    seen: dict[str, Path] = {}
+    todo = [root]
+    while todo:
+        name = todo.pop()
+        path = _source_of(name)
+        if name in seen or path is None:
+            continue
+        seen[name] = path
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Import):
+                todo += [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
+                # `from package import module` names a module, `from module import name`
+                # a name in it (no source of that name: the module itself counts)
+                todo += [node.module, *(f"{node.module}.{a.name}" for a in node.names)]
+    return dict(sorted(seen.items()))
+
+
+def _source_of(name: str) -> Path | None:
+    """The source file of module ``name`` of ours (None: not ours, or not a module)."""
+    parts = name.split(".")
+    if parts[0] not in _OURS:
+        return None
+    spec = importlib.util.find_spec(parts[0])  # a top-level package: nothing is run
+    base = Path(spec.origin).parent.joinpath(*parts[1:])
+    for path in (base.with_suffix(".py"), base / "__init__.py"):
+        if path.is_file():
+            return path
+    return None
 
 
 @functools.cache
 def code_fingerprint() -> str:
-    """SHA-256 (12 hex digits) of the source of the modules a K depends on."""
+    """SHA-256 (12 hex digits) of the source of the modules a K depends on
+    (:func:`code_modules`)."""
     h = hashlib.sha256()
-    for name in _CODE:
-        spec = importlib.util.find_spec(name)
-        h.update(Path(spec.origin).read_bytes())
+    for name, path in code_modules().items():
+        h.update(name.encode() + b"\0" + path.read_bytes())
     return h.hexdigest()[:12]
 
 
