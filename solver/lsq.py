@@ -11,8 +11,14 @@ import numpy as np
 
 from solver.errors import SolverError
 from solver.geometry import line_normal, unit, wrap_bearing
-from solver.measurements import BeaconMeasurement, ObjectSigmas, Sigma, as_object_sigmas
-from solver.selfcal import NUISANCES, PLAIN, SelfCalibration, check_nuisances
+from solver.measurements import (
+    BeaconMeasurement,
+    ObjectSigmas,
+    Sigma,
+    as_object_sigmas,
+    check_measurements,
+)
+from solver.selfcal import NUISANCES, PLAIN, SelfCalibration, as_calibration, check_nuisances
 from solver.sltr import MirrorLine, Solution, observe, ray_hits_line, solve_single
 
 ArrayLike = np.typing.ArrayLike
@@ -344,7 +350,32 @@ def solve_measurements(observer, beacons: list[BeaconMeasurement],
                        calibration: SelfCalibration = PLAIN) -> Solution:
     """The solver's front door: the closed form for one beacon and one target without
     σ's and without self-calibration, weighted least squares (with covariance when σ's
-    are given) otherwise."""
+    are given) otherwise.
+
+    Parameters
+    ----------
+    observer : (x, y)
+        The camera's position (cm).
+    beacons : list of BeaconMeasurement
+        Each beacon's known position and its image's α (deg) and d_total (cm).
+    targets : list of (alpha_deg, d_total)
+        The target's image, once or once per frame.
+    sigma : Sigma or ObjectSigmas, optional
+        The measurements' σ's: they weigh the fit and give the covariance.
+    calibration : SelfCalibration
+        What to self-calibrate (default: nothing).
+
+    Raises
+    ------
+    SolverError
+        Measurements that are not finite, or a d_total outside
+        :data:`~solver.measurements.D_TOTAL_RANGE_CM`; σ's out of their range; geometry
+        that does not determine the unknowns.
+    """
+    check_measurements(observer, beacons, targets)
+    calibration = as_calibration(calibration)
+    if sigma is not None:
+        as_object_sigmas(sigma)  # its type, before the closed form or a fit uses it
     if (len(beacons) == 1 and len(targets) == 1 and not calibration.nuisances
             and not calibration.position_sigma):
         b = beacons[0]

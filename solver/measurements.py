@@ -99,8 +99,13 @@ class ObjectSigmas:
 
 
 def as_object_sigmas(sigma: Sigma | ObjectSigmas) -> ObjectSigmas:
-    """Either form of σ's as :class:`ObjectSigmas`."""
-    return sigma if isinstance(sigma, ObjectSigmas) else ObjectSigmas.same(sigma)
+    """Either form of σ's as :class:`ObjectSigmas` (anything else refused in one line)."""
+    if isinstance(sigma, ObjectSigmas):
+        return sigma
+    if isinstance(sigma, Sigma):
+        return ObjectSigmas.same(sigma)
+    raise SolverError(f"sigma must be a Sigma or ObjectSigmas, e.g. Sigma(0.01, 0.002), "
+                      f"got {type(sigma).__name__} {sigma!r}")
 
 
 # σ's beyond these are no measurement: a bearing known to ±45° or a distance to ±100 %
@@ -114,6 +119,31 @@ SIGMA_D_REL_MIN = 1e-6
 # a d_total beyond these is no bench's (cm): a path a kilometre long, or a tenth of a
 # millimetre; 1e300 overflowed the solver's arithmetic
 D_TOTAL_RANGE_CM = (0.01, 1e5)
+
+
+def check_measurements(observer, beacons: list[BeaconMeasurement],
+                       targets: list[tuple[float, float]]) -> None:
+    """Refuse what no solve can use: no beacon or target, a number that is not finite,
+    or a d_total outside :data:`D_TOTAL_RANGE_CM` (the file reader says so naming the
+    key; this is the same rule for a caller of the library)."""
+    if not beacons or not targets:
+        raise SolverError("give at least one beacon and one target observation")
+    lo, hi = D_TOTAL_RANGE_CM
+    values = [("observer", v) for v in np.ravel(np.asarray(observer, float))]
+    for i, b in enumerate(beacons):
+        values += [(f"beacons[{i}].position", v) for v in np.ravel(np.asarray(b.position,
+                                                                               float))]
+        values += [(f"beacons[{i}].alpha_deg", b.alpha_deg), (f"beacons[{i}].d_total",
+                                                               b.d_total)]
+    for i, (a, d) in enumerate(targets):
+        values += [(f"targets[{i}].alpha_deg", a), (f"targets[{i}].d_total", d)]
+    for name, v in values:
+        if not np.isfinite(v):
+            raise SolverError(f"{name} is {v}: every measurement must be a finite number")
+        if name.endswith("d_total") and not lo <= v <= hi:
+            raise SolverError(f"{name} {v:g} cm is outside {lo:g}..{hi:g} cm")
+    if np.asarray(observer, float).shape != (2,):
+        raise SolverError(f"observer must be (x, y), got {observer!r}")
 
 
 @dataclass(frozen=True)

@@ -68,6 +68,13 @@ class SelfCalibration:
     priors: Mapping[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        if isinstance(self.nuisances, str):  # tuple("pan") would be ('p', 'a', 'n')
+            raise SolverError(f"nuisances must be a tuple of names, e.g. "
+                              f"({self.nuisances!r},), not the string {self.nuisances!r}")
+        if self.priors is None:
+            object.__setattr__(self, "priors", {})
+        if not isinstance(self.priors, Mapping):
+            raise SolverError(f"priors must map nuisance names to σ's, got {self.priors!r}")
         object.__setattr__(self, "nuisances", tuple(self.nuisances))
         check_nuisances(self.nuisances, None, 1)
         check_position_sigma(self.position_sigma)
@@ -93,6 +100,16 @@ class SelfCalibration:
         return {"nuisances": list(self.nuisances),
                 "beacon_position_sigma_cm": self.position_sigma,
                 **({"priors": dict(self.priors)} if self.priors else {})}
+
+
+def as_calibration(calibration) -> SelfCalibration:
+    """``calibration``, refused (one line) where it is not a :class:`SelfCalibration` (a
+    dict had failed deep inside a solve, after the frames were rendered)."""
+    if not isinstance(calibration, SelfCalibration):
+        raise SolverError(f"calibration must be a SelfCalibration, e.g. "
+                          f"SelfCalibration(('pan', 'scale')), got {type(calibration).__name__}"
+                          f" {calibration!r}")
+    return calibration
 
 
 def describe_priors(priors: Mapping[str, float]) -> str:

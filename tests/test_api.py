@@ -51,3 +51,60 @@ def test_the_example_sweeps_a_yaw_and_plots(tmp_path):
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.count("target error") == 2
     assert (tmp_path / "sweep_yaw.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_the_api_keeps_the_command_lines_promises(tmp_path):
+    """A script calling the library gets what the command line refuses refused too,
+    before anything is rendered or written (a hostile sweep of the API found each)."""
+    import shutil
+
+    from mirrorsim.errors import BadParameter, OutputError
+    from solver.errors import SolverError
+    from solver.measurements import BeaconMeasurement, Sigma
+
+    scene = ms.load_scene(ROOT / "scenes" / "exp1.yaml")
+    # no writing into a folder of the user's files, nor over the run's own input
+    user = tmp_path / "user"
+    user.mkdir()
+    (user / "notes.txt").write_text("mine")
+    for run in (lambda: ms.render(scene, user), lambda: ms.evaluate(scene, user),
+                lambda: ms.budget(scene, user), lambda: ms.track(scene, user, steps=1)):
+        with pytest.raises(OutputError, match="did not write"):
+            run()
+    assert sorted(p.name for p in user.iterdir()) == ["notes.txt"]
+    inside = tmp_path / "run"
+    inside.mkdir()
+    shutil.copy(ROOT / "scenes" / "exp1.yaml", inside / "exp1.json")
+    with pytest.raises(OutputError, match="holds this run's input scene"):
+        ms.evaluate(ms.load_scene(inside / "exp1.json"), inside)
+    assert sorted(p.name for p in inside.iterdir()) == ["exp1.json"]
+    # measurements no solve can use, and values of the wrong type, in one line
+    truth = ms.check(scene).exact_measurements()
+    b = truth.beacons[0]
+    for beacons, targets in (([BeaconMeasurement(b.position, float("nan"), b.d_total)],
+                              truth.targets),
+                             (truth.beacons, [(truth.targets[0][0], 1e7)])):
+        with pytest.raises(SolverError, match="finite|outside"):
+            ms.solve(truth.observer, beacons, targets, Sigma())
+    with pytest.raises(SolverError, match="sigma must be a Sigma"):
+        ms.solve(truth.observer, truth.beacons, truth.targets, {"alpha_deg": 0.01})
+    with pytest.raises(SolverError, match="calibration must be a SelfCalibration"):
+        ms.solve(truth.observer, truth.beacons, truth.targets, None, {})
+    with pytest.raises(SolverError, match="not the string"):
+        ms.SelfCalibration("pan")
+    out = tmp_path / "out"
+    with pytest.raises(SolverError, match="calibration must be"):
+        ms.evaluate(scene, out, calibration={"nuisances": ["pan"]})
+    with pytest.raises(BadParameter, match="keep"):
+        ms.evaluate(scene, out, keep=("annotate",))
+    # a one-beacon scene cannot carry a self-calibrated budget: refused, not an empty column
+    with pytest.raises(BadParameter, match="nuisances"):
+        ms.budget(scene, out, calibration=ms.SelfCalibration(("pan",)))
+    with pytest.raises(BadParameter, match="position_sigma"):
+        ms.track(scene, out, steps=1, position_sigma=0.5)
+    # a dataset's parameters, before its folder is claimed
+    for bad in ({"n": 2.5}, {"workers": 0}, {"seed": -1}, {"spp": 0}, {"sampler": "sobol"},
+                {"executor": "slurm"}, {"keep": ("annotate",)}):
+        with pytest.raises(BadParameter):
+            ms.generate_dataset(**{"n": 2, "seed": 1, "out": tmp_path / "ds", **bad})
+    assert not out.exists() and not (tmp_path / "ds").exists()

@@ -574,7 +574,7 @@ def test_budget_says_when_the_ideal_bench_cannot_be_measured(tmp_path, monkeypat
     def refuse(*_a, **_k):
         raise DetectionError("no target (grey upright panel) found in the frame")
 
-    monkeypatch.setattr(budget, "evaluate_scene", refuse)
+    monkeypatch.setattr(budget, "evaluate_into", refuse)
     scene = bench_scene(camera={**SMALL, "pan_error": 0.5}, mirror={"tilt": 0.5})
     with pytest.raises(DetectionError, match="^the ideal bench: no target"):
         budget.run_budget(scene, tmp_path / "b", progress=False)

@@ -104,7 +104,7 @@ def test_only_the_scenes_own_failures_become_rows(tmp_path, monkeypatch, exc, re
     def failing(*_args, **_kwargs):
         raise DetectionError("nothing found") if exc == "detection" else exc
 
-    monkeypatch.setattr(evaluate, "evaluate_scene", failing)
+    monkeypatch.setattr(evaluate, "evaluate_into", failing)
     for sub in ("scenes", "rows", "frames"):
         (tmp_path / sub).mkdir()
     result = dataset.process_one(0, 1, load_spec(SPEC), str(tmp_path), 1, "scalar_rgb")

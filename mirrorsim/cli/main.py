@@ -29,7 +29,8 @@ from mirrorsim.errors import (
 # a library parameter whose flag is not "--" + its name with "-" for "_"
 FLAG_OF = {"kind": "--path", "eps_deg": "--eps", "yaw_spread_deg": "--yaw-spread",
            "sigma.alpha_deg": "--sigma-alpha", "sigma.d_total_rel": "--sigma-d",
-           "n_beacons": "--beacons", "position_sigma": "--beacon-sigma"}
+           "n_beacons": "--beacons", "position_sigma": "--beacon-sigma",
+           "nuisances": "--calibrate"}
 
 # the order of `mirrorsim --help`: the main job first
 ORDER = ("evaluate", "render", "check", "plot", "detect", "calibrate", "budget", "dataset",

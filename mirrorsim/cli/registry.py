@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 
 from mirrorsim.errors import BadArgument, OutputError
 from mirrorsim.formats.files import (
+    check_inputs_outside,
     check_output_dir,
     check_output_file,
     claim_output_folder,
@@ -126,16 +127,10 @@ def _check_files_outside(args: argparse.Namespace, folder: Path) -> None:
 
 
 def _check_inputs_outside(args: argparse.Namespace, folder: Path, flag: str) -> None:
-    """No input file of the run inside ``folder``, the run's output folder: the run
-    names the files it writes there, and one of them may be the input's name."""
-    folder = folder.resolve()
-    for dest, name, kind in getattr(args, "inputs", None) or []:
-        source = getattr(args, dest, None)
-        if kind == "file" and source is not None and str(source) != "-" and \
-                Path(source).resolve().is_relative_to(folder):
-            raise OutputError(folder, f"{flag}: holds this run's input {name} "
-                              f"({str(source)!r}), and the run names the files it writes "
-                              "there: move the input out, or choose another folder")
+    """No input file of the run inside ``folder``, the run's output folder."""
+    check_inputs_outside(folder, [(name, getattr(args, dest, None)) for dest, name, kind
+                                  in getattr(args, "inputs", None) or [] if kind == "file"],
+                         flag)
 
 
 def out_folder(args: argparse.Namespace, scene: Scene, sub: str = "") -> Path:

@@ -279,14 +279,12 @@ def _budget(args) -> int:
     from mirrorsim.cli.plots import plot_budget
     from mirrorsim.cli.tables import budget_table
     from mirrorsim.formats.files import write_json
-    from mirrorsim.pipelines.budget import run_budget
+    from mirrorsim.pipelines.budget import check_budget_calibration, run_budget
     from mirrorsim.scene.imperfections import sources
 
     scene = render_options(args, load(args.scene))
-    calibration = calibration_of(args, len(scene.beacons))  # before anything renders
-    if calibration.position_sigma and not calibration.nuisances:
-        raise BadArgument("--beacon-sigma", "the budget uses it in its self-calibrated "
-                          "column only: give --calibrate too")
+    # before anything renders or is written
+    calibration = check_budget_calibration(scene, calibration_of(args, len(scene.beacons)))
     found = sources(scene)
     if not found:
         print(f"{scene.name}: no bench imperfections in {args.scene}: only the ideal bench "
@@ -353,7 +351,7 @@ def _track(args) -> int:
     from mirrorsim.cli.registry import at_least
     from mirrorsim.cli.tables import track_table
     from mirrorsim.formats.files import write_json
-    from mirrorsim.pipelines.track import check_options, run_track
+    from mirrorsim.pipelines.track import check_fixed_beacons, check_options, run_track
 
     # before the scene is read (run_track checks again, for callers other than the CLI)
     check_options(args.path, args.steps, args.odometry_sigma, args.side, args.step,
@@ -361,13 +359,11 @@ def _track(args) -> int:
     at_least(("--seed", args.seed, 0))
     position_sigma = beacon_sigma_of(args)
     scene = load(args.scene)
-    if position_sigma and len(scene.beacons) < 2:  # it would change nothing, silently
-        raise BadArgument("--beacon-sigma", f"{args.scene} has no fixed beacon (its one "
-                          "beacon is the moving one, whose position is the odometry's)")
     if args.spp is not None:  # --seed is the run's (each pose's render seed follows it)
         scene = scene.with_render(spp=args.spp)
     check_options(args.path, args.steps, args.odometry_sigma, args.side, args.step,
                   args.heading, scene.board.size)  # side and step within the board
+    check_fixed_beacons(scene, position_sigma)  # before the folder is made
     out = out_folder(args, scene, "track")
     from tqdm import tqdm
 

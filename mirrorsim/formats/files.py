@@ -191,6 +191,28 @@ def claim_output_folder(path: str | Path, option: str) -> Path:
     return path
 
 
+def check_inputs_outside(folder: str | Path, inputs, option: str) -> None:
+    """Refuse an input file inside ``folder``, a run's output folder, whose file names
+    the run gives (one may be the input's).  ``inputs``: (what it is, its path) pairs,
+    a path None or ``-`` skipped."""
+    folder = Path(folder).resolve()
+    for name, source in inputs:
+        if source is not None and str(source) not in ("", "-") and \
+                Path(source).resolve().is_relative_to(folder):
+            raise OutputError(folder, f"{option}: holds this run's input {name} "
+                              f"({str(source)!r}), and the run names the files it writes "
+                              "there: move the input out, or choose another folder")
+
+
+def claim_run_folder(path: str | Path, option: str, inputs=()) -> Path:
+    """A library run's output folder: :func:`claim_output_folder`, after refusing any of
+    ``inputs`` inside it (:func:`check_inputs_outside`), so that a script calling the
+    library keeps the command line's promises (no user's folder written into, no input
+    written over)."""
+    check_inputs_outside(path, inputs, option)
+    return claim_output_folder(path, option)
+
+
 def _check_ours(folder: Path, option: str) -> None:
     if (folder / OUTPUT_MARK).exists():
         return

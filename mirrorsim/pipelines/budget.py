@@ -17,16 +17,17 @@ from typing import Any
 
 import numpy as np
 
-from mirrorsim.errors import DetectionError, SolverError
+from mirrorsim.errors import BadParameter, DetectionError, SolverError
 from mirrorsim.formats.error_model import ErrorModel
-from mirrorsim.pipelines.evaluate import evaluate_scene
-from mirrorsim.pipelines.score import Report
+from mirrorsim.formats.files import claim_run_folder
+from mirrorsim.pipelines.evaluate import evaluate_into
+from mirrorsim.pipelines.score import Report, check_keep
 from mirrorsim.rendering.passes import reusing_renders
 from mirrorsim.scene import imperfections
 from mirrorsim.scene.model import Scene
 from solver.lsq import solve_measurements
 from solver.measurements import BeaconMeasurement, Measurements
-from solver.selfcal import PLAIN, SelfCalibration
+from solver.selfcal import PLAIN, SelfCalibration, as_calibration, check_nuisances
 
 # central-difference steps: α (deg), d_total (cm), beacon position (cm); the solver is
 # smooth on these scales and far from them its rounding noise (1e-12) is negligible
@@ -172,6 +173,21 @@ def contribution(source: str, value: Any, ideal: Report, report: Report,
                         calibrated_cm=calibrated_error(report, calibration))
 
 
+def check_budget_calibration(scene: Scene, calibration: SelfCalibration) -> SelfCalibration:
+    """``calibration`` for a budget of ``scene``, refused before anything is rendered or
+    written where its self-calibrated column would be empty: nuisances the scene's
+    beacons cannot carry, or a beacons' position σ without nuisances."""
+    calibration = as_calibration(calibration)
+    if calibration.position_sigma and not calibration.nuisances:
+        raise BadParameter("position_sigma", "the budget uses it in its self-calibrated "
+                           "column only: give nuisances too")
+    try:
+        check_nuisances(calibration.nuisances, len(scene.beacons), 1)
+    except SolverError as exc:
+        raise BadParameter("nuisances", str(exc)) from None
+    return calibration
+
+
 def run_budget(scene: Scene, out: str | Path, *, variant: str = "auto", progress: bool = True,
                on_step: Callable[[str, int, int], None] | None = None,
                error_model: ErrorModel | None = None,
@@ -185,8 +201,15 @@ def run_budget(scene: Scene, out: str | Path, *, variant: str = "auto", progress
     ------
     DetectionError
         If a frame cannot be measured (the message names the source).
+    BadParameter
+        A ``calibration`` whose nuisances the scene's beacons cannot carry (its column
+        would be empty), a position σ without nuisances, or a bad ``keep``.
+    OutputError
+        If ``out`` holds files mirrorsim did not write, or the scene's own file.
     """
-    out = Path(out)
+    check_keep(keep)
+    calibration = check_budget_calibration(scene, calibration)
+    out = claim_run_folder(out, "out", [("scene", scene.source)])
     found = imperfections.sources(scene)
     runs = 1 + len(found) + (len(found) > 1)  # ideal, each source alone, all of them
     done = iter(range(1, runs + 1))
@@ -194,8 +217,8 @@ def run_budget(scene: Scene, out: str | Path, *, variant: str = "auto", progress
     def run(label: str, sub: Scene) -> Report:
         if on_step is not None:
             on_step(label, next(done), runs)
-        return evaluate_scene(sub, out / _folder(label), variant=variant, progress=progress,
-                              keep=keep, error_model=error_model)
+        return evaluate_into(sub, out / _folder(label), variant=variant, progress=progress,
+                             keep=keep, error_model=error_model)
 
     def measured(label: str, value: Any, sub: Scene) -> Contribution:
         # a bench error can make a frame unmeasurable (an image taken for the wrong one

@@ -91,7 +91,7 @@ def process_one(i: int, seed: int, spec: DatasetSpec, out: str, spp: int | None,
     the solver saw (``frames/<scene>/<scene>.measurements.json``, for ``solve``) and its
     row.  ``calibration``: self-calibration, as
     :func:`~mirrorsim.pipelines.evaluate.evaluate_scene` takes it."""
-    from mirrorsim.pipelines.evaluate import evaluate_scene
+    from mirrorsim.pipelines.evaluate import evaluate_into
     from mirrorsim.pipelines.random_scenes import sample_scene, to_yaml
 
     out_dir = Path(out)
@@ -106,9 +106,10 @@ def process_one(i: int, seed: int, spec: DatasetSpec, out: str, spp: int | None,
         t1 = time.perf_counter()
         with warnings.catch_warnings():  # a spec that draws JPEG frames knows it does
             warnings.filterwarnings("ignore", message=".*a JPEG frame")
-            rep = evaluate_scene(scene, out_dir / "frames" / name, variant=variant,
-                                 progress=False, keep=keep, error_model=error_model,
-                                 calibration=calibration)
+            # into the dataset's own folder (claimed by run_dataset)
+            rep = evaluate_into(scene, out_dir / "frames" / name, variant=variant,
+                                progress=False, keep=keep, error_model=error_model,
+                                calibration=calibration)
         write_json(out_dir / "frames" / name / f"{name}.measurements.json",
                    rep.measurements.to_json())
         row.update(_flatten(scene, rep, calibration))
@@ -234,6 +235,30 @@ class DatasetRun:
     per_minute: float
 
 
+def _check_run_parameters(n, seed, workers, spp, sampler, executor, keep) -> None:
+    """Every parameter of :func:`run_dataset` that can be checked before anything is
+    written (a bad one had failed after the folder was claimed, or in every scene)."""
+    from mirrorsim.pipelines.score import check_keep
+    from mirrorsim.scene.model import MAX_SPP, SAMPLERS
+
+    def whole(v) -> bool:
+        return isinstance(v, int | np.integer) and not isinstance(v, bool)
+
+    for name, v, lo, hi in (("n", n, 1, MAX_SCENES), ("seed", seed, 0, None),
+                            ("workers", workers, 1, None)):
+        if not whole(v) or v < lo or (hi is not None and v > hi):
+            raise BadParameter(name, f"{v!r} must be a whole number within {lo}.."
+                               f"{hi if hi is not None else ''}")
+    if spp is not None and not (whole(spp) and 1 <= spp <= MAX_SPP):
+        raise BadParameter("spp", f"{spp!r} must be a whole number within 1..{MAX_SPP} "
+                           "(or None: the spec's)")
+    if sampler is not None and sampler not in SAMPLERS:
+        raise BadParameter("sampler", f"{sampler!r}: choose from {', '.join(SAMPLERS)}")
+    if executor not in ("local", "dask"):
+        raise BadParameter("executor", f"{executor!r}: choose local or dask")
+    check_keep(keep)
+
+
 def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
                 spec_path: str | Path | None = None, spp: int | None = None,
                 sampler: str | None = None, variant: str = "auto", resume: bool = False,
@@ -256,14 +281,14 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
         If ``out`` is not a new or empty folder, or (with ``resume``) one of this
         command's datasets made with the same settings.
     BadParameter
-        For ``n`` outside 1..MAX_SCENES.
-        For nuisances the spec's beacons cannot carry.
+        For ``n`` outside 1..MAX_SCENES, a negative ``seed``, ``workers`` below 1, an
+        ``spp`` outside 1..MAX_SPP, an unknown ``sampler``, ``executor`` or ``keep``;
+        for nuisances the spec's beacons cannot carry.
     """
     from mirrorsim.pipelines.random_scenes import load_spec
     from mirrorsim.rendering.backend import choose_variant
 
-    if not 1 <= n <= MAX_SCENES:
-        raise BadParameter("n", f"{n} must be within 1..{MAX_SCENES}")
+    _check_run_parameters(n, seed, workers, spp, sampler, executor, keep)
     out = Path(out)
     spec = load_spec(spec_path)
     if sampler is not None:  # part of the spec, so that --resume checks it

@@ -16,15 +16,15 @@ import numpy as np
 from mirrorsim.detection.detector import annotate
 from mirrorsim.errors import DetectionError
 from mirrorsim.formats.error_model import ErrorModel, default_error_model
-from mirrorsim.formats.files import default_out, write_png
+from mirrorsim.formats.files import claim_run_folder, default_out, write_png
 from mirrorsim.pipelines.frame import MeasuredFrame, render_and_measure
-from mirrorsim.pipelines.score import EXTRA_FILES, FrameRecord, Report, score
+from mirrorsim.pipelines.score import EXTRA_FILES, FrameRecord, Report, check_keep, score
 from mirrorsim.scene.model import Scene
 from mirrorsim.truth.groundtruth import RenderInfo
 from solver.errors import SolverError
 from solver.lsq import solve_measurements
 from solver.measurements import Measurements
-from solver.selfcal import PLAIN, SelfCalibration
+from solver.selfcal import PLAIN, SelfCalibration, as_calibration
 
 
 def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: str = "auto",
@@ -46,8 +46,24 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
     ------
     DetectionError
         If an object is not found, or the target's d_total in no frame.
+    OutputError
+        If ``out_dir`` holds files mirrorsim did not write, or the scene's own file.
+    BadParameter
+        A ``keep`` that names no extra file.
     """
-    out = Path(out_dir) if out_dir is not None else default_out(scene.name)
+    check_keep(keep)
+    calibration = as_calibration(calibration)  # before anything renders
+    out = claim_run_folder(out_dir if out_dir is not None else default_out(scene.name),
+                           "out_dir", [("scene", scene.source)])
+    return evaluate_into(scene, out, variant=variant, progress=progress,
+                         error_model=error_model, keep=keep, calibration=calibration)
+
+
+def evaluate_into(scene: Scene, out: Path, *, variant: str = "auto", progress: bool = True,
+                  error_model: ErrorModel | None = None, keep: tuple[str, ...] = EXTRA_FILES,
+                  calibration: SelfCalibration = PLAIN) -> Report:
+    """:func:`evaluate_scene` into ``out``, a folder inside one its caller has claimed
+    (a dataset's, a budget's): its parameters already checked."""
     cam = scene.camera
 
     per_beacon = frames_of(scene)

@@ -43,7 +43,7 @@ from solver.placement import (
     region_area,
     visible_region,
 )
-from solver.selfcal import PLAIN, SelfCalibration
+from solver.selfcal import PLAIN, SelfCalibration, as_calibration
 
 AREA_DISTANCES = (25.0, 50.0, 100.0, 200.0, 400.0, 1000.0)
 # cm: finer grids take long without news (exp1 here: 1 cm 7 s, 0.5 cm 11 s, 0.25 cm 26 s)
@@ -54,6 +54,8 @@ MIN_STEP = 0.5
 PLACEMENT_EXCESS = 2 * REFLECTION_EXCESS
 # the most beacons plan places (each a greedy step over the whole grid)
 MAX_PLANNED_BEACONS = 8
+# mirror poses the expected error averages over (each a full placement solve)
+MAX_POSES = 50
 
 
 @dataclass(frozen=True)
@@ -143,14 +145,20 @@ def plan_scene(scene: Scene, sigma: Sigma | ObjectSigmas | None = None, eps_deg:
     Raises
     ------
     BadParameter
-        For a σ, ε or step that is not > 0, ε ≥ 45° or a negative spread.
+        For a σ, ε or step that is not > 0, ε ≥ 45° or a negative spread; ``n_beacons``
+        or ``n_poses`` not a whole number within its range.
+    SolverError
+        A ``calibration`` that is not a :class:`~solver.selfcal.SelfCalibration`.
     """
     # the placement's Fisher information takes independent errors: a shared α offset
     # enters each α whole (the conservative choice; see docs/limitations.md)
     sigma = as_object_sigmas(sigma or Sigma()).independent()
     _check_parameters(sigma, eps_deg, step, yaw_spread_deg, d1_spread)
-    if not 1 <= n_beacons <= MAX_PLANNED_BEACONS:
-        raise BadParameter("n_beacons", f"{n_beacons} must be within 1..{MAX_PLANNED_BEACONS}")
+    calibration = as_calibration(calibration)
+    for name, v, hi in (("n_beacons", n_beacons, MAX_PLANNED_BEACONS), ("n_poses", n_poses,
+                                                                       MAX_POSES)):
+        if not (isinstance(v, int) and not isinstance(v, bool) and 1 <= v <= hi):
+            raise BadParameter(name, f"{v!r} must be a whole number within 1..{hi}")
     cam, mir = scene.camera, scene.mirror
     img = optics.mirror_image(cam.position, mir, scene.target.position)
     o = np.asarray(cam.position, float)

@@ -9,6 +9,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from mirrorsim.errors import BadParameter
 from mirrorsim.formats.measurements import measurements_from_dict
 from mirrorsim.truth.groundtruth import GroundTruth, RenderInfo
 from solver.errors import SolverError
@@ -118,6 +119,16 @@ def _crlb_cm(truth: GroundTruth, m: Measurements, sol: Solution) -> float | None
 REPORT_RENDER_KEYS = ("spp", "seed", "sampler", "variant")
 # optional files beside each frame (its PNG, truth and capture record are always written)
 EXTRA_FILES = ("ids", "annotated")
+
+
+def check_keep(keep) -> None:
+    """Refuse a ``keep`` that is not a collection of :data:`EXTRA_FILES` names (a typo
+    kept nothing, silently; a bare string matched by its substrings)."""
+    if isinstance(keep, str):
+        raise BadParameter("keep", f"{keep!r}: give a tuple of names, e.g. ({keep!r},)")
+    unknown = set(keep) - set(EXTRA_FILES)
+    if unknown:
+        raise BadParameter("keep", f"{sorted(unknown)}: choose from {list(EXTRA_FILES)}")
 
 
 @dataclass(frozen=True)

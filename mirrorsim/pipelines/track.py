@@ -30,6 +30,7 @@ from mirrorsim.detection.detector import Detection
 from mirrorsim.detection.image_geometry import Calibration
 from mirrorsim.errors import BadParameter, DetectionError
 from mirrorsim.formats.error_model import ErrorModel, default_error_model
+from mirrorsim.formats.files import claim_run_folder
 from mirrorsim.pipelines.frame import FrameNotMeasured, render_and_measure
 from mirrorsim.scene.model import PENCIL_RADIUS, Bench, Scene
 from mirrorsim.truth.optics import target_facing
@@ -235,6 +236,14 @@ def check_options(kind: str, steps: int, sigma: float, side: float, step: float,
 FILTER_SIGMA_FLOOR = Sigma(alpha_deg=0.005, d_total_rel=0.006)
 
 
+def check_fixed_beacons(scene: Scene, position_sigma: float) -> None:
+    """Refuse a fixed beacons' position σ for a scene without fixed beacons: it would
+    change nothing, silently (its one beacon is the moving one)."""
+    if position_sigma and len(scene.beacons) < 2:
+        raise BadParameter("position_sigma", f"scene {scene.name!r} has no fixed beacon (its "
+                           "one beacon is the moving one, whose position is the odometry's)")
+
+
 def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps: int = 20,
               odometry_sigma: float = 0.1, seed: int = 0, side: float = 4.0,
               step: float = 1.0, heading: str = "view",
@@ -265,7 +274,8 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
         check_position_sigma(position_sigma)
     except SolverError as exc:
         raise BadParameter("position_sigma", str(exc)) from None
-    out = Path(out)
+    check_fixed_beacons(scene, position_sigma)
+    out = claim_run_folder(out, "out", [("scene", scene.source)])
     rng = np.random.default_rng(seed)
     b0, cam = scene.beacons[0], scene.camera
     start = np.asarray(b0.believed, float)

@@ -20,7 +20,14 @@ import numpy as np
 
 from mirrorsim.formats.cache import seal, unseal
 from mirrorsim.formats.capture import CaptureRecord, load_capture
-from mirrorsim.formats.files import atomic_path, default_out, dumps, encode_jpeg, encode_png
+from mirrorsim.formats.files import (
+    atomic_path,
+    claim_run_folder,
+    default_out,
+    dumps,
+    encode_jpeg,
+    encode_png,
+)
 from mirrorsim.rendering.mitsuba_scene import (
     BACKGROUND_LABEL,
     BEACON_LABEL,
@@ -133,7 +140,8 @@ def render_to_files(scene: Scene, out: str | Path | None = None, *, variant: str
     """Render ``scene`` with its render settings (or, with ``reuse``, take a render of
     exactly this scene already in ``out``) and write its files (default folder
     ``renders/<name>/``; the id labels only with ``ids``)."""
-    out = Path(out) if out is not None else default_out(scene.name)
+    out = claim_run_folder(out if out is not None else default_out(scene.name), "out",
+                           [("scene", scene.source)])
     found = reused_frame(scene, out, ids) if reuse else None
     if found is not None:
         return found
