@@ -107,4 +107,14 @@ def test_the_api_keeps_the_command_lines_promises(tmp_path):
                 {"executor": "slurm"}, {"keep": ("annotate",)}):
         with pytest.raises(BadParameter):
             ms.generate_dataset(**{"n": 2, "seed": 1, "out": tmp_path / "ds", **bad})
+    # values a script edits in are held to the same rules as a file's
+    from dataclasses import replace
+
+    with pytest.raises(BadParameter, match="plain file name"):
+        replace(scene, name="/".join(("..", "escaped")))
+    with pytest.raises(BadParameter, match="whole number"):
+        scene.with_render(spp=4.5)
+    for bad in ({"particles": 0}, {"steps": 2.5}, {"seed": -1}):
+        with pytest.raises(BadParameter):
+            ms.track(scene, out, **{"steps": 1, **bad})
     assert not out.exists() and not (tmp_path / "ds").exists()

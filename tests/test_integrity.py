@@ -205,7 +205,7 @@ def test_a_scene_at_the_bounds_renders():
     (["--odometry-sigma", "1e300"], "--odometry-sigma: 1e+300 must be within 0..10"),
     (["--side", "200"], "--side: 200 must be a positive length (cm) within the board's 80"),
     (["--step", "81"], "--step: 81 must be"),
-    (["--spp", "70000"], "--spp: 70000 must be within 1..65536"),
+    (["--spp", "70000"], "--spp: 70000 must be a whole number within 1..65536"),
 ])
 def test_track_refuses_paths_off_the_board_and_absurd_noise(tmp_path, capsys, argv, says):
     from mirrorsim.cli.main import main
@@ -421,21 +421,23 @@ def test_a_dataset_parent_killed_alone_takes_its_workers_with_it(tmp_path, sig):
 
 
 def test_a_killed_writers_temporary_file_is_swept(tmp_path):
-    """kill -9 between writing and renaming leaves `.NAME.tmpPID.png`: the next write
-    into that folder removes it when PID is gone (a live writer's is left alone)."""
+    """kill -9 between writing and renaming leaves `.NAME.mirrorsim-tmpPID.png`: the next
+    write into that folder removes it when PID is gone (a live writer's is left alone,
+    and a user's file named like an editor's temporary file too: one was swept away)."""
     import os
 
     from mirrorsim.formats.files import write_text
 
-    dead = tmp_path / ".frame.tmp999999999.png"  # no such process
-    dead_json = tmp_path / ".frame.capture.tmp999999998.json"
-    live = tmp_path / f".frame.tmp{os.getppid()}.png"
-    users = tmp_path / ".notes.txt"
-    for p in (dead, dead_json, live, users):
+    dead = tmp_path / ".frame.mirrorsim-tmp999999999.png"  # no such process
+    dead_json = tmp_path / ".frame.capture.mirrorsim-tmp999999998.json"
+    live = tmp_path / f".frame.mirrorsim-tmp{os.getppid()}.png"
+    users = [tmp_path / n for n in (".notes.txt", ".plan.tmp999999997.yaml",
+                                    ".draft.tmp1999.txt")]
+    for p in (dead, dead_json, live, *users):
         p.write_bytes(b"half a frame")
     write_text(tmp_path / "report.json", "x")
     assert not dead.exists() and not dead_json.exists()
-    assert live.exists() and users.exists()
+    assert live.exists() and all(p.exists() for p in users)
 
 
 # ------------------------------------------------------ resource bombs and odd files

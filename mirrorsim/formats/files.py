@@ -72,7 +72,7 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     """
     path = Path(path)
     _sweep_stale(path)
-    tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}{path.suffix}")
+    tmp = path.with_name(f".{path.stem}{_TMP_MARK}{os.getpid()}{path.suffix}")
     try:
         yield tmp
         os.replace(tmp, path)
@@ -84,6 +84,9 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
 
 
 _SWEPT: set[Path] = set()  # folders swept by this process: once each, not on every write
+# in every temporary file's name, so that the sweep below removes only files mirrorsim
+# made (".plan.tmp2024.yaml" was a user's own file, and was swept away)
+_TMP_MARK = ".mirrorsim-tmp"
 
 
 def _sweep_stale(path: Path) -> None:
@@ -95,11 +98,11 @@ def _sweep_stale(path: Path) -> None:
         return
     _SWEPT.add(folder)
     try:
-        found = [p for p in folder.iterdir() if p.name.startswith(".") and ".tmp" in p.name]
+        found = [p for p in folder.iterdir() if p.name.startswith(".") and _TMP_MARK in p.name]
     except OSError:
         return
     for tmp in found:
-        m = re.fullmatch(r"\..*\.tmp(\d+)(\.[^.]*)?", tmp.name)
+        m = re.fullmatch(r"\..*" + re.escape(_TMP_MARK) + r"(\d+)(\.[^.]*)?", tmp.name)
         if m and int(m[1]) != os.getpid() and not _alive(int(m[1])):
             with contextlib.suppress(OSError):
                 tmp.unlink()

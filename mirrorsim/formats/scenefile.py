@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import math
-import re
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
@@ -37,6 +36,8 @@ from mirrorsim.scene.model import (
     MAX_CURVATURE_RADIUS,
     MAX_FULL_WELL,
     MAX_READ_NOISE,
+    NAME_PATTERN,
+    NAME_RULE,
     PAN_WORDS,
     Beacon,
     Bench,
@@ -55,7 +56,6 @@ DEFAULT_RESOLUTION = (1920, 1088)
 
 
 # a scene's name: a plain file name
-NAME_PATTERN = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")
 
 def load_scene(path: str | Path) -> Scene:
     """Read and validate a scene file.
@@ -185,7 +185,7 @@ def _build(data: Any, source: str, default_name: str, f: Failures) -> Scene:
 def _name(r: Reader, top: dict, default_name: str) -> str:
     name = top.get("name", default_name)
     if not isinstance(name, str) or not NAME_PATTERN.fullmatch(name):
-        rule = "letters, digits, '.', '_', '-'; no path"
+        rule = NAME_RULE
         if "name" not in top:  # the file's own name stands in: say so, not blame a key
             raise r.fail("", f"has no `name:` and its file name {show(name)} cannot stand in "
                          f"for one ({rule}): add a `name:` key")

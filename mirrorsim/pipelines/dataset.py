@@ -269,6 +269,10 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
                 calibration: SelfCalibration = PLAIN, beacons: int | None = None) -> DatasetRun:
     """Make (or finish) a dataset of ``n`` scenes; return a summary.
 
+    The scenes run in worker processes (started afresh, ``spawn``; one with
+    ``workers=1`` too), which import the calling script again: call this under
+    ``if __name__ == "__main__":``.
+
     ``error_model`` gives each row's measurements their σ's (default: the model shipped
     for the ideal bench); a dataset is resumed only with the model it was started with.
     ``calibration``: each scene solved self-calibrated (its rows' ``est_*`` columns),

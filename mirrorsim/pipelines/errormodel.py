@@ -300,7 +300,16 @@ def bias_of(model: ErrorModel, kind: str, quantity: str, features: np.ndarray) -
 
 
 def fit_dataset(dataset_dir: str | Path) -> ErrorModel:
-    """The error model of a dataset folder (its verified table), with its provenance."""
+    """The error model of a dataset folder (its verified table), with its provenance.
+
+    Raises
+    ------
+    ValueError
+        If the table has too few usable rows to fit a σ law (the message says how many
+        it has and needs).
+    DatasetError
+        If the folder holds no verified dataset table.
+    """
     cols = read_columns(dataset_dir)
     return fit(cols, provenance_of(dataset_dir, cols))
 

@@ -50,6 +50,11 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
         If ``out_dir`` holds files mirrorsim did not write, or the scene's own file.
     BadParameter
         A ``keep`` that names no extra file.
+    SolverError
+        If the measurements do not determine the mirror and the target, or
+        ``calibration`` is not a :class:`~solver.selfcal.SelfCalibration`.
+    BackendError
+        If no Mitsuba variant can render here.
     """
     check_keep(keep)
     calibration = as_calibration(calibration)  # before anything renders

@@ -84,6 +84,9 @@ def measure_frame(image_path: str | Path, capture: CaptureRecord, *,
 
     Raises
     ------
+    InputError
+        If the frame's file is missing, not a PNG or JPEG, damaged, or not of the
+        capture record's camera size.
     FrameNotMeasured
         Naming the frame (and ``source``, where given) when nothing usable is found.
     DetectionError

@@ -219,8 +219,8 @@ def check_options(kind: str, steps: int, sigma: float, side: float, step: float,
         raise BadParameter("kind", f"{kind!r}: expected one of {', '.join(PATHS)}")
     if heading not in HEADINGS:
         raise BadParameter("heading", f"{heading!r}: expected one of {', '.join(HEADINGS)}")
-    if not 1 <= steps <= MAX_STEPS:
-        raise BadParameter("steps", f"{steps} must be within 1..{MAX_STEPS}")
+    if not (isinstance(steps, int) and not isinstance(steps, bool) and 1 <= steps <= MAX_STEPS):
+        raise BadParameter("steps", f"{steps!r} must be a whole number within 1..{MAX_STEPS}")
     if not (np.isfinite(sigma) and 0 <= sigma <= MAX_ODOMETRY_SIGMA):
         raise BadParameter("odometry_sigma", f"{sigma:g} must be within 0..{MAX_ODOMETRY_SIGMA:g}"
                            " (cm per move)")
@@ -234,6 +234,8 @@ def check_options(kind: str, steps: int, sigma: float, side: float, step: float,
 # the narrowest likelihood the filter is given: the σ's it was validated with before the
 # error model (tests/test_track.py: the filter converges on rendered frames with them)
 FILTER_SIGMA_FLOOR = Sigma(alpha_deg=0.005, d_total_rel=0.006)
+# fewer particles than this cannot carry a posterior over the mirror's two parameters
+MIN_PARTICLES = 10
 
 
 def check_fixed_beacons(scene: Scene, position_sigma: float) -> None:
@@ -259,7 +261,11 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
     Raises
     ------
     BadParameter
-        For bad options.
+        For bad options: ``kind``, ``heading``, ``steps``, ``odometry_sigma``, ``side``,
+        ``step``, ``particles``, ``seed`` or ``position_sigma`` out of its range (a
+        ``position_sigma`` without fixed beacons too).
+    OutputError
+        If ``out`` holds files mirrorsim did not write, or the scene's own file.
     DetectionError
         If the beacon or the target is not measured at the start pose (no prior, no path),
         or a fixed beacon's image is not measured.
@@ -270,6 +276,9 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
     known to ``position_sigma`` cm per axis (0: exactly).
     """
     check_options(kind, steps, odometry_sigma, side, step, heading, scene.board.size)
+    for name, v, lo in (("particles", particles, MIN_PARTICLES), ("seed", seed, 0)):
+        if not (isinstance(v, int | np.integer) and not isinstance(v, bool) and v >= lo):
+            raise BadParameter(name, f"{v!r} must be a whole number ≥ {lo}")
     try:
         check_position_sigma(position_sigma)
     except SolverError as exc:

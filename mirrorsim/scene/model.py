@@ -8,6 +8,7 @@ target's facing are computed from the geometry by :mod:`mirrorsim.truth.optics` 
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -196,13 +197,18 @@ class RenderSettings:
         # spec, a flag): the scene reader and the CLI name the key or flag it refuses
         for name in ("spp", "background_spp", "beacon_spp"):
             value = getattr(self, name)
-            if not 1 <= value <= MAX_SPP:
-                raise BadParameter(name, f"{value} must be within 1..{MAX_SPP}")
-        if self.seed < 0:
-            raise BadParameter("seed", f"{self.seed} must be ≥ 0")
+            if not (_whole(value) and 1 <= value <= MAX_SPP):
+                raise BadParameter(name, f"{value!r} must be a whole number within 1..{MAX_SPP}")
+        if not (_whole(self.seed) and self.seed >= 0):
+            raise BadParameter("seed", f"{self.seed!r} must be a whole number ≥ 0")
         if self.sampler not in SAMPLERS:
             raise BadParameter("sampler", f"{self.sampler!r}: expected one of "
                                f"{', '.join(SAMPLERS)}")
+
+
+def _whole(v) -> bool:
+    """An integer (numpy's too), not a bool: a count of samples or a seed."""
+    return isinstance(v, int | np.integer) and not isinstance(v, bool)
 
 
 @dataclass(frozen=True)
@@ -233,6 +239,11 @@ class Bench:
     calibration_distance_error: float = 0.0  # cm: reference at 100 + this, 100 assumed
 
 
+# a scene's name names its files: letters, digits, '.', '_', '-', no path
+NAME_PATTERN = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")
+NAME_RULE = "letters, digits, '.', '_', '-'; no path"
+
+
 @dataclass(frozen=True)
 class Scene:
     """A validated scene.  Build one with :func:`mirrorsim.formats.scenefile.load_scene`."""
@@ -248,6 +259,13 @@ class Scene:
     bench: Bench = field(default_factory=Bench)
     source: str = "<scene>"
     warnings: tuple[str, ...] = ()
+
+    def __post_init__(self):
+        # every file of a scene is named after it: a name edited in by a script
+        # (dataclasses.replace) is held to the scene reader's rule, or a parent path would write
+        # outside the run's folder
+        if not isinstance(self.name, str) or not NAME_PATTERN.fullmatch(self.name):
+            raise BadParameter("name", f"{self.name!r} is not a plain file name ({NAME_RULE})")
 
     def with_render(self, **settings) -> Scene:
         """The same scene rendered with other settings (``spp``, ``seed``, ``sampler``…),
