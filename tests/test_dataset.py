@@ -729,3 +729,19 @@ def test_a_table_of_the_older_layout_is_read(one_worker, tmp_path):
     pq.write_table(arrow, old / "dataset.parquet")
     with pytest.raises(DatasetError, match="missing columns calibrate_priors"):
         read_table(old)
+
+
+def test_a_second_run_on_a_dataset_being_written_is_refused(tmp_path):
+    """Two runs on one folder at once (a fresh one and a --resume) both computed the
+    same scenes, and the last to end wrote its table and card over the other's."""
+    import fcntl
+
+    from mirrorsim.formats.dataset_folder import LOCK_NAME, DatasetError
+
+    out = tmp_path / "ds"
+    out.mkdir()
+    with open(out / LOCK_NAME, "a") as held:  # the first run, still writing
+        fcntl.flock(held, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        with pytest.raises(DatasetError, match="another run is writing"):
+            run_dataset(1, 5, out, workers=1, spec_path=SPEC, progress=False)
+    assert sorted(p.name for p in out.iterdir()) == [LOCK_NAME]

@@ -660,3 +660,25 @@ def test_a_calibrations_key_covers_all_the_code_it_comes_out_of():
                          check=True).stdout.split("\n")
     assert out[0] == "False"  # the key is made without Mitsuba
     assert set(out[1].split()) <= set(covered), set(out[1].split()) - set(covered)
+
+
+def test_a_fifo_where_a_file_is_read_back_is_distrusted_not_waited_on(tmp_path,
+                                                                       monkeypatch):
+    """A FIFO in place of a cache entry, a frame's file or a row made the read wait for
+    a writer for ever; now it is a file that fails verification (redone, or rejected)."""
+    import os
+
+    from mirrorsim.formats import cache
+    from mirrorsim.formats.files import read_regular_bytes
+
+    monkeypatch.setenv("MIRRORSIM_CACHE_DIR", str(tmp_path / "cache"))
+    cache.write_entry("calibration", "k", {"K": 1.0})
+    path = cache.entry_path("calibration", "k")
+    path.unlink()
+    os.mkfifo(path)
+    with pytest.warns(RuntimeWarning, match="not a regular file"):
+        assert cache.read_entry("calibration", "k") is None
+    with pytest.raises(OSError, match="not a regular file"):
+        read_regular_bytes(path)
+    (tmp_path / "f.json").write_bytes(b"{}")
+    assert read_regular_bytes(tmp_path / "f.json") == b"{}"

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from mirrorsim.errors import OutputError
-from mirrorsim.formats.files import jsonable, write_json
+from mirrorsim.formats.files import jsonable, read_regular_bytes, write_json
 
 FORMAT = "mirrorsim-cache-1"
 
@@ -79,7 +79,7 @@ def read_entry(kind: str, key: str, check: Callable[[dict], None] | None = None
     """
     path = entry_path(kind, key)
     try:
-        data = path.read_bytes()
+        data = read_regular_bytes(path)
     except FileNotFoundError:
         return None
     except OSError as exc:

@@ -5,10 +5,13 @@ Parquet table (sealed and verified) and its card.  The layout is described in
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import json
 import math
 import textwrap
 import warnings
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -17,7 +20,13 @@ import numpy as np
 from mirrorsim.errors import InputError
 from mirrorsim.formats import dataset_table as table
 from mirrorsim.formats.cache import checksum, unseal
-from mirrorsim.formats.files import atomic_path, jsonable, write_json, write_text
+from mirrorsim.formats.files import (
+    atomic_path,
+    jsonable,
+    read_regular_bytes,
+    write_json,
+    write_text,
+)
 from solver.selfcal import priors_text
 
 DATASET_FORMAT = "mirrorsim-dataset"
@@ -53,14 +62,38 @@ def make_folders(out: Path, meta: dict) -> None:
 
 
 
+# held (flock) by the run writing a dataset, for as long as it runs: a second run on the
+# same folder (a fresh one, or a --resume) is refused rather than computing the same
+# scenes and writing the table and card over the first's.  The kernel drops it when the
+# run ends, however it ends (kill -9 too): no stale lock to remove by hand
+LOCK_NAME = ".mirrorsim-lock"
+
+
+@contextlib.contextmanager
+def writing(out: Path, meta: dict, resume: bool) -> Iterator[None]:
+    """Claim ``out`` (:func:`claim_folder`) and hold its lock while the block runs."""
+    claim_folder(out, meta, resume)  # before anything is written into it
+    out.mkdir(parents=True, exist_ok=True)
+    with open(out / LOCK_NAME, "a") as lock:
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise DatasetError(out, "another run is writing this dataset now: wait for it "
+                               "to end (then resume it), or choose another folder") from None
+        claim_folder(out, meta, resume)  # again, now alone: another run may have begun it
+        yield
+
+
 def claim_folder(out: Path, meta: dict, resume: bool) -> None:
     """``out`` must be new or empty, or hold this command's dataset (with --resume)."""
     if out.exists() and not out.is_dir():
         raise DatasetError(out, "is a file, not a new or empty folder")
     meta_path = out / "dataset.json"
     if not meta_path.exists():
-        if out.is_dir() and any(out.iterdir()):
-            shown = ", ".join(sorted(p.name for p in out.iterdir())[:3])
+        others = sorted(p.name for p in out.iterdir() if p.name != LOCK_NAME) \
+            if out.is_dir() else []
+        if others:
+            shown = ", ".join(others[:3])
             raise DatasetError(out, f"holds other files ({shown}, …), not a dataset: use a new "
                                "or empty folder")
         if resume:
@@ -138,7 +171,8 @@ def read_row(path: Path, index: int, seed: int) -> table.DatasetRow:
         Why it is not trusted.
     """
     try:
-        row = table.DatasetRow.from_json(unseal(json.loads(path.read_bytes()), path.name))
+        row = table.DatasetRow.from_json(unseal(json.loads(read_regular_bytes(path)),
+                                                path.name))
         found = (row.index, row.columns.get("seed"))
     except KeyError as exc:
         raise ValueError(f"no {exc} column") from None

@@ -14,6 +14,7 @@ import json
 import math
 import os
 import re
+import stat
 import sys
 import tempfile
 from collections.abc import Iterator
@@ -60,6 +61,23 @@ def jsonable(value: Any) -> Any:
 def dumps(data: Any, indent: int | None = 2) -> str:
     """Strict JSON text of ``data`` (see :func:`jsonable`), with a final newline."""
     return json.dumps(jsonable(data), indent=indent, allow_nan=False) + "\n"
+
+
+def read_regular_bytes(path: str | Path) -> bytes:
+    """The bytes of a file mirrorsim reads back (a cache entry, a frame, a row), which
+    must be a regular file: a FIFO put in its place made the read wait for a writer for
+    ever.  OSError for anything else, as for an unreadable file."""
+    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)  # a FIFO's open does not wait either
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise OSError(errno.EINVAL, "not a regular file (a folder, FIFO, device or "
+                          "socket)", str(path))
+        with os.fdopen(fd, "rb") as f:
+            fd = -1  # the file object closes it
+            return f.read()
+    finally:
+        if fd >= 0:
+            os.close(fd)
 
 
 @contextlib.contextmanager

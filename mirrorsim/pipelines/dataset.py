@@ -43,12 +43,12 @@ from mirrorsim.formats import dataset_table as table
 from mirrorsim.formats.cache import seal
 from mirrorsim.formats.dataset_folder import (
     DATASET_FORMAT,
-    claim_folder,
     collect_rows,
     make_folders,
     scene_name,
     write_card,
     write_table,
+    writing,
 )
 from mirrorsim.formats.error_model import ErrorModel, default_error_model
 from mirrorsim.formats.files import dumps, write_json, write_text
@@ -313,40 +313,40 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
                              "position_sigma": calibration.position_sigma,
                              **({"priors": dict(calibration.priors)}
                                 if calibration.priors else {})}
-    claim_folder(out, meta, resume)
-    make_folders(out, meta)
-    chosen = choose_variant(variant)  # the probe runs once here rather than in every worker
-    _calibrate_models(spec, chosen, progress)
-    retry: dict[int, str] = {}
+    with writing(out, meta, resume):  # claimed, and locked while it runs
+        make_folders(out, meta)
+        chosen = choose_variant(variant)  # the probe runs once here rather than in every worker
+        _calibrate_models(spec, chosen, progress)
+        retry: dict[int, str] = {}
 
-    def is_done(i: int) -> bool:
-        return i in retry or (out / "rows" / f"{scene_name(i)}.json").exists()
+        def is_done(i: int) -> bool:
+            return i in retry or (out / "rows" / f"{scene_name(i)}.json").exists()
 
-    done = {p.stem for p in (out / "rows").glob("scene*.json")}
-    todo = [i for i in range(n) if scene_name(i) not in done]
-    t_start = time.perf_counter()
-    bar = tqdm(total=len(todo), unit="scene", disable=not progress, desc="dataset")
+        done = {p.stem for p in (out / "rows").glob("scene*.json")}
+        todo = [i for i in range(n) if scene_name(i) not in done]
+        t_start = time.perf_counter()
+        bar = tqdm(total=len(todo), unit="scene", disable=not progress, desc="dataset")
 
-    def on_result(result: SceneResult) -> None:
-        if result.row is None:
-            retry[result.index] = result.retry
-        bar.update()
+        def on_result(result: SceneResult) -> None:
+            if result.row is None:
+                retry[result.index] = result.retry
+            bar.update()
 
-    jobs = [(i, seed, spec, str(out), spp, chosen, tuple(keep), model, calibration)
-            for i in todo]
-    try:
-        _run_jobs(jobs, executor, workers, scheduler, is_done, on_result, max_rss_mb)
-    finally:
-        bar.close()
-    wall = time.perf_counter() - t_start
-    rows = collect_rows(out, n, seed)
-    write_table(out, rows)
-    write_card(out, meta, rows, chosen)
-    return DatasetRun(rows=len(rows), computed=len(todo) - len(retry),
-                      already_done=n - len(todo),
-                      failed=sum(bool(r.error) for r in rows), retry=retry,
-                      parquet=out / "dataset.parquet", seconds=wall,
-                      per_minute=len(todo) / wall * 60 if todo and wall else 0.0)
+        jobs = [(i, seed, spec, str(out), spp, chosen, tuple(keep), model, calibration)
+                for i in todo]
+        try:
+            _run_jobs(jobs, executor, workers, scheduler, is_done, on_result, max_rss_mb)
+        finally:
+            bar.close()
+        wall = time.perf_counter() - t_start
+        rows = collect_rows(out, n, seed)
+        write_table(out, rows)
+        write_card(out, meta, rows, chosen)
+        return DatasetRun(rows=len(rows), computed=len(todo) - len(retry),
+                          already_done=n - len(todo),
+                          failed=sum(bool(r.error) for r in rows), retry=retry,
+                          parquet=out / "dataset.parquet", seconds=wall,
+                          per_minute=len(todo) / wall * 60 if todo and wall else 0.0)
 
 
 def _run_jobs(jobs: list[tuple], executor: str, workers: int, scheduler: str | None,

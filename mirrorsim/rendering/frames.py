@@ -27,6 +27,7 @@ from mirrorsim.formats.files import (
     dumps,
     encode_jpeg,
     encode_png,
+    read_regular_bytes,
 )
 from mirrorsim.rendering.mitsuba_scene import (
     BACKGROUND_LABEL,
@@ -163,7 +164,7 @@ def _reusable(scene: Scene, out: Path, fingerprint: str) -> FrameFiles | None:
     if not (image.exists() and js.exists() and cap.exists()):
         return None
     try:
-        truth = GroundTruth.from_json(unseal(json.loads(js.read_bytes()), js.name))
+        truth = GroundTruth.from_json(unseal(json.loads(read_regular_bytes(js)), js.name))
     except (OSError, ValueError, KeyError, TypeError, RecursionError) as exc:
         return _rerender(image, str(exc))
     if truth.render is None or truth.render.fingerprint != fingerprint:
@@ -173,7 +174,7 @@ def _reusable(scene: Scene, out: Path, fingerprint: str) -> FrameFiles | None:
         # the id labels are optional (a dataset keeps them on request): checked if there
         have_ids = ids.name in digests and ids.exists()
         for path in (image, cap, *((ids,) if have_ids else ())):
-            if digests.get(path.name) != hashlib.sha256(path.read_bytes()).hexdigest():
+            if digests.get(path.name) != hashlib.sha256(read_regular_bytes(path)).hexdigest():
                 raise ValueError(f"{path.name}'s bytes do not match the hash in {js.name}")
         capture = load_capture(cap)
     except (OSError, ValueError, KeyError, TypeError) as exc:  # CaptureError: a ValueError
