@@ -374,10 +374,11 @@ def test_error_model_fits_bias_against_bench_imperfections():
 
 
 @pytest.mark.parametrize("damage", ["misspelt column", "edited value", "truncated",
-                                    "another scene's", "no checksum"])
+                                    "another scene's", "no checksum", "other settings"])
 def test_resume_redoes_a_row_that_fails_verification(one_worker, tmp_path, damage):
     """A row file edited, truncated, copied from another scene or from before rows were
-    sealed: moved to rows/rejected/ with a warning and redone, to the same row."""
+    sealed, or sealed by a dataset of the same seed and other settings (its digest of
+    them differs): moved to rows/rejected/ with a warning and redone, to the same row."""
     import json
     import shutil
 
@@ -393,7 +394,8 @@ def test_resume_redoes_a_row_that_fails_verification(one_worker, tmp_path, damag
             "edited value": json.dumps({**good, "err_target_cm": 0.0}),
             "truncated": row.read_text()[:100],
             "another scene's": (dst / "rows" / "scene000002.json").read_text(),
-            "no checksum": json.dumps(bad)}[damage]
+            "no checksum": json.dumps(bad),
+            "other settings": json.dumps(seal({**bad, "dataset": "0" * 16}))}[damage]
     row.write_text(text)
     with pytest.warns(RuntimeWarning, match="scene000001.json.*not trusted"):
         run = run_dataset(3, 3, dst, workers=1, spec_path=SPEC, progress=False, resume=True)

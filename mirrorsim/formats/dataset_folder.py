@@ -19,7 +19,7 @@ import numpy as np
 
 from mirrorsim.errors import InputError
 from mirrorsim.formats import dataset_table as table
-from mirrorsim.formats.cache import checksum, unseal
+from mirrorsim.formats.cache import checksum, seal, unseal
 from mirrorsim.formats.files import (
     atomic_path,
     jsonable,
@@ -161,9 +161,33 @@ def _differences(old: Any, new: Any, key: str = "", most: int = 3) -> list[str]:
     return [] if old == new else [f"{key} {old} (now {new})"]
 
 
-def read_row(path: Path, index: int, seed: int) -> table.DatasetRow:
+# the settings a row comes out of (n aside: it may grow), as dataset.json holds them
+_SETTINGS = ("format", "seed", "spp", "spec", "error_model_sha256", "calibrate")
+
+
+def settings_digest(meta: dict) -> str:
+    """The digest of a dataset's settings that each of its row files carries (under
+    ``"dataset"``): a sealed row of another dataset of the same seed but other settings
+    (spp, spec, error model, self-calibration) was taken as this one's."""
+    return checksum({k: meta.get(k) for k in _SETTINGS})[:16]
+
+
+def dataset_digest(out: Path) -> str:
+    """:func:`settings_digest` of the dataset in ``out`` (its ``dataset.json``)."""
+    return settings_digest(json.loads(read_regular_bytes(Path(out) / "dataset.json")))
+
+
+def row_document(row: table.DatasetRow, digest: str | None) -> dict:
+    """A row file's contents: the row and (where given) the digest of its dataset's
+    settings, sealed."""
+    return seal({**row.to_json(), **({"dataset": digest} if digest else {})})
+
+
+def read_row(path: Path, index: int, seed: int, digest: str | None = None
+             ) -> table.DatasetRow:
     """Scene ``index``'s row file, verified: its checksum, its declared columns, and that
-    it is this dataset's (its index and seed).
+    it is this dataset's (its index and seed, and where ``digest`` is given and the row
+    carries one, its settings: rows made before the digest carry none).
 
     Raises
     ------
@@ -171,8 +195,12 @@ def read_row(path: Path, index: int, seed: int) -> table.DatasetRow:
         Why it is not trusted.
     """
     try:
-        row = table.DatasetRow.from_json(unseal(json.loads(read_regular_bytes(path)),
-                                                path.name))
+        data = unseal(json.loads(read_regular_bytes(path)), path.name)
+        made = data.pop("dataset", None)
+        if digest is not None and made is not None and made != digest:
+            raise ValueError("a row made with other settings (spp, spec, error model or "
+                             "self-calibration) than this dataset's")
+        row = table.DatasetRow.from_json(data)
         found = (row.index, row.columns.get("seed"))
     except KeyError as exc:
         raise ValueError(f"no {exc} column") from None
@@ -189,12 +217,13 @@ def read_row(path: Path, index: int, seed: int) -> table.DatasetRow:
 def reject_bad_rows(out: Path, n: int, seed: int) -> None:
     """Move each row file that fails verification to ``rows/rejected/`` (kept, not lost),
     with a warning: its scene is redone."""
+    digest = dataset_digest(out)
     for i in range(n):
         path = out / "rows" / f"{scene_name(i)}.json"
         if not path.exists():
             continue
         try:
-            read_row(path, i, seed)
+            read_row(path, i, seed, digest)
         except ValueError as exc:
             aside = _aside(out / "rows" / "rejected", path.name)
             path.replace(aside)
@@ -220,12 +249,13 @@ def collect_rows(out: Path, n: int, seed: int | None = None) -> list[table.Datas
     out = Path(out)
     if seed is None:
         seed = json.loads((out / "dataset.json").read_text())["seed"]
+    digest = dataset_digest(out)
     rows = []
     for i in range(n):
         p = out / "rows" / f"{scene_name(i)}.json"
         if p.exists():
             try:
-                rows.append(read_row(p, i, seed))
+                rows.append(read_row(p, i, seed, digest))
             except ValueError as exc:
                 raise DatasetError(p, f"not a row of this dataset ({exc}); resuming the "
                                    "dataset redoes it") from None

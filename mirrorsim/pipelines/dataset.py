@@ -40,12 +40,13 @@ from tqdm import tqdm
 
 from mirrorsim.errors import BadParameter, DetectionError, InputError, SolverError
 from mirrorsim.formats import dataset_table as table
-from mirrorsim.formats.cache import seal
 from mirrorsim.formats.dataset_folder import (
     DATASET_FORMAT,
     collect_rows,
     make_folders,
+    row_document,
     scene_name,
+    settings_digest,
     write_card,
     write_table,
     writing,
@@ -86,10 +87,13 @@ class SceneResult:
 def process_one(i: int, seed: int, spec: DatasetSpec, out: str, spp: int | None,
                 variant: str, keep: tuple[str, ...] = (),
                 error_model: ErrorModel | None = None,
-                calibration: SelfCalibration = PLAIN) -> SceneResult:
+                calibration: SelfCalibration = PLAIN, digest: str | None = None
+                ) -> SceneResult:
     """Draw, render, detect, solve and score scene i; write its files, the measurements
     the solver saw (``frames/<scene>/<scene>.measurements.json``, for ``solve``) and its
-    row.  ``calibration``: self-calibration, as
+    row (with ``digest``, its dataset's
+    :func:`~mirrorsim.formats.dataset_folder.settings_digest`, where given).
+    ``calibration``: self-calibration, as
     :func:`~mirrorsim.pipelines.evaluate.evaluate_scene` takes it."""
     from mirrorsim.pipelines.evaluate import evaluate_into
     from mirrorsim.pipelines.random_scenes import sample_scene, to_yaml
@@ -122,7 +126,7 @@ def process_one(i: int, seed: int, spec: DatasetSpec, out: str, spp: int | None,
         return SceneResult(i, None, f"{type(exc).__name__}: {exc}")
     row["seconds_total"] = time.perf_counter() - t0
     done = table.DatasetRow.from_json(row)
-    write_json(out_dir / "rows" / f"{name}.json", seal(done.to_json()))
+    write_json(out_dir / "rows" / f"{name}.json", row_document(done, digest))
     return SceneResult(i, done)
 
 
@@ -332,8 +336,9 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
                 retry[result.index] = result.retry
             bar.update()
 
-        jobs = [(i, seed, spec, str(out), spp, chosen, tuple(keep), model, calibration)
-                for i in todo]
+        digest = settings_digest(meta)
+        jobs = [(i, seed, spec, str(out), spp, chosen, tuple(keep), model, calibration,
+                 digest) for i in todo]
         try:
             _run_jobs(jobs, executor, workers, scheduler, is_done, on_result, max_rss_mb)
         finally:
