@@ -747,3 +747,13 @@ def test_a_second_run_on_a_dataset_being_written_is_refused(tmp_path):
         with pytest.raises(DatasetError, match="another run is writing"):
             run_dataset(1, 5, out, workers=1, spec_path=SPEC, progress=False)
     assert sorted(p.name for p in out.iterdir()) == [LOCK_NAME]
+
+
+def test_the_cards_command_is_the_one_that_made_the_dataset(three_beacons):
+    """The card said `mirrorsim dataset --n 2 --seed 5` for a dataset made with a spec
+    file, three beacons and self-calibration: rerun, it made another dataset."""
+    out, _ = three_beacons
+    card = (out / "README.md").read_text()
+    assert (f"`mirrorsim dataset --n 2 --seed 5 --spec {SPEC} --beacons 3 --calibrate "
+            "pan,scale --prior pan=0.3`") in card
+    assert "--error-model" not in card  # the shipped model

@@ -399,6 +399,30 @@ def _calibrated(meta: dict) -> str:
             + (f" --prior {priors_text(cal['priors'])}" if cal.get("priors") else ""))
 
 
+def made_with(meta: dict) -> str:
+    """The command that makes the dataset ``meta`` describes again (the spec's file as
+    it was named; the error model, where not the shipped one, by its hash: see
+    :func:`_model_words`)."""
+    spec = meta.get("spec") or {}
+    sampler = (spec.get("render") or {}).get("sampler")
+    count = (spec.get("beacon") or {}).get("count")
+    return (f"mirrorsim dataset --n {meta['n']} --seed {meta['seed']}"
+            + (f" --spec {meta['spec_file']}" if meta.get("spec_file") else "")
+            + (f" --spp {meta['spp']}" if meta.get("spp") is not None else "")
+            + (f" --sampler {sampler}" if sampler else "")
+            + (f" --beacons {count}" if count else "")
+            + (" --error-model MODEL" if meta.get("error_model_shipped") is False else "")
+            + _calibrated(meta))
+
+
+def _model_words(meta: dict) -> str:
+    """The error model a dataset was made with, where it is not the shipped one."""
+    if meta.get("error_model_shipped") is not False:
+        return ""
+    return (f"; MODEL: the error model of SHA-256 {meta['error_model_sha256'][:12]}… "
+            "(dataset.json)")
+
+
 def write_card(out: Path, meta: dict, rows: list[table.DatasetRow], variant: str) -> None:
     """Write the dataset card DIR/README.md."""
     ok = [r for r in rows if not r.error]
@@ -406,9 +430,9 @@ def write_card(out: Path, meta: dict, rows: list[table.DatasetRow], variant: str
     columns = card_columns()
     text = f"""# mirrorsim dataset
 
-Made with `mirrorsim dataset --n {meta['n']} --seed {meta['seed']}{_calibrated(meta)}`
+Made with `{made_with(meta)}`
 ({'scene spp' if meta['spp'] is None else f"--spp {meta['spp']}"}; backend {variant};
-{(meta['spec'].get('beacon') or {}).get('count', 1)} beacon(s) a scene).
+{(meta['spec'].get('beacon') or {}).get('count', 1)} beacon(s) a scene{_model_words(meta)}).
 {len(rows)} rows, {len(rows) - len(ok)} failed (their `error` column says why).
 
 Each row is one random scene (`scenes/<scene>.yaml`, a normal scene file: rerun it with

@@ -309,8 +309,12 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
         raise BadParameter("nuisances", f"{exc} (scenes of {spec.beacon_count} beacon(s) "
                            f"drawn from {spec_path or 'the default spec'})") from None
     model = error_model or default_error_model()
+    digest_of = lambda m: hashlib.sha256(dumps(m.to_json()).encode()).hexdigest()  # noqa: E731
     meta = {"format": DATASET_FORMAT, "n": n, "seed": seed, "spp": spp, "spec": spec.data,
-            "error_model_sha256": hashlib.sha256(dumps(model.to_json()).encode()).hexdigest()}
+            "error_model_sha256": digest_of(model),
+            # for the card's command only (not settings: a resume compares none of them)
+            "spec_file": None if spec_path is None else str(spec_path),
+            "error_model_shipped": digest_of(model) == digest_of(default_error_model())}
     if calibration.nuisances or calibration.position_sigma:
         # (absent otherwise, as in datasets without them; priors only where given)
         meta["calibrate"] = {"nuisances": list(calibration.nuisances),
