@@ -754,6 +754,6 @@ def test_the_cards_command_is_the_one_that_made_the_dataset(three_beacons):
     file, three beacons and self-calibration: rerun, it made another dataset."""
     out, _ = three_beacons
     card = (out / "README.md").read_text()
-    assert (f"`mirrorsim dataset --n 2 --seed 5 --spec {SPEC} --beacons 3 --calibrate "
-            "pan,scale --prior pan=0.3`") in card
+    assert (f"`mirrorsim dataset --n 2 --seed 5 --out {out} --spec {SPEC} --beacons 3 "
+            "--calibrate pan,scale --prior pan=0.3`") in card
     assert "--error-model" not in card  # the shipped model

@@ -262,3 +262,33 @@ def test_track_refuses_a_beacon_sigma_it_would_not_use(tmp_path, capsys):
     assert main(argv) == 2
     assert "no fixed beacon" in capsys.readouterr().err
     assert not (tmp_path / "t").exists()
+
+
+def test_review_mends_of_the_sweeps(tmp_path, capsys):
+    """A budget's lone --beacon-sigma names --calibrate; a dataset's settings digest
+    takes numpy numbers; a folder output named - is not stdout; a scene made in memory
+    has no file to be found inside an output folder; derived frame names may pass 64."""
+    import argparse
+    from dataclasses import replace
+
+    import numpy as np
+
+    from mirrorsim.cli.registry import stdout_output
+    from mirrorsim.formats.dataset_folder import settings_digest
+    from mirrorsim.formats.files import check_inputs_outside
+    from mirrorsim.formats.scenefile import load_scene
+
+    assert main(["budget", str(SCENES / "exp1.yaml"), "--beacon-sigma", "0.1", "--out",
+                 str(tmp_path / "b")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert err.startswith("error: --calibrate:") and not (tmp_path / "b").exists(), err
+    assert settings_digest({"seed": np.int64(5), "spp": np.int32(4)}) == \
+        settings_digest({"seed": 5, "spp": 4})
+    ns = argparse.Namespace(out="-", json=None, outputs=[("out", "--out", "dir"),
+                                                         ("json", "--json", "file")])
+    assert stdout_output(ns) is None
+    ns.json = "-"
+    assert stdout_output(ns) == "--json"
+    check_inputs_outside(tmp_path, [("scene", "<scene>")], "out")  # no file: no refusal
+    scene = load_scene(SCENES / "exp1.yaml")
+    assert replace(scene, name="a" * 64 + "_pose000").name.endswith("_pose000")

@@ -77,8 +77,8 @@ def check_outputs(args: argparse.Namespace) -> None:
 def stdout_output(args: argparse.Namespace) -> str | None:
     """The flag of the one output given as ``-`` (stdout), or None; two are refused, as
     their documents would run together."""
-    dashes = [flag for dest, flag, _kind in getattr(args, "outputs", None) or []
-              if str(getattr(args, dest, None)) == "-"]
+    dashes = [flag for dest, flag, kind in getattr(args, "outputs", None) or []
+              if kind == "file" and str(getattr(args, dest, None)) == "-"]
     if len(dashes) > 1:
         raise BadArgument(dashes[1], f"- (stdout), which {dashes[0]} writes to already: "
                           "give one of them a file")
@@ -275,14 +275,18 @@ def beacon_sigma_option(p: argparse.ArgumentParser, what: str) -> None:
 
 
 def beacon_sigma_of(args: argparse.Namespace) -> float:
-    """--beacon-sigma, checked: 0 (exactly known), or finite within
-    POSITION_SIGMA_MIN_CM..MAX_BEACON_SIGMA cm."""
-    from solver.selfcal import POSITION_SIGMA_MIN_CM
+    """--beacon-sigma, checked: the solver's rule for a position σ
+    (:func:`solver.selfcal.check_position_sigma`), and at most MAX_BEACON_SIGMA cm."""
+    from solver.errors import SolverError
+    from solver.selfcal import check_position_sigma
 
     v = args.beacon_sigma
-    if not (v == 0 or POSITION_SIGMA_MIN_CM <= v <= MAX_BEACON_SIGMA):  # NaN fails both
-        raise BadArgument("--beacon-sigma", f"{v:g} must be 0 (known exactly) or within "
-                          f"{POSITION_SIGMA_MIN_CM:g}..{MAX_BEACON_SIGMA:g} cm")
+    try:
+        check_position_sigma(v)
+    except SolverError as exc:
+        raise BadArgument("--beacon-sigma", str(exc)) from None
+    if v > MAX_BEACON_SIGMA:
+        raise BadArgument("--beacon-sigma", f"{v:g} must be ≤ {MAX_BEACON_SIGMA:g} cm")
     return float(v)
 
 

@@ -37,9 +37,9 @@ Model
 
 from __future__ import annotations
 
+import errno
 import warnings
 from dataclasses import asdict, dataclass
-from pathlib import Path
 
 import cv2
 import numpy as np
@@ -54,7 +54,7 @@ from mirrorsim.detection.image_geometry import (
 from mirrorsim.detection.regions import find_pencils, find_target
 from mirrorsim.errors import DetectionError, InputError
 from mirrorsim.formats.capture import CaptureRecord
-from mirrorsim.formats.files import decode_image
+from mirrorsim.formats.files import decode_image, read_regular_bytes
 from mirrorsim.rendering.sensor import undistort
 from mirrorsim.scene.model import (
     MAX_RESOLUTION,
@@ -287,13 +287,12 @@ def read_stored_frame(path, size: tuple[int, int] | None = None) -> StoredFrame:
         that are measured.
     """
     try:
-        if Path(path).exists() and not Path(path).is_file():
-            raise InputError(path, "", "not a regular file (a folder, FIFO, device or socket)")
-        raw = Path(path).read_bytes()
+        raw = read_regular_bytes(path)
     except FileNotFoundError:
         raise InputError(path, "", "no such file") from None
-    except OSError as exc:
-        raise InputError(path, "", f"cannot read: {exc.strerror or exc}") from None
+    except OSError as exc:  # "not a regular file" for a folder, FIFO, device or socket
+        raise InputError(path, "", exc.strerror if exc.errno == errno.EINVAL and
+                         exc.strerror else f"cannot read: {exc.strerror or exc}") from None
     head = raw[:8]
     if not (head.startswith(PNG_MAGIC) or head.startswith(JPEG_MAGIC)):
         raise InputError(path, "", "not a PNG or JPEG image")

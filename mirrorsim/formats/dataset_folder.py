@@ -81,6 +81,8 @@ def writing(out: Path, meta: dict, resume: bool) -> Iterator[None]:
             raise DatasetError(out, "another run is writing this dataset now: wait for it "
                                "to end (then resume it), or choose another folder") from None
         claim_folder(out, meta, resume)  # again, now alone: another run may have begun it
+        if resume:  # its rows, verified only now that no other run writes them
+            reject_bad_rows(out, meta["n"], meta["seed"])
         yield
 
 
@@ -129,7 +131,6 @@ def claim_folder(out: Path, meta: dict, resume: bool) -> None:
     if not isinstance(old["n"], int) or meta["n"] < old["n"]:
         raise DatasetError(out, f"holds {old['n']} scenes: resume it with n ≥ {old['n']} "
                            f"(more scenes extend it), not {meta['n']}")
-    reject_bad_rows(out, meta["n"], meta["seed"])
 
 
 def _calibration_words(cal: Any) -> str:
@@ -169,7 +170,7 @@ def settings_digest(meta: dict) -> str:
     """The digest of a dataset's settings that each of its row files carries (under
     ``"dataset"``): a sealed row of another dataset of the same seed but other settings
     (spp, spec, error model, self-calibration) was taken as this one's."""
-    return checksum({k: meta.get(k) for k in _SETTINGS})[:16]
+    return checksum(jsonable({k: meta.get(k) for k in _SETTINGS}))[:16]
 
 
 def dataset_digest(out: Path) -> str:
@@ -399,14 +400,14 @@ def _calibrated(meta: dict) -> str:
             + (f" --prior {priors_text(cal['priors'])}" if cal.get("priors") else ""))
 
 
-def made_with(meta: dict) -> str:
+def made_with(meta: dict, out: Path) -> str:
     """The command that makes the dataset ``meta`` describes again (the spec's file as
     it was named; the error model, where not the shipped one, by its hash: see
     :func:`_model_words`)."""
     spec = meta.get("spec") or {}
     sampler = (spec.get("render") or {}).get("sampler")
     count = (spec.get("beacon") or {}).get("count")
-    return (f"mirrorsim dataset --n {meta['n']} --seed {meta['seed']}"
+    return (f"mirrorsim dataset --n {meta['n']} --seed {meta['seed']} --out {out}"
             + (f" --spec {meta['spec_file']}" if meta.get("spec_file") else "")
             + (f" --spp {meta['spp']}" if meta.get("spp") is not None else "")
             + (f" --sampler {sampler}" if sampler else "")
@@ -430,8 +431,8 @@ def write_card(out: Path, meta: dict, rows: list[table.DatasetRow], variant: str
     columns = card_columns()
     text = f"""# mirrorsim dataset
 
-Made with `{made_with(meta)}`
-({'scene spp' if meta['spp'] is None else f"--spp {meta['spp']}"}; backend {variant};
+Made with `{made_with(meta, out)}`
+({'the scenes’ spp' if meta['spp'] is None else f"{meta['spp']} spp"}; backend {variant};
 {(meta['spec'].get('beacon') or {}).get('count', 1)} beacon(s) a scene{_model_words(meta)}).
 {len(rows)} rows, {len(rows) - len(ok)} failed (their `error` column says why).
 

@@ -218,8 +218,9 @@ def check_inputs_outside(folder: str | Path, inputs, option: str) -> None:
     a path None or ``-`` skipped."""
     folder = Path(folder).resolve()
     for name, source in inputs:
-        if source is not None and str(source) not in ("", "-") and \
-                Path(source).resolve().is_relative_to(folder):
+        # a scene made in memory has a source that names no file ("<scene>")
+        if source is not None and str(source) not in ("", "-") and Path(source).is_file() \
+                and Path(source).resolve().is_relative_to(folder):
             raise OutputError(folder, f"{option}: holds this run's input {name} "
                               f"({str(source)!r}), and the run names the files it writes "
                               "there: move the input out, or choose another folder")

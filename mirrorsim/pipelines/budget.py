@@ -179,8 +179,9 @@ def check_budget_calibration(scene: Scene, calibration: SelfCalibration) -> Self
     beacons cannot carry, or a beacons' position σ without nuisances."""
     calibration = as_calibration(calibration)
     if calibration.position_sigma and not calibration.nuisances:
-        raise BadParameter("position_sigma", "the budget uses it in its self-calibrated "
-                           "column only: give nuisances too")
+        raise BadParameter("nuisances", "none given, yet a beacons' position σ is: the "
+                           "budget uses that σ in its self-calibrated column only, which "
+                           "needs nuisances to self-calibrate")
     try:
         check_nuisances(calibration.nuisances, len(scene.beacons), 1)
     except SolverError as exc:

@@ -8,11 +8,13 @@ Layout of a dataset folder::
                               ids, annotated: its id labels, the annotated frame)
     DIR/rows/<name>.json      its finished row (written last, atomically: a row file
                               exists only for a complete scene), sealed with the
-                              checksum of its contents; on --resume a row that fails
+                              checksum of its contents and the digest of the
+                              dataset's settings; on --resume a row that fails
                               verification is moved to rows/rejected/ and redone
     DIR/dataset.parquet       all rows, one per scene, in index order
     DIR/README.md             the dataset card
     DIR/dataset.json          how it was made (seed, n, spec, spp): --resume checks it
+    DIR/.mirrorsim-lock       locked by the run writing the dataset (a second is refused)
 
 Scene i is drawn from ``SeedSequence(seed, spawn_key=(i,))`` (the same as
 ``SeedSequence(seed).spawn(n)[i]``) and rendered with seed i, so a row depends on
@@ -243,17 +245,14 @@ def _check_run_parameters(n, seed, workers, spp, sampler, executor, keep) -> Non
     """Every parameter of :func:`run_dataset` that can be checked before anything is
     written (a bad one had failed after the folder was claimed, or in every scene)."""
     from mirrorsim.pipelines.score import check_keep
-    from mirrorsim.scene.model import MAX_SPP, SAMPLERS
-
-    def whole(v) -> bool:
-        return isinstance(v, int | np.integer) and not isinstance(v, bool)
+    from mirrorsim.scene.model import MAX_SPP, SAMPLERS, is_whole
 
     for name, v, lo, hi in (("n", n, 1, MAX_SCENES), ("seed", seed, 0, None),
                             ("workers", workers, 1, None)):
-        if not whole(v) or v < lo or (hi is not None and v > hi):
+        if not is_whole(v) or v < lo or (hi is not None and v > hi):
             raise BadParameter(name, f"{v!r} must be a whole number within {lo}.."
                                f"{hi if hi is not None else ''}")
-    if spp is not None and not (whole(spp) and 1 <= spp <= MAX_SPP):
+    if spp is not None and not (is_whole(spp) and 1 <= spp <= MAX_SPP):
         raise BadParameter("spp", f"{spp!r} must be a whole number within 1..{MAX_SPP} "
                            "(or None: the spec's)")
     if sampler is not None and sampler not in SAMPLERS:
@@ -297,6 +296,8 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
     from mirrorsim.rendering.backend import choose_variant
 
     _check_run_parameters(n, seed, workers, spp, sampler, executor, keep)
+    # plain numbers from here on (numpy's would write themselves into files otherwise)
+    n, seed, workers, spp = int(n), int(seed), int(workers), None if spp is None else int(spp)
     out = Path(out)
     spec = load_spec(spec_path)
     if sampler is not None:  # part of the spec, so that --resume checks it

@@ -17,6 +17,7 @@ from mirrorsim.scene.model import (
     TARGET_THICKNESS,
     Beacon,
     Scene,
+    is_whole,
 )
 from mirrorsim.truth import optics, visibility
 from solver.beacon_set import BeaconSet, best_beacon_set
@@ -157,7 +158,7 @@ def plan_scene(scene: Scene, sigma: Sigma | ObjectSigmas | None = None, eps_deg:
     calibration = as_calibration(calibration)
     for name, v, hi in (("n_beacons", n_beacons, MAX_PLANNED_BEACONS), ("n_poses", n_poses,
                                                                        MAX_POSES)):
-        if not (isinstance(v, int) and not isinstance(v, bool) and 1 <= v <= hi):
+        if not (is_whole(v) and 1 <= v <= hi):
             raise BadParameter(name, f"{v!r} must be a whole number within 1..{hi}")
     cam, mir = scene.camera, scene.mirror
     img = optics.mirror_image(cam.position, mir, scene.target.position)

@@ -32,7 +32,7 @@ from mirrorsim.errors import BadParameter, DetectionError
 from mirrorsim.formats.error_model import ErrorModel, default_error_model
 from mirrorsim.formats.files import claim_run_folder
 from mirrorsim.pipelines.frame import FrameNotMeasured, render_and_measure
-from mirrorsim.scene.model import PENCIL_RADIUS, Bench, Scene
+from mirrorsim.scene.model import PENCIL_RADIUS, Bench, Scene, is_whole
 from mirrorsim.truth.optics import target_facing
 from mirrorsim.truth.visibility import visibility
 from solver.errors import SolverError
@@ -219,7 +219,7 @@ def check_options(kind: str, steps: int, sigma: float, side: float, step: float,
         raise BadParameter("kind", f"{kind!r}: expected one of {', '.join(PATHS)}")
     if heading not in HEADINGS:
         raise BadParameter("heading", f"{heading!r}: expected one of {', '.join(HEADINGS)}")
-    if not (isinstance(steps, int) and not isinstance(steps, bool) and 1 <= steps <= MAX_STEPS):
+    if not (is_whole(steps) and 1 <= steps <= MAX_STEPS):
         raise BadParameter("steps", f"{steps!r} must be a whole number within 1..{MAX_STEPS}")
     if not (np.isfinite(sigma) and 0 <= sigma <= MAX_ODOMETRY_SIGMA):
         raise BadParameter("odometry_sigma", f"{sigma:g} must be within 0..{MAX_ODOMETRY_SIGMA:g}"
@@ -277,7 +277,7 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
     """
     check_options(kind, steps, odometry_sigma, side, step, heading, scene.board.size)
     for name, v, lo in (("particles", particles, MIN_PARTICLES), ("seed", seed, 0)):
-        if not (isinstance(v, int | np.integer) and not isinstance(v, bool) and v >= lo):
+        if not (is_whole(v) and v >= lo):
             raise BadParameter(name, f"{v!r} must be a whole number ≥ {lo}")
     try:
         check_position_sigma(position_sigma)

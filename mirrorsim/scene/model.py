@@ -197,17 +197,17 @@ class RenderSettings:
         # spec, a flag): the scene reader and the CLI name the key or flag it refuses
         for name in ("spp", "background_spp", "beacon_spp"):
             value = getattr(self, name)
-            if not (_whole(value) and 1 <= value <= MAX_SPP):
+            if not (is_whole(value) and 1 <= value <= MAX_SPP):
                 raise BadParameter(name, f"{value!r} must be a whole number within 1..{MAX_SPP}")
-        if not (_whole(self.seed) and self.seed >= 0):
+        if not (is_whole(self.seed) and self.seed >= 0):
             raise BadParameter("seed", f"{self.seed!r} must be a whole number ≥ 0")
         if self.sampler not in SAMPLERS:
             raise BadParameter("sampler", f"{self.sampler!r}: expected one of "
                                f"{', '.join(SAMPLERS)}")
 
 
-def _whole(v) -> bool:
-    """An integer (numpy's too), not a bool: a count of samples or a seed."""
+def is_whole(v) -> bool:
+    """An integer (numpy's too), not a bool: a count or a seed, wherever one is taken."""
     return isinstance(v, int | np.integer) and not isinstance(v, bool)
 
 
@@ -239,9 +239,12 @@ class Bench:
     calibration_distance_error: float = 0.0  # cm: reference at 100 + this, 100 assumed
 
 
-# a scene's name names its files: letters, digits, '.', '_', '-', no path
+# a scene's name names its files: letters, digits, '.', '_', '-', no path; a scene file
+# names at most 64 characters, the frames derived from it add their suffixes (_b0,
+# _pose000, _fixed0) to that
 NAME_PATTERN = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")
-NAME_RULE = "letters, digits, '.', '_', '-'; no path"
+NAME_RULE = "letters, digits, '.', '_', '-'; no path; at most 64 characters"
+_DERIVED_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,127}")
 
 
 @dataclass(frozen=True)
@@ -264,8 +267,9 @@ class Scene:
         # every file of a scene is named after it: a name edited in by a script
         # (dataclasses.replace) is held to the scene reader's rule, or a parent path would write
         # outside the run's folder
-        if not isinstance(self.name, str) or not NAME_PATTERN.fullmatch(self.name):
-            raise BadParameter("name", f"{self.name!r} is not a plain file name ({NAME_RULE})")
+        if not isinstance(self.name, str) or not _DERIVED_NAME.fullmatch(self.name):
+            raise BadParameter("scene.name", f"{self.name!r} is not a plain file name "
+                               f"({NAME_RULE})")
 
     def with_render(self, **settings) -> Scene:
         """The same scene rendered with other settings (``spp``, ``seed``, ``sampler``…),
