@@ -117,4 +117,10 @@ def test_the_api_keeps_the_command_lines_promises(tmp_path):
     for bad in ({"particles": 0}, {"steps": 2.5}, {"seed": -1}):
         with pytest.raises(BadParameter):
             ms.track(scene, out, **{"steps": 1, **bad})
+    from mirrorsim.pipelines.calibrate import calibrate
+
+    for bad in (float("nan"), "1", 500.0):  # NaN failed deep inside a format
+        with pytest.raises(BadParameter, match="distance_error"):
+            calibrate(scene.camera, scene.target.size, scene.beacons[0].height,
+                      distance_error=bad)
     assert not out.exists() and not (tmp_path / "ds").exists()

@@ -19,14 +19,16 @@ import ast
 import functools
 import hashlib
 import importlib.util
+import math
 from pathlib import Path
 
 import numpy as np
 
 from mirrorsim.detection.detector import measure_object
 from mirrorsim.detection.image_geometry import Calibration
-from mirrorsim.errors import DetectionError
+from mirrorsim.errors import BadParameter, DetectionError
 from mirrorsim.formats.cache import read_entry, write_entry
+from mirrorsim.scene import imperfections
 from mirrorsim.scene.model import FRONT_OFFSET, PENCIL_RADIUS, Beacon, Board, Camera, Target
 from mirrorsim.truth import optics
 from solver.geometry import unit
@@ -162,6 +164,18 @@ def measure_reference(camera: Camera, kind: str, size, variant: str = "auto",
     return m.height_px
 
 
+def _check_distance_error(value) -> None:
+    """The scene key ``calibration.distance_error``'s rule, for a caller of the library
+    (NaN failed deep in a format, a string in a subtraction)."""
+    imp = next(i for i in imperfections.REGISTRY if i.field == "calibration_distance_error")
+    if isinstance(value, bool) or not isinstance(value, int | float | np.number) \
+            or not math.isfinite(value):
+        raise BadParameter("distance_error", f"{value!r} is not a finite number (cm)")
+    why = imperfections.check_bounds(imp, float(value))
+    if why:
+        raise BadParameter("distance_error", why)
+
+
 def calibrate(camera: Camera, target_size, pencil_height: float, *, variant: str = "auto",
               refresh: bool = False, distance_error: float = 0.0,
               subsampled: bool = False) -> Calibration:
@@ -172,7 +186,13 @@ def calibrate(camera: Camera, target_size, pencil_height: float, *, variant: str
     every d_total measured with it, comes out too small by about that fraction.
     ``subsampled``: K for JPEG frames, whose edges the detector measures otherwise; the
     references are measured that way, so that a bias of that way common to both cancels.
+
+    Raises
+    ------
+    BadParameter
+        A ``distance_error`` that is not a number within the scene key's bounds.
     """
+    _check_distance_error(distance_error)
     key = calibration_key(camera, target_size, pencil_height, distance_error, subsampled)
     found = None if refresh else read_entry("calibration", key, _check_entry)
     if found is not None:
