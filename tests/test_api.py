@@ -117,6 +117,13 @@ def test_the_api_keeps_the_command_lines_promises(tmp_path):
     for bad in ({"particles": 0}, {"steps": 2.5}, {"seed": -1}):
         with pytest.raises(BadParameter):
             ms.track(scene, out, **{"steps": 1, **bad})
+    from mirrorsim.errors import InputError
+    from solver.measurements import ObjectSigmas
+
+    with pytest.raises(BadParameter, match="beacon σ pairs"):  # was taken for the first's
+        ms.plan(scene, ObjectSigmas(Sigma(), (Sigma(), Sigma(0.02))))
+    with pytest.raises(InputError, match="capture"):  # a path is read, not an AttributeError
+        ms.detect(tmp_path / "f.png", tmp_path / "f.capture.json")
     from mirrorsim.pipelines.calibrate import calibrate
 
     for bad in (float("nan"), "1", 500.0):  # NaN failed deep inside a format

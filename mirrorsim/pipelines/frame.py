@@ -23,7 +23,7 @@ from mirrorsim.detection.detector import (
 )
 from mirrorsim.detection.image_geometry import Calibration
 from mirrorsim.errors import DetectionError
-from mirrorsim.formats.capture import CaptureRecord
+from mirrorsim.formats.capture import CaptureRecord, load_capture
 from mirrorsim.pipelines.calibrate import calibrate
 from mirrorsim.rendering.frames import FrameFiles, capture_of, reused_frame, write_frame
 from mirrorsim.rendering.passes import render_frame, scene_fingerprint
@@ -75,12 +75,13 @@ def subsampled(image_path: str | Path) -> bool:
         return path.suffix.lower() in (".jpg", ".jpeg")
 
 
-def measure_frame(image_path: str | Path, capture: CaptureRecord, *,
+def measure_frame(image_path: str | Path, capture: CaptureRecord | str | Path, *,
                   calibration: Calibration | None = None, variant: str = "auto",
                   distance_error: float = 0.0, source: str = "",
                   pixels: np.ndarray | None = None) -> MeasuredFrame:
     """Calibrate (unless given) and detect one frame from its pixels and capture record
-    (``pixels``: the file's pixels already in memory, a PNG just written).
+    (``capture``: the record, or its ``.capture.json`` file; ``pixels``: the file's pixels
+    already in memory, a PNG just written).
 
     Raises
     ------
@@ -92,6 +93,8 @@ def measure_frame(image_path: str | Path, capture: CaptureRecord, *,
     DetectionError
         When the calibration's own references cannot be measured.
     """
+    if isinstance(capture, str | Path):  # its file, read and checked (CaptureError)
+        capture = load_capture(capture)
     cam = capture.camera
     if pixels is None:
         stored = read_stored_frame(image_path, (cam.width, cam.height_px))

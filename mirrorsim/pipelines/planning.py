@@ -154,6 +154,9 @@ def plan_scene(scene: Scene, sigma: Sigma | ObjectSigmas | None = None, eps_deg:
     # the placement's Fisher information takes independent errors: a shared α offset
     # enters each α whole (the conservative choice; see docs/limitations.md)
     sigma = as_object_sigmas(sigma or Sigma()).independent()
+    if len(sigma.beacons) > 1:  # it was silently taken for the first beacon's
+        raise BadParameter("sigma", f"{len(sigma.beacons)} beacon σ pairs: give one (every "
+                           "position the plan tries is a pencil like the others)")
     _check_parameters(sigma, eps_deg, step, yaw_spread_deg, d1_spread)
     calibration = as_calibration(calibration)
     for name, v, hi in (("n_beacons", n_beacons, MAX_PLANNED_BEACONS), ("n_poses", n_poses,
