@@ -39,12 +39,12 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from mirrorsim.detection.detector import detect_frame, read_frame  # noqa: E402
+from mirrorsim.detection.detector import detect_frame, read_stored_frame  # noqa: E402
 from mirrorsim.errors import DetectionError, SceneError  # noqa: E402
 from mirrorsim.formats.error_model import default_error_model  # noqa: E402
 from mirrorsim.formats.scenefile import load_scene, scene_from_dict  # noqa: E402
 from mirrorsim.pipelines.calibrate import calibrate  # noqa: E402
-from mirrorsim.pipelines.frame import render_and_measure, subsampled  # noqa: E402
+from mirrorsim.pipelines.frame import render_and_measure  # noqa: E402
 from mirrorsim.pipelines.random_scenes import load_spec, sample_scene  # noqa: E402
 from mirrorsim.rendering.frames import render_to_files  # noqa: E402
 from mirrorsim.truth import optics, visibility  # noqa: E402
@@ -103,10 +103,10 @@ def measure(scene, tmp: Path) -> dict:
     # is timed
     spp = label(scene)
     res = render_to_files(scene, tmp / scene.name, progress=False)
-    lossy = subsampled(res.image)
+    stored = read_stored_frame(res.image)  # its pixels and its kind, from one read
+    img, lossy = stored.pixels, stored.subsampled
     cal = calibrate(scene.camera, scene.target.size, scene.beacons[0].height,
                     subsampled=lossy)
-    img = read_frame(res.image)
     t0 = time.perf_counter()
     try:
         out = detect_frame(img, res.capture, cal, lossy)

@@ -165,7 +165,7 @@ def check_position_sigma(position_sigma: float) -> None:
 
 def check_nuisance_sigma(priors: Mapping[str, float], nuisances: tuple[str, ...]) -> None:
     """Refuse a prior σ for a nuisance that is not estimated, or one that is not a
-    finite number > 0."""
+    finite number of at least :data:`PRIOR_MIN`."""
     for name, s in priors.items():
         if name not in NUISANCES:
             raise SolverError(f"a prior σ for an unknown nuisance {name!r}: choose from "

@@ -183,6 +183,8 @@ def _plan(args) -> int:
 
 
 def _dataset_options(p):
+    from mirrorsim.pipelines.dataset import EXECUTORS
+
     p.add_argument("--n", type=int, required=True, help="number of scenes")
     p.add_argument("--seed", type=int, required=True)
     output(p, "--out", "dataset", type=Path, required=True,
@@ -210,7 +212,7 @@ def _dataset_options(p):
     p.add_argument("--resume", action="store_true",
                    help="finish an interrupted run, or extend one to a larger --n (the same "
                    "seed and settings: the added scenes are those a run of that --n makes)")
-    p.add_argument("--executor", default="local", choices=["local", "dask"])
+    p.add_argument("--executor", default="local", choices=EXECUTORS)
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help="Dask scheduler (tcp://host:8786); default: a local cluster")
 

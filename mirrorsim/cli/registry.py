@@ -16,6 +16,7 @@ from mirrorsim.formats.files import (
     check_output_dir,
     check_output_file,
     claim_output_folder,
+    claim_run_folder,
     default_out,
 )
 
@@ -95,7 +96,7 @@ def _check_outputs(args: argparse.Namespace, checking: list[str]) -> None:
                 check_output_dir(default_out("x").parent, flag, ours=False)
             check_output_dir(value, flag, ours=kind == "dir")
             if kind == "dir" and value is not None:
-                _check_inputs_outside(args, Path(value), flag)
+                check_inputs_outside(value, _file_inputs(args), flag)
             continue
         check_output_file(value, flag)
         _check_not_an_input(args, value, flag)
@@ -126,20 +127,18 @@ def _check_files_outside(args: argparse.Namespace, folder: Path) -> None:
                               "whose file names the run gives: put it elsewhere")
 
 
-def _check_inputs_outside(args: argparse.Namespace, folder: Path, flag: str) -> None:
-    """No input file of the run inside ``folder``, the run's output folder."""
-    check_inputs_outside(folder, [(name, getattr(args, dest, None)) for dest, name, kind
-                                  in getattr(args, "inputs", None) or [] if kind == "file"],
-                         flag)
+def _file_inputs(args: argparse.Namespace) -> list[tuple[str, object]]:
+    """The run's input files as (name shown, path) pairs."""
+    return [(name, getattr(args, dest, None))
+            for dest, name, kind in getattr(args, "inputs", None) or [] if kind == "file"]
 
 
 def out_folder(args: argparse.Namespace, scene: Scene, sub: str = "") -> Path:
-    """The run's output folder, claimed (:func:`claim_output_folder`): ``--out``, else
-    ``renders/<name>/<sub>``; no file output of the run may lie inside it."""
+    """The run's output folder, claimed with its inputs kept out (:func:`claim_run_folder`):
+    ``--out``, else ``renders/<name>/<sub>``; no file output of the run may lie inside it."""
     out = args.out if args.out is not None else default_out(scene.name) / sub
     _check_files_outside(args, out)
-    _check_inputs_outside(args, out, "--out")
-    return claim_output_folder(out, "--out")
+    return claim_run_folder(out, "--out", _file_inputs(args))
 
 
 def out_file(args: argparse.Namespace, scene: Scene, name: str) -> Path:

@@ -65,6 +65,8 @@ from solver.geometry import yaw_difference
 from solver.selfcal import NUISANCES, PLAIN, SelfCalibration, check_nuisances, priors_text
 
 # 3: the beacon count, each beacon's columns, self-calibration; 4: its priors
+# where the scenes run: warm local worker processes, or a Dask cluster
+EXECUTORS = ("local", "dask")
 ROW_SCHEMA_VERSION = 4
 # a worker retires past this resident memory; measured on llvm_ad_rgb, a warm worker
 # holds ~500 MiB after its first full-size scene and no more after 30 (README
@@ -245,20 +247,17 @@ def _check_run_parameters(n, seed, workers, spp, sampler, executor, keep) -> Non
     """Every parameter of :func:`run_dataset` that can be checked before anything is
     written (a bad one had failed after the folder was claimed, or in every scene)."""
     from mirrorsim.pipelines.score import check_keep
-    from mirrorsim.scene.model import MAX_SPP, SAMPLERS, is_whole
+    from mirrorsim.scene.model import RenderSettings, is_whole
 
     for name, v, lo, hi in (("n", n, 1, MAX_SCENES), ("seed", seed, 0, None),
                             ("workers", workers, 1, None)):
         if not is_whole(v) or v < lo or (hi is not None and v > hi):
             raise BadParameter(name, f"{v!r} must be a whole number within {lo}.."
                                f"{hi if hi is not None else ''}")
-    if spp is not None and not (is_whole(spp) and 1 <= spp <= MAX_SPP):
-        raise BadParameter("spp", f"{spp!r} must be a whole number within 1..{MAX_SPP} "
-                           "(or None: the spec's)")
-    if sampler is not None and sampler not in SAMPLERS:
-        raise BadParameter("sampler", f"{sampler!r}: choose from {', '.join(SAMPLERS)}")
-    if executor not in ("local", "dask"):
-        raise BadParameter("executor", f"{executor!r}: choose local or dask")
+    # the render settings' own check (None: the spec's, checked when it is read)
+    RenderSettings(**{k: v for k, v in (("spp", spp), ("sampler", sampler)) if v is not None})
+    if executor not in EXECUTORS:
+        raise BadParameter("executor", f"{executor!r}: choose {' or '.join(EXECUTORS)}")
     check_keep(keep)
 
 
