@@ -3,6 +3,7 @@
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -289,6 +290,8 @@ def test_review_mends_of_the_sweeps(tmp_path, capsys):
     assert stdout_output(ns) is None
     ns.json = "-"
     assert stdout_output(ns) == "--json"
-    check_inputs_outside(tmp_path, [("scene", "<scene>")], "out")  # no file: no refusal
+    # "<scene>" names no file: the folder holding the working directory, where that name
+    # would resolve, does not refuse it
+    check_inputs_outside(Path.cwd(), [("scene", "<scene>")], "out")
     scene = load_scene(SCENES / "exp1.yaml")
     assert replace(scene, name="a" * 64 + "_pose000").name.endswith("_pose000")
