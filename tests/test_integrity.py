@@ -682,3 +682,70 @@ def test_a_fifo_where_a_file_is_read_back_is_distrusted_not_waited_on(tmp_path,
         read_regular_bytes(path)
     (tmp_path / "f.json").write_bytes(b"{}")
     assert read_regular_bytes(tmp_path / "f.json") == b"{}"
+
+
+# ------------------------------------------------------------------- error model files
+
+
+def test_an_error_model_is_used_only_while_its_checksum_holds(tmp_path):
+    """A model mirrorsim wrote carries its checksum: a σ's digit changed within every
+    range (which passes each other check) is refused, naming the key; a model written by
+    hand (no checksum) is read as before; the shipped model is sealed."""
+    from mirrorsim.formats.error_model import (
+        ErrorModelError,
+        default_error_model,
+        default_model_path,
+        load_error_model,
+    )
+    from mirrorsim.pipelines.errormodel import write_model
+
+    assert "sha256" in json.loads(default_model_path().read_text())
+    path = tmp_path / "model.json"
+    write_model(default_error_model(), path)
+    data = json.loads(path.read_text())
+    assert load_error_model(path) == default_error_model()
+    law = data["objects"]["beacon"]["d_rel"]["log_sigma"]
+    law["intercept"] = round(law["intercept"] - 0.5, 6)  # σ × 0.6: still a plausible σ
+    path.write_text(json.dumps(data))
+    with pytest.raises(ErrorModelError, match=r"sha256.*damaged or edited") as exc:
+        load_error_model(path)
+    assert str(path) in str(exc.value) and "\n" not in str(exc.value)
+    del data["sha256"]  # a model edited on purpose, by hand
+    path.write_text(json.dumps(data))
+    edited = load_error_model(path)
+    assert edited.fits["beacon"]["d_rel"].log_sigma.intercept == law["intercept"]
+    assert edited.source == str(path) and edited != default_error_model()
+
+
+def test_a_datasets_card_names_the_error_model_file_it_was_made_with(tmp_path, monkeypatch):
+    """The card's command named a model other than the shipped one only as MODEL (with
+    its hash): it now names the file given, and the hash it had then."""
+    from dataclasses import replace
+
+    from mirrorsim.formats.dataset_folder import made_with
+    from mirrorsim.formats.error_model import default_error_model, load_error_model
+    from mirrorsim.pipelines import dataset as ds
+    from mirrorsim.pipelines.errormodel import write_model
+
+    model_path = tmp_path / "bench_model.json"
+    write_model(replace(default_error_model(), shared_alpha_deg=0.05), model_path)
+
+    class Stop(Exception):
+        pass
+
+    def stop(*_a, **_k):  # the folder is claimed and described: stop before rendering
+        raise Stop
+
+    monkeypatch.setattr(ds, "_calibrate_models", stop)
+    out = tmp_path / "ds"
+    with pytest.raises(Stop):
+        ds.run_dataset(1, 5, out, workers=1, progress=False,
+                       error_model=load_error_model(model_path))
+    meta = json.loads((out / "dataset.json").read_text())
+    assert meta["error_model_file"] == str(model_path)
+    assert f"--error-model {model_path}" in made_with(meta, out)
+    shipped = tmp_path / "shipped"
+    with pytest.raises(Stop):  # the shipped model: no file, no option
+        ds.run_dataset(1, 5, shipped, workers=1, progress=False)
+    meta = json.loads((shipped / "dataset.json").read_text())
+    assert "error_model_file" not in meta and "--error-model" not in made_with(meta, shipped)

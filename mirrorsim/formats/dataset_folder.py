@@ -402,7 +402,8 @@ def _calibrated(meta: dict) -> str:
 
 def made_with(meta: dict, out: Path) -> str:
     """The command that makes the dataset ``meta`` describes again (the spec's file as
-    it was named; the error model, where not the shipped one, by its hash: see
+    it was named; the error model, where not the shipped one, by its file as it was named
+    or, made in memory, by its hash: see
     :func:`_model_words`)."""
     spec = meta.get("spec") or {}
     sampler = (spec.get("render") or {}).get("sampler")
@@ -412,7 +413,8 @@ def made_with(meta: dict, out: Path) -> str:
             + (f" --spp {meta['spp']}" if meta.get("spp") is not None else "")
             + (f" --sampler {sampler}" if sampler else "")
             + (f" --beacons {count}" if count else "")
-            + (" --error-model MODEL" if meta.get("error_model_shipped") is False else "")
+            + (f" --error-model {meta.get('error_model_file') or 'MODEL'}"
+               if meta.get("error_model_shipped") is False else "")
             + _calibrated(meta))
 
 
@@ -420,6 +422,9 @@ def _model_words(meta: dict) -> str:
     """The error model a dataset was made with, where it is not the shipped one."""
     if meta.get("error_model_shipped") is not False:
         return ""
+    if meta.get("error_model_file"):  # the file as it was named, and what it held then
+        return (f"; the error model {meta['error_model_file']} was the one of SHA-256 "
+                f"{meta['error_model_sha256'][:12]}… (dataset.json)")
     return (f"; MODEL: the error model of SHA-256 {meta['error_model_sha256'][:12]}… "
             "(dataset.json)")
 

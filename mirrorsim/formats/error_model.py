@@ -18,13 +18,14 @@ errors and σ_d relative, a fraction of d_total (0.002 = 0.2 %; printed tables s
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from mirrorsim.formats.cache import seal, unseal
 from mirrorsim.formats.measurements import read_shared_alpha
 from mirrorsim.formats.reader import Reader, read_json
 from solver.errors import InputError
@@ -112,6 +113,9 @@ class ErrorModel:
     # the training rows' covariance of target and beacon α errors; the α laws are then
     # each image's own part.  A mechanical angle: it does not scale with fx.
     shared_alpha_deg: float = 0.0
+    # the file it was read from (None: made in memory), for records that name it (a
+    # dataset's card); not part of the model, so not in its file, digest or equality
+    source: str | None = field(default=None, compare=False)
 
     def fx_scale(self, fx_px):
         """The factor on σ for frames of focal length ``fx_px`` (broadcasts; 1 where it
@@ -169,7 +173,7 @@ class ErrorModel:
         return ObjectSigmas(pair("target"), (pair("beacon"),), self.shared_alpha_deg)
 
     def to_json(self) -> dict:
-        """The model file."""
+        """The model file's contents (:func:`sealed` adds their checksum)."""
         out = {"format": FORMAT, "version": VERSION, "units": UNITS, "fx_px": self.fx_px,
                "shared_alpha_deg": self.shared_alpha_deg,
                "sigma_features": list(SIGMA_FEATURES), "bias_features": list(self.bias_features),
@@ -180,10 +184,27 @@ class ErrorModel:
         return out
 
 
+def sealed(model: ErrorModel) -> dict:
+    """The model file as ``mirrorsim errormodel`` writes it: :meth:`ErrorModel.to_json`
+    with the checksum of its contents under ``"sha256"``, so that a model damaged or
+    edited since is refused rather than used (a digit changed within range passes every
+    other check)."""
+    return seal(model.to_json())
+
+
 def model_from_dict(data: Any, source: str | Path) -> ErrorModel:
     """Validate a parsed model file (raises :class:`ErrorModelError` naming the file and
-    the key)."""
+    the key).  A file that carries a checksum (``"sha256"``: every file mirrorsim writes)
+    must match it; a model written by hand carries none and is checked as the rest."""
     r = Reader(source, ErrorModelError)
+    if isinstance(data, dict) and "sha256" in data:
+        try:
+            data = unseal(data, "the model")
+        except ValueError:
+            raise r.fail("sha256", "the checksum does not match the model's contents: the "
+                                   "file was damaged or edited since mirrorsim wrote it (fit "
+                                   "it again, or drop the sha256 key to use an edited "
+                                   "model)") from None
     top = r.mapping(data, "", ("format", "version", "objects"),
                     ("units", "sigma_features", "bias_features", "provenance", "fx_px",
                      "shared_alpha_deg"))
@@ -241,8 +262,8 @@ def _list(r: Reader, value: Any, key: str, length: int | None = None) -> list:
 
 
 def load_error_model(path: str | Path) -> ErrorModel:
-    """Read and validate a model file."""
-    return model_from_dict(read_json(path, ErrorModelError), path)
+    """Read and validate a model file (see :func:`model_from_dict`)."""
+    return replace(model_from_dict(read_json(path, ErrorModelError), path), source=str(path))
 
 
 def load_error_model_or_default(path: str | Path | None = None) -> ErrorModel:

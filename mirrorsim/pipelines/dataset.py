@@ -315,6 +315,8 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
             # for the card's command only (not settings: a resume compares none of them)
             "spec_file": None if spec_path is None else str(spec_path),
             "error_model_shipped": digest_of(model) == digest_of(default_error_model())}
+    if not meta["error_model_shipped"] and model.source:  # the card names its file
+        meta["error_model_file"] = model.source
     if calibration.nuisances or calibration.position_sigma:
         # (absent otherwise, as in datasets without them; priors only where given)
         meta["calibrate"] = {"nuisances": list(calibration.nuisances),

@@ -31,6 +31,7 @@ from mirrorsim.formats.error_model import (
     LogSigma,
     QuantityFit,
     measured_features,
+    sealed,
 )
 from mirrorsim.formats.files import save_figure, write_json
 from mirrorsim.scene import imperfections
@@ -395,5 +396,6 @@ def plot(cols: dict, model: ErrorModel, out: str | Path) -> Path:
 
 
 def write_model(model: ErrorModel, path: str | Path) -> None:
-    """Write the model file (strict JSON, atomically)."""
-    write_json(path, model.to_json())
+    """Write the model file (strict JSON, atomically), sealed (see
+    :func:`~mirrorsim.formats.error_model.sealed`)."""
+    write_json(path, sealed(model))
