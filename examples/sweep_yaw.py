@@ -11,11 +11,10 @@ solver's 95 % ellipse against the yaw.
 from __future__ import annotations
 
 import argparse
-from dataclasses import replace
 from pathlib import Path
 
 import mirrorsim as ms
-from mirrorsim.errors import RunFailed, SolverError
+from mirrorsim.errors import RunFailed, SceneError, SolverError
 
 
 def main() -> None:
@@ -27,14 +26,18 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=root / "renders" / "sweep_yaw")
     a = ap.parse_args()
     base = ms.load_scene(a.scene)
-    cam = replace(base.camera, resolution=(a.width, int(a.width * 1088 / 1920) // 2 * 2))
+    resolution = [a.width, int(a.width * 1088 / 1920) // 2 * 2]
     rows = []
     for yaw in a.yaws:
-        scene = replace(base, name=f"{base.name}_yaw{yaw:g}", camera=cam,
-                        mirror=replace(base.mirror, yaw=yaw))
+        # edited as its file would be: the target panel turns to face the turned mirror,
+        # and every check of the scene file runs on the new yaw
         try:
+            scene = ms.edit_scene(base, {"name": f"{base.name}_yaw{yaw:g}",
+                                         "camera": {"resolution": resolution},
+                                         "mirror": {"yaw": yaw}})
             report = ms.evaluate(scene, a.out / scene.name, progress=False, keep=())
-        except (RunFailed, SolverError) as exc:  # a yaw whose frame shows too little
+        except (SceneError, RunFailed, SolverError) as exc:  # a yaw the bench cannot hold
+            # (the scene's checks) or whose frame shows too little
             print(f"yaw {yaw:g}°: {type(exc).__name__}: {exc}")
             continue
         e = report.errors
@@ -53,7 +56,7 @@ def main() -> None:
             label="95 % ellipse, semi-major axis")
     ax.set_xlabel("mirror yaw (°)")
     ax.set_ylabel("cm")
-    ax.set_title(f"{base.name}: {cam.width}×{cam.height_px} px")
+    ax.set_title(f"{base.name}: {resolution[0]}×{resolution[1]} px")
     ax.legend()
     fig.tight_layout()
     a.out.mkdir(parents=True, exist_ok=True)

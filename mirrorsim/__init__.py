@@ -10,6 +10,7 @@ cheap)::
 
 ========================  ====================================================
 ``load_scene(path)``      a scene file → :class:`mirrorsim.scene.model.Scene`
+``edit_scene(scene, changes)``  a scene with some of its file's keys changed, checked
 ``check(scene)``          the exact ground truth (:class:`GroundTruth`)
 ``render(scene, out)``    render and write a frame's files (:class:`FrameFiles`)
 ``load_capture(path)``    a capture record (what the experimenter knows)
@@ -37,6 +38,7 @@ __version__ = "0.2.0"
 # name → (module, attribute): the entry points, each declared once in its wing
 _API = {
     "load_scene": ("mirrorsim.formats.scenefile", "load_scene"),
+    "edit_scene": ("mirrorsim.formats.scenefile", "edit_scene"),
     "check": ("mirrorsim.truth.groundtruth", "ground_truth"),
     "render": ("mirrorsim.rendering.frames", "render_to_files"),
     "load_capture": ("mirrorsim.formats.capture", "load_capture"),

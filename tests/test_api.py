@@ -131,3 +131,49 @@ def test_the_api_keeps_the_command_lines_promises(tmp_path):
             calibrate(scene.camera, scene.target.size, scene.beacons[0].height,
                       distance_error=bad)
     assert not out.exists() and not (tmp_path / "ds").exists()
+
+
+def test_a_scene_edited_in_a_script_is_built_as_its_file_would_be(tmp_path):
+    """`dataclasses.replace` turned the mirror and left the target panel facing where the
+    old mirror had put it (sweep_yaw.py did so): `edit_scene` recomputes it and runs the
+    file's checks, and the entry points refuse a scene whose facing is stale, or whose
+    edit a scene file would refuse, before anything is written."""
+    from dataclasses import replace
+
+    from mirrorsim.errors import BadParameter, SceneError
+    from mirrorsim.truth.optics import target_facing
+
+    base = ms.load_scene(ROOT / "scenes" / "default.yaml")
+    turned = ms.edit_scene(base, {"name": "yaw25", "mirror": {"yaw": 25}})
+    assert (turned.name, turned.mirror.yaw) == ("yaw25", 25)
+    # the panel faces the camera's image in the turned mirror (optics, independently)
+    facing = target_facing(base.camera.position, turned.mirror, base.target.position)
+    assert turned.target.facing_deg == pytest.approx(facing, abs=1e-9)
+    assert abs(turned.target.facing_deg - base.target.facing_deg) > 1.0
+    assert turned.source == base.source and turned.render == base.render
+    # a change the file's checks refuse, naming its key
+    with pytest.raises(SceneError, match=r"\(edited\): mirror\.yawn: unknown key"):
+        ms.edit_scene(base, {"mirror": {"yawn": 25}})
+    with pytest.raises(SceneError, match="mirror.center"):
+        ms.edit_scene(base, {"mirror": {"center": [500, 10]}})
+    with pytest.raises(BadParameter, match="changes"):
+        ms.edit_scene(base, [("mirror", {"yaw": 25})])
+    # a one-beacon scene given a list of beacons takes the list
+    pencil = {"height": base.beacons[0].height}
+    two = ms.edit_scene(base, {"beacons": [{"position": list(base.beacons[0].position),
+                                            **pencil}, {"position": [36, 53], **pencil}]})
+    assert len(two.beacons) == 2
+    stale = replace(base, name="stale", mirror=replace(base.mirror, yaw=25))
+    off = replace(base, name="off", mirror=replace(base.mirror, center=(500.0, 10.0)))
+    out = tmp_path / "out"
+    for run in (ms.render, ms.evaluate, ms.budget, lambda s, o: ms.track(s, o, steps=1),
+                lambda s, _o: ms.plan(s)):
+        with pytest.raises(BadParameter, match="target panel's facing no longer follows"):
+            run(stale, out)
+        with pytest.raises(SceneError, match="mirror.center"):
+            run(off, out)
+    for run in (ms.check, lambda s: ms.evaluate(s, out)):  # a path for a scene: one line
+        with pytest.raises(BadParameter, match="expected a Scene"):
+            run(str(ROOT / "scenes" / "default.yaml"))
+    assert not out.exists()
+    assert ms.plan(turned).best is not None  # an edited scene is an ordinary one

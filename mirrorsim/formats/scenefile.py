@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -30,7 +30,13 @@ from mirrorsim.formats.scene_checks import (
     fmt,
     unit_hints,
 )
-from mirrorsim.scene.imperfections import REGISTRY, Imperfection, check_bounds, radius_bound
+from mirrorsim.scene.imperfections import (
+    REGISTRY,
+    Imperfection,
+    as_keys,
+    check_bounds,
+    radius_bound,
+)
 from mirrorsim.scene.model import (
     MAX_BOARD_CM,
     MAX_CURVATURE_RADIUS,
@@ -49,6 +55,7 @@ from mirrorsim.scene.model import (
     Scene,
     SensorNoise,
     Target,
+    check_is_scene,
 )
 from mirrorsim.truth import optics
 
@@ -180,6 +187,103 @@ def _build(data: Any, source: str, default_name: str, f: Failures) -> Scene:
     warnings = check_sight(f, scene, r, bkey)
     f.raise_any(hint)
     return replace(scene, warnings=warnings)
+
+
+def scene_document(scene: Scene) -> dict:
+    """The scene as a scene file's keys (docs/scenes.md): what :func:`scene_from_dict`
+    builds the same scene from (a dataset's scene files, :func:`edit_scene`)."""
+    c, m, t = scene.camera, scene.mirror, scene.target
+    d = {"name": scene.name,
+         "board": {"size": list(scene.board.size), "hole_pitch": scene.board.hole_pitch},
+         "camera": {"position": list(c.position), "height": c.height,
+                    "resolution": list(c.resolution), "hfov": c.hfov, "pan": c.pan},
+         "mirror": {"center": list(m.center), "yaw": m.yaw, "size": list(m.size)},
+         "target": {"position": list(t.position), "size": list(t.size)},
+         "beacons": [{"position": list(b.position), "height": b.height}
+                     for b in scene.beacons],
+         "occluders": [{"start": list(o.start), "end": list(o.end), "height": o.height}
+                       for o in scene.occluders],
+         "render": {"spp": scene.render.spp, "seed": scene.render.seed,
+                    "sampler": scene.render.sampler,
+                    "background_spp": scene.render.background_spp,
+                    "beacon_spp": scene.render.beacon_spp}}
+    for path, value in as_keys(scene).items():  # the bench's imperfections
+        block, key = path.split(".")
+        if block.startswith("beacons["):
+            d["beacons"][int(block[len("beacons["):-1])][key] = value
+        else:
+            d.setdefault(block, {})[key] = value
+    if len(scene.beacons) == 1:
+        d["beacon"] = d.pop("beacons")[0]
+    return d
+
+
+def edit_scene(scene: Scene, changes: Mapping[str, Any]) -> Scene:
+    """``scene`` with some of its file's keys changed, built again as a scene file is:
+    every check runs, and what the file's geometry decides (the target panel's facing, an
+    ``auto`` pan) follows the edit.  ``dataclasses.replace`` recomputes none of it.
+
+    ``changes`` nests as the file does, ``{"mirror": {"yaw": 20}, "name": "yaw20"}``: a
+    mapping merges into its block, any other value (a list too) replaces its key.
+
+    Raises
+    ------
+    SceneError
+        An edit the file's checks refuse, naming its key (the source reads
+        ``SOURCE (edited)``).
+    BadParameter
+        ``changes`` is not a mapping.
+    """
+    if not isinstance(changes, Mapping):
+        raise BadParameter("changes", f"expected a mapping of scene-file keys, not "
+                           f"{type(changes).__name__}")
+    doc = scene_document(scene)
+    if "beacons" in changes:  # the one-beacon form gives way to the list given
+        doc.pop("beacon", None)
+    elif "beacon" in changes:
+        doc.pop("beacons", None)
+    edited = scene_from_dict(_merged(doc, changes), source=f"{scene.source} (edited)",
+                             default_name=scene.name)
+    return replace(edited, source=scene.source)
+
+
+def _merged(doc: dict, changes: Mapping[str, Any]) -> dict:
+    out = dict(doc)
+    for key, value in changes.items():
+        if isinstance(value, Mapping) and isinstance(out.get(key), dict):
+            out[key] = _merged(out[key], value)
+        else:
+            out[key] = value
+    return out
+
+
+def check_given_scene(scene: Any) -> Scene:
+    """A scene given to the Python API, held to what its file would make of it: a scene
+    edited with ``dataclasses.replace`` skips the file's checks and keeps the target's
+    facing and the pan that its old geometry decided (a mirror turned by 10° left the
+    panel facing the old mirror).  Returns ``scene``.
+
+    Raises
+    ------
+    SceneError
+        The edited scene fails a check of the scene file (naming the key).
+    BadParameter
+        ``scene`` is not a :class:`Scene`, or what its geometry decides has not followed
+        an edit (use :func:`edit_scene`).
+    """
+    check_is_scene(scene)
+    again = scene_from_dict(scene_document(scene), source=f"{scene.source} (edited)",
+                            default_name=scene.name)
+    stale = [what for what, given, made in (
+        ("target panel's facing", scene.target.facing_deg, again.target.facing_deg),
+        ("camera's pan bearing", scene.camera.pan_deg, again.camera.pan_deg))
+        if not math.isclose(given, made, rel_tol=0, abs_tol=1e-9)]
+    if stale:
+        raise BadParameter("scene", f"{scene.name}: the {' and the '.join(stale)} no longer "
+                           f"follow{'s' if len(stale) == 1 else ''} its geometry (edited with "
+                           "dataclasses.replace, which recomputes nothing): edit it with "
+                           "mirrorsim.edit_scene")
+    return scene
 
 
 def _name(r: Reader, top: dict, default_name: str) -> str:

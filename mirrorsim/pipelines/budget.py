@@ -20,6 +20,7 @@ import numpy as np
 from mirrorsim.errors import BadParameter, DetectionError, SolverError
 from mirrorsim.formats.error_model import ErrorModel
 from mirrorsim.formats.files import claim_run_folder
+from mirrorsim.formats.scenefile import check_given_scene
 from mirrorsim.pipelines.evaluate import evaluate_into
 from mirrorsim.pipelines.score import Report, check_keep
 from mirrorsim.rendering.passes import reusing_renders
@@ -208,6 +209,7 @@ def run_budget(scene: Scene, out: str | Path, *, variant: str = "auto", progress
     OutputError
         If ``out`` holds files mirrorsim did not write, or the scene's own file.
     """
+    check_given_scene(scene)  # edited by a script: held to what its file would make
     check_keep(keep)
     calibration = check_budget_calibration(scene, calibration)
     out = claim_run_folder(out, "out", [("scene", scene.source)])

@@ -17,6 +17,7 @@ from mirrorsim.detection.detector import annotate
 from mirrorsim.errors import DetectionError
 from mirrorsim.formats.error_model import ErrorModel, default_error_model
 from mirrorsim.formats.files import claim_run_folder, default_out, write_png
+from mirrorsim.formats.scenefile import check_given_scene
 from mirrorsim.pipelines.frame import MeasuredFrame, render_and_measure
 from mirrorsim.pipelines.score import EXTRA_FILES, FrameRecord, Report, check_keep, score
 from mirrorsim.scene.model import Scene
@@ -56,6 +57,7 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
     BackendError
         If no Mitsuba variant can render here.
     """
+    check_given_scene(scene)  # edited by a script: held to what its file would make
     check_keep(keep)
     calibration = as_calibration(calibration)  # before anything renders
     out = claim_run_folder(out_dir if out_dir is not None else default_out(scene.name),

@@ -24,9 +24,10 @@ from mirrorsim.formats.scenefile import (
     read_camera_model,
     read_pan,
     read_render,
+    scene_document,
     scene_from_dict,
 )
-from mirrorsim.scene.imperfections import REGISTRY, as_keys
+from mirrorsim.scene.imperfections import REGISTRY
 from mirrorsim.scene.model import MAX_BOARD_CM, Camera, Scene
 from mirrorsim.truth import visibility
 
@@ -409,27 +410,4 @@ def _sample(spec: dict, rng: int | np.random.Generator | None, name: str,
 
 def to_yaml(scene: Scene) -> str:
     """The scene as a scene file (docs/scenes.md's format)."""
-    c, m, t = scene.camera, scene.mirror, scene.target
-    d = {"name": scene.name,
-         "board": {"size": list(scene.board.size), "hole_pitch": scene.board.hole_pitch},
-         "camera": {"position": list(c.position), "height": c.height,
-                    "resolution": list(c.resolution), "hfov": c.hfov, "pan": c.pan},
-         "mirror": {"center": list(m.center), "yaw": m.yaw, "size": list(m.size)},
-         "target": {"position": list(t.position), "size": list(t.size)},
-         "beacons": [{"position": list(b.position), "height": b.height}
-                     for b in scene.beacons],
-         "occluders": [{"start": list(o.start), "end": list(o.end), "height": o.height}
-                       for o in scene.occluders],
-         "render": {"spp": scene.render.spp, "seed": scene.render.seed,
-                    "sampler": scene.render.sampler,
-                    "background_spp": scene.render.background_spp,
-                    "beacon_spp": scene.render.beacon_spp}}
-    for path, value in as_keys(scene).items():  # the bench's imperfections
-        block, key = path.split(".")
-        if block.startswith("beacons["):
-            d["beacons"][int(block[len("beacons["):-1])][key] = value
-        else:
-            d.setdefault(block, {})[key] = value
-    if len(scene.beacons) == 1:
-        d["beacon"] = d.pop("beacons")[0]
-    return yaml.safe_dump(d, sort_keys=False)
+    return yaml.safe_dump(scene_document(scene), sort_keys=False)

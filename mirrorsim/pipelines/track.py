@@ -31,6 +31,7 @@ from mirrorsim.detection.image_geometry import Calibration
 from mirrorsim.errors import BadParameter, DetectionError
 from mirrorsim.formats.error_model import ErrorModel, default_error_model
 from mirrorsim.formats.files import claim_run_folder
+from mirrorsim.formats.scenefile import check_given_scene
 from mirrorsim.pipelines.frame import FrameNotMeasured, render_and_measure
 from mirrorsim.scene.model import PENCIL_RADIUS, Bench, Scene, is_whole
 from mirrorsim.truth.optics import target_facing
@@ -275,6 +276,7 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
     prior on the mirror (:class:`solver.particle.Prior`'s ``fixed``), its believed position
     known to ``position_sigma`` cm per axis (0: exactly).
     """
+    check_given_scene(scene)  # edited by a script: held to what its file would make
     check_options(kind, steps, odometry_sigma, side, step, heading, scene.board.size)
     for name, v, lo in (("particles", particles, MIN_PARTICLES), ("seed", seed, 0)):
         if not (is_whole(v) and v >= lo):

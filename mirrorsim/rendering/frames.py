@@ -29,6 +29,7 @@ from mirrorsim.formats.files import (
     encode_png,
     read_regular_bytes,
 )
+from mirrorsim.formats.scenefile import check_given_scene
 from mirrorsim.rendering.mitsuba_scene import (
     BACKGROUND_LABEL,
     BEACON_LABEL,
@@ -141,6 +142,7 @@ def render_to_files(scene: Scene, out: str | Path | None = None, *, variant: str
     """Render ``scene`` with its render settings (or, with ``reuse``, take a render of
     exactly this scene already in ``out``) and write its files (default folder
     ``renders/<name>/``; the id labels only with ``ids``)."""
+    check_given_scene(scene)  # edited by a script: held to what its file would make
     out = claim_run_folder(out if out is not None else default_out(scene.name), "out",
                            [("scene", scene.source)])
     found = reused_frame(scene, out, ids) if reuse else None

@@ -277,6 +277,14 @@ class Scene:
         return replace(self, render=replace(self.render, **settings))
 
 
+def check_is_scene(value: object) -> None:
+    """Refuse a value given as a scene that is not a :class:`Scene` (a path, a dict), in
+    one line rather than an AttributeError deep in the code."""
+    if not isinstance(value, Scene):
+        raise BadParameter("scene", f"expected a Scene (mirrorsim.load_scene), not "
+                           f"{type(value).__name__}")
+
+
 def footprints(scene: Scene, bkey=None) -> list[tuple[str, np.ndarray, np.ndarray, float]]:
     """Each object's footprint as a capsule: (key, segment start, segment end, radius).
 

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from mirrorsim.scene.imperfections import as_keys
-from mirrorsim.scene.model import Camera, Mirror, Occluder, Point2, Scene
+from mirrorsim.scene.model import Camera, Mirror, Occluder, Point2, Scene, check_is_scene
 from mirrorsim.truth import optics, visibility
 from mirrorsim.truth.optics import ImagePx
 from solver.geometry import wrap_yaw
@@ -205,7 +205,14 @@ class GroundTruth:
 
 
 def ground_truth(scene: Scene) -> GroundTruth:
-    """The exact ground truth of a scene; the renderer adds what its id pass sees."""
+    """The exact ground truth of a scene; the renderer adds what its id pass sees.
+
+    Raises
+    ------
+    BadParameter
+        ``scene`` is not a :class:`~mirrorsim.scene.model.Scene`.
+    """
+    check_is_scene(scene)
     cam, mir = scene.camera, scene.mirror
 
     def entry(obj, **extra) -> ObjectTruth:
