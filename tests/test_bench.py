@@ -618,15 +618,6 @@ def test_jpeg_frames_have_their_own_calibration():
     assert len(keys) == 2
 
 
-def test_a_jpeg_is_told_by_its_bytes(tmp_path):
-    from mirrorsim.pipelines.frame import subsampled
-
-    (tmp_path / "named.png").write_bytes(b"\xff\xd8\xff\xe0 a JPEG named .png")
-    (tmp_path / "frame.jpg").write_bytes(b"\x89PNG\r\n\x1a\n a PNG named .jpg")
-    assert subsampled(tmp_path / "named.png") and not subsampled(tmp_path / "frame.jpg")
-    assert subsampled(tmp_path / "not_yet.JPG") and not subsampled(tmp_path / "not_yet.png")
-
-
 def test_a_frame_and_its_kind_come_from_one_read(tmp_path):
     import cv2
 

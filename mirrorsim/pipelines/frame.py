@@ -16,7 +16,6 @@ from pathlib import Path
 import numpy as np
 
 from mirrorsim.detection.detector import (
-    JPEG_MAGIC,
     Detection,
     detect_frame,
     read_stored_frame,
@@ -54,25 +53,14 @@ class MeasuredFrame:
 def calibration_for(capture: CaptureRecord, *, variant: str = "auto",
                     distance_error: float = 0.0, subsampled: bool = False) -> Calibration:
     """The size-constancy constants for the camera and objects a capture record names
-    (``subsampled``: for its JPEG frames, see :func:`subsampled`).
+    (``subsampled``: for its JPEG frames, which the detector measures otherwise; see
+    :func:`~mirrorsim.detection.detector.read_stored_frame`).
 
     ``distance_error``: the bench's calibration error (cm), which a capture record cannot
     know; the simulator renders its calibration with it.
     """
     return calibrate(capture.camera, capture.target_size, capture.beacons[0].height,
                      variant=variant, distance_error=distance_error, subsampled=subsampled)
-
-
-def subsampled(image_path: str | Path) -> bool:
-    """Whether a frame file stores its colour at half resolution (a JPEG's 4:2:0 chroma),
-    which the detector measures otherwise: by its first bytes, as the frame reader tells
-    a JPEG, or by its name where it is not written yet."""
-    path = Path(image_path)
-    try:
-        with open(path, "rb") as f:
-            return f.read(len(JPEG_MAGIC)) == JPEG_MAGIC
-    except OSError:
-        return path.suffix.lower() in (".jpg", ".jpeg")
 
 
 def measure_frame(image_path: str | Path, capture: CaptureRecord | str | Path, *,
