@@ -85,6 +85,12 @@ def test_reuse_and_several_beacons(tmp_path):
     a = evaluate_scene(scene.with_render(spp=8), tmp_path, progress=False)
     assert [f.reused for f in a.frames] == [False, False]
     assert [r["beacons"] for r in a.to_json()["error_vs_beacons"]] == [1, 2]
+    # each count scored on its own beacons: the first alone has one beacon's errors and
+    # a wider bound than both (it was both beacons' errors and bound)
+    one, both = a.error_vs_beacons
+    assert len(one.beacon_alpha_deg) == 1 and len(both.beacon_alpha_deg) == 2
+    assert one.beacon_alpha_deg[0] == both.beacon_alpha_deg[0]
+    assert one.target_crlb_cm > 1.5 * both.target_crlb_cm
     b = evaluate_scene(scene.with_render(spp=8), tmp_path, progress=False)
     assert all(f.reused for f in b.frames)
     assert a.errors == b.errors

@@ -19,7 +19,14 @@ from mirrorsim.formats.error_model import ErrorModel, default_error_model
 from mirrorsim.formats.files import claim_run_folder, default_out, write_png
 from mirrorsim.formats.scenefile import check_given_scene
 from mirrorsim.pipelines.frame import MeasuredFrame, render_and_measure
-from mirrorsim.pipelines.score import EXTRA_FILES, FrameRecord, Report, check_keep, score
+from mirrorsim.pipelines.score import (
+    EXTRA_FILES,
+    FrameRecord,
+    Report,
+    Score,
+    check_keep,
+    score,
+)
 from mirrorsim.scene.model import Scene
 from mirrorsim.truth.groundtruth import RenderInfo
 from solver.errors import SolverError
@@ -107,21 +114,24 @@ def evaluate_into(scene: Scene, out: Path, *, variant: str = "auto", progress: b
     errors = score(truth, measurements, sol)
     by_count = ()
     if len(beacons) > 1:
-        def first(k: int):
+        def first(k: int) -> Score:
             # self-calibration from the first k beacons with as many of the nuisances
-            # (in their order) as they can carry and separate; plain at the least
+            # (in their order) as they can carry and separate; plain at the least.
+            # Scored against those k alone: their errors, and the bound k beacons give
             sig_k = replace(sigma, beacons=sigma.beacons[:k])
+            meas_k = replace(measurements, beacons=beacons[:k], sigma=sig_k)
+            truth_k = replace(truth, beacons=truth.beacons[:k])
             for m in range(len(calibration.nuisances), -1, -1):
                 try:
-                    return solve_measurements(cam.position, beacons[:k], target, sig_k,
-                                              calibration.first(m))
+                    return score(truth_k, meas_k, solve_measurements(
+                        cam.position, beacons[:k], target, sig_k, calibration.first(m)))
                 except SolverError:
                     if not m:
                         raise
+            raise AssertionError("unreachable: the plain solve raises or returns")
 
         # all of them: the solution above
-        by_count = tuple(score(truth, measurements, first(k))
-                         for k in range(1, len(beacons))) + (errors,)
+        by_count = tuple(first(k) for k in range(1, len(beacons))) + (errors,)
     done = truths[0].render  # how the frames were rendered, read back from the first
     return Report(scene=scene.name, truth=truth, measurements=measurements, solution=sol,
                   errors=errors, frames=tuple(frames),
