@@ -519,3 +519,29 @@ def test_a_jpeg_pencil_kept_by_one_side_on_its_colour_is_not_used_when_partly_hi
     assert (got.clipped == "") is used and (got.clipped == "left") is not used
     plain = pencil_geometry(cam, replace(m, notes=()), paint, 5000.0)
     assert plain.clipped == "" and (plain.alpha_deg == got.alpha_deg) is used
+
+
+def test_a_panel_in_shadow_keeps_its_foot():
+    """A panel in shadow is a dark grey with almost no colour across the board's beige:
+    its foot, measured on that colour, had no contrast and the scene lost its target's
+    height (1 of 24 drawn scenes).  It is measured on the image's colour then, with a
+    note; a panel of its own colour keeps the colour measurement."""
+    from mirrorsim.detection import edges
+
+    top, foot = 40.3, 150.6  # rows: pixel r spans r − 0.5 … r + 0.5
+    board, panel = np.array([180.0, 150.0, 100.0]), np.array([10.0, 10.0, 10.5])
+    img = np.empty((220, 200, 3), np.float32)
+    img[:] = board * 0.9  # the wall behind, above the panel
+    img[int(foot + 0.5):] = board
+    rows = np.arange(220)[:, None, None]
+    cover = np.clip(np.minimum(rows + 0.5 - top, foot - (rows - 0.5)), 0, 1)  # per row
+    inside = slice(60, 140)
+    img[:, inside] = cover * panel + (1 - cover) * img[:, inside]
+    box = (60, int(top + 0.5), 139, int(foot - 0.5))
+    m = edges.measure_region(img, box, "target")
+    assert m.v_bottom == pytest.approx(foot, abs=0.05) and m.height_px is not None
+    assert edges.FOOT_ON_COLOUR in m.notes and not m.clipped
+    coloured = img.copy()  # a blue panel: its foot on the colour, no note
+    coloured[:, inside] = cover * np.array([20.0, 40.0, 120.0]) + (1 - cover) * img[:, inside]
+    c = edges.measure_region(coloured, box, "target")
+    assert c.v_bottom == pytest.approx(foot, abs=0.05) and edges.FOOT_ON_COLOUR not in c.notes

@@ -216,6 +216,10 @@ def _median_edges(imgs, lo, hi, cross_lo, cross_hi, axis, band_px=3,
 # (its one side may then stand against what hides part of it: image_geometry checks)
 SIDES_ON_COLOUR = "sides on the image's colour: JPEG's smeared blue lost both"
 
+# the note of a target whose foot had no colour contrast with the board (a panel in
+# shadow) and was measured on the image's colour
+FOOT_ON_COLOUR = "foot on the image's colour: no colour contrast with the board"
+
 # how far a side edge may lie from its region's boundary (px): good images are within
 # 1.1 px (198 random scenes), a side measured on the mirror frame 8-17 px
 SIDE_MAX_OFF_PX = 2.5
@@ -305,6 +309,14 @@ def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str,
         top, bottom, out_top, out_bottom = _median_edges((img, img), v0, v1, u0, u1, axis=0,
                                                          chroma=(False, on_chroma),
                                                          near=(False, True))
+        if bottom is None and on_chroma:
+            # a panel in shadow is a dark grey with almost no colour across the board's
+            # (a drawn scene's lost its height, 1 of 24): its foot on the image's colour,
+            # where the board's contact shadow counts (as on a JPEG frame)
+            _, bottom, _, out_bottom = _median_edges((img, img), v0, v1, u0, u1, axis=0,
+                                                     near=(False, True))
+            if bottom is not None:
+                sides_note = (FOOT_ON_COLOUR,)
         # a side 2-3 px from the mirror frame's inner edge leaves a bright strip of glass
         # between them: the coarse pass's outside level then falls on the dark frame bar,
         # the strip reads as coverage far above 1 and the edge is pushed 9-13 px out.  The

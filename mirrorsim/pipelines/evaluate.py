@@ -45,7 +45,10 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
     ``error_model``: gives each measurement its σ's, which weight the solver and make
     its error ellipse (default: the model shipped for the ideal bench at the default
     render settings).  ``keep``: which of EXTRA_FILES to write beside each frame (the id
-    labels, the annotated frame).  ``calibration``: the bench errors to estimate with
+    labels, the annotated frame; both by default, where the command line keeps none).
+    The report is returned, not written: ``report.to_json()`` is the document the
+    command line writes as ``<name>.report.json``; the top view is the command line's
+    (``--keep plot``).  ``calibration``: the bench errors to estimate with
     the mirror (self-calibration, :class:`solver.selfcal.SelfCalibration`; needs two
     beacons or more, three for pan, scale and power together), how well the beacons'
     positions are known and what the bench knows of the nuisances.
@@ -98,8 +101,10 @@ def evaluate_into(scene: Scene, out: Path, *, variant: str = "auto", progress: b
     targets = [(d.target.alpha_deg, d.target.d_total) for d in detections
                if d.target.d_total is not None]
     if not targets:
-        raise DetectionError("the target's d_total could not be measured in any frame "
-                             "(its image is clipped at the top)")
+        why = "; ".join(dict.fromkeys(n for d in detections for n in d.target.notes))
+        raise DetectionError(f"{scene.name}: the target's d_total could not be measured in "
+                             f"any frame ({', '.join(str(m.files.image) for m in measured)}): "
+                             f"{why or 'its image is clipped at the top'}")
     mean_target = tuple(float(v) for v in np.mean(targets, axis=0))
     model = error_model or default_error_model()
     # what the experimenter knows: the measurements and the capture record's pan
