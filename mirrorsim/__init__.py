@@ -16,6 +16,8 @@ cheap)::
 ``load_capture(path)``    a capture record (what the experimenter knows)
 ``detect(frame, capture)``  measure a frame (:class:`MeasuredFrame`)
 ``solve(...)``            the mirror and the target from measurements
+``BeaconMeasurement(...)``  one beacon's known position and its image's α, d_total
+``load_measurements(path)``  a measurements file (what ``detect`` writes)
 ``SelfCalibration(...)``  what ``solve``, ``evaluate``, ``budget``, ``plan`` and
                           ``generate_dataset`` self-calibrate (``calibration=``)
 ``evaluate(scene, out)``  render → detect → solve → score (:class:`Report`)
@@ -44,6 +46,8 @@ _API = {
     "load_capture": ("mirrorsim.formats.capture", "load_capture"),
     "detect": ("mirrorsim.pipelines.frame", "measure_frame"),
     "solve": ("solver.lsq", "solve_measurements"),
+    "BeaconMeasurement": ("solver.measurements", "BeaconMeasurement"),
+    "load_measurements": ("mirrorsim.formats.measurements", "load_measurements"),
     "SelfCalibration": ("solver.selfcal", "SelfCalibration"),
     "evaluate": ("mirrorsim.pipelines.evaluate", "evaluate_scene"),
     "budget": ("mirrorsim.pipelines.budget", "run_budget"),

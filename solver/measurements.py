@@ -128,6 +128,13 @@ def check_measurements(observer, beacons: list[BeaconMeasurement],
     key; this is the same rule for a caller of the library)."""
     if not beacons or not targets:
         raise SolverError("give at least one beacon and one target observation")
+    for i, b in enumerate(beacons):  # a tuple failed as an AttributeError deep in the solve
+        if not isinstance(b, BeaconMeasurement):
+            raise SolverError(f"beacons[{i}] must be a BeaconMeasurement(position, alpha_deg, "
+                              f"d_total), not {type(b).__name__}")
+    for i, t in enumerate(targets):
+        if np.shape(t) != (2,):
+            raise SolverError(f"targets[{i}] must be a pair (alpha_deg, d_total), got {t!r}")
     lo, hi = D_TOTAL_RANGE_CM
     values = [("observer", v) for v in np.ravel(np.asarray(observer, float))]
     for i, b in enumerate(beacons):
@@ -138,6 +145,8 @@ def check_measurements(observer, beacons: list[BeaconMeasurement],
     for i, (a, d) in enumerate(targets):
         values += [(f"targets[{i}].alpha_deg", a), (f"targets[{i}].d_total", d)]
     for name, v in values:
+        if isinstance(v, str | bytes) or not np.isreal(v):
+            raise SolverError(f"{name} is {v!r}: every measurement must be a finite number")
         if not np.isfinite(v):
             raise SolverError(f"{name} is {v}: every measurement must be a finite number")
         if name.endswith("d_total") and not lo <= v <= hi:

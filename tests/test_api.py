@@ -86,6 +86,13 @@ def test_the_api_keeps_the_command_lines_promises(tmp_path):
                              (truth.beacons, [(truth.targets[0][0], 1e7)])):
         with pytest.raises(SolverError, match="finite|outside"):
             ms.solve(truth.observer, beacons, targets, Sigma())
+    with pytest.raises(SolverError, match=r"beacons\[0\] must be a BeaconMeasurement"):
+        ms.solve(truth.observer, [(b.position, b.alpha_deg, b.d_total)], truth.targets)
+    with pytest.raises(SolverError, match=r"targets\[0\] must be a pair"):
+        ms.solve(truth.observer, truth.beacons, [truth.targets[0][1]])
+    with pytest.raises(SolverError, match="must be a finite number"):
+        ms.solve(truth.observer, [ms.BeaconMeasurement(b.position, "66", b.d_total)],
+                 truth.targets)
     with pytest.raises(SolverError, match="sigma must be a Sigma"):
         ms.solve(truth.observer, truth.beacons, truth.targets, {"alpha_deg": 0.01})
     with pytest.raises(SolverError, match="calibration must be a SelfCalibration"):

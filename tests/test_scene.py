@@ -203,7 +203,10 @@ def test_new_writes_a_template_that_check_accepts_and_never_writes_over(tmp_path
     before = path.read_bytes()
     capsys.readouterr()
     assert main(["new", str(path)]) == 2
-    assert "exists" in capsys.readouterr().err and path.read_bytes() == before
+    assert "exists (a file)" in capsys.readouterr().err and path.read_bytes() == before
+    (tmp_path / "renders.yaml").mkdir()  # a folder was called a file
+    assert main(["new", str(tmp_path / "renders.yaml")]) == 2
+    assert "exists (a folder)" in capsys.readouterr().err
     assert main(["new", str(tmp_path / "bad name.yaml")]) == 2
     assert not (tmp_path / "bad name.yaml").exists()
 

@@ -295,3 +295,22 @@ def test_review_mends_of_the_sweeps(tmp_path, capsys):
     check_inputs_outside(Path.cwd(), [("scene", "<scene>")], "out")
     scene = load_scene(SCENES / "exp1.yaml")
     assert replace(scene, name="a" * 64 + "_pose000").name.endswith("_pose000")
+
+
+def test_solve_reads_measurements_from_a_pipe(tmp_path):
+    """`check --measurements - | solve -`: the measurements from stdin (it said
+    `-: no such file`), solved as from a file; a binary file given for the JSON is one
+    line saying so (it quoted the UTF-8 codec)."""
+    check = subprocess.run([sys.executable, "-m", "mirrorsim", "check",
+                            str(SCENES / "exp1.yaml"), "--measurements", "-"],
+                           capture_output=True, text=True, check=True)
+    piped = subprocess.run([sys.executable, "-m", "mirrorsim", "solve", "-", "--json", "-"],
+                           input=check.stdout, capture_output=True, text=True)
+    assert piped.returncode == 0, piped.stderr
+    assert json.loads(piped.stdout)["target"]["position"] == pytest.approx([55.0, 70.0], abs=1e-6)
+    binary = tmp_path / "table.parquet"
+    binary.write_bytes(b"PAR1\xa0\xff\x00" * 20)
+    bad = subprocess.run([sys.executable, "-m", "mirrorsim", "solve", str(binary)],
+                         capture_output=True, text=True)
+    assert bad.returncode == 2 and bad.stderr.count("\n") == 1
+    assert str(binary) in bad.stderr and "not UTF-8 text" in bad.stderr

@@ -65,8 +65,9 @@ def _new(args) -> int:
     path = Path(args.scene)
     text = scene_template(path)  # refuses a name that cannot be a scene's
     if path.exists() or path.is_symlink():
-        raise BadArgument("SCENE", f"{str(path)!r} exists: mirrorsim new never writes over a "
-                                   "file; give a new name")
+        what = "a folder" if path.is_dir() else "a file"
+        raise BadArgument("SCENE", f"{str(path)!r} exists ({what}): mirrorsim new writes only "
+                                   "a new file; give a new name")
     check_output_file(path, "SCENE")
     write_text(path, text)
     print(f"{path}: a template scene; check it with `mirrorsim check {path}`")

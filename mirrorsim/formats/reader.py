@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -31,17 +32,24 @@ def show(value: Any) -> str:
 
 
 def read_input_text(path: str | Path, error_class: type[InputError] = InputError) -> str:
-    """The text of an input file, or ``error_class`` with one line: missing, not a
-    regular file (a FIFO would wait for a writer for ever), unreadable, not UTF-8."""
+    """The text of an input file (``-``: standard input, for a pipe), or ``error_class``
+    with one line: missing, not a regular file (a FIFO would wait for a writer for
+    ever), unreadable, not UTF-8 text."""
+    if str(path) == "-":
+        try:
+            return sys.stdin.read()
+        except UnicodeDecodeError:
+            raise error_class("<stdin>", "", "cannot read: not UTF-8 text") from None
     path = Path(path)
     try:
         if not path.is_file():
             raise error_class(path, "", "no such file" if not path.exists() else
                               "not a regular file (a folder, FIFO, device or socket)")
         return path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        why = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
-        raise error_class(path, "", f"cannot read: {why}") from None
+    except UnicodeDecodeError:  # a Parquet or an image given for a JSON or YAML file
+        raise error_class(path, "", "cannot read: not UTF-8 text (a binary file?)") from None
+    except OSError as exc:
+        raise error_class(path, "", f"cannot read: {exc.strerror or exc}") from None
 
 
 class _DuplicateKey(ValueError):
