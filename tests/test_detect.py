@@ -180,6 +180,15 @@ def test_detect_reads_only_the_capture_record(half_default, tmp_path, capsys):
     assert main(["detect", str(res.image), "--scene", str(original), "--json",
                  str(by_scene)]) == 0
     assert json.loads(by_scene.read_text()) == json.loads(by_capture.read_text())
+    assert "warning" not in capsys.readouterr().err  # the record beside it agrees
+    # another scene's camera (panned 2° more): measured with it, as asked, but not without
+    # a word, since the record beside the frame says otherwise
+    other = tmp_path / "other.yaml"
+    other.write_text(yaml.safe_dump({**d, "camera": {**d["camera"],
+                                                     "pan": res.capture.camera.pan_deg + 2}}))
+    main(["detect", str(res.image), "--scene", str(other)])
+    err = capsys.readouterr().err
+    assert "records another camera" in err and "pan" in err and str(res.capture_json) in err
     d["mirror"]["center"] = [40.0, 70.0]
     d["target"]["position"] = [60.0, 40.0]
     original.write_text(yaml.safe_dump(d))  # the scene moves; the frame and record do not
