@@ -39,6 +39,7 @@ from solver.sltr import virtual_image
 SPREAD_FLOOR = (0.002, 0.001)  # the proposal's least spread: yaw (deg), offset (cm)
 MOVE_SWEEPS = 4  # Metropolis–Hastings moves after each resampling
 MOVE_SCALE = 2.38 / np.sqrt(2.0)  # random-walk scale for a 2-D target (Roberts et al.)
+DEFAULT_PARTICLES = 4000  # the filter's particles where a caller gives no number
 
 
 @dataclass(frozen=True)
@@ -340,7 +341,7 @@ class MovingBeaconFilter:
     """Stateful wrapper of :func:`pf_step`: it keeps the particles, the weights and the
     history that the move step replays."""
 
-    def __init__(self, observer, beacon_start, yaw_range, rho_range, n: int = 4000,
+    def __init__(self, observer, beacon_start, yaw_range, rho_range, n: int = DEFAULT_PARTICLES,
                  params: PFParams | None = None, rng: int | np.random.Generator | None = 0,
                  fixed: tuple[BeaconMeasurement, ...] = (), fixed_sigma: float = 0.0):
         self.observer = np.asarray(observer, float)
@@ -429,7 +430,7 @@ def simulate_run(observer, mirror_point, mirror_yaw_deg: float, path: np.ndarray
 
 
 def track(observer, beacon_start, controls, observations, yaw_range, rho_range,
-          n: int = 4000, params: PFParams | None = None, rng=0,
+          n: int = DEFAULT_PARTICLES, params: PFParams | None = None, rng=0,
           fixed: tuple[BeaconMeasurement, ...] = (), fixed_sigma: float = 0.0
           ) -> list[MirrorEstimate]:
     """Run the filter over a whole run (beside the ``fixed`` beacons, known to

@@ -456,7 +456,8 @@ def test_budget_measures_each_source_and_predicts_it(tmp_path, capsys):
     predicted = -100 * 2 * cos_i * img.d1 * img.d2 / 1500 / img.d_total
     assert by["mirror.curvature_radius"]["delta"]["target_d_total_pct"] == pytest.approx(
         predicted, rel=0.2)
-    assert doc["all"]["target_cm"] > 0 and doc["ideal"]["target_cm"] >= 0
+    # the ideal bench within the detector's few millimetres; every imperfection beyond it
+    assert doc["ideal"]["target_cm"] < 1.0 < doc["all"]["target_cm"]
     for name in ("ideal", "camera.pan_error", "beacons0.known_position", "all"):
         assert (out / name / "default.png").exists()
         assert not (out / name / "default.annotated.png").exists()  # only with --keep

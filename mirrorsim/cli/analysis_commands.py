@@ -97,7 +97,7 @@ def _montecarlo_options(p):
          "mirror and beacon stand: the options below set them.", _montecarlo_options)
 def _montecarlo(args) -> int:
     from mirrorsim.cli.tables import montecarlo_table
-    from solver.measurements import SIGMA_ALPHA_MAX_DEG
+    from solver.measurements import SIGMA_ALPHA_MAX_DEG, SIGMA_D_REL_MAX
     from solver.montecarlo import Table1Geometry, table1, table_rows
     from solver.sltr import SolverError
 
@@ -106,9 +106,10 @@ def _montecarlo(args) -> int:
         raise BadArgument("--iterations", f"{args.iterations} must be ≤ {MAX_ITERATIONS}")
     finite(args, "alpha", "d_total", "d1", "incidence", "beacon_depth", "beacon_along", "sigma")
     for a, d in args.sigma or []:
-        if not (0 <= a <= SIGMA_ALPHA_MAX_DEG and 0 <= d <= 100):
+        if not (0 <= a <= SIGMA_ALPHA_MAX_DEG and 0 <= d <= 100 * SIGMA_D_REL_MAX):
             raise BadArgument("--sigma", f"{a:g} {d:g}: need 0 ≤ σ_α ≤ "
-                              f"{SIGMA_ALPHA_MAX_DEG:g}° and 0 ≤ σ_d ≤ 100 (% of d_total)")
+                              f"{SIGMA_ALPHA_MAX_DEG:g}° and 0 ≤ σ_d ≤ "
+                              f"{100 * SIGMA_D_REL_MAX:g} (% of d_total)")
     # the command line's σ_d is in %; the solver's a fraction
     args.sigma = [(a, d / 100.0) for a, d in args.sigma or []] or None
     try:
@@ -175,7 +176,7 @@ def _plan(args) -> int:
     plan = plan_scene(scene, sigma, args.eps, args.yaw_spread, args.d1_spread, args.step,
                       n_beacons=args.beacons, calibration=calibration_of(args))
     summ = plan.to_json()
-    print(plan_text(scene, summ))
+    print(plan_text(scene, plan))
     out = out_file(args, scene, f"{scene.name}.plan.png")
     print(f"  figure: {plot_plan(scene, plan, out)}")
     emit(args, summ)

@@ -16,8 +16,10 @@ from solver.sltr import Solution, chi2_2_radius
 
 if TYPE_CHECKING:  # renders, budgets and tracks: no Mitsuba import to print a table
     from mirrorsim.pipelines.budget import Budget
+    from mirrorsim.pipelines.planning import Plan
     from mirrorsim.pipelines.track import TrackReport
     from mirrorsim.rendering.frames import FrameFiles
+    from solver.beacon_set import BeaconSet
 
 
 def _columns(rows: list[tuple[str, ...]]) -> list[str]:
@@ -255,47 +257,46 @@ def montecarlo_table(res: Table1) -> str:
     return "\n".join(lines)
 
 
-def plan_text(scene: Scene, summ: dict) -> str:
+def plan_text(scene: Scene, plan: Plan) -> str:
     """The placement analysis as ``mirrorsim plan`` prints it."""
-    p, q, L = summ["paper"], summ["paper_eq15_perpendicular"], summ["path_lengths"]
-    bb, sig = summ["best_beacon"], summ["sigma_text"]
+    p, q, L, bb = plan.geometry, plan.geometry_corrected, plan.path_lengths, plan.best
     return "\n".join([
-        f"{scene.name}: target alpha {summ['target']['alpha_deg']:.3f}°, d_total "
-        f"{summ['target']['d_total']:.2f} cm, mirror {scene.mirror.size[0]:g} cm wide, "
-        f"eps ±{summ['eps_deg']:g}°",
-        f"  paper (eqs 9-18): step b = {p['b']:.3f} cm, a/2 = {p['half_a']:.3f} cm, "
-        f"triangle {p['area']:.2f} cm², N_bea = 2·d_total/b = {p['n_beacons']:.1f}",
+        f"{scene.name}: target alpha {plan.target_alpha_deg:.3f}°, d_total "
+        f"{plan.target_d_total:.2f} cm, mirror {scene.mirror.size[0]:g} cm wide, "
+        f"eps ±{plan.eps_deg:g}°",
+        f"  paper (eqs 9-18): step b = {p.b:.3f} cm, a/2 = {p.half_a:.3f} cm, "
+        f"triangle {p.area:.2f} cm², N_bea = 2·d_total/b = {p.n_beacons:.1f}",
         f"  eq 15 with the line perpendicular to the observation line (as its text says): "
-        f"a/2 = {q['half_a']:.3f} cm",
-        f"  exact region seen for every orientation: {summ['exact_region_area']:.0f} cm²; "
+        f"a/2 = {q.half_a:.3f} cm",
+        f"  exact region seen for every orientation: {plan.region.area:.0f} cm²; "
         "area vs d_total (paper / exact): " + ", ".join(
-            f"{a['d_total']:g}: {a['paper']:.2f}/{a['exact']:.0f}"
-            for a in summ["area_vs_d_total"]),
-        f"  paths over {summ['n_steps']} steps: linear {L['linear']:.1f}, rectangular "
+            f"{d:g}: {a:.2f}/{e:.0f}" for d, a, e in zip(*plan.area_vs_d, strict=True)),
+        f"  paths over {plan.n_steps} steps: linear {L['linear']:.1f}, rectangular "
         f"{L['rectangular']:.1f}, saw-tooth {L['sawtooth']:.1f} cm",
-        f"  expected target RMSE at {sig} over {summ['mirror_poses']} mirror poses:",
-        *(f"    scene's beacon {i} {list(b.position)} alone: {e['rmse']:.3f} cm (seen under "
-          f"{100 * e['seen_fraction']:.0f}% of poses)"
-          for i, (b, e) in enumerate(zip(scene.beacons, summ["scene_beacons"], strict=True))),
-        f"    best position ({bb['position'][0]:.1f}, {bb['position'][1]:.1f}): "
-        f"{bb['rmse']:.3f} cm", *_set_lines(summ.get("beacon_set"))])
+        f"  expected target RMSE at {plan.sigma.describe()} over {plan.n_poses} mirror poses:",
+        *(f"    scene's beacon {i} {list(b.position)} alone: {rmse:.3f} cm (seen under "
+          f"{100 * seen:.0f}% of poses)"
+          for i, (b, (rmse, seen)) in enumerate(zip(scene.beacons, plan.scene_beacons,
+                                                    strict=True))),
+        f"    best position ({bb.position[0]:.1f}, {bb.position[1]:.1f}): "
+        f"{bb.rmse:.3f} cm", *_set_lines(plan.beacon_set)])
 
 
-def _set_lines(bs: dict | None) -> list[str]:
+def _set_lines(bs: BeaconSet | None) -> list[str]:
     """What each planned beacon buys."""
-    if not bs:
+    if bs is None:
         return []
-    nu = " and ".join(bs["self_calibration"])
-    priors = describe_priors(bs.get("priors", {}))
-    out = [f"  {len(bs['beacons'])} beacons, chosen one at a time"
+    nu = " and ".join(bs.calibration.nuisances)
+    priors = describe_priors(dict(bs.calibration.priors))
+    out = [f"  {len(bs.positions)} beacons, chosen one at a time"
            + (f" with {nu} estimated alongside (self-calibration"
               + (f"; priors {priors}" if priors else "") + ")" if nu else "") + ":"]
-    for k, b in enumerate(bs["beacons"]):
-        cal = ("not yet observable" if b["rmse_after"] is None
-               else f"{b['rmse_after']:.3f} cm")
-        out.append(f"    beacon {k} at ({b['position'][0]:.1f}, {b['position'][1]:.1f}): "
+    for k, (pos, after, plain) in enumerate(zip(bs.positions, bs.rmse, bs.rmse_plain,
+                                                strict=True)):
+        cal = "not yet observable" if not np.isfinite(after) else f"{after:.3f} cm"
+        out.append(f"    beacon {k} at ({pos[0]:.1f}, {pos[1]:.1f}): "
                    f"expected target RMSE with {k + 1} beacon(s) {cal}"
-                   + (f" (without {nu} errors {b['rmse_after_plain']:.3f} cm)" if nu else ""))
+                   + (f" (without {nu} errors {plain:.3f} cm)" if nu else ""))
     return out
 
 

@@ -16,7 +16,7 @@ from typing import Any
 
 from mirrorsim.errors import InputError
 from mirrorsim.formats.reader import Reader, read_json, read_resolution, show
-from mirrorsim.scene.model import Beacon, Camera, Point2, Scene
+from mirrorsim.scene.model import MAX_HFOV_DEG, Beacon, Camera, Point2, Scene
 
 REFERENCE_DISTANCE = 100.0  # cm: where calibration stands its reference objects
 
@@ -80,7 +80,7 @@ class CaptureRecord:
                       ("fy", "cx", "cy", "hfov_deg", "distortion"))
         resolution = read_resolution(r, c["resolution"], "camera.resolution")
         fx = r.number(c["fx"], "camera.fx", positive=True)
-        hfov = (r.number(c["hfov_deg"], "camera.hfov_deg", positive=True, high=170.0)
+        hfov = (r.number(c["hfov_deg"], "camera.hfov_deg", positive=True, high=MAX_HFOV_DEG)
                 if "hfov_deg" in c else math.degrees(2 * math.atan(resolution[0] / 2 / fx)))
         if abs((resolution[0] / 2) / math.tan(math.radians(hfov) / 2) - fx) > 1e-6 * fx:
             raise r.fail("camera.fx", f"{fx:g} disagrees with hfov_deg {hfov:g} (square "

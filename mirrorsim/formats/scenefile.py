@@ -41,6 +41,7 @@ from mirrorsim.scene.model import (
     MAX_BOARD_CM,
     MAX_CURVATURE_RADIUS,
     MAX_FULL_WELL,
+    MAX_HFOV_DEG,
     MAX_READ_NOISE,
     NAME_PATTERN,
     NAME_RULE,
@@ -82,7 +83,7 @@ def read_camera_model(r: Reader, cam: dict, key: str,
     """A camera's model from its block (scene files and specs alike): mount height (cm),
     hfov (°), resolution (px)."""
     return (r.number(cam["height"], f"{key}.height", positive=True, high=MAX_BOARD_CM),
-            r.number(cam["hfov"], f"{key}.hfov", positive=True, high=170.0),
+            r.number(cam["hfov"], f"{key}.hfov", positive=True, high=MAX_HFOV_DEG),
             read_resolution(r, cam.get("resolution", default_resolution),
                             f"{key}.resolution"))
 

@@ -28,12 +28,14 @@ from mirrorsim.detection.detector import measure_object
 from mirrorsim.detection.image_geometry import Calibration
 from mirrorsim.errors import BadParameter, DetectionError
 from mirrorsim.formats.cache import read_entry, write_entry
+from mirrorsim.formats.capture import REFERENCE_DISTANCE
 from mirrorsim.scene import imperfections
 from mirrorsim.scene.model import FRONT_OFFSET, PENCIL_RADIUS, Beacon, Board, Camera, Target
 from mirrorsim.truth import optics
 from solver.geometry import unit
 
-D_REF = 100.0
+# where the reference objects stand (cm): the capture record's, declared with it
+D_REF = REFERENCE_DISTANCE
 # per reference object: the pencil's 45 px band rests on two edges of a few columns, whose
 # render noise at 64 spp erred K for every frame of a camera alike; the target's 230 px
 # panel averages over ~90 columns and is well measured at 64

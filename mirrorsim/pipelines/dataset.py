@@ -64,13 +64,13 @@ from mirrorsim.truth.groundtruth import ObjectTruth
 from solver.geometry import yaw_difference
 from solver.selfcal import NUISANCES, PLAIN, SelfCalibration, check_nuisances, priors_text
 
-# 3: the beacon count, each beacon's columns, self-calibration; 4: its priors
 # where the scenes run: warm local worker processes, or a Dask cluster
 EXECUTORS = ("local", "dask")
+# 3: the beacon count, each beacon's columns, self-calibration; 4: its priors
 ROW_SCHEMA_VERSION = 4
 # a worker retires past this resident memory; measured on llvm_ad_rgb, a warm worker
-# holds ~500 MiB after its first full-size scene and no more after 30 (README
-# "Throughput"), so this only stops a leak that another Mitsuba might bring
+# holds ~500 MiB after its first full-size scene and no more after 30 (docs/results.md,
+# "Datasets and the error model"), so this only stops a leak that another Mitsuba might bring
 MAX_WORKER_RSS_MB = 3072
 MAX_SCENES = 1_000_000  # a documented bound on --n
 # failures that belong to the scene (recorded as its row); all else is redone on resume

@@ -295,11 +295,6 @@ def shared_alpha(cols: dict, ok: np.ndarray) -> float:
     return float(np.sqrt(np.mean(p))) if t > SHARED_T else 0.0
 
 
-def bias_of(model: ErrorModel, kind: str, quantity: str, features: np.ndarray) -> np.ndarray:
-    """The diagnostic bias fit of a quantity at feature rows (k, len(model.bias_features))."""
-    return np.atleast_2d(features) @ np.asarray(model.fits[kind][quantity].bias)
-
-
 def fit_dataset(dataset_dir: str | Path) -> ErrorModel:
     """The error model of a dataset folder (its verified table), with its provenance.
 

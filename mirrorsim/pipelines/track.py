@@ -39,7 +39,7 @@ from mirrorsim.truth.visibility import visibility
 from solver.errors import SolverError
 from solver.geometry import bearing_deg, line_normal, wrap_bearing
 from solver.measurements import BeaconMeasurement, Sigma
-from solver.particle import MovingBeaconFilter, PFParams, mirror_errors
+from solver.particle import DEFAULT_PARTICLES, MovingBeaconFilter, PFParams, mirror_errors
 from solver.placement import path_points
 from solver.selfcal import check_position_sigma
 from solver.sltr import locate, mirror_from_beacon, observe, ray_hits_line
@@ -250,7 +250,7 @@ def check_fixed_beacons(scene: Scene, position_sigma: float) -> None:
 def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps: int = 20,
               odometry_sigma: float = 0.1, seed: int = 0, side: float = 4.0,
               step: float = 1.0, heading: str = "view",
-              variant: str = "auto", particles: int = 4000,
+              variant: str = "auto", particles: int = DEFAULT_PARTICLES,
               on_pose: Callable[[int, int], None] | None = None,
               error_model: ErrorModel | None = None,
               position_sigma: float = 0.0) -> TrackReport:

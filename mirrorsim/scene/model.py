@@ -33,6 +33,7 @@ MAX_SPP = 1 << 16  # a documented bound: more samples than this is a typo, not a
 # the pegboard's texture has 24 texels a cm (a 200 cm board: 4800² texels, ~0.3 GiB);
 # no size or height on the bench (mirror, target, pencil, occluder, camera) exceeds it
 MAX_BOARD_CM = 200.0
+MAX_HFOV_DEG = 170.0  # a pinhole camera's widest field of view that a file may give
 MAX_RESOLUTION = (7680, 4320)  # 8K UHD: the film and its passes fit a few GiB
 # electrons: at 1e7 shot noise is 0.03 % of full scale (no noise: leave `noise` out)
 MAX_FULL_WELL = 1e7
