@@ -9,14 +9,13 @@ target stands.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 from mirrorsim.errors import InputError
 from mirrorsim.formats.reader import Reader, read_json, read_resolution, show
-from mirrorsim.scene.model import MAX_HFOV_DEG, Beacon, Camera, Point2, Scene
+from mirrorsim.scene.model import MAX_HFOV_DEG, Beacon, Camera, Point2, Scene, fx_of, hfov_of
 
 REFERENCE_DISTANCE = 100.0  # cm: where calibration stands its reference objects
 
@@ -81,8 +80,8 @@ class CaptureRecord:
         resolution = read_resolution(r, c["resolution"], "camera.resolution")
         fx = r.number(c["fx"], "camera.fx", positive=True)
         hfov = (r.number(c["hfov_deg"], "camera.hfov_deg", positive=True, high=MAX_HFOV_DEG)
-                if "hfov_deg" in c else math.degrees(2 * math.atan(resolution[0] / 2 / fx)))
-        if abs((resolution[0] / 2) / math.tan(math.radians(hfov) / 2) - fx) > 1e-6 * fx:
+                if "hfov_deg" in c else hfov_of(resolution[0], fx))
+        if abs(fx_of(resolution[0], hfov) - fx) > 1e-6 * fx:
             raise r.fail("camera.fx", f"{fx:g} disagrees with hfov_deg {hfov:g} (square "
                          "pixels, the principal point at the centre)")
         distortion = (read_distortion(r, c["distortion"], "camera.distortion")

@@ -57,6 +57,7 @@ from mirrorsim.scene.model import (
     SensorNoise,
     Target,
     check_is_scene,
+    fx_of,
 )
 from mirrorsim.truth import optics
 
@@ -357,8 +358,7 @@ def _imperfection(r: Reader, imp: Imperfection, raw: Any, mirror: Mirror,
         return r.integer(raw, key, low=int(imp.low), high=int(imp.high))
     if imp.form == "lens":
         k = read_distortion(r, raw, key)
-        corner = math.hypot(*resolution) / 2 / ((resolution[0] / 2)
-                                                 / math.tan(math.radians(hfov) / 2))
+        corner = math.hypot(*resolution) / 2 / fx_of(resolution[0], hfov)
         if not distortion_monotonic(k, corner):
             raise r.fail(key, f"{list(k)}: the lens folds the image over before the "
                          "frame's corner (r·(1 + k1 r² + k2 r⁴) must grow)")

@@ -28,6 +28,7 @@ from mirrorsim.scene.model import (
     Camera,
     Scene,
     Target,
+    hfov_of,
     pencil_paint_height,
 )
 from mirrorsim.truth import optics, visibility
@@ -255,7 +256,7 @@ def build_direct_dict(board: Board, camera: Camera, obj: Target | Beacon, *, spp
 
 def _tile_sensor(sensor: dict, cam: Camera, t: int) -> dict:
     """A copy of a sensor description with a t × t film and the same pixel size."""
-    fov = math.degrees(2.0 * math.atan(t / 2.0 / cam.fx))
+    fov = hfov_of(t, cam.fx)
     return {**sensor, "fov": fov, "sampler": dict(sensor["sampler"]),
             "film": {**sensor["film"], "width": t, "height": t}}
 

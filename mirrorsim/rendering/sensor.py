@@ -16,7 +16,7 @@ from dataclasses import replace
 import cv2
 import numpy as np
 
-from mirrorsim.scene.model import Camera, SensorNoise
+from mirrorsim.scene.model import Camera, SensorNoise, hfov_of
 
 # fixed-point steps inverting the radial model at most (tested to 1e-6 px); it stops
 # earlier where a step changes nothing (13 steps for exp1's lens: the same result)
@@ -69,7 +69,7 @@ def distortion_canvas(camera: Camera, k: tuple[float, float]) -> tuple[Camera, i
     frame has something to sample)."""
     margin = _distort_maps(camera, k)[2]
     w, h = camera.width + 2 * margin, camera.height_px + 2 * margin
-    hfov = math.degrees(2 * math.atan(w / 2 / camera.fx))
+    hfov = hfov_of(w, camera.fx)
     return replace(camera, resolution=(w, h), hfov=hfov), margin
 
 

@@ -88,8 +88,8 @@ class Camera:
 
     @property
     def fx(self) -> float:
-        """Focal length in px: (W/2)/tan(hfov/2); square pixels, so fy = fx."""
-        return (self.width / 2.0) / math.tan(math.radians(self.hfov) / 2.0)
+        """Focal length in px (:func:`fx_of`); square pixels, so fy = fx."""
+        return fx_of(self.width, self.hfov)
 
     @property
     def cx(self) -> float:
@@ -205,6 +205,18 @@ class RenderSettings:
         if self.sampler not in SAMPLERS:
             raise BadParameter("sampler", f"{self.sampler!r}: expected one of "
                                f"{', '.join(SAMPLERS)}")
+
+
+def fx_of(width: float, hfov_deg: float) -> float:
+    """A pinhole's focal length in px for a frame ``width`` px wide seeing ``hfov_deg``:
+    (W/2)/tan(hfov/2) (square pixels, so fy = fx)."""
+    return (width / 2.0) / math.tan(math.radians(hfov_deg) / 2.0)
+
+
+def hfov_of(width: float, fx: float) -> float:
+    """The horizontal field of view (deg) that ``width`` px see at focal length ``fx``
+    px: the inverse of :func:`fx_of`."""
+    return math.degrees(2.0 * math.atan(width / 2.0 / fx))
 
 
 def is_whole(v) -> bool:
