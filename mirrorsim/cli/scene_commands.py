@@ -229,7 +229,7 @@ def _calibrate(args) -> int:
           f"({cal.height_px('target', D_REF):.2f} px at 1 m; the paper's camera: 229 px)")
     print(f"  pencil's painted band: K = {cal.pencil_k:.1f} px·cm "
           f"({cal.height_px('beacon', D_REF):.2f} px at 1 m)")
-    emit(args, {"key": cal.key, "target_k": cal.target_k, "pencil_k": cal.pencil_k})
+    emit(args, {"key": cal.key, **cal.constants()})
     return 0
 
 

@@ -32,6 +32,11 @@ class Calibration:
         k = self.target_k if kind == "target" else self.pencil_k
         return k / (distance - FRONT_OFFSET[kind])
 
+    def constants(self) -> dict[str, float]:
+        """The two constants as every file that records them names them (a report, the
+        cache entry, ``calibrate --json``)."""
+        return {"target_k": self.target_k, "pencil_k": self.pencil_k}
+
 
 RATIO_TOLERANCE = 0.004  # relative: the panel's angular width/height ratio is exact unclipped
 

@@ -204,7 +204,7 @@ def calibrate(camera: Camera, target_size, pencil_height: float, *, variant: str
     s_p = measure_reference(camera, "beacon", pencil_height, variant, where, subsampled)
     cal = Calibration(target_k=s_t * (D_REF - FRONT_OFFSET["target"]),
                       pencil_k=s_p * (D_REF - FRONT_OFFSET["beacon"]), key=key)
-    write_entry("calibration", key, {"target_k": cal.target_k, "pencil_k": cal.pencil_k,
+    write_entry("calibration", key, {**cal.constants(),
                                      "target_px_at_100cm": s_t, "pencil_paint_px_at_100cm": s_p})
     return cal
 
