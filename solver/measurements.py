@@ -121,6 +121,11 @@ SIGMA_D_REL_MIN = 1e-6
 D_TOTAL_RANGE_CM = (0.01, 1e5)
 
 
+def is_number(x: object) -> bool:
+    """A real number (numpy's too), not a bool: what every measured value and σ must be."""
+    return isinstance(x, int | float | np.integer | np.floating) and not isinstance(x, bool)
+
+
 def check_measurements(observer, beacons: list[BeaconMeasurement],
                        targets: list[tuple[float, float]]) -> None:
     """Refuse what no solve can use: no beacon or target, a number that is not finite,
@@ -145,7 +150,7 @@ def check_measurements(observer, beacons: list[BeaconMeasurement],
     for i, (a, d) in enumerate(targets):
         values += [(f"targets[{i}].alpha_deg", a), (f"targets[{i}].d_total", d)]
     for name, v in values:
-        if isinstance(v, str | bytes) or not np.isreal(v):
+        if not is_number(v):  # a string, None: a TypeError deep in numpy otherwise
             raise SolverError(f"{name} is {v!r}: every measurement must be a finite number")
         if not np.isfinite(v):
             raise SolverError(f"{name} is {v}: every measurement must be a finite number")

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from solver.errors import SolverError
+from solver.measurements import is_number
 
 # nuisances a bench shares across its measurements, estimated with the mirror when asked
 # (self-calibration): "pan", an offset δ (deg) on every α (the mount's pan reading);
@@ -157,7 +158,7 @@ def describe_estimates(estimates: Mapping[str, float], sd: Mapping[str, float]) 
 def check_position_sigma(position_sigma: float) -> None:
     """Refuse a beacon position σ that is not 0 (exactly known) or a finite length of at
     least :data:`POSITION_SIGMA_MIN_CM` (cm per axis)."""
-    if not (_number(position_sigma) and np.isfinite(position_sigma)
+    if not (is_number(position_sigma) and np.isfinite(position_sigma)
             and (position_sigma == 0 or position_sigma >= POSITION_SIGMA_MIN_CM)):
         raise SolverError(f"position_sigma must be 0 (known exactly) or a finite number ≥ "
                           f"{POSITION_SIGMA_MIN_CM:g} (cm), got {position_sigma!r}")
@@ -173,15 +174,10 @@ def check_nuisance_sigma(priors: Mapping[str, float], nuisances: tuple[str, ...]
         if name not in nuisances:
             raise SolverError(f"a prior σ for {name!r}, which is not estimated (estimated: "
                               f"{', '.join(nuisances) or 'none'})")
-        if not (_number(s) and np.isfinite(s) and s >= PRIOR_MIN[name]):
+        if not (is_number(s) and np.isfinite(s) and s >= PRIOR_MIN[name]):
             raise SolverError(f"the prior σ of {name} must be a number ≥ {PRIOR_MIN[name]:g} "
                               f"(one known better is known: leave it out of the nuisances), "
                               f"got {s!r}")
-
-
-def _number(x) -> bool:
-    """A real number (numpy's too), not a bool."""
-    return isinstance(x, int | float | np.integer | np.floating) and not isinstance(x, bool)
 
 
 def check_nuisances(nuisances: tuple[str, ...], nb: int | None, nt: int) -> None:

@@ -749,3 +749,11 @@ def test_a_datasets_card_names_the_error_model_file_it_was_made_with(tmp_path, m
         ds.run_dataset(1, 5, shipped, workers=1, progress=False)
     meta = json.loads((shipped / "dataset.json").read_text())
     assert "error_model_file" not in meta and "--error-model" not in made_with(meta, shipped)
+    # a model read from a file and changed in memory still names that file: not its file
+    edited = tmp_path / "edited"
+    with pytest.raises(Stop):
+        ds.run_dataset(1, 5, edited, workers=1, progress=False,
+                       error_model=replace(load_error_model(model_path), shared_alpha_deg=0.1))
+    meta = json.loads((edited / "dataset.json").read_text())
+    assert meta["error_model_shipped"] is False and "error_model_file" not in meta
+    assert "--error-model MODEL" in made_with(meta, edited)

@@ -314,3 +314,12 @@ def test_solve_reads_measurements_from_a_pipe(tmp_path):
                          capture_output=True, text=True)
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1
     assert str(binary) in bad.stderr and "not UTF-8 text" in bad.stderr
+    # the same bytes piped (the locale's decoding let them through as escapes)
+    piped_bad = subprocess.run([sys.executable, "-m", "mirrorsim", "solve", "-"],
+                               input=binary.read_bytes(), capture_output=True)
+    assert piped_bad.returncode == 2 and b"<stdin>" in piped_bad.stderr
+    assert b"not UTF-8 text" in piped_bad.stderr and piped_bad.stderr.count(b"\n") == 1
+    # only solve's measurements come from a pipe: a scene named - is a file name
+    scene = subprocess.run([sys.executable, "-m", "mirrorsim", "check", "-"], input="{}",
+                           capture_output=True, text=True, cwd=tmp_path)
+    assert scene.returncode == 2 and "no such file" in scene.stderr

@@ -28,7 +28,9 @@ MAX_ITERATIONS = 1_000_000  # draws per Monte Carlo row: about a second a row at
 
 
 def _solve_options(p):
-    p.add_argument("measurements", type=Path)
+    p.add_argument("measurements", type=Path,
+                   help="a measurements file (detect --json, check --measurements); - reads "
+                        "it from standard input")
     inputs(p, ("measurements", "MEASUREMENTS", "file"))
     common(p, scene=False, json="the solution",
            error_model="each measurement's σ's; given, it replaces the file's `sigma`")

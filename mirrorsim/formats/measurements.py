@@ -6,7 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from mirrorsim.formats.reader import Reader, read_json
+from mirrorsim.formats.reader import Reader, parse_json, read_json, read_stdin_text
 from solver.errors import InputError
 from solver.measurements import (
     D_TOTAL_RANGE_CM,
@@ -29,7 +29,11 @@ class MeasurementError(InputError):
 
 
 def load_measurements(path: str | Path) -> Measurements:
-    """Parse and validate a measurements file (raises :class:`MeasurementError`)."""
+    """Parse and validate a measurements file (raises :class:`MeasurementError`); ``-``
+    reads standard input (``check --measurements - | solve -``)."""
+    if str(path) == "-":
+        return measurements_from_dict(parse_json(read_stdin_text(MeasurementError), "<stdin>",
+                                                 MeasurementError), "<stdin>")
     return measurements_from_dict(read_json(path, MeasurementError), path)
 
 

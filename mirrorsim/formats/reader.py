@@ -32,14 +32,8 @@ def show(value: Any) -> str:
 
 
 def read_input_text(path: str | Path, error_class: type[InputError] = InputError) -> str:
-    """The text of an input file (``-``: standard input, for a pipe), or ``error_class``
-    with one line: missing, not a regular file (a FIFO would wait for a writer for
-    ever), unreadable, not UTF-8 text."""
-    if str(path) == "-":
-        try:
-            return sys.stdin.read()
-        except UnicodeDecodeError:
-            raise error_class("<stdin>", "", "cannot read: not UTF-8 text") from None
+    """The text of an input file, or ``error_class`` with one line: missing, not a
+    regular file (a FIFO would wait for a writer for ever), unreadable, not UTF-8 text."""
     path = Path(path)
     try:
         if not path.is_file():
@@ -69,10 +63,24 @@ def _unique_keys(pairs: list[tuple[str, Any]]) -> dict:
     return out
 
 
+def read_stdin_text(error_class: type[InputError] = InputError) -> str:
+    """Standard input's text (a command's ``-`` input, for a pipe), strictly UTF-8: the
+    locale's decoding would let a binary stream through as escaped characters."""
+    try:
+        return sys.stdin.buffer.read().decode("utf-8")
+    except UnicodeDecodeError:
+        raise error_class("<stdin>", "", "cannot read: not UTF-8 text (a binary "
+                          "stream?)") from None
+
+
 def read_json(path: str | Path, error_class: type[InputError] = InputError) -> Any:
     """Parse a JSON file, raising ``error_class`` with one line for a missing, unreadable,
     malformed or absurdly nested one."""
-    text = read_input_text(path, error_class)
+    return parse_json(read_input_text(path, error_class), path, error_class)
+
+
+def parse_json(text: str, path: str | Path, error_class: type[InputError] = InputError) -> Any:
+    """Parse JSON text read from ``path`` (named in messages) as :func:`read_json` does."""
     try:
         return json.loads(text, object_pairs_hook=_unique_keys)
     except _DuplicateKey as exc:

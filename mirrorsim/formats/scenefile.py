@@ -226,7 +226,10 @@ def edit_scene(scene: Scene, changes: Mapping[str, Any]) -> Scene:
     ``auto`` pan) follows the edit.  ``dataclasses.replace`` recomputes none of it.
 
     ``changes`` nests as the file does, ``{"mirror": {"yaw": 20}, "name": "yaw20"}``: a
-    mapping merges into its block, any other value (a list too) replaces its key.
+    mapping merges into its block, whose other keys keep their values (a beacon moved by
+    ``{"beacon": {"position": …}}`` keeps a ``known_position`` its file gave), and any
+    other value (a list too: ``beacons``) replaces its key.  numpy numbers are taken as
+    numbers.
 
     Raises
     ------
@@ -242,11 +245,24 @@ def edit_scene(scene: Scene, changes: Mapping[str, Any]) -> Scene:
     doc = scene_document(scene)
     if "beacons" in changes:  # the one-beacon form gives way to the list given
         doc.pop("beacon", None)
-    elif "beacon" in changes:
-        doc.pop("beacons", None)
-    edited = scene_from_dict(_merged(doc, changes), source=f"{scene.source} (edited)",
+    elif "beacon" in changes and "beacons" in doc:
+        raise BadParameter("changes", f"beacon: {scene.name} has {len(scene.beacons)} beacons; "
+                           "give `beacons`, the whole list")
+    edited = scene_from_dict(_merged(doc, _plain(changes)), source=f"{scene.source} (edited)",
                              default_name=scene.name)
     return replace(edited, source=scene.source)
+
+
+def _plain(value: Any) -> Any:
+    """``value`` with numpy numbers as Python's (a script's ``np.arange`` of yaws), which
+    the reader takes as a file's numbers."""
+    if isinstance(value, Mapping):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, list | tuple | np.ndarray):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.bool_ | np.integer | np.floating):
+        return value.item()
+    return value
 
 
 def _merged(doc: dict, changes: Mapping[str, Any]) -> dict:

@@ -53,7 +53,7 @@ from mirrorsim.formats.dataset_folder import (
     write_table,
     writing,
 )
-from mirrorsim.formats.error_model import ErrorModel, default_error_model
+from mirrorsim.formats.error_model import ErrorModel, default_error_model, load_error_model
 from mirrorsim.formats.files import dumps, write_json, write_text
 from mirrorsim.pipelines.random_scenes import DatasetSpec, NoValidScene
 from mirrorsim.pipelines.score import Report
@@ -261,6 +261,23 @@ def _check_run_parameters(n, seed, workers, spp, sampler, executor, keep) -> Non
     check_keep(keep)
 
 
+def _holds(path: str | None, digest: str) -> bool:
+    """Whether the model file ``path`` holds the model of ``digest``: a model read from a
+    file and then changed in memory (``dataclasses.replace``) still names that file."""
+    if path is None:
+        return False
+    try:
+        found = load_error_model(path)
+    except InputError:
+        return False
+    return _digest(found) == digest
+
+
+def _digest(model: ErrorModel) -> str:
+    """What a dataset records of its error model: the SHA-256 of its file's contents."""
+    return hashlib.sha256(dumps(model.to_json()).encode()).hexdigest()
+
+
 def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
                 spec_path: str | Path | None = None, spp: int | None = None,
                 sampler: str | None = None, variant: str = "auto", resume: bool = False,
@@ -309,14 +326,13 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
         raise BadParameter("nuisances", f"{exc} (scenes of {spec.beacon_count} beacon(s) "
                            f"drawn from {spec_path or 'the default spec'})") from None
     model = error_model or default_error_model()
-    digest_of = lambda m: hashlib.sha256(dumps(m.to_json()).encode()).hexdigest()  # noqa: E731
     meta = {"format": DATASET_FORMAT, "n": n, "seed": seed, "spp": spp, "spec": spec.data,
-            "error_model_sha256": digest_of(model),
+            "error_model_sha256": _digest(model),
             # for the card's command only (not settings: a resume compares none of them)
             "spec_file": None if spec_path is None else str(spec_path),
-            "error_model_shipped": digest_of(model) == digest_of(default_error_model())}
-    if not meta["error_model_shipped"] and model.source:  # the card names its file
-        meta["error_model_file"] = model.source
+            "error_model_shipped": _digest(model) == _digest(default_error_model())}
+    if not meta["error_model_shipped"] and _holds(model.source, meta["error_model_sha256"]):
+        meta["error_model_file"] = model.source  # the card names its file
     if calibration.nuisances or calibration.position_sigma:
         # (absent otherwise, as in datasets without them; priors only where given)
         meta["calibrate"] = {"nuisances": list(calibration.nuisances),
