@@ -30,13 +30,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from solver.geometry import line_normal  # noqa: E402
 from solver.measurements import Sigma  # noqa: E402
-from solver.particle import (  # noqa: E402
-    MovingBeaconFilter,
-    PFParams,
-    mirror_errors,
-    simulate_run,
-    track,
-)
+from solver.particle import MovingBeaconFilter, PFParams  # noqa: E402
+from solver.particle_runs import mirror_errors, simulate_run, track  # noqa: E402
 from solver.placement import path_points  # noqa: E402
 from solver.smoother import smooth_run  # noqa: E402
 

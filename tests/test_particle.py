@@ -9,11 +9,9 @@ from solver.particle import (
     PFParams,
     Prior,
     initial_particles,
-    mirror_errors,
     pf_step,
-    simulate_run,
-    track,
 )
+from solver.particle_runs import mirror_errors, simulate_run, track
 from solver.placement import path_points
 from solver.smoother import smooth_run
 

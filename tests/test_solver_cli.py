@@ -20,7 +20,8 @@ from .conftest import SCENES
 
 
 def test_solver_imports_neither_mirrorsim_mitsuba_nor_opencv():
-    code = ("import sys, solver.sltr, solver.placement, solver.particle, solver.montecarlo, "
+    code = ("import sys, solver.sltr, solver.placement, solver.particle, solver.particle_runs, "
+            "solver.montecarlo, "
             "solver.measurements; bad = [m for m in ('mirrorsim', 'mitsuba', 'drjit', 'cv2') "
             "if m in sys.modules]; print(bad)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)

@@ -39,7 +39,8 @@ from mirrorsim.truth.visibility import visibility
 from solver.errors import SolverError
 from solver.geometry import bearing_deg, line_normal, wrap_bearing
 from solver.measurements import BeaconMeasurement, Sigma
-from solver.particle import DEFAULT_PARTICLES, MovingBeaconFilter, PFParams, mirror_errors
+from solver.particle import DEFAULT_PARTICLES, MovingBeaconFilter, PFParams
+from solver.particle_runs import mirror_errors
 from solver.placement import path_points
 from solver.selfcal import check_position_sigma
 from solver.sltr import locate, mirror_from_beacon, observe, ray_hits_line
