@@ -722,7 +722,7 @@ def test_a_datasets_card_names_the_error_model_file_it_was_made_with(tmp_path, m
     its hash): it now names the file given, and the hash it had then."""
     from dataclasses import replace
 
-    from mirrorsim.formats.dataset_folder import made_with
+    from mirrorsim.formats.dataset_card import made_with
     from mirrorsim.formats.error_model import default_error_model, load_error_model
     from mirrorsim.pipelines import dataset as ds
     from mirrorsim.pipelines.errormodel import write_model

@@ -1,6 +1,6 @@
 """A dataset's folder on disk: claiming it, its row files (sealed and verified), its
-Parquet table (sealed and verified) and its card.  The layout is described in
-:mod:`mirrorsim.pipelines.dataset`.
+Parquet table (sealed and verified); its card is :mod:`mirrorsim.formats.dataset_card`.
+The layout is described in :mod:`mirrorsim.pipelines.dataset`.
 """
 
 from __future__ import annotations
@@ -8,14 +8,10 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import json
-import math
-import textwrap
 import warnings
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
-
-import numpy as np
 
 from mirrorsim.errors import InputError
 from mirrorsim.formats import dataset_table as table
@@ -25,7 +21,6 @@ from mirrorsim.formats.files import (
     jsonable,
     read_regular_bytes,
     write_json,
-    write_text,
 )
 from solver.selfcal import priors_text
 
@@ -373,86 +368,3 @@ def load_dataset(folder: str | Path):
     df["measurements_file"] = [path_of(n, ".measurements.json", f)
                                for n, f in zip(df["scene"], failed, strict=True)]
     return df
-
-
-def card_columns() -> str:
-    """The table's columns as the card lists them, from their declaration."""
-    groups = (("the run", table.RUN, ""), ("scene parameters", table.SCENE, ""),
-              ("what the solver was given besides the images", table.KNOWN, ""),
-              ("for `target_*` and `beacon_*` (and, in a scene of several beacons, "
-               "`beacon2_*`, `beacon3_*`… with `known_x` and `known_y` besides)",
-               table.PER_OBJECT, "<object>_"),
-              ("solution", table.SOLUTION, ""),
-              ("bench imperfections (the spec's `bench:` block; ideal values when absent)",
-               table.BENCH, ""), ("timings", table.TIMING, ""))
-    return "\n".join(textwrap.fill(f"- {title}: {table.card_section(cols, prefix)}.", 88,
-                                    subsequent_indent="  ", break_on_hyphens=False)
-                      for title, cols, prefix in groups)
-
-
-def _calibrated(meta: dict) -> str:
-    """The self-calibration options a dataset was made with, as its command had them."""
-    cal = meta.get("calibrate")
-    if not cal:
-        return ""
-    return ((f" --calibrate {','.join(cal['nuisances'])}" if cal["nuisances"] else "")
-            + (f" --beacon-sigma {cal['position_sigma']:g}" if cal["position_sigma"] else "")
-            + (f" --prior {priors_text(cal['priors'])}" if cal.get("priors") else ""))
-
-
-def made_with(meta: dict, out: Path) -> str:
-    """The command that makes the dataset ``meta`` describes again (the spec's file as
-    it was named; the error model, where not the shipped one, by its file as it was named
-    or, made in memory, by its hash: see
-    :func:`_model_words`)."""
-    spec = meta.get("spec") or {}
-    sampler = (spec.get("render") or {}).get("sampler")
-    count = (spec.get("beacon") or {}).get("count")
-    return (f"mirrorsim dataset --n {meta['n']} --seed {meta['seed']} --out {out}"
-            + (f" --spec {meta['spec_file']}" if meta.get("spec_file") else "")
-            + (f" --spp {meta['spp']}" if meta.get("spp") is not None else "")
-            + (f" --sampler {sampler}" if sampler else "")
-            + (f" --beacons {count}" if count else "")
-            + (f" --error-model {meta.get('error_model_file') or 'MODEL'}"
-               if meta.get("error_model_shipped") is False else "")
-            + _calibrated(meta))
-
-
-def _model_words(meta: dict) -> str:
-    """The error model a dataset was made with, where it is not the shipped one."""
-    if meta.get("error_model_shipped") is not False:
-        return ""
-    if meta.get("error_model_file"):  # the file as it was named, and what it held then
-        return (f"; the error model {meta['error_model_file']} was the one of SHA-256 "
-                f"{meta['error_model_sha256'][:12]}… (dataset.json)")
-    return (f"; MODEL: the error model of SHA-256 {meta['error_model_sha256'][:12]}… "
-            "(dataset.json)")
-
-
-def write_card(out: Path, meta: dict, rows: list[table.DatasetRow], variant: str) -> None:
-    """Write the dataset card DIR/README.md."""
-    ok = [r for r in rows if not r.error]
-    med = lambda k: float(np.nanmedian([abs(r[k]) for r in ok])) if ok else math.nan  # noqa: E731
-    columns = card_columns()
-    text = f"""# mirrorsim dataset
-
-Made with `{made_with(meta, out)}`
-({'the scenes’ spp' if meta['spp'] is None else f"{meta['spp']} spp"}; backend {variant};
-{(meta['spec'].get('beacon') or {}).get('count', 1)} beacon(s) a scene{_model_words(meta)}).
-{len(rows)} rows, {len(rows) - len(ok)} failed (their `error` column says why).
-
-Each row is one random scene (`scenes/<scene>.yaml`, a normal scene file: rerun it with
-`mirrorsim evaluate`), its frame (`frames/<scene>/`), and these columns of
-`dataset.parquet`:
-
-{columns}
-
-Median |errors| here: target α {med('target_alpha_err'):.4f}°, target d
-{100 * med('target_d_rel_err'):.3f} %, beacon α {med('beacon_alpha_err'):.4f}°, beacon d
-{100 * med('beacon_d_rel_err'):.3f} %, target {med('err_target_cm'):.3f} cm.
-
-Scene i is drawn from `SeedSequence({meta['seed']}).spawn({meta['n']})[i]` with the spec in
-`dataset.json` and rendered with seed i.  `mirrorsim errormodel DIR` fits the error
-model.
-"""
-    write_text(Path(out) / "README.md", text)

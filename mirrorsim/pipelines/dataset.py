@@ -42,6 +42,7 @@ from tqdm import tqdm
 
 from mirrorsim.errors import BadParameter, DetectionError, InputError, SolverError
 from mirrorsim.formats import dataset_table as table
+from mirrorsim.formats.dataset_card import write_card
 from mirrorsim.formats.dataset_folder import (
     DATASET_FORMAT,
     collect_rows,
@@ -49,7 +50,6 @@ from mirrorsim.formats.dataset_folder import (
     row_document,
     scene_name,
     settings_digest,
-    write_card,
     write_table,
     writing,
 )
