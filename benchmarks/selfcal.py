@@ -42,7 +42,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 from stamp import stamp  # noqa: E402
 
-from mirrorsim.errors import DetectionError  # noqa: E402
+from mirrorsim.errors import DetectionError, SceneError  # noqa: E402
 from mirrorsim.formats.error_model import load_error_model  # noqa: E402
 from mirrorsim.pipelines.calibrate import D_REF  # noqa: E402
 from mirrorsim.pipelines.evaluate import evaluate_scene  # noqa: E402
@@ -212,7 +212,9 @@ def main() -> None:
                 rep = evaluate_scene(scene, out / scene.name, progress=False, keep=(),
                                      error_model=model)
                 e = _errors(rep, scene, position_sigma, nuisances, priors)
-            except (DetectionError, SolverError) as exc:
+            except (DetectionError, SolverError, SceneError) as exc:
+                # (SceneError: planned positions the scene file's checks refuse, which
+                # evaluate runs on a scene it is given)
                 # the frame's name without the (temporary) folder it was written to
                 skipped.append(f"{scene.name}: {str(exc).replace(str(out) + os.sep, '')}")
                 continue
