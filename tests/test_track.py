@@ -106,7 +106,7 @@ def test_paths_stay_on_the_board_and_in_front_of_the_glass(name, kind):
     import numpy as np
 
     from mirrorsim.formats.scenefile import load_scene
-    from mirrorsim.pipelines.track import CLEARANCE_CM, beacon_path
+    from mirrorsim.pipelines.track_paths import CLEARANCE_CM, beacon_path
     from mirrorsim.truth.groundtruth import ground_truth
     from solver.geometry import signed_distance
 
@@ -132,7 +132,7 @@ def test_the_view_heading_keeps_the_beacon_in_the_mirror(name):
     from dataclasses import replace
 
     from mirrorsim.formats.scenefile import load_scene
-    from mirrorsim.pipelines.track import beacon_path
+    from mirrorsim.pipelines.track_paths import beacon_path
     from mirrorsim.truth.groundtruth import ground_truth
     from mirrorsim.truth.visibility import visibility
 
@@ -171,7 +171,7 @@ def test_the_path_does_not_read_the_scene_s_mirror_or_target():
     import numpy as np
 
     from mirrorsim.formats.scenefile import load_scene
-    from mirrorsim.pipelines.track import beacon_path
+    from mirrorsim.pipelines.track_paths import beacon_path
     from mirrorsim.truth.groundtruth import ground_truth
 
     scene = load_scene(SCENES / "exp1.yaml")
@@ -220,7 +220,7 @@ def test_the_path_keeps_clear_of_fixed_beacons():
     import numpy as np
 
     from mirrorsim.formats.scenefile import load_scene
-    from mirrorsim.pipelines.track import FIXED_CLEARANCE_CM, beacon_path
+    from mirrorsim.pipelines.track_paths import FIXED_CLEARANCE_CM, beacon_path
     from mirrorsim.scene.model import Beacon
     from mirrorsim.truth.groundtruth import ground_truth
 

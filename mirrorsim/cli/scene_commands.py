@@ -334,7 +334,8 @@ def _budget(args) -> int:
 
 
 def _track_options(p):
-    from mirrorsim.pipelines.track import HEADINGS, MAX_ODOMETRY_SIGMA, MAX_STEPS, PATHS
+    from mirrorsim.pipelines.track import MAX_ODOMETRY_SIGMA, MAX_STEPS
+    from mirrorsim.pipelines.track_paths import HEADINGS, PATHS
 
     common(p, out="output folder (default renders/<name>/track/)", json="the track report",
            variant=True, quiet=True, error_model="the filter's measurement σ's (the beacon's "

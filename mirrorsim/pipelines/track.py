@@ -5,7 +5,8 @@ The scene's first beacon follows a path (eqs 19–21: ``linear``, ``rectangular`
 still (``fixed``: the baseline of one fixed beacon seen in as many frames).  The start
 pose is rendered and measured first: its beacon's (α, d_total) give a mirror line (the
 perpendicular bisector of the beacon and its image), which centres the filter's prior
-(yaw ± 15°, offset ± 8 cm) and lays out the path (:func:`beacon_path`) — from what the
+(yaw ± 15°, offset ± 8 cm) and lays out the path
+(:func:`~mirrorsim.pipelines.track_paths.beacon_path`) — from what the
 experimenter saw, never from the scene's mirror.  The experimenter commands each move;
 the beacon's believed position is the start plus the commanded moves, its true position
 also carries odometry noise (N(0, σ) per axis per move, seeded).  Each pose is rendered,
@@ -33,27 +34,19 @@ from mirrorsim.formats.error_model import ErrorModel, default_error_model
 from mirrorsim.formats.files import claim_run_folder
 from mirrorsim.formats.scenefile import check_given_scene
 from mirrorsim.pipelines.frame import FrameNotMeasured, render_and_measure
-from mirrorsim.scene.model import PENCIL_RADIUS, Bench, Scene, is_whole
-from mirrorsim.truth.optics import target_facing
-from mirrorsim.truth.visibility import visibility
+from mirrorsim.pipelines.track_paths import HEADINGS, PATHS, beacon_path
+from mirrorsim.scene.model import Scene, is_whole
 from solver.errors import SolverError
-from solver.geometry import bearing_deg, line_normal, wrap_bearing
+from solver.geometry import line_normal
 from solver.measurements import BeaconMeasurement, Sigma
 from solver.particle import DEFAULT_PARTICLES, MovingBeaconFilter, PFParams
 from solver.particle_runs import mirror_errors
-from solver.placement import path_points
 from solver.selfcal import check_position_sigma
-from solver.sltr import locate, mirror_from_beacon, observe, ray_hits_line
+from solver.sltr import locate, mirror_from_beacon
 
-PATHS = ("rectangular", "linear", "sawtooth", "fixed")  # fixed: the baseline, standing still
-HEADINGS = ("view", "camera")
 PRIOR_YAW_DEG, PRIOR_OFFSET_CM = 15.0, 8.0
 MAX_STEPS = 500
 MAX_ODOMETRY_SIGMA = 10.0  # cm per move: a robot that errs more than this is not driving
-CLEARANCE_CM = 1.0  # the path's least distance in front of the start's mirror line
-# the path's least distance from a fixed beacon's believed position: two pencils apart,
-# with half a centimetre between them
-FIXED_CLEARANCE_CM = 2 * PENCIL_RADIUS + 0.5
 
 
 @dataclass(frozen=True)
@@ -128,89 +121,6 @@ class TrackReport:
                           "target_error_cm": f.target_error_cm,
                           "seen_poses": sum(s.seen for s in self.steps),
                           "poses": len(self.steps)}}
-
-
-def beacon_path(scene: Scene, first_obs: tuple[float, float],
-                target_obs: tuple[float, float], kind: str, steps: int, side: float,
-                step: float, heading: str = "view") -> np.ndarray:
-    """The commanded positions, start first: ``steps`` moves along the path ``kind``.
-
-    The path is laid out from what the experimenter knows at the start pose, never from
-    the scene's mirror or target: the bench (board, occluders, camera, the mirror's and
-    the target's sizes) and the start pose's measurements.  The beacon's (α, d_total)
-    give a mirror line (the perpendicular bisector of the beacon and its image); the
-    glass is placed on it between the beacon's and the target's reflection points, and
-    the target panel (a wall for the beacon's image) where that mirror puts it.
-    ``heading`` sets the line the steps of b run on: ``view``, the beacon's reflected
-    line of sight (its image stays on the same part of the glass); ``camera``, the
-    camera's line to the beacon.  Of the four ways to walk it (b forwards or back, side a
-    left or right), the path kept is the first by: on the board and ``CLEARANCE_CM`` in
-    front of the mirror line (no robot drives off the board or into the glass); most
-    poses predicted seen in that glass; b forwards (``view``: away from the glass;
-    ``camera``: towards the camera); images nearest the target's in α.
-
-    Raises
-    ------
-    SolverError
-        If the start pose's measurement gives no mirror.
-    """
-    b0 = scene.beacons[0]
-    o = np.asarray(scene.camera.position, float)
-    s0 = np.asarray(b0.believed, float)
-    if kind == "fixed":
-        return np.tile(s0, (steps + 1, 1))
-    yaw, mid, hit = mirror_from_beacon(o, s0, *first_obs)
-    yaw = float(yaw)
-    front = line_normal(yaw)
-    front = front if front @ (s0 - mid) > 0 else -front
-    target_alpha_deg = target_obs[0]
-    believed = _believed_scene(scene, o, yaw, mid, hit, target_obs)
-    h = float(bearing_deg(hit, s0) if heading == "view" else bearing_deg(s0, o))
-    size = np.asarray(scene.board.size, float)
-    best: tuple[tuple, np.ndarray] | None = None
-    for forwards in (True, False):
-        for a in (side, -side):
-            # path_points steps towards its ``alpha`` origin: alpha = heading + 180°
-            pts = path_points(kind, s0, h + (180.0 if forwards else 0.0), a, step,
-                              steps // 2 + 2)
-            pts = (pts - pts[0] + s0)[: steps + 1]
-            allowed = (bool(np.all((pts >= 0) & (pts <= size)))
-                       and float(np.min((pts - mid) @ front)) >= CLEARANCE_CM
-                       and all(np.min(np.linalg.norm(pts - np.asarray(b.believed), axis=1))
-                               >= FIXED_CLEARANCE_CM for b in scene.beacons[1:]))
-            seen = sum(_seen_in(believed, replace(b0, position=tuple(p))) for p in pts)
-            alphas = observe(o, mid, yaw, pts, strict=False).alpha_deg
-            spread = float(np.mean(np.abs(wrap_bearing(alphas - target_alpha_deg))))
-            score = (allowed, seen, forwards, -spread)
-            if best is None or score > best[0]:
-                best = (score, pts)
-    if not best[0][0]:
-        raise BadParameter("side", f"{side:g} cm (with a step of {step:g} cm, {steps} steps): "
-                           "every way to walk this path leaves the board, comes within "
-                           f"{CLEARANCE_CM:g} cm of the mirror or within "
-                           f"{FIXED_CLEARANCE_CM:g} cm of a fixed beacon; make the path "
-                           "smaller")
-    return best[1]
-
-
-def _believed_scene(scene: Scene, o: np.ndarray, yaw: float, mid: np.ndarray,
-                    hit: np.ndarray, target_obs: tuple[float, float]) -> Scene:
-    """The scene as the start pose's measurements make it: the mirror on the beacon's
-    mirror line, between the beacon's and the target's reflection points, and the
-    target where that mirror puts it, on an ideal bench."""
-    try:
-        centre = (hit + ray_hits_line(o, target_obs[0], mid, yaw)) / 2
-    except SolverError:  # the target's ray misses the line (parallel, or behind)
-        centre = hit
-    mirror = replace(scene.mirror, yaw=yaw, center=tuple(map(float, centre)))
-    target = tuple(map(float, locate(o, mid, yaw, *target_obs)))
-    return replace(scene, mirror=mirror, bench=Bench(), target=replace(
-        scene.target, position=target, facing_deg=target_facing(o, mirror, target)))
-
-
-def _seen_in(scene: Scene, beacon) -> bool:
-    """Whether ``beacon``, standing alone in ``scene``, is seen whole in its mirror."""
-    return visibility(replace(scene, beacons=(beacon,)), beacon).fraction == 1.0
 
 
 def check_options(kind: str, steps: int, sigma: float, side: float, step: float,
