@@ -43,6 +43,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from stamp import stamp  # noqa: E402
 
+from mirrorsim.errors import BadParameter  # noqa: E402
 from mirrorsim.formats.scenefile import load_scene  # noqa: E402
 from mirrorsim.pipelines.planning import plan_scene  # noqa: E402
 from mirrorsim.pipelines.track import TrackReport, run_track  # noqa: E402
@@ -99,8 +100,13 @@ def main() -> None:
     reports: dict[str, dict[str, TrackReport]] = {}
     for name in args.scenes:
         for run in RUNS:
-            rep, wall = one_run(name, run, args.steps, args.spp, args.odometry_sigma,
-                                args.out)
+            try:
+                rep, wall = one_run(name, run, args.steps, args.spp, args.odometry_sigma,
+                                    args.out)
+            except BadParameter as exc:  # no way to walk it clear of the board's objects
+                print(f"| {name} | {run} | refused: {exc} |" + " |" * len(marks) + " |",
+                      flush=True)
+                continue
             reports.setdefault(name, {})[run] = rep
             seen = sum(s.seen for s in rep.steps)
             cells = " | ".join(f"{rep.steps[m].path_length_cm:.0f} / "
@@ -118,17 +124,26 @@ def coverage(args: argparse.Namespace) -> None:
 
     first = int.from_bytes(os.urandom(3), "big")  # fresh: no test's seed
     nees: list[list[float]] = []
+    refused: list[str] = []
     for name in args.scenes:
         for k in range(args.coverage):
-            rep, wall = one_run(name, "rectangular", args.steps, args.spp,
-                                args.odometry_sigma, args.out / "coverage", first + k)
+            try:
+                rep, wall = one_run(name, "rectangular", args.steps, args.spp,
+                                    args.odometry_sigma, args.out / "coverage", first + k)
+            except BadParameter as exc:  # the path cannot be walked there: no run
+                print(f"{name}: not run: {exc}", file=sys.stderr, flush=True)
+                refused.append(name)
+                break
             nees.append([s.mirror_nees for s in rep.steps])
             print(f"{name} seed {first + k}: final NEES {nees[-1][-1]:.2f}, {wall:.0f} s",
                   file=sys.stderr, flush=True)
     v = np.array(nees)
+    ran = [n for n in args.scenes if n not in refused]
     print(f"{stamp()}; seeds {first}–{first + args.coverage - 1} on each of "
-          f"{', '.join(args.scenes)}; rectangular path, {args.steps} moves, odometry σ "
-          f"{args.odometry_sigma:g} cm\n")
+          f"{', '.join(ran)}; rectangular path, {args.steps} moves, odometry σ "
+          f"{args.odometry_sigma:g} cm"
+          + (f"; not run on {', '.join(refused)} (no way to walk the path clear of the "
+             "board's objects)" if refused else "") + "\n")
     print("| step | runs | true mirror inside the 95 % region (interval) | mean NEES (honest: 2) |")
     print("|---|---|---|---|")
     for k in range(v.shape[1]):

@@ -113,8 +113,15 @@ def test_paths_stay_on_the_board_and_in_front_of_the_glass(name, kind):
     scene = load_scene(SCENES / f"{name}.yaml")
     gt = ground_truth(scene)
     b = gt.beacons[0]
-    pts = beacon_path(scene, (b.alpha_deg, b.d_total), (gt.target.alpha_deg, gt.target.d_total),
-                      kind, 20, 4.0, 1.0)
+    args = (scene, (b.alpha_deg, b.d_total), (gt.target.alpha_deg, gt.target.d_total), kind,
+            20, 4.0, 1.0)
+    if name == "exp2" and kind != "linear":  # every way walks the pencil into its wall
+        from mirrorsim.errors import BadParameter
+
+        with pytest.raises(BadParameter, match="of the target or a wall"):
+            beacon_path(*args)
+        return
+    pts = beacon_path(*args)
     assert pts.shape == (21, 2) and np.allclose(pts[0], scene.beacons[0].position)
     assert np.all(pts >= 0) and np.all(pts <= np.asarray(scene.board.size))
     side = np.sign(signed_distance(pts[0], scene.mirror.center, scene.mirror.yaw))
@@ -234,3 +241,49 @@ def test_the_path_keeps_clear_of_fixed_beacons():
     path = beacon_path(replace(scene, beacons=(scene.beacons[0], blocker)), obs, tobs,
                        "rectangular", 12, 4.0, 1.0)
     assert np.min(np.linalg.norm(path - free[6], axis=1)) >= FIXED_CLEARANCE_CM
+
+
+def test_a_path_keeps_the_beacon_clear_of_the_target_and_the_walls(tmp_path):
+    """A beacon planned beside the target (exp1 with its three planned beacons, the
+    first two kept, every imperfection removed): the path walked the moving pencil into
+    the target panel (footprints 0.09 cm into each other: a scene `check` refuses,
+    rendered).  Every way to walk it from there comes within the clearance of the panel,
+    so it is refused, naming the target; where a path is found (the bundled scenes,
+    beside walls and panels), every pose stands clear of the true panel and walls (from
+    the start pose's exact measurement the believed panel is the true one)."""
+    import yaml
+
+    from mirrorsim.errors import BadParameter
+    from mirrorsim.formats.scenefile import load_scene
+    from mirrorsim.pipelines.track_paths import OBJECT_CLEARANCE_CM, beacon_path
+    from mirrorsim.scene.model import PENCIL_RADIUS, footprints
+    from mirrorsim.truth.groundtruth import ground_truth
+    from solver.geometry import point_segment_distance
+
+    def path(scene, steps, side=4.0):
+        gt = ground_truth(scene)
+        b = gt.beacons[0]
+        return beacon_path(scene, (b.alpha_deg, b.d_total),
+                           (gt.target.alpha_deg, gt.target.d_total), "rectangular", steps,
+                           side, 1.0)
+
+    d = yaml.safe_load((SCENES / "bench" / "exp1_3beacons.yaml").read_text())
+    d["camera"] = {k: d["camera"][k] for k in ("position", "height", "hfov", "pan")}
+    d["mirror"] = {k: d["mirror"][k] for k in ("center", "yaw", "size")}
+    d.pop("calibration", None)
+    d["beacons"] = [{"position": b["position"], "height": b["height"]}
+                    for b in d["beacons"][:2]]
+    (tmp_path / "ideal2.yaml").write_text(yaml.safe_dump(d))
+    with pytest.raises(BadParameter, match="of the target or a wall"):
+        path(load_scene(tmp_path / "ideal2.yaml"), 2)
+    for name in ("default", "exp1", "exp2", "exp3"):
+        scene = load_scene(SCENES / f"{name}.yaml")
+        if name == "exp2":  # its rectangular path went 0.81 cm into its wall: refused
+            with pytest.raises(BadParameter, match="of the target or a wall"):
+                path(scene, 20)
+            continue
+        pts = path(scene, 20)
+        for key, a, e, radius in footprints(scene):
+            if key.startswith(("target", "occluders")):
+                gap = point_segment_distance(pts[1:], a, e).min() - radius - PENCIL_RADIUS
+                assert gap >= OBJECT_CLEARANCE_CM - 1e-9, (name, key, gap)

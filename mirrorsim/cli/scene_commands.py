@@ -240,7 +240,7 @@ def _evaluate_options(p):
     from mirrorsim.pipelines.score import EXTRA_FILES
 
     calibrate_option(p)
-    p.add_argument("--keep", nargs="*", default=[], choices=(*EXTRA_FILES, "plot"),
+    p.add_argument("--keep", nargs="*", action="extend", default=[], choices=(*EXTRA_FILES, "plot"),
                    help="write also: ids, each frame's object-id labels (<name>.ids.png); "
                         "annotated, each frame with its detections drawn "
                         "(<name>.annotated.png); plot, the top view of truth and estimate "
@@ -290,7 +290,7 @@ def _budget_options(p):
     calibrate_option(p, beacon_sigma_alone=False)
     from mirrorsim.pipelines.score import EXTRA_FILES
 
-    p.add_argument("--keep", nargs="*", default=[], choices=EXTRA_FILES,
+    p.add_argument("--keep", nargs="*", action="extend", default=[], choices=EXTRA_FILES,
                    help="files to write beside each run's frame besides its image, capture "
                    "record and truth: ids (the id labels), annotated (the detections drawn); "
                    "default none")
@@ -346,8 +346,12 @@ def _track_options(p):
                    help="where the steps of b run: view (default), along the beacon's "
                         "reflected line of sight away from the glass, as the start pose's "
                         "measurement shows it; camera, along the camera's line to the "
-                        "beacon, towards the camera.  Side a goes to the side that keeps "
-                        "the path farther in front of the mirror")
+                        "beacon, towards the camera.  Of the ways to walk it (b forwards or "
+                        "back, side a left or right), the first kept stays on the board, "
+                        "clear of the mirror, the target and walls as the start pose shows "
+                        "them and of fixed beacons; then the one with the most poses "
+                        "predicted seen in the glass, then forwards, then with images "
+                        "nearest the target's in α")
     p.add_argument("--steps", type=int, default=20,
                    help=f"moves after the start, 1..{MAX_STEPS} (default 20)")
     p.add_argument("--odometry-sigma", type=float, default=0.1, metavar="CM",

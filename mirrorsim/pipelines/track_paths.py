@@ -8,11 +8,11 @@ from dataclasses import replace
 import numpy as np
 
 from mirrorsim.errors import BadParameter
-from mirrorsim.scene.model import PENCIL_RADIUS, Bench, Scene
+from mirrorsim.scene.model import PENCIL_RADIUS, Bench, Scene, footprints
 from mirrorsim.truth.optics import target_facing
 from mirrorsim.truth.visibility import visibility
 from solver.errors import SolverError
-from solver.geometry import bearing_deg, line_normal, wrap_bearing
+from solver.geometry import bearing_deg, line_normal, point_segment_distance, wrap_bearing
 from solver.placement import path_points
 from solver.sltr import locate, mirror_from_beacon, observe, ray_hits_line
 
@@ -22,6 +22,8 @@ CLEARANCE_CM = 1.0  # the path's least distance in front of the start's mirror l
 # the path's least distance from a fixed beacon's believed position: two pencils apart,
 # with half a centimetre between them
 FIXED_CLEARANCE_CM = 2 * PENCIL_RADIUS + 0.5
+# a pencil's least gap to the target panel and the walls, as the start pose shows them
+OBJECT_CLEARANCE_CM = 0.5
 
 
 def beacon_path(scene: Scene, first_obs: tuple[float, float],
@@ -71,7 +73,8 @@ def beacon_path(scene: Scene, first_obs: tuple[float, float],
             allowed = (bool(np.all((pts >= 0) & (pts <= size)))
                        and float(np.min((pts - mid) @ front)) >= CLEARANCE_CM
                        and all(np.min(np.linalg.norm(pts - np.asarray(b.believed), axis=1))
-                               >= FIXED_CLEARANCE_CM for b in scene.beacons[1:]))
+                               >= FIXED_CLEARANCE_CM for b in scene.beacons[1:])
+                       and _clear_of_objects(believed, pts[1:]))  # (the start: the scene's)
             seen = sum(_seen_in(believed, replace(b0, position=tuple(p))) for p in pts)
             alphas = observe(o, mid, yaw, pts, strict=False).alpha_deg
             spread = float(np.mean(np.abs(wrap_bearing(alphas - target_alpha_deg))))
@@ -81,10 +84,23 @@ def beacon_path(scene: Scene, first_obs: tuple[float, float],
     if not best[0][0]:
         raise BadParameter("side", f"{side:g} cm (with a step of {step:g} cm, {steps} steps): "
                            "every way to walk this path leaves the board, comes within "
-                           f"{CLEARANCE_CM:g} cm of the mirror or within "
-                           f"{FIXED_CLEARANCE_CM:g} cm of a fixed beacon; make the path "
-                           "smaller")
+                           f"{CLEARANCE_CM:g} cm of the mirror, within {OBJECT_CLEARANCE_CM:g} "
+                           f"cm of the target or a wall, or within {FIXED_CLEARANCE_CM:g} cm "
+                           "of a fixed beacon; make the path smaller, or start the beacon "
+                           "farther from what it would meet")
     return best[1]
+
+
+def _clear_of_objects(believed: Scene, pts: np.ndarray) -> bool:
+    """Whether a pencil at every point of ``pts`` stands ``OBJECT_CLEARANCE_CM`` clear of
+    the target panel (where the start pose puts it) and the walls: a path once walked the
+    beacon into the panel, rendering a scene that `check` refuses."""
+    for key, a, b, radius in footprints(believed):
+        if key.startswith(("target", "occluders")):
+            if float(np.min(point_segment_distance(pts, a, b))) < (
+                    radius + PENCIL_RADIUS + OBJECT_CLEARANCE_CM):
+                return False
+    return True
 
 
 def _believed_scene(scene: Scene, o: np.ndarray, yaw: float, mid: np.ndarray,
