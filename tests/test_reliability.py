@@ -440,3 +440,33 @@ def test_an_output_over_the_runs_own_input_is_refused(tmp_path, capsys):
     assert meas.read_bytes() == kept
     # another file beside them is fine
     assert main(["check", str(scene), "--json", str(tmp_path / "truth.json")]) == 0
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["plan", DEFAULT, "--beacons", "2.5"], "--beacons"),  # argparse's, after its usage
+    (["track", DEFAULT, "--steps", "0.5"], "--steps"),
+    (["montecarlo", "--seed", "-1"], "--seed"),  # a traceback
+    (["montecarlo", "--d-total", "1e300"], "--d-total"),  # rows of inf, exit 0
+    (["montecarlo", "--d-total", "0.5"], "--d1"),  # said `geometry`
+    (["montecarlo", "--alpha", "1e300"], "--alpha"),
+    (["plan", DEFAULT, "--eps", "0.01"], "--eps"),  # asked numpy for 182 GiB
+])
+def test_every_refusal_is_one_line_naming_the_flag(capsys, argv, says):
+    try:
+        status = main(argv)
+    except SystemExit as exc:  # argparse's own refusals exit from inside the parser
+        status = exc.code
+    err = capsys.readouterr().err.strip().splitlines()
+    assert status == 2 and len(err) == 1 and says in err[0], err
+
+
+def test_keep_given_twice_keeps_both():
+    """`--keep ids --keep annotated` kept only the last, silently."""
+    from mirrorsim.cli.main import build_parser
+
+    for cmd in ("evaluate", "budget", "dataset"):
+        argv = [cmd, DEFAULT, "--keep", "ids", "--keep", "annotated"]
+        if cmd == "dataset":
+            argv = [cmd, "--n", "1", "--seed", "0", "--out", "d", "--keep", "ids", "--keep",
+                    "annotated"]
+        assert build_parser(argv).parse_args(argv).keep == ["ids", "annotated"]

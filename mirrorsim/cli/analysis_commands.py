@@ -99,14 +99,27 @@ def _montecarlo_options(p):
          "mirror and beacon stand: the options below set them.", _montecarlo_options)
 def _montecarlo(args) -> int:
     from mirrorsim.cli.tables import montecarlo_table
-    from solver.measurements import SIGMA_ALPHA_MAX_DEG, SIGMA_D_REL_MAX
+    from solver.measurements import D_TOTAL_RANGE_CM, SIGMA_ALPHA_MAX_DEG, SIGMA_D_REL_MAX
     from solver.montecarlo import Table1Geometry, table1, table_rows
     from solver.sltr import SolverError
 
-    at_least(("--iterations", args.iterations, 2))
+    at_least(("--iterations", args.iterations, 2), ("--seed", args.seed, 0))
     if args.iterations > MAX_ITERATIONS:
         raise BadArgument("--iterations", f"{args.iterations} must be ≤ {MAX_ITERATIONS}")
     finite(args, "alpha", "d_total", "d1", "incidence", "beacon_depth", "beacon_along", "sigma")
+    lo, hi = D_TOTAL_RANGE_CM  # what any measured d_total may be; the rest within it
+    for flag, value in (("--d-total", args.d_total), ("--d1", args.d1),
+                        ("--beacon-depth", args.beacon_depth),
+                        ("--beacon-along", abs(args.beacon_along))):
+        if value > hi:
+            raise BadArgument(flag, f"{value:g} cm: must be ≤ {hi:g} cm")
+    for flag, value in (("--alpha", args.alpha), ("--incidence", args.incidence)):
+        if abs(value) > 360:  # a bearing of 1e300° has no digits left below the turn
+            raise BadArgument(flag, f"{value:g}°: give an angle within ±360°")
+    if not lo <= args.d_total:
+        raise BadArgument("--d-total", f"{args.d_total:g} cm: must be ≥ {lo:g} cm")
+    if not 0 < args.d1 < args.d_total:
+        raise BadArgument("--d1", f"{args.d1:g}: need 0 < d1 < d_total ({args.d_total:g})")
     for a, d in args.sigma or []:
         if not (0 <= a <= SIGMA_ALPHA_MAX_DEG and 0 <= d <= 100 * SIGMA_D_REL_MAX):
             raise BadArgument("--sigma", f"{a:g} {d:g}: need 0 ≤ σ_α ≤ "
@@ -136,7 +149,8 @@ def _plan_options(p):
     p.add_argument("--sigma-d", type=float, metavar="PCT",
                    help="σ_d in %% of d_total (0.2 = 0.2 %%; files hold it as a fraction, "
                    "0.002)")
-    p.add_argument("--eps", type=float, default=5.0, help="orientation range ±eps (deg)")
+    p.add_argument("--eps", type=float, default=5.0,
+                   help="orientation range ±eps (deg; 1 ≤ eps < 45, default 5)")
     p.add_argument("--yaw-spread", type=float, default=3.0, help="prior yaw ± (deg)")
     p.add_argument("--d1-spread", type=float, default=2.0, help="prior mirror distance ± (cm)")
     p.add_argument("--step", type=float, default=1.0, help="grid step of the search (cm)")
@@ -201,7 +215,7 @@ def _dataset_options(p):
     sampler_option(p)
     from mirrorsim.pipelines.score import EXTRA_FILES
 
-    p.add_argument("--keep", nargs="*", default=[], choices=EXTRA_FILES,
+    p.add_argument("--keep", nargs="*", action="extend", default=[], choices=EXTRA_FILES,
                    help="files to write beside each frame besides its PNG, capture record "
                    "and truth: ids (the id labels), annotated (the detections drawn); "
                    "default none")

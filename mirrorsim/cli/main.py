@@ -14,6 +14,7 @@ import signal
 import sys
 import threading
 import warnings
+from typing import NoReturn
 
 from mirrorsim import __version__
 from mirrorsim.cli import analysis_commands, scene_commands  # noqa: F401 (they register)
@@ -37,12 +38,21 @@ ORDER = ("evaluate", "render", "check", "plot", "detect", "calibrate", "budget",
          "errormodel", "solve", "montecarlo", "plan")
 
 
+class _OneLineParser(argparse.ArgumentParser):
+    """argparse's refusals (a flag's value of the wrong type, a flag given twice, a
+    missing argument) in one line, as every other bad input is, not after the usage
+    block; its subcommands' parsers are of this class too."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"error: {self.prog}: {message} (see `{self.prog} --help`)\n")
+
+
 def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     """The argument parser with every registered command; given the command line
     ``argv``, with the options of its command only (a command's options import what it
     needs, SciPy's optimizer for `track`: `mirrorsim --help` and `check` need none of
     that)."""
-    parser = argparse.ArgumentParser(
+    parser = _OneLineParser(
         prog="mirrorsim",
         description="Physically rendered mirror space for NLOS localization (SLTR): render "
                     "scenes with exact ground truth, detect, solve and score them; datasets, "

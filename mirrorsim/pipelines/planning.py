@@ -207,6 +207,11 @@ def plan_scene(scene: Scene, sigma: Sigma | ObjectSigmas | None = None, eps_deg:
         beacon_set=chosen)
 
 
+# the least orientation range: the region seen under every orientation spans
+# ~ (s/2)/tan(2ε), so its grid grows as 1/ε² (0.01° asked for 182 GiB, 0.5° ran minutes)
+MIN_EPS_DEG = 1.0
+
+
 def _check_parameters(sigma: ObjectSigmas, eps_deg: float, step: float,
                       yaw_spread_deg: float, d1_spread: float) -> None:
     pairs = (sigma.target, *sigma.beacons)
@@ -217,8 +222,8 @@ def _check_parameters(sigma: ObjectSigmas, eps_deg: float, step: float,
               for s in pairs)):
         if not lo <= v <= hi:
             raise BadParameter(name, f"{v} must be within [{lo:g}, {hi:g}]")
-    if not 0 < eps_deg < 45:
-        raise BadParameter("eps_deg", f"{eps_deg} must be > 0 and < 45")
+    if not MIN_EPS_DEG <= eps_deg < 45:
+        raise BadParameter("eps_deg", f"{eps_deg} must be ≥ {MIN_EPS_DEG:g} and < 45")
     if not MIN_STEP <= step <= 20:
         raise BadParameter("step", f"{step} must be within [{MIN_STEP:g}, 20] cm")
     for name, v in (("yaw_spread_deg", yaw_spread_deg), ("d1_spread", d1_spread)):
