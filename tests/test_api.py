@@ -122,7 +122,7 @@ def test_the_api_keeps_the_command_lines_promises(tmp_path):
         replace(scene, name="/".join(("..", "escaped")))
     with pytest.raises(BadParameter, match="whole number"):
         scene.with_render(spp=4.5)
-    for bad in ({"particles": 0}, {"steps": 2.5}, {"seed": -1}):
+    for bad in ({"particles": 0}, {"particles": 10**9}, {"steps": 2.5}, {"seed": -1}):
         with pytest.raises(BadParameter):
             ms.track(scene, out, **{"steps": 1, **bad})
     from mirrorsim.errors import InputError
@@ -174,6 +174,9 @@ def test_a_scene_edited_in_a_script_is_built_as_its_file_would_be(tmp_path):
     with pytest.raises(BadParameter, match="changes"):
         ms.edit_scene(base, [("mirror", {"yaw": 25})])
     assert ms.edit_scene(base, {"mirror": {"yaw": np.int64(25)}}).mirror.yaw == 25  # np.arange
+    assert ms.edit_scene(base, {"mirror": {"yaw": np.array(25.0)}}).mirror.yaw == 25
+    with pytest.raises(BadParameter, match="expected a Scene"):
+        ms.edit_scene(str(ROOT / "scenes" / "default.yaml"), {"mirror": {"yaw": 25}})
     assert ms.edit_scene(base, {"mirror": {"center": np.array([30.0, 62.0])}}).mirror.center \
         == (30.0, 62.0)
     # a one-beacon scene given a list of beacons takes the list

@@ -239,6 +239,7 @@ def edit_scene(scene: Scene, changes: Mapping[str, Any]) -> Scene:
     BadParameter
         ``changes`` is not a mapping.
     """
+    check_is_scene(scene)
     if not isinstance(changes, Mapping):
         raise BadParameter("changes", f"expected a mapping of scene-file keys, not "
                            f"{type(changes).__name__}")
@@ -258,6 +259,8 @@ def _plain(value: Any) -> Any:
     the reader takes as a file's numbers."""
     if isinstance(value, Mapping):
         return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, np.ndarray) and value.ndim == 0:
+        return value.item()
     if isinstance(value, list | tuple | np.ndarray):
         return [_plain(v) for v in value]
     if isinstance(value, np.bool_ | np.integer | np.floating):

@@ -148,6 +148,9 @@ def check_options(kind: str, steps: int, sigma: float, side: float, step: float,
 FILTER_SIGMA_FLOOR = Sigma(alpha_deg=0.005, d_total_rel=0.006)
 # fewer particles than this cannot carry a posterior over the mirror's two parameters
 MIN_PARTICLES = 10
+# the most: each particle carries a Kalman filter replayed over the run at every move,
+# and 10⁹ of them took 24 GiB before the kernel stopped the process
+MAX_PARTICLES = 1_000_000
 
 
 def check_fixed_beacons(scene: Scene, position_sigma: float) -> None:
@@ -192,6 +195,8 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
     for name, v, lo in (("particles", particles, MIN_PARTICLES), ("seed", seed, 0)):
         if not (is_whole(v) and v >= lo):
             raise BadParameter(name, f"{v!r} must be a whole number ≥ {lo}")
+    if particles > MAX_PARTICLES:
+        raise BadParameter("particles", f"{particles} must be ≤ {MAX_PARTICLES}")
     try:
         check_position_sigma(position_sigma)
     except SolverError as exc:
