@@ -122,7 +122,10 @@ D_TOTAL_RANGE_CM = (0.01, 1e5)
 
 
 def is_number(x: object) -> bool:
-    """A real number (numpy's too), not a bool: what every measured value and σ must be."""
+    """A real number (numpy's too, a 0-d array of one as well), not a bool: what every
+    measured value and σ must be."""
+    if isinstance(x, np.ndarray) and x.ndim == 0:
+        x = x[()]
     return isinstance(x, int | float | np.integer | np.floating) and not isinstance(x, bool)
 
 

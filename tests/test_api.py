@@ -90,6 +90,11 @@ def test_the_api_keeps_the_command_lines_promises(tmp_path):
         ms.solve(truth.observer, [(b.position, b.alpha_deg, b.d_total)], truth.targets)
     with pytest.raises(SolverError, match=r"targets\[0\] must be a pair"):
         ms.solve(truth.observer, truth.beacons, [truth.targets[0][1]])
+    import numpy as np
+
+    zero_d = ms.BeaconMeasurement(b.position, np.array(b.alpha_deg), b.d_total)  # a number
+    assert ms.solve(truth.observer, [zero_d], truth.targets).target == pytest.approx(
+        scene.target.position, abs=1e-6)
     for odd in ("66", None):  # None was a TypeError inside numpy
         with pytest.raises(SolverError, match="must be a finite number"):
             ms.solve(truth.observer, [ms.BeaconMeasurement(b.position, odd, b.d_total)],

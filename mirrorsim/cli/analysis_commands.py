@@ -107,17 +107,19 @@ def _montecarlo(args) -> int:
     if args.iterations > MAX_ITERATIONS:
         raise BadArgument("--iterations", f"{args.iterations} must be ≤ {MAX_ITERATIONS}")
     finite(args, "alpha", "d_total", "d1", "incidence", "beacon_depth", "beacon_along", "sigma")
-    lo, hi = D_TOTAL_RANGE_CM  # what any measured d_total may be; the rest within it
+    # the protocol's lengths are in the table's units; a measured d_total's range bounds
+    # them, so that no row turns to inf
+    lo, hi = D_TOTAL_RANGE_CM
     for flag, value in (("--d-total", args.d_total), ("--d1", args.d1),
                         ("--beacon-depth", args.beacon_depth),
                         ("--beacon-along", abs(args.beacon_along))):
         if value > hi:
-            raise BadArgument(flag, f"{value:g} cm: must be ≤ {hi:g} cm")
+            raise BadArgument(flag, f"{value:g}: must be ≤ {hi:g}")
     for flag, value in (("--alpha", args.alpha), ("--incidence", args.incidence)):
         if abs(value) > 360:  # a bearing of 1e300° has no digits left below the turn
             raise BadArgument(flag, f"{value:g}°: give an angle within ±360°")
     if not lo <= args.d_total:
-        raise BadArgument("--d-total", f"{args.d_total:g} cm: must be ≥ {lo:g} cm")
+        raise BadArgument("--d-total", f"{args.d_total:g}: must be ≥ {lo:g}")
     if not 0 < args.d1 < args.d_total:
         raise BadArgument("--d1", f"{args.d1:g}: need 0 < d1 < d_total ({args.d_total:g})")
     for a, d in args.sigma or []:

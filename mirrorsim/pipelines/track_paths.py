@@ -12,7 +12,7 @@ from mirrorsim.scene.model import PENCIL_RADIUS, Bench, Scene, footprints
 from mirrorsim.truth.optics import target_facing
 from mirrorsim.truth.visibility import visibility
 from solver.errors import SolverError
-from solver.geometry import bearing_deg, line_normal, point_segment_distance, wrap_bearing
+from solver.geometry import bearing_deg, line_normal, segment_distance, wrap_bearing
 from solver.placement import path_points
 from solver.sltr import locate, mirror_from_beacon, observe, ray_hits_line
 
@@ -40,15 +40,20 @@ def beacon_path(scene: Scene, first_obs: tuple[float, float],
     ``heading`` sets the line the steps of b run on: ``view``, the beacon's reflected
     line of sight (its image stays on the same part of the glass); ``camera``, the
     camera's line to the beacon.  Of the four ways to walk it (b forwards or back, side a
-    left or right), the path kept is the first by: on the board and ``CLEARANCE_CM`` in
-    front of the mirror line (no robot drives off the board or into the glass); most
-    poses predicted seen in that glass; b forwards (``view``: away from the glass;
-    ``camera``: towards the camera); images nearest the target's in α.
+    left or right), the path kept is the first by: on the board, ``CLEARANCE_CM`` in
+    front of the mirror line, its moves ``OBJECT_CLEARANCE_CM`` clear of the target panel
+    and the walls and ``FIXED_CLEARANCE_CM`` from fixed beacons (no robot drives off the
+    board or into the glass or a wall); most poses predicted seen in that glass; b
+    forwards (``view``: away from the glass; ``camera``: towards the camera); images
+    nearest the target's in α.  The clearances hold for the commanded poses: odometry
+    noise moves the true ones.
 
     Raises
     ------
     SolverError
         If the start pose's measurement gives no mirror.
+    BadParameter
+        ``side``: if no way to walk the path keeps every clearance.
     """
     b0 = scene.beacons[0]
     o = np.asarray(scene.camera.position, float)
@@ -74,7 +79,7 @@ def beacon_path(scene: Scene, first_obs: tuple[float, float],
                        and float(np.min((pts - mid) @ front)) >= CLEARANCE_CM
                        and all(np.min(np.linalg.norm(pts - np.asarray(b.believed), axis=1))
                                >= FIXED_CLEARANCE_CM for b in scene.beacons[1:])
-                       and _clear_of_objects(believed, pts[1:]))  # (the start: the scene's)
+                       and _clear_of_objects(believed, pts))
             seen = sum(_seen_in(believed, replace(b0, position=tuple(p))) for p in pts)
             alphas = observe(o, mid, yaw, pts, strict=False).alpha_deg
             spread = float(np.mean(np.abs(wrap_bearing(alphas - target_alpha_deg))))
@@ -92,13 +97,19 @@ def beacon_path(scene: Scene, first_obs: tuple[float, float],
 
 
 def _clear_of_objects(believed: Scene, pts: np.ndarray) -> bool:
-    """Whether a pencil at every point of ``pts`` stands ``OBJECT_CLEARANCE_CM`` clear of
-    the target panel (where the start pose puts it) and the walls: a path once walked the
-    beacon into the panel, rendering a scene that `check` refuses."""
+    """Whether a pencil moved along the poses ``pts`` (start first) stays clear of the
+    target panel (where the start pose puts it) and the walls: a path once walked the
+    beacon into the panel, rendering a scene that `check` refuses.  Each pose after the
+    start and each move between two of them keep ``OBJECT_CLEARANCE_CM``; the first move
+    leaves the start, which stands where the scene puts it, and must not pass through.
+    """
     for key, a, b, radius in footprints(believed):
-        if key.startswith(("target", "occluders")):
-            if float(np.min(point_segment_distance(pts, a, b))) < (
-                    radius + PENCIL_RADIUS + OBJECT_CLEARANCE_CM):
+        if not key.startswith(("target", "occluders")):
+            continue
+        least = radius + PENCIL_RADIUS
+        for k in range(len(pts) - 1):
+            margin = OBJECT_CLEARANCE_CM if k else 0.0
+            if segment_distance(pts[k], pts[k + 1], a, b) < least + margin:
                 return False
     return True
 
