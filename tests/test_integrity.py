@@ -757,3 +757,39 @@ def test_a_datasets_card_names_the_error_model_file_it_was_made_with(tmp_path, m
     meta = json.loads((edited / "dataset.json").read_text())
     assert meta["error_model_shipped"] is False and "error_model_file" not in meta
     assert "--error-model MODEL" in made_with(meta, edited)
+
+
+@pytest.mark.usefixtures("fake_reference")  # calibrate measures no render here
+def test_pencils_of_two_heights_in_one_frame_are_refused_not_scaled_alike(tmp_path, capsys):
+    """One calibration measures one pencil's K: a frame of a 4.2 cm and a 6 cm pencil
+    scaled both by the first's (the 6 cm one, 4.8 cm of paint against 3.0, would read
+    37.5 % near).  Detecting such a frame is
+    refused before the frame is read; `calibrate` says whose K it printed."""
+    import yaml
+
+    import mirrorsim as ms
+    from mirrorsim.cli.main import main
+    from mirrorsim.formats.capture import CaptureError, CaptureRecord
+    from mirrorsim.formats.files import write_json
+    from mirrorsim.pipelines.frame import measure_frame
+
+    from .conftest import SCENES
+
+    base = ms.load_scene(SCENES / "default.yaml")
+    two = ms.edit_scene(base, {"beacons": [
+        {"position": list(base.beacons[0].position), "height": 4.2},
+        {"position": [36, 53], "height": 6.0}]})
+    capture = CaptureRecord.from_scene(two, "two.png")
+    with pytest.raises(CaptureError, match=r"pencils of 4\.2, 6 cm in one frame"):
+        measure_frame(tmp_path / "two.png", capture)  # no such file: refused before
+    record = write_json(tmp_path / "two.capture.json", capture.to_json())
+    (tmp_path / "two.png").write_bytes(b"")
+    assert main(["detect", str(tmp_path / "two.png"), "--capture", str(record)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "in one frame" in err[0]
+    doc = yaml.safe_load((SCENES / "default.yaml").read_text())
+    doc["beacons"] = [{**doc.pop("beacon"), "height": 4.2},
+                      {"position": [36, 53], "height": 6.0}]
+    (tmp_path / "two.yaml").write_text(yaml.safe_dump(doc))
+    assert main(["calibrate", str(tmp_path / "two.yaml")]) == 0
+    assert "the 6 cm pencils get theirs" in capsys.readouterr().err

@@ -229,6 +229,11 @@ def _calibrate(args) -> int:
           f"({cal.height_px('target', D_REF):.2f} px at 1 m; the paper's camera: 229 px)")
     print(f"  pencil's painted band: K = {cal.pencil_k:.1f} px·cm "
           f"({cal.height_px('beacon', D_REF):.2f} px at 1 m)")
+    others = sorted({b.height for b in scene.beacons} - {scene.beacons[0].height})
+    if others:  # it said nothing of them
+        print(f"note: this K is the {scene.beacons[0].height:g} cm pencil's (beacon 0); the "
+              f"{', '.join(f'{h:g}' for h in others)} cm pencils get theirs when each is "
+              "measured in a frame of its own (evaluate)", file=sys.stderr)
     emit(args, {"key": cal.key, **cal.constants()})
     return 0
 

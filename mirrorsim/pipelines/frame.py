@@ -22,7 +22,7 @@ from mirrorsim.detection.detector import (
 )
 from mirrorsim.detection.image_geometry import Calibration
 from mirrorsim.errors import DetectionError
-from mirrorsim.formats.capture import CaptureRecord, load_capture
+from mirrorsim.formats.capture import CaptureError, CaptureRecord, load_capture
 from mirrorsim.pipelines.calibrate import calibrate
 from mirrorsim.rendering.frames import FrameFiles, capture_of, reused_frame, write_frame
 from mirrorsim.rendering.passes import render_frame, scene_fingerprint
@@ -58,9 +58,28 @@ def calibration_for(capture: CaptureRecord, *, variant: str = "auto",
 
     ``distance_error``: the bench's calibration error (cm), which a capture record cannot
     know; the simulator renders its calibration with it.
+
+    Raises
+    ------
+    CaptureError
+        If the record's beacons differ in height (see :func:`check_one_pencil_height`).
     """
+    check_one_pencil_height(capture)
     return calibrate(capture.camera, capture.target_size, capture.beacons[0].height,
                      variant=variant, distance_error=distance_error, subsampled=subsampled)
+
+
+def check_one_pencil_height(capture: CaptureRecord) -> None:
+    """Refuse a frame whose pencils differ in height: one calibration measures one
+    pencil's K, and every beacon's d_total would be scaled by the first's (a 6 cm pencil,
+    4.8 cm of paint, beside a 4.2 cm one, 3.0 cm, would read 37.5 % near).  ``evaluate``
+    renders each beacon in a frame of its own, with its own K."""
+    heights = sorted({b.height for b in capture.beacons})
+    if len(heights) > 1:
+        raise CaptureError(capture.frame or "<capture record>", "beacons",
+                           f"pencils of {', '.join(f'{h:g}' for h in heights)} cm in one "
+                           "frame: a calibration measures one pencil height; render and "
+                           "detect each beacon in a frame of its own (evaluate does)")
 
 
 def measure_frame(image_path: str | Path, capture: CaptureRecord | str | Path, *,
@@ -83,6 +102,8 @@ def measure_frame(image_path: str | Path, capture: CaptureRecord | str | Path, *
     """
     if isinstance(capture, str | Path):  # its file, read and checked (CaptureError)
         capture = load_capture(capture)
+    if calibration is None:  # before the frame is read: a refusal costs nothing
+        check_one_pencil_height(capture)
     cam = capture.camera
     if pixels is None:
         stored = read_stored_frame(image_path, (cam.width, cam.height_px))
