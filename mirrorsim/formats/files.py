@@ -17,7 +17,7 @@ import re
 import stat
 import sys
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -37,22 +37,24 @@ def default_out(scene_name: str) -> Path:
     return Path("renders") / scene_name
 
 
-def jsonable(value: Any) -> Any:
-    """``value`` with numpy scalars and arrays made plain, and NaN/±inf made ``None``."""
+def jsonable(value: Any, nonfinite_as_null: bool = True) -> Any:
+    """``value`` with numpy scalars and arrays made plain, and (``nonfinite_as_null``)
+    NaN/±inf made ``None``; without it they stay, for a reader that refuses them by
+    name (a scene's edits)."""
     import numpy as np  # here, not at the top: the command line's start-up imports this
-    if isinstance(value, dict):
-        return {str(k): jsonable(v) for k, v in value.items()}
+    if isinstance(value, Mapping):
+        return {str(k): jsonable(v, nonfinite_as_null) for k, v in value.items()}
     if isinstance(value, list | tuple):
-        return [jsonable(v) for v in value]
+        return [jsonable(v, nonfinite_as_null) for v in value]
     if isinstance(value, np.ndarray):
-        return jsonable(value.tolist())
+        return jsonable(value.tolist(), nonfinite_as_null)
     if isinstance(value, np.bool_):
         return bool(value)
     if isinstance(value, np.integer):
         return int(value)
     if isinstance(value, float | np.floating):
         v = float(value)
-        return v if math.isfinite(v) else None
+        return v if math.isfinite(v) or not nonfinite_as_null else None
     if isinstance(value, Path):
         return str(value)
     return value

@@ -19,6 +19,7 @@ import numpy as np
 
 from mirrorsim.errors import BadParameter, SceneError
 from mirrorsim.formats.capture import read_distortion
+from mirrorsim.formats.files import jsonable
 from mirrorsim.formats.reader import Reader, read_resolution, read_yaml, show
 from mirrorsim.formats.scene_checks import (
     Failures,
@@ -222,8 +223,9 @@ def scene_document(scene: Scene) -> dict:
 
 def edit_scene(scene: Scene, changes: Mapping[str, Any]) -> Scene:
     """``scene`` with some of its file's keys changed, built again as a scene file is:
-    every check runs, and what the file's geometry decides (the target panel's facing, an
-    ``auto`` pan) follows the edit.  ``dataclasses.replace`` recomputes none of it.
+    every check runs, and what the file's geometry decides (the target panel's facing, a
+    pan aimed with ``mirror``, ``target`` or ``beacon``) follows the edit.
+    ``dataclasses.replace`` recomputes none of it.
 
     ``changes`` nests as the file does, ``{"mirror": {"yaw": 20}, "name": "yaw20"}``: a
     mapping merges into its block, whose other keys keep their values (a beacon moved by
@@ -249,23 +251,11 @@ def edit_scene(scene: Scene, changes: Mapping[str, Any]) -> Scene:
     elif "beacon" in changes and "beacons" in doc:
         raise BadParameter("changes", f"beacon: {scene.name} has {len(scene.beacons)} beacons; "
                            "give `beacons`, the whole list")
-    edited = scene_from_dict(_merged(doc, _plain(changes)), source=f"{scene.source} (edited)",
+    # numpy numbers (a script's np.arange of yaws) as a file's; NaN left to be refused
+    plain = jsonable(changes, nonfinite_as_null=False)
+    edited = scene_from_dict(_merged(doc, plain), source=f"{scene.source} (edited)",
                              default_name=scene.name)
     return replace(edited, source=scene.source)
-
-
-def _plain(value: Any) -> Any:
-    """``value`` with numpy numbers as Python's (a script's ``np.arange`` of yaws), which
-    the reader takes as a file's numbers."""
-    if isinstance(value, Mapping):
-        return {k: _plain(v) for k, v in value.items()}
-    if isinstance(value, np.ndarray) and value.ndim == 0:
-        return value.item()
-    if isinstance(value, list | tuple | np.ndarray):
-        return [_plain(v) for v in value]
-    if isinstance(value, np.bool_ | np.integer | np.floating):
-        return value.item()
-    return value
 
 
 def _merged(doc: dict, changes: Mapping[str, Any]) -> dict:

@@ -33,6 +33,7 @@ from mirrorsim.scene import imperfections
 from mirrorsim.scene.model import FRONT_OFFSET, PENCIL_RADIUS, Beacon, Board, Camera, Target
 from mirrorsim.truth import optics
 from solver.geometry import unit
+from solver.measurements import is_number
 
 # where the reference objects stand (cm): the capture record's, declared with it
 D_REF = REFERENCE_DISTANCE
@@ -170,8 +171,7 @@ def _check_distance_error(value) -> None:
     """The scene key ``calibration.distance_error``'s rule, for a caller of the library
     (NaN failed deep in a format, a string in a subtraction)."""
     imp = next(i for i in imperfections.REGISTRY if i.field == "calibration_distance_error")
-    if isinstance(value, bool) or not isinstance(value, int | float | np.number) \
-            or not math.isfinite(value):
+    if not is_number(value) or not math.isfinite(value):
         raise BadParameter("distance_error", f"{value!r} is not a finite number (cm)")
     why = imperfections.check_bounds(imp, float(value))
     if why:
@@ -215,7 +215,7 @@ def _check_entry(value: dict) -> None:
     for k_name, px_name, kind in (("target_k", "target_px_at_100cm", "target"),
                                   ("pencil_k", "pencil_paint_px_at_100cm", "beacon")):
         k, px = value[k_name], value[px_name]
-        if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in (k, px)):
+        if not all(is_number(v) for v in (k, px)):
             raise TypeError(f"{k_name} and {px_name} must be numbers")
         if not (np.isfinite(k) and np.isfinite(px) and k > 0 and px > 0):
             raise ValueError(f"{k_name} = {k!r}, {px_name} = {px!r}: not positive numbers")

@@ -126,14 +126,14 @@ def evaluate_into(scene: Scene, out: Path, *, variant: str = "auto", progress: b
             sig_k = replace(sigma, beacons=sigma.beacons[:k])
             meas_k = replace(measurements, beacons=beacons[:k], sigma=sig_k)
             truth_k = replace(truth, beacons=truth.beacons[:k])
-            for m in range(len(calibration.nuisances), -1, -1):
+            for m in range(len(calibration.nuisances), 0, -1):
                 try:
                     return score(truth_k, meas_k, solve_measurements(
                         cam.position, beacons[:k], target, sig_k, calibration.first(m)))
                 except SolverError:
-                    if not m:
-                        raise
-            raise AssertionError("unreachable: the plain solve raises or returns")
+                    continue
+            return score(truth_k, meas_k, solve_measurements(
+                cam.position, beacons[:k], target, sig_k, calibration.first(0)))
 
         # all of them: the solution above
         by_count = tuple(first(k) for k in range(1, len(beacons))) + (errors,)

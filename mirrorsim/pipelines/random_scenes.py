@@ -30,6 +30,7 @@ from mirrorsim.formats.scenefile import (
 from mirrorsim.scene.imperfections import REGISTRY
 from mirrorsim.scene.model import MAX_BOARD_CM, Camera, Scene
 from mirrorsim.truth import visibility
+from solver.measurements import is_number
 
 DEFAULT_SPEC = Path(__file__).resolve().parents[2] / "scenes" / "dataset_spec.yaml"
 
@@ -359,7 +360,7 @@ def _range_end(raw: Any, end: int) -> Any:
     if isinstance(raw, dict):
         return {k: _range_end(v, end) for k, v in raw.items()}
     if isinstance(raw, list) and len(raw) == 2 and all(
-            isinstance(x, (int, float)) and not isinstance(x, bool) for x in raw):
+            is_number(x) for x in raw):
         return raw[end]
     if isinstance(raw, list):
         return [_range_end(v, end) for v in raw]
