@@ -24,6 +24,22 @@ PAPER_TABLE1 = (
 
 
 @dataclass(frozen=True)
+class Table1Layout:
+    """Where :class:`Table1Geometry` puts everything, and the exact α, d_total of the
+    beacon and the target."""
+
+    mirror_point: np.ndarray  # the target's reflection point (the reflector)
+    yaw_deg: float
+    target: np.ndarray
+    beacon: np.ndarray
+    beacon_alpha: float
+    beacon_d: float
+    target_alpha: float
+    target_d: float
+    target_reflection_point: np.ndarray
+
+
+@dataclass(frozen=True)
 class Table1Geometry:
     """The set-up of the Monte Carlo runs (observer at the origin).
 
@@ -40,7 +56,7 @@ class Table1Geometry:
     beacon_depth: float = 0.5
     beacon_along: float = 0.3
 
-    def layout(self) -> dict[str, np.ndarray | float]:
+    def layout(self) -> Table1Layout:
         """Mirror point and yaw, target and beacon positions, and their exact α, d."""
         if not 0 < self.d1 < self.d_total:
             raise ValueError(f"need 0 < d1 < d_total, got d1={self.d1}, d_total={self.d_total}")
@@ -53,10 +69,10 @@ class Table1Geometry:
         o = np.zeros(2)
         ob = observe(o, r, yaw, beacon)
         ot = observe(o, r, yaw, target)
-        return {"mirror_point": r, "yaw_deg": yaw, "target": target, "beacon": beacon,
-                "beacon_alpha": float(ob.alpha_deg), "beacon_d": float(ob.d_total),
-                "target_alpha": float(ot.alpha_deg), "target_d": float(ot.d_total),
-                "target_reflection_point": np.asarray(ot.reflection_point)}
+        return Table1Layout(mirror_point=r, yaw_deg=float(yaw), target=target, beacon=beacon,
+                            beacon_alpha=float(ob.alpha_deg), beacon_d=float(ob.d_total),
+                            target_alpha=float(ot.alpha_deg), target_d=float(ot.d_total),
+                            target_reflection_point=np.asarray(ot.reflection_point))
 
 
 @dataclass(frozen=True)
@@ -109,9 +125,9 @@ class Table1:
         """``montecarlo --json``'s document."""
         lay = self.geometry.layout()
         return {"geometry": {**asdict(self.geometry),
-                             "mirror_point": lay["mirror_point"].tolist(),
-                             "mirror_yaw_deg": float(lay["yaw_deg"]),
-                             "target": lay["target"].tolist(), "beacon": lay["beacon"].tolist()},
+                             "mirror_point": lay.mirror_point.tolist(),
+                             "mirror_yaw_deg": float(lay.yaw_deg),
+                             "target": lay.target.tolist(), "beacon": lay.beacon.tolist()},
                 "iterations": self.iterations, "rows": [r.to_json() for r in self.rows]}
 
 
@@ -128,20 +144,20 @@ def run_row(sigma_alpha_deg: float, sigma_d: float, iterations: int = 200,
     rng = np.random.default_rng(rng)
     k = iterations
     sab, sdb = beacon_sigma or (sigma_alpha_deg, sigma_d)
-    ab = g["beacon_alpha"] + rng.normal(0, sab, k)
-    db = g["beacon_d"] + rng.normal(0, sdb, k)
-    at = g["target_alpha"] + rng.normal(0, sigma_alpha_deg, k)
-    dt = g["target_d"] + rng.normal(0, sigma_d, k)
+    ab = g.beacon_alpha + rng.normal(0, sab, k)
+    db = g.beacon_d + rng.normal(0, sdb, k)
+    at = g.target_alpha + rng.normal(0, sigma_alpha_deg, k)
+    dt = g.target_d + rng.normal(0, sigma_d, k)
     if shared_alpha_deg:  # drawn after the others: rows without it draw as before
         delta = rng.normal(0, shared_alpha_deg, k)
         ab, at = ab + delta, at + delta
-    est = closed_form_unchecked(np.zeros(2), g["beacon"], ab, db, at, dt)
+    est = closed_form_unchecked(np.zeros(2), g.beacon, ab, db, at, dt)
     ok = np.isfinite(est.target).all(axis=1) & np.isfinite(
         est.target_reflection_point).all(axis=1)
-    ref_err = np.linalg.norm(est.target_reflection_point[ok] - g["target_reflection_point"],
+    ref_err = np.linalg.norm(est.target_reflection_point[ok] - g.target_reflection_point,
                              axis=1)
-    tar_err = np.linalg.norm(est.target[ok] - g["target"], axis=1)
-    yaw_err = yaw_difference(est.yaw_deg[ok], g["yaw_deg"])
+    tar_err = np.linalg.norm(est.target[ok] - g.target, axis=1)
+    yaw_err = yaw_difference(est.yaw_deg[ok], g.yaw_deg)
     return RowErrors(rmse_ref=float(np.sqrt(np.mean(ref_err ** 2))),
                      rmse_tar=float(np.sqrt(np.mean(tar_err ** 2))),
                      rmse_yaw_deg=float(np.sqrt(np.mean(yaw_err ** 2))),
@@ -167,7 +183,7 @@ def table_rows(sigmas: list[tuple[float, float]] | None = None,
     beacon's); relative σ_d's become absolute at each object's own d_total."""
     nan = float("nan")
     lay = (geometry or Table1Geometry()).layout()
-    d_t, d_b = lay["target_d"], lay["beacon_d"]
+    d_t, d_b = lay.target_d, lay.beacon_d
     rows = PAPER_TABLE1 if not sigmas else tuple((a, d * d_t, nan, nan, (a, d * d_b))
                                                  for a, d in sigmas)
     if relative is not None:

@@ -32,15 +32,15 @@ def _first_order_target_rmse(g, sigma_alpha, sigma_d) -> float:
     """RMS target error predicted by linearizing the exact one-beacon solution with
     central differences (independent of run_row's vectorized closed form)."""
     lay = g.layout()
-    x0 = np.array([lay["beacon_alpha"], lay["beacon_d"], lay["target_alpha"], lay["target_d"]])
+    x0 = np.array([lay.beacon_alpha, lay.beacon_d, lay.target_alpha, lay.target_d])
     h = np.array([1e-5, 1e-6, 1e-5, 1e-6])
     J = np.empty((2, 4))
     for k in range(4):
         hi, lo = x0.copy(), x0.copy()
         hi[k] += h[k]
         lo[k] -= h[k]
-        J[:, k] = (solve_single(np.zeros(2), lay["beacon"], *hi).target
-                   - solve_single(np.zeros(2), lay["beacon"], *lo).target) / (2 * h[k])
+        J[:, k] = (solve_single(np.zeros(2), lay.beacon, *hi).target
+                   - solve_single(np.zeros(2), lay.beacon, *lo).target) / (2 * h[k])
     sd = np.array([sigma_alpha, sigma_d, sigma_alpha, sigma_d])
     return float(np.sqrt(np.trace(J @ np.diag(sd**2) @ J.T)))
 
@@ -74,13 +74,13 @@ def test_closed_form_unchecked_agrees_with_solve_single():
     """Monte Carlo's unchecked batch arithmetic is the checked closed form's."""
     g = Table1Geometry().layout()
     rng = np.random.default_rng(0)
-    ab = g["beacon_alpha"] + rng.normal(0, 0.5, 50)
-    db = g["beacon_d"] + rng.normal(0, 0.02, 50)
-    at = g["target_alpha"] + rng.normal(0, 0.5, 50)
-    dt = g["target_d"] + rng.normal(0, 0.02, 50)
-    batch = closed_form_unchecked(np.zeros(2), g["beacon"], ab, db, at, dt)
+    ab = g.beacon_alpha + rng.normal(0, 0.5, 50)
+    db = g.beacon_d + rng.normal(0, 0.02, 50)
+    at = g.target_alpha + rng.normal(0, 0.5, 50)
+    dt = g.target_d + rng.normal(0, 0.02, 50)
+    batch = closed_form_unchecked(np.zeros(2), g.beacon, ab, db, at, dt)
     for k in range(50):
-        one = solve_single(np.zeros(2), g["beacon"], ab[k], db[k], at[k], dt[k])
+        one = solve_single(np.zeros(2), g.beacon, ab[k], db[k], at[k], dt[k])
         assert np.allclose(batch.target[k], one.target, atol=1e-12)
         assert np.allclose(batch.target_reflection_point[k], one.target_reflection_point,
                            atol=1e-12)
@@ -168,16 +168,16 @@ def test_montecarlo_command(capsys):
     r0, r1 = res["rows"]
     assert r0["rmse_tar"] < 1e-9 and r0["paper_rmse_tar"] is None
     g = Table1Geometry().layout()
-    x0 = np.array([g["beacon_alpha"], g["beacon_d"], g["target_alpha"], g["target_d"]])
+    x0 = np.array([g.beacon_alpha, g.beacon_d, g.target_alpha, g.target_d])
 
     def target(x):
-        return solve_single(np.zeros(2), g["beacon"], *x).target
+        return solve_single(np.zeros(2), g.beacon, *x).target
 
     J = np.column_stack([(target(x0 + h * e) - target(x0 - h * e)) / (2 * h)
                          for e, h in zip(np.eye(4), (1e-5, 1e-6, 1e-5, 1e-6), strict=True)])
     # --sigma's σ_d is relative: each object's absolute σ_d is it times its own d_total
     rel = sd / 5.0
-    cov = J @ np.diag([sa**2, (rel * g["beacon_d"])**2, sa**2, (rel * g["target_d"])**2]) @ J.T
+    cov = J @ np.diag([sa**2, (rel * g.beacon_d)**2, sa**2, (rel * g.target_d)**2]) @ J.T
     # 4000 draws: the RMSE's own sampling error is ~1.1 %
     assert r1["rmse_tar"] == pytest.approx(np.sqrt(np.trace(cov)), rel=0.05)
     assert main(["montecarlo", "--iterations", "1"]) == 2

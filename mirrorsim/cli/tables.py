@@ -242,7 +242,7 @@ def montecarlo_table(res: Table1) -> str:
              "units",
              f"{'σ_α (°)':>9} {'σ_d (%)':>7} | {'paper ref':>9} {'paper tar':>9} | "
              f"{'ours ref':>9} {'ours tar':>9} {'yaw (deg)':>9}"]
-    d_total, d_b = res.geometry.d_total, res.geometry.layout()["beacon_d"]
+    d_total, d_b = res.geometry.d_total, res.geometry.layout().beacon_d
     for r in res.rows:
         rel_t = r.sigma_d / d_total
         beacon = ""

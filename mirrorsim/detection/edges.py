@@ -10,11 +10,21 @@ independent estimates; their median resists partial occlusion.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from mirrorsim.rendering.sensor import LINEAR_OF_CODE, lookup_codes, to_srgb8
+
+
+@dataclass(frozen=True)
+class Surround:
+    """Mean linear radiance just outside each edge of an image (NaN: not measured)."""
+
+    left: float = float("nan")
+    right: float = float("nan")
+    top: float = float("nan")
+    bottom: float = float("nan")
 
 
 @dataclass(frozen=True)
@@ -35,7 +45,7 @@ class ImageMeasurement:
     u_left: float | None = None  # the side edges (None: no contrast there)
     u_right: float | None = None
     # mean linear radiance just outside each edge, and inside (for the clip decision)
-    outside: dict[str, float] = field(default_factory=dict)
+    outside: Surround = Surround()
     inside: float = float("nan")
     clipped: str = ""  # '', 'top', 'left', 'right'
     alpha_deg: float = float("nan")
@@ -333,8 +343,8 @@ def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str,
         height_px=None if top is None or bottom is None else bottom - top,
         width_px=None if left is None or right is None else right - left,
         u_left=left, u_right=right,
-        outside={k: float(np.mean(o)) for k, o in (("left", out_left), ("right", out_right),
-                                                    ("top", out_top), ("bottom", out_bottom))},
+        outside=Surround(*(float(np.mean(o)) for o in (out_left, out_right, out_top,
+                                                       out_bottom))),
         inside=float(np.median(core.reshape(-1, img.shape[-1]).mean(axis=1))),
         notes=sides_note)
     if left is not None and right is not None:

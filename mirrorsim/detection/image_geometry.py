@@ -193,7 +193,8 @@ def _target_clip(cam: Camera, m: ImageMeasurement, size: Point2, present: list[s
     measurement, the edges to use and the half-width β the height implies."""
     w, h = size
     edges = {"left": m.u_left, "right": m.u_right}
-    dark = {side: m.outside.get(side, math.inf) < 0.5 * m.inside
+    # (a level not measured is NaN: not dark)
+    dark = {side: getattr(m.outside, side) < 0.5 * m.inside
             for side in ("left", "right", "top")}
     phi0 = (sum(_off_axis(cam, edges[s_]) for s_ in present) / len(present))
     beta = _half_angle(cam, w / 2, m.height_px, h, phi0)
@@ -206,7 +207,9 @@ def _target_clip(cam: Camera, m: ImageMeasurement, size: Point2, present: list[s
                 *m.notes, f"image {100 * (r - 1):.1f}% shorter than its width implies, under "
                 "a dark edge: clipped at the top, height not used"))
         elif r < 1 - tol and (dark["left"] or dark["right"]):
-            side = "left" if m.outside["left"] <= m.outside["right"] else "right"
+            side = ("left" if dark["left"] and not (dark["right"]
+                                                    and m.outside.right < m.outside.left)
+                    else "right")
             present = ["right" if side == "left" else "left"]
             m = replace(m, clipped=side, notes=(
                 *m.notes, f"image {100 * (1 - r):.1f}% narrower than its height implies, "

@@ -141,7 +141,7 @@ def evaluate_into(scene: Scene, out: Path, *, variant: str = "auto", progress: b
     return Report(scene=scene.name, truth=truth, measurements=measurements, solution=sol,
                   errors=errors, frames=tuple(frames),
                   render=RenderInfo(done.variant, done.spp, done.seed, done.sampler),
-                  calibration=cal.constants(),
+                  calibration=cal,
                   error_vs_beacons=by_count)
 
 

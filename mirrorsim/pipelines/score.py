@@ -9,6 +9,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from mirrorsim.detection.image_geometry import Calibration
 from mirrorsim.errors import BadParameter
 from mirrorsim.formats.measurements import measurements_from_dict
 from mirrorsim.truth.groundtruth import GroundTruth, RenderInfo
@@ -154,7 +155,7 @@ class Report:
     errors: Score
     frames: tuple[FrameRecord, ...]
     render: RenderInfo
-    calibration: dict[str, float]
+    calibration: Calibration
     error_vs_beacons: tuple[Score, ...] = field(default=())
 
     @property
@@ -169,7 +170,7 @@ class Report:
                "solution": self.solution.to_json(), "errors": self.errors.to_json(),
                "frames": [asdict(f) for f in self.frames],
                "render": {k: self.render.to_json()[k] for k in REPORT_RENDER_KEYS},
-               "calibration": dict(self.calibration)}
+               "calibration": self.calibration.constants()}
         if self.error_vs_beacons:
             out["error_vs_beacons"] = [{"beacons": k + 1, **s.to_json()}
                                        for k, s in enumerate(self.error_vs_beacons)]
@@ -184,7 +185,7 @@ class Report:
                    errors=Score.from_json(d["errors"]),
                    frames=tuple(FrameRecord(**f) for f in d["frames"]),
                    render=RenderInfo.from_json(d["render"]),
-                   calibration=dict(d["calibration"]),
+                   calibration=Calibration(**d["calibration"]),
                    error_vs_beacons=tuple(
                        Score.from_json({k: v for k, v in e.items() if k != "beacons"})
                        for e in d.get("error_vs_beacons", [])))
