@@ -314,7 +314,7 @@ def read_table(folder: str | Path) -> dict[str, list]:
     n = len(cols.get("index", []))
     if n == 0:
         raise DatasetError(path, "holds no rows")
-    failed = sum(bool(e) for e in cols.get("error", [""] * n))
+    failed = int(n - table.usable_rows(cols).sum())
     if failed == n:
         raise DatasetError(path, f"all {n} rows failed (their `error` column says why)")
     meta = Path(folder) / "dataset.json"

@@ -219,6 +219,17 @@ def card_section(group: tuple[Column, ...], prefix: str = "") -> str:
                      + f": {c.doc}" for c in group)
 
 
+def usable_rows(cols: dict) -> np.ndarray:
+    """Which rows of a table's columns were measured and solved (their ``error`` empty)."""
+    return np.array([not e for e in cols.get("error", [""] * len(cols["index"]))], bool)
+
+
+def focal_lengths(cols: dict) -> np.ndarray:
+    """Each row's camera focal length (px); NaN for a table made before it was recorded."""
+    n = len(cols["index"])
+    return np.asarray(cols["fx_px"], float) if "fx_px" in cols else np.full(n, np.nan)
+
+
 def counted_once(beacon_of: np.ndarray) -> dict[str, np.ndarray]:
     """Per kind, the image rows (:func:`image_rows`) that count: every beacon's, the
     target's once a scene (its first beacon's row)."""

@@ -68,7 +68,7 @@ def features_of(cols: dict) -> list[str]:
     names = list(FEATURES)
     if imperfections.ROW_COLUMNS[0] not in cols:  # a dataset from before the bench
         return names
-    ok = np.array([not e for e in cols.get("error", [""] * len(cols["index"]))])
+    ok = table.usable_rows(cols)
     for name in BENCH_FEATURES:
         for kind in ("target", "beacon"):
             v = _feature(cols, kind, name)[ok]
@@ -199,11 +199,11 @@ def fit(cols: dict, provenance: dict | None = None) -> ErrorModel:
     # a row per beacon image: every beacon of a scene is fitted, its target once (the
     # pair fit and the shared α take the target beside each of its beacons)
     cols, beacon_of, scene_of = table.image_rows(cols)
-    ok = np.array([not e for e in cols.get("error", [""] * len(cols["index"]))])
+    ok = table.usable_rows(cols)
     once = table.counted_once(beacon_of)
     need = min_rows(names)
     # pixel errors scale as 1/fx: each row's errors as at the rows' median focal length
-    fx = np.asarray(cols["fx_px"], float) if "fx_px" in cols else np.full(len(ok), np.nan)
+    fx = table.focal_lengths(cols)
     fx_px = float(np.median(fx[ok & np.isfinite(fx)])) if np.any(ok & np.isfinite(fx)) else None
     at_fx = np.where(np.isfinite(fx), fx / (fx_px or 1.0), 1.0)
     shared = shared_alpha(cols, ok)
@@ -317,7 +317,7 @@ def provenance_of(dataset_dir: str | Path, cols: dict) -> dict:
 
     meta = json.loads((Path(dataset_dir) / "dataset.json").read_text())
     return {"dataset_seed": meta.get("seed"), "dataset_n": meta.get("n"),
-            "rows_used": int(sum(not e for e in cols.get("error", []))),
+            "rows_used": int(table.usable_rows(cols).sum()),
             "command": f"mirrorsim errormodel {Path(dataset_dir).name}"}
 
 
@@ -359,7 +359,7 @@ def plot(cols: dict, model: ErrorModel, out: str | Path) -> Path:
 
     fig, axes = plt.subplots(2, 3, figsize=(16, 8.5))
     cols, beacon_of, _ = table.image_rows(cols)  # every beacon's image; the target once
-    ok = np.array([not e for e in cols.get("error", [""] * len(cols["index"]))])
+    ok = table.usable_rows(cols)
     once = table.counted_once(beacon_of)
     grid = np.linspace(-5, 5, 201)
     for r, (q, col, scale, unit) in enumerate((("alpha", "alpha_err", 1.0, "°"),
@@ -368,7 +368,7 @@ def plot(cols: dict, model: ErrorModel, out: str | Path) -> Path:
             y = np.asarray(cols[table.object_column(kind, col)], float)
             S = sigma_features_of(cols, kind)
             m = ok & once[kind] & np.isfinite(y) & np.isfinite(S).all(axis=1)
-            fx = np.asarray(cols.get("fx_px", np.full(len(ok), np.nan)), float)[m]
+            fx = table.focal_lengths(cols)[m]
             sd = model.whole_sigma(kind, q, S[m], fx)
             for c, (x, name) in enumerate(((np.exp(S[m, 0]), "measured d_total (cm)"),
                                            (S[m, 1], "|off-axis bearing| (°)"))):

@@ -102,9 +102,9 @@ def validate(model: ErrorModel, cols: dict) -> Validation:
     """Solve each usable row of ``cols`` (dataset columns) again with ``model``'s σ's and
     score the target's covariance against the true target."""
     n = len(cols["index"])
-    ok = np.array([not e for e in cols.get("error", [""] * n)])
+    ok = table.usable_rows(cols)
     pan = _col(cols, "observer_pan_deg")
-    fx = np.asarray(cols["fx_px"], float) if "fx_px" in cols else np.full(n, np.nan)
+    fx = table.focal_lengths(cols)
     obs = np.column_stack([_col(cols, "observer_x"), _col(cols, "observer_y")])
     truth = np.column_stack([_col(cols, "target_x"), _col(cols, "target_y")])
     target = np.column_stack([_col(cols, "target_alpha_meas"), _col(cols, "target_d_meas")])
