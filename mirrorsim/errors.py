@@ -9,6 +9,7 @@ statuses with :func:`exit_status`; nothing is told apart by name.
 from __future__ import annotations
 
 import sys
+from typing import TextIO
 
 from solver.errors import InputError, SolverError
 
@@ -74,8 +75,9 @@ def exit_status(exc: BaseException) -> int | None:
     return None
 
 
-def one_line_warning(message, category, filename, lineno, file=None,  # noqa: ARG001
-                     line=None) -> None:  # noqa: ARG001
+def one_line_warning(message: Warning | str, category: type[Warning],  # noqa: ARG001
+                     filename: str, lineno: int, file: TextIO | None = None,  # noqa: ARG001
+                     line: str | None = None) -> None:  # noqa: ARG001
     """``warnings.showwarning`` for the command line (and its worker processes): one
     ``warning:`` line on stderr, without the source line."""
     print(f"warning: {message}", file=sys.stderr)

@@ -12,9 +12,11 @@ candidate and pose.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from solver.errors import SolverError
 from solver.geometry import point_segment_distance
@@ -86,11 +88,14 @@ def _target_variance(info: np.ndarray, keep: int) -> np.ndarray:
     return np.where(np.isfinite(v) & (v > 0) & (v < UNDETERMINED_CM2), v, np.inf)
 
 
-def best_beacon_set(observer, target_alpha_deg: float, target_d_total: float, poses,
-                    sigma: Sigma | ObjectSigmas, mirror_size: float,
-                    board: tuple[float, float], n: int,
-                    calibration: SelfCalibration = PLAIN, step: float = 1.0, keep_out=(),
-                    clearance: float = 1.0, accept=None, min_depth: float = 0.5) -> BeaconSet:
+def best_beacon_set(observer: ArrayLike, target_alpha_deg: float, target_d_total: float,
+                    poses: list[tuple[np.ndarray, float]], sigma: Sigma | ObjectSigmas,
+                    mirror_size: float, board: tuple[float, float], n: int,
+                    calibration: SelfCalibration = PLAIN, step: float = 1.0,
+                    keep_out: Sequence[tuple[np.ndarray, np.ndarray, float]] = (),
+                    clearance: float = 1.0,
+                    accept: Callable[[np.ndarray], np.ndarray] | None = None,
+                    min_depth: float = 0.5) -> BeaconSet:
     """Choose ``n`` beacon positions on the board's grid one at a time, each the one that
     lowers the expected target error most (with ``calibration``'s nuisances estimated,
     and its priors on them known), among

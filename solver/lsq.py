@@ -344,7 +344,7 @@ def crlb(observer: ArrayLike, beacons: ArrayLike, mirror_yaw_deg: float, mirror_
     return np.linalg.inv(info)
 
 
-def solve_measurements(observer, beacons: list[BeaconMeasurement],
+def solve_measurements(observer: ArrayLike, beacons: list[BeaconMeasurement],
                        targets: list[tuple[float, float]],
                        sigma: Sigma | ObjectSigmas | None = None,
                        calibration: SelfCalibration = PLAIN) -> Solution:

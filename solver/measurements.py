@@ -6,6 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from solver.errors import SolverError
 
@@ -129,7 +130,7 @@ def is_number(x: object) -> bool:
     return isinstance(x, int | float | np.integer | np.floating) and not isinstance(x, bool)
 
 
-def check_measurements(observer, beacons: list[BeaconMeasurement],
+def check_measurements(observer: ArrayLike, beacons: list[BeaconMeasurement],
                        targets: list[tuple[float, float]]) -> None:
     """Refuse what no solve can use: no beacon or target, a number that is not finite,
     or a d_total outside :data:`D_TOTAL_RANGE_CM` (the file reader says so naming the

@@ -28,9 +28,11 @@ calls it (tested to agree).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from solver.geometry import line_normal, unit
 from solver.measurements import BeaconMeasurement, Sigma
@@ -161,8 +163,9 @@ def _fixed_loglik(mirror: np.ndarray, prior: Prior, observer, sigma: Sigma) -> n
     return loglik
 
 
-def replay(mirror: np.ndarray, prior: Prior, history, observer, params: PFParams
-           ) -> Particles:
+def replay(mirror: np.ndarray, prior: Prior,
+           history: Sequence[tuple[np.ndarray, tuple[float, float] | None]], observer: ArrayLike,
+           params: PFParams) -> Particles:
     """The hypotheses ``mirror`` (N, 2) run through ``history`` ((control, observation or
     None), …) from the prior's start: their beacons' Gaussians and log likelihoods (the
     fixed beacons' included)."""
@@ -179,7 +182,9 @@ def replay(mirror: np.ndarray, prior: Prior, history, observer, params: PFParams
 
 def pf_step(particles: Particles, weights: np.ndarray, control: np.ndarray,
             observation: tuple[float, float] | None, observer: np.ndarray, params: PFParams,
-            rng: np.random.Generator, prior: Prior, history=()) -> tuple[Particles, np.ndarray]:
+            rng: np.random.Generator, prior: Prior,
+            history: Sequence[tuple[np.ndarray, tuple[float, float] | None]] = ()
+            ) -> tuple[Particles, np.ndarray]:
     """One predict–update–resample–move step; returns new (particles, weights).
 
     Parameters
@@ -328,7 +333,7 @@ def _move(p: Particles, prior: Prior, history, observer, params: PFParams,
 
 
 def initial_particles(prior: Prior, n: int, params: PFParams, rng: np.random.Generator,
-                      observer=None) -> Particles:
+                      observer: ArrayLike | None = None) -> Particles:
     """The mirror drawn from the prior's uniform box; the beacon at its known start (to
     σ_trs); each hypothesis' log likelihood of the fixed beacons (they need the
     ``observer``), which :class:`MovingBeaconFilter` then weighs the draws by."""
@@ -357,7 +362,7 @@ class MovingBeaconFilter:
                 self.particles, self.particles.loglik.copy(), self.prior, (), self.observer,
                 self.params, self.rng)
 
-    def step(self, control, observation) -> None:
+    def step(self, control: ArrayLike, observation: tuple[float, float] | None) -> None:
         """Move by ``control`` and weigh by ``observation`` (α, d_total; None: unseen)."""
         self.particles, self.weights = pf_step(self.particles, self.weights, control,
                                                observation, self.observer, self.params,
@@ -389,7 +394,7 @@ class MovingBeaconFilter:
         return MirrorEstimate(beacon=w @ self.particles.beacon, yaw_deg=yaw, rho=rho,
                               yaw_sd_deg=float(yaw_sd), rho_sd=float(rho_sd))
 
-    def nees(self, mirror_point, mirror_yaw_deg: float) -> float:
+    def nees(self, mirror_point: ArrayLike, mirror_yaw_deg: float) -> float:
         """eᵀ C⁻¹ e: the true mirror line's squared Mahalanobis distance from the
         hypotheses' weighted mean, in their weighted covariance of (yaw, offset) (the
         offsets along the mean yaw's normal, as :meth:`estimate` takes them).  χ²₂ for

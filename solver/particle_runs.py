@@ -3,7 +3,10 @@ commands and observations, the filter over a run, and its mirror errors per step
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
+from numpy.typing import ArrayLike
 
 from solver.geometry import line_normal
 from solver.measurements import BeaconMeasurement
@@ -11,8 +14,9 @@ from solver.particle import DEFAULT_PARTICLES, MirrorEstimate, MovingBeaconFilte
 from solver.sltr import observe
 
 
-def simulate_run(observer, mirror_point, mirror_yaw_deg: float, path: np.ndarray,
-                 params: PFParams, rng: int | np.random.Generator | None = 0):
+def simulate_run(observer: ArrayLike, mirror_point: ArrayLike, mirror_yaw_deg: float,
+                 path: np.ndarray, params: PFParams, rng: int | np.random.Generator | None = 0
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Noisy commands and observations for a beacon following ``path`` (k, 2).
 
     Returns (controls (k-1, 2), observations (k-1, 2), true positions (k, 2)); the true
@@ -31,8 +35,10 @@ def simulate_run(observer, mirror_point, mirror_yaw_deg: float, path: np.ndarray
     return controls, np.column_stack([a, d]), true
 
 
-def track(observer, beacon_start, controls, observations, yaw_range, rho_range,
-          n: int = DEFAULT_PARTICLES, params: PFParams | None = None, rng=0,
+def track(observer: ArrayLike, beacon_start: ArrayLike, controls: ArrayLike,
+          observations: Sequence[tuple[float, float] | None], yaw_range: tuple[float, float],
+          rho_range: tuple[float, float], n: int = DEFAULT_PARTICLES,
+          params: PFParams | None = None, rng: int | np.random.Generator | None = 0,
           fixed: tuple[BeaconMeasurement, ...] = (), fixed_sigma: float = 0.0
           ) -> list[MirrorEstimate]:
     """Run the filter over a whole run (beside the ``fixed`` beacons, known to
@@ -46,7 +52,7 @@ def track(observer, beacon_start, controls, observations, yaw_range, rho_range,
     return out
 
 
-def mirror_errors(estimates: list[MirrorEstimate], mirror_point, mirror_yaw_deg: float
+def mirror_errors(estimates: list[MirrorEstimate], mirror_point: ArrayLike, mirror_yaw_deg: float
                   ) -> tuple[np.ndarray, np.ndarray]:
     """Yaw error (deg) and offset error (distance of the true mirror point from each
     estimated line) per step."""

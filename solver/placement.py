@@ -5,9 +5,11 @@ orientation method of its ref. [26], and the best beacon position (beyond the pa
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.optimize import least_squares
 
 from solver.geometry import line_normal, point_segment_distance, reflect, unit, wrap_bearing
@@ -77,7 +79,7 @@ def paper_placement(alpha_deg: float, d_total: float, s: float, eps_deg: float,
                              n_beacons=2.0 * d_total / b)
 
 
-def visible_region(observer, alpha_deg: float, d_total: float, s: float, eps_deg: float,
+def visible_region(observer: ArrayLike, alpha_deg: float, d_total: float, s: float, eps_deg: float,
                    grid: np.ndarray, n_orientations: int = 21) -> np.ndarray:
     """Exact version of the paper's area: grid points (k, 2) whose image the observer
     sees through a mirror of width ``s`` centred at R = d_total·u(α), for *every*
@@ -99,8 +101,8 @@ def visible_region(observer, alpha_deg: float, d_total: float, s: float, eps_deg
     return ok
 
 
-def region_area(observer, alpha_deg, d_total, s, eps_deg, cell: float = 0.5,
-                n_orientations: int = 11) -> float:
+def region_area(observer: ArrayLike, alpha_deg: float, d_total: float, s: float, eps_deg: float,
+                cell: float = 0.5, n_orientations: int = 11) -> float:
     """Area of :func:`visible_region`, counting grid cells.
 
     The reflected fields of view of the extreme orientations cross about
@@ -129,7 +131,8 @@ def path_lengths(a: float, b: float, n: int) -> dict[str, float]:
     }
 
 
-def path_points(kind: str, origin, alpha_deg: float, a: float, b: float, n: int) -> np.ndarray:
+def path_points(kind: str, origin: ArrayLike, alpha_deg: float, a: float, b: float, n: int
+                ) -> np.ndarray:
     """Vertices of a path (for plots and the particle filter's simulated runs).
 
     Steps of b run along the observation line (towards the observer), a across it.
@@ -161,7 +164,7 @@ def polyline_length(points: np.ndarray) -> float:
 # ------------------------------------------------------------------ Algorithm 1
 
 
-def algorithm1(observer, alpha_deg: float, d_total: float, s: float, eps_deg: float
+def algorithm1(observer: ArrayLike, alpha_deg: float, d_total: float, s: float, eps_deg: float
                ) -> list[dict]:
     """The paper's Algorithm 1: reflector positions stepped along the observation line by
     Δd = b, two beacons per step, below the reflector on both sides of the line."""
@@ -178,8 +181,8 @@ def algorithm1(observer, alpha_deg: float, d_total: float, s: float, eps_deg: fl
     return steps
 
 
-def orientation_from_beacons(observer, reflector_point, beacons, alphas_deg,
-                             initial_yaw_deg: float) -> float:
+def orientation_from_beacons(observer: ArrayLike, reflector_point: ArrayLike, beacons: ArrayLike,
+                             alphas_deg: ArrayLike, initial_yaw_deg: float) -> float:
     """Ref. [26]: the yaw of a reflector of known position from the angles of arrival
     of beacons seen in it (two or more; least squares in the one unknown)."""
     o = np.asarray(observer, float)
@@ -209,7 +212,7 @@ class MirrorPrior:
     yaw_spread_deg: float = 5.0
     n: int = 5
 
-    def poses(self, observer, target_alpha_deg: float) -> list[tuple[np.ndarray, float]]:
+    def poses(self, observer: ArrayLike, target_alpha_deg: float) -> list[tuple[np.ndarray, float]]:
         """Mirror poses (a point on the line, yaw) spread around the prior's centre."""
         out = []
         for dd in np.linspace(-self.d1_spread, self.d1_spread, self.n):
@@ -220,7 +223,7 @@ class MirrorPrior:
 
 
 def implied_target(observer: np.ndarray, target_alpha_deg: float, target_d_total: float,
-                   point, yaw: float) -> tuple[np.ndarray, np.ndarray]:
+                   point: ArrayLike, yaw: float) -> tuple[np.ndarray, np.ndarray]:
     """A mirror pose's (θ, ρ) and the target it implies for this target measurement: its
     virtual image reflected in the line (the (θ, ρ) form :func:`predict` differentiates)."""
     n = line_normal(yaw)
@@ -229,7 +232,7 @@ def implied_target(observer: np.ndarray, target_alpha_deg: float, target_d_total
     return params, vt - 2.0 * (n @ vt - params[1]) * n
 
 
-def seen_in_mirror(observer: np.ndarray, points: np.ndarray, point, yaw: float,
+def seen_in_mirror(observer: np.ndarray, points: np.ndarray, point: ArrayLike, yaw: float,
                    mirror_size: float, min_depth: float) -> np.ndarray:
     """Which points a mirror pose (a point on the line, its yaw) shows the observer: in
     front of it by ``min_depth``, their image on the glass of width ``mirror_size``."""
@@ -240,10 +243,10 @@ def seen_in_mirror(observer: np.ndarray, points: np.ndarray, point, yaw: float,
     return (sp * so > 0) & (np.abs(sp) >= min_depth) & (np.abs(off) <= mirror_size / 2)
 
 
-def expected_target_error(observer, target_alpha_deg: float, target_d_total: float,
-                          beacons: np.ndarray, poses, sigma: Sigma | ObjectSigmas,
-                          mirror_size: float,
-                          min_depth: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
+def expected_target_error(observer: ArrayLike, target_alpha_deg: float, target_d_total: float,
+                          beacons: np.ndarray, poses: list[tuple[np.ndarray, float]],
+                          sigma: Sigma | ObjectSigmas, mirror_size: float, min_depth: float = 0.5
+                          ) -> tuple[np.ndarray, np.ndarray]:
     """First-order RMS target error for each candidate beacon position over the mirror
     poses where it is seen, and the fraction of poses where it is seen.
 
@@ -299,11 +302,11 @@ class BeaconSearch:
     seen: np.ndarray
 
 
-def best_beacon(observer, target_alpha_deg, target_d_total, poses,
-                sigma: Sigma | ObjectSigmas,
+def best_beacon(observer: ArrayLike, target_alpha_deg: float, target_d_total: float,
+                poses: list[tuple[np.ndarray, float]], sigma: Sigma | ObjectSigmas,
                 mirror_size: float, board: tuple[float, float], step: float = 0.5,
-                keep_out: list[tuple[np.ndarray, np.ndarray, float]] = (),
-                min_seen: float = 1.0, accept=None) -> BeaconSearch:
+                keep_out: list[tuple[np.ndarray, np.ndarray, float]] = (), min_seen: float = 1.0,
+                accept: Callable[[np.ndarray], np.ndarray] | None = None) -> BeaconSearch:
     """Grid search over the board for the beacon position with the least expected
     target error among those seen under at least ``min_seen`` of the mirror poses (or,
     where none is, under as many as any position is).  ``keep_out`` holds segments

@@ -103,7 +103,7 @@ class SelfCalibration:
                 **({"priors": dict(self.priors)} if self.priors else {})}
 
 
-def as_calibration(calibration) -> SelfCalibration:
+def as_calibration(calibration: object) -> SelfCalibration:
     """``calibration``, refused (one line) where it is not a :class:`SelfCalibration` (a
     dict had failed deep inside a solve, after the frames were rendered)."""
     if not isinstance(calibration, SelfCalibration):

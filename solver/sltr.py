@@ -279,7 +279,7 @@ def _ray_parameter(o, alpha_deg, point, yaw_deg) -> tuple[np.ndarray, np.ndarray
     return u, denom, t
 
 
-def ray_hits_line(o, alpha_deg, point, yaw_deg) -> np.ndarray:
+def ray_hits_line(o: ArrayLike, alpha_deg: float, point: ArrayLike, yaw_deg: float) -> np.ndarray:
     """Where the ray from o at bearing α meets the line (raises if parallel or behind)."""
     u, denom, t = _ray_parameter(o, alpha_deg, point, yaw_deg)
     if np.any(np.abs(denom) < 1e-9):
@@ -324,8 +324,9 @@ class BatchEstimate:
     target_reflection_point: np.ndarray
 
 
-def closed_form_unchecked(observer, beacon, beacon_alpha_deg, beacon_d_total,
-                          target_alpha_deg, target_d_total) -> BatchEstimate:
+def closed_form_unchecked(observer: ArrayLike, beacon: ArrayLike, beacon_alpha_deg: ArrayLike,
+                          beacon_d_total: ArrayLike, target_alpha_deg: ArrayLike,
+                          target_d_total: ArrayLike) -> BatchEstimate:
     """:func:`solve_single`'s arithmetic without its checks, for Monte Carlo batches
     where a few noisy draws may be physically impossible (they still give a line)."""
     o, b = np.asarray(observer, float), np.asarray(beacon, float)

@@ -8,6 +8,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from solver.geometry import line_normal, wrap_bearing
 from solver.measurements import BeaconMeasurement
@@ -24,10 +25,10 @@ class SmoothedRun:
     beacons: np.ndarray  # (k + 1, 2): the start pose, then one per control
 
 
-def smooth_run(observer, start, controls: np.ndarray, observations: np.ndarray,
-               params: PFParams, yaw_deg: float, rho: float, beacons: np.ndarray,
-               fixed: tuple[BeaconMeasurement, ...] = (), fixed_sigma: float = 0.0
-               ) -> SmoothedRun:
+def smooth_run(observer: ArrayLike, start: ArrayLike, controls: np.ndarray,
+               observations: np.ndarray, params: PFParams, yaw_deg: float, rho: float,
+               beacons: np.ndarray, fixed: tuple[BeaconMeasurement, ...] = (),
+               fixed_sigma: float = 0.0) -> SmoothedRun:
     """Least squares over the odometry (σ_trs per move, the start as believed) and every
     observation (α, d_total with ``params.sigma``) of the moving beacon and of the
     ``fixed`` ones (their believed positions known to ``fixed_sigma``), from the start

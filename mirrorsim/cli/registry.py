@@ -8,9 +8,10 @@ import os
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from mirrorsim.errors import BadArgument, OutputError
+from mirrorsim.formats.error_model import ErrorModel
 from mirrorsim.formats.files import (
     check_inputs_outside,
     check_output_dir,
@@ -32,7 +33,8 @@ Handler = Callable[[argparse.Namespace], int]
 COMMANDS: dict[str, tuple[str, str, Options, Handler]] = {}
 
 
-def command(name: str, summary: str, description: str, options: Options):
+def command(name: str, summary: str, description: str,
+            options: Options) -> Callable[[Handler], Handler]:
     """Register the decorated handler as subcommand ``name``, with its ``options``."""
     def register(handler: Handler) -> Handler:
         COMMANDS[name] = (summary, description, options, handler)
@@ -293,7 +295,7 @@ def beacon_sigma_of(args: argparse.Namespace) -> float:
 MAX_BEACON_SIGMA = 10.0
 
 
-def emit(args: argparse.Namespace, data) -> None:
+def emit(args: argparse.Namespace, data: Any) -> None:
     """``--json``'s document: to its file, or (``-``) to stdout alone (the command's
     printed lines went to stderr, :func:`mirrorsim.cli.main._run`)."""
     from mirrorsim.formats.files import emit_json
@@ -301,7 +303,7 @@ def emit(args: argparse.Namespace, data) -> None:
     emit_json(args.json, data, getattr(args, "json_stdout", None))
 
 
-def error_model_of(args: argparse.Namespace):
+def error_model_of(args: argparse.Namespace) -> ErrorModel | None:
     """The model of ``--error-model``, or None where it is not given."""
     if not args.error_model:
         return None

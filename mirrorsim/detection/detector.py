@@ -40,6 +40,7 @@ from __future__ import annotations
 import errno
 import warnings
 from dataclasses import asdict, dataclass
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -267,12 +268,12 @@ class StoredFrame:
     subsampled: bool
 
 
-def read_frame(path, size: tuple[int, int] | None = None) -> np.ndarray:
+def read_frame(path: str | Path, size: tuple[int, int] | None = None) -> np.ndarray:
     """An 8-bit RGB frame from a PNG or JPEG file (see :func:`read_stored_frame`)."""
     return read_stored_frame(path, size).pixels
 
 
-def read_stored_frame(path, size: tuple[int, int] | None = None) -> StoredFrame:
+def read_stored_frame(path: str | Path, size: tuple[int, int] | None = None) -> StoredFrame:
     """An 8-bit RGB frame from a PNG or JPEG file, and whether it is a JPEG.
 
     Its size is read from the file's header before anything is decoded: a frame larger

@@ -11,7 +11,7 @@ import json
 import warnings
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from mirrorsim.errors import InputError
 from mirrorsim.formats import dataset_table as table
@@ -23,6 +23,9 @@ from mirrorsim.formats.files import (
     write_json,
 )
 from solver.selfcal import priors_text
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 DATASET_FORMAT = "mirrorsim-dataset"
 TABLE_SEAL = "mirrorsim.sha256"  # the Parquet schema's metadata key of its checksum
@@ -344,7 +347,7 @@ def read_table(folder: str | Path) -> dict[str, list]:
     return cols
 
 
-def load_dataset(folder: str | Path):
+def load_dataset(folder: str | Path) -> pd.DataFrame:
     """A dataset's table, verified (:func:`read_table`), as a pandas DataFrame with each
     scene's frame, scene file and measurements file beside its columns (``frame``,
     ``scene_file``, ``measurements_file``: paths; empty for a failed scene).  The same

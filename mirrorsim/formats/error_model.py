@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from mirrorsim.formats.cache import seal, unseal
 from mirrorsim.formats.measurements import read_shared_alpha
@@ -117,7 +118,7 @@ class ErrorModel:
     # dataset's card); not part of the model, so not in its file, digest or equality
     source: str | None = field(default=None, compare=False)
 
-    def fx_scale(self, fx_px):
+    def fx_scale(self, fx_px: ArrayLike | None) -> float | np.ndarray:
         """The factor on σ for frames of focal length ``fx_px`` (broadcasts; 1 where it
         or the model's is unknown): pixel errors scale as fx_px(model) / fx."""
         fx = np.asarray(np.nan if fx_px is None else fx_px, float)
@@ -125,7 +126,8 @@ class ErrorModel:
         scale = np.where(ok, (self.fx_px or 1.0) / np.where(ok, fx, 1.0), 1.0)
         return float(scale) if scale.ndim == 0 else scale
 
-    def whole_sigma(self, kind: str, quantity: str, features: np.ndarray, fx_px) -> np.ndarray:
+    def whole_sigma(self, kind: str, quantity: str, features: np.ndarray, fx_px: ArrayLike | None
+                    ) -> np.ndarray:
         """Each row's whole σ of ``kind``'s ``quantity`` at feature rows and focal lengths:
         its own law scaled to fx, and for α the frame's shared offset besides."""
         own = self.fits[kind][quantity].log_sigma(features) * self.fx_scale(fx_px)

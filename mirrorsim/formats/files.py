@@ -17,11 +17,14 @@ import re
 import stat
 import sys
 import tempfile
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TextIO
 
 from mirrorsim.errors import OutputError
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 if TYPE_CHECKING:
     import numpy as np
@@ -214,7 +217,8 @@ def claim_output_folder(path: str | Path, option: str) -> Path:
     return path
 
 
-def check_inputs_outside(folder: str | Path, inputs, option: str) -> None:
+def check_inputs_outside(folder: str | Path, inputs: Iterable[tuple[str, str | Path | None]],
+                         option: str) -> None:
     """Refuse an input file inside ``folder``, a run's output folder, whose file names
     the run gives (one may be the input's).  ``inputs``: (what it is, its path) pairs,
     a path None or ``-`` skipped."""
@@ -228,7 +232,8 @@ def check_inputs_outside(folder: str | Path, inputs, option: str) -> None:
                               "there: move the input out, or choose another folder")
 
 
-def claim_run_folder(path: str | Path, option: str, inputs=()) -> Path:
+def claim_run_folder(path: str | Path, option: str,
+                     inputs: Iterable[tuple[str, str | Path | None]] = ()) -> Path:
     """A library run's output folder: :func:`claim_output_folder`, after refusing any of
     ``inputs`` inside it (:func:`check_inputs_outside`), so that a script calling the
     library keeps the command line's promises (no user's folder written into, no input
@@ -294,7 +299,7 @@ def encode_jpeg(pixels: np.ndarray, quality: int) -> bytes:
     return _encode(pixels, ".jpg", [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
 
 
-def decode_image(data: bytes):
+def decode_image(data: bytes) -> np.ndarray | None:
     """8-bit RGB pixels of PNG or JPEG bytes (None where they cannot be decoded), without
     OpenCV's own messages on stderr."""
     import cv2
@@ -328,7 +333,7 @@ def write_png(path: str | Path, pixels: np.ndarray) -> Path:
     return Path(path)
 
 
-def save_figure(fig, path: str | Path, dpi: int = 110) -> Path:
+def save_figure(fig: Figure, path: str | Path, dpi: int = 110) -> Path:
     """Write a matplotlib figure as a PNG atomically (tight layout), and close it."""
     import matplotlib.pyplot as plt
 
@@ -349,7 +354,7 @@ def write_json(path: str | Path, data: Any) -> Path:
     return write_text(path, dumps(data))
 
 
-def emit_json(dest: str | Path | None, data: Any, stdout=None) -> None:
+def emit_json(dest: str | Path | None, data: Any, stdout: TextIO | None = None) -> None:
     """Write strict JSON to a file, to stdout (or the ``stdout`` given) for ``"-"``, or
     nowhere for None."""
     if dest is None:

@@ -7,14 +7,15 @@ can draw an invalid scene.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from mirrorsim.errors import SceneError
 from mirrorsim.formats.reader import Reader
-from mirrorsim.scene.model import Board, Mirror, Scene, footprints
+from mirrorsim.scene.model import Beacon, Board, Mirror, Occluder, Scene, footprints
 from mirrorsim.truth import visibility
 from solver.geometry import segment_distance, signed_distance
 
@@ -54,7 +55,7 @@ class Failures:
         raise first
 
 
-def unit_hints(board: Board, mirror: Mirror, hfov: float, positions) -> str:
+def unit_hints(board: Board, mirror: Mirror, hfov: float, positions: Iterable[ArrayLike]) -> str:
     """Why a geometric check may have failed: a length given in mm, an angle in radians.
     Only said once a check has failed, since each such value is also a valid one."""
     W, H = board.size
@@ -75,8 +76,9 @@ def unit_hints(board: Board, mirror: Mirror, hfov: float, positions) -> str:
     return "; ".join(hints)
 
 
-def check_all_on_board(f: Failures, on_board, position, mirror: Mirror, target_position,
-                        beacons, bkey, occluders) -> None:
+def check_all_on_board(f: Failures, on_board: Callable[[Any, str, str], bool], position: ArrayLike,
+                       mirror: Mirror, target_position: ArrayLike, beacons: Sequence[Beacon],
+                       bkey: Callable[[int], str], occluders: Sequence[Occluder]) -> None:
     """Every object stands on the board (the mirror's ends, believed positions too)."""
     f.attempt(on_board, position, "camera.position", "the camera")
     # the mirror's ends only where its centre is on the board, and one end off is enough
@@ -109,8 +111,9 @@ def board_check(r: Reader, board: Board) -> Callable[[Any, str, str], bool]:
     return on_board
 
 
-def check_mirror_faces(f: Failures, r: Reader, camera_position, mirror: Mirror,
-                        target_position, beacons, bkey) -> None:
+def check_mirror_faces(f: Failures, r: Reader, camera_position: ArrayLike, mirror: Mirror,
+                       target_position: ArrayLike, beacons: Sequence[Beacon],
+                       bkey: Callable[[int], str]) -> None:
     """The camera must see the mirror's face, and the objects stand in front of it."""
     # The reflective face is the one turned towards the camera; a camera on the line
     # (or nearly so) sees the mirror edge-on.
@@ -133,7 +136,8 @@ def check_mirror_faces(f: Failures, r: Reader, camera_position, mirror: Mirror,
         f.attempt(in_front, b.position, f"{bkey(i)}.position", "beacon")
 
 
-def check_sight(f: Failures, scene: Scene, r: Reader, bkey) -> tuple[str, ...]:
+def check_sight(f: Failures, scene: Scene, r: Reader, bkey: Callable[[int], str]
+                ) -> tuple[str, ...]:
     """Refuse images that do not reach the camera; warn of clipped or direct views."""
     sighted = [("target.position", scene.target, "target")] + [
         (f"{bkey(i)}.position", b, "beacon") for i, b in enumerate(scene.beacons)]
@@ -156,7 +160,7 @@ def check_sight(f: Failures, scene: Scene, r: Reader, bkey) -> tuple[str, ...]:
     return tuple(warnings)
 
 
-def check_overlaps(f: Failures, scene: Scene, r: Reader, bkey) -> None:
+def check_overlaps(f: Failures, scene: Scene, r: Reader, bkey: Callable[[int], str]) -> None:
     """Record footprints that intersect, and a camera standing inside one."""
     fps = footprints(scene, bkey)
     for j in range(len(fps)):
@@ -175,6 +179,6 @@ def check_overlaps(f: Failures, scene: Scene, r: Reader, bkey) -> None:
                                   f"{fmt(cam)}: the camera stands inside {k}"))
 
 
-def fmt(p) -> str:
+def fmt(p: ArrayLike) -> str:
     """A point as the messages show it: ``[57, 95]``."""
     return "[" + ", ".join(f"{float(v):g}" for v in p) + "]"

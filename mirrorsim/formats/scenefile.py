@@ -80,8 +80,8 @@ def load_scene(path: str | Path) -> Scene:
 
 
 def read_camera_model(r: Reader, cam: dict, key: str,
-                      default_resolution=DEFAULT_RESOLUTION) -> tuple[float, float,
-                                                                   tuple[int, int]]:
+                      default_resolution: tuple[int, int] = DEFAULT_RESOLUTION
+                      ) -> tuple[float, float, tuple[int, int]]:
     """A camera's model from its block (scene files and specs alike): mount height (cm),
     hfov (°), resolution (px)."""
     return (r.number(cam["height"], f"{key}.height", positive=True, high=MAX_BOARD_CM),

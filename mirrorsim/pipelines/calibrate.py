@@ -48,7 +48,7 @@ MARGIN_PX = 24  # rendered around the object's projected outline
 METHOD = "foot-chroma|target-foot-chroma|front-0.338|slope8|seeds-ss"
 
 
-def calibration_key(camera: Camera, target_size, pencil_height: float,
+def calibration_key(camera: Camera, target_size: tuple[float, float], pencil_height: float,
                     distance_error: float = 0.0, subsampled: bool = False) -> str:
     """What K depends on: the camera model, the objects' sizes, the method (and whether
     its edges are measured as in a frame of half-resolution colour), and where the
@@ -123,7 +123,8 @@ def reference_camera(camera: Camera) -> Camera:
                   hfov=camera.hfov, pan=REFERENCE_PAN, pan_deg=REFERENCE_PAN)
 
 
-def reference_object(kind: str, size, distance: float = D_REF) -> Target | Beacon:
+def reference_object(kind: str, size: float | tuple[float, float], distance: float = D_REF
+                     ) -> Target | Beacon:
     """The object on the reference camera's optical axis at ``distance``, facing it."""
     p = tuple(float(v) for v in distance * unit(REFERENCE_PAN))
     if kind == "target":
@@ -146,8 +147,9 @@ def reference_crop(camera: Camera, obj: Target | Beacon) -> tuple[int, int, int,
     return box
 
 
-def measure_reference(camera: Camera, kind: str, size, variant: str = "auto",
-                      distance: float = D_REF, subsampled: bool = False) -> float:
+def measure_reference(camera: Camera, kind: str, size: float | tuple[float, float],
+                      variant: str = "auto", distance: float = D_REF, subsampled: bool = False
+                      ) -> float:
     """Pixel height of the object standing at ``distance``, as the detector measures it
     (``subsampled``: as it measures a JPEG frame)."""
     from mirrorsim.rendering.passes import render_direct  # Mitsuba only when a render is needed
@@ -178,8 +180,8 @@ def _check_distance_error(value) -> None:
         raise BadParameter("distance_error", why)
 
 
-def calibrate(camera: Camera, target_size, pencil_height: float, *, variant: str = "auto",
-              refresh: bool = False, distance_error: float = 0.0,
+def calibrate(camera: Camera, target_size: tuple[float, float], pencil_height: float, *,
+              variant: str = "auto", refresh: bool = False, distance_error: float = 0.0,
               subsampled: bool = False) -> Calibration:
     """K for the target and the pencil with this camera (cached).
 

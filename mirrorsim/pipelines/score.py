@@ -122,7 +122,7 @@ REPORT_RENDER_KEYS = ("spp", "seed", "sampler", "variant")
 EXTRA_FILES = ("ids", "annotated")
 
 
-def check_keep(keep) -> None:
+def check_keep(keep: object) -> None:
     """Refuse a ``keep`` that is not a collection of :data:`EXTRA_FILES` names (a typo
     kept nothing, silently; a bare string matched by its substrings)."""
     if isinstance(keep, str):

@@ -293,7 +293,7 @@ def _accumulate(mi_scene, sensor, spp: int, seed: tuple[int, ...],
     return (acc / spp).astype(np.float32)
 
 
-def id_pass(mi_scene, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
+def id_pass(mi_scene: mi.Scene, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
     """Object ids at pixel centres: the first surface hit, and what the mirror shows.
 
     The ``aov`` integrator's ``shape_index`` only records the first hit, which for

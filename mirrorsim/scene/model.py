@@ -9,9 +9,11 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from mirrorsim.errors import BadParameter
 from solver.geometry import line_normal, signed_distance, unit
@@ -120,7 +122,7 @@ class Mirror:
         c, d = np.asarray(self.center, float), unit(self.yaw) * self.size[0] / 2.0
         return c - d, c + d
 
-    def normal_towards(self, point) -> np.ndarray:
+    def normal_towards(self, point: ArrayLike) -> np.ndarray:
         """Unit normal of the mirror's line on the side of ``point`` (2-D)."""
         n = line_normal(self.yaw)
         return n if signed_distance(point, self.center, self.yaw) >= 0 else -n
@@ -219,7 +221,7 @@ def hfov_of(width: float, fx: float) -> float:
     return math.degrees(2.0 * math.atan(width / 2.0 / fx))
 
 
-def is_whole(v) -> bool:
+def is_whole(v: object) -> bool:
     """An integer (numpy's too), not a bool: a count or a seed, wherever one is taken."""
     return isinstance(v, int | np.integer) and not isinstance(v, bool)
 
@@ -298,7 +300,8 @@ def check_is_scene(value: object) -> None:
                            f"{type(value).__name__}")
 
 
-def footprints(scene: Scene, bkey=None) -> list[tuple[str, np.ndarray, np.ndarray, float]]:
+def footprints(scene: Scene, bkey: Callable[[int], str] | None = None
+               ) -> list[tuple[str, np.ndarray, np.ndarray, float]]:
     """Each object's footprint as a capsule: (key, segment start, segment end, radius).
 
     ``bkey(i)`` names beacon i's key as the file wrote it (``beacon`` or ``beacons[i]``).

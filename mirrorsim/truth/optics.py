@@ -14,6 +14,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from mirrorsim.scene.model import (
     FRONT_OFFSET,
@@ -30,7 +31,7 @@ from solver.geometry import bearing_deg, unit
 from solver.sltr import Observation, observe
 
 
-def mirror_image(observer: Point2, mirror: Mirror, point) -> Observation:
+def mirror_image(observer: Point2, mirror: Mirror, point: ArrayLike) -> Observation:
     """Virtual image, α, d_total, d1, d2 and reflection point of a board point seen from
     ``observer`` (the camera's position): the solver's forward model, as plain floats."""
     obs = observe(observer, mirror.center, mirror.yaw, point, strict=False)
@@ -40,7 +41,7 @@ def mirror_image(observer: Point2, mirror: Mirror, point) -> Observation:
                        reflection_point=np.asarray(obs.reflection_point, float))
 
 
-def along_mirror(mirror: Mirror, point) -> float:
+def along_mirror(mirror: Mirror, point: ArrayLike) -> float:
     """A point's signed distance from the mirror's centre along its yaw (a reflection
     point's offset: beyond half the width, the glass does not reach it)."""
     return float((np.asarray(point, float) - np.asarray(mirror.center, float))
@@ -87,7 +88,7 @@ def camera_axes(camera: Camera, pitch: float = 0.0, roll: float = 0.0
     return forward, right, down
 
 
-def project(camera: Camera, points3, pitch: float = 0.0, roll: float = 0.0
+def project(camera: Camera, points3: ArrayLike, pitch: float = 0.0, roll: float = 0.0
             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Pinhole projection of 3-D points (OpenCV pixel convention: centres at integers),
     by the level camera or one pitched and rolled (:func:`camera_axes`).

@@ -95,7 +95,7 @@ def glass_frame(scene: Scene) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.nd
     return np.r_[m.center, 0.0] + up * m.size[1] / 2, along, up, n
 
 
-def sag(a, b, radius: float | None):
+def sag(a: np.ndarray, b: np.ndarray, radius: float | None) -> np.ndarray:
     """How far a spherical glass of ``radius`` (> 0: concave) stands before its tangent
     plane at (a, b) from the centre (cm; 0 for a flat one)."""
     if radius is None:
