@@ -94,7 +94,7 @@ def best_beacon_set(observer: ArrayLike, target_alpha_deg: float, target_d_total
                     calibration: SelfCalibration = PLAIN, step: float = 1.0,
                     keep_out: Sequence[tuple[np.ndarray, np.ndarray, float]] = (),
                     clearance: float = 1.0,
-                    accept: Callable[[np.ndarray], np.ndarray] | None = None,
+                    accept: Callable[[np.ndarray], bool] | None = None,
                     min_depth: float = 0.5) -> BeaconSet:
     """Choose ``n`` beacon positions on the board's grid one at a time, each the one that
     lowers the expected target error most (with ``calibration``'s nuisances estimated,
@@ -149,7 +149,7 @@ def best_beacon_set(observer: ArrayLike, target_alpha_deg: float, target_d_total
             ok &= np.hypot(*(grid - grid[c]).T) >= clearance
         score = np.where(ok, full if np.isfinite(full[ok]).any() else only, np.inf)
         order = np.argsort(score)
-        pick = next((int(i) for i in order[:500] if np.isfinite(score[i])
+        pick = next((int(i) for i in order if np.isfinite(score[i])
                      and (accept is None or accept(grid[i]))), -1)
         if pick < 0:
             raise SolverError(f"no acceptable position for beacon {len(chosen) + 1}")

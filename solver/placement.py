@@ -306,7 +306,7 @@ def best_beacon(observer: ArrayLike, target_alpha_deg: float, target_d_total: fl
                 poses: list[tuple[np.ndarray, float]], sigma: Sigma | ObjectSigmas,
                 mirror_size: float, board: tuple[float, float], step: float = 0.5,
                 keep_out: list[tuple[np.ndarray, np.ndarray, float]] = (), min_seen: float = 1.0,
-                accept: Callable[[np.ndarray], np.ndarray] | None = None) -> BeaconSearch:
+                accept: Callable[[np.ndarray], bool] | None = None) -> BeaconSearch:
     """Grid search over the board for the beacon position with the least expected
     target error among those seen under at least ``min_seen`` of the mirror poses (or,
     where none is, under as many as any position is).  ``keep_out`` holds segments
@@ -324,13 +324,23 @@ def best_beacon(observer: ArrayLike, target_alpha_deg: float, target_d_total: fl
         err[blocked], seen[blocked] = np.inf, 0.0
     if not (seen > 0).any():
         raise SolverError("no beacon position on the board is seen through the mirror")
-    need = min(min_seen, seen.max())
-    score = np.where(seen >= need - 1e-12, err, np.inf)
-    order = np.argsort(score)
-    k = int(order[0])
-    if accept is not None:
-        k = next((int(i) for i in order[:500] if np.isfinite(score[i]) and accept(grid[i])), -1)
-        if k < 0:
-            raise SolverError("no acceptable beacon position among the 500 best candidates")
+    k, refused = -1, set()
+    # the best position seen under ``min_seen`` of the poses; where ``accept`` refuses
+    # every such one (a wide prior leaves a handful), the best under fewer poses
+    for need in np.unique(seen[seen > 0])[::-1]:
+        score = np.where(seen >= min(min_seen, need) - 1e-12, err, np.inf)
+        for i in np.argsort(score):
+            if not np.isfinite(score[i]):
+                break
+            if i not in refused:
+                if accept is None or accept(grid[i]):
+                    k = int(i)
+                    break
+                refused.add(i)
+        if k >= 0:
+            break
+    if k < 0:
+        raise SolverError("no beacon position on the board passes the placement's test "
+                          "(its image unobstructed through the mirror)")
     return BeaconSearch(grid[k], float(err[k]), float(seen[k]), xs, ys,
                         err.reshape(gx.shape), seen.reshape(gx.shape))

@@ -5,6 +5,7 @@ import math
 import numpy as np
 import pytest
 
+from solver.errors import SolverError
 from solver.lsq import solve_lsq, solve_measurements
 from solver.measurements import BeaconMeasurement, Sigma
 from solver.placement import (
@@ -128,3 +129,34 @@ def test_expected_error_matches_least_squares_and_best_is_much_better():
     paper, _ = expected_target_error(o, ot.alpha_deg, ot.d_total, np.array([[17.0, 33.5]]),
                                      poses, sig, 18.2, min_depth=0.0)
     assert best.rmse < paper[0] / 10 and best.seen_fraction == 1.0
+
+
+def test_best_beacon_falls_back_to_fewer_poses_where_the_test_refuses_every_fully_seen():
+    """A wide prior leaves few positions seen under every pose; where ``accept`` refuses
+    them all, the best position seen under fewer poses is chosen (it stopped with an
+    error after 500 candidates), and where it refuses every position, one line says so."""
+    o, m, yaw = np.zeros(2), np.array([16.0, 34.5]), 38.3
+    ot = observe(o, m, yaw, (65.5, 42.7))
+    sig = Sigma(0.01, 0.002)
+    poses = MirrorPrior(d1=float(ot.d1), yaw_deg=yaw, d1_spread=2,
+                        yaw_spread_deg=3).poses(o, ot.alpha_deg)
+    free = best_beacon(o, ot.alpha_deg, ot.d_total, poses, sig, 18.2, (80, 80), step=1.0)
+    full = free.seen >= 1.0
+    assert full.any() and (free.seen[(free.seen > 0) & ~full]).any()
+    # refuse every position seen under all poses
+    xs, ys = np.meshgrid(free.xs, free.ys)
+    refused = {(float(x), float(y)) for x, y in zip(xs[full], ys[full], strict=True)}
+    calls = []
+
+    def accept(p):
+        calls.append(tuple(p))
+        return (float(p[0]), float(p[1])) not in refused
+
+    got = best_beacon(o, ot.alpha_deg, ot.d_total, poses, sig, 18.2, (80, 80), step=1.0,
+                      accept=accept)
+    assert got.seen_fraction < 1.0 and tuple(got.position) not in refused
+    assert got.seen_fraction == free.seen[free.seen < 1.0].max()
+    assert len(calls) == len(set(calls))  # no position tested twice
+    with pytest.raises(SolverError, match="no beacon position on the board passes"):
+        best_beacon(o, ot.alpha_deg, ot.d_total, poses, sig, 18.2, (80, 80), step=1.0,
+                    accept=lambda _p: False)

@@ -324,3 +324,15 @@ def test_solve_reads_measurements_from_a_pipe(tmp_path):
     scene = subprocess.run([sys.executable, "-m", "mirrorsim", "check", "-"], input="{}",
                            capture_output=True, text=True, cwd=tmp_path)
     assert scene.returncode == 2 and "no such file" in scene.stderr
+
+
+def test_plan_with_a_wide_prior_falls_back_and_says_so(tmp_path, capsys):
+    """At a ±20° yaw prior two positions of the default scene are seen under every pose
+    and its real mirror shows neither unobstructed: the plan chose none and stopped
+    (exit 1).  Now it proposes the best seen under fewer poses and prints how many."""
+    png, js = tmp_path / "plan.png", tmp_path / "plan.json"
+    assert main(["plan", str(SCENES / "default.yaml"), "--yaw-spread", "20", "--out", str(png),
+                 "--json", str(js)]) == 0
+    best = json.loads(js.read_text())["best_beacon"]
+    assert 0 < best["seen_fraction"] < 1
+    assert f"seen under {100 * best['seen_fraction']:.0f}% of poses" in capsys.readouterr().out

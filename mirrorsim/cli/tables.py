@@ -279,7 +279,10 @@ def plan_text(scene: Scene, plan: Plan) -> str:
           for i, (b, (rmse, seen)) in enumerate(zip(scene.beacons, plan.scene_beacons,
                                                     strict=True))),
         f"    best position ({bb.position[0]:.1f}, {bb.position[1]:.1f}): "
-        f"{bb.rmse:.3f} cm", *_set_lines(plan.beacon_set)])
+        f"{bb.rmse:.3f} cm" + (f" (seen under {100 * bb.seen_fraction:.0f}% of poses: none "
+                               "seen under all passes the placement's test)"
+                               if bb.seen_fraction < 1 else ""),
+        *_set_lines(plan.beacon_set)])
 
 
 def _set_lines(bs: BeaconSet | None) -> list[str]:
