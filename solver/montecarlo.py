@@ -78,12 +78,21 @@ class Table1Geometry:
 @dataclass(frozen=True)
 class RowErrors:
     """One row's RMSEs over its draws: the reflector (the target's reflection point), the
-    target, the mirror's yaw; and how many draws gave no finite estimate."""
+    target, the mirror's yaw; and how many draws gave no finite estimate.  Beside them,
+    the reflector's and the target's median errors and the share of each one's summed
+    squared error that its single largest draw holds: a mirror estimated nearly along the
+    target's ray puts the reflection point (and the target) far off, and where one draw
+    holds most of the sum the RMSE follows that draw, not the σ's (it does not settle as
+    draws grow)."""
 
     rmse_ref: float
     rmse_tar: float
     rmse_yaw_deg: float
     failed: int
+    median_ref: float = float("nan")
+    median_tar: float = float("nan")
+    largest_share_ref: float = float("nan")
+    largest_share_tar: float = float("nan")
 
 
 @dataclass(frozen=True)
@@ -161,7 +170,16 @@ def run_row(sigma_alpha_deg: float, sigma_d: float, iterations: int = 200,
     return RowErrors(rmse_ref=float(np.sqrt(np.mean(ref_err ** 2))),
                      rmse_tar=float(np.sqrt(np.mean(tar_err ** 2))),
                      rmse_yaw_deg=float(np.sqrt(np.mean(yaw_err ** 2))),
-                     failed=int(k - ok.sum()))
+                     failed=int(k - ok.sum()),
+                     median_ref=float(np.median(ref_err)), median_tar=float(np.median(tar_err)),
+                     largest_share_ref=_largest_share(ref_err),
+                     largest_share_tar=_largest_share(tar_err))
+
+
+def _largest_share(err: np.ndarray) -> float:
+    """The share of ``sum(err²)`` that the largest draw holds (NaN for no draws)."""
+    sq = np.asarray(err, float) ** 2
+    return float(sq.max() / sq.sum()) if sq.size and sq.sum() > 0 else float("nan")
 
 
 def table1(iterations: int = 200, geometry: Table1Geometry | None = None,

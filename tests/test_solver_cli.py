@@ -336,3 +336,18 @@ def test_plan_with_a_wide_prior_falls_back_and_says_so(tmp_path, capsys):
     best = json.loads(js.read_text())["best_beacon"]
     assert 0 < best["seen_fraction"] < 1
     assert f"seen under {100 * best['seen_fraction']:.0f}% of poses" in capsys.readouterr().out
+
+
+def test_montecarlo_says_where_one_draw_holds_a_rows_rmse(capsys):
+    """Table 1's second row at 1000 draws: one draw's reflection point lies far off
+    (the reflector's RMSE 17.9 where 200 draws give 0.28), so the RMSE is no measure of
+    the σ's; the row's largest draw's share and its median say so.  Small σ's give no
+    such draw."""
+    heavy = run_row(2.6, 0.29, iterations=1000, rng=np.random.default_rng(0))
+    assert heavy.largest_share_ref > 0.5 and heavy.rmse_ref > 2 * heavy.median_ref
+    calm = run_row(0.01, 0.005, iterations=1000, rng=np.random.default_rng(0))
+    assert calm.largest_share_ref < 0.05 and calm.largest_share_tar < 0.05
+    assert calm.rmse_ref == pytest.approx(calm.median_ref, rel=0.5)
+    assert main(["montecarlo", "--iterations", "1000"]) == 0
+    notes = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("note:")]
+    assert len(notes) == 1 and notes[0].startswith("note: row 2: one draw of 1000 holds")

@@ -254,7 +254,22 @@ def montecarlo_table(res: Table1) -> str:
                      f"{r.paper_rmse_ref:9.3f} {r.paper_rmse_tar:9.3f} | "
                      f"{r.ours.rmse_ref:9.3f} {r.ours.rmse_tar:9.3f} "
                      f"{r.ours.rmse_yaw_deg:9.2f}" + beacon)
+    for i, r in enumerate(res.rows, 1):
+        for what, share, median, why in (
+                ("reflector", r.ours.largest_share_ref, r.ours.median_ref,
+                 " (a mirror estimated nearly along the target's ray meets it far off)"),
+                ("target", r.ours.largest_share_tar, r.ours.median_tar, "")):
+            if share > HEAVY_TAIL_SHARE:
+                lines.append(
+                    f"note: row {i}: one draw of {res.iterations} holds {100 * share:.0f} % of "
+                    f"the {what}'s squared error{why}, so its RMSE follows that draw and does "
+                    f"not settle as draws grow; its median error is {median:.3f}")
     return "\n".join(lines)
+
+
+# a row's RMSE is called unsettled where its largest draw holds more than this share of
+# the summed squared error
+HEAVY_TAIL_SHARE = 0.5
 
 
 def plan_text(scene: Scene, plan: Plan) -> str:
