@@ -23,7 +23,11 @@ images' own α errors beside the mirror's power's first-order move.  ``--lossles
 tell JPEG's part from the rest.  ``--priors``: two more columns, self-calibrated with
 the spec's ranges as what the bench knows of each nuisance (``SelfCalibration.priors``: a
 uniform draw's σ, (hi − lo)/√12; the calibration's distance error over D_REF as the
-scale's), with the believed and with the exact positions.
+scale's), with the believed and with the exact positions.  Every run ends with two
+more columns: the same frames measured with the camera's pose from the pegboard's holes
+(``evaluate --board-pose``: every α turned by the board's pan, every d_total corrected
+for its pitch, the pan then known to the board's precision), self-calibrated for the
+rest, with the believed and with the exact positions.
 """
 
 from __future__ import annotations
@@ -59,6 +63,18 @@ from solver.selfcal import (  # noqa: E402
     check_nuisances,
     describe_priors,
 )
+
+
+def _board_errors(rep, scene, position_sigma: float, nuisances: tuple[str, ...]
+                  ) -> tuple[float, float]:
+    """Target error self-calibrated on the measurements corrected by the board's camera
+    pose (``rep``: evaluated with ``board_pose``), with believed and with exact positions."""
+    m, truth = rep.measurements, np.asarray(rep.truth.target.position, float)
+    exact = [BeaconMeasurement(tuple(b.position), mb.alpha_deg, mb.d_total)
+             for b, mb in zip(scene.beacons, m.beacons, strict=True)]
+    return tuple(float(np.linalg.norm(solve_measurements(
+        m.observer, beacons, m.targets, m.sigma, SelfCalibration(nuisances, ps)).target - truth))
+        for beacons, ps in ((m.beacons, position_sigma), (exact, 0.0)))
 
 
 def _errors(rep, scene, position_sigma: float, nuisances: tuple[str, ...],
@@ -181,11 +197,12 @@ def main() -> None:
     if a.priors:
         print(f"priors (the spec's ranges): "
               f"{describe_priors(priors)}\n")
-    extra = " self-calibrated with priors | … exact positions |" if a.priors else ""
+    extra = (" self-calibrated with priors | … exact positions |" if a.priors else "") + (
+        " board's pose, self-calibrated | board's pose, exact positions |")
     print("| scene | plain (cm) | self-calibrated | pan and scale only | plain, exact "
           "positions | self-calibrated, exact positions | reference: pan and scale known | "
           f"pan error ° | calibration error cm |{extra}\n|---|---|---|---|---|---|---|---|---|"
-          + "---|---|" * a.priors)
+          + "---|---|" * a.priors + "---|---|")
     rows, skipped, own, moved = [], [], [], []
     rng = np.random.default_rng(seed)
     with tempfile.TemporaryDirectory() as tmp:
@@ -211,7 +228,11 @@ def main() -> None:
             try:
                 rep = evaluate_scene(scene, out / scene.name, progress=False, keep=(),
                                      error_model=model)
-                e = _errors(rep, scene, position_sigma, nuisances, priors)
+                # the same frames (reused), measured with the board's camera pose
+                posed = evaluate_scene(scene, out / scene.name, progress=False, keep=(),
+                                       error_model=model, board_pose=True)
+                e = (_errors(rep, scene, position_sigma, nuisances, priors)
+                     + _board_errors(posed, scene, position_sigma, nuisances))
             except (DetectionError, SolverError, SceneError) as exc:
                 # (SceneError: planned positions the scene file's checks refuse, which
                 # evaluate runs on a scene it is given)
@@ -238,7 +259,9 @@ def main() -> None:
           f"{med[3] / med[2]:.2f} (exact positions); pan and scale only: "
           f"{med[7] / med[0]:.2f} (believed); the reference / plain: {med[4] / med[2]:.2f} "
           f"(exact)" + (f"; with priors: {med[8] / med[0]:.2f} (believed), "
-                        f"{med[9] / med[2]:.2f} (exact)" if a.priors else ""))
+                        f"{med[9] / med[2]:.2f} (exact)" if a.priors else "")
+          + f"; with the board's camera pose: {med[-2] / med[0]:.2f} (believed), "
+          f"{med[-1] / med[2]:.2f} (exact)")
     print(f"\nthe reference's parts, medians: each image's own α error alone (every d_total "
           f"true) {med[5]:.3f} cm, its own d_total error alone (every α true) {med[6]:.3f} cm")
     own, moved = np.concatenate(own), np.concatenate(moved)

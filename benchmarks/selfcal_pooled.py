@@ -3,17 +3,17 @@
 
     python benchmarks/selfcal_pooled.py [TABLE ...] [--draws 4000] [--seed 0]
 
-Reads the per-scene tables that ``benchmarks/selfcal.py`` printed (by default the
-JPEG runs registered in ``docs/results/``: three seeds of 40 benches each), and prints
-for each run and for all of them pooled the ratios of medians the issue's targets are
-stated in (self-calibrated / plain, with the believed and with the exact positions;
-the same self-calibrated with priors, where every run pooled has them; the reference /
-plain), each with a 90 % bootstrap interval: the scenes redrawn with
-replacement within each run, ``--draws`` times.  A ratio of medians over 40 scenes
-moves a lot with the scenes drawn; the interval says how much, so that a target met or
-missed on one run is not taken for more than it is.  The tables' values are printed to
-three decimals, so a run's ratio here may differ in its last digit from the one
-printed under its table.
+Reads the per-scene tables that ``benchmarks/selfcal.py`` printed (by default the JPEG
+runs registered in ``docs/results/``: four seeds of 40 benches each), and prints for
+each run and for all of them pooled the ratios of medians the issue's targets are stated
+in (self-calibrated / plain, with the believed and with the exact positions; the same
+self-calibrated with priors, and with the board's camera pose, where every run pooled
+has them; the reference / plain), each with a 90 % bootstrap interval: the scenes
+redrawn with replacement within each run, ``--draws`` times. A ratio of medians over 40
+scenes moves a lot with the scenes drawn; the interval says how much, so that a target
+met or missed on one run is not taken for more than it is. The tables' values are
+printed to three decimals, so a run's ratio here may differ in its last digit from the
+one printed under its table.
 """
 
 from __future__ import annotations
@@ -29,22 +29,27 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 from stamp import stamp  # noqa: E402
 
-RUNS = ("selfcal_bench", "selfcal_bench_fresh", "selfcal_bench_priors")
+RUNS = ("selfcal_bench", "selfcal_bench_fresh", "selfcal_bench_priors", "selfcal_bench_board")
 # the per-scene table's columns read here, by their headings as selfcal.py prints them
 HEADINGS = {"plain": "plain (cm)", "selfcal": "self-calibrated",
             "plain_exact": "plain, exact positions",
             "selfcal_exact": "self-calibrated, exact positions",
             "reference": "reference: pan and scale known",
             # a run with --priors has these two more (NaN where a run has not)
-            "priors": "self-calibrated with priors", "priors_exact": "… exact positions"}
+            "priors": "self-calibrated with priors", "priors_exact": "… exact positions",
+            # the camera's pose from the board's holes (evaluate --board-pose)
+            "board": "board's pose, self-calibrated",
+            "board_exact": "board's pose, exact positions"}
 COLUMNS = list(HEADINGS)
-OPTIONAL = ("priors", "priors_exact")
+OPTIONAL = ("priors", "priors_exact", "board", "board_exact")
 # the run whose benches chose the JPEG foot's 5-px window (docs/results.md)
 TUNED = "selfcal_bench"
 RATIOS = (("self-calibrated / plain, believed positions", "selfcal", "plain"),
           ("self-calibrated / plain, exact positions", "selfcal_exact", "plain_exact"),
           ("with priors / plain, believed positions", "priors", "plain"),
           ("with priors / plain, exact positions", "priors_exact", "plain_exact"),
+          ("board's pose / plain, believed positions", "board", "plain"),
+          ("board's pose / plain, exact positions", "board_exact", "plain_exact"),
           ("reference / plain, exact positions", "reference", "plain_exact"))
 
 

@@ -140,8 +140,14 @@ RESULTS: tuple[Result, ...] = (
            markdown=True, about="self-calibration with and without priors from the spec's "
                                 "ranges, on 40 benches of the seed the page reads, drawn "
                                 "afresh for it (about 8 min)"),
+    Result("selfcal_bench_board",
+           (f"{PY} benchmarks/selfcal.py --scenes 40 --priors --seed 13179213",),
+           markdown=True, about="self-calibration with the board's camera pose, on 40 "
+                                "benches of a seed drawn afresh for it on 2026-12-03 after "
+                                "the board's columns were measured on the three above "
+                                "(about 10 min)"),
     Result("selfcal_pooled", (f"{PY} benchmarks/selfcal_pooled.py",), markdown=True,
-           about="the three JPEG runs above, their ratios pooled with bootstrap intervals "
+           about="the four JPEG runs above, their ratios pooled with bootstrap intervals "
                  "(after them: it reads their tables)"),
     Result("selfcal_bench_png",
            (f"{PY} benchmarks/selfcal.py --scenes 40 --seed 4417001 --lossless",),

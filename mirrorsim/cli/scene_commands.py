@@ -251,6 +251,11 @@ def _evaluate_options(p):
                         "(<name>.annotated.png); plot, the top view of truth and estimate "
                         "with the 95 %% error ellipse (<name>.eval.png).  Each costs "
                         "0.1-2 s, so none by default")
+    p.add_argument("--board-pose", action="store_true",
+                   help="measure the camera's pan, pitch and roll on the pegboard's holes "
+                        "seen in each frame and correct every α and d_total by them: the "
+                        "bench calibrates its mount (its pan then known to ~0.002°; a "
+                        "--prior on pan gives way to it).  About 0.1 s a frame")
 
 
 @command("evaluate", "render, detect, solve and score against ground truth",
@@ -273,7 +278,8 @@ def _evaluate(args) -> int:
     out = out_folder(args, scene)
     report = evaluate_scene(scene, out, variant=args.variant, progress=not args.quiet,
                             keep=tuple(k for k in args.keep if k != "plot"),
-                            error_model=error_model_of(args), calibration=calibration)
+                            error_model=error_model_of(args), calibration=calibration,
+                            board_pose=args.board_pose)
     print(f"{scene.name}: {len(report.frames)} frame(s), {report.render.spp} spp, "
           f"{report.render.variant}{' (reused)' if report.reused else ''}")
     print(report_table(report, scene))

@@ -15,7 +15,16 @@ from typing import Any
 
 from mirrorsim.errors import InputError
 from mirrorsim.formats.reader import Reader, read_json, read_resolution, show
-from mirrorsim.scene.model import MAX_HFOV_DEG, Beacon, Camera, Point2, Scene, fx_of, hfov_of
+from mirrorsim.scene.model import (
+    MAX_HFOV_DEG,
+    Beacon,
+    Board,
+    Camera,
+    Point2,
+    Scene,
+    fx_of,
+    hfov_of,
+)
 
 REFERENCE_DISTANCE = 100.0  # cm: where calibration stands its reference objects
 
@@ -42,6 +51,9 @@ class CaptureRecord:
     frame: str = ""
     reference_distance: float = REFERENCE_DISTANCE
     distortion: tuple[float, float] = (0.0, 0.0)  # the lens's k1, k2 as calibrated
+    # the pegboard the camera stands on, as built (its size and hole grid): what measures
+    # the camera's pose (mirrorsim.detection.board); None in a record made before it
+    board: Board | None = None
 
     @classmethod
     def from_scene(cls, scene: Scene, frame: str = "") -> CaptureRecord:
@@ -54,7 +66,8 @@ class CaptureRecord:
         beacons = tuple(Beacon(b.believed, b.height) for b in scene.beacons)
         return cls(camera=camera, beacons=beacons, target_size=scene.target.size,
                    frame=frame,
-                   distortion=bench.distortion if bench.distortion_known else (0.0, 0.0))
+                   distortion=bench.distortion if bench.distortion_known else (0.0, 0.0),
+                   board=scene.board)
 
     def to_json(self) -> dict:
         """The capture record document."""
@@ -67,13 +80,18 @@ class CaptureRecord:
                 "beacons": [{"position": list(b.position), "height": b.height}
                             for b in self.beacons],
                 "target": {"size": list(self.target_size)},
-                "calibration": {"reference_distance": self.reference_distance}}
+                "calibration": {"reference_distance": self.reference_distance},
+                **({"board": {"size": list(self.board.size),
+                              "hole_pitch": self.board.hole_pitch,
+                              "hole_diameter": self.board.hole_diameter}}
+                   if self.board is not None else {})}
 
     @classmethod
     def from_json(cls, data: Any, source: str | Path = "<capture>") -> CaptureRecord:
         """Parse and check a record (raises :class:`CaptureError` naming file and key)."""
         r = Reader(source, CaptureError)
-        top = r.mapping(data, "", ("camera", "beacons", "target"), ("frame", "calibration"))
+        top = r.mapping(data, "", ("camera", "beacons", "target"),
+                        ("frame", "calibration", "board"))
         c = r.mapping(top["camera"], "camera", ("position", "height", "pan_deg", "resolution",
                                                 "fx"),
                       ("fy", "cx", "cy", "hfov_deg", "distortion"))
@@ -99,7 +117,14 @@ class CaptureRecord:
                                   r.number(b["height"], f"beacons[{i}].height", positive=True)))
         t = r.mapping(top["target"], "target", ("size",))
         cal = r.mapping(top.get("calibration", {}), "calibration", (), ("reference_distance",))
-        return cls(camera=camera, beacons=tuple(beacons),
+        board = None
+        if "board" in top:
+            b = r.mapping(top["board"], "board", ("size", "hole_pitch", "hole_diameter"))
+            board = Board(size=r.pair(b["size"], "board.size", positive=True),
+                          hole_pitch=r.number(b["hole_pitch"], "board.hole_pitch", low=0.0),
+                          hole_diameter=r.number(b["hole_diameter"], "board.hole_diameter",
+                                                 positive=True))
+        return cls(camera=camera, beacons=tuple(beacons), board=board,
                    target_size=r.pair(t["size"], "target.size", positive=True),
                    frame=str(top.get("frame", "")), distortion=distortion,
                    reference_distance=r.number(cal.get("reference_distance", REFERENCE_DISTANCE),

@@ -13,6 +13,13 @@ from pathlib import Path
 
 import numpy as np
 
+from mirrorsim.detection.board import (
+    corrected_beacon,
+    corrected_pair,
+    frame_pose,
+    mean_pose,
+    pose_pan_sigma,
+)
 from mirrorsim.detection.detector import annotate
 from mirrorsim.errors import DetectionError
 from mirrorsim.formats.error_model import ErrorModel, default_error_model
@@ -27,7 +34,7 @@ from mirrorsim.pipelines.score import (
     check_keep,
     score,
 )
-from mirrorsim.scene.model import Scene
+from mirrorsim.scene.model import Scene, pencil_paint_height
 from mirrorsim.truth.groundtruth import RenderInfo
 from solver.errors import SolverError
 from solver.lsq import solve_measurements
@@ -38,7 +45,7 @@ from solver.selfcal import PLAIN, SelfCalibration, as_calibration
 def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: str = "auto",
                    progress: bool = True, error_model: ErrorModel | None = None,
                    keep: tuple[str, ...] = EXTRA_FILES,
-                   calibration: SelfCalibration = PLAIN) -> Report:
+                   calibration: SelfCalibration = PLAIN, board_pose: bool = False) -> Report:
     """Render (or reuse) with the scene's render settings, detect, solve and score
     ``scene``; return the report.
 
@@ -51,12 +58,17 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
     (``--keep plot``).  ``calibration``: the bench errors to estimate with
     the mirror (self-calibration, :class:`solver.selfcal.SelfCalibration`; needs two
     beacons or more, three for pan, scale and power together), how well the beacons'
-    positions are known and what the bench knows of the nuisances.
+    positions are known and what the bench knows of the nuisances.  ``board_pose``: the
+    camera's pan, pitch and roll measured on the pegboard's holes in each frame
+    (:func:`mirrorsim.detection.board.measure_camera_pose`), every α and d_total
+    corrected by them, and the pan then known to the board's precision (a pan prior of
+    ``calibration`` gives way to it); the pose is in the report.
 
     Raises
     ------
     DetectionError
-        If an object is not found, or the target's d_total in no frame.
+        If an object is not found, or the target's d_total in no frame; with
+        ``board_pose``, too few of the board's holes in a frame.
     OutputError
         If ``out_dir`` holds files mirrorsim did not write, or the scene's own file.
     BadParameter
@@ -73,12 +85,13 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
     out = claim_run_folder(out_dir if out_dir is not None else default_out(scene.name),
                            "out_dir", [("scene", scene.source)])
     return evaluate_into(scene, out, variant=variant, progress=progress,
-                         error_model=error_model, keep=keep, calibration=calibration)
+                         error_model=error_model, keep=keep, calibration=calibration,
+                         board_pose=board_pose)
 
 
 def evaluate_into(scene: Scene, out: Path, *, variant: str = "auto", progress: bool = True,
                   error_model: ErrorModel | None = None, keep: tuple[str, ...] = EXTRA_FILES,
-                  calibration: SelfCalibration = PLAIN) -> Report:
+                  calibration: SelfCalibration = PLAIN, board_pose: bool = False) -> Report:
     """:func:`evaluate_scene` into ``out``, a folder inside one its caller has claimed
     (a dataset's, a budget's): its parameters already checked."""
     cam = scene.camera
@@ -105,11 +118,25 @@ def evaluate_into(scene: Scene, out: Path, *, variant: str = "auto", progress: b
         raise DetectionError(f"{scene.name}: the target's d_total could not be measured in "
                              f"any frame ({', '.join(str(m.files.image) for m in measured)}): "
                              f"{why or 'its image is clipped at the top'}")
+    pose = None
+    if board_pose:
+        pose = mean_pose([frame_pose(m.files.image, m.files.capture) for m in measured])
+        h = measured[0].files.capture.camera.height
+        heights = [b.height for det in detections for b, _ in det.beacons]
+        beacons = [corrected_beacon(pose, b, h, pencil_paint_height(ht))
+                   for b, ht in zip(beacons, heights, strict=True)]
+        top = measured[0].files.capture.target_size[1]
+        targets = [corrected_pair(pose, t, h, top) for t in targets]
+        # the pan is now the board's to know: a prior from the mount's reading gives way
+        calibration = replace(calibration, priors={k: v for k, v in calibration.priors.items()
+                                                   if k != "pan"})
     mean_target = tuple(float(v) for v in np.mean(targets, axis=0))
     model = error_model or default_error_model()
     # what the experimenter knows: the measurements and the capture record's pan
     pan, fx = measured[0].files.capture.camera.pan_deg, measured[0].files.capture.camera.fx
     sigma = model.sigmas(mean_target, [(b.alpha_deg, b.d_total) for b in beacons], pan, fx)
+    if pose is not None:  # every α's shared offset: what is left of the pan after the board
+        sigma = replace(sigma, shared_alpha_deg=pose_pan_sigma(pose))
     measurements = Measurements(observer=cam.position, targets=[mean_target], beacons=beacons,
                                 sigma=sigma, observer_pan_deg=pan)
     # the target once, at its mean over the frames: each frame's detection of the same
@@ -142,7 +169,7 @@ def evaluate_into(scene: Scene, out: Path, *, variant: str = "auto", progress: b
                   errors=errors, frames=tuple(frames),
                   render=RenderInfo(done.variant, done.spp, done.seed, done.sampler),
                   calibration=cal,
-                  error_vs_beacons=by_count)
+                  error_vs_beacons=by_count, camera_pose=pose)
 
 
 def frames_of(scene: Scene) -> list[Scene]:

@@ -9,6 +9,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from mirrorsim.detection.board import CameraPose
 from mirrorsim.detection.image_geometry import Calibration
 from mirrorsim.errors import BadParameter
 from mirrorsim.formats.measurements import measurements_from_dict
@@ -157,6 +158,8 @@ class Report:
     render: RenderInfo
     calibration: Calibration
     error_vs_beacons: tuple[Score, ...] = field(default=())
+    # the camera's pose measured on the board (``evaluate --board-pose``), else None
+    camera_pose: CameraPose | None = None
 
     @property
     def reused(self) -> bool:
@@ -171,6 +174,8 @@ class Report:
                "frames": [asdict(f) for f in self.frames],
                "render": {k: self.render.to_json()[k] for k in REPORT_RENDER_KEYS},
                "calibration": self.calibration.constants()}
+        if self.camera_pose is not None:
+            out["camera_pose"] = self.camera_pose.to_json()
         if self.error_vs_beacons:
             out["error_vs_beacons"] = [{"beacons": k + 1, **s.to_json()}
                                        for k, s in enumerate(self.error_vs_beacons)]
@@ -188,4 +193,5 @@ class Report:
                    calibration=Calibration(**d["calibration"]),
                    error_vs_beacons=tuple(
                        Score.from_json({k: v for k, v in e.items() if k != "beacons"})
-                       for e in d.get("error_vs_beacons", [])))
+                       for e in d.get("error_vs_beacons", [])),
+                   camera_pose=CameraPose(**d["camera_pose"]) if "camera_pose" in d else None)

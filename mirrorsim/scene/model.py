@@ -66,6 +66,16 @@ class Board:
     hole_pitch: float = 2.5
     hole_diameter: float = 0.6
 
+    def hole_centres(self) -> np.ndarray:
+        """(k, 2) centres of the holes (cm): every whole multiple of the pitch inside the
+        board's edges, as the rendered pegboard has them; none on a plain board."""
+        if self.hole_pitch <= 0:
+            return np.zeros((0, 2))
+        xs, ys = (np.arange(1, math.ceil(s / self.hole_pitch)) * self.hole_pitch
+                  for s in self.size)
+        gx, gy = np.meshgrid(xs[xs < self.size[0]], ys[ys < self.size[1]])
+        return np.column_stack([gx.ravel(), gy.ravel()])
+
 
 @dataclass(frozen=True)
 class Camera:
@@ -145,6 +155,26 @@ class Target:
         """Ends of the panel's footprint (its width runs across the facing direction)."""
         p, d = np.asarray(self.position, float), unit(self.facing_deg + 90.0) * self.size[0] / 2
         return p - d, p + d
+
+
+def camera_axes(camera: Camera, pitch: float = 0.0, roll: float = 0.0
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Forward, right and down unit vectors of the camera (3-D): level unless a bench's
+    ``pitch`` (deg, optical axis raised) or ``roll`` (deg, clockwise as seen from behind)
+    says otherwise."""
+    f = unit(camera.pan_deg)
+    forward = np.array([f[0], f[1], 0.0])
+    right = np.array([f[1], -f[0], 0.0])
+    down = np.array([0.0, 0.0, -1.0])
+    if pitch:
+        p = math.radians(pitch)
+        forward, down = (math.cos(p) * forward - math.sin(p) * down,
+                         math.cos(p) * down + math.sin(p) * forward)
+    if roll:
+        q = math.radians(roll)
+        right, down = (math.cos(q) * right + math.sin(q) * down,
+                       math.cos(q) * down - math.sin(q) * right)
+    return forward, right, down
 
 
 def pencil_paint_height(height: float) -> float:

@@ -26,6 +26,7 @@ from mirrorsim.scene.model import (
     Point2,
     Scene,
     Target,
+    camera_axes,
 )
 from solver.geometry import bearing_deg, unit
 from solver.sltr import Observation, observe
@@ -66,26 +67,6 @@ def resolve_pan(observer: Point2, pan: float | str, mirror: Mirror, target_posit
     if pan == "beacon":
         return mirror_image(observer, mirror, beacon_position).alpha_deg
     return float(pan)
-
-
-def camera_axes(camera: Camera, pitch: float = 0.0, roll: float = 0.0
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Forward, right and down unit vectors of the camera (3-D): level unless a bench's
-    ``pitch`` (deg, optical axis raised) or ``roll`` (deg, clockwise as seen from behind)
-    says otherwise."""
-    f = unit(camera.pan_deg)
-    forward = np.array([f[0], f[1], 0.0])
-    right = np.array([f[1], -f[0], 0.0])
-    down = np.array([0.0, 0.0, -1.0])
-    if pitch:
-        p = math.radians(pitch)
-        forward, down = (math.cos(p) * forward - math.sin(p) * down,
-                         math.cos(p) * down + math.sin(p) * forward)
-    if roll:
-        q = math.radians(roll)
-        right, down = (math.cos(q) * right + math.sin(q) * down,
-                       math.cos(q) * down - math.sin(q) * right)
-    return forward, right, down
 
 
 def project(camera: Camera, points3: ArrayLike, pitch: float = 0.0, roll: float = 0.0
