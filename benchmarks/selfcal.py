@@ -203,7 +203,7 @@ def main() -> None:
           "positions | self-calibrated, exact positions | reference: pan and scale known | "
           f"pan error ° | calibration error cm |{extra}\n|---|---|---|---|---|---|---|---|---|"
           + "---|---|" * a.priors + "---|---|")
-    rows, skipped, own, moved = [], [], [], []
+    rows, skipped, own, moved, pose_err = [], [], [], [], []
     rng = np.random.default_rng(seed)
     with tempfile.TemporaryDirectory() as tmp:
         out = a.out or Path(tmp)
@@ -233,6 +233,10 @@ def main() -> None:
                                        error_model=model, board_pose=True)
                 e = (_errors(rep, scene, position_sigma, nuisances, priors)
                      + _board_errors(posed, scene, position_sigma, nuisances))
+                cp, bench = posed.camera_pose, scene.bench
+                # the mount reads pan + pan_error: the board's offset should be its negative
+                pose_err.append((cp.pan_offset_deg + bench.pan_error, cp.pitch_deg - bench.pitch,
+                                 cp.roll_deg - bench.roll))
             except (DetectionError, SolverError, SceneError) as exc:
                 # (SceneError: planned positions the scene file's checks refuse, which
                 # evaluate runs on a scene it is given)
@@ -262,6 +266,11 @@ def main() -> None:
                         f"{med[9] / med[2]:.2f} (exact)" if a.priors else "")
           + f"; with the board's camera pose: {med[-2] / med[0]:.2f} (believed), "
           f"{med[-1] / med[2]:.2f} (exact)")
+    pe = np.abs(np.array(pose_err))
+    print(f"\nthe board's camera pose against the bench's, {len(pe)} scenes (mean of each "
+          f"scene's frames): pan RMS {np.sqrt(np.mean(pe[:, 0]**2)):.4f}° (at most "
+          f"{pe[:, 0].max():.4f}°), pitch RMS {np.sqrt(np.mean(pe[:, 1]**2)):.4f}° (at most "
+          f"{pe[:, 1].max():.4f}°), roll RMS {np.sqrt(np.mean(pe[:, 2]**2)):.4f}°")
     print(f"\nthe reference's parts, medians: each image's own α error alone (every d_total "
           f"true) {med[5]:.3f} cm, its own d_total error alone (every α true) {med[6]:.3f} cm")
     own, moved = np.concatenate(own), np.concatenate(moved)

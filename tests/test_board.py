@@ -1,0 +1,183 @@
+"""The camera's pose from the pegboard (mirrorsim.detection.board): on rendered frames of
+benches whose pan reading, pitch and roll are off by amounts fixed in the scene, against
+those amounts; the pitch's effect on an upright object's height against the projection
+of the truth wing; what evaluate makes of it; the capture record's board."""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+
+import numpy as np
+import pytest
+
+from mirrorsim.cli.main import main
+from mirrorsim.detection.board import (
+    PAN_SD_FLOOR_DEG,
+    corrected_pair,
+    frame_pose,
+    measure_camera_pose,
+    pitch_factor,
+)
+from mirrorsim.detection.detector import read_frame
+from mirrorsim.errors import DetectionError
+from mirrorsim.formats.capture import CaptureRecord
+from mirrorsim.formats.files import claim_output_folder
+from mirrorsim.formats.scenefile import scene_from_dict
+from mirrorsim.pipelines.evaluate import evaluate_scene
+from mirrorsim.pipelines.frame import render_and_measure
+from mirrorsim.pipelines.score import Report
+from mirrorsim.scene.model import Board, Camera
+from mirrorsim.truth import optics
+
+from .conftest import SCENES, scene_dict
+
+W, H = 960, 544  # half size
+POSE = {"pan_error": 0.3, "pitch": -0.7, "roll": 0.4}  # the mount's errors, fixed here
+
+
+def _bench(**camera) -> object:
+    d = copy.deepcopy(scene_dict("default"))
+    d["camera"]["resolution"] = [W, H]
+    d["camera"].update(camera)
+    d["render"] = {"spp": 8}
+    return scene_from_dict(d, source="bench.yaml", default_name="default")
+
+
+@pytest.fixture(scope="module")
+def posed(tmp_path_factory):
+    """A bench whose mount reads the pan 0.3° high, pitched 0.7° down and rolled 0.4°."""
+    tmp = claim_output_folder(tmp_path_factory.mktemp("board") / "run", "out")
+    scene = _bench(**POSE)
+    m = render_and_measure(scene, tmp, progress=False)
+    return scene, m.files, tmp
+
+
+def test_the_board_gives_the_camera_its_pose(posed):
+    _, files, _ = posed
+    pose = measure_camera_pose(read_frame(files.image), files.capture.camera,
+                               files.capture.board)
+    # the mount reads pan + 0.3°: the board says to turn every α by −0.3°
+    assert pose.pan_offset_deg == pytest.approx(-POSE["pan_error"], abs=0.01)
+    assert pose.pitch_deg == pytest.approx(POSE["pitch"], abs=0.01)
+    assert pose.roll_deg == pytest.approx(POSE["roll"], abs=0.02)
+    assert pose.holes >= 50 and pose.residual_px < 0.5
+    assert frame_pose(files.image, files.capture) == pose  # the stored frame, read alike
+
+
+def test_a_level_mount_reads_level(tmp_path):
+    scene = _bench()
+    m = render_and_measure(scene, tmp_path, progress=False)
+    pose = frame_pose(m.files.image, m.files.capture)
+    assert abs(pose.pan_offset_deg) < 0.01 and abs(pose.pitch_deg) < 0.01
+    assert abs(pose.roll_deg) < 0.02
+
+
+def test_no_pose_without_holes_or_a_board():
+    cam = Camera(position=(0.0, 0.0), height=5.0, resolution=(320, 182), hfov=60.0, pan=45.0,
+                 pan_deg=45.0)
+    with pytest.raises(DetectionError, match="no holes"):
+        measure_camera_pose(np.full((182, 320, 3), 200, np.uint8), cam, Board((80, 80), 0.0))
+    with pytest.raises(DetectionError, match="too few"):
+        measure_camera_pose(np.full((182, 320, 3), 200, np.uint8), cam, Board((80, 80)))
+
+
+def test_the_pitch_factor_is_the_projection_of_the_truth_wing():
+    """An upright segment on the optical axis's column, seen by a camera pitched p and by
+    a level one: the ratio of their pixel heights (optics.project) is the factor."""
+    cam = Camera(position=(0.0, 0.0), height=6.5, resolution=(1920, 1088), hfov=65.2,
+                 pan=0.0, pan_deg=0.0)
+    for pitch, top, d in ((1.0, 3.0, 60.0), (-1.0, 3.0, 60.0), (0.5, 15.0, 90.0),
+                          (-0.8, 3.0, 30.0)):
+        seg = np.array([[d, 0.0, top], [d, 0.0, 0.0]])
+        _, v_level, _ = optics.project(cam, seg)
+        _, v_pitched, _ = optics.project(cam, seg, pitch=pitch)
+        ratio = (v_pitched[1] - v_pitched[0]) / (v_level[1] - v_level[0])
+        assert pitch_factor(pitch, top, cam.height, d) == pytest.approx(ratio, rel=1e-9)
+    # to first order the factor is 1 − (tan φ_top + tan φ_foot)·p: a pencil below the
+    # camera looks shorter to one pitched down towards it (−0.3 % at 1°, the size of
+    # JPEG's error on its height), taller to one pitched up
+    for pitch in (-1.0, 1.0):
+        first = -((3.0 - 6.5) / 60.0 + -6.5 / 60.0) * math.radians(pitch)
+        assert pitch_factor(pitch, 3.0, 6.5, 60.0) - 1 == pytest.approx(first, rel=0.15)
+    assert pitch_factor(-1.0, 3.0, 6.5, 60.0) < 0.9975
+
+
+def test_corrected_pair_turns_alpha_and_scales_d():
+    from mirrorsim.detection.board import CameraPose
+
+    pose = CameraPose(pan_offset_deg=-0.3, pitch_deg=1.0, roll_deg=0.0, holes=100,
+                      residual_px=0.2, pan_sd_deg=0.001)
+    a, d = corrected_pair(pose, (359.9, 60.0), 6.5, 3.0)  # bearings within (−180, 180]
+    assert a == pytest.approx(-0.4) and d == pytest.approx(60.0 * pitch_factor(1.0, 3.0, 6.5,
+                                                                                60.0))
+
+
+def test_evaluate_with_the_board_pose(posed):
+    """The same frames (reused) measured with the board's pose: the α errors the pan
+    reading put in every image are gone, the pose is in the report (and reads back), and
+    the pan is left to the board's σ."""
+    scene, _, folder = posed
+    plain = evaluate_scene(scene, folder, progress=False, keep=())
+    board = evaluate_scene(scene, folder, progress=False, keep=(), board_pose=True)
+    assert plain.camera_pose is None and board.camera_pose is not None
+    assert abs(plain.errors.target_alpha_deg) > 0.25  # the pan reading's 0.3°
+    assert abs(board.errors.target_alpha_deg) < 0.05
+    assert board.measurements.sigma.shared_alpha_deg >= PAN_SD_FLOOR_DEG
+    back = Report.from_json(board.to_json())
+    assert back.camera_pose == board.camera_pose
+
+
+def test_evaluate_board_pose_on_the_command_line(tmp_path):
+    out, js = tmp_path / "out", tmp_path / "r.json"
+    scene = tmp_path / "s.yaml"
+    d = copy.deepcopy(scene_dict("default"))
+    d["camera"].update(resolution=[W, H], pan_error=0.2)
+    d["render"] = {"spp": 4}
+    import yaml
+
+    scene.write_text(yaml.safe_dump(d))
+    assert main(["evaluate", str(scene), "--board-pose", "--out", str(out), "--json",
+                 str(js), "--quiet"]) == 0
+    pose = json.loads(js.read_text())["camera_pose"]
+    assert pose["pan_offset_deg"] == pytest.approx(-0.2, abs=0.01)
+
+
+def test_the_capture_record_carries_the_board():
+    scene = scene_from_dict(scene_dict("default"), source=str(SCENES / "default.yaml"),
+                            default_name="default")
+    rec = CaptureRecord.from_scene(scene, "f.png")
+    back = CaptureRecord.from_json(json.loads(json.dumps(rec.to_json())))
+    assert back.board == scene.board
+    old = rec.to_json()
+    del old["board"]
+    assert CaptureRecord.from_json(old).board is None
+    bad = rec.to_json()
+    bad["board"]["hole_pitch"] = -1
+    with pytest.raises(Exception, match="board.hole_pitch"):
+        CaptureRecord.from_json(bad)
+
+
+def test_a_record_without_a_board_is_refused_in_one_line(posed):
+    _, files, _ = posed
+    old = files.capture.to_json()
+    del old["board"]
+    with pytest.raises(DetectionError, match="names no board"):
+        frame_pose(files.image, CaptureRecord.from_json(old))
+
+
+def test_hole_centres_are_where_the_texture_darkens():
+    """Board.hole_centres against the rendered texture: each centre's texel is the hole's
+    colour, the point halfway between two holes the board's."""
+    from mirrorsim.rendering.mitsuba_scene import BOARD_TEXELS_PER_CM, _board_texture
+
+    board = Board((20.0, 10.0), 2.5, 0.6)
+    tex = _board_texture(board)
+    c = board.hole_centres()
+    assert len(c) == 7 * 3
+    rows = ((board.size[1] - c[:, 1]) * BOARD_TEXELS_PER_CM).astype(int)
+    cols = (c[:, 0] * BOARD_TEXELS_PER_CM).astype(int)
+    assert np.all(tex[rows, cols].mean(axis=1) < 0.05)
+    mid_rows = ((board.size[1] - c[:, 1] - 1.25) * BOARD_TEXELS_PER_CM).astype(int)
+    assert np.all(tex[mid_rows, cols].mean(axis=1) > 0.2)
