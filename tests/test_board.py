@@ -181,3 +181,25 @@ def test_hole_centres_are_where_the_texture_darkens():
     assert np.all(tex[rows, cols].mean(axis=1) < 0.05)
     mid_rows = ((board.size[1] - c[:, 1] - 1.25) * BOARD_TEXELS_PER_CM).astype(int)
     assert np.all(tex[mid_rows, cols].mean(axis=1) > 0.2)
+
+
+def test_a_frame_whose_record_lacks_the_board_is_rendered_anew(posed):
+    """A frame an older mirrorsim wrote, its record without the board but every hash
+    consistent: not reused (its pose could not be measured), rendered again."""
+    import hashlib
+
+    from mirrorsim.formats.cache import seal, unseal
+    from mirrorsim.rendering.frames import reused_frame
+
+    scene, files, folder = posed
+    assert reused_frame(scene, folder, ids=False) is not None
+    old = files.capture.to_json()
+    del old["board"]
+    data = json.dumps(old).encode()
+    files.capture_json.write_bytes(data)
+    truth = unseal(json.loads(files.truth_json.read_text()), "truth")
+    truth["render"]["files"][files.capture_json.name] = hashlib.sha256(data).hexdigest()
+    files.truth_json.write_text(json.dumps(seal(truth)))
+    assert reused_frame(scene, folder, ids=False) is None
+    again = render_and_measure(scene, folder, progress=False)
+    assert again.files.capture.board == scene.board

@@ -181,6 +181,8 @@ def _reusable(scene: Scene, out: Path, fingerprint: str) -> FrameFiles | None:
         capture = load_capture(cap)
     except (OSError, ValueError, KeyError, TypeError) as exc:  # CaptureError: a ValueError
         return _rerender(image, str(exc))
+    if capture != capture_of(scene, out):
+        return None  # a record an older mirrorsim wrote (without the board): made anew
     return FrameFiles(image=image, truth_json=js, ids_png=ids if have_ids else None,
                       capture_json=cap, capture=capture, truth=truth, reused=True)
 
