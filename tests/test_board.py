@@ -101,7 +101,7 @@ def test_the_pitch_factor_is_the_projection_of_the_truth_wing():
     for pitch in (-1.0, 1.0):
         first = -((3.0 - 6.5) / 60.0 + -6.5 / 60.0) * math.radians(pitch)
         assert pitch_factor(pitch, 3.0, 6.5, 60.0) - 1 == pytest.approx(first, rel=0.15)
-    assert pitch_factor(-1.0, 3.0, 6.5, 60.0) < 0.9975
+    assert pitch_factor(-1.0, 3.0, 6.5, 60.0) == pytest.approx(1 - 0.0026, abs=5e-5)  # Method
 
 
 def test_corrected_pair_turns_alpha_and_scales_d():
