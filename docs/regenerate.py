@@ -55,6 +55,12 @@ RESULTS: tuple[Result, ...] = (
     Result("budget_exp1", (f"{MS} budget scenes/bench/exp1.yaml",),
            about="the paper's EXP1 on a hand-built bench: the error budget",
            fresh=("renders/exp1_bench",)),
+    Result("evaluate_exp1_board",
+           (f"{MS} evaluate scenes/bench/exp1_3beacons.yaml --calibrate pan,scale "
+            "--beacon-sigma 0.115 --board-pose --out renders/exp1_board --quiet",),
+           about="EXP1's bench with three planned beacons, self-calibrated with the "
+                 "camera's pose from the pegboard",
+           fresh=("renders/exp1_board",)),
     Result("budget_exp1_3beacons",
            (f"{MS} budget scenes/bench/exp1_3beacons.yaml --calibrate pan,scale "
             "--beacon-sigma 0.115",),
