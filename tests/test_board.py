@@ -15,7 +15,7 @@ import pytest
 from mirrorsim.cli.main import main
 from mirrorsim.detection.board import (
     PAN_SD_FLOOR_DEG,
-    corrected_pair,
+    corrected_image,
     frame_pose,
     measure_camera_pose,
     pitch_factor,
@@ -104,14 +104,48 @@ def test_the_pitch_factor_is_the_projection_of_the_truth_wing():
     assert pitch_factor(-1.0, 3.0, 6.5, 60.0) == pytest.approx(1 - 0.0026, abs=5e-5)  # Method
 
 
-def test_corrected_pair_turns_alpha_and_scales_d():
+@pytest.mark.parametrize("offset,pitch,roll", [(0.0, 0.0, 0.0), (-0.3, 1.0, 0.0),
+                                                (0.2, -0.8, 0.5), (0.0, 0.0, -0.5)])
+def test_corrected_image_undoes_the_pose(offset, pitch, roll):
+    """An upright object at a known bearing and distance, imaged by a camera turned,
+    pitched and rolled (the truth wing's projection), its d_total as size constancy with a
+    level camera's K reads it: corrected, its bearing (every point of an upright axis has
+    it) and its distance come back."""
     from mirrorsim.detection.board import CameraPose
+    from mirrorsim.detection.edges import ImageMeasurement
 
-    pose = CameraPose(pan_offset_deg=-0.3, pitch_deg=1.0, roll_deg=0.0, holes=100,
+    reported = Camera(position=(3.0, 2.0), height=6.5, resolution=(1920, 1088), hfov=65.2,
+                      pan=60.0, pan_deg=60.0)
+    true_cam = Camera(position=(3.0, 2.0), height=6.5, resolution=(1920, 1088), hfov=65.2,
+                      pan=60.0 + offset, pan_deg=60.0 + offset)
+    pose = CameraPose(pan_offset_deg=offset, pitch_deg=pitch, roll_deg=roll, holes=100,
                       residual_px=0.2, pan_sd_deg=0.001)
-    a, d = corrected_pair(pose, (359.9, 60.0), 6.5, 3.0)  # bearings within (−180, 180]
-    assert a == pytest.approx(-0.4) and d == pytest.approx(60.0 * pitch_factor(1.0, 3.0, 6.5,
-                                                                                60.0))
+    for bearing, dist, top in ((52.0, 60.0, 3.0), (75.0, 90.0, 15.25), (66.0, 45.0, 3.0)):
+        foot = np.array(reported.position) + dist * np.array(
+            [math.cos(math.radians(bearing)), math.sin(math.radians(bearing))])
+        seg = np.array([[*foot, top], [*foot, 0.0]])
+        u, v, _ = optics.project(true_cam, seg, pitch=pitch, roll=roll)
+        _, v_level, _ = optics.project(true_cam, seg)
+        mid = 0.5  # the axis's column at the band's middle row (a straight line)
+        image = ImageMeasurement(kind="beacon", source="mirror", bbox_px=[0, 0, 1, 1],
+                                 u_axis=float(u[0] + mid * (u[1] - u[0])),
+                                 v_top=float(v[0]), v_bottom=float(v[1]),
+                                 height_px=float(v[1] - v[0]), width_px=None,
+                                 d_total=dist * (v_level[1] - v_level[0]) / (v[1] - v[0]))
+        a, d = corrected_image(pose, reported, image, top)
+        assert a == pytest.approx(bearing, abs=1e-9)
+        assert d == pytest.approx(dist, rel=2e-4)
+
+
+def test_a_rolled_mount_alone_is_measured(tmp_path):
+    """A mount rolled 0.25° and nothing else: the coarse search's best cell is the level
+    one, and the fit must still move from it (it stopped at once from a start of 1e-16)."""
+    scene = _bench(roll=-0.25)
+    m = render_and_measure(scene, claim_output_folder(tmp_path / "run", "out"),
+                           progress=False)
+    pose = frame_pose(m.files.image, m.files.capture)
+    assert pose.roll_deg == pytest.approx(-0.25, abs=0.02)
+    assert abs(pose.pan_offset_deg) < 0.01 and pose.residual_px < 0.5
 
 
 def test_evaluate_with_the_board_pose(posed):

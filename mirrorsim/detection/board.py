@@ -24,12 +24,12 @@ import cv2
 import numpy as np
 
 from mirrorsim.detection.detector import read_stored_frame
+from mirrorsim.detection.edges import ImageMeasurement
 from mirrorsim.errors import DetectionError
 from mirrorsim.formats.capture import CaptureRecord
 from mirrorsim.rendering.sensor import undistort
 from mirrorsim.scene.model import Board, Camera, camera_axes
 from solver.geometry import wrap_bearing
-from solver.measurements import BeaconMeasurement
 
 # the mount's reading is good to this (deg): the coarse search spans it
 PAN_SEARCH_DEG = 0.6
@@ -89,19 +89,26 @@ def hole_blobs(image: np.ndarray) -> np.ndarray:
     return np.asarray(out, float).reshape(-1, 2)
 
 
-def project_holes(camera: Camera, holes: np.ndarray, pan_offset: float = 0.0,
-                  pitch: float = 0.0, roll: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-    """Pixel positions (k, 2) of board points (k, 2) at z = 0 for the camera turned by
-    ``pan_offset`` and pitched and rolled; and their depth along the optical axis."""
+def project_points(camera: Camera, points3: np.ndarray, pan_offset: float = 0.0,
+                   pitch: float = 0.0, roll: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Pixel positions (k, 2) of 3-D points (k, 3) for the camera turned by ``pan_offset``
+    and pitched and rolled (:func:`~mirrorsim.scene.model.camera_axes`); and their depth
+    along the optical axis."""
     cam = replace(camera, pan_deg=camera.pan_deg + pan_offset)
     forward, right, down = camera_axes(cam, pitch, roll)
-    p = np.column_stack([holes, np.zeros(len(holes))]) - np.array(
-        [*camera.position, camera.height])
+    p = np.asarray(points3, float) - np.array([*camera.position, camera.height])
     z = p @ forward
     with np.errstate(divide="ignore", invalid="ignore"):
         uv = np.column_stack([cam.cx + cam.fx * (p @ right) / z,
                               cam.cy + cam.fx * (p @ down) / z])
     return uv, z
+
+
+def project_holes(camera: Camera, holes: np.ndarray, pan_offset: float = 0.0,
+                  pitch: float = 0.0, roll: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`project_points` of board points (k, 2) at z = 0."""
+    return project_points(camera, np.column_stack([holes, np.zeros(len(holes))]), pan_offset,
+                          pitch, roll)
 
 
 def _on_film(camera: Camera, uv: np.ndarray, z: np.ndarray) -> np.ndarray:
@@ -132,8 +139,10 @@ def measure_camera_pose(image: np.ndarray, camera: Camera, board: Board) -> Came
     tree = cKDTree(blobs)
     # coarse: the pan and pitch within the mount's tolerance that put most holes on blobs
     best, x = -1, np.zeros(3)
-    for dp in np.arange(-PAN_SEARCH_DEG, PAN_SEARCH_DEG + 1e-9, COARSE_STEP_DEG):
-        for pt in np.arange(-PITCH_SEARCH_DEG, PITCH_SEARCH_DEG + 1e-9, COARSE_STEP_DEG):
+    steps = (lambda half: np.arange(-round(half / COARSE_STEP_DEG),  # noqa: E731
+                                    round(half / COARSE_STEP_DEG) + 1) * COARSE_STEP_DEG)
+    for dp in steps(PAN_SEARCH_DEG):
+        for pt in steps(PITCH_SEARCH_DEG):
             uv, z = project_holes(camera, holes, dp, pt)
             uv = uv[_on_film(camera, uv, z)]
             if len(uv):
@@ -149,19 +158,24 @@ def measure_camera_pose(image: np.ndarray, camera: Camera, board: Board) -> Came
         near = dist < gate
         pairs = (seen[near], which[near])
         if len(pairs[0]) < MIN_HOLES:
-            raise DetectionError(f"{len(pairs[0])} of the board's holes matched in the frame: "
-                                 f"too few to measure the camera's pose on (need {MIN_HOLES})")
+            raise DetectionError(
+                f"{len(pairs[0])} of the board's holes matched in the frame: too few to "
+                f"measure the camera's pose on (need {MIN_HOLES}; the search covers a mount "
+                f"off by up to ±{PAN_SEARCH_DEG:g}° in pan and ±{PITCH_SEARCH_DEG:g}° in "
+                "pitch)")
 
-        def residuals(x, pairs=pairs):
-            uv, _ = project_holes(camera, holes[pairs[0]], *x)
+        def residuals(step, x=x, pairs=pairs):
+            uv, _ = project_holes(camera, holes[pairs[0]], *(x + step))
             return (uv - blobs[pairs[1]]).ravel()
 
-        fit = least_squares(residuals, x, loss="soft_l1", f_scale=0.5)
-        x = fit.x
+        # the step from the current pose, from exactly zero: least squares sizes its first
+        # trust region by the start's norm, and a start of 1e-16 never moved
+        fit = least_squares(residuals, np.zeros(3), loss="soft_l1", f_scale=0.5)
+        x = x + fit.x
         if gate <= LAST_GATE_PX:
             break
         gate = max(LAST_GATE_PX, gate / 1.5)
-    r = residuals(x).reshape(-1, 2)
+    r = residuals(np.zeros(3), x).reshape(-1, 2)
     # the pan's σ from the fit: the residuals' robust spread through the Jacobian
     spread = 1.4826 * float(np.median(np.abs(r - np.median(r, axis=0))))
     J = fit.jac
@@ -175,8 +189,8 @@ def pitch_factor(pitch_deg: float, top: float, camera_height: float, distance: f
                  ) -> float:
     """How much taller an upright object ``top`` cm high, standing ``distance`` cm away
     (horizontally), looks to a camera ``camera_height`` cm up pitched by ``pitch_deg``
-    than to a level one (its rows, on the optical axis's column): a d_total measured by
-    size constancy with the level camera's K is short by this factor."""
+    than to a level one (its rows, on the optical axis's column): multiply a d_total
+    measured by size constancy with the level camera's K by this factor."""
     p = math.radians(pitch_deg)
     above, below = math.atan2(top - camera_height, distance), math.atan2(-camera_height,
                                                                         distance)
@@ -215,16 +229,16 @@ def frame_pose(image_path: str | Path, capture: CaptureRecord) -> CameraPose:
 
 
 def mean_pose(poses: list[CameraPose]) -> CameraPose:
-    """The pose of one camera measured in several of its frames: their mean, the pan's σ
-    that of the mean."""
-    n = len(poses)
+    """The pose of one camera measured in several of its frames: their mean (the pan's σ
+    their mean σ, not that of a mean of independent errors)."""
     return CameraPose(
         pan_offset_deg=float(np.mean([p.pan_offset_deg for p in poses])),
         pitch_deg=float(np.mean([p.pitch_deg for p in poses])),
         roll_deg=float(np.mean([p.roll_deg for p in poses])),
         holes=int(sum(p.holes for p in poses)),
         residual_px=float(np.median([p.residual_px for p in poses])),
-        pan_sd_deg=float(np.sqrt(sum(p.pan_sd_deg ** 2 for p in poses)) / n))
+        # the frames see one board from one pose: their errors are not independent
+        pan_sd_deg=float(np.mean([p.pan_sd_deg for p in poses])))
 
 
 def pose_pan_sigma(pose: CameraPose) -> float:
@@ -232,18 +246,30 @@ def pose_pan_sigma(pose: CameraPose) -> float:
     return float(math.hypot(pose.pan_sd_deg, PAN_SD_FLOOR_DEG))
 
 
-def corrected_pair(pose: CameraPose, measurement: tuple[float, float], camera_height: float,
-                   top: float) -> tuple[float, float]:
-    """An image's (α, d_total) as the level camera at the board's pan would measure them:
-    α turned by the pan's offset, d_total lengthened by the pitch's factor for an upright
-    object ``top`` cm high (the measured band of a pencil, the panel's height)."""
-    alpha, d = measurement
-    return (float(wrap_bearing(alpha + pose.pan_offset_deg)),
-            float(d * pitch_factor(pose.pitch_deg, top, camera_height, d)))
+def corrected_image(pose: CameraPose, camera: Camera, image: ImageMeasurement, top: float
+                    ) -> tuple[float, float]:
+    """An image's (α, d_total) as a level camera at the board's pan would have measured
+    them (``camera`` as the mount reports it; ``top``: how high the measured upright
+    object is, the band of a pencil, the panel's height).
 
-
-def corrected_beacon(pose: CameraPose, beacon: BeaconMeasurement, camera_height: float,
-                     top: float) -> BeaconMeasurement:
-    """:func:`corrected_pair` for a beacon's measurement."""
-    return BeaconMeasurement(beacon.position, *corrected_pair(
-        pose, (beacon.alpha_deg, beacon.d_total), camera_height, top))
+    α is the bearing of the ray through the image's axis column and the middle of its band,
+    the camera turned, pitched and rolled as the board says: a roll moves the bearing of an
+    image below the camera's height by about roll·tan(elevation), the pencils' all alike.
+    d_total is multiplied by how much taller that pose makes the object look than a level
+    camera does, where it stands (:func:`pitch_factor` on the optical axis).
+    """
+    cam = replace(camera, pan_deg=camera.pan_deg + pose.pan_offset_deg)
+    forward, right, down = camera_axes(cam, pose.pitch_deg, pose.roll_deg)
+    v_mid = (cam.cy if image.v_top is None or image.v_bottom is None
+             else (image.v_top + image.v_bottom) / 2)
+    ray = forward + (image.u_axis - cam.cx) / cam.fx * right + (v_mid - cam.cy) / cam.fx * down
+    alpha = math.degrees(math.atan2(ray[1], ray[0]))
+    d = float(image.d_total)
+    foot = np.asarray(camera.position, float) + d * np.array(
+        [math.cos(math.radians(alpha)), math.sin(math.radians(alpha))])
+    upright = np.array([[*foot, top], [*foot, 0.0]])
+    posed, _ = project_points(camera, upright, pose.pan_offset_deg, pose.pitch_deg,
+                              pose.roll_deg)
+    level, _ = project_points(camera, upright, pose.pan_offset_deg)
+    return (float(wrap_bearing(alpha)),
+            d * float((posed[1, 1] - posed[0, 1]) / (level[1, 1] - level[0, 1])))

@@ -7,7 +7,7 @@ edges, this turns them into the angle of arrival α and the path length d_total.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 from mirrorsim.detection.edges import SIDES_ON_COLOUR, ImageMeasurement
 from mirrorsim.errors import DetectionError
@@ -24,7 +24,9 @@ class Calibration:
 
     target_k: float
     pencil_k: float
-    key: str = ""
+    # what the constants were measured for (the cache's key): not part of their value, so
+    # a report's calibration read back from its JSON equals the one it was written from
+    key: str = field(default="", compare=False)
 
     def height_px(self, kind: str, distance: float) -> float:
         """The image height (px) of the target or the beacon (``kind``) whose measured

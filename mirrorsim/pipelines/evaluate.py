@@ -14,8 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from mirrorsim.detection.board import (
-    corrected_beacon,
-    corrected_pair,
+    corrected_image,
     frame_pose,
     mean_pose,
     pose_pan_sigma,
@@ -37,8 +36,9 @@ from mirrorsim.pipelines.score import (
 from mirrorsim.scene.model import Scene, pencil_paint_height
 from mirrorsim.truth.groundtruth import RenderInfo
 from solver.errors import SolverError
+from solver.geometry import wrap_bearing
 from solver.lsq import solve_measurements
-from solver.measurements import Measurements
+from solver.measurements import BeaconMeasurement, Measurements
 from solver.selfcal import PLAIN, SelfCalibration, as_calibration
 
 
@@ -121,12 +121,14 @@ def evaluate_into(scene: Scene, out: Path, *, variant: str = "auto", progress: b
     pose = None
     if board_pose:
         pose = mean_pose([frame_pose(m.files.image, m.files.capture) for m in measured])
-        h = measured[0].files.capture.camera.height
-        heights = [b.height for det in detections for b, _ in det.beacons]
-        beacons = [corrected_beacon(pose, b, h, pencil_paint_height(ht))
-                   for b, ht in zip(beacons, heights, strict=True)]
-        top = measured[0].files.capture.target_size[1]
-        targets = [corrected_pair(pose, t, h, top) for t in targets]
+        capture = measured[0].files.capture
+        # each image again from its pixels, as the level camera at the board's pan would
+        # have measured it (the detections' beacons in the order of beacon_measurements)
+        beacons = [BeaconMeasurement(tuple(b.position), *corrected_image(
+            pose, capture.camera, m, pencil_paint_height(b.height)))
+            for det in detections for b, m in det.beacons]
+        targets = [corrected_image(pose, capture.camera, d.target, capture.target_size[1])
+                   for d in detections if d.target.d_total is not None]
         # the pan is now the board's to know: a prior from the mount's reading gives way
         calibration = replace(calibration, priors={k: v for k, v in calibration.priors.items()
                                                    if k != "pan"})
@@ -134,6 +136,8 @@ def evaluate_into(scene: Scene, out: Path, *, variant: str = "auto", progress: b
     model = error_model or default_error_model()
     # what the experimenter knows: the measurements and the capture record's pan
     pan, fx = measured[0].files.capture.camera.pan_deg, measured[0].files.capture.camera.fx
+    if pose is not None:  # the pan the board measured, which the α's above are turned to
+        pan = float(wrap_bearing(pan + pose.pan_offset_deg))
     sigma = model.sigmas(mean_target, [(b.alpha_deg, b.d_total) for b in beacons], pan, fx)
     if pose is not None:  # every α's shared offset: what is left of the pan after the board
         sigma = replace(sigma, shared_alpha_deg=pose_pan_sigma(pose))
