@@ -37,10 +37,12 @@ W, H = 960, 544  # half size
 POSE = {"pan_error": 0.3, "pitch": -0.7, "roll": 0.4}  # the mount's errors, fixed here
 
 
-def _bench(**camera) -> object:
+def _bench(board: dict | None = None, **camera) -> object:
     d = copy.deepcopy(scene_dict("default"))
     d["camera"]["resolution"] = [W, H]
     d["camera"].update(camera)
+    if board is not None:
+        d["board"] = board
     d["render"] = {"spp": 8}
     return scene_from_dict(d, source="bench.yaml", default_name="default")
 
@@ -202,19 +204,40 @@ def test_a_record_without_a_board_is_refused_in_one_line(posed):
 
 
 def test_hole_centres_are_where_the_texture_darkens():
-    """Board.hole_centres against the rendered texture: each centre's texel is the hole's
-    colour, the point halfway between two holes the board's."""
+    """Board.hole_centres against the texture: the texture's row r lands at y = r / texels
+    on the board (the bitmap's first row at the near edge), so each centre's texel is the
+    hole's colour and the point halfway to the next hole the board's.  A size that is no
+    whole number of pitches tells the far edge's grid from the near edge's."""
     from mirrorsim.rendering.mitsuba_scene import BOARD_TEXELS_PER_CM, _board_texture
 
-    board = Board((20.0, 10.0), 2.5, 0.6)
+    board = Board((20.0, 11.0), 2.5, 0.6)
     tex = _board_texture(board)
     c = board.hole_centres()
-    assert len(c) == 7 * 3
-    rows = ((board.size[1] - c[:, 1]) * BOARD_TEXELS_PER_CM).astype(int)
+    assert len(c) == 7 * 4 and np.allclose(sorted(set(c[:, 1])), [1.0, 3.5, 6.0, 8.5])
+    rows = (c[:, 1] * BOARD_TEXELS_PER_CM).astype(int)
     cols = (c[:, 0] * BOARD_TEXELS_PER_CM).astype(int)
     assert np.all(tex[rows, cols].mean(axis=1) < 0.05)
-    mid_rows = ((board.size[1] - c[:, 1] - 1.25) * BOARD_TEXELS_PER_CM).astype(int)
+    mid_rows = ((c[:, 1] + 1.25) * BOARD_TEXELS_PER_CM).astype(int)
     assert np.all(tex[mid_rows, cols].mean(axis=1) > 0.2)
+
+
+def test_a_board_of_no_whole_number_of_pitches(tmp_path):
+    """Rendered: a board 76 cm deep (30.4 pitches), whose holes start from its far edge;
+    the pose was not found when the fit expected them from the near one (18 matched)."""
+    scene = _bench(**POSE, board={"size": [62.5, 76], "hole_pitch": 2.5})
+    m = render_and_measure(scene, claim_output_folder(tmp_path / "run", "out"),
+                           progress=False)
+    pose = frame_pose(m.files.image, m.files.capture)
+    assert pose.pan_offset_deg == pytest.approx(-POSE["pan_error"], abs=0.01)
+
+
+def test_a_plain_board_is_refused_before_rendering(tmp_path):
+    from mirrorsim.errors import BadParameter
+
+    scene = _bench(board={"size": [80, 80], "hole_pitch": 0})
+    with pytest.raises(BadParameter, match="plain"):
+        evaluate_scene(scene, tmp_path / "out", progress=False, keep=(), board_pose=True)
+    assert not (tmp_path / "out").exists()
 
 
 def test_a_frame_whose_record_lacks_the_board_is_rendered_anew(posed):

@@ -201,7 +201,8 @@ def pitch_factor(pitch_deg: float, top: float, camera_height: float, distance: f
 # the pan's σ after the board, at the least: on the bench spec's frames the board's pan
 # errs by about 0.001° RMS (benchmarks/selfcal.py prints it), where its fit's own σ says
 # a few ten-thousandths (the holes' centroids share small biases the fit does not see)
-PAN_SD_FLOOR_DEG = 0.002
+PAN_SD_FLOOR_DEG = 0.002  # at the bench's focal length, FLOOR_FX_PX; ∝ 1/fx (pixel errors)
+FLOOR_FX_PX = 1500.0
 
 
 def frame_pose(image_path: str | Path, capture: CaptureRecord) -> CameraPose:
@@ -241,9 +242,11 @@ def mean_pose(poses: list[CameraPose]) -> CameraPose:
         pan_sd_deg=float(np.mean([p.pan_sd_deg for p in poses])))
 
 
-def pose_pan_sigma(pose: CameraPose) -> float:
-    """The σ (deg) of what is left of the pan once the board has measured it."""
-    return float(math.hypot(pose.pan_sd_deg, PAN_SD_FLOOR_DEG))
+def pose_pan_sigma(pose: CameraPose, fx_px: float = FLOOR_FX_PX) -> float:
+    """The σ (deg) of what is left of the pan once the board has measured it, on frames of
+    focal length ``fx_px`` (a smaller frame sees the holes in fewer pixels)."""
+    floor = PAN_SD_FLOOR_DEG * max(1.0, FLOOR_FX_PX / fx_px)
+    return float(math.hypot(pose.pan_sd_deg, floor))
 
 
 def corrected_image(pose: CameraPose, camera: Camera, image: ImageMeasurement, top: float

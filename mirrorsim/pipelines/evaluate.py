@@ -20,7 +20,7 @@ from mirrorsim.detection.board import (
     pose_pan_sigma,
 )
 from mirrorsim.detection.detector import annotate
-from mirrorsim.errors import DetectionError
+from mirrorsim.errors import BadParameter, DetectionError
 from mirrorsim.formats.error_model import ErrorModel, default_error_model
 from mirrorsim.formats.files import claim_run_folder, default_out, write_png
 from mirrorsim.formats.scenefile import check_given_scene
@@ -72,7 +72,7 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
     OutputError
         If ``out_dir`` holds files mirrorsim did not write, or the scene's own file.
     BadParameter
-        A ``keep`` that names no extra file.
+        A ``keep`` that names no extra file; ``board_pose`` on a plain board.
     SolverError
         If the measurements do not determine the mirror and the target, or
         ``calibration`` is not a :class:`~solver.selfcal.SelfCalibration`.
@@ -82,6 +82,9 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
     check_given_scene(scene)  # edited by a script: held to what its file would make
     check_keep(keep)
     calibration = as_calibration(calibration)  # before anything renders
+    if board_pose and scene.board.hole_pitch <= 0:
+        raise BadParameter("board_pose", f"{scene.name}: its board is plain (board.hole_pitch "
+                           "0): no holes to measure the camera's pose on")
     out = claim_run_folder(out_dir if out_dir is not None else default_out(scene.name),
                            "out_dir", [("scene", scene.source)])
     return evaluate_into(scene, out, variant=variant, progress=progress,
@@ -140,7 +143,7 @@ def evaluate_into(scene: Scene, out: Path, *, variant: str = "auto", progress: b
         pan = float(wrap_bearing(pan + pose.pan_offset_deg))
     sigma = model.sigmas(mean_target, [(b.alpha_deg, b.d_total) for b in beacons], pan, fx)
     if pose is not None:  # every α's shared offset: what is left of the pan after the board
-        sigma = replace(sigma, shared_alpha_deg=pose_pan_sigma(pose))
+        sigma = replace(sigma, shared_alpha_deg=pose_pan_sigma(pose, fx))
     measurements = Measurements(observer=cam.position, targets=[mean_target], beacons=beacons,
                                 sigma=sigma, observer_pan_deg=pan)
     # the target once, at its mean over the frames: each frame's detection of the same

@@ -95,7 +95,9 @@ def _board_texture(board: Board) -> np.ndarray:
     pitch = board.hole_pitch
     if pitch <= 0:
         return base.copy()
-    # texel centres in cm; row 0 is the far (y = sy) edge as textures run top-down
+    # texel centres in cm, y counted down from the far edge (y = sy); the board's mesh
+    # puts the bitmap's row 0 at its near edge (y = 0), so the rendered holes sit at
+    # whole pitches from the far edge (Board.hole_centres; tests/test_board.py)
     x = (np.arange(nx) + 0.5) * sx / nx
     y = sy - (np.arange(ny) + 0.5) * sy / ny
     dx = (x - pitch / 2) % pitch - pitch / 2

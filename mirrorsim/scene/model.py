@@ -67,13 +67,16 @@ class Board:
     hole_diameter: float = 0.6
 
     def hole_centres(self) -> np.ndarray:
-        """(k, 2) centres of the holes (cm): every whole multiple of the pitch inside the
-        board's edges, as the rendered pegboard has them; none on a plain board."""
+        """(k, 2) centres of the holes (cm), as the rendered pegboard has them: every whole
+        multiple of the pitch inside the board, in x from the near edge (x = 0) and in y
+        from the far edge (y = size[1]), where the texture's rows start; none on a plain
+        board."""
         if self.hole_pitch <= 0:
             return np.zeros((0, 2))
         xs, ys = (np.arange(1, math.ceil(s / self.hole_pitch)) * self.hole_pitch
                   for s in self.size)
-        gx, gy = np.meshgrid(xs[xs < self.size[0]], ys[ys < self.size[1]])
+        xs, ys = xs[xs < self.size[0]], ys[ys < self.size[1]]
+        gx, gy = np.meshgrid(xs, self.size[1] - ys)
         return np.column_stack([gx.ravel(), gy.ravel()])
 
 
