@@ -65,13 +65,18 @@ from solver.selfcal import (  # noqa: E402
 )
 
 
+def _at_exact_positions(m, scene) -> list[BeaconMeasurement]:
+    """The measured beacons with their exact positions in place of the believed ones."""
+    return [BeaconMeasurement(tuple(b.position), mb.alpha_deg, mb.d_total)
+            for b, mb in zip(scene.beacons, m.beacons, strict=True)]
+
+
 def _board_errors(rep, scene, position_sigma: float, nuisances: tuple[str, ...]
                   ) -> tuple[float, float]:
     """Target error self-calibrated on the measurements corrected by the board's camera
     pose (``rep``: evaluated with ``board_pose``), with believed and with exact positions."""
     m, truth = rep.measurements, np.asarray(rep.truth.target.position, float)
-    exact = [BeaconMeasurement(tuple(b.position), mb.alpha_deg, mb.d_total)
-             for b, mb in zip(scene.beacons, m.beacons, strict=True)]
+    exact = _at_exact_positions(m, scene)
     return tuple(float(np.linalg.norm(solve_measurements(
         m.observer, beacons, m.targets, m.sigma, SelfCalibration(nuisances, ps)).target - truth))
         for beacons, ps in ((m.beacons, position_sigma), (exact, 0.0)))
@@ -84,8 +89,7 @@ def _errors(rep, scene, position_sigma: float, nuisances: tuple[str, ...],
     two parts; self-calibrated for pan and scale only (believed positions); with
     ``priors``, self-calibrated with them (believed, then exact positions)."""
     m, truth = rep.measurements, np.asarray(rep.truth.target.position, float)
-    exact = [BeaconMeasurement(tuple(b.position), mb.alpha_deg, mb.d_total)
-             for b, mb in zip(scene.beacons, m.beacons, strict=True)]
+    exact = _at_exact_positions(m, scene)
     out = []
     for beacons, ps in ((m.beacons, position_sigma), (exact, 0.0)):
         for nu in ((), nuisances):

@@ -65,13 +65,13 @@ def test_the_board_gives_the_camera_its_pose(posed):
     assert pose.pitch_deg == pytest.approx(POSE["pitch"], abs=0.01)
     assert pose.roll_deg == pytest.approx(POSE["roll"], abs=0.02)
     assert pose.holes >= 50 and pose.residual_px < 0.5
-    assert frame_pose(files.image, files.capture) == pose  # the stored frame, read alike
+    assert frame_pose(read_frame(files.image), files.capture, files.image) == pose
 
 
 def test_a_level_mount_reads_level(tmp_path):
     scene = _bench()
     m = render_and_measure(scene, tmp_path, progress=False)
-    pose = frame_pose(m.files.image, m.files.capture)
+    pose = frame_pose(m.image, m.files.capture, m.files.image)
     assert abs(pose.pan_offset_deg) < 0.01 and abs(pose.pitch_deg) < 0.01
     assert abs(pose.roll_deg) < 0.02
 
@@ -145,7 +145,7 @@ def test_a_rolled_mount_alone_is_measured(tmp_path):
     scene = _bench(roll=-0.25)
     m = render_and_measure(scene, claim_output_folder(tmp_path / "run", "out"),
                            progress=False)
-    pose = frame_pose(m.files.image, m.files.capture)
+    pose = frame_pose(m.image, m.files.capture, m.files.image)
     assert pose.roll_deg == pytest.approx(-0.25, abs=0.02)
     assert abs(pose.pan_offset_deg) < 0.01 and pose.residual_px < 0.5
 
@@ -200,7 +200,7 @@ def test_a_record_without_a_board_is_refused_in_one_line(posed):
     old = files.capture.to_json()
     del old["board"]
     with pytest.raises(DetectionError, match="names no board"):
-        frame_pose(files.image, CaptureRecord.from_json(old))
+        frame_pose(read_frame(files.image), CaptureRecord.from_json(old), files.image)
 
 
 def test_hole_centres_are_where_the_texture_darkens():
@@ -227,7 +227,7 @@ def test_a_board_of_no_whole_number_of_pitches(tmp_path):
     scene = _bench(**POSE, board={"size": [62.5, 76], "hole_pitch": 2.5})
     m = render_and_measure(scene, claim_output_folder(tmp_path / "run", "out"),
                            progress=False)
-    pose = frame_pose(m.files.image, m.files.capture)
+    pose = frame_pose(m.image, m.files.capture, m.files.image)
     assert pose.pan_offset_deg == pytest.approx(-POSE["pan_error"], abs=0.01)
 
 

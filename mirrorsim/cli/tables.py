@@ -231,18 +231,17 @@ def _cm(x: float | None) -> str:
 
 def montecarlo_table(res: Table1) -> str:
     """Table 1 of the paper beside ours (``mirrorsim montecarlo``)."""
-    g = res.to_json()["geometry"]
+    g, lay = res.geometry, res.geometry.layout()
     lines = [f"Table 1 protocol: {res.iterations} draws per row; target at alpha "
-             f"{g['alpha_deg']:g}°, d_total {g['d_total']:g}; mirror through "
-             f"({g['mirror_point'][0]:.3f}, {g['mirror_point'][1]:.3f}) at yaw "
-             f"{g['mirror_yaw_deg']:.1f}°; beacon at ({g['beacon'][0]:.3f}, "
-             f"{g['beacon'][1]:.3f})",
+             f"{g.alpha_deg:g}°, d_total {g.d_total:g}; mirror through "
+             f"({lay.mirror_point[0]:.3f}, {lay.mirror_point[1]:.3f}) at yaw "
+             f"{lay.yaw_deg:.1f}°; beacon at ({lay.beacon[0]:.3f}, {lay.beacon[1]:.3f})",
              "σ_α: the angle's standard deviation (deg); σ_d: d_total's, in % of d_total "
              "(the paper's absolute σ_d divided by d_total); RMSEs in the table's distance "
              "units",
              f"{'σ_α (°)':>9} {'σ_d (%)':>7} | {'paper ref':>9} {'paper tar':>9} | "
              f"{'ours ref':>9} {'ours tar':>9} {'yaw (deg)':>9}"]
-    d_total, d_b = res.geometry.d_total, res.geometry.layout().beacon_d
+    d_total, d_b = g.d_total, lay.beacon_d
     for r in res.rows:
         rel_t = r.sigma_d / d_total
         beacon = ""

@@ -16,20 +16,18 @@ Pure numpy, SciPy and OpenCV; no truth.
 from __future__ import annotations
 
 import math
-import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import cv2
 import numpy as np
 
-from mirrorsim.detection.detector import read_stored_frame
 from mirrorsim.detection.edges import ImageMeasurement
 from mirrorsim.errors import DetectionError
 from mirrorsim.formats.capture import CaptureRecord
 from mirrorsim.rendering.sensor import undistort
-from mirrorsim.scene.model import Board, Camera, camera_axes
-from solver.geometry import wrap_bearing
+from mirrorsim.scene.model import Board, Camera, camera_axes, project
+from solver.geometry import unit, wrap_bearing
 
 # the mount's reading is good to this (deg): the coarse search spans it
 PAN_SEARCH_DEG = 0.6
@@ -89,26 +87,17 @@ def hole_blobs(image: np.ndarray) -> np.ndarray:
     return np.asarray(out, float).reshape(-1, 2)
 
 
-def project_points(camera: Camera, points3: np.ndarray, pan_offset: float = 0.0,
-                   pitch: float = 0.0, roll: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-    """Pixel positions (k, 2) of 3-D points (k, 3) for the camera turned by ``pan_offset``
-    and pitched and rolled (:func:`~mirrorsim.scene.model.camera_axes`); and their depth
-    along the optical axis."""
-    cam = replace(camera, pan_deg=camera.pan_deg + pan_offset)
-    forward, right, down = camera_axes(cam, pitch, roll)
-    p = np.asarray(points3, float) - np.array([*camera.position, camera.height])
-    z = p @ forward
-    with np.errstate(divide="ignore", invalid="ignore"):
-        uv = np.column_stack([cam.cx + cam.fx * (p @ right) / z,
-                              cam.cy + cam.fx * (p @ down) / z])
-    return uv, z
-
-
 def project_holes(camera: Camera, holes: np.ndarray, pan_offset: float = 0.0,
                   pitch: float = 0.0, roll: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`project_points` of board points (k, 2) at z = 0."""
-    return project_points(camera, np.column_stack([holes, np.zeros(len(holes))]), pan_offset,
-                          pitch, roll)
+    """Pixel positions (k, 2) of board points (k, 2) at z = 0 for the camera turned by
+    ``pan_offset`` and pitched and rolled; and their depth along the optical axis."""
+    u, v, z = project(_turned(camera, pan_offset),
+                      np.column_stack([holes, np.zeros(len(holes))]), pitch, roll)
+    return np.column_stack([u, v]), z
+
+
+def _turned(camera: Camera, pan_offset: float) -> Camera:
+    return replace(camera, pan_deg=camera.pan_deg + pan_offset)
 
 
 def _on_film(camera: Camera, uv: np.ndarray, z: np.ndarray) -> np.ndarray:
@@ -139,10 +128,8 @@ def measure_camera_pose(image: np.ndarray, camera: Camera, board: Board) -> Came
     tree = cKDTree(blobs)
     # coarse: the pan and pitch within the mount's tolerance that put most holes on blobs
     best, x = -1, np.zeros(3)
-    steps = (lambda half: np.arange(-round(half / COARSE_STEP_DEG),  # noqa: E731
-                                    round(half / COARSE_STEP_DEG) + 1) * COARSE_STEP_DEG)
-    for dp in steps(PAN_SEARCH_DEG):
-        for pt in steps(PITCH_SEARCH_DEG):
+    for dp in _grid(PAN_SEARCH_DEG):
+        for pt in _grid(PITCH_SEARCH_DEG):
             uv, z = project_holes(camera, holes, dp, pt)
             uv = uv[_on_film(camera, uv, z)]
             if len(uv):
@@ -150,7 +137,7 @@ def measure_camera_pose(image: np.ndarray, camera: Camera, board: Board) -> Came
                                    < COARSE_GATE_PX))
                 if count > best:
                     best, x = count, np.array([dp, pt, 0.0])
-    gate, pairs = FIRST_GATE_PX, None
+    gate = FIRST_GATE_PX
     while True:
         uv, z = project_holes(camera, holes, *x)
         seen = np.flatnonzero(_on_film(camera, uv, z))
@@ -185,6 +172,13 @@ def measure_camera_pose(image: np.ndarray, camera: Camera, board: Board) -> Came
                       pan_sd_deg=float(math.sqrt(max(cov[0, 0], 0.0))))
 
 
+def _grid(half: float) -> np.ndarray:
+    """The coarse search's values within ±half: whole multiples of its step, so that its
+    middle one is exactly 0."""
+    k = round(half / COARSE_STEP_DEG)
+    return np.arange(-k, k + 1) * COARSE_STEP_DEG
+
+
 def pitch_factor(pitch_deg: float, top: float, camera_height: float, distance: float
                  ) -> float:
     """How much taller an upright object ``top`` cm high, standing ``distance`` cm away
@@ -205,9 +199,11 @@ PAN_SD_FLOOR_DEG = 0.002  # at the bench's focal length, FLOOR_FX_PX; ∝ 1/fx (
 FLOOR_FX_PX = 1500.0
 
 
-def frame_pose(image_path: str | Path, capture: CaptureRecord) -> CameraPose:
-    """:func:`measure_camera_pose` on a stored frame, as the detector sees it (the lens's
-    distortion taken out where it was calibrated); the board from the capture record.
+def frame_pose(pixels: np.ndarray, capture: CaptureRecord, where: str | Path = "the frame"
+               ) -> CameraPose:
+    """:func:`measure_camera_pose` on a frame's stored pixels, as the detector sees them
+    (the lens's distortion taken out where it was calibrated); the board from the capture
+    record; ``where``: the frame's name, for the messages.
 
     Raises
     ------
@@ -216,17 +212,14 @@ def frame_pose(image_path: str | Path, capture: CaptureRecord) -> CameraPose:
         :func:`measure_camera_pose`.
     """
     if capture.board is None:
-        raise DetectionError(f"{image_path}: its capture record names no board (made by an "
+        raise DetectionError(f"{where}: its capture record names no board (made by an "
                              "older mirrorsim: render the frame again)")
-    with warnings.catch_warnings():  # the detector has said so of this frame already
-        warnings.filterwarnings("ignore", message=".*a JPEG frame", category=RuntimeWarning)
-        pixels = read_stored_frame(image_path).pixels
     if capture.distortion != (0.0, 0.0):
         pixels = undistort(pixels, capture.camera, capture.distortion)
     try:
         return measure_camera_pose(pixels, capture.camera, capture.board)
     except DetectionError as exc:
-        raise DetectionError(f"{image_path}: {exc}") from None
+        raise DetectionError(f"{where}: {exc}") from None
 
 
 def mean_pose(poses: list[CameraPose]) -> CameraPose:
@@ -261,18 +254,15 @@ def corrected_image(pose: CameraPose, camera: Camera, image: ImageMeasurement, t
     d_total is multiplied by how much taller that pose makes the object look than a level
     camera does, where it stands (:func:`pitch_factor` on the optical axis).
     """
-    cam = replace(camera, pan_deg=camera.pan_deg + pose.pan_offset_deg)
+    cam = _turned(camera, pose.pan_offset_deg)
     forward, right, down = camera_axes(cam, pose.pitch_deg, pose.roll_deg)
     v_mid = (cam.cy if image.v_top is None or image.v_bottom is None
              else (image.v_top + image.v_bottom) / 2)
     ray = forward + (image.u_axis - cam.cx) / cam.fx * right + (v_mid - cam.cy) / cam.fx * down
     alpha = math.degrees(math.atan2(ray[1], ray[0]))
     d = float(image.d_total)
-    foot = np.asarray(camera.position, float) + d * np.array(
-        [math.cos(math.radians(alpha)), math.sin(math.radians(alpha))])
+    foot = np.asarray(camera.position, float) + d * unit(alpha)
     upright = np.array([[*foot, top], [*foot, 0.0]])
-    posed, _ = project_points(camera, upright, pose.pan_offset_deg, pose.pitch_deg,
-                              pose.roll_deg)
-    level, _ = project_points(camera, upright, pose.pan_offset_deg)
-    return (float(wrap_bearing(alpha)),
-            d * float((posed[1, 1] - posed[0, 1]) / (level[1, 1] - level[0, 1])))
+    _, posed, _ = project(cam, upright, pose.pitch_deg, pose.roll_deg)
+    _, level, _ = project(cam, upright)
+    return float(wrap_bearing(alpha)), d * float((posed[1] - posed[0]) / (level[1] - level[0]))

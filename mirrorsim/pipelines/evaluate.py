@@ -121,10 +121,14 @@ def evaluate_into(scene: Scene, out: Path, *, variant: str = "auto", progress: b
         raise DetectionError(f"{scene.name}: the target's d_total could not be measured in "
                              f"any frame ({', '.join(str(m.files.image) for m in measured)}): "
                              f"{why or 'its image is clipped at the top'}")
+    # what the experimenter knows: the measurements and the capture record's pan
+    capture = measured[0].files.capture
+    pan, fx = capture.camera.pan_deg, capture.camera.fx
     pose = None
     if board_pose:
-        pose = mean_pose([frame_pose(m.files.image, m.files.capture) for m in measured])
-        capture = measured[0].files.capture
+        pose = mean_pose([frame_pose(m.image, m.files.capture, m.files.image)
+                          for m in measured])
+        pan = float(wrap_bearing(pan + pose.pan_offset_deg))  # the α's below are turned to it
         # each image again from its pixels, as the level camera at the board's pan would
         # have measured it (the detections' beacons in the order of beacon_measurements)
         beacons = [BeaconMeasurement(tuple(b.position), *corrected_image(
@@ -137,10 +141,6 @@ def evaluate_into(scene: Scene, out: Path, *, variant: str = "auto", progress: b
                                                    if k != "pan"})
     mean_target = tuple(float(v) for v in np.mean(targets, axis=0))
     model = error_model or default_error_model()
-    # what the experimenter knows: the measurements and the capture record's pan
-    pan, fx = measured[0].files.capture.camera.pan_deg, measured[0].files.capture.camera.fx
-    if pose is not None:  # the pan the board measured, which the α's above are turned to
-        pan = float(wrap_bearing(pan + pose.pan_offset_deg))
     sigma = model.sigmas(mean_target, [(b.alpha_deg, b.d_total) for b in beacons], pan, fx)
     if pose is not None:  # every α's shared offset: what is left of the pan after the board
         sigma = replace(sigma, shared_alpha_deg=pose_pan_sigma(pose, fx))

@@ -28,10 +28,11 @@ from mirrorsim.scene.model import (
     Camera,
     Scene,
     Target,
+    camera_axes,
     hfov_of,
     pencil_paint_height,
 )
-from mirrorsim.truth import optics, visibility
+from mirrorsim.truth import visibility
 from solver.geometry import line_normal, unit
 
 # Labels of the object-id pass.  Beacons take BEACON_LABEL + i, occluders after them.
@@ -292,7 +293,7 @@ def _stage(board: Board, cam: Camera, spp: int, sampler: str, pitch: float = 0.0
     board: everything but the objects."""
     sx, sy = board.size
     bc = _v3((sx / 2, sy / 2))
-    forward, _, down = optics.camera_axes(cam, pitch, roll)
+    forward, _, down = camera_axes(cam, pitch, roll)
     return {
         "type": "scene",
         "integrator": {"type": "path", "max_depth": MAX_DEPTH},

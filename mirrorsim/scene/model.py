@@ -180,6 +180,27 @@ def camera_axes(camera: Camera, pitch: float = 0.0, roll: float = 0.0
     return forward, right, down
 
 
+def project(camera: Camera, points3: ArrayLike, pitch: float = 0.0, roll: float = 0.0
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pinhole projection of 3-D points (OpenCV pixel convention: centres at integers),
+    by the level camera or one pitched and rolled (:func:`camera_axes`).
+
+    Returns
+    -------
+    u, v : ndarray
+        Pixel coordinates (+u right, +v down).
+    depth : ndarray
+        Distance along the optical axis (negative behind the camera).
+    """
+    p = np.asarray(points3, float) - camera.center3
+    forward, right, down = camera_axes(camera, pitch, roll)
+    z = p @ forward
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = camera.cx + camera.fx * (p @ right) / z
+        v = camera.cy + camera.fx * (p @ down) / z
+    return u, v, z
+
+
 def pencil_paint_height(height: float) -> float:
     """Height of a pencil's painted band, below its sharpened cone (cm)."""
     return height - min(1.2, 0.35 * height)

@@ -26,7 +26,7 @@ from mirrorsim.scene.model import (
     Point2,
     Scene,
     Target,
-    camera_axes,
+    project,
 )
 from solver.geometry import bearing_deg, unit
 from solver.sltr import Observation, observe
@@ -67,27 +67,6 @@ def resolve_pan(observer: Point2, pan: float | str, mirror: Mirror, target_posit
     if pan == "beacon":
         return mirror_image(observer, mirror, beacon_position).alpha_deg
     return float(pan)
-
-
-def project(camera: Camera, points3: ArrayLike, pitch: float = 0.0, roll: float = 0.0
-            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Pinhole projection of 3-D points (OpenCV pixel convention: centres at integers),
-    by the level camera or one pitched and rolled (:func:`camera_axes`).
-
-    Returns
-    -------
-    u, v : ndarray
-        Pixel coordinates (+u right, +v down).
-    depth : ndarray
-        Distance along the optical axis (negative behind the camera).
-    """
-    p = np.asarray(points3, float) - camera.center3
-    forward, right, down = camera_axes(camera, pitch, roll)
-    z = p @ forward
-    with np.errstate(divide="ignore", invalid="ignore"):
-        u = camera.cx + camera.fx * (p @ right) / z
-        v = camera.cy + camera.fx * (p @ down) / z
-    return u, v, z
 
 
 @dataclass(frozen=True)
