@@ -16,6 +16,7 @@ from typing import Any
 from mirrorsim.errors import InputError
 from mirrorsim.formats.reader import Reader, read_json, read_resolution, show
 from mirrorsim.scene.model import (
+    MAX_BOARD_CM,
     MAX_HFOV_DEG,
     Beacon,
     Board,
@@ -27,6 +28,23 @@ from mirrorsim.scene.model import (
 )
 
 REFERENCE_DISTANCE = 100.0  # cm: where calibration stands its reference objects
+
+
+def read_board(r: Reader, raw: Any, required: tuple[str, ...] = ("size",),
+               optional: tuple[str, ...] = ("hole_pitch",)) -> Board:
+    """A ``board`` block: a scene file's (its size, and its hole pitch, 2.5 cm unless
+    given) or a capture record's (which names the holes' diameter too)."""
+    b = r.mapping(raw, "board", required, optional)
+    d = Board((1.0, 1.0))  # the defaults
+    board = Board(size=r.pair(b["size"], "board.size", positive=True, high=MAX_BOARD_CM),
+                  hole_pitch=r.number(b.get("hole_pitch", d.hole_pitch), "board.hole_pitch",
+                                      low=0.0),
+                  hole_diameter=r.number(b.get("hole_diameter", d.hole_diameter),
+                                         "board.hole_diameter", positive=True))
+    if 0.0 < board.hole_pitch <= board.hole_diameter:
+        raise r.fail("board.hole_pitch", f"{board.hole_pitch:g} must exceed the hole diameter "
+                     f"{board.hole_diameter:g} cm (or be 0 for a plain board)")
+    return board
 
 
 def read_distortion(r: Reader, raw: Any, key: str) -> tuple[float, float]:
@@ -117,13 +135,8 @@ class CaptureRecord:
                                   r.number(b["height"], f"beacons[{i}].height", positive=True)))
         t = r.mapping(top["target"], "target", ("size",))
         cal = r.mapping(top.get("calibration", {}), "calibration", (), ("reference_distance",))
-        board = None
-        if "board" in top:
-            b = r.mapping(top["board"], "board", ("size", "hole_pitch", "hole_diameter"))
-            board = Board(size=r.pair(b["size"], "board.size", positive=True),
-                          hole_pitch=r.number(b["hole_pitch"], "board.hole_pitch", low=0.0),
-                          hole_diameter=r.number(b["hole_diameter"], "board.hole_diameter",
-                                                 positive=True))
+        board = (read_board(r, top["board"], ("size", "hole_pitch", "hole_diameter"), ())
+                 if "board" in top else None)
         return cls(camera=camera, beacons=tuple(beacons), board=board,
                    target_size=r.pair(t["size"], "target.size", positive=True),
                    frame=str(top.get("frame", "")), distortion=distortion,

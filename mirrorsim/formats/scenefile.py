@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from mirrorsim.errors import BadParameter, SceneError
-from mirrorsim.formats.capture import read_distortion
+from mirrorsim.formats.capture import read_board, read_distortion
 from mirrorsim.formats.files import jsonable
 from mirrorsim.formats.reader import Reader, read_resolution, read_yaml, show
 from mirrorsim.formats.scene_checks import (
@@ -49,7 +49,6 @@ from mirrorsim.scene.model import (
     PAN_WORDS,
     Beacon,
     Bench,
-    Board,
     Camera,
     Mirror,
     Occluder,
@@ -144,7 +143,7 @@ def _build(data: Any, source: str, default_name: str, f: Failures) -> Scene:
         optional={"name", "beacon", "beacons", "occluders", "render", "calibration"},
     )
     name = f.attempt(_name, r, top, default_name)
-    board = f.attempt(_board, r, top["board"])
+    board = f.attempt(read_board, r, top["board"])
     cam = f.attempt(r.mapping, top["camera"], "camera", {"position", "height", "hfov", "pan"},
                     {"resolution", *CAMERA_IMPERFECTIONS})
     pan = position = model = None
@@ -394,16 +393,6 @@ def distortion_monotonic(k: tuple[float, float], r_max: float) -> bool:
     that folds its image over is no lens."""
     r = np.linspace(0.0, r_max, 512)
     return bool((1 + 3 * k[0] * r**2 + 5 * k[1] * r**4 > 0).all())
-
-
-def _board(r: Reader, raw: Any) -> Board:
-    b = r.mapping(raw, "board", {"size"}, {"hole_pitch"})
-    board = Board(size=r.pair(b["size"], "board.size", positive=True, high=MAX_BOARD_CM),
-                  hole_pitch=r.number(b.get("hole_pitch", 2.5), "board.hole_pitch", low=0.0))
-    if 0.0 < board.hole_pitch <= board.hole_diameter:
-        raise r.fail("board.hole_pitch", f"{board.hole_pitch:g} must exceed the hole diameter "
-                     f"{board.hole_diameter:g} cm (or be 0 for a plain board)")
-    return board
 
 
 def _beacons(r: Reader, top: dict) -> tuple[tuple[Beacon, ...], Callable[[int], str]]:
