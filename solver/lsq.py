@@ -5,7 +5,7 @@ Jacobian; :func:`solve_measurements` is the solver's front door.
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -95,59 +95,37 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
     """
     if not beacons or not targets:
         raise SolverError("least squares needs at least one beacon and one target observation")
-    nuisances, position_sigma = calibration.nuisances, calibration.position_sigma
-    priors = calibration.priors
-    check_nuisances(nuisances, len(beacons), len(targets))
+    nuisances, priors = calibration.nuisances, calibration.priors
+    check_nuisances(nuisances, len(beacons), len(targets), priors)
     o = np.asarray(observer, float)
     sig = as_object_sigmas(sigma or Sigma())
-    sa, sd = sig.arrays(len(beacons), len(targets))
     bpos, meas_a, meas_d = _measurement_arrays(beacons, targets)
     shared = sig.shared_alpha_deg
-    if initial is None and (nuisances or position_sigma or shared):
+    if initial is None and (nuisances or calibration.position_sigma or shared):
         # start from the plain fit: from the one-beacon closed form, a pan offset and a
         # range scale let the fit wander to a mirror on the far side of a beacon
         initial = solve_lsq(observer, beacons, targets,
                             replace(sig, shared_alpha_deg=0.0) if shared else sigma)
     init = initial or solve_single(o, bpos[0], beacons[0].alpha_deg, beacons[0].d_total,
                                    targets[0][0], targets[0][1])
-    free = position_sigma > 0
-    # a shared α offset (a bench's pan reading) is an unknown δ on every α with the prior
-    # N(0, shared²): for Gaussian errors the same estimate and covariance as correlated
-    # α's, while each image keeps its own residual row for the Huber loss to weigh and
-    # name (whitened rows would mix a bad image into every later one)
-    implicit = bool(shared) and "pan" not in nuisances
-    unknown = nuisances + (("pan",) if implicit else ())
-    nb, nt, k = len(beacons), len(targets), len(unknown)
-    x0 = np.array([init.mirror.yaw_deg, init.mirror.rho, *init.target,
-                   *(NUISANCES[n][1] for n in unknown), *np.zeros(2 * nb if free else 0)])
-    w_a = 1.0 / sa
-    w_d = 1.0 / (sd * meas_d)
-    eye = np.eye(len(x0))
-    # each prior is a row (x − neutral)/σ: the shared α offset's, the nuisances' the
-    # bench knows, each beacon's offset from its believed position
-    known = {"pan": shared} if shared else {}
-    # a pan prior and the σ's shared α offset are independent errors of one reading (the
-    # bench's tolerance, the mount's scatter): their variances add
-    known |= {n: float(np.hypot(v, known.get(n, 0.0))) for n, v in priors.items()}
-    prior = np.vstack([*(eye[[4 + unknown.index(n)]] / known[n] for n in unknown if n in known),
-                       eye[4 + k:] / position_sigma if free else eye[:0]])
-    neutral = np.concatenate([np.zeros(4), [NUISANCES[n][1] for n in unknown],
-                              np.zeros(len(x0) - 4 - k)])
+    p = _Problem.of(o, bpos, len(targets), sig, calibration, meas_d)
+    unknown, free, known, nb, nt = p.unknown, p.free, p.known, len(beacons), len(targets)
+    x0 = np.concatenate([[init.mirror.yaw_deg, init.mirror.rho, *init.target], p.neutral[4:]])
+    implicit = unknown != nuisances
 
     def fun(x):
         a, d, _, _ = _forward(x, o, bpos, nt, unknown, free)
-        return np.concatenate([w_a * wrap_bearing(a - meas_a), w_d * (d - meas_d),
-                               prior @ (x - neutral)])
+        return np.concatenate([p.w_a * wrap_bearing(a - meas_a), p.w_d * (d - meas_d),
+                               p.prior @ (x - p.neutral)])
 
     def jac(x):
-        _, _, da, dd = _forward(x, o, bpos, nt, unknown, free)
-        return np.vstack([w_a[:, None] * da, w_d[:, None] * dd, prior])
+        return p.jacobian(x, o, bpos)
 
     from scipy.optimize import least_squares  # scipy is slow to import: only when used
 
     # more measurements than unknowns: a Huber loss, so that one bad image (a residual
     # beyond HUBER_K σ's) does not drag the estimate; it is named in the solution
-    robust = len(meas_a) * 2 + len(prior) > len(x0)
+    robust = len(meas_a) * 2 + len(p.prior) > len(x0)
     res = least_squares(fun, x0, jac=jac, method="trf" if robust else "lm",
                         loss="huber" if robust else "linear", f_scale=HUBER_K,
                         xtol=1e-15, ftol=1e-15, gtol=1e-15)
@@ -158,6 +136,9 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
     if np.linalg.cond(jtj) > 1e14:
         raise SolverError(_undetermined(nuisances))
     cov = np.linalg.inv(jtj) if sigma is not None else None
+    if cov is not None and implicit:  # the shared α's own unknown: marginalized out
+        keep = [i for i in range(len(x0)) if i != 4 + len(nuisances)]
+        cov = cov[np.ix_(keep, keep)]
     names = (_residual_names(nb, nt)
              + [f"the {n} prior" if n in priors else "the shared α offset's prior"
                 for n in unknown if n in known]
@@ -174,6 +155,61 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
                       if priors else "")
                    + (f", a shared α offset of prior σ {shared:.3g}° estimated" if implicit
                       else ""))
+
+
+@dataclass(frozen=True)
+class _Problem:
+    """What a weighted fit of the mirror and the target weighs, declared once for the
+    solve and for its Cramér–Rao bound: the unknowns (the mirror, the target, the
+    nuisances, each beacon's offset where positions are uncertain), the measurements'
+    weights and each prior's row (x − neutral)/σ."""
+
+    unknown: tuple[str, ...]  # the nuisances estimated, "pan" added for a shared α offset
+    free: bool  # each beacon's offset from its believed position estimated
+    known: dict[str, float]  # each nuisance's prior σ, the shared α offset's included
+    nt: int
+    w_a: np.ndarray  # 1/σ of each α (beacons, then targets)
+    w_d: np.ndarray  # 1/σ (cm) of each d_total
+    prior: np.ndarray  # the prior rows
+    neutral: np.ndarray  # every unknown's neutral value (mirror and target: 0)
+
+    @classmethod
+    def of(cls, o: np.ndarray, bpos: np.ndarray, nt: int, sig: ObjectSigmas,
+           calibration: SelfCalibration, d_cm: np.ndarray) -> _Problem:
+        """The problem of ``bpos`` beacons and ``nt`` target observations with σ's
+        ``sig`` (a relative σ_d taken of ``d_cm``: the measured d_totals for a solve, the
+        true ones for a bound)."""
+        del o  # the weights do not depend on the camera: kept for symmetry of callers
+        nuisances, position_sigma = calibration.nuisances, calibration.position_sigma
+        sa, sd = sig.arrays(len(bpos), nt)
+        shared = sig.shared_alpha_deg
+        free = position_sigma > 0
+        # a shared α offset (a bench's pan reading) is an unknown δ on every α with the
+        # prior N(0, shared²): for Gaussian errors the same estimate and covariance as
+        # correlated α's, while each image keeps its own residual row for the Huber loss
+        # to weigh and name (whitened rows would mix a bad image into every later one)
+        implicit = bool(shared) and "pan" not in nuisances
+        unknown = nuisances + (("pan",) if implicit else ())
+        k, nb = len(unknown), len(bpos)
+        n_x = 4 + k + (2 * nb if free else 0)
+        eye = np.eye(n_x)
+        # a pan prior and the σ's shared α offset are independent errors of one reading
+        # (the bench's tolerance, the mount's scatter): their variances add
+        known = {"pan": shared} if shared else {}
+        known |= {n: float(np.hypot(v, known.get(n, 0.0)))
+                  for n, v in calibration.priors.items()}
+        prior = np.vstack([*(eye[[4 + unknown.index(n)]] / known[n] for n in unknown
+                             if n in known),
+                           eye[4 + k:] / position_sigma if free else eye[:0]])
+        neutral = np.concatenate([np.zeros(4), [NUISANCES[n][1] for n in unknown],
+                                  np.zeros(n_x - 4 - k)])
+        return cls(unknown, free, known, nt, 1.0 / sa, 1.0 / (sd * np.asarray(d_cm, float)),
+                   prior, neutral)
+
+    def jacobian(self, x: np.ndarray, o: np.ndarray, bpos: np.ndarray) -> np.ndarray:
+        """The weighted residuals' Jacobian at ``x``: the measurements', then the priors'."""
+        _, _, da, dd = _forward(x, o, bpos, self.nt, self.unknown, self.free)
+        return np.vstack([self.w_a[:, None] * da, self.w_d[:, None] * dd, self.prior])
 
 
 def _forward(x: np.ndarray, o: np.ndarray, bpos: np.ndarray, nt: int,
@@ -315,13 +351,19 @@ def _solution(o: np.ndarray, x: np.ndarray, bpos: np.ndarray,
 
 def crlb(observer: ArrayLike, beacons: ArrayLike, mirror_yaw_deg: float, mirror_rho: float,
          target: ArrayLike, sigma: Sigma | ObjectSigmas, n_targets: int = 1,
-         nuisances: tuple[str, ...] = ()) -> np.ndarray:
-    """The Cramér–Rao bound of (θ [deg], ρ, x_t, y_t, *nuisances): (Jᵀ Σ⁻¹ J)⁻¹ at the
-    true mirror and target (nuisances at their neutral values), for Gaussian measurement
-    errors of these σ's (beacon positions known).
+         nuisances: tuple[str, ...] = (), calibration: SelfCalibration | None = None
+         ) -> np.ndarray:
+    """The Cramér–Rao bound of (θ [deg], ρ, x_t, y_t, *nuisances, …): the inverse of the
+    Fisher information at the true mirror and target (nuisances at their neutral values,
+    beacons where believed), for Gaussian measurement errors of these σ's, of the
+    estimator :func:`solve_lsq` runs with ``calibration`` (its nuisances, their priors,
+    the beacons' position σ; default: ``nuisances`` without priors, positions exact).
 
-    No unbiased estimator's covariance is smaller; for one beacon and one target the
-    four measurements fix the four unknowns and the bound is J⁻¹ Σ J⁻ᵀ.
+    The bound is the same information the solve's covariance inverts, taken at the
+    truth instead of the estimate: the two differ only by the linearization's point (and
+    by the robust fit's down-weighting, which widens the covariance).  No unbiased
+    estimator's covariance is smaller; for one beacon and one target the four
+    measurements fix the four unknowns and the bound is J⁻¹ Σ J⁻ᵀ.
 
     Raises
     ------
@@ -330,18 +372,24 @@ def crlb(observer: ArrayLike, beacons: ArrayLike, mirror_yaw_deg: float, mirror_
     """
     o = np.asarray(observer, float)
     B = np.atleast_2d(np.asarray(beacons, float))
-    check_nuisances(nuisances, len(B), n_targets)
-    x = np.array([mirror_yaw_deg, mirror_rho, *np.asarray(target, float),
-                  *(NUISANCES[n][1] for n in nuisances)])
-    _, d, da, dd = _forward(x, o, B, n_targets, nuisances)
+    calibration = SelfCalibration(tuple(nuisances)) if calibration is None else calibration
+    check_nuisances(calibration.nuisances, len(B), n_targets, calibration.priors)
     sig = as_object_sigmas(sigma)
-    sa, sr = sig.arrays(len(B), n_targets)
-    J = np.vstack([sig.alpha_whitener(sa) @ da, dd / (sr * d)[:, None]])
+    t = np.asarray(target, float)
+    x4 = np.array([mirror_yaw_deg, mirror_rho, *t])
+    _, d, _, _ = predict(x4, o, np.vstack([B, np.broadcast_to(t, (n_targets, 2))]))
+    p = _Problem.of(o, B, n_targets, sig, calibration, d)
+    x = np.concatenate([x4, p.neutral[4:]])
+    J = p.jacobian(x, o, B)
     info = J.T @ J
     if np.linalg.cond(info) > 1e14:
         raise SolverError("the geometry does not determine the mirror and the target "
                           "(singular Fisher information)")
-    return np.linalg.inv(info)
+    bound = np.linalg.inv(info)
+    if len(p.unknown) > len(calibration.nuisances):  # the shared α's implicit pan: not asked
+        keep = [i for i in range(len(x)) if i != 4 + len(calibration.nuisances)]
+        bound = bound[np.ix_(keep, keep)]
+    return bound
 
 
 def solve_measurements(observer: ArrayLike, beacons: list[BeaconMeasurement],

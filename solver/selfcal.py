@@ -77,7 +77,7 @@ class SelfCalibration:
         if not isinstance(self.priors, Mapping):
             raise SolverError(f"priors must map nuisance names to σ's, got {self.priors!r}")
         object.__setattr__(self, "nuisances", tuple(self.nuisances))
-        check_nuisances(self.nuisances, None, 1)
+        check_nuisances(self.nuisances, None, 1)  # the names: no beacons yet
         check_position_sigma(self.position_sigma)
         check_nuisance_sigma(self.priors, self.nuisances)
         # plain floats (a numpy number would write itself as "np.float64(0.3)" in a
@@ -180,9 +180,11 @@ def check_nuisance_sigma(priors: Mapping[str, float], nuisances: tuple[str, ...]
                               f"got {s!r}")
 
 
-def check_nuisances(nuisances: tuple[str, ...], nb: int | None, nt: int) -> None:
+def check_nuisances(nuisances: tuple[str, ...], nb: int | None, nt: int,
+                    priors: Mapping[str, float] | None = None) -> None:
     """Refuse unknown nuisances, and more unknowns than measurements (``nb`` None: the
-    beacons are not known yet, the names only)."""
+    beacons are not known yet, the names only).  A nuisance with a prior brings its own
+    measurement (the prior's row), so it does not count against the beacons."""
     bad = [n for n in nuisances if n not in NUISANCES]
     if bad:
         raise SolverError(f"unknown nuisance(s) {', '.join(map(str, bad))}: choose from "
@@ -190,15 +192,16 @@ def check_nuisances(nuisances: tuple[str, ...], nb: int | None, nt: int) -> None
     twice = sorted({n for n in nuisances if nuisances.count(n) > 1})
     if twice:
         raise SolverError(f"{', '.join(twice)} given twice: name each nuisance once")
-    unknowns = 4 + len(nuisances)
+    free = [n for n in nuisances if n not in (priors or {})]
+    unknowns = 4 + len(free)
     # the target's observations (one per frame) repeat one image's measurement: they
     # count once
-    if nuisances and nb is not None and 2 * (nb + min(nt, 1)) < unknowns:
+    if free and nb is not None and 2 * (nb + min(nt, 1)) < unknowns:
         need = -(-(unknowns - 2) // 2)
-        raise SolverError(f"calibrating {' and '.join(nuisances)} needs at least {need} beacon "
+        raise SolverError(f"calibrating {' and '.join(free)} needs at least {need} beacon "
                           f"observations ({nb} given): each image gives 2 measurements, and "
-                          f"the mirror, the target and {len(nuisances)} nuisance(s) are "
-                          f"{unknowns} unknowns")
+                          f"the mirror, the target and {len(free)} nuisance(s) without a "
+                          f"prior are {unknowns} unknowns")
 
 
 PLAIN = SelfCalibration()  # plain least squares: nothing estimated, positions exact

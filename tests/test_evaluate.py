@@ -56,6 +56,46 @@ def _worst_case(rep: Report, bounds: np.ndarray) -> tuple[float, float]:
     return worst_target, worst_yaw
 
 
+def assert_consistent(report: Report) -> None:
+    """The two rules every report keeps: its Cramér–Rao bound is its own estimator's,
+    never above its covariance's RMS but for the linearization's difference, and its
+    sentence says inside or outside as the distance is (2.45 σ: χ₂'s 95 %); and the
+    target's row shows both of the ellipse's axes.
+
+    The same information taken at the estimate instead of the truth is the covariance
+    (to the d_totals' residuals, 1 %; below it where the robust fit trusted an image
+    less); at the truth it moves by the linearization alone, which the synthetic test of
+    tests/test_selfcal.py bounds at 5 % and a rendered half-size frame whose mirror came
+    out 1.9° off (3.7 σ) moved by 9 %: 25 % here."""
+    from solver.geometry import line_normal
+    from solver.lsq import crlb
+    from solver.selfcal import PLAIN, SelfCalibration
+
+    e, sol, m = report.errors, report.solution, report.measurements
+    rms = float(np.sqrt(np.trace(sol.target_covariance)))
+    yaw = sol.mirror.yaw_deg
+    cal = (SelfCalibration(e.calibrated, priors={k: v for k, v in sol.priors.items()
+                                                 if k in e.calibrated})
+           if e.calibrated else PLAIN)
+    at_estimate = crlb(m.observer, [b.position for b in m.beacons], yaw,
+                       float(line_normal(yaw) @ sol.mirror.point), sol.target, m.sigma,
+                       len(m.targets), calibration=cal)
+    assert np.sqrt(np.trace(at_estimate[2:4, 2:4])) <= 1.01 * rms
+    assert e.target_crlb_cm <= 1.25 * rms
+    text = report_table(report)
+    where = "inside" if e.target_mahalanobis <= 2.4477 else "outside"
+    assert f"{e.target_mahalanobis:.2f} σ from the estimate: {where} the 95 % ellipse" in text
+    major, minor, _ = sol.ellipse95()
+    assert f"(95 %: {major:.3f} × {minor:.3f})" in text
+
+
+def test_the_sentence_follows_the_distance():
+    from mirrorsim.cli.tables import mahalanobis_sentence
+
+    assert "inside" in mahalanobis_sentence(2.44) and "outside" in mahalanobis_sentence(2.45)
+    assert "outside" in mahalanobis_sentence(101.91)
+
+
 @pytest.mark.parametrize("k", range(len(VARIANTS)))
 def test_random_scenes_at_half_size(k, tmp_path):
     v = VARIANTS[k]
@@ -76,6 +116,7 @@ def test_random_scenes_at_half_size(k, tmp_path):
     assert e.target_cm < worst_target and e.mirror_yaw_deg < worst_yaw
     # the report survives its JSON unchanged
     assert Report.from_json(rep.to_json()).to_json() == rep.to_json()
+    assert_consistent(rep)
 
 
 def test_reuse_and_several_beacons(tmp_path):
@@ -101,6 +142,8 @@ def test_reuse_and_several_beacons(tmp_path):
     assert s.errors.calibrated == ("pan", "scale") and a.errors.calibrated == ()
     assert [r["calibrated"] for r in s.to_json()["error_vs_beacons"]] == [[], ["pan", "scale"]]
     assert "2: " in report_table(s) and "(pan, scale)" in report_table(s)
+    assert_consistent(a)
+    assert_consistent(s)
     # a different seed is a different render
     c = evaluate_scene(scene.with_render(spp=8, seed=3), tmp_path, progress=False)
     assert not any(f.reused for f in c.frames)
@@ -123,6 +166,7 @@ def test_full_size_end_to_end(name, tmp_path, capsys):
     # independent --spp 16` with the whole frame at 16 spp; see README "Throughput")
     bounds = np.array([0.01, 0.01, 0.01, 0.002])  # beacon α, d/d, target α, d/d
     report = Report.from_json(rep)
+    assert_consistent(report)
     assert report.errors.beacon_alpha_deg[0] < bounds[0]
     assert report.errors.beacon_d_total_pct[0] < 100 * bounds[1]
     assert report.errors.target_alpha_deg < bounds[2]

@@ -256,14 +256,17 @@ def calibration_of(args: argparse.Namespace, n_beacons: int | None = None,
     )
 
     names = tuple(n.strip() for n in args.calibrate.split(",") if n.strip())
+    try:
+        priors = parse_priors(args.prior)
+    except ValueError as exc:
+        raise BadArgument("--prior", str(exc)) from None
     try:  # the names always; the count only where the beacons are known
-        check_nuisances(names, n_beacons, n_targets)
+        check_nuisances(names, n_beacons, n_targets, priors)
     except SolverError as exc:
         raise BadArgument("--calibrate", str(exc)) from None
     try:
-        priors = parse_priors(args.prior)
         check_nuisance_sigma(priors, names)
-    except (ValueError, SolverError) as exc:
+    except SolverError as exc:
         raise BadArgument("--prior", str(exc)) from None
     return SelfCalibration(names, beacon_sigma_of(args), priors)
 

@@ -109,8 +109,8 @@ def solution_summary(source: str, sol: Solution) -> str:
         major, minor, angle = sol.ellipse95()
         lines.append(f"  95 % ellipse of the target: {major:.3f} × {minor:.3f} cm, major axis "
                      f"at {angle:.1f}°; RMS {np.sqrt(np.trace(sol.target_covariance)):.3f} cm "
-                     "(first order, at the estimate; without down-weighting, a position "
-                     "prior or a nuisance prior, the Cramér–Rao bound there)")
+                     "(first order, at the estimate; without down-weighting, the "
+                     "Cramér–Rao bound there)")
     if sol.downweighted:
         lines.append("  trusted less (a Huber loss): " + ", ".join(sol.downweighted))
     if sol.nuisances:
@@ -140,14 +140,15 @@ def report_table(report: Report, report_scene: Scene | None = None) -> str:
                      "", f"{e.beacon_d_total_pct[i]:.3f} %"))
     rp_t, rp_e = t.target.reflection_point, s.target_reflection_point
     tp, te = t.target.position, s.target
-    bound = e.target_ellipse95_major_cm
+    ellipse = s.ellipse95()  # semi-major × semi-minor
     rows += [("mirror yaw (°)", f"{t.mirror_yaw_deg:.3f}", "", f"{s.mirror.yaw_deg:.3f}",
               f"{e.mirror_yaw_deg:.3f}"),
              ("mirror line offset (cm)", "0", "", "", f"{e.mirror_offset_cm:.3f}"),
              ("reflection point (cm)", f"({rp_t[0]:.2f}, {rp_t[1]:.2f})", "",
               f"({rp_e[0]:.2f}, {rp_e[1]:.2f})", f"{e.reflection_point_cm:.3f}"),
              ("target (cm)", f"({tp[0]:.2f}, {tp[1]:.2f})", "", f"({te[0]:.2f}, {te[1]:.2f})",
-              f"{e.target_cm:.3f}" + ("" if bound is None else f"  (95 %: {bound:.3f})"))]
+              f"{e.target_cm:.3f}" + ("" if ellipse is None else
+                                       f"  (95 %: {ellipse[0]:.3f} × {ellipse[1]:.3f})"))]
     lines = _columns(rows)
     lines.insert(1, "-" * len(lines[0]))
     if report_scene is not None:
@@ -159,16 +160,26 @@ def report_table(report: Report, report_scene: Scene | None = None) -> str:
     if s.nuisances:
         lines.append("self-calibration: " + nuisance_text(s))
     if e.target_mahalanobis is not None:
-        bound = ("" if e.target_crlb_cm is None else "; Cramér–Rao bound of the target's "
-                 f"RMS error: {e.target_crlb_cm:.3f} cm"
-                 + (" (the nuisances free: the priors left out)" if s.priors else ""))
-        lines.append(f"the true target lies {e.target_mahalanobis:.2f} σ from the estimate "
-                     f"(inside the 95 % ellipse below {chi2_2_radius(0.95):.2f}){bound}")
+        lines.append(mahalanobis_sentence(e.target_mahalanobis))
+    if e.target_crlb_cm is not None and s.target_covariance is not None:
+        lines.append(f"Cramér–Rao bound of the target's RMS error: {e.target_crlb_cm:.3f} cm "
+                     f"at the truth, for this estimator (its nuisances and priors); its "
+                     f"covariance's RMS at the estimate: "
+                     f"{np.sqrt(np.trace(s.target_covariance)):.3f} cm")
     if report.error_vs_beacons:
         lines.append("target error with the first k beacons: " + ", ".join(
             f"{k + 1}: {r.target_cm:.3f} cm ({', '.join(r.calibrated) or 'plain'})"
             for k, r in enumerate(report.error_vs_beacons)))
     return "\n".join(lines)
+
+
+def mahalanobis_sentence(distance: float) -> str:
+    """Where the true target lies against the estimate's 95 % ellipse, in words that
+    follow the distance: inside below χ₂'s 95 % radius, outside beyond it."""
+    r95 = chi2_2_radius(0.95)
+    where = (f"inside the 95 % ellipse, whose edge is at {r95:.2f} σ" if distance <= r95
+             else f"outside the 95 % ellipse, whose edge is at {r95:.2f} σ")
+    return f"the true target lies {distance:.2f} σ from the estimate: {where}"
 
 
 def _show_value(value) -> str:

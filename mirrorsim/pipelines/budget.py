@@ -184,7 +184,7 @@ def check_budget_calibration(scene: Scene, calibration: SelfCalibration) -> Self
                            "budget uses that σ in its self-calibrated column only, which "
                            "needs nuisances to self-calibrate")
     try:
-        check_nuisances(calibration.nuisances, len(scene.beacons), 1)
+        check_nuisances(calibration.nuisances, len(scene.beacons), 1, calibration.priors)
     except SolverError as exc:
         raise BadParameter("nuisances", str(exc)) from None
     return calibration

@@ -321,7 +321,7 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
     if beacons is not None:  # likewise
         spec = spec.with_beacon_count(beacons)
     try:  # before anything is written
-        check_nuisances(calibration.nuisances, spec.beacon_count, 1)
+        check_nuisances(calibration.nuisances, spec.beacon_count, 1, calibration.priors)
     except SolverError as exc:
         raise BadParameter("nuisances", f"{exc} (scenes of {spec.beacon_count} beacon(s) "
                            f"drawn from {spec_path or 'the default spec'})") from None

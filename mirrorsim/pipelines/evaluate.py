@@ -150,7 +150,7 @@ def evaluate_into(scene: Scene, out: Path, *, variant: str = "auto", progress: b
     # image shares its errors (bias included), so several would shrink its σ by √frames
     target = [mean_target]
     sol = solve_measurements(cam.position, beacons, target, sigma, calibration)
-    errors = score(truth, measurements, sol)
+    errors = score(truth, measurements, sol, calibration)
     by_count = ()
     if len(beacons) > 1:
         def first(k: int) -> Score:
@@ -160,14 +160,16 @@ def evaluate_into(scene: Scene, out: Path, *, variant: str = "auto", progress: b
             sig_k = replace(sigma, beacons=sigma.beacons[:k])
             meas_k = replace(measurements, beacons=beacons[:k], sigma=sig_k)
             truth_k = replace(truth, beacons=truth.beacons[:k])
+            def scored(cal_k: SelfCalibration) -> Score:
+                return score(truth_k, meas_k, solve_measurements(
+                    cam.position, beacons[:k], target, sig_k, cal_k), cal_k)
+
             for m in range(len(calibration.nuisances), 0, -1):
                 try:
-                    return score(truth_k, meas_k, solve_measurements(
-                        cam.position, beacons[:k], target, sig_k, calibration.first(m)))
+                    return scored(calibration.first(m))
                 except SolverError:
                     continue
-            return score(truth_k, meas_k, solve_measurements(
-                cam.position, beacons[:k], target, sig_k, calibration.first(0)))
+            return scored(calibration.first(0))
 
         # all of them: the solution above
         by_count = tuple(first(k) for k in range(1, len(beacons))) + (errors,)

@@ -18,7 +18,7 @@ from solver.errors import SolverError
 from solver.geometry import line_normal, yaw_difference
 from solver.lsq import crlb
 from solver.measurements import Measurements
-from solver.selfcal import NUISANCES
+from solver.selfcal import NUISANCES, PLAIN, SelfCalibration
 from solver.sltr import Solution
 
 
@@ -65,8 +65,11 @@ class Score:
                       "calibrated": tuple(d.get("calibrated", ()))})
 
 
-def score(truth: GroundTruth, measurements: Measurements, sol: Solution) -> Score:
-    """Errors of measurements and estimate against the ground truth (docs/files.md)."""
+def score(truth: GroundTruth, measurements: Measurements, sol: Solution,
+          calibration: SelfCalibration = PLAIN) -> Score:
+    """Errors of measurements and estimate against the ground truth (docs/files.md);
+    ``calibration``: how ``sol`` was solved, so that its Cramér–Rao bound is that
+    estimator's (its nuisances, their priors, the beacons' position σ)."""
     t_true = np.asarray(truth.target.position, float)
     rp_true = np.asarray(truth.target.reflection_point, float)
     n = line_normal(sol.mirror.yaw_deg)
@@ -90,7 +93,7 @@ def score(truth: GroundTruth, measurements: Measurements, sol: Solution) -> Scor
                                  zip(measurements.beacons, truth.beacons, strict=True)),
         target_ellipse95_major_cm=None if ellipse is None else float(ellipse[0]),
         target_mahalanobis=sol.mahalanobis(t_true),
-        target_crlb_cm=_crlb_cm(truth, measurements, sol),
+        target_crlb_cm=_crlb_cm(truth, measurements, calibration),
         calibrated=calibrated_of(sol),
     )
 
@@ -100,18 +103,17 @@ def calibrated_of(sol: Solution) -> tuple[str, ...]:
     return tuple(n for n, (key, _) in NUISANCES.items() if key in sol.nuisances)
 
 
-def _crlb_cm(truth: GroundTruth, m: Measurements, sol: Solution) -> float | None:
-    """√trace of the target's CRLB at the truth for ``m``'s σ's and the nuisances the
-    solution estimated (None without σ's, or where the geometry determines nothing; a
-    beacon-position prior is not in it)."""
+def _crlb_cm(truth: GroundTruth, m: Measurements, calibration: SelfCalibration
+             ) -> float | None:
+    """√trace of the target's CRLB at the truth for ``m``'s σ's and the estimator solved
+    with ``calibration`` (None without σ's, or where the geometry determines nothing)."""
     if m.sigma is None:
         return None
     yaw = truth.mirror_yaw_deg
     rho = float(line_normal(yaw) @ np.asarray(truth.target.reflection_point, float))
-    nuisances = calibrated_of(sol)
     try:
         bound = crlb(m.observer, [b.position for b in m.beacons], yaw, rho,
-                     truth.target.position, m.sigma, len(m.targets), nuisances)
+                     truth.target.position, m.sigma, len(m.targets), calibration=calibration)
     except SolverError:
         return None
     return float(np.sqrt(np.trace(bound[2:4, 2:4])))
