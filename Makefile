@@ -8,11 +8,14 @@ STAMP  := $(VENV)/.installed
 
 .PHONY: demo test test-fast lint bench setup llvm clean error-model docs docs-build
 
-# the error model shipped in mirrorsim/data: fitted on the project's own dataset of the
-# default spec (ideal bench, default render settings); tests/test_uncertainty.py makes
-# the same dataset again and checks that its fit is the shipped model
-ERROR_MODEL_SEED := 20261202
-ERROR_MODEL_N := 120
+# the error models shipped in mirrorsim/data, each fitted on the project's own dataset of
+# the scene format's domain: the ideal bench (scenes/dataset_spec_domain.yaml) and
+# hand-built benches (scenes/dataset_spec_domain_bench.yaml); tests/test_uncertainty.py
+# renders again the rows each model's provenance records and checks them against it
+ERROR_MODEL_SEED := 20261206
+ERROR_MODEL_N := 360
+BENCH_MODEL_SEED := 20261207
+BENCH_MODEL_N := 300
 
 setup: $(STAMP) llvm
 
@@ -79,11 +82,15 @@ bench: setup
 	$(BIN)/python benchmarks/sensor_noise.py
 
 error-model: setup
-	rm -rf renders/error-model
+	rm -rf renders/em-ideal renders/em-bench
 	$(BIN)/mirrorsim dataset --n $(ERROR_MODEL_N) --seed $(ERROR_MODEL_SEED) \
-	  --out renders/error-model --workers 2 --quiet
-	$(BIN)/mirrorsim errormodel renders/error-model
-	cp renders/error-model/error_model.json mirrorsim/data/error_model.json
+	  --spec scenes/dataset_spec_domain.yaml --out renders/em-ideal --workers 2 --quiet
+	$(BIN)/mirrorsim dataset --n $(BENCH_MODEL_N) --seed $(BENCH_MODEL_SEED) \
+	  --spec scenes/dataset_spec_domain_bench.yaml --out renders/em-bench --workers 2 --quiet
+	$(BIN)/mirrorsim errormodel renders/em-ideal
+	$(BIN)/mirrorsim errormodel renders/em-bench
+	cp renders/em-ideal/error_model.json mirrorsim/data/error_model.json
+	cp renders/em-bench/error_model.json mirrorsim/data/error_model_bench.json
 
 clean:
 	rm -rf $(VENV) renders/*/ .pytest_cache .ruff_cache .hypothesis

@@ -27,7 +27,9 @@ cheap)::
 ``generate_dataset(n, seed, out)``  a dataset of random scenes (:class:`DatasetRun`)
 ``load_dataset(folder)``  a dataset's table, verified, as a pandas DataFrame
 ``fit_error_model(folder)``  the error model of a dataset
-``load_error_model(path)``  an error model file (``None``: the shipped one)
+``load_error_model(path, kind)``  an error model file (``None``: the shipped one of
+                          ``kind``, ``"ideal"`` or ``"bench"``)
+``model_for(scene)``      the shipped model a scene's bench calls for
 ========================  ====================================================
 """
 
@@ -57,6 +59,7 @@ _API = {
     "load_dataset": ("mirrorsim.formats.dataset_folder", "load_dataset"),
     "fit_error_model": ("mirrorsim.pipelines.errormodel", "fit_dataset"),
     "load_error_model": ("mirrorsim.formats.error_model", "load_error_model_or_default"),
+    "model_for": ("mirrorsim.pipelines.evaluate", "model_for"),
 }
 __all__ = ["__version__", *_API]
 

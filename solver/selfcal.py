@@ -102,6 +102,11 @@ class SelfCalibration:
                 "beacon_position_sigma_cm": self.position_sigma,
                 **({"priors": dict(self.priors)} if self.priors else {})}
 
+    @classmethod
+    def from_json(cls, d: dict) -> SelfCalibration:
+        """Inverse of :meth:`to_json`."""
+        return cls(tuple(d["nuisances"]), d["beacon_position_sigma_cm"], d.get("priors", {}))
+
 
 def as_calibration(calibration: object) -> SelfCalibration:
     """``calibration``, refused (one line) where it is not a :class:`SelfCalibration` (a

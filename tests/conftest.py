@@ -80,5 +80,25 @@ def synthetic_columns(n: int, seed: int, sigma_alpha=(0.003, 0.003), sigma_d=(0.
                      f"{kind}_height_px_true": 15000 / d,
                      f"{kind}_alpha_err": a_err, f"{kind}_d_rel_err": d_err,
                      f"{kind}_alpha_meas": alpha + a_err, f"{kind}_d_meas": d * (1 + d_err)})
+    with_frame_columns(cols, rng)
     cols.update(extra)
+    return cols
+
+
+def with_frame_columns(cols: dict, rng) -> dict:
+    """``cols`` with what the frames showed of each image and the scenes' facts, as a
+    dataset records them (the error model's features and domain): each image's measured
+    height (its true one), a contrast, the frame's noise, a lossless frame; a 6 cm camera
+    of fx 1500 px, 4.2 cm pencils, one beacon."""
+    import numpy as np
+
+    n = len(cols["index"])
+    for kind in ("target", "beacon"):
+        cols[f"{kind}_height_px_meas"] = np.asarray(cols[f"{kind}_height_px_true"], float)
+        cols[f"{kind}_contrast"] = rng.uniform(0.3, 0.8, n)
+        cols[f"{kind}_noise"] = rng.uniform(0.005, 0.02, n)
+        cols[f"{kind}_jpeg_quality"] = np.zeros(n)
+    cols.setdefault("fx_px", np.full(n, 1500.0))
+    cols.update(camera_height=np.full(n, 6.0), pencil_height_cm=np.full(n, 4.2),
+                beacons=np.ones(n))
     return cols

@@ -275,6 +275,20 @@ def test_spec_values_that_would_fail_every_scene_are_refused(tmp_path, capsys, e
     (lambda m: m["objects"]["target"].pop("d_rel"), "objects.target.d_rel"),
     (lambda m: m.update(version=1), "version"),
     (lambda m: m.update(sigma={"alpha_deg": 0.01, "d_total_rel": 0.002}), "sigma"),
+    # the domain and the tolerances: missing, NaN (strict JSON's null), inconsistent
+    (lambda m: m.pop("domain"), "domain"),
+    (lambda m: m.pop("tolerances"), "tolerances"),
+    (lambda m: m["domain"]["features"]["beacon"].pop("log_noise"),
+     "domain.features.beacon.log_noise"),
+    (lambda m: m["domain"]["scene"].update(fx_px=[None, 2000]), "domain.scene.fx_px[0]"),
+    (lambda m: m["domain"]["scene"].update(fx_px=[2000, 1000]), "domain.scene.fx_px"),
+    (lambda m: m["tolerances"].update(pan_deg=None), "tolerances.pan_deg"),
+    (lambda m: m["objects"]["target"]["alpha"].update(tail=0.5), "objects.target.alpha.tail"),
+    (lambda m: m["objects"]["target"]["alpha"].update(typical_sigma=0.5),
+     "objects.target.alpha.typical_sigma"),
+    (lambda m: m["domain"]["features"]["target"].update(log_height_px=[7.0, 8.0]),
+     "objects.target.alpha.log_sigma.mean"),
+    (lambda m: m.update(kind="bench"), "kind"),
 ])
 def test_error_model_files_are_checked_as_measurement_files_are(tmp_path, capsys, edit, key):
     from mirrorsim.pipelines import errormodel
@@ -292,6 +306,9 @@ def test_error_model_files_are_checked_as_measurement_files_are(tmp_path, capsys
     _refused(capsys, ["plan", DEFAULT, "--error-model", str(model)], says=(key,))
     _refused(capsys, ["montecarlo", "--error-model", str(model)], says=(key,))
     assert not (tmp_path / "s.json").exists()
+    _refused(capsys, ["evaluate", DEFAULT, "--error-model", str(model), "--out",
+                      str(tmp_path / "ev")], says=(str(model), key))
+    assert not (tmp_path / "ev").exists()
 
 
 @pytest.mark.parametrize("argv, says", [

@@ -585,3 +585,35 @@ def test_a_prior_lets_fewer_beacons_carry_a_nuisance():
     assert np.trace(sol.target_covariance) > 10 * np.trace(plain.target_covariance)
     with pytest.raises(SolverError, match="at least 2 beacon observations"):
         solve_measurements(OBS, bs, ts, SIG, SelfCalibration(("pan", "scale")))
+
+
+def test_a_nuisance_the_beacons_do_not_separate_is_held_and_said():
+    """Two beacons 2 mm apart (nearly one view of the mirror) cannot tell a pan offset
+    from the mirror's yaw: asked to calibrate the pan freely, the solve holds it at the
+    bench's prior (or at 0 with none) and says so, whatever the beacon count; three
+    well-spread beacons separate it and nothing is said; an estimate far beyond its
+    prior is flagged."""
+    from types import SimpleNamespace
+
+    from mirrorsim.formats.error_model import BenchTolerances
+    from mirrorsim.pipelines.evaluate import SEPARATED_SD, solve_separated
+
+    rng = np.random.default_rng(4)
+    close = [BEACONS[0], BEACONS[0] + np.array([0.2, 0.0])]
+    bs, ts = _measure(rng, beacons=close)
+    bench = SimpleNamespace(tolerances=BenchTolerances(pan_deg=1.5))
+    ideal = SimpleNamespace(tolerances=BenchTolerances())
+    free = solve_measurements(OBS, bs, ts, SIG, SelfCalibration(("pan",)))
+    assert free.nuisance_sd["pan_offset_deg"] > SEPARATED_SD["pan"]
+    sol, cal, said = solve_separated(OBS, bs, ts, SIG, SelfCalibration(("pan",)), bench)
+    assert cal.priors == {"pan": pytest.approx(1.5 / 3**0.5)}
+    assert any("do not separate it" in s and "held at its prior" in s for s in said)
+    sol, cal, said = solve_separated(OBS, bs, ts, SIG, SelfCalibration(("pan",)), ideal)
+    assert cal.nuisances == () and any("held at its neutral value" in s for s in said)
+    bs, ts = _measure(rng)  # three beacons spread along the mirror
+    sol, cal, said = solve_separated(OBS, bs, ts, SIG, SelfCalibration(("pan",)), bench)
+    assert cal.nuisances == ("pan",) and said == []
+    bs, ts = _measure(rng, delta=0.5)
+    _, _, said = solve_separated(OBS, bs, ts, SIG, SelfCalibration(("pan",), priors={
+        "pan": 0.05}), bench)
+    assert any(s.startswith("warning: pan came out") for s in said)

@@ -4,6 +4,7 @@ errormodel."""
 from __future__ import annotations
 
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 from mirrorsim.cli.registry import (
@@ -59,13 +60,16 @@ def _solve(args) -> int:
     if model is None and m.sigma is not None:
         sigma, source = m.sigma, f"`sigma` of {args.measurements}"
     else:
+        # a measurements file holds no pixels: each kind's typical σ (its training rows'
+        # RMS), the same for every beacon
         model = model or default_error_model()
-        sigma = model.sigmas(m.targets[0], [(b.alpha_deg, b.d_total) for b in m.beacons],
-                             m.observer_pan_deg)
-        source = (f"error model {args.error_model}" if args.error_model
-                  else "the shipped error model (ideal bench)")
-        if m.observer_pan_deg is None:
-            source += "; no observer_pan_deg: images taken as off-axis as its training rows"
+        typical = model.typical
+        sigma = replace(typical, beacons=typical.beacons * len(m.beacons))
+        from mirrorsim.pipelines.evaluate import model_calibration
+
+        calibration = model_calibration(model, calibration)  # a bench model's priors
+        source = (f"{model.name()}'s typical σ's (a measurements file holds no image "
+                  "features: `evaluate` gives each image its own)")
     sol = solve_measurements(m.observer, m.beacons, m.targets, sigma, calibration)
     print(f"σ's from {source}", file=sys.stderr)
     print(solution_summary(str(args.measurements), sol))
@@ -310,11 +314,21 @@ def _errormodel_options(p):
 
 @command("errormodel", "fit the detector's error model to a dataset, and test it on another",
          "Fit each measurement's σ (target and beacon, alpha and d_total) as a function of what "
-         "is known when the photograph is measured (log d_total, off-axis bearing), and the "
-         "errors' bias against geometry and bench (to explain them); write "
-         "DIR/error_model.json (give it to evaluate, dataset, budget, track, solve, montecarlo "
-         "or plan with --error-model) and DIR/error_model.png.  With --test HELDOUT: solve "
-         "each held-out row again with the model's σ's and say whether its ellipses hold.",
+         "its frame shows (the image's height in pixels, its angle off the optical axis, its "
+         "edges' contrast, the frame's noise and JPEG quality), with a tail factor that "
+         "holds 95 %% of the errors within 1.96 σ, the domain it was fitted on (a scene "
+         "outside it gets a warning) and, for a spec with a bench block, the benches' shared "
+         "errors as tolerances the solver estimates with priors; and the errors' bias against "
+         "geometry and bench (to explain them).  Needs at least "
+         "30 usable rows of each kind (five per coefficient of a σ law); a law whose σ's "
+         "over its own rows span more than a factor 10000, or move by more than a factor 30 "
+         "when it is refitted on 20 resamples of its rows, is refused as unstable, and one "
+         "that moves beyond 4 is kept with a warning.  "
+         "Writes DIR/error_model.json (give it to evaluate, dataset, budget, track, solve, "
+         "montecarlo or plan with --error-model) and DIR/error_model.png.  With --test "
+         "HELDOUT: solve each held-out row again with the model's σ's (and its bench's "
+         "priors) and say whether its ellipses hold; without DATASET or --error-model, the "
+         "shipped model the held-out spec's benches call for.",
          _errormodel_options)
 def _errormodel(args) -> int:
     from mirrorsim.formats.error_model import default_error_model
@@ -341,15 +355,17 @@ def _errormodel(args) -> int:
                               "which is not a model's: choose another name")
         cols = errormodel.read_columns(args.dataset)
         try:
-            model = errormodel.fit(cols, errormodel.provenance_of(args.dataset, cols))
+            model = errormodel.fit(cols, errormodel.provenance_of(args.dataset, cols),
+                                   errormodel.spec_of(args.dataset).get("bench"))
         except ValueError as exc:
             raise BadArgument(str(args.dataset), str(exc)) from None
         errormodel.write_model(model, out)
         png = errormodel.plot(cols, model, plots)
         print(errormodel.summary(model))
         print(f"model: {out}\nplots: {png}")
-    else:
-        model = error_model_of(args) or default_error_model()
+    else:  # the shipped model the held-out benches call for, as evaluate chooses it
+        model = error_model_of(args) or default_error_model(
+            "bench" if errormodel.spec_of(args.test).get("bench") else "ideal")
     if args.test is not None:
         _test_model(args, model, out)
     return 0
@@ -362,7 +378,7 @@ def _test_model(args, model, out: Path | None) -> None:
         v = uncertainty.validate(model, errormodel.read_columns(args.test))
     except ValueError as exc:
         raise BadArgument(str(args.test), str(exc)) from None
-    name = args.error_model or out or "the shipped error model"
+    name = args.error_model or out or model.name()
     print(f"{name} on {args.test}:")
     print("\n".join(uncertainty.report_lines(v)))
     plot = args.plot or (out.with_suffix(".reliability.png") if out is not None else None)

@@ -275,14 +275,17 @@ def _evaluate(args) -> int:
     calibration = calibration_of(args, len(scene.beacons))  # before anything renders
     if "plot" in args.keep:
         preload("mirrorsim.cli.plots")  # matplotlib imports while the frame renders
+    model = error_model_of(args)  # read and checked before anything is written
     out = out_folder(args, scene)
     report = evaluate_scene(scene, out, variant=args.variant, progress=not args.quiet,
                             keep=tuple(k for k in args.keep if k != "plot"),
-                            error_model=error_model_of(args), calibration=calibration,
+                            error_model=model, calibration=calibration,
                             board_pose=args.board_pose)
     print(f"{scene.name}: {len(report.frames)} frame(s), {report.render.spp} spp, "
           f"{report.render.variant}{' (reused)' if report.reused else ''}")
     print(report_table(report, scene))
+    for line in report.model_warnings:
+        print(f"warning: error model: {line}", file=sys.stderr)
     print(f"report: {write_json(out / f'{scene.name}.report.json', report.to_json())}")
     if "plot" in args.keep:
         from mirrorsim.cli.plots import plot_evaluation

@@ -154,11 +154,20 @@ def report_table(report: Report, report_scene: Scene | None = None) -> str:
     if report_scene is not None:
         lines.append(bench_line(report_scene))
     if m.sigma is not None:
-        lines.append(f"σ's from the error model: {m.sigma.describe()}")
+        lines.append(f"σ's from {report.error_model or 'the error model'}: "
+                     f"{m.sigma.describe()}")
+    cal = report.self_calibration
+    if cal.priors or cal.position_sigma:
+        lines.append("the bench's shared errors estimated with their priors: "
+                     + ", ".join(filter(None, [cal.describe_priors(),
+                                               f"beacon positions ±{cal.position_sigma:.3g} cm"
+                                               if cal.position_sigma else ""])))
     if s.downweighted:
         lines.append("trusted less by the solver (a Huber loss): " + ", ".join(s.downweighted))
     if s.nuisances:
         lines.append("self-calibration: " + nuisance_text(s))
+    lines += [note if note.startswith("warning: ") else f"self-calibration: {note}"
+              for note in report.calibration_notes]
     if e.target_mahalanobis is not None:
         lines.append(mahalanobis_sentence(e.target_mahalanobis))
     if e.target_crlb_cm is not None and s.target_covariance is not None:

@@ -38,6 +38,7 @@ Model
 from __future__ import annotations
 
 import errno
+import math
 import warnings
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -55,6 +56,7 @@ from mirrorsim.detection.image_geometry import (
 from mirrorsim.detection.regions import find_pencils, find_target
 from mirrorsim.errors import DetectionError, InputError
 from mirrorsim.formats.capture import CaptureRecord
+from mirrorsim.formats.error_model import ImageFeatures
 from mirrorsim.formats.files import decode_image, read_regular_bytes
 from mirrorsim.rendering.sensor import undistort
 from mirrorsim.scene.model import (
@@ -79,6 +81,17 @@ class Detection:
     beacons: list[tuple[Beacon, ImageMeasurement]]  # each beacon and its mirror image
     images: list[ImageMeasurement]  # every pencil image found (mirror and direct)
     pan_deg: float | None = None  # the optical axis's bearing, as the capture record says
+    noise: float = float("nan")  # the frame's relative noise (:func:`frame_noise`)
+    jpeg_quality: int = 0  # the frame's JPEG quality as its file says (0: lossless)
+
+    def features(self, m: ImageMeasurement, alpha_deg: float | None = None,
+                 d_total: float | None = None) -> ImageFeatures:
+        """What the error model weighs an image of this frame by (``alpha_deg`` and
+        ``d_total``: its measurement corrected since, where it was)."""
+        return ImageFeatures(m.alpha_deg if alpha_deg is None else alpha_deg,
+                             m.d_total if d_total is None else d_total,
+                             float(m.height_px or float("nan")), image_contrast(m),
+                             self.noise, self.jpeg_quality)
 
     def measurements(self) -> Measurements:
         """The solver's inputs (raises DetectionError if the target's d_total is missing)."""
@@ -138,9 +151,10 @@ def measure_object(img: np.ndarray, kind: str, target_ratio: float | None = None
 
 
 def detect_frame(image: np.ndarray, view: CaptureRecord, calibration: Calibration,
-                 subsampled: bool = False) -> Detection:
+                 subsampled: bool = False, *, jpeg_quality: int = 0) -> Detection:
     """Measure the target and each beacon in an RGB uint8 frame (``subsampled``: one
-    whose colour was stored at half resolution, a JPEG; ``calibration`` measured so).
+    whose colour was stored at half resolution, a JPEG; ``calibration`` measured so;
+    ``jpeg_quality``: the quality its file gives, for the error model).
 
     Raises
     ------
@@ -169,7 +183,8 @@ def detect_frame(image: np.ndarray, view: CaptureRecord, calibration: Calibratio
         _check_stands_on_board(cam, m, view)
     images, mirror_imgs = assign_beacons(pencils, view)
     det = Detection(observer=tuple(cam.position), pan_deg=cam.pan_deg, target=target,
-                    beacons=list(zip(view.beacons, mirror_imgs, strict=True)), images=images)
+                    beacons=list(zip(view.beacons, mirror_imgs, strict=True)), images=images,
+                    noise=frame_noise(linear, target.bbox_px), jpeg_quality=jpeg_quality)
     _check_a_mirror_fits(det)
     return det
 
@@ -266,6 +281,7 @@ class StoredFrame:
 
     pixels: np.ndarray
     subsampled: bool
+    jpeg_quality: int = 0  # the JPEG's quality as its tables say (0: a lossless frame)
 
 
 def read_frame(path: str | Path, size: tuple[int, int] | None = None) -> np.ndarray:
@@ -313,7 +329,68 @@ def read_stored_frame(path: str | Path, size: tuple[int, int] | None = None) -> 
     if jpeg:
         warnings.warn(f"{path}: a JPEG frame: compression blurs the edges the detector "
                       "measures; expect larger errors", RuntimeWarning, stacklevel=2)
-    return StoredFrame(rgb, jpeg)
+    return StoredFrame(rgb, jpeg, jpeg_quality(raw) if jpeg else 0)
+
+
+# libjpeg's luminance quantization table at quality 50 (ITU-T T.81 Annex K), whose
+# scaled copy a JPEG of quality q holds: its sum is all an estimate of q needs, so the
+# order the file stores it in (zigzag) does not matter
+_IJG_LUMA_SUM = 3688
+
+
+def jpeg_quality(data: bytes) -> int:
+    """The quality (1–100) a JPEG was written at, estimated from its first quantization
+    table as libjpeg scales it (q < 50: ×5000/q %, else ×(200 − 2q) %); 0 for a file
+    without one.  What the frame shows of its compression, known without the scene."""
+    i = 2
+    while i + 4 < len(data):
+        if data[i] != 0xFF:
+            return 0
+        marker = data[i + 1]
+        if marker in (0xD8, 0x01, 0xFF) or 0xD0 <= marker <= 0xD7:
+            i += 1 if marker == 0xFF else 2
+            continue
+        length = int.from_bytes(data[i + 2:i + 4], "big")
+        if marker == 0xDB:  # DQT: Pq/Tq, then 64 values of 8 (Pq 0) or 16 bits
+            precision = data[i + 4] >> 4
+            body = data[i + 5:i + 5 + 64 * (1 + precision)]
+            values = (np.frombuffer(body, ">u2") if precision else
+                      np.frombuffer(body, np.uint8)).astype(float)
+            if values.size != 64:
+                return 0
+            scale = 100.0 * values.sum() / _IJG_LUMA_SUM
+            q = 5000.0 / scale if scale > 100.0 else (200.0 - scale) / 2.0
+            return int(np.clip(round(q), 1, 100))
+        if marker == 0xDA:  # the scan starts: no table came before it
+            return 0
+        i += 2 + length
+    return 0
+
+
+def frame_noise(linear: np.ndarray, box: list[int]) -> float:
+    """The frame's relative noise, measured where it is flat: in the middle half of the
+    target panel's image (mid-grey, square-on), the robust σ of neighbouring pixels'
+    differences over √2, over the panel's level.  Render noise, sensor noise and JPEG's
+    blocks all show there; NaN where the panel's image is too small to hold a sample."""
+    u0, v0, u1, v1 = box
+    du, dv = (u1 - u0) // 4, (v1 - v0) // 4
+    core = np.asarray(linear[v0 + dv:v1 - dv, u0 + du:u1 - du], float).mean(axis=-1)
+    if core.shape[0] < 2 or core.shape[1] < 3:
+        return float("nan")
+    diff = np.diff(core, axis=1).ravel()
+    sd = 1.4826 * float(np.median(np.abs(diff - np.median(diff)))) / math.sqrt(2.0)
+    level = float(np.median(core))
+    return sd / level if level > 0 else float("nan")
+
+
+def image_contrast(m: ImageMeasurement) -> float:
+    """The relative contrast of an image's edges: the smallest, over its measured sides,
+    of |inside − outside| over the larger of the two (mean linear radiance)."""
+    sides = [x for x in (m.outside.left, m.outside.right, m.outside.top, m.outside.bottom)
+             if np.isfinite(x)]
+    if not sides or not np.isfinite(m.inside):
+        return float("nan")
+    return min(abs(m.inside - x) / max(m.inside, x, 1e-9) for x in sides)
 
 
 def header_size(data: bytes) -> tuple[int, int] | None:

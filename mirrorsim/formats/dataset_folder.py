@@ -331,7 +331,7 @@ def read_table(folder: str | Path) -> dict[str, list]:
         raise DatasetError(path, "its rows differ from the row files in rows/ (resuming the "
                            "dataset writes the table again)")
     schemas = cols.get("schema") or [None]
-    if all(s in (2, 3) for s in schemas):
+    if all(s in (*table.OLDER_SCHEMAS, table.SCHEMA) for s in schemas):
         # a table of older layouts (one resumed by a later version mixes them): each row
         # takes the values its scene had for the columns added since its layout (one
         # beacon, plain; no priors); a column its own layout had stays missing

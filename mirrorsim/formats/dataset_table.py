@@ -58,6 +58,7 @@ SCENE = (
     Column("target_x", "cm", "target position"), Column("target_y", "cm", "target position"),
     Column("beacons", "", "how many beacons the scene has (columns `beacon_*` for the first, "
                           "`beacon2_*`… for the others)"),
+    Column("pencil_height_cm", "cm", "the first beacon's pencil height"),
 )
 # what the solver was given besides the images (the capture record's: believed values)
 KNOWN = (
@@ -86,6 +87,11 @@ PER_OBJECT = (
     Column("alpha_err", "deg", "measured − true α"),
     Column("d_rel_err", "1", "(measured − true) / true d_total"),
     Column("clipped", "", "the detector found the image clipped"),
+    # what the frame showed of the image (the error model's σ features)
+    Column("height_px_meas", "px", "measured image height"),
+    Column("contrast", "1", "relative contrast of the image's edges"),
+    Column("noise", "1", "the frame's relative noise (on the target panel)"),
+    Column("jpeg_quality", "", "the frame's JPEG quality as its file says (0: lossless)"),
     Column("sigma_alpha_deg", "deg", "σ of the measured α, from the error model"),
     Column("sigma_d_rel", "1", "σ of the measured d_total, relative (a fraction), from the "
                                "error model"),
@@ -146,12 +152,20 @@ COLUMNS = (*RUN, *SCENE, *KNOWN,
 NAMES = tuple(c.name for c in COLUMNS)
 # the columns of the second, third… beacon: in a row exactly when its scene has them
 SLOT_NAMES = {k: tuple(c.name for c in _slot_columns(k)) for k in range(1, MAX_BEACONS)}
+# the layout of the rows this mirrorsim writes
+SCHEMA = 5
 # the columns each layout added, with the value a row of an older layout had for them:
-# schema 3 several beacons and self-calibration, schema 4 the self-calibration's priors
+# schema 3 several beacons and self-calibration, schema 4 the self-calibration's priors,
+# schema 5 what the frame showed of each image (unknown for an older row: null)
 ADDED_IN = {3: {"beacons": 1, "calibrate": "", "beacon_sigma": 0.0,
                 **{f"est_{key}{sd}": None for key, _ in NUISANCES.values()
                    for sd in ("", "_sd")}},
-            4: {"calibrate_priors": ""}}
+            4: {"calibrate_priors": ""},
+            5: {"pencil_height_cm": None,
+                **{object_column(k, c): None for k in OBJECTS
+                   for c in ("height_px_meas", "contrast", "noise", "jpeg_quality")}}}
+# the older layouts a table may hold, read with ADDED_IN's values
+OLDER_SCHEMAS = tuple(range(2, SCHEMA))
 
 
 def older_values(schema: int) -> dict[str, Any]:
@@ -206,9 +220,9 @@ class DatasetRow:
     @classmethod
     def from_json(cls, d: dict) -> DatasetRow:
         """Inverse of :meth:`to_json`; a row of an older layout (schema 2: one beacon, no
-        self-calibration; 3: no priors) takes the values its scene had for the columns
-        added since."""
-        if d.get("schema") in (2, 3) and not d.get("error"):
+        self-calibration; 3: no priors; 4: no image features) takes the values its scene
+        had for the columns added since."""
+        if d.get("schema") in OLDER_SCHEMAS and not d.get("error"):
             d = {**older_values(d["schema"]), **d}
         return cls({k: v for k, v in d.items() if k != "traceback"}, d.get("traceback", ""))
 

@@ -21,7 +21,7 @@ from mirrorsim.errors import BadParameter, DetectionError, SolverError
 from mirrorsim.formats.error_model import ErrorModel
 from mirrorsim.formats.files import claim_run_folder
 from mirrorsim.formats.scenefile import check_given_scene
-from mirrorsim.pipelines.evaluate import evaluate_into
+from mirrorsim.pipelines.evaluate import evaluate_into, model_for
 from mirrorsim.pipelines.score import Report, check_keep
 from mirrorsim.rendering.passes import reusing_renders
 from mirrorsim.scene import imperfections
@@ -212,6 +212,7 @@ def run_budget(scene: Scene, out: str | Path, *, variant: str = "auto", progress
     check_given_scene(scene)  # edited by a script: held to what its file would make
     check_keep(keep)
     calibration = check_budget_calibration(scene, calibration)
+    model = model_for(scene, error_model)  # read and checked before anything is written
     out = claim_run_folder(out, "out", [("scene", scene.source)])
     found = imperfections.sources(scene)
     runs = 1 + len(found) + (len(found) > 1)  # ideal, each source alone, all of them
@@ -220,8 +221,11 @@ def run_budget(scene: Scene, out: str | Path, *, variant: str = "auto", progress
     def run(label: str, sub: Scene) -> Report:
         if on_step is not None:
             on_step(label, next(done), runs)
+        # every run weighed by the model the whole scene's bench calls for, and solved
+        # as the budget solves (its own calibration, not the model's bench priors): the
+        # runs differ by their imperfections alone
         return evaluate_into(sub, out / _folder(label), variant=variant, progress=progress,
-                             keep=keep, error_model=error_model)
+                             keep=keep, error_model=model, model_priors=False)
 
     def measured(label: str, value: Any, sub: Scene) -> Contribution:
         # a bench error can make a frame unmeasurable (an image taken for the wrong one

@@ -66,8 +66,8 @@ from solver.selfcal import NUISANCES, PLAIN, SelfCalibration, check_nuisances, p
 
 # where the scenes run: warm local worker processes, or a Dask cluster
 EXECUTORS = ("local", "dask")
-# 3: the beacon count, each beacon's columns, self-calibration; 4: its priors
-ROW_SCHEMA_VERSION = 4
+# the layout of its rows (dataset_table.ADDED_IN says what each added)
+ROW_SCHEMA_VERSION = table.SCHEMA
 # a worker retires past this resident memory; measured on llvm_ad_rgb, a warm worker
 # holds ~500 MiB after its first full-size scene and no more after 30 (docs/results.md,
 # "Datasets and the error model"), so this only stops a leak that another Mitsuba might bring
@@ -120,7 +120,7 @@ def process_one(i: int, seed: int, spec: DatasetSpec, out: str, spp: int | None,
                                 calibration=calibration)
         write_json(out_dir / "frames" / name / f"{name}.measurements.json",
                    rep.measurements.to_json())
-        row.update(_flatten(scene, rep, calibration))
+        row.update(_flatten(scene, rep))
         row["seconds_sample"] = t1 - t0
         row["error"] = ""
     except SCENE_FAILURES as exc:  # the scene's own: recorded, one bad scene must not stop a run
@@ -134,9 +134,10 @@ def process_one(i: int, seed: int, spec: DatasetSpec, out: str, spp: int | None,
     return SceneResult(i, done)
 
 
-def _flatten(scene: Scene, rep: Report, calibration: SelfCalibration = PLAIN) -> dict:
+def _flatten(scene: Scene, rep: Report) -> dict:
     """The row's columns: scene parameters, truth, measurements, solution, errors (each
-    beacon's under its own prefix, :func:`~mirrorsim.formats.dataset_table.beacon_kind`)."""
+    beacon's under its own prefix, :func:`~mirrorsim.formats.dataset_table.beacon_kind`;
+    the self-calibration the report solved with)."""
     cam, mir, t = scene.camera, scene.mirror, rep.truth
     meas, sol, err = rep.measurements, rep.solution, rep.errors
     cov = sol.target_covariance
@@ -146,8 +147,9 @@ def _flatten(scene: Scene, rep: Report, calibration: SelfCalibration = PLAIN) ->
         "mirror_x": mir.center[0], "mirror_y": mir.center[1], "mirror_yaw_deg": mir.yaw % 180,
         "mirror_width": mir.size[0], "mirror_height": mir.size[1],
         "target_x": scene.target.position[0], "target_y": scene.target.position[1],
-        "beacons": len(scene.beacons), "calibrate": ",".join(calibration.nuisances),
-        "calibrate_priors": priors_text(calibration.priors),
+        "beacons": len(scene.beacons), "pencil_height_cm": scene.beacons[0].height,
+        "calibrate": ",".join(rep.self_calibration.nuisances),
+        "calibrate_priors": priors_text(rep.self_calibration.priors),
         "variant": rep.render.variant, "spp": rep.render.spp, "sampler": rep.render.sampler,
         "background_spp": min(scene.render.background_spp, scene.render.spp),
         "beacon_spp": max(scene.render.beacon_spp, scene.render.spp),
@@ -156,19 +158,20 @@ def _flatten(scene: Scene, rep: Report, calibration: SelfCalibration = PLAIN) ->
     }
     row.update({"observer_x": meas.observer[0], "observer_y": meas.observer[1],
                 "observer_pan_deg": meas.observer_pan_deg,  # the capture record's
-                "fx_px": scene.camera.fx, "beacon_sigma": calibration.position_sigma})
+                "fx_px": scene.camera.fx, "beacon_sigma": rep.self_calibration.position_sigma})
     sig = meas.sigma
     # the target as measured (its mean over the frames), clipped as in the first frame;
     # each beacon from its own frame
+    seen = rep.image_features  # the target's, then each beacon's
     objects = [("target", t.target, meas.targets[0], rep.frames[0].target_clipped,
-                sig.target)]
+                sig.target, seen[0])]
     for k, (b, frame) in enumerate(zip(meas.beacons, rep.frames, strict=True)):
         kind = table.beacon_kind(k)
         row.update({table.object_column(kind, "known_x"): b.position[0],
                     table.object_column(kind, "known_y"): b.position[1]})
         objects.append((kind, t.beacons[k], (b.alpha_deg, b.d_total), frame.beacon_clipped,
-                        sig.beacons[k]))
-    for kind, truth, (alpha, d), clipped, s in objects:
+                        sig.beacons[k], seen[1 + k]))
+    for kind, truth, (alpha, d), clipped, s, f in objects:
         values = {
             "pos_x": truth.position[0], "pos_y": truth.position[1],
             "alpha_true": truth.alpha_deg, "d_true": truth.d_total,
@@ -180,6 +183,8 @@ def _flatten(scene: Scene, rep: Report, calibration: SelfCalibration = PLAIN) ->
             "alpha_err": alpha - truth.alpha_deg,
             "d_rel_err": (d - truth.d_total) / truth.d_total,
             "clipped": bool(clipped),
+            "height_px_meas": f.height_px, "contrast": f.contrast, "noise": f.noise,
+            "jpeg_quality": f.jpeg_quality,
             "sigma_alpha_deg": s.alpha_deg, "sigma_d_rel": s.d_total_rel,
         }
         row.update({table.object_column(kind, name): v for name, v in values.items()})
@@ -210,7 +215,8 @@ def _calibrate_models(spec: DatasetSpec, variant: str, progress: bool) -> None:
     cams, height = camera_models(spec), spec.beacon_height
     # a calibration distance error drawn per scene: each scene calibrates as it comes
     error = spec.calibration_error
-    if cams is None or isinstance(height, list) or isinstance(error, list):
+    if (cams is None or isinstance(height, list) or isinstance(error, list)
+            or spec.target_size is None):
         return
     for cam in tqdm(cams, desc="calibrating camera models", unit="model",
                     disable=not progress, leave=False):
@@ -325,12 +331,15 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
     except SolverError as exc:
         raise BadParameter("nuisances", f"{exc} (scenes of {spec.beacon_count} beacon(s) "
                            f"drawn from {spec_path or 'the default spec'})") from None
-    model = error_model or default_error_model()
+    # the model shipped for the spec's benches (a spec with a bench block draws
+    # imperfections), as evaluate chooses it for a scene
+    shipped = default_error_model("bench" if spec.data.get("bench") else "ideal")
+    model = error_model or shipped
     meta = {"format": DATASET_FORMAT, "n": n, "seed": seed, "spp": spp, "spec": spec.data,
             "error_model_sha256": _digest(model),
             # for the card's command only (not settings: a resume compares none of them)
             "spec_file": None if spec_path is None else str(spec_path),
-            "error_model_shipped": _digest(model) == _digest(default_error_model())}
+            "error_model_shipped": _digest(model) == _digest(shipped)}
     if not meta["error_model_shipped"] and _holds(model.source, meta["error_model_sha256"]):
         meta["error_model_file"] = model.source  # the card names its file
     if calibration.nuisances or calibration.position_sigma:

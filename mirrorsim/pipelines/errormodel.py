@@ -26,11 +26,15 @@ import numpy as np
 from mirrorsim.formats import dataset_table as table
 from mirrorsim.formats.error_model import (
     KINDS,
+    SCENE_DOMAIN,
     SIGMA_FEATURES,
+    BenchTolerances,
+    Domain,
     ErrorModel,
     LogSigma,
     QuantityFit,
-    measured_features,
+    feature_vector,
+    off_axis,
     sealed,
 )
 from mirrorsim.formats.files import save_figure, write_json
@@ -146,7 +150,9 @@ def fit_log_sigma(X: np.ndarray, y: np.ndarray, ridge: float = 1e-3,
 def _standardized(X: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The design z = [1, (X − mean)/SD] (an SD of 0 taken as 1), the means and SDs."""
     mu, sc = X.mean(axis=0), X.std(axis=0)
-    sc[sc == 0] = 1.0
+    # a feature the rows do not vary in (to rounding: a constant's SD comes out 1e-16)
+    # is left unscaled, its slope then held near 0 by the ridge
+    sc[sc <= 1e-9 * (1.0 + np.abs(mu))] = 1.0
     return np.column_stack([np.ones(len(X)), (X - mu) / sc]), mu, sc
 
 
@@ -166,48 +172,86 @@ def _sigma_fit(X: np.ndarray, y: np.ndarray, shared_var: float = 0.0
 
 
 def sigma_features_of(cols: dict, kind: str) -> np.ndarray:
-    """The σ law's features (SIGMA_FEATURES) of ``kind``'s measurements in dataset
-    columns: from the measurement and the pan the capture record gives, as at
-    measurement time."""
-    col = lambda k: np.asarray(cols[k], float)  # noqa: E731
-    for k in (table.object_column(kind, "d_meas"), "observer_pan_deg"):
-        if k not in cols:
-            raise ValueError(f"the dataset has no column {k!r}: it was made by an older "
-                             "mirrorsim; make it again")
-    return measured_features(col(table.object_column(kind, "d_meas")),
-                             col(table.object_column(kind, "alpha_meas")),
-                             col("observer_pan_deg"))
-
-
-def min_rows(names: tuple[str, ...] | list[str]) -> int:
-    """The fewest usable rows a fit takes: five per coefficient of the σ law, and two
-    more than the bias fit's coefficients."""
-    return max(5 * (len(SIGMA_FEATURES) + 1), len(names) + 2)
-
-
-def fit(cols: dict, provenance: dict | None = None) -> ErrorModel:
-    """Fit the model to dataset columns (name → sequence); rows with errors or missing
-    values are left out.
+    """The σ law's features (SIGMA_FEATURES) of ``kind``'s images in dataset columns:
+    what each frame showed of the image, and its bearing off the pan the capture record
+    gives, as at measurement time (NaN where not measured).
 
     Raises
     ------
     ValueError
-        When too few rows are usable (the message says how many are needed).
+        For a table made before these were recorded.
+    """
+    col = lambda k: np.asarray(cols[k], float)  # noqa: E731
+    names = [table.object_column(kind, c) for c in ("height_px_meas", "contrast", "noise",
+                                                    "jpeg_quality", "alpha_meas")]
+    for k in (*names, "observer_pan_deg"):
+        if k not in cols or all(v is None for v in cols[k]):
+            raise ValueError(f"the dataset has no column {k!r}: it was made by an older "
+                             "mirrorsim; make it again")
+    h, contrast, noise, jpeg, alpha = (col(k) for k in names)
+    return feature_vector(h, off_axis(alpha, col("observer_pan_deg")), contrast, noise, jpeg)
+
+
+def min_rows(names: tuple[str, ...] | list[str]) -> int:
+    """The fewest usable rows of each kind a fit takes: five per coefficient of the σ law
+    (:data:`MIN_ROWS`), and two more than the bias fit's coefficients."""
+    return max(MIN_ROWS, len(names) + 2)
+
+
+# five rows per coefficient of a σ law (its intercept and a slope per feature)
+MIN_ROWS = 5 * (len(SIGMA_FEATURES) + 1)
+# a law is unstable where its rows barely determine it: refitted on resamples of its
+# own rows (STABILITY_DRAWS, drawn with replacement), the σ it gives a training row
+# moves by more than this factor (the largest over the draws over the smallest, at the
+# 90th percentile of the rows): refused; beyond UNSTABLE_WARN it is kept with a warning.
+# A law of 400 rows of Gaussian errors moves by 1.5, of 60 rows by 3; the renders' heavy
+# tails move a law of 120 rows by 2-9.  And a law whose σ's over its own rows span more
+# than SPAN_REFUSE is refused: no image's error varies by four orders of magnitude
+# across a domain (a d_total's σ goes as 1/height: 16-600 px is a factor 40)
+UNSTABLE_REFUSE = 30.0
+UNSTABLE_WARN = 4.0
+SPAN_REFUSE = 1e4
+STABILITY_DRAWS = 20
+# the bias features of the errors every image of a frame shares, which the solver
+# estimates (its nuisances with their priors) rather than each image's σ holding them:
+# the pan reading (α), the calibration's distance and the mirror's curvature (d_total)
+SHARED_FEATURES = {"alpha": ("pan_error_deg",),
+                   "d_rel": ("calibration_error_cm", "mirror_power")}
+TAIL_LEVEL = 0.95  # the tail factor puts this share of the training errors within z σ's
+TAIL_Z = 1.959964
+
+
+def fit(cols: dict, provenance: dict | None = None, bench: dict | None = None) -> ErrorModel:
+    """Fit the model to dataset columns (name → sequence); rows with errors or missing
+    values are left out.  ``bench``: the ``bench`` block of the spec the rows were drawn
+    from (its ranges become the model's bench domain and tolerances).
+
+    Each image's own error is its error less the parts every image of its frame shares
+    (the pan reading, the calibration, the mirror's curvature: their bias coefficients
+    times their values), which the solver estimates as nuisances with the tolerances'
+    priors; the σ law is fitted to the own errors, its tail factor on them all.
+
+    Raises
+    ------
+    ValueError
+        When too few rows are usable (the message says how many are needed), or a law
+        is unstable (its σ's over its own rows span more than UNSTABLE_REFUSE).
     """
     names = features_of(cols)
     fits: dict[str, dict[str, QuantityFit]] = {}
+    notes: list[str] = []
+    scene_cols = cols
     # a row per beacon image: every beacon of a scene is fitted, its target once (the
     # pair fit and the shared α take the target beside each of its beacons)
     cols, beacon_of, scene_of = table.image_rows(cols)
     ok = table.usable_rows(cols)
     once = table.counted_once(beacon_of)
     need = min_rows(names)
-    # pixel errors scale as 1/fx: each row's errors as at the rows' median focal length
+    # pixel errors scale as 1/fx: each row's α errors as at the rows' median focal length
     fx = table.focal_lengths(cols)
     fx_px = float(np.median(fx[ok & np.isfinite(fx)])) if np.any(ok & np.isfinite(fx)) else None
-    at_fx = np.where(np.isfinite(fx), fx / (fx_px or 1.0), 1.0)
-    shared = shared_alpha(cols, ok)
-    alpha_rows = {}  # per kind: the α rows used and which were gross, for the pair fit
+    own_alpha: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+    domain: dict[str, dict[str, tuple[float, float]]] = {}
     for kind in KINDS:
         X_all = _design(cols, kind, names)
         S_all = sigma_features_of(cols, kind)
@@ -219,33 +263,121 @@ def fit(cols: dict, provenance: dict | None = None) -> ErrorModel:
             if m.sum() < need:
                 raise ValueError(f"too few usable rows ({int(m.sum())}) to fit {kind} {q}: "
                                  f"{need} needed")
-            law, gross = _sigma_fit(S_all[m], (y * at_fx)[m],
-                                    shared**2 if q == "alpha" else 0.0)
-            bias = _robust_fit(X_all[m][~gross], y[m][~gross])
+            bias = _robust_fit(X_all[m], y[m])
+            own = own_errors(cols, kind, q, names, bias, fx_px)
             if q == "alpha":
-                keep = m.copy()
-                keep[np.flatnonzero(m)[gross]] = False
-                # the target's rows as its scene's first (the target fitted once)
-                alpha_rows[kind] = (keep[scene_of] if kind == "target" else keep, S_all,
-                                    y * at_fx)
+                own_alpha[kind] = (m, S_all, own)
+            law, gross = _sigma_fit(S_all[m], own[m])
+            z = np.abs(own[m]) / law(S_all[m])
+            tail = max(1.0, float(np.quantile(z, TAIL_LEVEL)) / TAIL_Z)
+            sig = tail * law(S_all[m])
+            span = float(sig.max() / sig.min())
+            if span > SPAN_REFUSE:
+                raise ValueError(f"the {kind} {q} law is unstable: its σ's over its own "
+                                 f"{int(m.sum())} rows span a factor {span:.3g} (from "
+                                 f"{sig.min():.3g}); fit it on more rows, or rows that vary "
+                                 "more evenly")
+            moves = stability(S_all[m], own[m])
+            if moves > UNSTABLE_REFUSE:
+                raise ValueError(f"the {kind} {q} law is unstable: refitted on resamples of "
+                                 f"its own {int(m.sum())} rows, the σ it gives a row moves by "
+                                 f"a factor {moves:.3g} (its rows barely determine it); fit "
+                                 "it on more rows, or rows that vary more evenly")
+            if moves > UNSTABLE_WARN:
+                notes.append(f"{kind} {q}: refitted on resamples of its rows, its σ's move by "
+                             f"a factor {moves:.3g}")
             fits[kind][q] = QuantityFit(
                 log_sigma=law, n=int(m.sum()), gross_errors=int(gross.sum()),
-                rms=float(np.sqrt(np.mean((y * at_fx)[m] ** 2))),
-                typical_sigma=float(np.sqrt(np.mean(law(S_all[m][~gross]) ** 2))),
-                bias=tuple(bias.tolist()))
+                rms=float(np.sqrt(np.mean(own[m] ** 2))),
+                typical_sigma=float(np.sqrt(np.mean(sig[~gross] ** 2))),
+                bias=tuple(bias.tolist()), tail=tail)
+        used = (ok & once[kind] & np.isfinite(S_all).all(1))
+        domain[kind] = {n: (float(S_all[used, j].min()), float(S_all[used, j].max()))
+                        for j, n in enumerate(SIGMA_FEATURES)}
+    # each beacon's image beside its scene's target (the target's row is its first)
+    (mt, St, et), (mb, Sb, eb) = (own_alpha[k] for k in KINDS)
+    both = mt[scene_of] & mb
+    shared = shared_of(et, eb, both)
     if shared:
         # each kind's own α law is nearly free in its own likelihood when the shared
-        # part dominates (a bench's pan): both laws and the shared σ from the pair's
-        # likelihood, where the difference of the two errors holds the own parts
-        (kt, St, yt), (kb, Sb, yb) = (alpha_rows[k] for k in KINDS)
-        both = kt & kb
-        law_t, law_b, shared = fit_alpha_pair(St[both], yt[both], Sb[both], yb[both], shared)
-        for kind, law, S in (("target", law_t, St), ("beacon", law_b, Sb)):
-            keep = alpha_rows[kind][0] & once[kind]
+        # part dominates: both laws and the shared σ from the pair's likelihood, where
+        # the difference of the two errors holds the own parts
+        law_t, law_b, shared = fit_alpha_pair(St[both], et[both], Sb[both], eb[both], shared)
+        for kind, law, S, (m, _, own) in (("target", law_t, St, own_alpha["target"]),
+                                          ("beacon", law_b, Sb, own_alpha["beacon"])):
+            whole = np.hypot(law(S[m]), shared)
+            tail = max(1.0, float(np.quantile(np.abs(own[m]) / whole, TAIL_LEVEL)) / TAIL_Z)
             fits[kind]["alpha"] = replace(
-                fits[kind]["alpha"], log_sigma=law,
-                typical_sigma=float(np.sqrt(np.mean(law(S[keep]) ** 2))))
-    return ErrorModel(fits, tuple(names), provenance, fx_px, shared)
+                fits[kind]["alpha"], log_sigma=law, tail=tail,
+                typical_sigma=float(np.sqrt(np.mean((tail * law(S[m])) ** 2))))
+    model = ErrorModel(fits, Domain(domain, _scene_domain(scene_cols),
+                                    imperfections.spec_ranges(bench or {})),
+                       tolerances_of(bench or {}), tuple(names),
+                       {**(provenance or {}), **({"warnings": notes} if notes else {})},
+                       fx_px, shared)
+    return model
+
+
+def stability(S: np.ndarray, y: np.ndarray, draws: int = STABILITY_DRAWS) -> float:
+    """How far a σ law's fit moves with the rows drawn: refitted on ``draws`` resamples of
+    (S, y) with replacement (a fixed seed: the same rows, the same answer), the factor
+    between the largest and the smallest σ each row gets, at the 90th percentile of the
+    rows."""
+    rng = np.random.default_rng(0)
+    sig = np.empty((draws, len(y)))
+    for k in range(draws):
+        pick = rng.integers(0, len(y), len(y))
+        sig[k] = _sigma_fit(S[pick], y[pick])[0](S)  # as fitted: gross errors apart
+    return float(np.quantile(sig.max(axis=0) / sig.min(axis=0), 0.9))
+
+
+def own_errors(cols: dict, kind: str, q: str, names: tuple[str, ...] | list[str],
+               bias: tuple[float, ...] | np.ndarray, fx_px: float | None) -> np.ndarray:
+    """Each row's own error of ``kind``'s ``q``: its error less the parts every image of
+    its frame shares (SHARED_FEATURES' bias coefficients times their values), and for α
+    as at the focal length ``fx_px`` (pixel errors scale as 1/fx)."""
+    y = np.asarray(cols[table.object_column(kind, QUANTITY_COLUMNS[q])], float)
+    X = _design(cols, kind, names)
+    idx = [list(names).index(f) for f in SHARED_FEATURES[q] if f in names]
+    own = y - X[:, idx] @ np.asarray(bias, float)[idx] if idx else y
+    if q == "alpha":
+        fx = table.focal_lengths(cols)
+        own = own * np.where(np.isfinite(fx), fx / (fx_px or 1.0), 1.0)
+    return own
+
+
+def model_own_errors(cols: dict, model: ErrorModel, kind: str, q: str) -> np.ndarray:
+    """:func:`own_errors` with ``model``'s bias fit (image rows of a table)."""
+    return own_errors(cols, kind, q, model.bias_features, model.fits[kind][q].bias,
+                      model.fx_px)
+
+
+def _scene_domain(cols: dict) -> dict[str, tuple[float, float]]:
+    """The scenes' facts (SCENE_DOMAIN) over a table's usable rows: (min, max)."""
+    ok = table.usable_rows(cols)
+    names = {"fx_px": "fx_px", "camera_height_cm": "camera_height",
+             "pencil_height_cm": "pencil_height_cm", "beacons": "beacons"}
+    out = {}
+    for key, column in names.items():
+        v = np.asarray([np.nan if x is None else x for x in cols[column]], float)[ok]
+        v = v[np.isfinite(v)]
+        if not v.size:
+            raise ValueError(f"the dataset's {column!r} column holds no value: it was made by "
+                             "an older mirrorsim; make it again")
+        out[key] = (float(v.min()), float(v.max()))
+    assert set(out) == set(SCENE_DOMAIN)
+    return out
+
+
+def tolerances_of(bench: dict) -> BenchTolerances:
+    """A spec's ``bench`` block as the population its benches were drawn from: each
+    shared error's largest |value| (0 where not drawn)."""
+    r = imperfections.spec_ranges(bench)
+    half = lambda key: max((abs(x) for x in r.get(key, (0.0, 0.0))), default=0.0)  # noqa: E731
+    return BenchTolerances(pan_deg=half("camera.pan_error"),
+                           calibration_cm=half("calibration.distance_error"),
+                           curvature_per_cm=half("mirror.curvature"),
+                           beacon_position_cm=half("beacon.known_position_offset"))
 
 
 def fit_alpha_pair(St: np.ndarray, yt: np.ndarray, Sb: np.ndarray, yb: np.ndarray,
@@ -276,14 +408,13 @@ def fit_alpha_pair(St: np.ndarray, yt: np.ndarray, Sb: np.ndarray, yb: np.ndarra
     return law(w[:k], mt, ct), law(w[k:2 * k], mb, cb), float(np.exp(w[-1]))
 
 
-def shared_alpha(cols: dict, ok: np.ndarray) -> float:
-    """σ (deg) of the α error every image of a frame shares (a bench's pan reading):
-    √ of the mean product of each frame's target and beacon α errors (independent errors
-    average to 0), gross pairs left out; 0 unless the mean is positive by more than
-    SHARED_T of its standard errors (an ideal bench's errors are independent)."""
-    et = np.asarray(cols[table.object_column("target", "alpha_err")], float)
-    eb = np.asarray(cols[table.object_column("beacon", "alpha_err")], float)
-    m = ok & np.isfinite(et) & np.isfinite(eb)
+def shared_of(et: np.ndarray, eb: np.ndarray, m: np.ndarray) -> float:
+    """σ (deg) of the α error every image of a frame shares (beyond what the pan's
+    tolerance holds): √ of the mean product of each frame's target and beacon α errors
+    (``et``, ``eb``: their own errors; independent errors average to 0), gross pairs
+    left out; 0 unless the mean is positive by more than SHARED_T of its standard errors
+    (an ideal bench's errors are independent)."""
+    m = m & np.isfinite(et) & np.isfinite(eb)
     p = et[m] * eb[m]
     if p.size < 3:
         return 0.0
@@ -307,7 +438,16 @@ def fit_dataset(dataset_dir: str | Path) -> ErrorModel:
         If the folder holds no verified dataset table.
     """
     cols = read_columns(dataset_dir)
-    return fit(cols, provenance_of(dataset_dir, cols))
+    return fit(cols, provenance_of(dataset_dir, cols), spec_of(dataset_dir).get("bench"))
+
+
+def spec_of(dataset_dir: str | Path) -> dict:
+    """The spec a dataset folder's scenes were drawn from, as its ``dataset.json`` keeps
+    it (empty where it keeps none)."""
+    import json
+
+    spec = json.loads((Path(dataset_dir) / "dataset.json").read_text()).get("spec")
+    return spec if isinstance(spec, dict) else {}
 
 
 def provenance_of(dataset_dir: str | Path, cols: dict) -> dict:
@@ -316,9 +456,21 @@ def provenance_of(dataset_dir: str | Path, cols: dict) -> dict:
     import json
 
     meta = json.loads((Path(dataset_dir) / "dataset.json").read_text())
+    ok = np.flatnonzero(table.usable_rows(cols))
+    # a few rows' measured errors, so that the rows can be made again and compared
+    # (tests/test_uncertainty.py renders them anew)
+    check = [{"index": int(cols["index"][i]),
+              **{c: float(cols[c][i]) for c in CHECK_COLUMNS}} for i in ok[:CHECK_ROWS]]
     return {"dataset_seed": meta.get("seed"), "dataset_n": meta.get("n"),
+            "spec_file": meta.get("spec_file"),
             "rows_used": int(table.usable_rows(cols).sum()),
-            "command": f"mirrorsim errormodel {Path(dataset_dir).name}"}
+            "command": f"mirrorsim errormodel {Path(dataset_dir).name}",
+            "check_rows": check}
+
+
+CHECK_ROWS = 2
+CHECK_COLUMNS = tuple(table.object_column(k, c) for k in KINDS
+                      for c in ("alpha_err", "d_rel_err", "height_px_meas", "noise"))
 
 
 def read_columns(dataset_dir: str | Path) -> dict:
@@ -331,27 +483,43 @@ def read_columns(dataset_dir: str | Path) -> dict:
 
 def summary(model: ErrorModel) -> str:
     """The model in a few printed lines (σ_d in %)."""
-    lines = ["error model: σ = exp(w·z), z = [1, " + ", ".join(SIGMA_FEATURES)
-             + "] standardized; α in degrees, d_total in % of d_total"]
+    lines = [f"error model ({model.kind} bench): σ = tail·exp(w·z), z = [1, "
+             + ", ".join(SIGMA_FEATURES) + "] standardized; α in degrees at "
+             f"fx {model.fx_px or float('nan'):.0f} px, d_total in % of d_total"]
     for kind, qs in model.fits.items():
         for q, m in qs.items():
             scale, unit = (1.0, "°") if q == "alpha" else (100.0, " %")
             w = ", ".join(f"{n} {c:+.3f}" for n, c in zip(SIGMA_FEATURES, m.log_sigma.weights,
                                                           strict=True))
-            lines.append(f"  {kind:6s} {q:5s}: n={m.n} ({m.gross_errors} gross left out), "
-                         f"RMS error {scale * m.rms:.4f}{unit}, typical σ "
-                         f"{scale * m.typical_sigma:.4f}{unit}; log σ slopes: {w}")
-    lines.append(f"  an α offset shared by every image of a frame (the pan reading): σ "
+            lines.append(f"  {kind:6s} {q:5s}: n={m.n} ({m.gross_errors} gross left out of "
+                         f"the law), RMS own error {scale * m.rms:.4f}{unit}, typical σ "
+                         f"{scale * m.typical_sigma:.4f}{unit}, tail ×{m.tail:.2f}; log σ "
+                         f"slopes: {w}")
+    lines.append(f"  an α offset shared by every image of a frame beyond the tolerances: σ "
                  f"{model.shared_alpha_deg:.4f}°" + (
                      " (each α law above is the image's own part)" if model.shared_alpha_deg
-                     else " (none found: the images' α errors are independent)"))
+                     else " (none found)"))
+    t = model.tolerances
+    if not t.ideal:
+        lines.append(f"  its benches' shared errors (half-widths), estimated with priors: pan "
+                     f"±{t.pan_deg:g}°, calibration distance ±{t.calibration_cm:g} cm, "
+                     f"curvature ±{t.curvature_per_cm:.3g}/cm, beacon positions "
+                     f"±{t.beacon_position_cm:g} cm")
+    for kind, feats in model.domain.features.items():
+        lines.append(f"  domain, {kind}: " + ", ".join(
+            f"{n} {lo:.3g}–{hi:.3g}" for n, (lo, hi) in feats.items()))
+    lines.append("  domain, scenes: " + ", ".join(
+        f"{n} {lo:.3g}–{hi:.3g}" for n, (lo, hi) in model.domain.scene.items()))
+    for note in (model.provenance or {}).get("warnings", []):
+        lines.append(f"  warning: a loosely determined law: {note}")
     return "\n".join(lines)
 
 
 def plot(cols: dict, model: ErrorModel, out: str | Path) -> Path:
-    """Each row's error against its measured d_total and off-axis bearing, with the σ
-    the model gives that row (a ±2σ bar on each point), and the errors in σ's against a
-    standard normal."""
+    """Each row's own error (the frame's shared parts apart, α at the model's focal
+    length) against its image's height and off-axis bearing, with the σ the model gives
+    that row (a ±2σ bar on each point), and the errors in σ's against a standard
+    normal."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -362,15 +530,13 @@ def plot(cols: dict, model: ErrorModel, out: str | Path) -> Path:
     ok = table.usable_rows(cols)
     once = table.counted_once(beacon_of)
     grid = np.linspace(-5, 5, 201)
-    for r, (q, col, scale, unit) in enumerate((("alpha", "alpha_err", 1.0, "°"),
-                                                ("d_rel", "d_rel_err", 100.0, "% of d_total"))):
+    for r, (q, scale, unit) in enumerate((("alpha", 1.0, "°"), ("d_rel", 100.0, "% of d_total"))):
         for k, (kind, colour) in enumerate((("target", "#c0392b"), ("beacon", "#b8860b"))):
-            y = np.asarray(cols[table.object_column(kind, col)], float)
+            y = model_own_errors(cols, model, kind, q)
             S = sigma_features_of(cols, kind)
             m = ok & once[kind] & np.isfinite(y) & np.isfinite(S).all(axis=1)
-            fx = table.focal_lengths(cols)[m]
-            sd = model.whole_sigma(kind, q, S[m], fx)
-            for c, (x, name) in enumerate(((np.exp(S[m, 0]), "measured d_total (cm)"),
+            sd = model.whole_sigma(kind, q, S[m], model.fx_px)  # y is as at its fx
+            for c, (x, name) in enumerate(((np.exp(S[m, 0]), "measured image height (px)"),
                                            (S[m, 1], "|off-axis bearing| (°)"))):
                 axes[r, c].errorbar(x + 0.15 * k, y[m] * scale, yerr=2 * sd * scale, fmt="o",
                                     ms=3, color=colour, ecolor=colour, elinewidth=0.6,

@@ -21,7 +21,7 @@ from mirrorsim.detection.board import (
 )
 from mirrorsim.detection.detector import annotate
 from mirrorsim.errors import BadParameter, DetectionError
-from mirrorsim.formats.error_model import ErrorModel, default_error_model
+from mirrorsim.formats.error_model import ErrorModel, default_error_model, load_error_model
 from mirrorsim.formats.files import claim_run_folder, default_out, write_png
 from mirrorsim.formats.scenefile import check_given_scene
 from mirrorsim.pipelines.frame import MeasuredFrame, render_and_measure
@@ -33,13 +33,15 @@ from mirrorsim.pipelines.score import (
     check_keep,
     score,
 )
+from mirrorsim.scene import imperfections
 from mirrorsim.scene.model import Scene, pencil_paint_height
 from mirrorsim.truth.groundtruth import RenderInfo
 from solver.errors import SolverError
 from solver.geometry import wrap_bearing
 from solver.lsq import solve_measurements
-from solver.measurements import BeaconMeasurement, Measurements
-from solver.selfcal import PLAIN, SelfCalibration, as_calibration
+from solver.measurements import BeaconMeasurement, Measurements, ObjectSigmas
+from solver.selfcal import NUISANCES, PLAIN, SelfCalibration, as_calibration, describe_priors
+from solver.sltr import Solution
 
 
 def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: str = "auto",
@@ -82,6 +84,7 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
     check_given_scene(scene)  # edited by a script: held to what its file would make
     check_keep(keep)
     calibration = as_calibration(calibration)  # before anything renders
+    error_model = as_error_model(error_model)
     if board_pose and scene.board.hole_pitch <= 0:
         raise BadParameter("board_pose", f"{scene.name}: its board is plain (board.hole_pitch "
                            "0): no holes to measure the camera's pose on")
@@ -94,9 +97,12 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
 
 def evaluate_into(scene: Scene, out: Path, *, variant: str = "auto", progress: bool = True,
                   error_model: ErrorModel | None = None, keep: tuple[str, ...] = EXTRA_FILES,
-                  calibration: SelfCalibration = PLAIN, board_pose: bool = False) -> Report:
+                  calibration: SelfCalibration = PLAIN, board_pose: bool = False,
+                  model_priors: bool = True) -> Report:
     """:func:`evaluate_scene` into ``out``, a folder inside one its caller has claimed
-    (a dataset's, a budget's): its parameters already checked."""
+    (a dataset's, a budget's): its parameters already checked.  ``model_priors``: the
+    model's bench tolerances estimated with their priors (:func:`model_calibration`);
+    False solves with ``calibration`` alone (a budget compares runs solved alike)."""
     cam = scene.camera
 
     per_beacon = frames_of(scene)
@@ -136,20 +142,40 @@ def evaluate_into(scene: Scene, out: Path, *, variant: str = "auto", progress: b
             for det in detections for b, m in det.beacons]
         targets = [corrected_image(pose, capture.camera, d.target, capture.target_size[1])
                    for d in detections if d.target.d_total is not None]
-        # the pan is now the board's to know: a prior from the mount's reading gives way
-        calibration = replace(calibration, priors={k: v for k, v in calibration.priors.items()
-                                                   if k != "pan"})
     mean_target = tuple(float(v) for v in np.mean(targets, axis=0))
-    model = error_model or default_error_model()
-    sigma = model.sigmas(mean_target, [(b.alpha_deg, b.d_total) for b in beacons], pan, fx)
-    if pose is not None:  # every α's shared offset: what is left of the pan after the board
-        sigma = replace(sigma, shared_alpha_deg=pose_pan_sigma(pose, fx))
+    model = model_for(scene, error_model)
+    # what each frame showed of each image, at the measurements the solver sees
+    first = next(d for d in detections if d.target.d_total is not None)
+    features = (first.features(first.target, *mean_target),
+                *(det.features(m, b.alpha_deg, b.d_total) for (det, m), b in zip(
+                    ((det, m) for det in detections for _, m in det.beacons), beacons,
+                    strict=True)))
+    sigma = model.sigmas(features[0], list(features[1:]), pan, fx)
+    if model_priors:
+        calibration = model_calibration(model, calibration)
+    if pose is not None:
+        # the pan is now the board's to know, to what is left of it after the board: a
+        # prior from the mount's reading (the user's or the bench model's) gives way, and
+        # where the pan is not a nuisance, it is every α's shared offset
+        left = pose_pan_sigma(pose, fx)
+        if "pan" in calibration.nuisances:
+            calibration = replace(calibration, priors={**calibration.priors, "pan": left})
+            sigma = replace(sigma, shared_alpha_deg=0.0)
+        else:
+            sigma = replace(sigma, shared_alpha_deg=left)
+    notes = model.domain_warnings(
+        features[0], list(features[1:]), pan,
+        {"fx_px": fx, "camera_height_cm": capture.camera.height,
+         "pencil_height_cm": tuple(b.height for b in scene.beacons),
+         "beacons": len(scene.beacons)},
+        imperfections.judged_values(scene))
     measurements = Measurements(observer=cam.position, targets=[mean_target], beacons=beacons,
                                 sigma=sigma, observer_pan_deg=pan)
     # the target once, at its mean over the frames: each frame's detection of the same
     # image shares its errors (bias included), so several would shrink its σ by √frames
     target = [mean_target]
-    sol = solve_measurements(cam.position, beacons, target, sigma, calibration)
+    sol, calibration, said = solve_separated(cam.position, beacons, target, sigma,
+                                             calibration, model)
     errors = score(truth, measurements, sol, calibration)
     by_count = ()
     if len(beacons) > 1:
@@ -178,7 +204,116 @@ def evaluate_into(scene: Scene, out: Path, *, variant: str = "auto", progress: b
                   errors=errors, frames=tuple(frames),
                   render=RenderInfo(done.variant, done.spp, done.seed, done.sampler),
                   calibration=cal,
-                  error_vs_beacons=by_count, camera_pose=pose)
+                  error_vs_beacons=by_count, camera_pose=pose, error_model=model.name(),
+                  model_warnings=tuple(notes), image_features=features,
+                  self_calibration=calibration, calibration_notes=tuple(said))
+
+
+# a nuisance the frames determine no better than this (its σ from the solve's Fisher
+# information, the mirror's pose marginalized) is not separated from the mirror: a
+# pan σ of half a degree, a range scale's of 2 %, a power's of 1/(500 cm)
+SEPARATED_SD = {"pan": 0.5, "scale": 0.02, "power": 2e-3}
+# a nuisance whose prior holds it but which comes out held no tighter than this share
+# of the prior's σ was held by the prior, not measured
+HELD_SHARE = 0.8
+# an estimate this many of its prior's σ's from its neutral value is outside what the
+# bench's tolerances allow
+FAR_SIGMAS = 3.0
+
+
+def solve_separated(observer: tuple[float, float], beacons: list[BeaconMeasurement],
+                    targets: list[tuple[float, float]], sigma: ObjectSigmas,
+                    calibration: SelfCalibration, model: ErrorModel
+                    ) -> tuple[Solution, SelfCalibration, list[str]]:
+    """Solve, then hold every nuisance the beacons do not separate from the mirror.
+
+    A nuisance estimated without a prior whose σ comes out above :data:`SEPARATED_SD`
+    (the Fisher information's conditioning, whatever the beacon count) is solved again
+    held at the prior the model's bench gives it, or at its neutral value where it gives
+    none; the lines returned say so, and name the nuisances their priors held
+    (:data:`HELD_SHARE`) and any estimate :data:`FAR_SIGMAS` prior σ's from neutral.
+
+    Returns
+    -------
+    solution, the calibration it was solved with, the lines to print
+    """
+    sol = solve_measurements(observer, beacons, targets, sigma, calibration)
+    said: list[str] = []
+    sd = {n: sol.nuisance_sd.get(NUISANCES[n][0], 0.0) for n in calibration.nuisances}
+    loose = [n for n in calibration.nuisances
+             if n not in calibration.priors and sd[n] > SEPARATED_SD[n]]
+    if loose:
+        bench = model.tolerances.priors()
+        calibration = SelfCalibration(
+            tuple(n for n in calibration.nuisances if n not in loose or n in bench),
+            calibration.position_sigma,
+            {**calibration.priors, **{n: bench[n] for n in loose if n in bench}})
+        for n in loose:
+            said.append(f"{n}: the beacons do not separate it from the mirror (its σ would "
+                        f"be {describe_priors({n: sd[n]}).split(' ', 1)[1]}); "
+                        + (f"held at its prior {describe_priors({n: bench[n]})}" if n in bench
+                           else "held at its neutral value"))
+        sol = solve_measurements(observer, beacons, targets, sigma, calibration)
+    held, far = [], []
+    for n, prior in calibration.priors.items():
+        if n == "pan" and sigma.shared_alpha_deg:
+            prior = float(np.hypot(prior, sigma.shared_alpha_deg))
+        name, neutral = NUISANCES[n]
+        if sol.nuisance_sd.get(name, 0.0) > HELD_SHARE * prior:
+            held.append(n)
+        off = abs(sol.nuisances.get(name, neutral) - neutral) / prior
+        if off > FAR_SIGMAS:
+            far.append(f"{n} came out {off:.1f} of its prior's σ's from {neutral:g}")
+    if held:
+        said.append(f"held by their priors (the beacons do not separate them from the "
+                    f"mirror): {', '.join(held)}")
+    if far:
+        said.append("warning: " + "; ".join(far) + ": beyond what the bench's tolerances "
+                    "allow (a bench error larger than stated, or a bad image)")
+    return sol, calibration, said
+
+
+def as_error_model(error_model: object) -> ErrorModel | None:
+    """``error_model`` as a model: None (the shipped one the scene calls for), a model,
+    or a model file's path (read and checked now, before anything renders).
+
+    Raises
+    ------
+    BadParameter
+        Anything else.
+    ErrorModelError
+        A path to a file that is not a valid model.
+    """
+    if error_model is None or isinstance(error_model, ErrorModel):
+        return error_model
+    if isinstance(error_model, str | Path):
+        return load_error_model(error_model)
+    raise BadParameter("error_model", f"{error_model!r}: give an ErrorModel, a model file's "
+                       "path, or None for the shipped model")
+
+
+def model_for(scene: Scene, error_model: ErrorModel | None = None) -> ErrorModel:
+    """``error_model``, or the model shipped for the scene's bench: the bench model for a
+    scene with bench imperfections (their presence, never their values), the ideal
+    model otherwise."""
+    error_model = as_error_model(error_model)
+    if error_model is not None:
+        return error_model
+    return default_error_model("bench" if imperfections.sources(scene) else "ideal")
+
+
+def model_calibration(model: ErrorModel, asked: SelfCalibration = PLAIN) -> SelfCalibration:
+    """What a solve with ``model``'s σ's estimates: the nuisances ``asked`` for, and every
+    shared error of the model's benches (:class:`~mirrorsim.formats.error_model.
+    BenchTolerances`) with its prior; a prior ``asked`` gives (what the user states of
+    their bench) wins over the model's, and a position σ ``asked`` over its own.  An
+    ideal-bench model adds nothing."""
+    bench = model.tolerances.calibration()
+    if not bench.nuisances and not bench.position_sigma:
+        return asked
+    nuisances = asked.nuisances + tuple(n for n in bench.nuisances if n not in asked.nuisances)
+    priors = {**{n: s for n, s in bench.priors.items() if n in nuisances}, **asked.priors}
+    return SelfCalibration(nuisances, asked.position_sigma or bench.position_sigma, priors)
 
 
 def frames_of(scene: Scene) -> list[Scene]:

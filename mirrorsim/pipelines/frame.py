@@ -107,13 +107,13 @@ def measure_frame(image_path: str | Path, capture: CaptureRecord | str | Path, *
     cam = capture.camera
     if pixels is None:
         stored = read_stored_frame(image_path, (cam.width, cam.height_px))
-        image, lossy = stored.pixels, stored.subsampled
+        image, lossy, quality = stored.pixels, stored.subsampled, stored.jpeg_quality
     else:  # a lossless PNG just made
-        image, lossy = pixels, False
+        image, lossy, quality = pixels, False, 0
     cal = calibration or calibration_for(capture, variant=variant,
                                          distance_error=distance_error, subsampled=lossy)
     try:
-        det = detect_frame(image, capture, cal, lossy)  # the record, never the scene
+        det = detect_frame(image, capture, cal, lossy, jpeg_quality=quality)  # never the scene
     except DetectionError as exc:
         where = f"{image_path} ({source})" if source else str(image_path)
         raise FrameNotMeasured(where, str(exc)) from None

@@ -56,9 +56,11 @@ class DatasetSpec:
         return int(self.data.get("max_tries", 5000))
 
     @property
-    def target_size(self) -> tuple[float, float]:
-        """The target panel's (width, height), cm."""
-        return tuple(self.data["target"]["size"])
+    def target_size(self) -> tuple[float, float] | None:
+        """The target panel's (width, height), cm; None where the spec draws them from
+        ranges (each scene then has its own)."""
+        size = self.data["target"]["size"]
+        return None if any(isinstance(x, list) for x in size) else tuple(size)
 
     @property
     def beacon_height(self) -> float | list[float]:
@@ -67,8 +69,10 @@ class DatasetSpec:
 
     @property
     def beacon_count(self) -> int:
-        """How many beacons each scene has (the spec's ``beacon.count``, default 1)."""
-        return int(self.data["beacon"].get("count", 1))
+        """The fewest beacons a scene has (the spec's ``beacon.count``, a value or a
+        [lo, hi] range drawn per scene; default 1): what every scene can carry."""
+        count = self.data["beacon"].get("count", 1)
+        return int(count[0] if isinstance(count, list) else count)
 
     @property
     def calibration_error(self) -> float | list[float]:
@@ -137,9 +141,19 @@ def load_spec(path: str | Path | None = None) -> DatasetSpec:
     read_pan(r, spec["camera"].get("pan", "mirror"), "camera.pan")
     r.mapping(spec["mirror"], "mirror", {"x", "y", "yaw", "width", "height"})
     r.mapping(spec["target"], "target", {"x", "y", "size"})
-    r.pair(spec["target"]["size"], "target.size", positive=True)
+    size = spec["target"]["size"]
+    if isinstance(size, list) and len(size) == 2 and any(isinstance(x, list) for x in size):
+        for k, x in enumerate(size):  # [width, height], each a value or [lo, hi]
+            for j, v in enumerate(x if isinstance(x, list) else [x]):
+                r.number(v, f"target.size[{k}]" + (f"[{j}]" if isinstance(x, list) else ""),
+                         positive=True)
+    else:
+        r.pair(size, "target.size", positive=True)
     r.mapping(spec["beacon"], "beacon", {"depth", "along", "height"}, {"count"})
-    r.integer(spec["beacon"].get("count", 1), "beacon.count", low=1, high=MAX_BEACONS)
+    count = spec["beacon"].get("count", 1)
+    for k, c in enumerate(count if isinstance(count, list) and len(count) == 2 else [count]):
+        r.integer(c, f"beacon.count[{k}]" if isinstance(count, list) else "beacon.count",
+                  low=1, high=MAX_BEACONS)
     r.mapping(spec["occluder"], "occluder", {"at", "length", "height"})
     read_render(r, spec.get("render", {}), seed=False)
     r.integer(spec.get("max_tries", 5000), "max_tries", low=1, high=MAX_TRIES)
@@ -206,7 +220,8 @@ def _draw(spec: dict, rng: np.random.Generator, where="<spec>",
     mirror = {"center": centre.tolist(), "yaw": yaw,
               "size": [g("mirror", "width"), g("mirror", "height")]}
     target = {"position": [g("target", "x"), g("target", "y")],
-              "size": list(spec["target"]["size"])}
+              "size": [_draw_number(x, f"target.size[{k}]", rng, where)
+                       for k, x in enumerate(spec["target"]["size"])]}
     # the beacon in front of the mirror (on the camera's side)
     n = np.array([-math.sin(math.radians(yaw)), math.cos(math.radians(yaw))])
     if n @ (np.asarray(cam["position"]) - centre) < 0:
@@ -228,8 +243,9 @@ def _draw(spec: dict, rng: np.random.Generator, where="<spec>",
            "height": g("occluder", "height")}
     # the other beacons drawn after everything else: a spec of one beacon draws as before
     # (one pencil height for all: the calibration and the detector take one)
-    beacons += [beacon(beacons[0]["height"])
-                for _ in range(DatasetSpec(spec).beacon_count - 1)]
+    count = _draw_number(spec["beacon"].get("count", 1), "beacon.count", rng, where,
+                         integer=True)
+    beacons += [beacon(beacons[0]["height"]) for _ in range(count - 1)]
     # one beacon under the scene file's "beacon" key: a refusal names the key a spec has
     d = {"board": copy.deepcopy(spec["board"]), "camera": cam, "mirror": mirror,
          "target": target, **({"beacon": beacons[0]} if len(beacons) == 1 else
@@ -290,8 +306,10 @@ def _draw_bench(bench: dict, rng: np.random.Generator, where="<spec>") -> dict[s
                     raise Reader(where, SceneError).fail(path, f"expected [k1, k2] (each a "
                                                          f"value or [lo, hi]), got {show(v)}")
                 out[imp.key] = [_draw_number(v[j], f"{path}[{j}]", rng, where) for j in (0, 1)]
-            elif imp.form == "flag":
-                out[imp.key] = v  # the scene reader checks the bool
+            elif imp.form == "flag":  # a value (the scene reader checks the bool), or
+                # [true, false]: drawn per scene
+                out[imp.key] = (bool(rng.integers(2)) if v == [True, False] or v == [False, True]
+                                else v)
             elif imp.form == "noise":
                 n = Reader(where, SceneError).mapping(v, path, {"full_well", "read_noise"})
                 out[imp.key] = {k: _draw_number(n[k], f"{path}.{k}", rng, where)

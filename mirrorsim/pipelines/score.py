@@ -12,6 +12,7 @@ import numpy as np
 from mirrorsim.detection.board import CameraPose
 from mirrorsim.detection.image_geometry import Calibration
 from mirrorsim.errors import BadParameter
+from mirrorsim.formats.error_model import ImageFeatures
 from mirrorsim.formats.measurements import measurements_from_dict
 from mirrorsim.truth.groundtruth import GroundTruth, RenderInfo
 from solver.errors import SolverError
@@ -162,6 +163,18 @@ class Report:
     error_vs_beacons: tuple[Score, ...] = field(default=())
     # the camera's pose measured on the board (``evaluate --board-pose``), else None
     camera_pose: CameraPose | None = None
+    # the error model that gave the σ's (its name) and every way the scene lies outside
+    # what it was fitted on (one line each)
+    error_model: str = ""
+    model_warnings: tuple[str, ...] = ()
+    # what each frame showed of each image: the target's, then each beacon's
+    image_features: tuple[ImageFeatures, ...] = ()
+    # what the solve estimated with the mirror: the nuisances, their priors, the
+    # beacons' position σ (the model's bench and the caller's wishes together)
+    self_calibration: SelfCalibration = PLAIN
+    # what the solve says of its nuisances: held by their priors, not separated from
+    # the mirror, or far outside what the bench allows (one line each)
+    calibration_notes: tuple[str, ...] = ()
 
     @property
     def reused(self) -> bool:
@@ -178,6 +191,10 @@ class Report:
                "calibration": self.calibration.constants()}
         if self.camera_pose is not None:
             out["camera_pose"] = self.camera_pose.to_json()
+        out["error_model"] = {"name": self.error_model, "warnings": list(self.model_warnings),
+                              "images": [f.to_json() for f in self.image_features]}
+        out["self_calibration"] = {**self.self_calibration.to_json(),
+                                   "notes": list(self.calibration_notes)}
         if self.error_vs_beacons:
             out["error_vs_beacons"] = [{"beacons": k + 1, **s.to_json()}
                                        for k, s in enumerate(self.error_vs_beacons)]
@@ -196,4 +213,10 @@ class Report:
                    error_vs_beacons=tuple(
                        Score.from_json({k: v for k, v in e.items() if k != "beacons"})
                        for e in d.get("error_vs_beacons", [])),
-                   camera_pose=CameraPose(**d["camera_pose"]) if "camera_pose" in d else None)
+                   camera_pose=CameraPose(**d["camera_pose"]) if "camera_pose" in d else None,
+                   error_model=d["error_model"]["name"],
+                   model_warnings=tuple(d["error_model"]["warnings"]),
+                   image_features=tuple(ImageFeatures.from_json(f)
+                                        for f in d["error_model"]["images"]),
+                   self_calibration=SelfCalibration.from_json(d["self_calibration"]),
+                   calibration_notes=tuple(d["self_calibration"]["notes"]))

@@ -30,9 +30,10 @@ import numpy as np
 from mirrorsim.detection.detector import Detection
 from mirrorsim.detection.image_geometry import Calibration
 from mirrorsim.errors import BadParameter, DetectionError
-from mirrorsim.formats.error_model import ErrorModel, default_error_model
+from mirrorsim.formats.error_model import ErrorModel
 from mirrorsim.formats.files import claim_run_folder
 from mirrorsim.formats.scenefile import check_given_scene
+from mirrorsim.pipelines.evaluate import model_for
 from mirrorsim.pipelines.frame import FrameNotMeasured, render_and_measure
 from mirrorsim.pipelines.track_paths import HEADINGS, PATHS, beacon_path
 from mirrorsim.scene.model import Scene, is_whole
@@ -202,11 +203,11 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
     except SolverError as exc:
         raise BadParameter("position_sigma", str(exc)) from None
     check_fixed_beacons(scene, position_sigma)
+    model = model_for(scene, error_model)  # read and checked before anything is written
     out = claim_run_folder(out, "out", [("scene", scene.source)])
     rng = np.random.default_rng(seed)
     b0, cam = scene.beacons[0], scene.camera
     start = np.asarray(b0.believed, float)
-    model = error_model or default_error_model()
     # the filter takes each pose's α error whole: its own part and the shared offset
     # (a bench's pan), which the filter does not model apart
     typical = model.typical_at(cam.fx).independent().beacons[0]

@@ -21,8 +21,9 @@ from pathlib import Path
 import numpy as np
 
 from mirrorsim.formats import dataset_table as table
-from mirrorsim.formats.error_model import KINDS, ErrorModel, measured_features
+from mirrorsim.formats.error_model import KINDS, ErrorModel, ImageFeatures
 from mirrorsim.formats.files import save_figure
+from mirrorsim.pipelines.evaluate import model_calibration
 from solver.errors import SolverError
 from solver.lsq import solve_measurements
 from solver.measurements import BeaconMeasurement
@@ -115,42 +116,55 @@ def validate(model: ErrorModel, cols: dict) -> Validation:
     calibrate = cols.get("calibrate") or [""] * n
     beacon_sigma = cols.get("beacon_sigma") or [0.0] * n
     priors = cols.get("calibrate_priors") or [""] * n
+    t_feat = _features(cols, "target")
+    b_feat = _features(images, "beacon")
     dist, failed = [], 0
     for i in np.flatnonzero(ok):
         t = tuple(target[i])
         # image_rows gives a scene's beacons in their order
         beacons = [BeaconMeasurement((x, y), a, d) for x, y, a, d in beacon[scene_of == i]]
         try:
-            calibration = SelfCalibration(tuple(x for x in (calibrate[i] or "").split(",") if x),
-                                          float(beacon_sigma[i] or 0.0),
-                                          parse_priors(priors[i] or ""))
-            sigma = model.sigmas(t, [(b.alpha_deg, b.d_total) for b in beacons], pan[i],
-                                 fx[i] if np.isfinite(fx[i]) else None)
+            asked = SelfCalibration(tuple(x for x in (calibrate[i] or "").split(",") if x),
+                                    float(beacon_sigma[i] or 0.0), parse_priors(priors[i] or ""))
+            # as evaluate solves with this model: its bench's shared errors besides
+            calibration = model_calibration(model, asked)
+            sigma = model.sigmas(t_feat[i], [b_feat[j] for j in np.flatnonzero(scene_of == i)],
+                                 pan[i], fx[i] if np.isfinite(fx[i]) else None)
             sol = solve_measurements(obs[i], beacons, [t], sigma, calibration)
             dist.append(sol.mahalanobis(truth[i]))
         except (SolverError, np.linalg.LinAlgError):
             failed += 1
     m = np.asarray(dist, float)
     coverage = tuple(Coverage(p, int(np.sum(m <= chi2_2_radius(p))), len(m)) for p in LEVELS)
-    return Validation(int(ok.sum()), failed, m, coverage, _within(model, cols, ok, pan, fx),
+    return Validation(int(ok.sum()), failed, m, coverage, _within(model, cols, ok),
                       int((~ok).sum()))
 
 
-def _within(model: ErrorModel, cols: dict, ok: np.ndarray, pan: np.ndarray, fx: np.ndarray
+def _features(cols: dict, kind: str) -> list[ImageFeatures]:
+    """Each row's ``kind`` image as the error model weighs it, from its columns."""
+    c = lambda name: _col(cols, table.object_column(kind, name))  # noqa: E731
+    return [ImageFeatures(*row) for row in zip(
+        c("alpha_meas"), c("d_meas"), c("height_px_meas"), c("contrast"), c("noise"),
+        np.nan_to_num(c("jpeg_quality")).astype(int), strict=True)]
+
+
+def _within(model: ErrorModel, cols: dict, ok: np.ndarray
             ) -> dict[str, dict[str, tuple[float, float]]]:
-    """Each measurement's errors in the model's σ's: the fractions within 1σ and 2σ."""
+    """Each measurement's own errors (the frame's shared parts apart) in the model's
+    σ's: the fractions within 1σ and 2σ."""
+    from mirrorsim.pipelines.errormodel import model_own_errors, sigma_features_of
+
     out: dict[str, dict[str, tuple[float, float]]] = {}
     cols, beacon_of, scene_of = table.image_rows(cols)  # every beacon's image, the target once
-    ok, pan, fx = ok[scene_of], pan[scene_of], fx[scene_of]
+    ok = ok[scene_of]
     once = table.counted_once(beacon_of)
     for kind in KINDS:
-        x = measured_features(_col(cols, table.object_column(kind, "d_meas")),
-                              _col(cols, table.object_column(kind, "alpha_meas")), pan)
+        x = sigma_features_of(cols, kind)
         out[kind] = {}
-        for q, col in (("alpha", "alpha_err"), ("d_rel", "d_rel_err")):
-            err = _col(cols, table.object_column(kind, col))
+        for q in ("alpha", "d_rel"):
+            err = model_own_errors(cols, model, kind, q)
             m = ok & once[kind] & np.isfinite(err) & np.isfinite(x).all(axis=1)
-            z = np.abs(err[m]) / model.whole_sigma(kind, q, x[m], fx[m])
+            z = np.abs(err[m]) / model.whole_sigma(kind, q, x[m], model.fx_px)
             out[kind][q] = (float(np.mean(z <= 1.0)), float(np.mean(z <= 2.0))) if z.size \
                 else (math.nan, math.nan)
     return out

@@ -317,3 +317,63 @@ def only(scene: Scene, key: str) -> Scene:
 def row_values(scene: Scene) -> dict[str, Any]:
     """The scene's imperfections as a dataset row's columns (:data:`ROW_COLUMNS`)."""
     return {c.name: c.of(scene) for imp in REGISTRY for c in imp.columns}
+
+
+def judged_values(scene: Scene) -> dict[str, float]:
+    """The imperfections present in ``scene`` (:func:`sources`), each as the number its
+    size is judged by, keyed as a dataset spec's ``bench`` block draws it (the mirror's
+    curvature 1/R, a beacon's offset from its believed position, a lens's k1 and k2, a
+    sensor's full well and read noise): what an error model's bench domain is checked
+    against."""
+    out: dict[str, float] = {}
+    bench = scene.bench
+    for src in sources(scene):
+        if src.key.startswith("beacons["):
+            b = scene.beacons[int(src.key[len("beacons["):src.key.index("]")])]
+            offset = max(abs(p - q) for p, q in zip(b.believed, b.position, strict=True))
+            key = _BY_FIELD["known_position"].spec_path
+            out[key] = max(out.get(key, 0.0), offset)
+            continue
+        imp = next(i for i in REGISTRY if i.key == src.key)
+        if imp.form == "lens":
+            out[f"{imp.spec_path}[0]"], out[f"{imp.spec_path}[1]"] = bench.distortion
+        elif imp.form == "noise":
+            out[f"{imp.spec_path}.full_well"] = bench.noise.full_well
+            out[f"{imp.spec_path}.read_noise"] = bench.noise.read_noise
+        elif imp.form == "radius":
+            out[imp.spec_path] = 1.0 / bench.curvature_radius
+        else:
+            out[imp.spec_path] = float(src.value)
+    return out
+
+
+def spec_ranges(bench: dict) -> dict[str, tuple[float, float]]:
+    """A dataset spec's ``bench`` block as (low, high) per key of
+    :func:`judged_values` (a value v is (v, v); a beacon offset's range is judged by its
+    largest |offset|, from 0; a flag has no range)."""
+    out: dict[str, tuple[float, float]] = {}
+
+    def span(raw: Any) -> tuple[float, float]:
+        lo, hi = (raw[0], raw[1]) if isinstance(raw, list) else (raw, raw)
+        return float(lo), float(hi)
+
+    for block, keys in (bench or {}).items():
+        for key, raw in (keys or {}).items():
+            imp = next((i for i in REGISTRY if i.spec_path == f"{block}.{key}"), None)
+            if imp is None or imp.form == "flag":
+                continue
+            path = imp.spec_path
+            if imp.form == "lens":
+                for j in (0, 1):
+                    out[f"{path}[{j}]"] = span(raw[j])
+            elif imp.form == "noise":
+                for k in ("full_well", "read_noise"):
+                    out[f"{path}.{k}"] = span(raw[k])
+            elif imp.form == "offset":
+                out[path] = (0.0, max(abs(x) for x in span(raw)))
+            else:
+                out[path] = span(raw)
+    return out
+
+
+_BY_FIELD = {imp.field: imp for imp in REGISTRY}

@@ -148,3 +148,25 @@ def beacon_boxes(scene: Scene, margin_px: int = 16) -> list[tuple[int, int, int,
         out.append(film_box(cam, *project(cam, pts, bench.pitch, bench.roll), margin_px))
     return out
 
+
+
+def upright_box(cam: Camera, point: ArrayLike, half_width: float, height: float,
+                margin_px: float = 0.0) -> tuple[float, float, float, float] | None:
+    """The film box (u0, v0, u1, v1) of an upright object ``half_width`` cm either side of
+    its axis at board ``point`` (2-D), ``height`` cm tall, square-on to the camera, as the
+    level camera projects it, ``margin_px`` wider; None behind the camera."""
+    p = np.asarray(point, float)
+    ray = p - np.asarray(cam.position, float)
+    side = np.array([-ray[1], ray[0]]) / max(float(np.hypot(*ray)), 1e-9) * half_width
+    pts = np.array([[*(p + s * side), z] for s in (-1.0, 1.0) for z in (0.0, height)])
+    u, v, depth = project(cam, pts)
+    if (depth <= 0).any():
+        return None
+    return (float(u.min()) - margin_px, float(v.min()) - margin_px,
+            float(u.max()) + margin_px, float(v.max()) + margin_px)
+
+
+def boxes_overlap(a: tuple[float, ...] | None, b: tuple[float, ...] | None) -> bool:
+    """Whether two film boxes (u0, v0, u1, v1) overlap (None: no box, no overlap)."""
+    return (a is not None and b is not None and a[0] < b[2] and b[0] < a[2]
+            and a[1] < b[3] and b[1] < a[3])
