@@ -554,3 +554,23 @@ def test_a_panel_in_shadow_keeps_its_foot():
     coloured[:, inside] = cover * np.array([20.0, 40.0, 120.0]) + (1 - cover) * img[:, inside]
     c = edges.measure_region(coloured, box, "target")
     assert c.v_bottom == pytest.approx(foot, abs=0.05) and edges.FOOT_ON_COLOUR not in c.notes
+
+
+def test_a_pencil_in_front_of_the_panel_does_not_split_it():
+    """A pencil's reflection standing in front of the panel's image, taller than it (a
+    yellow band across it, top to bottom): the panel is still found whole, its box the
+    panel's alone (not one of the two halves, each of a panel's shape); a pencil beside
+    the panel, against the board, does not join it.  (Frames of the domain dataset
+    failed with "no target" this way.)"""
+    from mirrorsim.detection.regions import find_target
+
+    img = np.full((300, 400, 3), (200, 170, 120), np.uint8)  # the board's beige
+    img[80:230, 150:250] = (90, 90, 88)  # the panel, 100 × 150 px
+    img[70:230, 194:204] = (230, 190, 30)  # a pencil in front of it, across its height
+    img[60:70, 196:202] = (60, 40, 20)  # its cone
+    img[120:230, 290:300] = (230, 190, 30)  # another beside it, on the board
+    bare = np.full((300, 400, 3), (200, 170, 120), np.uint8)
+    bare[80:230, 150:250] = (90, 90, 88)
+    alone = find_target(bare.astype(np.float32), 100 / 150)
+    assert alone is not None and alone[2] - alone[0] > 95
+    assert find_target(img.astype(np.float32), 100 / 150) == alone

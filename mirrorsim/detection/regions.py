@@ -49,12 +49,21 @@ def _within(img: np.ndarray, centre: np.ndarray, reach: float) -> np.ndarray:
                        (0.0, 0.0, 0.0), (below, below, below))
 
 
+# a pencil's image in front of the panel's splits it in two: its pixels count as the
+# panel's where the panel's grey lies within this many px on both sides of it in its row
+PENCIL_FILL_PX = 25
+
+
 def find_target(img: np.ndarray, ratio: float) -> tuple[int, int, int, int] | None:
     """Bounding box (u0, v0, u1, v1) of the grey panel's image, or None."""
     blur = cv2.GaussianBlur(img, (5, 5), 0)
     vmax, vmin = _channel_max(blur), _channel_min(blur)
     neutral = (vmax - vmin) < 0.12 * vmax + 6
-    mask = neutral & (vmax > 20) & (vmax < 135)
+    grey = neutral & (vmax > 20) & (vmax < 135)
+    # a pencil standing in front of the panel (its reflection crossing the panel's) would
+    # split the region into two that are no panel: its pixels between grey ones belong
+    inside = _between(_pencil_mask(img), grey)
+    mask = grey | inside
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (FRAME_OPEN_PX, FRAME_OPEN_PX))
     mask = cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_OPEN, kernel).astype(bool)
     labels, comps = _components(mask, 300)
@@ -68,21 +77,22 @@ def find_target(img: np.ndarray, ratio: float) -> tuple[int, int, int, int] | No
         # window around the region (the whole frame only where what matters reaches the
         # window's edge: the same result, without rescanning the frame per region)
         box = (x, y, w, h)
-        found = _regrow(blur, neutral, labels, k, box, whole, ratio, kernel, max(w, h))
+        found = _regrow(blur, neutral, inside, labels, k, box, whole, ratio, kernel, max(w, h))
         if found is None:
-            found = _regrow(blur, neutral, labels, k, box, whole, ratio, kernel, None)
+            found = _regrow(blur, neutral, inside, labels, k, box, whole, ratio, kernel, None)
         for cand in found:
             if best is None or cand[4] > best[4]:
                 best = cand
     return None if best is None else best[:4]
 
 
-def _regrow(blur, neutral, labels, k, box, whole: bool, ratio: float, kernel,
+def _regrow(blur, neutral, inside, labels, k, box, whole: bool, ratio: float, kernel,
             margin: int | None) -> list[tuple[int, int, int, int, int]] | None:
     """The panel-shaped regions of region ``k``'s own colour that belong to it, as
     (u0, v0, u1, v1, area), looked for within ``margin`` px of its box (None: the
     whole frame); None if one that matters comes near the window's edge, where the
-    opening and the regions could differ from the whole frame's."""
+    opening and the regions could differ from the whole frame's.  ``inside``: pencil
+    pixels in front of grey ones, which belong to the panel they cross."""
     x, y, w, h = box
     H, W = labels.shape
     near = 2 * FRAME_OPEN_PX  # the opening's reach, twice
@@ -93,11 +103,16 @@ def _regrow(blur, neutral, labels, k, box, whole: bool, ratio: float, kernel,
         u1, v1 = min(W, x + w + margin + near), min(H, y + h + margin + near)
     win = (slice(v0, v1), slice(u0, u1))
     mine = labels[win] == k
-    med = np.median(blur[win][mine], axis=0)
-    similar = _within(blur[win], med, SAME_GREY) & neutral[win]
+    own = mine & ~inside[win]  # its grey, the pencils in front of it apart
+    med = np.median(blur[win][own if own.any() else mine], axis=0)
+    similar = (_within(blur[win], med, SAME_GREY) & neutral[win]) | inside[win]
     similar = cv2.morphologyEx(similar, cv2.MORPH_OPEN, kernel)
     lab2, comps2 = _components(similar, 300)
-    seed = lab2[y + h // 2 - v0, x + w // 2 - u0]
+    # the region's own component: the one most of its pixels fall in (its centre may be
+    # a hole, where a pencil's unpainted tip stands in front of the panel)
+    held = lab2[mine]
+    held = held[held > 0]
+    seed = int(np.bincount(held).argmax()) if held.size else 0
     out = []
     for kk, x2, y2, w2, h2, area2 in comps2:
         if whole and kk != seed:
@@ -115,14 +130,36 @@ def _regrow(blur, neutral, labels, k, box, whole: bool, ratio: float, kernel,
     return out
 
 
-def find_pencils(img: np.ndarray) -> list[tuple[int, int, int, int]]:
-    """Bounding boxes of painted (yellow) pencil bands."""
+def _pencil_mask(img: np.ndarray) -> np.ndarray:
+    """uint8 mask of the painted (yellow, saturated) pixels of an 8-bit RGB image."""
     blur = cv2.GaussianBlur(img, (3, 3), 0)
     r, g, b = blur[..., 0], blur[..., 1], blur[..., 2]
     vmax, vmin = _channel_max(blur), _channel_min(blur)
     sat = (vmax - vmin) / np.maximum(vmax, 1.0)
     yellow = (r + g) / 2 - b
     mask = (sat > 0.55) & (yellow > 30) & (vmax > 40)
-    mask = cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
+    return cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
+
+
+def _between(pencil: np.ndarray, grey: np.ndarray) -> np.ndarray:
+    """The pencil pixels that have ``grey`` pixels within PENCIL_FILL_PX on their left and
+    on their right in their row (bool)."""
+    if not pencil.any():
+        return np.zeros(pencil.shape, bool)
+    g = grey.astype(np.uint8)
+    reach = PENCIL_FILL_PX + 1
+    # a one-sided dilation: the kernel's anchor at its right end spreads each grey pixel
+    # rightwards (a grey pixel on the left), at its left end leftwards
+    row = np.ones((1, reach), np.uint8)
+    left = cv2.dilate(g, row, anchor=(reach - 1, 0))
+    right = cv2.dilate(g, row, anchor=(0, 0))
+    between = ((pencil > 0) & (left > 0) & (right > 0)).astype(np.uint8)
+    # and the blend of pencil and panel at either side (the blur's few px)
+    return cv2.dilate(between, np.ones((1, 7), np.uint8)) > 0
+
+
+def find_pencils(img: np.ndarray) -> list[tuple[int, int, int, int]]:
+    """Bounding boxes of painted (yellow) pencil bands."""
+    mask = _pencil_mask(img)
     _, comps = _components(mask, 30)
     return [(x, y, x + w - 1, y + h - 1) for _, x, y, w, h, _ in comps if h >= 2 * w * 0.8]
