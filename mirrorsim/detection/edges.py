@@ -76,7 +76,8 @@ def _edge_by_area(profile: np.ndarray, start: int, inside: np.ndarray, outside: 
 def _level(rows: np.ndarray, offsets: np.ndarray, at: np.ndarray, slope: bool) -> np.ndarray:
     """A side's colour at the window's rows ``at`` (offsets from the edge's pixel) from
     its rows at ``offsets``: their median, or (``slope``) their straight-line fit."""
-    if not slope:
+    if not slope or np.unique(offsets).size < 2:  # a line needs two offsets (a window
+        # cut short at the frame's edge leaves one): the median there
         return np.median(rows, axis=0)
     coef = np.polyfit(offsets, rows, 1)  # (2, channels)
     return coef[0] * at[:, None] + coef[1]

@@ -6,6 +6,8 @@ pencils (the only strongly saturated yellow), as pixel boxes for
 
 from __future__ import annotations
 
+import math
+
 import cv2
 import numpy as np
 
@@ -55,14 +57,33 @@ PENCIL_FILL_PX = 25
 
 
 def find_target(img: np.ndarray, ratio: float) -> tuple[int, int, int, int] | None:
-    """Bounding box (u0, v0, u1, v1) of the grey panel's image, or None."""
+    """Bounding box (u0, v0, u1, v1) of the grey panel's image, or None.
+
+    A pencil standing in front of the panel (its reflection or its direct view crossing
+    the panel's image) splits the panel's region into two, each of which may pass for a
+    panel; so the panel is looked for twice, as the grey pixels are and with the pencil
+    pixels that lie between grey ones taken for the panel's, and of the two boxes the
+    one whose width over height is nearer the panel's (``ratio``: seen square-on in the
+    mirror, its image has the panel's proportions) is kept.  A pencil beside the panel,
+    grey beyond it, would have widened the filled one."""
     blur = cv2.GaussianBlur(img, (5, 5), 0)
     vmax, vmin = _channel_max(blur), _channel_min(blur)
     neutral = (vmax - vmin) < 0.12 * vmax + 6
     grey = neutral & (vmax > 20) & (vmax < 135)
-    # a pencil standing in front of the panel (its reflection crossing the panel's) would
-    # split the region into two that are no panel: its pixels between grey ones belong
+    plain = _find_panel(blur, neutral, grey, np.zeros(grey.shape, bool), ratio)
     inside = _between(_pencil_mask(img), grey)
+    if not inside.any():
+        return plain
+    filled = _find_panel(blur, neutral, grey, inside, ratio)
+    found = [b for b in (plain, filled) if b is not None]
+    if not found:
+        return None
+    return min(found, key=lambda b: abs(math.log((b[2] - b[0] + 1) / (b[3] - b[1] + 1) / ratio)))
+
+
+def _find_panel(blur: np.ndarray, neutral: np.ndarray, grey: np.ndarray, inside: np.ndarray,
+                ratio: float) -> tuple[int, int, int, int] | None:
+    """:func:`find_target` on the mask ``grey`` with the pencil pixels ``inside`` added."""
     mask = grey | inside
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (FRAME_OPEN_PX, FRAME_OPEN_PX))
     mask = cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_OPEN, kernel).astype(bool)
