@@ -255,7 +255,8 @@ def _evaluate_options(p):
                    help="measure the camera's pan, pitch and roll on the pegboard's holes "
                         "seen in each frame and correct every α and d_total by them: the "
                         "bench calibrates its mount (its pan then known to ~0.002°; a "
-                        "--prior on pan gives way to it).  About 0.1 s a frame")
+                        "--prior on pan gives way to it); a mount off by up to ±3.2° in "
+                        "pan, pitch and roll.  About 1 s a frame")
 
 
 @command("evaluate", "render, detect, solve and score against ground truth",

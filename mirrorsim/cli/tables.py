@@ -153,6 +153,12 @@ def report_table(report: Report, report_scene: Scene | None = None) -> str:
     lines.insert(1, "-" * len(lines[0]))
     if report_scene is not None:
         lines.append(bench_line(report_scene))
+    if report.camera_pose is not None:
+        p = report.camera_pose
+        lines.append(f"camera pose from the board's holes: pan {p.pan_offset_deg:+.4f}° from the "
+                     f"mount's reading (± {p.pan_sd_deg:.4f}°), pitch {p.pitch_deg:+.4f}°, roll "
+                     f"{p.roll_deg:+.4f}° ({p.holes} holes, median residual "
+                     f"{p.residual_px:.2f} px)")
     if m.sigma is not None:
         lines.append(f"σ's from {report.error_model or 'the error model'}: "
                      f"{m.sigma.describe()}")

@@ -29,10 +29,24 @@ from mirrorsim.rendering.sensor import undistort
 from mirrorsim.scene.model import Board, Camera, camera_axes, project
 from solver.geometry import unit, wrap_bearing
 
-# the mount's reading is good to this (deg): the coarse search spans it
-PAN_SEARCH_DEG = 0.6
-PITCH_SEARCH_DEG = 1.2
+# a hand-built bench's mount is good to this (deg) in pan, pitch and roll: the search
+# spans it, a correlation of the holes' image with the grid's under each roll first
+SEARCH_DEG = 3.2
+ROLL_STEP_DEG = 0.2
+# the correlation's maps are at this share of the frame's resolution, each point a
+# Gaussian of this σ (px of the map)
+MAP_SCALE = 0.5
+MAP_SIGMA_PX = 1.2
+# around each roll's correlated pose, the finer search: ±LOCAL_DEG in pan and pitch in
+# steps of COARSE_STEP_DEG, the pose that puts most holes on blobs kept
+LOCAL_DEG = 0.2
 COARSE_STEP_DEG = 0.1
+# a pose is a match only if it puts at least this share of the holes it projects onto
+# the frame on blobs, and their median residual is within the holes' image noise
+# (0.2-0.3 px on the project's renders at any size): else the grid is locked onto the
+# wrong holes (a pitch off, or on another dark pattern)
+MATCH_SHARE = 0.25
+RESIDUAL_MAX_PX = 0.6
 # a blob within this of a projected hole (px) counts in the coarse search
 COARSE_GATE_PX = 4.0
 # the matching gate narrows from FIRST_GATE_PX to LAST_GATE_PX as the pose converges
@@ -41,6 +55,7 @@ MIN_HOLES = 20  # fewer matched holes than this: no pose
 # a hole is darker than this share of the board around it
 DARK_SHARE = 0.55
 BACKGROUND_PX = 31  # the median filter that gives the board's level around each hole
+MIN_BLOB_AREA = 4  # px: a smaller dark spot is noise, not a hole
 
 
 @dataclass(frozen=True)
@@ -75,7 +90,7 @@ def hole_blobs(image: np.ndarray) -> np.ndarray:
     out = []
     for i in range(1, n):
         x0, y0, w, h, area = (int(v) for v in stats[i])
-        if not (4 <= area <= 3000 and w >= 3 and h >= 2):
+        if not (MIN_BLOB_AREA <= area <= 3000 and w >= 3 and h >= 2):
             continue
         box = np.s_[y0:y0 + h, x0:x0 + w]
         weight = np.clip(level[box] - g[box], 0, None) * (labels[box] == i)
@@ -105,17 +120,20 @@ def _on_film(camera: Camera, uv: np.ndarray, z: np.ndarray) -> np.ndarray:
             & (uv[:, 1] > 0) & (uv[:, 1] < camera.height_px - 1))
 
 
-def measure_camera_pose(image: np.ndarray, camera: Camera, board: Board) -> CameraPose:
+def measure_camera_pose(image: np.ndarray, camera: Camera, board: Board,
+                        start: tuple[float, float, float] | None = None) -> CameraPose:
     """The camera's pan offset, pitch and roll from the board's holes in ``image`` (8-bit
     RGB, the pinhole image: undistorted where the lens is calibrated), ``camera`` as the
-    mount reports it.
+    mount reports it.  ``start``: fit from this pose (pan offset, pitch, roll; deg)
+    instead of searching ±SEARCH_DEG for one (what a test locks a pitch off with).
 
     Raises
     ------
     DetectionError
-        A plain board, or fewer than MIN_HOLES holes matched.
+        A plain board, fewer than MIN_HOLES holes matched, or a pose that does not fit
+        the holes (too few of those it projects on blobs, or a residual beyond their
+        image noise: the grid locked onto the wrong holes).
     """
-    from scipy.optimize import least_squares
     from scipy.spatial import cKDTree
 
     holes = board.hole_centres()
@@ -126,17 +144,67 @@ def measure_camera_pose(image: np.ndarray, camera: Camera, board: Board) -> Came
         raise DetectionError(f"{len(blobs)} hole-like blobs in the frame: too few to measure "
                              f"the camera's pose on (need {MIN_HOLES})")
     tree = cKDTree(blobs)
-    # coarse: the pan and pitch within the mount's tolerance that put most holes on blobs
-    best, x = -1, np.zeros(3)
-    for dp in _grid(PAN_SEARCH_DEG):
-        for pt in _grid(PITCH_SEARCH_DEG):
-            uv, z = project_holes(camera, holes, dp, pt)
-            uv = uv[_on_film(camera, uv, z)]
-            if len(uv):
-                count = int(np.sum(tree.query(uv, distance_upper_bound=COARSE_GATE_PX)[0]
-                                   < COARSE_GATE_PX))
+
+    def matched(x: np.ndarray, gate: float) -> int:
+        uv, z = project_holes(camera, holes, *x)
+        uv = uv[_on_film(camera, uv, z)]
+        if not len(uv):
+            return 0
+        return int(np.sum(tree.query(uv, distance_upper_bound=gate)[0] < gate))
+
+    # coarse: the pose within the mount's tolerance the correlation finds, then the pan
+    # and pitch near it that put most holes on blobs
+    best, x = -1, np.asarray(start if start is not None else (0.0, 0.0, 0.0), float)
+    for near in ([] if start is not None else
+                 _correlated_poses(blobs, camera, holes, board.hole_diameter)):
+        for dp in _grid(LOCAL_DEG):
+            for pt in _grid(LOCAL_DEG):
+                cand = near + np.array([dp, pt, 0.0])
+                count = matched(cand, COARSE_GATE_PX)
                 if count > best:
-                    best, x = count, np.array([dp, pt, 0.0])
+                    best, x = count, cand
+    x, pairs, fit = _fit_pose(camera, holes, blobs, tree, x)
+    r = _residuals(camera, holes, blobs, pairs, x).reshape(-1, 2)
+    residual = float(np.median(np.hypot(*r.T)))
+    uv, z = project_holes(camera, holes, *x)
+    # the holes the pose puts on the frame large enough to be found (some are behind
+    # the mirror, the target, a wall: a share of them)
+    on_film = int((_on_film(camera, uv, z)
+                   & (_blob_area(camera, z, board.hole_diameter) >= MIN_BLOB_AREA)).sum())
+    if len(pairs[0]) < MATCH_SHARE * on_film or residual > RESIDUAL_MAX_PX:
+        raise DetectionError(
+            f"the board's holes do not fit one pose: the best puts {len(pairs[0])} of the "
+            f"{on_film} holes large enough to see on blobs, their median residual "
+            f"{residual:.2f} px (a match needs {MATCH_SHARE:.0%} and at most "
+            f"{RESIDUAL_MAX_PX:g} px); the grid would be locked onto the wrong holes (the "
+            f"search covers a mount off by up to ±{SEARCH_DEG:g}° in pan, pitch and roll)")
+    # the pan's σ from the fit: the residuals' robust spread through the Jacobian
+    spread = 1.4826 * float(np.median(np.abs(r - np.median(r, axis=0))))
+    J = fit.jac
+    cov = np.linalg.pinv(J.T @ J) * max(spread, 1e-3) ** 2
+    return CameraPose(pan_offset_deg=float(x[0]), pitch_deg=float(x[1]), roll_deg=float(x[2]),
+                      holes=len(pairs[0]), residual_px=residual,
+                      pan_sd_deg=float(math.sqrt(max(cov[0, 0], 0.0))))
+
+
+def _residuals(camera: Camera, holes: np.ndarray, blobs: np.ndarray,
+               pairs: tuple[np.ndarray, np.ndarray], x: np.ndarray) -> np.ndarray:
+    uv, _ = project_holes(camera, holes[pairs[0]], *x)
+    return (uv - blobs[pairs[1]]).ravel()
+
+
+def _fit_pose(camera: Camera, holes: np.ndarray, blobs: np.ndarray, tree, x: np.ndarray):
+    """The pose fitted to the holes matched near ``x``, the gate narrowing from
+    FIRST_GATE_PX to LAST_GATE_PX as it converges; the pose, the matched pairs (hole
+    indices, blob indices) and the last fit.
+
+    Raises
+    ------
+    DetectionError
+        Fewer than MIN_HOLES holes matched.
+    """
+    from scipy.optimize import least_squares
+
     gate = FIRST_GATE_PX
     while True:
         uv, z = project_holes(camera, holes, *x)
@@ -148,28 +216,62 @@ def measure_camera_pose(image: np.ndarray, camera: Camera, board: Board) -> Came
             raise DetectionError(
                 f"{len(pairs[0])} of the board's holes matched in the frame: too few to "
                 f"measure the camera's pose on (need {MIN_HOLES}; the search covers a mount "
-                f"off by up to ±{PAN_SEARCH_DEG:g}° in pan and ±{PITCH_SEARCH_DEG:g}° in "
-                "pitch)")
-
-        def residuals(step, x=x, pairs=pairs):
-            uv, _ = project_holes(camera, holes[pairs[0]], *(x + step))
-            return (uv - blobs[pairs[1]]).ravel()
+                f"off by up to ±{SEARCH_DEG:g}° in pan, pitch and roll)")
 
         # the step from the current pose, from exactly zero: least squares sizes its first
         # trust region by the start's norm, and a start of 1e-16 never moved
-        fit = least_squares(residuals, np.zeros(3), loss="soft_l1", f_scale=0.5)
+        fit = least_squares(lambda step, x=x, pairs=pairs: _residuals(
+            camera, holes, blobs, pairs, x + step), np.zeros(3), loss="soft_l1", f_scale=0.5)
         x = x + fit.x
         if gate <= LAST_GATE_PX:
-            break
+            return x, pairs, fit
         gate = max(LAST_GATE_PX, gate / 1.5)
-    r = residuals(np.zeros(3), x).reshape(-1, 2)
-    # the pan's σ from the fit: the residuals' robust spread through the Jacobian
-    spread = 1.4826 * float(np.median(np.abs(r - np.median(r, axis=0))))
-    J = fit.jac
-    cov = np.linalg.pinv(J.T @ J) * max(spread, 1e-3) ** 2
-    return CameraPose(pan_offset_deg=float(x[0]), pitch_deg=float(x[1]), roll_deg=float(x[2]),
-                      holes=len(pairs[0]), residual_px=float(np.median(np.hypot(*r.T))),
-                      pan_sd_deg=float(math.sqrt(max(cov[0, 0], 0.0))))
+
+
+def _blob_area(camera: Camera, depth: np.ndarray, diameter: float) -> np.ndarray:
+    """The image area (px) of a hole of ``diameter`` cm on the board at ``depth`` cm
+    along the optical axis: its width fx·D/z by its foreshortened height fx·D·h/z² (the
+    camera ``h`` cm above the board)."""
+    z = np.maximum(depth, 1e-6)
+    return math.pi / 4 * (camera.fx * diameter / z) * (camera.fx * diameter * camera.height
+                                                        / z**2)
+
+
+def _correlated_poses(blobs: np.ndarray, camera: Camera, holes: np.ndarray,
+                      hole_diameter: float) -> list[np.ndarray]:
+    """Candidate poses (pan offset, pitch, roll), deg: for each roll within ±SEARCH_DEG,
+    the shift that best lays the grid's projected holes over the blobs (the peak of the
+    two point maps' cross-correlation, by FFT), read as a pan (a shift across, fx·tan)
+    and a pitch (a shift down).  A roll moves the holes below the frame's middle much as
+    a pan does, so the candidates are judged by the holes each puts on blobs."""
+    s = MAP_SCALE
+    pad = int(math.ceil(camera.fx * math.tan(math.radians(SEARCH_DEG)) * s)) + 4
+    shape = (int(camera.height_px * s) + 2 * pad, int(camera.width * s) + 2 * pad)
+
+    def point_map(uv: np.ndarray) -> np.ndarray:
+        m = np.zeros(shape, np.float32)
+        rc = np.round(uv[:, ::-1] * s).astype(int) + pad
+        ok = (rc[:, 0] >= 0) & (rc[:, 0] < shape[0]) & (rc[:, 1] >= 0) & (rc[:, 1] < shape[1])
+        m[rc[ok, 0], rc[ok, 1]] = 1.0
+        return cv2.GaussianBlur(m, (0, 0), MAP_SIGMA_PX)
+
+    seen = np.fft.rfft2(point_map(blobs))
+    out = []
+    k = round(SEARCH_DEG / ROLL_STEP_DEG)
+    for roll in np.arange(-k, k + 1) * ROLL_STEP_DEG:
+        uv, z = project_holes(camera, holes, 0.0, 0.0, roll)
+        # the holes a shift within the search could bring onto the frame, and large
+        # enough to be found as blobs: the far rows' holes, packed closely, would lay
+        # themselves over any blobs and drown the near ones' peak
+        m = ((z > 1.0) & (uv[:, 0] > -pad / s) & (uv[:, 0] < camera.width + pad / s)
+             & (uv[:, 1] > -pad / s) & (uv[:, 1] < camera.height_px + pad / s)
+             & (_blob_area(camera, z, hole_diameter) >= MIN_BLOB_AREA))
+        corr = np.fft.irfft2(seen * np.conj(np.fft.rfft2(point_map(uv[m]))), s=shape)
+        peak = np.unravel_index(int(np.argmax(corr)), shape)
+        dv, du = ((p + n // 2) % n - n // 2 for p, n in zip(peak, shape, strict=True))
+        out.append(np.array([math.degrees(math.atan(du / s / camera.fx)),
+                             math.degrees(math.atan(dv / s / camera.fx)), roll]))
+    return out
 
 
 def _grid(half: float) -> np.ndarray:
