@@ -4,8 +4,8 @@ import copy
 import json
 
 import numpy as np
-import yaml
 import pytest
+import yaml
 
 from mirrorsim.cli.main import main
 from mirrorsim.cli.tables import report_table
