@@ -118,9 +118,9 @@ def measure(scene, tmp: Path) -> dict:
     target_cm = None
     if mt.d_total is not None:  # end to end: the solver on these measurements
         meas = out.measurements()
-        sigma = default_error_model().sigmas(meas.targets[0], [(b.alpha_deg, b.d_total)
-                                                               for b in meas.beacons],
-                                             meas.observer_pan_deg)
+        sigma = default_error_model().sigmas(out.features(out.target),
+                                             [out.features(m) for _, m in out.beacons],
+                                             meas.observer_pan_deg, scene.camera.fx)
         sol = solve_measurements(meas.observer, meas.beacons, meas.targets, sigma)
         target_cm = float(np.linalg.norm(sol.target - np.asarray(t.position)))
     return {
