@@ -47,7 +47,7 @@ sys.path.insert(0, str(ROOT))
 from stamp import stamp  # noqa: E402
 
 from mirrorsim.errors import DetectionError, SceneError  # noqa: E402
-from mirrorsim.formats.error_model import load_error_model  # noqa: E402
+from mirrorsim.formats.error_model import default_error_model, load_error_model  # noqa: E402
 from mirrorsim.pipelines.calibrate import D_REF  # noqa: E402
 from mirrorsim.pipelines.evaluate import evaluate_scene  # noqa: E402
 from mirrorsim.pipelines.planning import plan_scene  # noqa: E402
@@ -184,7 +184,9 @@ def main() -> None:
     a = ap.parse_args()
     nuisances = tuple(n.strip() for n in a.calibrate.split(",") if n.strip())
     check_nuisances(nuisances, a.beacons, 1)
-    model = load_error_model(a.error_model) if a.error_model else None
+    # the ideal bench's σ's unless given (not the bench model evaluate would take for
+    # these scenes, whose priors would self-calibrate every fit, plain ones too)
+    model = load_error_model(a.error_model) if a.error_model else default_error_model()
     seed = a.seed if a.seed is not None else int.from_bytes(os.urandom(3), "big")
     spec = load_spec(a.spec)
     lo, hi = spec.data.get("bench", {}).get("beacon", {}).get("known_position_offset", [0, 0])
@@ -217,7 +219,7 @@ def main() -> None:
             if a.lossless:  # after the draw: the same scenes, their frames stored as PNG
                 scene = replace(scene, bench=replace(scene.bench, jpeg_quality=None))
             try:
-                plan = plan_scene(scene, None if model is None else model.typical,
+                plan = plan_scene(scene, model.typical if a.error_model else None,
                                   n_beacons=a.beacons, step=a.step,
                                   calibration=SelfCalibration(nuisances, position_sigma))
             except (SolverError, ValueError) as exc:

@@ -382,6 +382,17 @@ class ErrorModel:
         return ObjectSigmas(pair(t.target), tuple(pair(b) for b in t.beacons),
                             t.shared_alpha_deg)
 
+    def typical_whole(self, fx_px: float | None) -> ObjectSigmas:
+        """:meth:`typical_at` with every shared error folded into each image's σ as if
+        independent: the shared α offset and the tolerances' pan into σ_α, their range
+        scale into σ_d (for analyses that take independent errors: conservative)."""
+        t = self.typical_at(fx_px).independent()
+        priors = self.tolerances.priors()
+        pan, scale = priors.get("pan", 0.0), priors.get("scale", 0.0)
+        whole = lambda s: Sigma(float(np.hypot(s.alpha_deg, pan)),  # noqa: E731
+                                float(np.hypot(s.d_total_rel, scale)))
+        return ObjectSigmas(whole(t.target), tuple(whole(b) for b in t.beacons))
+
     @property
     def typical(self) -> ObjectSigmas:
         """The typical σ's (RMS over the training rows) per kind, for analyses without

@@ -208,9 +208,9 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
     rng = np.random.default_rng(seed)
     b0, cam = scene.beacons[0], scene.camera
     start = np.asarray(b0.believed, float)
-    # the filter takes each pose's α error whole: its own part and the shared offset
-    # (a bench's pan), which the filter does not model apart
-    typical = model.typical_at(cam.fx).independent().beacons[0]
+    # the filter takes each pose's error whole: its own part, the shared α offset and a
+    # bench model's pan and range-scale tolerances, which the filter does not model apart
+    typical = model.typical_whole(cam.fx).beacons[0]
     # a particle filter cannot follow a likelihood much narrower than its particles'
     # spread (they all but one get weight 0): no narrower than FILTER_SIGMA_FLOOR
     params = PFParams(sigma=Sigma(max(typical.alpha_deg, FILTER_SIGMA_FLOOR.alpha_deg),
