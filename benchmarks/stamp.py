@@ -16,10 +16,11 @@ def stamp() -> str:
     commit = subprocess.run(["git", "describe", "--always"], cwd=ROOT,
                             capture_output=True, text=True).stdout.strip()
     # a result of code not yet committed says so; the docs' prose and the results and
-    # figures a `regenerate.py` run has written before this one are not code
+    # figures a `regenerate.py` run has written before this one are not code (nor the
+    # README, whose quick-start block is the demo result, copied)
     changed = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--",
                               ".", ":(exclude)docs/results", ":(exclude,glob)docs/*.md",
-                              ":(exclude,glob)docs/*.png"], cwd=ROOT,
+                              ":(exclude,glob)docs/*.png", ":(exclude)README.md"], cwd=ROOT,
                              capture_output=True, text=True).stdout.strip()
     commit += "-dirty" if changed else ""
     return (f"commit {commit}, {datetime.date.today()}, {platform.node()} "
