@@ -206,6 +206,7 @@ def test_bundled_scenes_evaluate_contract_fields():
 
 
 @pytest.mark.slow
+@pytest.mark.filterwarnings("ignore:.*a JPEG frame")
 def test_the_scene_a_new_user_wrote_gets_the_bench_model_and_an_ellipse_that_holds(tmp_path):
     """The scene of issue 44's first complaint: the default geometry written with
     `camera.pan_error: 0.3`, `jpeg_quality: 90`, `mirror.curvature_radius: 1500` and three

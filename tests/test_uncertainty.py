@@ -310,7 +310,7 @@ def test_solve_says_which_sigmas_win(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "--error-model" in err and "not used" in err
     narrow = json.loads(out.read_text())["covariance"]["target_ellipse95"]["major"]
-    assert narrow < wide / 3
+    assert narrow < wide / 2
 
 
 @pytest.mark.slow
@@ -331,6 +331,8 @@ def test_the_shipped_models_rows_are_what_make_error_model_renders(kind, tmp_pat
     monkeypatch.setenv("MIRRORSIM_CACHE_DIR", str(tmp_path / "cache"))
     spec = load_spec(Path(__file__).parents[1] / prov["spec_file"])
     model = default_error_model(kind)
+    for folder in ("rows", "scenes", "frames"):
+        (tmp_path / folder).mkdir()
     for row in prov["check_rows"]:
         done = process_one(row["index"], prov["dataset_seed"], spec, str(tmp_path), None,
                            "auto", error_model=model)
