@@ -51,10 +51,18 @@ def made_with(meta: dict, out: Path) -> str:
             + (f" --spec {meta['spec_file']}" if meta.get("spec_file") else "")
             + (f" --spp {meta['spp']}" if meta.get("spp") is not None else "")
             + (f" --sampler {sampler}" if sampler else "")
-            + (f" --beacons {count}" if count else "")
+            # (a count drawn from a range is the spec file's own: no option gives it)
+            + (f" --beacons {count}" if count and not isinstance(count, list) else "")
             + (f" --error-model {meta.get('error_model_file') or 'MODEL'}"
                if meta.get("error_model_shipped") is False else "")
             + _calibrated(meta))
+
+
+def _beacon_words(meta: dict) -> str:
+    """How many beacons each scene has: ``2 beacon(s)``, or ``1–3 beacon(s)`` drawn."""
+    count = (meta['spec'].get('beacon') or {}).get('count', 1)
+    return (f"{count[0]}–{count[1]} beacon(s), drawn" if isinstance(count, list)
+            else f"{count} beacon(s)")
 
 
 def _model_words(meta: dict) -> str:
@@ -77,7 +85,7 @@ def write_card(out: Path, meta: dict, rows: list[table.DatasetRow], variant: str
 
 Made with `{made_with(meta, out)}`
 ({'the scenes’ spp' if meta['spp'] is None else f"{meta['spp']} spp"}; backend {variant};
-{(meta['spec'].get('beacon') or {}).get('count', 1)} beacon(s) a scene{_model_words(meta)}).
+{_beacon_words(meta)} a scene{_model_words(meta)}).
 {len(rows)} rows, {len(rows) - len(ok)} failed (their `error` column says why).
 
 Each row is one random scene (`scenes/<scene>.yaml`, a normal scene file: rerun it with
