@@ -68,6 +68,11 @@ def __getattr__(name: str):
     if name in _API:
         module, attr = _API[name]
         value = getattr(importlib.import_module(module), attr)
+        if not isinstance(value, type):  # a class checks its own fields
+            from mirrorsim.arguments import checked
+
+            # every argument held to its type hint before any work (a wrong one named)
+            value = checked(value)
         globals()[name] = value  # once imported, an ordinary attribute
         return value
     raise AttributeError(f"module 'mirrorsim' has no attribute {name!r}")

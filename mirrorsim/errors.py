@@ -8,16 +8,17 @@ statuses with :func:`exit_status`; nothing is told apart by name.
 
 from __future__ import annotations
 
+import errno
 import sys
 from typing import TextIO
 
-from solver.errors import InputError, SolverError
+from solver.errors import BadParameter, InputError, SolverError
 
 EXIT_BAD_INPUT = 2
 EXIT_FAILED = 1
 
-__all__ = ["InputError", "SolverError", "SceneError", "BadParameter", "BadArgument", "OutputError",
-           "RunFailed",
+__all__ = ["InputError", "SolverError", "SceneError", "BadParameter", "BadArgument",
+           "OutputError", "RunFailed", "DiskError", "DISK_CAUSES", "write_error",
            "DetectionError", "BackendError", "EXIT_BAD_INPUT", "EXIT_FAILED", "exit_status",
            "one_line_warning"]
 
@@ -27,16 +28,6 @@ class SceneError(InputError):
     same file (independent of this one; ``mirrorsim check`` lists them all)."""
 
     others: tuple[SceneError, ...] = ()
-
-
-class BadParameter(InputError):
-    """A library function's parameter out of range, named as the function names it:
-    ``BadParameter("steps", "0 must be within 1..200")``.  The command line turns it into
-    a :class:`BadArgument` naming the flag; the library knows no flags."""
-
-    def __init__(self, parameter: str, message: str):
-        self.parameter = parameter
-        super().__init__(parameter, "", message)
 
 
 class BadArgument(InputError):
@@ -56,6 +47,27 @@ class OutputError(InputError):
 
 class RunFailed(RuntimeError):
     """The run itself failed (exit status 1); the message says why."""
+
+
+class DiskError(RunFailed):
+    """A write failed for a cause outside the input (exit status 1): a full disk, a
+    file-size limit, a quota, an I/O error.  The input was fine; the run was not."""
+
+
+# the causes of a failed write that are the machine's, not the input's, in words
+DISK_CAUSES = {errno.ENOSPC: "disk full", errno.EFBIG: "file size limit reached",
+               errno.EDQUOT: "disk quota exceeded", errno.EIO: "I/O error"}
+
+
+def write_error(path: object, exc: OSError, what: str) -> InputError | DiskError:
+    """The error to raise for a write of ``path`` that failed with ``exc``:
+    :class:`DiskError` (exit 1) where the machine is at fault, naming the cause, else
+    :class:`OutputError` (exit 2: a path the user can change).  ``what``: the message's
+    start, e.g. ``"--out: cannot write"``."""
+    if exc.errno in DISK_CAUSES:
+        return DiskError(f"{path}: {what}: {DISK_CAUSES[exc.errno]} "
+                         f"({exc.strerror or exc})")
+    return OutputError(path, f"{what}: {exc.strerror or exc}")
 
 
 class DetectionError(RunFailed):

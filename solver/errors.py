@@ -20,3 +20,13 @@ class InputError(ValueError):
 
 class SolverError(ValueError):
     """Input the method cannot solve (degenerate geometry or impossible measurements)."""
+
+
+class BadParameter(InputError):
+    """A library function's parameter of the wrong type or out of range, named as the
+    function names it: ``BadParameter("steps", "0 must be within 1..200")``.  The command
+    line turns it into a ``BadArgument`` naming the flag; the library knows no flags."""
+
+    def __init__(self, parameter: str, message: str):
+        self.parameter = parameter
+        super().__init__(parameter, "", message)

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
+from solver.arguments import check_fields
 from solver.errors import SolverError
 
 
@@ -18,6 +19,9 @@ class BeaconMeasurement:
     position: tuple[float, float]
     alpha_deg: float
     d_total: float
+
+    def __post_init__(self) -> None:
+        check_fields(self)  # finite numbers, made plain (BadParameter naming the field)
 
 
 @dataclass(frozen=True)

@@ -12,7 +12,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from solver.errors import SolverError
+from solver.arguments import check_fields
+from solver.errors import BadParameter, SolverError
 from solver.measurements import is_number
 
 # nuisances a bench shares across its measurements, estimated with the mirror when asked
@@ -58,10 +59,11 @@ class SelfCalibration:
 
     Raises
     ------
-    SolverError
-        An unknown or repeated nuisance, a position σ that is neither 0 nor a finite
-        length ≥ :data:`POSITION_SIGMA_MIN_CM`, or a prior for a nuisance not estimated
-        or whose σ is below :data:`PRIOR_MIN`.
+    BadParameter
+        Naming the field: a value of the wrong type, an unknown or repeated nuisance, a
+        position σ that is neither 0 nor a finite length ≥
+        :data:`POSITION_SIGMA_MIN_CM`, or a prior for a nuisance not estimated or whose
+        σ is below :data:`PRIOR_MIN`.
     """
 
     nuisances: tuple[str, ...] = ()
@@ -69,17 +71,20 @@ class SelfCalibration:
     priors: Mapping[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        if isinstance(self.nuisances, str):  # tuple("pan") would be ('p', 'a', 'n')
-            raise SolverError(f"nuisances must be a tuple of names, e.g. "
-                              f"({self.nuisances!r},), not the string {self.nuisances!r}")
         if self.priors is None:
             object.__setattr__(self, "priors", {})
-        if not isinstance(self.priors, Mapping):
-            raise SolverError(f"priors must map nuisance names to σ's, got {self.priors!r}")
-        object.__setattr__(self, "nuisances", tuple(self.nuisances))
-        check_nuisances(self.nuisances, None, 1)  # the names: no beacons yet
-        check_position_sigma(self.position_sigma)
-        check_nuisance_sigma(self.priors, self.nuisances)
+        # the types first (a string for the names is refused: tuple("pan") would be
+        # ('p', 'a', 'n')), then the values, each refusal naming its field
+        check_fields(self)
+        for name, check in (("nuisances", lambda: check_nuisances(self.nuisances, None, 1)),
+                            ("position_sigma", lambda: check_position_sigma(
+                                self.position_sigma)),
+                            ("priors", lambda: check_nuisance_sigma(self.priors,
+                                                                    self.nuisances))):
+            try:
+                check()
+            except SolverError as exc:
+                raise BadParameter(name, str(exc)) from None
         # plain floats (a numpy number would write itself as "np.float64(0.3)" in a
         # dataset's row and card)
         object.__setattr__(self, "position_sigma", float(self.position_sigma))
@@ -192,7 +197,7 @@ def check_nuisances(nuisances: tuple[str, ...], nb: int | None, nt: int,
     measurement (the prior's row), so it does not count against the beacons."""
     bad = [n for n in nuisances if n not in NUISANCES]
     if bad:
-        raise SolverError(f"unknown nuisance(s) {', '.join(map(str, bad))}: choose from "
+        raise SolverError(f"unknown nuisance(s) {', '.join(map(repr, bad))}: choose from "
                           f"{', '.join(NUISANCES)}")
     twice = sorted({n for n in nuisances if nuisances.count(n) > 1})
     if twice:

@@ -80,5 +80,6 @@ def test_llvm15_abort_is_contained(monkeypatch):
 
 def test_scalar_always_available():
     assert backend.choose_variant("scalar") == "scalar_rgb"
-    with pytest.raises(backend.BackendError, match="unknown variant"):
+    # an unknown name is bad input (exit 2), refused before a run claims its folder
+    with pytest.raises(backend.BadParameter, match="variant: 'vulkan': use auto"):
         backend.choose_variant("vulkan")

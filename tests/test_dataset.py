@@ -691,53 +691,55 @@ def test_calibrate_needs_a_spec_whose_beacons_carry_it(tmp_path, capsys):
     assert not out.exists()
 
 
-def test_a_table_of_the_older_layout_is_read(one_worker, tmp_path):
-    """A dataset made before several beacons and self-calibration (rows of schema 2, its
-    table without their columns, sealed): read as one plain beacon; a table that says it
-    is of this layout without them is refused."""
+def _as_layout(src, dst, schemas, drop):
+    """A copy of dataset ``src`` as an older mirrorsim wrote it: each row of its schema
+    without the columns ``drop`` (sealed again), and the table of those rows, sealed."""
     import shutil
 
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    from mirrorsim.formats.cache import checksum
-    from mirrorsim.formats.dataset_folder import TABLE_SEAL, DatasetError, read_table
-    from mirrorsim.formats.dataset_table import older_values
+    from mirrorsim.formats.cache import checksum, seal, unseal
+    from mirrorsim.formats.dataset_folder import TABLE_SEAL
     from mirrorsim.formats.files import jsonable
+
+    shutil.rmtree(dst, ignore_errors=True)
+    shutil.copytree(src, dst)
+    for schema, p in zip(schemas, sorted((dst / "rows").glob("scene*.json")), strict=True):
+        d = {k: v for k, v in unseal(json.loads(p.read_text()), p.name).items()
+             if k not in drop}
+        p.write_text(json.dumps(seal({**d, "schema": schema})))
+    cols = {k: v for k, v in pq.read_table(dst / "dataset.parquet").to_pydict().items()
+            if k not in drop}
+    cols["schema"] = list(schemas)
+    arrow = pa.table(cols)
+    pq.write_table(arrow.replace_schema_metadata(
+        {TABLE_SEAL: checksum(jsonable(arrow.to_pydict()))}), dst / "dataset.parquet")
+
+
+def test_a_table_of_the_older_layout_is_read(one_worker, tmp_path):
+    """A dataset made before several beacons and self-calibration (rows of schema 2, its
+    table without their columns, sealed): read as one plain beacon; rows that say they
+    are of a later layout without its columns are refused."""
+    from mirrorsim.formats.dataset_folder import DatasetError, read_table
+    from mirrorsim.formats.dataset_table import older_values
 
     out, _ = one_worker
     old = tmp_path / "old"
-    shutil.copytree(out, old)
-    cols = pq.read_table(old / "dataset.parquet").to_pydict()
-    cols = {k: v for k, v in cols.items() if k not in older_values(2)}
-    cols["schema"] = [2] * len(cols["index"])
-    arrow = pa.table(cols)
-    arrow = arrow.replace_schema_metadata({TABLE_SEAL: checksum(jsonable(arrow.to_pydict()))})
-    pq.write_table(arrow, old / "dataset.parquet")
+    _as_layout(out, old, [2, 2, 2], set(older_values(2)))
     read = read_table(old)
     assert read["beacons"] == [1, 1, 1] and read["calibrate"] == ["", "", ""]
     assert read["est_range_scale"] == [None, None, None]
     assert read["calibrate_priors"] == ["", "", ""]
-    cols["schema"] = [3] * len(cols["index"])  # a table of this layout must have them
-    arrow = pa.table(cols)
-    arrow = arrow.replace_schema_metadata({TABLE_SEAL: checksum(jsonable(arrow.to_pydict()))})
-    pq.write_table(arrow, old / "dataset.parquet")
-    with pytest.raises(DatasetError, match="missing columns"):
+    _as_layout(out, old, [3, 3, 3], set(older_values(2)))  # this layout must have them
+    with pytest.raises(DatasetError, match="beacons"):
         read_table(old)
     # one resumed by the version after: its rows of schema 2 and 3 mixed, the table with
     # every column but the priors (schema 4's): each row reads as its scene was solved
-    cols = pq.read_table(out / "dataset.parquet").to_pydict()
-    del cols["calibrate_priors"]
-    cols["schema"] = [2, 3, 3]
-    arrow = pa.table(cols)
-    arrow = arrow.replace_schema_metadata({TABLE_SEAL: checksum(jsonable(arrow.to_pydict()))})
-    pq.write_table(arrow, old / "dataset.parquet")
+    _as_layout(out, old, [2, 3, 3], {"calibrate_priors"})
     assert read_table(old)["calibrate_priors"] == ["", "", ""]
-    cols["schema"] = [2, 3, 4]  # a row of schema 4 must have it
-    arrow = pa.table(cols)
-    arrow = arrow.replace_schema_metadata({TABLE_SEAL: checksum(jsonable(arrow.to_pydict()))})
-    pq.write_table(arrow, old / "dataset.parquet")
-    with pytest.raises(DatasetError, match="missing columns calibrate_priors"):
+    _as_layout(out, old, [2, 3, 4], {"calibrate_priors"})  # a row of schema 4 must have it
+    with pytest.raises(DatasetError, match="calibrate_priors"):
         read_table(old)
 
 

@@ -81,13 +81,19 @@ def test_ctrl_c_during_dataset_stops_at_once_and_resume_is_exact(tmp_path):
     ref = tmp_path / "ref"
     assert main(["dataset", "--n", "4", "--seed", "11", "--out", str(ref), "--spec", str(SPEC),
                  "--workers", "1", "--quiet"]) == 0
-    volatile = {"seconds_total", "seconds_sample", "sha256"}  # the seal covers the timings
+    # the seal covers the timings, and the files' digests the truth files' timings
+    volatile = {"seconds_total", "seconds_sample", "sha256", "files"}
 
     def rows_of(folder):
         return [{k: v for k, v in json.loads(p.read_text()).items() if k not in volatile}
                 for p in sorted((folder / "rows").glob("scene*.json"))]
 
+    def frames_of(folder):  # the frames' digests each row recorded: the same pixels
+        return [{k: v for k, v in json.loads(p.read_text())["files"].items()
+                 if k.endswith(".png")} for p in sorted((folder / "rows").glob("scene*.json"))]
+
     assert rows_of(out) == rows_of(ref) and len(rows_of(ref)) == 4
+    assert frames_of(out) == frames_of(ref)
     assert all(r["error"] == "" for r in rows_of(ref))
 
 
@@ -182,15 +188,17 @@ def test_unwritable_outputs_are_refused_before_any_work(tmp_path, capsys, argv_o
     assert _files(tmp_path) == before
 
 
-def test_a_full_disk_is_refused_in_one_line(tmp_path, capsys):
+def test_a_full_disk_fails_the_run_in_one_line(tmp_path, capsys):
+    """A full disk is the machine's failure, not the input's: exit 1, the cause named."""
     full = tmp_path / "full"
     full.mkdir()
     if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=32k", "tmpfs", str(full)],
                       capture_output=True).returncode != 0:
         pytest.skip("cannot mount a small tmpfs here (not root?)")
     try:
-        line = _refused(capsys, ["check", DEFAULT, "--json", str(full / "truth.json")])
-        assert "no space left" in line
+        line = _refused(capsys, ["check", DEFAULT, "--json", str(full / "truth.json")],
+                        status=1)
+        assert "disk full" in line and "No space left" in line
         assert list(full.iterdir()) == []
     finally:
         subprocess.run(["umount", str(full)], check=False)

@@ -78,8 +78,10 @@ def _solve(args) -> int:
 
 
 def _montecarlo_options(p):
+    from mirrorsim.scene.model import MAX_SEED
+
     p.add_argument("--iterations", type=int, default=200, help="draws per row (default 200)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help=f"0..{MAX_SEED} (default 0)")
     p.add_argument("--alpha", type=float, default=70.0, help="target's alpha (deg)")
     p.add_argument("--d-total", type=float, default=5.0, help="target's d_total")
     p.add_argument("--d1", type=float, default=3.0, help="observer → mirror along the ray")
@@ -103,11 +105,12 @@ def _montecarlo_options(p):
          "mirror and beacon stand: the options below set them.", _montecarlo_options)
 def _montecarlo(args) -> int:
     from mirrorsim.cli.tables import montecarlo_table
+    from mirrorsim.scene.model import MAX_SEED
     from solver.measurements import D_TOTAL_RANGE_CM, SIGMA_ALPHA_MAX_DEG, SIGMA_D_REL_MAX
     from solver.montecarlo import Table1Geometry, table1, table_rows
     from solver.sltr import SolverError
 
-    at_least(("--iterations", args.iterations, 2), ("--seed", args.seed, 0))
+    at_least(("--iterations", args.iterations, 2), ("--seed", args.seed, 0, MAX_SEED))
     if args.iterations > MAX_ITERATIONS:
         raise BadArgument("--iterations", f"{args.iterations} must be ≤ {MAX_ITERATIONS}")
     finite(args, "alpha", "d_total", "d1", "incidence", "beacon_depth", "beacon_along", "sigma")
@@ -206,15 +209,19 @@ def _plan(args) -> int:
 
 
 def _dataset_options(p):
-    from mirrorsim.pipelines.dataset import EXECUTORS
+    from mirrorsim.pipelines.dataset import EXECUTORS, MAX_SCENES, MAX_WORKERS
 
-    p.add_argument("--n", type=int, required=True, help="number of scenes")
-    p.add_argument("--seed", type=int, required=True)
+    p.add_argument("--n", type=int, required=True, help=f"number of scenes, 1..{MAX_SCENES}")
+    from mirrorsim.scene.model import MAX_SEED
+
+    p.add_argument("--seed", type=int, required=True,
+                   help=f"the dataset's seed, 0..{MAX_SEED} (scene i is drawn from (seed, i))")
     output(p, "--out", "dataset", type=Path, required=True,
            help="a new or empty folder, or (with --resume) one of its datasets")
     p.add_argument("--workers", type=int, default=default_workers(),
-                   help="worker processes (default: half the cores; more than the cores, "
-                        "or than the available memory holds at 1 GiB each, is capped)")
+                   help=f"worker processes, 1..{MAX_WORKERS} (default: half the cores; more "
+                        "than the cores, or than the available memory holds at 1 GiB each, "
+                        "is capped)")
     p.add_argument("--spec", type=Path, help="ranges of the random scenes (YAML)")
     inputs(p, ("spec", "--spec", "file"))
     p.add_argument("--spp", type=int, help="samples per pixel (default: the spec's)")
@@ -248,10 +255,12 @@ def _dataset_options(p):
          "gives the same rows whatever the number of workers.", _dataset_options)
 def _dataset(args) -> int:
     from mirrorsim.formats.dataset_folder import DatasetError
-    from mirrorsim.pipelines.dataset import run_dataset
+    from mirrorsim.pipelines.dataset import MAX_SCENES, MAX_WORKERS, run_dataset
     from mirrorsim.pipelines.workers import max_workers
+    from mirrorsim.scene.model import MAX_SEED
 
-    at_least(("--n", args.n, 1), ("--seed", args.seed, 0), ("--workers", args.workers, 1))
+    at_least(("--n", args.n, 1, MAX_SCENES), ("--seed", args.seed, 0, MAX_SEED),
+             ("--workers", args.workers, 1, MAX_WORKERS))
     calibration = calibration_of(args)
     if args.spp is not None:  # checked as every scene's render settings are
         from mirrorsim.scene.model import RenderSettings

@@ -20,11 +20,13 @@ from mirrorsim import __version__
 from mirrorsim.cli import analysis_commands, scene_commands  # noqa: F401 (they register)
 from mirrorsim.cli.registry import COMMANDS, check_outputs, stdout_output
 from mirrorsim.errors import (
+    DISK_CAUSES,
     BadArgument,
     BadParameter,
     SolverError,
     exit_status,
     one_line_warning,
+    write_error,
 )
 
 # a library parameter whose flag is not "--" + its name with "-" for "_"
@@ -133,6 +135,8 @@ def _run(args: argparse.Namespace) -> int:
     except Exception as exc:
         if _Interrupt.signum is not None:
             return _interrupted()
+        if isinstance(exc, OSError) and exc.errno in DISK_CAUSES:  # a write outside ours
+            exc = write_error(exc.filename or "", exc, "cannot write")
         if isinstance(exc, BadParameter):  # the library names parameters, the user flags
             exc = BadArgument(flag_of(exc.parameter), exc.message)
         status = exit_status(exc)

@@ -10,7 +10,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from mirrorsim.errors import BadArgument, OutputError
+from mirrorsim.errors import BadArgument, InputError, OutputError, write_error
 from mirrorsim.formats.error_model import ErrorModel
 from mirrorsim.formats.files import (
     check_inputs_outside,
@@ -73,8 +73,7 @@ def check_outputs(args: argparse.Namespace) -> None:
     try:
         _check_outputs(args, checking)
     except OSError as exc:  # a name too long, a loop of links, an unreadable folder
-        raise OutputError(exc.filename or "", f"{checking[0]}: {exc.strerror or exc}"
-                          ) from None
+        raise write_error(exc.filename or "", exc, checking[0]) from None
 
 
 def stdout_output(args: argparse.Namespace) -> str | None:
@@ -89,6 +88,11 @@ def stdout_output(args: argparse.Namespace) -> str | None:
 
 
 def _check_outputs(args: argparse.Namespace, checking: list[str]) -> None:
+    # a missing input is bad input whatever the outputs' state (a full disk found by the
+    # outputs' probe below would otherwise make a typo in a path a failed run)
+    for name, source in _file_inputs(args):
+        if source is not None and str(source) != "-" and not Path(source).exists():
+            raise InputError(source, "", f"{name}: no such file")
     files: dict[Path, str] = {}
     for dest, flag, kind in getattr(args, "outputs", None) or []:
         value = getattr(args, dest)
@@ -185,11 +189,12 @@ def common(p: argparse.ArgumentParser, *, scene: bool = True, out: str | None = 
     if json:
         output(p, "--json", "file", metavar="FILE", help=f"write {json} here (- = stdout)")
     if spp:
-        from mirrorsim.scene.model import MAX_SPP, RenderSettings
+        from mirrorsim.scene.model import MAX_RENDER_SEED, MAX_SPP, RenderSettings
 
         p.add_argument("--spp", type=int, help=f"samples per pixel in the mirror's image, "
                        f"1..{MAX_SPP} (default: the scene's, else {RenderSettings().spp})")
-        p.add_argument("--seed", type=int, help="sampler seed ≥ 0 (default: the scene's, else 0)")
+        p.add_argument("--seed", type=int, help=f"sampler seed, 0..{MAX_RENDER_SEED} (default: "
+                       "the scene's, else 0)")
         sampler_option(p)
     if variant:
         p.add_argument("--variant", default="auto", choices=VARIANT_CHOICES,
@@ -223,7 +228,7 @@ def calibrate_option(p: argparse.ArgumentParser, beacon_sigma_alone: bool = True
     """``--calibrate pan,scale[,power]``, ``--beacon-sigma CM`` and ``--prior NAME=σ,…``:
     self-calibration's settings (:func:`calibration_of`); ``beacon_sigma_alone`` False:
     the command takes --beacon-sigma only with --calibrate."""
-    p.add_argument("--calibrate", default="", metavar="pan,scale[,power]", action=_Once,
+    p.add_argument("--calibrate", default=None, metavar="pan,scale[,power]", action=_Once,
                    help="estimate bench errors shared by every measurement with the mirror "
                    "(self-calibration; needs 2+ beacons, 3+ for all three): pan, an offset on "
                    "every alpha (the mount's pan reading); scale, a factor on every d_total "
@@ -232,7 +237,7 @@ def calibrate_option(p: argparse.ArgumentParser, beacon_sigma_alone: bool = True
     beacon_sigma_option(p, ("" if beacon_sigma_alone else "with --calibrate only: ")
                         + "each beacon's offset is then estimated with that prior, and the "
                         "ellipse includes it")
-    p.add_argument("--prior", default="", metavar="NAME=SIGMA,...", action=_Once,
+    p.add_argument("--prior", default=None, metavar="NAME=SIGMA,...", action=_Once,
                    help="what the bench knows of some of --calibrate's nuisances before the "
                    "frames, as a σ each: pan in degrees, scale as a fraction (0.006: 0.6 %%), "
                    "power in 1/cm; e.g. pan=0.3,scale=0.006 for a pan reading good to about "
@@ -255,9 +260,9 @@ def calibration_of(args: argparse.Namespace, n_beacons: int | None = None,
         parse_priors,
     )
 
-    names = tuple(n.strip() for n in args.calibrate.split(",") if n.strip())
+    names = tuple(comma_items(args.calibrate, "--calibrate"))
     try:
-        priors = parse_priors(args.prior)
+        priors = parse_priors(",".join(comma_items(args.prior, "--prior")))
     except ValueError as exc:
         raise BadArgument("--prior", str(exc)) from None
     try:  # the names always; the count only where the beacons are known
@@ -269,6 +274,19 @@ def calibration_of(args: argparse.Namespace, n_beacons: int | None = None,
     except SolverError as exc:
         raise BadArgument("--prior", str(exc)) from None
     return SelfCalibration(names, beacon_sigma_of(args), priors)
+
+
+def comma_items(text: str | None, flag: str) -> list[str]:
+    """A comma list as given to ``flag`` (None: not given, no items), each item stripped;
+    an empty item (``''``, ``pan,``, ``pan,,scale``) is refused: it is a slip, not a
+    request for nothing."""
+    if text is None:
+        return []
+    items = [item.strip() for item in text.split(",")]
+    if not all(items):
+        raise BadArgument(flag, f"{text!r} has an empty item: give names separated by "
+                          "commas, each once (e.g. pan,scale)")
+    return items
 
 
 def beacon_sigma_option(p: argparse.ArgumentParser, what: str) -> None:
@@ -315,11 +333,15 @@ def error_model_of(args: argparse.Namespace) -> ErrorModel | None:
     return load_error_model(args.error_model)
 
 
-def at_least(*checks: tuple[str, int | None, int]) -> None:
-    """Refuse (exit 2) an option given below its least value; None means not given."""
-    for flag, value, low in checks:
+def at_least(*checks: tuple) -> None:
+    """Refuse (exit 2) an option given below its least value, or above its most where a
+    check names one: ``(flag, value, low)`` or ``(flag, value, low, high)``; None means
+    not given."""
+    for flag, value, low, *high in checks:
         if value is not None and value < low:
             raise BadArgument(flag, f"{value} must be ≥ {low}")
+        if value is not None and high and value > high[0]:
+            raise BadArgument(flag, f"{value} must be ≤ {high[0]}")
 
 
 def finite(args: argparse.Namespace, *dests: str) -> None:

@@ -157,11 +157,12 @@ def _detect(args) -> int:
     from mirrorsim.cli.tables import detect_summary
     from mirrorsim.detection.detector import annotate
     from mirrorsim.formats.capture import CaptureRecord, load_capture
-    from mirrorsim.pipelines.frame import measure_frame
+    from mirrorsim.pipelines.frame import check_pair, measure_frame
 
     reference_error = 0.0  # a capture record cannot know its bench's calibration error
     if args.capture:
         view, source = load_capture(args.capture), f"capture {args.capture}"
+        check_pair(args.frame, view, args.capture)  # before the calibration's renders
     else:
         scene = load(args.scene)
         view, source = CaptureRecord.from_scene(scene), f"scene {args.scene}"
@@ -270,13 +271,14 @@ def _evaluate_options(p):
 def _evaluate(args) -> int:
     from mirrorsim.cli.tables import report_table
     from mirrorsim.formats.files import write_json
-    from mirrorsim.pipelines.evaluate import evaluate_scene
+    from mirrorsim.pipelines.evaluate import check_board_pose, evaluate_scene
 
     scene = render_options(args, load(args.scene))
     calibration = calibration_of(args, len(scene.beacons))  # before anything renders
     if "plot" in args.keep:
         preload("mirrorsim.cli.plots")  # matplotlib imports while the frame renders
     model = error_model_of(args)  # read and checked before anything is written
+    check_board_pose(scene, args.board_pose)
     out = out_folder(args, scene)
     report = evaluate_scene(scene, out, variant=args.variant, progress=not args.quiet,
                             keep=tuple(k for k in args.keep if k != "plot"),
@@ -330,15 +332,17 @@ def _budget(args) -> int:
     scene = render_options(args, load(args.scene))
     # before anything renders or is written
     calibration = check_budget_calibration(scene, calibration_of(args, len(scene.beacons)))
+    model = error_model_of(args)  # read and checked before anything is written
     found = sources(scene)
     if not found:
-        print(f"{scene.name}: no bench imperfections in {args.scene}: only the ideal bench "
-              "is evaluated (see docs/scenes.md, Bench imperfections)", file=sys.stderr)
+        print(f"warning: {scene.name}: no bench imperfections in {args.scene}: only the "
+              "ideal bench is evaluated (see docs/scenes.md, Bench imperfections)",
+              file=sys.stderr)
     out = out_folder(args, scene, "budget")
     step = (None if args.quiet else lambda label, k, runs: print(f"[{k}/{runs}] {label}",
                                                                  file=sys.stderr, flush=True))
     budget = run_budget(scene, out, variant=args.variant, progress=not args.quiet,
-                        on_step=step, error_model=error_model_of(args),
+                        on_step=step, error_model=model,
                         calibration=calibration, keep=tuple(args.keep))
     print(budget_table(budget))
     path = write_json(out / "budget.json", budget.to_json())
@@ -349,7 +353,7 @@ def _budget(args) -> int:
 
 
 def _track_options(p):
-    from mirrorsim.pipelines.track import MAX_ODOMETRY_SIGMA, MAX_STEPS
+    from mirrorsim.pipelines.track import MAX_ODOMETRY_SIGMA, MAX_STEPS, MAX_TRACK_SEED
     from mirrorsim.pipelines.track_paths import HEADINGS, PATHS
 
     common(p, out="output folder (default renders/<name>/track/)", json="the track report",
@@ -375,7 +379,8 @@ def _track_options(p):
     beacon_sigma_option(p, "the fixed beacons (the scene's beacons after the first, "
                         "which stand still) weigh the filter's mirror with that σ")
     p.add_argument("--seed", type=int, default=0,
-                   help="seeds the odometry noise, the filter and the renders (default 0)")
+                   help=f"seeds the odometry noise, the filter and the renders, "
+                        f"0..{MAX_TRACK_SEED} (default 0)")
     p.add_argument("--side", type=float, default=4.0, metavar="CM",
                    help="a: the path's width across its heading, at most the board's "
                         "size; a path that leaves the board is refused (default 4)")
@@ -401,12 +406,17 @@ def _track(args) -> int:
     from mirrorsim.cli.registry import at_least
     from mirrorsim.cli.tables import track_table
     from mirrorsim.formats.files import write_json
-    from mirrorsim.pipelines.track import check_fixed_beacons, check_options, run_track
+    from mirrorsim.pipelines.track import (
+        MAX_TRACK_SEED,
+        check_fixed_beacons,
+        check_options,
+        run_track,
+    )
 
     # before the scene is read (run_track checks again, for callers other than the CLI)
     check_options(args.path, args.steps, args.odometry_sigma, args.side, args.step,
                   args.heading)
-    at_least(("--seed", args.seed, 0))
+    at_least(("--seed", args.seed, 0, MAX_TRACK_SEED))
     position_sigma = beacon_sigma_of(args)
     scene = load(args.scene)
     if args.spp is not None:  # --seed is the run's (each pose's render seed follows it)
@@ -414,6 +424,7 @@ def _track(args) -> int:
     check_options(args.path, args.steps, args.odometry_sigma, args.side, args.step,
                   args.heading, scene.board.size)  # side and step within the board
     check_fixed_beacons(scene, position_sigma)  # before the folder is made
+    model = error_model_of(args)  # read and checked before anything is written
     out = out_folder(args, scene, "track")
     from tqdm import tqdm
 
@@ -424,8 +435,7 @@ def _track(args) -> int:
                            odometry_sigma=args.odometry_sigma, seed=args.seed, side=args.side,
                            step=args.step, heading=args.heading, variant=args.variant,
                            on_pose=lambda k, _n: bar.update(k - bar.n),  # pose k begins
-                           error_model=error_model_of(args),
-                           position_sigma=position_sigma)
+                           error_model=model, position_sigma=position_sigma)
         bar.update(bar.total - bar.n)
     print(track_table(report))
     path = write_json(out / "track.json", report.to_json())

@@ -19,7 +19,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from mirrorsim.errors import OutputError
+from mirrorsim.errors import DiskError, OutputError
 from mirrorsim.formats.files import jsonable, read_regular_bytes, write_json
 
 FORMAT = "mirrorsim-cache-1"
@@ -110,7 +110,7 @@ def write_entry(kind: str, key: str, value: dict) -> None:
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         write_json(path, entry)
-    except (OSError, OutputError):  # atomic writes report a failure as OutputError
+    except (OSError, OutputError, DiskError):  # atomic writes report a failure as these
         pass
 
 

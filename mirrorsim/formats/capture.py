@@ -9,6 +9,7 @@ target stands.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -72,6 +73,10 @@ class CaptureRecord:
     # the pegboard the camera stands on, as built (its size and hole grid): what measures
     # the camera's pose (mirrorsim.detection.board); None in a record made before it
     board: Board | None = None
+    # the SHA-256 of the frame file this record was written with ('' where unknown: a
+    # hand-written record): `detect` refuses a frame whose bytes differ, the record of
+    # another frame (beacon 1's record with beacon 0's frame gave a wrong position)
+    frame_sha256: str = ""
 
     @classmethod
     def from_scene(cls, scene: Scene, frame: str = "") -> CaptureRecord:
@@ -102,14 +107,15 @@ class CaptureRecord:
                 **({"board": {"size": list(self.board.size),
                               "hole_pitch": self.board.hole_pitch,
                               "hole_diameter": self.board.hole_diameter}}
-                   if self.board is not None else {})}
+                   if self.board is not None else {}),
+                **({"frame_sha256": self.frame_sha256} if self.frame_sha256 else {})}
 
     @classmethod
     def from_json(cls, data: Any, source: str | Path = "<capture>") -> CaptureRecord:
         """Parse and check a record (raises :class:`CaptureError` naming file and key)."""
         r = Reader(source, CaptureError)
         top = r.mapping(data, "", ("camera", "beacons", "target"),
-                        ("frame", "calibration", "board"))
+                        ("frame", "calibration", "board", "frame_sha256"))
         c = r.mapping(top["camera"], "camera", ("position", "height", "pan_deg", "resolution",
                                                 "fx"),
                       ("fy", "cx", "cy", "hfov_deg", "distortion"))
@@ -137,9 +143,12 @@ class CaptureRecord:
         cal = r.mapping(top.get("calibration", {}), "calibration", (), ("reference_distance",))
         board = (read_board(r, top["board"], ("size", "hole_pitch", "hole_diameter"), ())
                  if "board" in top else None)
+        sha = top.get("frame_sha256", "")
+        if not (isinstance(sha, str) and (sha == "" or re.fullmatch(r"[0-9a-f]{64}", sha))):
+            raise r.fail("frame_sha256", f"{sha!r} is not a SHA-256 (64 hexadecimal digits)")
         return cls(camera=camera, beacons=tuple(beacons), board=board,
                    target_size=r.pair(t["size"], "target.size", positive=True),
-                   frame=str(top.get("frame", "")), distortion=distortion,
+                   frame=str(top.get("frame", "")), distortion=distortion, frame_sha256=sha,
                    reference_distance=r.number(cal.get("reference_distance", REFERENCE_DISTANCE),
                                                "calibration.reference_distance",
                                                positive=True))

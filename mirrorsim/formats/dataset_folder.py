@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
+import hashlib
 import json
 import warnings
 from collections.abc import Iterator
@@ -99,14 +100,7 @@ def claim_folder(out: Path, meta: dict, resume: bool) -> None:
         if resume:
             raise DatasetError(out, "there is no dataset here to resume")
         return
-    try:
-        old = json.loads(meta_path.read_text())
-    except (OSError, ValueError, RecursionError) as exc:
-        raise DatasetError(meta_path, f"not a readable dataset description ({exc})") from None
-    keys = ("n", "seed", "spp", "spec")
-    if not isinstance(old, dict) or not all(k in old for k in keys) or old.get(
-            "format", DATASET_FORMAT) != DATASET_FORMAT:
-        raise DatasetError(out, "holds a dataset.json that is not a mirrorsim dataset's")
+    old = read_description(out)
     if not resume:
         raise DatasetError(out, "already holds a dataset: resume it, or choose another "
                            "folder", resumable=True)
@@ -126,9 +120,48 @@ def claim_folder(out: Path, meta: dict, resume: bool) -> None:
         raise DatasetError(out, f"holds a dataset made with other settings: "
                            f"{'; '.join(differ)}: resume it with the same ones, or choose "
                            "another folder")
-    if not isinstance(old["n"], int) or meta["n"] < old["n"]:
+    if meta["n"] < old["n"]:
         raise DatasetError(out, f"holds {old['n']} scenes: resume it with n ≥ {old['n']} "
                            f"(more scenes extend it), not {meta['n']}")
+
+
+# what a dataset.json's keys hold: (key, what, test); ``spp`` None: the spec's
+_DESCRIBED = (
+    ("n", "a whole number ≥ 1", lambda v: _whole(v) and v >= 1),
+    ("seed", "a whole number ≥ 0", lambda v: _whole(v) and v >= 0),
+    ("spp", "a whole number ≥ 1 or null", lambda v: v is None or (_whole(v) and v >= 1)),
+    ("spec", "a mapping (the spec's ranges)", lambda v: isinstance(v, dict)),
+)
+
+
+def _whole(v: Any) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def read_description(out: str | Path) -> dict:
+    """A dataset's ``dataset.json``, verified: a mirrorsim dataset's, each of its keys of
+    the type it holds (a hand-edited ``"n": "8"`` is named as a string, not compared).
+
+    Raises
+    ------
+    DatasetError
+        Naming the file and, where one is wrong, the key, its value and what it holds.
+    """
+    path = Path(out) / "dataset.json"
+    try:
+        old = json.loads(read_regular_bytes(path))
+    except (OSError, ValueError, RecursionError) as exc:
+        raise DatasetError(path, f"not a readable dataset description ({exc})") from None
+    if not isinstance(old, dict) or old.get("format", DATASET_FORMAT) != DATASET_FORMAT:
+        raise DatasetError(path, "not a mirrorsim dataset's description")
+    for key, what, ok in _DESCRIBED:
+        if key not in old:
+            raise DatasetError(path, f"{key}: missing (not a mirrorsim dataset's description)")
+        if not ok(old[key]):
+            value = old[key]
+            raise DatasetError(path, f"{key}: {value!r} (a {type(value).__name__}) is not "
+                               f"{what}")
+    return old
 
 
 def _calibration_words(cal: Any) -> str:
@@ -173,7 +206,7 @@ def settings_digest(meta: dict) -> str:
 
 def dataset_digest(out: Path) -> str:
     """:func:`settings_digest` of the dataset in ``out`` (its ``dataset.json``)."""
-    return settings_digest(json.loads(read_regular_bytes(Path(out) / "dataset.json")))
+    return settings_digest(read_description(out))
 
 
 def row_document(row: table.DatasetRow, digest: str | None) -> dict:
@@ -213,6 +246,61 @@ def read_row(path: Path, index: int, seed: int, digest: str | None = None
     return row
 
 
+def scene_files(out: Path, name: str) -> dict[str, str]:
+    """The SHA-256 of each file of scene ``name`` in ``out/frames/<name>/`` (its frames,
+    truth, capture records, measurements; none where the scene wrote none), for its row."""
+    folder = Path(out) / "frames" / name
+    if not folder.is_dir():
+        return {}
+    return {p.name: hashlib.sha256(read_regular_bytes(p)).hexdigest()
+            for p in sorted(folder.iterdir()) if p.is_file() and not p.name.startswith(".")}
+
+
+def files_differ(out: Path, row: table.DatasetRow) -> tuple[list[Path], list[Path]]:
+    """Of the files ``row`` records, those missing and those whose bytes differ from its
+    SHA-256s."""
+    folder = Path(out) / "frames" / row["scene"]
+    missing, damaged = [], []
+    for name, digest in row.files.items():
+        path = folder / name
+        try:
+            found = hashlib.sha256(read_regular_bytes(path)).hexdigest()
+        except FileNotFoundError:
+            missing.append(path)
+            continue
+        except OSError:
+            found = ""
+        if found != digest:
+            damaged.append(path)
+    return missing, damaged
+
+
+def check_scene_files(out: Path, rows: list[table.DatasetRow]) -> None:
+    """Every file the rows record, checked against its SHA-256: one damaged or replaced
+    (another scene's) is refused in one line naming it; the missing ones (a folder of
+    frames deleted to save space) are named in one warning, the table's values standing.
+
+    Raises
+    ------
+    DatasetError
+        Naming the first file whose bytes differ from its row's record.
+    """
+    missing: list[Path] = []
+    for row in rows:
+        gone, damaged = files_differ(out, row)
+        if damaged:
+            raise DatasetError(damaged[0], "its bytes differ from the SHA-256 its row holds "
+                               f"(rows/{row['scene']}.json): damaged or replaced since; "
+                               "resuming the dataset redoes its scene")
+        missing += gone
+    if missing:
+        shown = ", ".join(p.name for p in missing[:4])
+        more = f" and {len(missing) - 4} more" if len(missing) > 4 else ""
+        warnings.warn(f"{out}: {len(missing)} of its scenes' files are missing ({shown}{more}): "
+                      "the table's values stand; a missing frame's path reads as None",
+                      RuntimeWarning, stacklevel=3)
+
+
 def reject_bad_rows(out: Path, n: int, seed: int) -> None:
     """Move each row file that fails verification to ``rows/rejected/`` (kept, not lost),
     with a warning: its scene is redone."""
@@ -222,7 +310,11 @@ def reject_bad_rows(out: Path, n: int, seed: int) -> None:
         if not path.exists():
             continue
         try:
-            read_row(path, i, seed, digest)
+            row = read_row(path, i, seed, digest)
+            gone, damaged = files_differ(out, row)
+            if gone or damaged:
+                raise ValueError(f"its scene's file {(gone or damaged)[0].name} is "
+                                 f"{'missing' if gone else 'damaged or replaced'}")
         except ValueError as exc:
             aside = _aside(out / "rows" / "rejected", path.name)
             path.replace(aside)
@@ -247,7 +339,7 @@ def collect_rows(out: Path, n: int, seed: int | None = None) -> list[table.Datas
     dataset's, read from its ``dataset.json`` when not given)."""
     out = Path(out)
     if seed is None:
-        seed = json.loads((out / "dataset.json").read_text())["seed"]
+        seed = read_description(out)["seed"]
     digest = dataset_digest(out)
     rows = []
     for i in range(n):
@@ -261,20 +353,29 @@ def collect_rows(out: Path, n: int, seed: int | None = None) -> list[table.Datas
     return rows
 
 
-def write_table(out: Path, rows: list[table.DatasetRow]) -> Path:
-    """All rows as one Parquet table (pyarrow), written atomically."""
+def _arrow_of(rows: list[table.DatasetRow], only: set[str] | None = None):
+    """The rows as an Arrow table (unsealed), and the checksum of its contents: what
+    :func:`write_table` writes, and (``only`` a table's columns: an older layout's table
+    lacks the columns its rows are read with since) what :func:`read_table` holds a
+    table to."""
     import pyarrow as pa
-    import pyarrow.parquet as pq
 
     cols: dict[str, list] = {}
-    keys = sorted({k for r in rows for k in r.columns},
+    keys = sorted({k for r in rows for k in r.columns if only is None or k in only},
                   key=lambda k: (k not in ("index", "scene", "error"), k))
     for k in keys:
         cols[k] = [r.columns.get(k) for r in rows]
     arrow = pa.table(cols) if rows else pa.table({"index": pa.array([], pa.int64())})
+    return arrow, checksum(jsonable(arrow.to_pydict()))
+
+
+def write_table(out: Path, rows: list[table.DatasetRow]) -> Path:
+    """All rows as one Parquet table (pyarrow), written atomically."""
+    import pyarrow.parquet as pq
+
+    arrow, digest = _arrow_of(rows)
     # sealed like a row file: a table edited or written by another tool is not fitted
-    arrow = arrow.replace_schema_metadata(
-        {TABLE_SEAL: checksum(jsonable(arrow.to_pydict()))})
+    arrow = arrow.replace_schema_metadata({TABLE_SEAL: digest})
     path = Path(out) / "dataset.parquet"
     with atomic_path(path) as tmp:
         pq.write_table(arrow, tmp)
@@ -320,16 +421,18 @@ def read_table(folder: str | Path) -> dict[str, list]:
     failed = int(n - table.usable_rows(cols).sum())
     if failed == n:
         raise DatasetError(path, f"all {n} rows failed (their `error` column says why)")
-    meta = Path(folder) / "dataset.json"
-    try:
-        described = json.loads(meta.read_text())
-        n_scenes, seed = described["n"], described["seed"]
-    except (OSError, ValueError, KeyError, TypeError, RecursionError):
-        raise DatasetError(meta, "not a readable dataset description") from None
-    # the table is its verified rows: a row file damaged since, or missing, is found here
-    if [r.index for r in collect_rows(folder, n_scenes, seed)] != cols["index"]:
-        raise DatasetError(path, "its rows differ from the row files in rows/ (resuming the "
-                           "dataset writes the table again)")
+    described = read_description(folder)
+    n_scenes, seed = described["n"], described["seed"]
+    # the table is its verified rows, value for value: a row file damaged since, or
+    # missing, and another dataset's table of the same size (its own seal intact) are
+    # found here
+    rows = collect_rows(folder, n_scenes, seed)
+    if [r.index for r in rows] != cols["index"] or _arrow_of(rows, set(cols))[1] != \
+            seal.decode():
+        raise DatasetError(path, "its rows differ from the row files in rows/ (another "
+                           "dataset's table, or one written before a row changed; resuming "
+                           "the dataset writes the table again)")
+    check_scene_files(folder, rows)
     schemas = cols.get("schema") or [None]
     if all(s in (*table.OLDER_SCHEMAS, table.SCHEMA) for s in schemas):
         # a table of older layouts (one resumed by a later version mixes them): each row
@@ -350,7 +453,9 @@ def read_table(folder: str | Path) -> dict[str, list]:
 def load_dataset(folder: str | Path) -> pd.DataFrame:
     """A dataset's table, verified (:func:`read_table`), as a pandas DataFrame with each
     scene's frame, scene file and measurements file beside its columns (``frame``,
-    ``scene_file``, ``measurements_file``: paths; empty for a failed scene).  The same
+    ``scene_file``, ``measurements_file``: paths; empty for a failed scene, None for a
+    file missing from a scene that did not fail, which one warning names).  Every file a
+    row records is checked against its SHA-256 (a damaged one is refused).  The same
     Parquet file loads without mirrorsim (``pandas.read_parquet``), unverified."""
     import pandas as pd
 
@@ -358,15 +463,15 @@ def load_dataset(folder: str | Path) -> pd.DataFrame:
     df = pd.DataFrame(read_table(folder))
     frames = folder / "frames"
 
-    def path_of(name: str, suffix: str, failed: bool) -> str:
+    def path_of(name: str, suffix: str, failed: bool) -> str | None:
         p = frames / name / f"{name}{suffix}"
-        return "" if failed or not p.exists() else str(p)
+        return "" if failed else str(p) if p.exists() else None
 
     failed = df["error"].astype(bool)
     # a scene of several beacons has a frame per beacon (<scene>_b<k>): the first's
-    df["frame"] = [path_of(n, ".png", f) or path_of(n, ".jpg", f) or path_of(n, "_b0.png", f)
-                   or path_of(n, "_b0.jpg", f)
-                   for n, f in zip(df["scene"], failed, strict=True)]
+    df["frame"] = ["" if f else next(filter(None, (path_of(n, s, f) for s in (
+        ".png", ".jpg", "_b0.png", "_b0.jpg"))), None)
+        for n, f in zip(df["scene"], failed, strict=True)]
     df["scene_file"] = [str(folder / "scenes" / f"{n}.yaml") for n in df["scene"]]
     df["measurements_file"] = [path_of(n, ".measurements.json", f)
                                for n, f in zip(df["scene"], failed, strict=True)]

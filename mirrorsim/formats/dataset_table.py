@@ -11,7 +11,7 @@ such a table into one row per beacon image, as the error model reads it.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -191,10 +191,13 @@ def checked_row(row: dict) -> dict:
 @dataclass(frozen=True)
 class DatasetRow:
     """One scene's row, written as ``rows/<scene>.json``: its columns by their declared
-    names (checked when the row is made) and, for a scene that failed, the traceback."""
+    names (checked when the row is made), for a scene that failed the traceback, and the
+    SHA-256 of each of its scene's files in ``frames/<scene>/`` as the row found them
+    (``files``; empty in a row made before they were recorded)."""
 
     columns: dict[str, Any]
     traceback: str = ""
+    files: dict[str, str] = field(default_factory=dict)
 
     def __post_init__(self):
         checked_row(self.columns)
@@ -215,7 +218,8 @@ class DatasetRow:
 
     def to_json(self) -> dict:
         """The row file."""
-        return {**self.columns, **({"traceback": self.traceback} if self.traceback else {})}
+        return {**self.columns, **({"traceback": self.traceback} if self.traceback else {}),
+                **({"files": dict(self.files)} if self.files else {})}
 
     @classmethod
     def from_json(cls, d: dict) -> DatasetRow:
@@ -224,7 +228,12 @@ class DatasetRow:
         had for the columns added since."""
         if d.get("schema") in OLDER_SCHEMAS and not d.get("error"):
             d = {**older_values(d["schema"]), **d}
-        return cls({k: v for k, v in d.items() if k != "traceback"}, d.get("traceback", ""))
+        files = d.get("files", {})
+        if not (isinstance(files, dict) and all(
+                isinstance(k, str) and isinstance(v, str) for k, v in files.items())):
+            raise ValueError("its files' SHA-256s are not a mapping of names to digests")
+        return cls({k: v for k, v in d.items() if k not in ("traceback", "files")},
+                   d.get("traceback", ""), files)
 
 
 def card_section(group: tuple[Column, ...], prefix: str = "") -> str:

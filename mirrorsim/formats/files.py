@@ -21,7 +21,7 @@ from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
-from mirrorsim.errors import OutputError
+from mirrorsim.errors import OutputError, write_error
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -100,7 +100,7 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         yield tmp
         os.replace(tmp, path)
     except OSError as exc:
-        raise OutputError(path, f"cannot write: {_why(exc)}") from None
+        raise write_error(path, exc, "cannot write") from None
     finally:
         with contextlib.suppress(OSError):
             tmp.unlink(missing_ok=True)
@@ -139,12 +139,6 @@ def _alive(pid: int) -> bool:
     except OSError:  # another user's process: alive
         return True
     return True
-
-
-def _why(exc: OSError) -> str:
-    if exc.errno == errno.ENOSPC:
-        return "no space left on the device"
-    return exc.strerror or str(exc)
 
 
 def check_output_file(path: str | Path | None, option: str) -> None:
@@ -212,8 +206,7 @@ def claim_output_folder(path: str | Path, option: str) -> Path:
             _check_ours(path, option)
             (path / OUTPUT_MARK).touch()
     except OSError as exc:
-        raise OutputError(path, f"{option}: cannot make or write the folder: {_why(exc)}"
-                          ) from None
+        raise write_error(path, exc, f"{option}: cannot make or write the folder") from None
     return path
 
 
@@ -266,8 +259,7 @@ def _probe(folder: Path, path: Path, option: str) -> None:
             f.flush()
             os.fsync(f.fileno())
     except OSError as exc:
-        raise OutputError(path, f"{option}: cannot write in {str(folder)!r}: {_why(exc)}"
-                          ) from None
+        raise write_error(path, exc, f"{option}: cannot write in {str(folder)!r}") from None
 
 
 def write_text(path: str | Path, text: str) -> Path:

@@ -23,6 +23,7 @@ from mirrorsim.formats.files import claim_run_folder
 from mirrorsim.formats.scenefile import check_given_scene
 from mirrorsim.pipelines.evaluate import evaluate_into, model_for
 from mirrorsim.pipelines.score import Report, check_keep
+from mirrorsim.rendering.backend import check_variant
 from mirrorsim.rendering.passes import reusing_renders
 from mirrorsim.scene import imperfections
 from mirrorsim.scene.model import Scene
@@ -213,6 +214,7 @@ def run_budget(scene: Scene, out: str | Path, *, variant: str = "auto", progress
     check_keep(keep)
     calibration = check_budget_calibration(scene, calibration)
     model = model_for(scene, error_model)  # read and checked before anything is written
+    check_variant(variant)
     out = claim_run_folder(out, "out", [("scene", scene.source)])
     found = imperfections.sources(scene)
     runs = 1 + len(found) + (len(found) > 1)  # ideal, each source alone, all of them

@@ -33,7 +33,7 @@ import time
 import traceback
 import warnings
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import partial
 from pathlib import Path
 
@@ -48,6 +48,7 @@ from mirrorsim.formats.dataset_folder import (
     collect_rows,
     make_folders,
     row_document,
+    scene_files,
     scene_name,
     settings_digest,
     write_table,
@@ -73,6 +74,9 @@ ROW_SCHEMA_VERSION = table.SCHEMA
 # "Datasets and the error model"), so this only stops a leak that another Mitsuba might bring
 MAX_WORKER_RSS_MB = 3072
 MAX_SCENES = 1_000_000  # a documented bound on --n
+# a documented bound on --workers: more local processes than any machine's cores is a
+# slip (the run caps them to the machine's anyway), and a Dask cluster sizes itself
+MAX_WORKERS = 1024
 # failures that belong to the scene (recorded as its row); all else is redone on resume
 SCENE_FAILURES = (InputError, DetectionError, SolverError, NoValidScene)
 
@@ -129,7 +133,9 @@ def process_one(i: int, seed: int, spec: DatasetSpec, out: str, spp: int | None,
     except Exception as exc:  # outside the scene: no row, so a resumed run redoes it
         return SceneResult(i, None, f"{type(exc).__name__}: {exc}")
     row["seconds_total"] = time.perf_counter() - t0
-    done = table.DatasetRow.from_json(row)
+    # the row records its scene's files: a frame damaged or replaced later is found by
+    # --resume (which redoes the scene), load_dataset and errormodel
+    done = replace(table.DatasetRow.from_json(row), files=scene_files(out_dir, name))
     write_json(out_dir / "rows" / f"{name}.json", row_document(done, digest))
     return SceneResult(i, done)
 
@@ -249,19 +255,21 @@ class DatasetRun:
     per_minute: float
 
 
-def _check_run_parameters(n, seed, workers, spp, sampler, executor, keep) -> None:
+def _check_run_parameters(n, seed, workers, spp, sampler, executor, keep, variant) -> None:
     """Every parameter of :func:`run_dataset` that can be checked before anything is
     written (a bad one had failed after the folder was claimed, or in every scene)."""
     from mirrorsim.pipelines.score import check_keep
-    from mirrorsim.scene.model import RenderSettings, is_whole
+    from mirrorsim.rendering.backend import check_variant
+    from mirrorsim.scene.model import MAX_SEED, RenderSettings, is_whole
 
-    for name, v, lo, hi in (("n", n, 1, MAX_SCENES), ("seed", seed, 0, None),
-                            ("workers", workers, 1, None)):
+    for name, v, lo, hi in (("n", n, 1, MAX_SCENES), ("seed", seed, 0, MAX_SEED),
+                            ("workers", workers, 1, MAX_WORKERS)):
         if not is_whole(v) or v < lo or (hi is not None and v > hi):
             raise BadParameter(name, f"{v!r} must be a whole number within {lo}.."
                                f"{hi if hi is not None else ''}")
     # the render settings' own check (None: the spec's, checked when it is read)
     RenderSettings(**{k: v for k, v in (("spp", spp), ("sampler", sampler)) if v is not None})
+    check_variant(variant)
     if executor not in EXECUTORS:
         raise BadParameter("executor", f"{executor!r}: choose {' or '.join(EXECUTORS)}")
     check_keep(keep)
@@ -317,7 +325,7 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
     from mirrorsim.pipelines.random_scenes import load_spec
     from mirrorsim.rendering.backend import choose_variant
 
-    _check_run_parameters(n, seed, workers, spp, sampler, executor, keep)
+    _check_run_parameters(n, seed, workers, spp, sampler, executor, keep, variant)
     # plain numbers from here on (numpy's would write themselves into files otherwise)
     n, seed, workers, spp = int(n), int(seed), int(workers), None if spp is None else int(spp)
     out = Path(out)

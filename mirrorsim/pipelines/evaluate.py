@@ -33,6 +33,7 @@ from mirrorsim.pipelines.score import (
     check_keep,
     score,
 )
+from mirrorsim.rendering.backend import check_variant
 from mirrorsim.scene import imperfections
 from mirrorsim.scene.model import Scene, pencil_paint_height
 from mirrorsim.truth.groundtruth import RenderInfo
@@ -85,14 +86,20 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
     check_keep(keep)
     calibration = as_calibration(calibration)  # before anything renders
     error_model = as_error_model(error_model)
-    if board_pose and scene.board.hole_pitch <= 0:
-        raise BadParameter("board_pose", f"{scene.name}: its board is plain (board.hole_pitch "
-                           "0): no holes to measure the camera's pose on")
+    check_board_pose(scene, board_pose)
+    check_variant(variant)
     out = claim_run_folder(out_dir if out_dir is not None else default_out(scene.name),
                            "out_dir", [("scene", scene.source)])
     return evaluate_into(scene, out, variant=variant, progress=progress,
                          error_model=error_model, keep=keep, calibration=calibration,
                          board_pose=board_pose)
+
+
+def check_board_pose(scene: Scene, board_pose: bool) -> None:
+    """Refuse ``board_pose`` on a plain board (before a run claims its folder)."""
+    if board_pose and scene.board.hole_pitch <= 0:
+        raise BadParameter("board_pose", f"{scene.name}: its board is plain (board.hole_pitch "
+                           "0): no holes to measure the camera's pose on")
 
 
 def evaluate_into(scene: Scene, out: Path, *, variant: str = "auto", progress: bool = True,

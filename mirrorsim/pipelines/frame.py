@@ -8,6 +8,7 @@ record (what the experimenter knows), never the scene.
 
 from __future__ import annotations
 
+import hashlib
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from functools import partial
@@ -23,6 +24,7 @@ from mirrorsim.detection.detector import (
 from mirrorsim.detection.image_geometry import Calibration
 from mirrorsim.errors import DetectionError
 from mirrorsim.formats.capture import CaptureError, CaptureRecord, load_capture
+from mirrorsim.formats.files import read_regular_bytes
 from mirrorsim.pipelines.calibrate import calibrate
 from mirrorsim.rendering.frames import FrameFiles, capture_of, reused_frame, write_frame
 from mirrorsim.rendering.passes import render_frame, scene_fingerprint
@@ -82,6 +84,24 @@ def check_one_pencil_height(capture: CaptureRecord) -> None:
                            "detect each beacon in a frame of its own (evaluate does)")
 
 
+def check_pair(image_path: str | Path, capture: CaptureRecord, named: str | Path) -> None:
+    """Refuse a frame that is not the one its capture record was written with (the
+    record's ``frame_sha256``, where it has one): beacon 1's record with beacon 0's frame
+    was measured with the wrong believed position, without a word.  A frame renamed with
+    its own record passes: the bytes decide, not the name."""
+    if not capture.frame_sha256:
+        return
+    try:
+        found = hashlib.sha256(read_regular_bytes(image_path)).hexdigest()
+    except OSError:
+        return  # an unreadable frame is refused by its reader, in its words
+    if found != capture.frame_sha256:
+        raise CaptureError(named, "frame_sha256",
+                           f"the record of frame {capture.frame or 'another frame'!r}, not of "
+                           f"{str(image_path)!r} (its bytes differ): give the frame's own "
+                           "capture record")
+
+
 def measure_frame(image_path: str | Path, capture: CaptureRecord | str | Path, *,
                   calibration: Calibration | None = None, variant: str = "auto",
                   distance_error: float = 0.0, source: str = "",
@@ -100,12 +120,14 @@ def measure_frame(image_path: str | Path, capture: CaptureRecord | str | Path, *
     DetectionError
         When the calibration's own references cannot be measured.
     """
+    named = capture if isinstance(capture, str | Path) else capture.frame or "<capture record>"
     if isinstance(capture, str | Path):  # its file, read and checked (CaptureError)
         capture = load_capture(capture)
     if calibration is None:  # before the frame is read: a refusal costs nothing
         check_one_pencil_height(capture)
     cam = capture.camera
     if pixels is None:
+        check_pair(image_path, capture, named)
         stored = read_stored_frame(image_path, (cam.width, cam.height_px))
         image, lossy, quality = stored.pixels, stored.subsampled, stored.jpeg_quality
     else:  # a lossless PNG just made

@@ -36,7 +36,8 @@ from mirrorsim.formats.scenefile import check_given_scene
 from mirrorsim.pipelines.evaluate import model_for
 from mirrorsim.pipelines.frame import FrameNotMeasured, render_and_measure
 from mirrorsim.pipelines.track_paths import HEADINGS, PATHS, beacon_path
-from mirrorsim.scene.model import Scene, is_whole
+from mirrorsim.rendering.backend import check_variant
+from mirrorsim.scene.model import MAX_RENDER_SEED, Scene, is_whole
 from solver.errors import SolverError
 from solver.geometry import line_normal
 from solver.measurements import BeaconMeasurement, Sigma
@@ -48,6 +49,10 @@ from solver.sltr import locate, mirror_from_beacon
 PRIOR_YAW_DEG, PRIOR_OFFSET_CM = 15.0, 8.0
 MAX_STEPS = 500
 MAX_ODOMETRY_SIGMA = 10.0  # cm per move: a robot that errs more than this is not driving
+
+# pose k renders with seed·1000 + k (a fixed beacon's frame with seed·1000 + 999 − i):
+# the largest run seed whose render seeds stay 32-bit
+MAX_TRACK_SEED = (MAX_RENDER_SEED - 999) // 1000
 
 
 @dataclass(frozen=True)
@@ -196,6 +201,9 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
     for name, v, lo in (("particles", particles, MIN_PARTICLES), ("seed", seed, 0)):
         if not (is_whole(v) and v >= lo):
             raise BadParameter(name, f"{v!r} must be a whole number ≥ {lo}")
+    if seed > MAX_TRACK_SEED:
+        raise BadParameter("seed", f"{seed} must be ≤ {MAX_TRACK_SEED} (pose k renders with "
+                           "seed·1000 + k, a 32-bit seed)")
     if particles > MAX_PARTICLES:
         raise BadParameter("particles", f"{particles} must be ≤ {MAX_PARTICLES}")
     try:
@@ -204,6 +212,7 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
         raise BadParameter("position_sigma", str(exc)) from None
     check_fixed_beacons(scene, position_sigma)
     model = model_for(scene, error_model)  # read and checked before anything is written
+    check_variant(variant)
     out = claim_run_folder(out, "out", [("scene", scene.source)])
     rng = np.random.default_rng(seed)
     b0, cam = scene.beacons[0], scene.camera

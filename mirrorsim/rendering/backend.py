@@ -21,7 +21,7 @@ import warnings
 from importlib import metadata
 from pathlib import Path
 
-from mirrorsim.errors import BackendError
+from mirrorsim.errors import BackendError, BadParameter
 from mirrorsim.formats.cache import read_entry, write_entry
 
 VARIANTS = {"cuda": "cuda_ad_rgb", "llvm": "llvm_ad_rgb", "scalar": "scalar_rgb"}
@@ -144,6 +144,14 @@ def _run_probe(variant: str) -> tuple[bool, str, bool]:
     return False, f"{status}: {why.strip()[:200]}", True
 
 
+def check_variant(requested: str) -> None:
+    """Refuse (:class:`BadParameter`, bad input) a variant name that is none of
+    ``auto``, ``cuda``, ``llvm``, ``scalar`` or a full Mitsuba name of one: before a run
+    claims its folder."""
+    if requested != "auto" and requested not in VARIANTS and requested not in VARIANTS.values():
+        raise BadParameter("variant", f"{requested!r}: use auto, cuda, llvm or scalar")
+
+
 def choose_variant(requested: str = "auto") -> str:
     """The Mitsuba variant to render with.
 
@@ -163,8 +171,7 @@ def choose_variant(requested: str = "auto") -> str:
             raise BackendError(f"variant {VARIANTS[requested]} does not work here "
                                f"({detail}){hint}")
         return VARIANTS[requested]
-    if requested != "auto":
-        raise BackendError(f"unknown variant {requested!r}: use auto, cuda, llvm or scalar")
+    check_variant(requested)
     if _maybe_gpu() and probe(VARIANTS["cuda"])[0]:
         return VARIANTS["cuda"]
     if probe(VARIANTS["llvm"])[0]:

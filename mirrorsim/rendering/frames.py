@@ -30,6 +30,7 @@ from mirrorsim.formats.files import (
     read_regular_bytes,
 )
 from mirrorsim.formats.scenefile import check_given_scene
+from mirrorsim.rendering.backend import check_variant
 from mirrorsim.rendering.mitsuba_scene import (
     BACKGROUND_LABEL,
     BEACON_LABEL,
@@ -102,11 +103,12 @@ def write_frame(scene: Scene, frame: RenderedFrame, out: Path,
     out.mkdir(parents=True, exist_ok=True)
     truth = truth_of(scene, frame, fingerprint)
     image, ids_png, js, cap = _paths(scene, out)
-    capture = capture_of(scene, out)
     srgb = to_srgb8(frame.linear) if srgb is None else srgb
     quality = scene.bench.jpeg_quality
-    files = {image: encode_png(srgb) if quality is None else encode_jpeg(srgb, quality),
-             cap: dumps(capture.to_json()).encode()}
+    encoded = encode_png(srgb) if quality is None else encode_jpeg(srgb, quality)
+    # the record names its frame's bytes: a record paired with another frame is refused
+    capture = replace(capture_of(scene, out), frame_sha256=hashlib.sha256(encoded).hexdigest())
+    files = {image: encoded, cap: dumps(capture.to_json()).encode()}
     if ids:
         labels = encode_ids(frame.first, frame.in_mirror)
         files[ids_png] = encode_png(labels)
@@ -143,6 +145,7 @@ def render_to_files(scene: Scene, out: str | Path | None = None, *, variant: str
     exactly this scene already in ``out``) and write its files (default folder
     ``renders/<name>/``; the id labels only with ``ids``)."""
     check_given_scene(scene)  # edited by a script: held to what its file would make
+    check_variant(variant)
     out = claim_run_folder(out if out is not None else default_out(scene.name), "out",
                            [("scene", scene.source)])
     found = reused_frame(scene, out, ids) if reuse else None
@@ -181,7 +184,7 @@ def _reusable(scene: Scene, out: Path, fingerprint: str) -> FrameFiles | None:
         capture = load_capture(cap)
     except (OSError, ValueError, KeyError, TypeError) as exc:  # CaptureError: a ValueError
         return _rerender(image, str(exc))
-    if capture != capture_of(scene, out):
+    if replace(capture, frame_sha256="") != capture_of(scene, out):
         return None  # a record an older mirrorsim wrote (without the board): made anew
     return FrameFiles(image=image, truth_json=js, ids_png=ids if have_ids else None,
                       capture_json=cap, capture=capture, truth=truth, reused=True)
