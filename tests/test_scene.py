@@ -209,6 +209,13 @@ def test_new_writes_a_template_that_check_accepts_and_never_writes_over(tmp_path
     assert "exists (a folder)" in capsys.readouterr().err
     assert main(["new", str(tmp_path / "bad name.yaml")]) == 2
     assert not (tmp_path / "bad name.yaml").exists()
+    # a bundled scene, renamed: the same bench as the file it copies
+    assert main(["new", str(tmp_path / "mine.yaml"), "--like", "exp2"]) == 0
+    mine, exp2 = load_scene(tmp_path / "mine.yaml"), load_scene(SCENES / "exp2.yaml")
+    assert mine.name == "mine" and mine.mirror == exp2.mirror and mine.camera == exp2.camera
+    with pytest.raises(SystemExit, match="2"):  # argparse's refusal of a choice
+        main(["new", str(tmp_path / "x.yaml"), "--like", "exp9"])
+    assert not (tmp_path / "x.yaml").exists()
 
 
 def _scene_text(**changes) -> str:

@@ -49,28 +49,36 @@ def _render(args) -> int:
 
 
 def _new_options(p):
+    from mirrorsim.formats.scenefile import BUNDLED
+
     p.add_argument("scene", type=Path, help="the scene file to write (YAML; must not exist)")
+    p.add_argument("--like", choices=BUNDLED,
+                   help="a copy of this bundled scene instead of the template (default: the "
+                        "paper's default bench; exp1-exp3: its experiments), named after "
+                        "SCENE")
 
 
 @command("new", "write a commented template scene",
          "Write SCENE: a complete scene with every key commented (a camera at the board's "
          "corner, a mirror, a target behind a wall, two pencil beacons), named after the "
-         "file, that `mirrorsim check` accepts.  Edit it from there; docs/scenes.md lists "
-         "every key.  An existing file is never written over.",
+         "file, that `mirrorsim check` accepts; or, with --like, one of the bundled scenes "
+         "(the package carries them).  Edit it from there; docs/scenes.md lists every key.  "
+         "An existing file is never written over.",
          _new_options)
 def _new(args) -> int:
     from mirrorsim.formats.files import check_output_file, write_text
     from mirrorsim.formats.scenefile import scene_template
 
     path = Path(args.scene)
-    text = scene_template(path)  # refuses a name that cannot be a scene's
+    text = scene_template(path, args.like)  # refuses a name that cannot be a scene's
     if path.exists() or path.is_symlink():
         what = "a folder" if path.is_dir() else "a file"
         raise BadArgument("SCENE", f"{str(path)!r} exists ({what}): mirrorsim new writes only "
                                    "a new file; give a new name")
     check_output_file(path, "SCENE")
     write_text(path, text)
-    print(f"{path}: a template scene; check it with `mirrorsim check {path}`")
+    made = f"a copy of the bundled {args.like}" if args.like else "a template scene"
+    print(f"{path}: {made}; check it with `mirrorsim check {path}`")
     return 0
 
 

@@ -32,7 +32,8 @@ from mirrorsim.scene.model import MAX_BOARD_CM, Camera, Scene
 from mirrorsim.truth import visibility
 from solver.measurements import is_number
 
-DEFAULT_SPEC = Path(__file__).resolve().parents[2] / "scenes" / "dataset_spec.yaml"
+# the bundled spec, from the package's data (a wheel carries the clone's scenes/)
+DEFAULT_SPEC = Path(__file__).resolve().parents[1] / "data" / "scenes" / "dataset_spec.yaml"
 
 
 MAX_TRIES = 100_000  # a documented bound on a spec's max_tries
