@@ -17,8 +17,8 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "mirrorsim"
 # the wings in the order data flows through them: a wing imports only wings before it
 WINGS = ("scene", "truth", "formats", "rendering", "detection", "pipelines", "cli")
-SHARED = {"errors", "arguments", "__init__"}  # the errors, the API's argument check and
-# the package's face: for every wing
+SHARED = {"errors", "arguments", "progress", "__init__"}  # the errors, the API's argument
+# check, the progress bars and the package's face: for every wing
 DATA = "data"  # files shipped with the package (the default error model); no code
 
 

@@ -495,3 +495,37 @@ def test_keep_given_twice_keeps_both():
             argv = [cmd, "--n", "1", "--seed", "0", "--out", "d", "--keep", "ids", "--keep",
                     "annotated"]
         assert build_parser(argv).parse_args(argv).keep == ["ids", "annotated"]
+
+
+def test_progress_is_a_bar_on_a_terminal_and_plain_lines_in_a_log(monkeypatch):
+    """A bar's carriage returns filled logs with one line of every redraw: off a terminal
+    progress is a plain line at most every LINE_SECONDS and one at the end; a transient
+    bar (a render's, under a run's own) says nothing there."""
+    import io as _io
+
+    from mirrorsim import progress as pr
+
+    class Tty(_io.StringIO):
+        def isatty(self):
+            return True
+
+    from tqdm import tqdm
+
+    assert isinstance(pr.progress_bar(3, stream=Tty()), tqdm)
+    log = _io.StringIO()
+    clock = iter([0.0, 5.0, 12.0, 13.0, 30.0])
+    monkeypatch.setattr(pr.time, "monotonic", lambda: next(clock, 30.0))
+    with pr.progress_bar(4, desc="dataset", unit="scene", stream=log) as bar:  # t = 0
+        bar.update()  # t = 5: too soon for a line
+        bar.update()  # t = 12: a line, with its rate and ETA
+        bar.update()  # t = 13
+    lines = log.getvalue().splitlines()  # and the last line, at t = 30
+    assert "\r" not in log.getvalue() and len(lines) == 2
+    assert lines[0] == "dataset: 2/4 scene, 12 s, 0.167 scene/s, ETA 12 s"
+    assert lines[1].startswith("dataset: 3/4 scene, 30 s")
+    quiet = _io.StringIO()
+    with pr.progress_bar(4, stream=quiet, leave=False) as bar:
+        bar.update(4)
+    with pr.progress_bar(4, stream=quiet, enabled=False) as bar:
+        bar.update(4)
+    assert quiet.getvalue() == ""

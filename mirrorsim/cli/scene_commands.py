@@ -334,7 +334,7 @@ def _budget(args) -> int:
     from mirrorsim.cli.plots import plot_budget
     from mirrorsim.cli.tables import budget_table
     from mirrorsim.formats.files import write_json
-    from mirrorsim.pipelines.budget import check_budget_calibration, run_budget
+    from mirrorsim.pipelines.budget import budget_runs, check_budget_calibration, run_budget
     from mirrorsim.scene.imperfections import sources
 
     scene = render_options(args, load(args.scene))
@@ -347,11 +347,20 @@ def _budget(args) -> int:
               "ideal bench is evaluated (see docs/scenes.md, Bench imperfections)",
               file=sys.stderr)
     out = out_folder(args, scene, "budget")
-    step = (None if args.quiet else lambda label, k, runs: print(f"[{k}/{runs}] {label}",
-                                                                 file=sys.stderr, flush=True))
-    budget = run_budget(scene, out, variant=args.variant, progress=not args.quiet,
-                        on_step=step, error_model=model,
-                        calibration=calibration, keep=tuple(args.keep))
+    from mirrorsim.progress import progress_bar
+
+    # one bar over the budget's runs (each a render, a detection and a solve), its rate
+    # and ETA; the runs' own render bars would flash beneath it, so they are not shown
+    runs = budget_runs(scene)
+    with progress_bar(runs, unit="run", desc="budget", enabled=not args.quiet) as bar:
+        def step(label: str, k: int, _runs: int) -> None:
+            bar.update(k - 1 - bar.n)  # run k begins: k − 1 are done
+            if hasattr(bar, "set_postfix_str"):
+                bar.set_postfix_str(label)
+        budget = run_budget(scene, out, variant=args.variant, progress=False,
+                            on_step=step, error_model=model,
+                            calibration=calibration, keep=tuple(args.keep))
+        bar.update(runs - bar.n)
     print(budget_table(budget))
     path = write_json(out / "budget.json", budget.to_json())
     fig = plot_budget(budget, out / "budget.png")
@@ -434,11 +443,11 @@ def _track(args) -> int:
     check_fixed_beacons(scene, position_sigma)  # before the folder is made
     model = error_model_of(args)  # read and checked before anything is written
     out = out_folder(args, scene, "track")
-    from tqdm import tqdm
+    from mirrorsim.progress import progress_bar
 
     # each pose is a render and a detection (seconds): a bar with its rate and ETA
-    with tqdm(total=args.steps + 1, unit="pose", desc="track", disable=args.quiet,
-              file=sys.stderr) as bar:
+    with progress_bar(args.steps + 1, unit="pose", desc="track", enabled=not args.quiet
+                      ) as bar:
         report = run_track(scene, out, kind=args.path, steps=args.steps,
                            odometry_sigma=args.odometry_sigma, seed=args.seed, side=args.side,
                            step=args.step, heading=args.heading, variant=args.variant,

@@ -191,6 +191,13 @@ def check_budget_calibration(scene: Scene, calibration: SelfCalibration) -> Self
     return calibration
 
 
+def budget_runs(scene: Scene) -> int:
+    """How many runs :func:`run_budget` makes of ``scene``: the ideal bench, each of its
+    imperfections alone and (where it has several) all of them."""
+    found = imperfections.sources(scene)
+    return 1 + len(found) + (len(found) > 1)
+
+
 def run_budget(scene: Scene, out: str | Path, *, variant: str = "auto", progress: bool = True,
                on_step: Callable[[str, int, int], None] | None = None,
                error_model: ErrorModel | None = None,
@@ -217,7 +224,7 @@ def run_budget(scene: Scene, out: str | Path, *, variant: str = "auto", progress
     check_variant(variant)
     out = claim_run_folder(out, "out", [("scene", scene.source)])
     found = imperfections.sources(scene)
-    runs = 1 + len(found) + (len(found) > 1)  # ideal, each source alone, all of them
+    runs = budget_runs(scene)
     done = iter(range(1, runs + 1))
 
     def run(label: str, sub: Scene) -> Report:

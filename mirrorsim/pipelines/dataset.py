@@ -38,7 +38,6 @@ from functools import partial
 from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
 from mirrorsim.errors import BadParameter, DetectionError, InputError, SolverError
 from mirrorsim.formats import dataset_table as table
@@ -59,6 +58,7 @@ from mirrorsim.formats.files import dumps, write_json, write_text
 from mirrorsim.pipelines.random_scenes import DatasetSpec, NoValidScene
 from mirrorsim.pipelines.score import Report
 from mirrorsim.pipelines.workers import run_dask, run_local, usable_cores
+from mirrorsim.progress import progress_bar
 from mirrorsim.scene import imperfections
 from mirrorsim.scene.model import Scene
 from mirrorsim.truth.groundtruth import ObjectTruth
@@ -224,10 +224,12 @@ def _calibrate_models(spec: DatasetSpec, variant: str, progress: bool) -> None:
     if (cams is None or isinstance(height, list) or isinstance(error, list)
             or spec.target_size is None):
         return
-    for cam in tqdm(cams, desc="calibrating camera models", unit="model",
-                    disable=not progress, leave=False):
-        calibrate(cam, spec.target_size, float(height), variant=variant,
-                  distance_error=float(error))
+    with progress_bar(len(cams), desc="calibrating camera models", unit="model",
+                      enabled=progress, leave=False) as bar:
+        for cam in cams:
+            calibrate(cam, spec.target_size, float(height), variant=variant,
+                      distance_error=float(error))
+            bar.update()
 
 
 def _incidence_deg(scene: Scene, truth: ObjectTruth) -> float:
@@ -368,7 +370,7 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
         done = {p.stem for p in (out / "rows").glob("scene*.json")}
         todo = [i for i in range(n) if scene_name(i) not in done]
         t_start = time.perf_counter()
-        bar = tqdm(total=len(todo), unit="scene", disable=not progress, desc="dataset")
+        bar = progress_bar(len(todo), unit="scene", enabled=progress, desc="dataset")
 
         def on_result(result: SceneResult) -> None:
             if result.row is None:

@@ -20,8 +20,8 @@ from dataclasses import asdict, dataclass, field, replace
 import drjit as dr
 import mitsuba as mi
 import numpy as np
-from tqdm import tqdm
 
+from mirrorsim.progress import progress_bar
 from mirrorsim.rendering.backend import choose_variant
 from mirrorsim.rendering.mitsuba_scene import (
     BACKGROUND_LABEL,
@@ -181,10 +181,10 @@ def _render_optics(scene: Scene, chosen: str, progress: bool) -> _Optics:
         film = pinhole.camera.width * pinhole.camera.height_px
         total = film * (spp if box is None else background) + sum(
             n * t * t * _tiles(region, t) for region, n, _, t in passes)
-        with tqdm(total=total / 1e6, unit="M samples", disable=not progress,
-                  leave=False, desc=f"rendering {scene.name} ({chosen})",
-                  bar_format="{l_bar}{bar}| {n:.1f}/{total:.1f} M samples "
-                             "[{elapsed}<{remaining}, {rate_fmt}]") as bar:
+        with progress_bar(total=total / 1e6, unit="M samples", enabled=progress,
+                          leave=False, desc=f"rendering {scene.name} ({chosen})",
+                          bar_format="{l_bar}{bar}| {n:.1f}/{total:.1f} M samples "
+                                     "[{elapsed}<{remaining}, {rate_fmt}]") as bar:
             linear = _render_regions(mi_scene, pinhole.camera,
                                      spp if box is None else background, passes, seed,
                                      bar.update)
