@@ -25,7 +25,34 @@ from solver.sltr import Solution
 
 @dataclass(frozen=True)
 class Score:
-    """Errors of the measurements and of the estimate against the ground truth."""
+    """Errors of the measurements and of the estimate against the ground truth
+    (``report.errors``; the ``errors`` block of docs/files.md).
+
+    Attributes
+    ----------
+    target_cm : float
+        The estimated target's distance from the true one (cm).
+    mirror_yaw_deg : float
+        The estimated mirror line's direction error (deg).
+    mirror_offset_cm : float
+        How far the estimated line passes from the true reflection point (cm).
+    reflection_point_cm : float
+        The target's reflection point's error (cm).
+    target_alpha_deg, target_d_total_pct : float
+        The target's measured α error (deg) and d_total error (% of d_total).
+    beacon_alpha_deg, beacon_d_total_pct : tuple of float
+        The same for each beacon.
+    target_ellipse95_major_cm : float or None
+        The semi-major axis of the solver's 95 % ellipse (cm; None without σ's).
+    target_mahalanobis : float or None
+        The true target's distance from the estimate in σ's of its covariance (inside
+        the 95 % ellipse below 2.45).
+    target_crlb_cm : float or None
+        √trace of the Cramér–Rao bound of the estimator that ran, at the true geometry
+        (cm): no unbiased estimate's RMS error is smaller.
+    calibrated : tuple of str
+        The nuisances the scored solution estimated (none: plain least squares).
+    """
 
     target_cm: float
     mirror_yaw_deg: float
@@ -150,7 +177,43 @@ class FrameRecord:
 
 @dataclass(frozen=True)
 class Report:
-    """What ``mirrorsim evaluate`` makes of a scene (``evaluate --json``)."""
+    """What ``mirrorsim evaluate`` makes of a scene (``evaluate --json``).
+
+    Attributes
+    ----------
+    scene : str
+        The scene's name.
+    truth : GroundTruth
+        The exact geometry the frames were rendered from (``ms.check``'s).
+    measurements : Measurements
+        What the detector measured, as the solver took it (with its σ's).
+    solution : Solution
+        The mirror and the target found (``solution.target``, ``.ellipse95()``,
+        ``.target_covariance``).
+    errors : Score
+        The solution and the measurements against the truth (``errors.target_cm``).
+    frames : tuple of FrameRecord
+        Each frame's files, whether it was reused, and where an image was clipped.
+    render : RenderInfo
+        The render's settings and timing.
+    calibration : Calibration
+        The size-constancy constants K the detector used.
+    error_vs_beacons : tuple of Score
+        With several beacons, the errors as beacons are added (the first k each).
+    camera_pose : CameraPose or None
+        The camera's pan, pitch and roll measured on the board (``board_pose``).
+    error_model : str
+        The name of the error model that gave the σ's.
+    model_warnings : tuple of str
+        Every way the scene lies outside what that model was fitted on.
+    image_features : tuple of ImageFeatures
+        What each frame showed of each image (the target's, then each beacon's).
+    self_calibration : SelfCalibration
+        What the solve estimated with the mirror, with its priors.
+    calibration_notes : tuple of str
+        What the solve says of its nuisances (held by their priors, not separated, far
+        outside what the bench allows).
+    """
 
     scene: str
     truth: GroundTruth

@@ -179,6 +179,11 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
     ``error_model``: the filter weighs each beacon observation with the model's typical
     beacon σ's (default: the model shipped for the ideal bench).
 
+    The scene's first beacon moves; any others stand still beside it, each rendered and
+    measured once (in a frame of its own, ``fixed<i>``) and weighed into the filter's
+    prior on the mirror (:class:`solver.particle.Prior`'s ``fixed``), its believed position
+    known to ``position_sigma`` cm per axis (0: exactly).
+
     Raises
     ------
     BadParameter
@@ -190,11 +195,6 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
     DetectionError
         If the beacon or the target is not measured at the start pose (no prior, no path),
         or a fixed beacon's image is not measured.
-
-    The scene's first beacon moves; any others stand still beside it, each rendered and
-    measured once (in a frame of its own, ``fixed<i>``) and weighed into the filter's
-    prior on the mirror (:class:`solver.particle.Prior`'s ``fixed``), its believed position
-    known to ``position_sigma`` cm per axis (0: exactly).
     """
     check_given_scene(scene)  # edited by a script: held to what its file would make
     check_options(kind, steps, odometry_sigma, side, step, heading, scene.board.size)
