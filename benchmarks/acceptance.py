@@ -35,9 +35,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 import numpy as np
-
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+from clone import ROOT  # noqa: E402  (the clone first on sys.path)
 from stamp import stamp  # noqa: E402
 
 R95 = math.sqrt(-2.0 * math.log(0.05))  # χ₂'s 95 % radius, 2.4477

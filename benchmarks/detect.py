@@ -35,9 +35,7 @@ from pathlib import Path
 
 import numpy as np
 import yaml
-
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+from clone import ROOT  # noqa: E402  (the clone first on sys.path)
 
 from mirrorsim.detection.detector import detect_frame, read_stored_frame  # noqa: E402
 from mirrorsim.errors import DetectionError, SceneError  # noqa: E402

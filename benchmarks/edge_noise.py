@@ -12,15 +12,12 @@ from __future__ import annotations
 
 import argparse
 import platform
-import sys
 import tempfile
 from dataclasses import replace
 from pathlib import Path
 
+import clone  # noqa: F401  (the clone first on sys.path)
 import numpy as np
-
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
 from mirrorsim.pipelines.calibrate import calibrate  # noqa: E402
 from mirrorsim.pipelines.frame import render_and_measure  # noqa: E402

@@ -13,15 +13,11 @@ the glass, with the world in the board's frame and centred on the glass.
 from __future__ import annotations
 
 import argparse
-import sys
 import tempfile
-from pathlib import Path
 
 import numpy as np
 import yaml
-
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+from clone import ROOT  # noqa: E402  (the clone first on sys.path)
 
 from mirrorsim.detection.detector import (  # noqa: E402
     measure_object,

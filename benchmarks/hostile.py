@@ -15,8 +15,7 @@ import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+import clone  # noqa: F401  (the clone first on sys.path)
 from stamp import stamp  # noqa: E402
 
 from tests.hostile import CASES, CLASSES, run  # noqa: E402

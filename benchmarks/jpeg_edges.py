@@ -22,13 +22,9 @@ scale cannot absorb (docs/limitations.md).
 from __future__ import annotations
 
 import argparse
-import sys
-from pathlib import Path
 
+import clone  # noqa: F401  (the clone first on sys.path)
 import numpy as np
-
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 from exact import spec_scenes  # noqa: E402
 from stamp import stamp  # noqa: E402
 

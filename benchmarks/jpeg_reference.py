@@ -17,11 +17,8 @@ same kinds in frames (``benchmarks/jpeg_edges.py``).
 from __future__ import annotations
 
 import argparse
-import sys
-from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+from clone import ROOT  # noqa: E402  (the clone first on sys.path)
 from stamp import stamp  # noqa: E402
 
 from mirrorsim.detection.detector import measure_object  # noqa: E402

@@ -23,14 +23,11 @@ paper.
 from __future__ import annotations
 
 import argparse
-import sys
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+from clone import ROOT  # noqa: E402  (the clone first on sys.path)
 
 from mirrorsim.formats.error_model import default_error_model  # noqa: E402
 from mirrorsim.formats.measurements import load_measurements  # noqa: E402

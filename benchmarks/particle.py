@@ -21,12 +21,9 @@ the fraction of seeds whose truth lies in the 95 % region (NEES ≤ 5.99).
 from __future__ import annotations
 
 import argparse
-import sys
-from pathlib import Path
 
+import clone  # noqa: E402, F401  (the clone first on sys.path)
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from solver.geometry import line_normal  # noqa: E402
 from solver.measurements import Sigma  # noqa: E402

@@ -14,15 +14,10 @@ from __future__ import annotations
 
 import argparse
 import platform
-import sys
-from pathlib import Path
-
-import numpy as np
-
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 from dataclasses import replace  # noqa: E402
 
+import clone  # noqa: F401  (the clone first on sys.path)
+import numpy as np
 from exact import spec_scenes  # noqa: E402
 
 from mirrorsim.detection.detector import detect_frame  # noqa: E402

@@ -19,16 +19,13 @@ import argparse
 import os
 import platform
 import statistics
-import sys
 import tempfile
 import time
 from dataclasses import replace
 from pathlib import Path
 
+import clone  # noqa: F401  (the clone first on sys.path)
 import numpy as np
-
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
 from mirrorsim.detection.detector import detect_frame  # noqa: E402
 from mirrorsim.pipelines.calibrate import calibrate  # noqa: E402

@@ -16,10 +16,8 @@ import platform
 import subprocess
 import sys
 import tempfile
-from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+from clone import ROOT  # noqa: E402  (the clone first on sys.path)
 
 from mirrorsim.rendering.backend import VARIANTS, probe  # noqa: E402
 

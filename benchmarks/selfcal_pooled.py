@@ -24,9 +24,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
-
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+from clone import ROOT  # noqa: E402  (the clone first on sys.path)
 from stamp import stamp  # noqa: E402
 
 RUNS = ("selfcal_bench", "selfcal_bench_fresh", "selfcal_bench_priors", "selfcal_bench_board")

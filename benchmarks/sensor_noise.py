@@ -17,15 +17,12 @@ import argparse
 import copy
 import math
 import platform
-import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
 import yaml
-
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+from clone import ROOT  # noqa: E402  (the clone first on sys.path)
 
 from mirrorsim.formats.scenefile import scene_from_dict  # noqa: E402
 from mirrorsim.pipelines.frame import render_and_measure  # noqa: E402

@@ -37,10 +37,8 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
+import clone  # noqa: E402, F401  (the clone first on sys.path)
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 from stamp import stamp  # noqa: E402
 
 from mirrorsim.errors import BadParameter  # noqa: E402
