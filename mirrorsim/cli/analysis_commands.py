@@ -22,6 +22,7 @@ from mirrorsim.cli.registry import (
     out_file,
     output,
     sampler_option,
+    spp_option,
 )
 from mirrorsim.errors import BadArgument, BadParameter, RunFailed
 
@@ -224,7 +225,7 @@ def _dataset_options(p):
                         "is capped)")
     p.add_argument("--spec", type=Path, help="ranges of the random scenes (YAML)")
     inputs(p, ("spec", "--spec", "file"))
-    p.add_argument("--spp", type=int, help="samples per pixel (default: the spec's)")
+    spp_option(p, "the spec's")
     sampler_option(p)
     from mirrorsim.pipelines.score import EXTRA_FILES
 

@@ -189,10 +189,9 @@ def common(p: argparse.ArgumentParser, *, scene: bool = True, out: str | None = 
     if json:
         output(p, "--json", "file", metavar="FILE", help=f"write {json} here (- = stdout)")
     if spp:
-        from mirrorsim.scene.model import MAX_RENDER_SEED, MAX_SPP, RenderSettings
+        from mirrorsim.scene.model import MAX_RENDER_SEED, RenderSettings
 
-        p.add_argument("--spp", type=int, help=f"samples per pixel in the mirror's image, "
-                       f"1..{MAX_SPP} (default: the scene's, else {RenderSettings().spp})")
+        spp_option(p, f"the scene's, else {RenderSettings().spp}")
         p.add_argument("--seed", type=int, help=f"sampler seed, 0..{MAX_RENDER_SEED} (default: "
                        "the scene's, else 0)")
         sampler_option(p)
@@ -222,6 +221,15 @@ class _Once(argparse.Action):
                                          "value, comma-separated)")
         setattr(namespace, seen, True)
         setattr(namespace, self.dest, values)
+
+
+def spp_option(p: argparse.ArgumentParser, default: str) -> None:
+    """``--spp N``: samples per pixel in the mirror's image (``default``: what it is when
+    not given, in words); declared once for every command that renders."""
+    from mirrorsim.scene.model import MAX_SPP
+
+    p.add_argument("--spp", type=int, help=f"samples per pixel in the mirror's image, "
+                   f"1..{MAX_SPP} (default: {default})")
 
 
 def calibrate_option(p: argparse.ArgumentParser, beacon_sigma_alone: bool = True) -> None:

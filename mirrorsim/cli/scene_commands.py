@@ -21,6 +21,7 @@ from mirrorsim.cli.registry import (
     output,
     preload,
     render_options,
+    spp_option,
 )
 from mirrorsim.errors import BadArgument
 from mirrorsim.formats.files import emit_json, write_png
@@ -404,7 +405,7 @@ def _track_options(p):
     p.add_argument("--step", type=float, default=1.0, metavar="CM",
                    help="b: the path's step along its heading, at most the board's size "
                         "(default 1)")
-    p.add_argument("--spp", type=int, help="samples per pixel (default: the scene's)")
+    spp_option(p, "the scene's")
 
 
 @command("track", "the moving beacon of the paper's Section 4 on rendered frames",

@@ -157,8 +157,8 @@ def _flatten(scene: Scene, rep: Report) -> dict:
         "calibrate": ",".join(rep.self_calibration.nuisances),
         "calibrate_priors": priors_text(rep.self_calibration.priors),
         "variant": rep.render.variant, "spp": rep.render.spp, "sampler": rep.render.sampler,
-        "background_spp": min(scene.render.background_spp, scene.render.spp),
-        "beacon_spp": max(scene.render.beacon_spp, scene.render.spp),
+        "background_spp": scene.render.outside_spp(),
+        "beacon_spp": scene.render.beacon_box_spp(),
         "render_seed": rep.render.seed,
         **imperfections.row_values(scene),
     }

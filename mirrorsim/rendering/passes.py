@@ -208,9 +208,9 @@ def _regions(pinhole: Scene, spp: int) -> tuple[Region | None, int, int, list[Re
     outside it, the beacons' spp and boxes, and the passes after the whole film as
     (region, spp, seed stream, tile size): the mirror's region at the full spp, then
     each beacon's image at beacon_spp (inside the mirror's region: pasted after it)."""
-    background = min(pinhole.render.background_spp, spp)
+    background = pinhole.render.outside_spp(spp)
     box = optics.mirror_box(pinhole) if background < spp else None
-    beacon_spp = max(pinhole.render.beacon_spp, spp)
+    beacon_spp = pinhole.render.beacon_box_spp(spp)
     boxes = [b for b in optics.beacon_boxes(pinhole) if b is not None] \
         if beacon_spp > spp else []
     passes = ([(box, spp, 1, MIRROR_TILE)] if box is not None else []) \

@@ -263,6 +263,19 @@ class RenderSettings:
             raise BadParameter("sampler", f"{self.sampler!r}: expected one of "
                                f"{', '.join(SAMPLERS)}")
 
+    # the effective sample counts, declared once (the renderer spends them, a dataset's
+    # row records them): never more outside the mirror, never fewer in a beacon's image,
+    # than the frame's spp
+    def outside_spp(self, spp: int | None = None) -> int:
+        """Samples per pixel outside the mirror's image for a frame of ``spp`` (default
+        this setting's): ``min(background_spp, spp)``."""
+        return min(self.background_spp, self.spp if spp is None else spp)
+
+    def beacon_box_spp(self, spp: int | None = None) -> int:
+        """Samples per pixel in each beacon's image for a frame of ``spp`` (default this
+        setting's): ``max(beacon_spp, spp)``."""
+        return max(self.beacon_spp, self.spp if spp is None else spp)
+
 
 def fx_of(width: float, hfov_deg: float) -> float:
     """A pinhole's focal length in px for a frame ``width`` px wide seeing ``hfov_deg``:
