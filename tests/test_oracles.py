@@ -61,6 +61,10 @@ def test_sltr_recovers_the_hand_worked_mirror_and_target(mirror, yaw, beacon, b_
     sol = solve_single((0.0, 0.0), beacon, *_seen(b_image), *_seen(t_image))
     assert np.asarray(sol.target) == pytest.approx(target, abs=1e-9)
     assert (sol.mirror.yaw_deg - yaw + 90.0) % 180.0 - 90.0 == pytest.approx(0.0, abs=1e-9)
+    # the hand's mirror point lies on the line found: n·x = n·(a point of it)
+    t = math.radians(sol.mirror.yaw_deg)
+    normal = np.array([-math.sin(t), math.cos(t)])
+    assert normal @ np.asarray(mirror) == pytest.approx(normal @ sol.mirror.point, abs=1e-9)
 
 
 @pytest.mark.parametrize("name", ["default", "exp1", "exp2", "exp3"])
