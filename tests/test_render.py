@@ -391,3 +391,13 @@ def test_the_id_preview_colours_each_label_apart():
     assert len({tuple(c) for c in rgb}) == len(labels[0])  # all apart
     assert rgb[2].sum() > rgb[1].sum() and rgb[4].sum() > rgb[3].sum()  # mirror: lighter
     assert tuple(rgb[7]) == (128, 128, 128)  # an occluder (label 3 + beacons): grey
+    # the preview file: the same colours above a legend strip naming each of them
+    from mirrorsim.rendering.passes import id_preview
+
+    big = np.repeat(np.repeat(labels, 40, axis=0), 60, axis=1)
+    shown = id_preview(big, n_beacons=2)
+    assert shown.shape[1] == big.shape[1] and shown.shape[0] > big.shape[0]
+    assert (shown[:40] == colourise_ids(big, 2)).all()
+    strip = shown[40:].reshape(-1, 3)
+    for colour in map(tuple, colourise_ids(labels, 2)[0]):  # every colour has a swatch
+        assert (strip == colour).all(axis=1).any(), colour

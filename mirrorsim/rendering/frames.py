@@ -40,8 +40,8 @@ from mirrorsim.rendering.mitsuba_scene import (
 from mirrorsim.rendering.passes import (
     IN_MIRROR,
     RenderedFrame,
-    colourise_ids,
     encode_ids,
+    id_preview,
     render_frame,
     scene_fingerprint,
 )
@@ -113,7 +113,7 @@ def write_frame(scene: Scene, frame: RenderedFrame, out: Path,
         labels = encode_ids(frame.first, frame.in_mirror)
         files[ids_png] = encode_png(labels)
         files[ids_png.with_suffix(".preview.png")] = encode_png(
-            colourise_ids(labels, len(scene.beacons)))
+            id_preview(labels, len(scene.beacons)))
     truth = replace(truth, render=replace(truth.render, files={
         p.name: hashlib.sha256(data).hexdigest() for p, data in files.items()}))
     files[js] = dumps(seal(truth.to_json())).encode()
