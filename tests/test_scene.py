@@ -300,3 +300,34 @@ def test_plot_draws_a_scene_whose_bench_key_is_out_of_bounds(tmp_path, capsys):
                                        "pan: mirror, pan_error: 50}"))
     assert main(["plot", str(path), "--out", str(tmp_path / "s.png")]) == 2
     assert (tmp_path / "s.png").exists() and "camera.pan_error" in capsys.readouterr().err
+
+
+def test_the_evaluation_plot_insets_an_ellipse_too_small_to_see(tmp_path, monkeypatch):
+    """A 95 % ellipse a few hundredths of a cm across in a close-up 2.5 cm wide was a dot
+    the legend listed: it gets an inset at its own scale; a visible one does not."""
+    import dataclasses
+
+    import mirrorsim as ms
+    from mirrorsim.cli import plots
+    from mirrorsim.pipelines.score import Report, Score
+
+    scene = ms.load_scene(SCENES / "default.yaml")
+    truth = ms.check(scene)
+    m = truth.exact_measurements()
+    from solver.measurements import Sigma
+
+    figures = []
+    monkeypatch.setattr(plots, "save_figure", lambda fig, out, _dpi: figures.append(fig) or out)
+    for scale, inset in ((1.0, False), (1e-2, True)):
+        sol = ms.solve(m.observer, m.beacons, m.targets, Sigma(0.02 * scale, 0.004 * scale))
+        err = np.hypot(*(np.asarray(sol.target) - scene.target.position))
+        score = Score(float(err), 0.0, 0.0, 0.0, 0.0, 0.0, (0.0,), (0.0,),
+                      sol.ellipse95()[0])
+        report = Report.__new__(Report)
+        for f in dataclasses.fields(Report):
+            object.__setattr__(report, f.name, None)
+        object.__setattr__(report, "solution", sol)
+        object.__setattr__(report, "errors", score)
+        plots.plot_evaluation(scene, report, tmp_path / "e.png")
+        close_up = figures[-1].axes[1]
+        assert (len(close_up.child_axes) == 1) is inset, (scale, sol.ellipse95())

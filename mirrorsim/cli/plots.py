@@ -108,7 +108,7 @@ def plot_evaluation(scene: Scene, report: Report, out: str | Path, *, dpi: int =
                label=f"estimated mirror (yaw error {err.mirror_yaw_deg:.3f}°)")
         a.plot(*est, "x", color="#d62728", ms=10, mew=2,
                label=f"estimated target (error {err.target_cm:.3f} cm)")
-    ax.legend(loc="upper left", fontsize=7, framealpha=0.9)
+    _legend_below(ax)
     ellipse = sol.ellipse95()
     half = max(1.0, 2.5 * err.target_cm)
     if ellipse is not None:
@@ -117,6 +117,8 @@ def plot_evaluation(scene: Scene, report: Report, out: str | Path, *, dpi: int =
                                color="#d62728", lw=1.2, label="95 % error ellipse"))
         half = max(half, 1.3 * major)
     zoom.plot(*truth, "*", color="#c0392b", ms=16, mec="k", label="true target")
+    if ellipse is not None and ellipse[0] < half / TOO_SMALL:  # a dot at this scale
+        _ellipse_inset(zoom, est, truth, ellipse)
     t0, t1 = scene.target.ends()
     zoom.plot(*zip(t0, t1, strict=True), color="#c0392b", lw=3, alpha=0.4)
     zoom.set_xlim(truth[0] - half, truth[0] + half)
@@ -126,6 +128,34 @@ def plot_evaluation(scene: Scene, report: Report, out: str | Path, *, dpi: int =
     zoom.legend(loc="upper left", fontsize=8)
     zoom.set_title("the target: truth, estimate and the solver's 95 % ellipse")
     return _save(fig, Path(out), dpi)
+
+
+# a virtual image's label moves aside of an earlier one nearer than this (cm)
+LABEL_NEAR_CM = 4.0
+# an ellipse whose semi-major axis is less than the close-up's half-width over this is
+# a dot there (0.08 cm in a 2.5 cm view): it gets an inset of its own scale
+TOO_SMALL = 15.0
+
+
+def _ellipse_inset(zoom, est: np.ndarray, truth: np.ndarray,
+                   ellipse: tuple[float, float, float]) -> None:
+    """An inset in the close-up's lower right at the ellipse's own scale: the estimate,
+    the ellipse and (where it falls inside) the truth."""
+    from matplotlib.patches import Ellipse
+
+    major, minor, angle = ellipse
+    inset = zoom.inset_axes([0.58, 0.03, 0.4, 0.4])
+    inset.add_patch(Ellipse(est, 2 * major, 2 * minor, angle=angle, fill=False,
+                            color="#d62728", lw=1.2))
+    inset.plot(*est, "x", color="#d62728", ms=8, mew=2)
+    inset.plot(*truth, "*", color="#c0392b", ms=12, mec="k")
+    r = 1.6 * major
+    inset.set_xlim(est[0] - r, est[0] + r)
+    inset.set_ylim(est[1] - r, est[1] + r)
+    inset.set_aspect("equal")
+    inset.tick_params(labelsize=6)
+    inset.set_title(f"95 % ellipse, {major:.3g} × {minor:.3g} cm", fontsize=7)
+    zoom.indicate_inset_zoom(inset, edgecolor="0.4")
 
 
 def _draw_top_view(ax, scene: Scene) -> None:
@@ -161,6 +191,7 @@ def _draw_top_view(ax, scene: Scene) -> None:
     objects = [("target", scene.target, "#c0392b", "*", 14)]
     objects += [(f"beacon {i}" if len(scene.beacons) > 1 else "beacon", b, "#d4a017", "o", 7)
                 for i, b in enumerate(scene.beacons)]
+    placed: list[np.ndarray] = []  # the virtual images labelled so far
     for label, obj, colour, marker, ms in objects:
         img = optics.mirror_image(cam.position, scene.mirror, obj.position)
         p, v, r = np.asarray(obj.position, float), img.virtual, img.reflection_point
@@ -169,8 +200,13 @@ def _draw_top_view(ax, scene: Scene) -> None:
         ax.plot(*p, marker=marker, color=colour, ms=ms, mec="k", zorder=6,
                 label=f"{label}: α {img.alpha_deg:.2f}°, d_total {img.d_total:.2f} cm")
         ax.plot(*v, marker=marker, color="none", mec=colour, ms=ms, zorder=6)
-        ax.annotate(f"{label}′", v, textcoords="offset points", xytext=(6, 4), fontsize=8,
-                    color=colour)
+        # images a few cm apart (beacons side by side) had their labels on top of each
+        # other: each further one near an earlier one goes a line lower, on the left
+        near = sum(float(np.hypot(*(v - q))) < LABEL_NEAR_CM for q in placed)
+        placed.append(np.asarray(v, float))
+        ax.annotate(f"{label}′", v, textcoords="offset points", fontsize=8, color=colour,
+                    xytext=(6 if near % 2 == 0 else -6, 4 - 11 * near),
+                    ha="left" if near % 2 == 0 else "right")
     t0, t1 = scene.target.ends()
     ax.plot(*zip(t0, t1, strict=True), color="#c0392b", lw=3, zorder=5)
 
@@ -185,8 +221,15 @@ def _draw_top_view(ax, scene: Scene) -> None:
     ax.set_xlabel("x (cm)")
     ax.set_ylabel("y (cm)")
     ax.set_title(f"{scene.name}: top view (dashed: to the virtual images)")
-    ax.legend(loc="upper left", fontsize=7, framealpha=0.9)
+    _legend_below(ax)
     ax.grid(alpha=0.2)
+
+
+def _legend_below(ax) -> None:
+    """The top view's legend under it: inside, it hid the virtual images and their
+    labels, which stand beyond the board's far edge."""
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.08), ncol=2, fontsize=7,
+              framealpha=0.9)
 
 
 def plot_plan(scene: Scene, plan: Plan, out: str | Path, *, dpi: int = 130) -> Path:
