@@ -16,7 +16,7 @@ from solver.geometry import yaw_difference
 from solver.selfcal import SelfCalibration
 from solver.sltr import solve_single
 
-from .conftest import SCENES, scene_dict
+from .conftest import SCENES, scene_dict, small_scene
 
 # Variations of the default scene (mirror pose, target, beacon), as benchmarks/detect.py draws
 # them; each validates with both images whole in the mirror.
@@ -250,3 +250,25 @@ def test_a_scene_outside_the_models_domain_is_warned_of_by_key(tmp_path, capsys)
     plain = evaluate_scene(load_scene(SCENES / "default.yaml"), tmp_path / "c",
                            progress=False)
     assert plain.model_warnings == ()
+
+
+def test_the_annotated_frame_shows_truth_beside_measurement_and_a_zoom_on_the_mirror(
+        tmp_path):
+    """The annotated frame marks each image's true axis and ends (magenta, from the
+    scorer's truth) beside the detector's, and pastes the mirror's glass enlarged in a
+    corner: the detector's own drawing (green and red) stays."""
+    import cv2
+
+    scene = small_scene("default", 960, 544)
+    report = evaluate_scene(scene, tmp_path, progress=False, keep=("annotated",))
+    ann = cv2.imread(report.frames[0].annotated)[..., ::-1]
+    magenta = (ann == (230, 40, 230)).all(axis=-1)
+    assert magenta.sum() > 50
+    u = int(round(report.truth.target.image_px.u_axis))
+    assert magenta[:, u].any()  # on the target's true axis
+    frame = cv2.imread(report.frames[0].png)[..., ::-1]
+    u0, v0, u1, v1 = report.truth.mirror_pixels.bbox_px
+    # a corner holds the enlarged glass: the frame's pixels there were replaced
+    corner = ann[4:40, 4:200] if (u0 + u1) / 2 > 480 else ann[4:40, -200:-4]
+    same = frame[4:40, 4:200] if (u0 + u1) / 2 > 480 else frame[4:40, -200:-4]
+    assert (corner != same).any(axis=-1).mean() > 0.5

@@ -332,9 +332,61 @@ def frames_of(scene: Scene) -> list[Scene]:
             for i, b in enumerate(scene.beacons)]
 
 
+def annotated_with_truth(m: MeasuredFrame) -> np.ndarray:
+    """The detector's annotated frame (:func:`~mirrorsim.detection.detector.annotate`)
+    with, from the frame's ground truth (the scorer's, never the detector's), each
+    image's true axis and ends in magenta beside the measured ones, and a zoom on the
+    mirror's glass pasted in the corner farthest from it (edges 1 px apart are seen
+    there, not in the whole frame)."""
+    import cv2
+
+    out = np.ascontiguousarray(annotate(m.image, m.detection))
+    truth = m.files.truth if m.files is not None else None
+    if truth is None:
+        return out
+    magenta = (230, 40, 230)
+    for obj in (truth.target, *truth.beacons):
+        px = obj.image_px
+        if px is None or not np.isfinite(px.u_axis):
+            continue
+        x, top, bottom = (int(round(v)) for v in (px.u_axis, px.v_top, px.v_bottom))
+        for y in range(top - 14, bottom + 14, 6):  # dashed: the measured axis stays seen
+            cv2.line(out, (x, y), (x, min(y + 3, bottom + 14)), magenta, 1)
+        for y in (top, bottom):
+            cv2.line(out, (x - 10, y), (x + 10, y), magenta, 1)
+    box = truth.mirror_pixels.bbox_px if truth.mirror_pixels is not None else None
+    if box is not None:
+        _paste_zoom(out, box)
+    return out
+
+
+def _paste_zoom(out: np.ndarray, box: tuple[int, int, int, int]) -> None:
+    """The region ``box`` (u0, v0, u1, v1) enlarged to a third of the frame's width, with
+    a border and its factor, in the top corner farther from it."""
+    import cv2
+
+    h, w = out.shape[:2]
+    u0, v0, u1, v1 = box
+    pad = 6
+    u0, v0, u1, v1 = max(0, u0 - pad), max(0, v0 - pad), min(w, u1 + pad), min(h, v1 + pad)
+    crop = out[v0:v1, u0:u1].copy()
+    if crop.size == 0:
+        return
+    k = min(w / 3 / crop.shape[1], h / 2 / crop.shape[0])
+    if k <= 1.2:  # the glass fills the frame already
+        return
+    zoom = cv2.resize(crop, None, fx=k, fy=k, interpolation=cv2.INTER_NEAREST)
+    zh, zw = zoom.shape[:2]
+    x = 4 if (u0 + u1) / 2 > w / 2 else w - zw - 4
+    out[4:4 + zh, x:x + zw] = zoom
+    cv2.rectangle(out, (x - 1, 3), (x + zw, 4 + zh), (255, 255, 255), 1)
+    cv2.putText(out, f"mirror x{k:.1f}", (x + 4, 4 + zh - 6), cv2.FONT_HERSHEY_SIMPLEX, 0.5,
+                (255, 255, 255), 1, cv2.LINE_AA)
+
+
 def _frame_record(m: MeasuredFrame, annotated_path: Path, annotate_it: bool) -> FrameRecord:
     """The report's entry for one frame (its annotated copy written where asked)."""
     det = m.detection
-    annotated = str(write_png(annotated_path, annotate(m.image, det))) if annotate_it else ""
+    annotated = str(write_png(annotated_path, annotated_with_truth(m))) if annotate_it else ""
     return FrameRecord(str(m.files.image), annotated, m.files.reused, det.target.clipped,
                        det.beacons[0][1].clipped)
