@@ -20,7 +20,7 @@ from mirrorsim.pipelines.frame import render_and_measure
 from mirrorsim.rendering.frames import scene_fingerprint
 from mirrorsim.rendering.mitsuba_scene import TARGET_LABEL
 from mirrorsim.rendering.passes import IN_MIRROR
-from mirrorsim.rendering.sensor import add_noise, undistort_points
+from mirrorsim.camera.sensor import add_noise, undistort_points
 from mirrorsim.scene import imperfections
 from mirrorsim.scene.model import FRONT_OFFSET, Bench, SensorNoise
 from mirrorsim.truth import groundtruth, optics, visibility
@@ -380,7 +380,7 @@ def test_sensor_noise_moves_the_bearing_as_first_order_predicts(ideal):
     noise of the channels' mean at the edge's level), the median of N rows by
     1.25·that/√N, the bearing (the mean angle of two edges) by half their quadrature sum;
     the measured shift stays within 4σ of it."""
-    from mirrorsim.rendering.sensor import srgb8_to_linear
+    from mirrorsim.camera.sensor import srgb8_to_linear
 
     scene0, files0, det0, tmp = ideal
     fw, rn = 6000.0, 4.0

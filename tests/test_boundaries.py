@@ -16,7 +16,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "mirrorsim"
 # the wings in the order data flows through them: a wing imports only wings before it
-WINGS = ("scene", "truth", "formats", "rendering", "detection", "pipelines", "cli")
+WINGS = ("scene", "truth", "formats", "camera", "rendering", "detection", "pipelines", "cli")
 SHARED = {"errors", "arguments", "progress", "__init__"}  # the errors, the API's argument
 # check, the progress bars and the package's face: for every wing
 DATA = "data"  # files shipped with the package (the default error model); no code
@@ -97,6 +97,16 @@ def test_the_solver_is_pure_mathematics():
     loaded = _loaded_by(", ".join(f"solver.{p.stem}" for p in _modules(ROOT / "solver")
                                   if p.stem != "__init__"))
     assert [m for m in loaded if m.startswith(("mirrorsim", "mitsuba", "drjit", "cv2"))] == []
+
+
+def test_the_sensor_model_is_below_rendering_and_detection():
+    """The camera's sensor and lens model is its own wing: the detector undoes what the
+    renderer applies without importing the renderer (it once did, in three places)."""
+    bad = [(p.relative_to(ROOT).as_posix(), m) for p in _modules(PACKAGE / "detection")
+           for m in _imports(p) if m.startswith("mirrorsim.rendering")]
+    assert bad == []
+    loaded = _loaded_by("mirrorsim.detection.detector")
+    assert [m for m in loaded if m.startswith(("mirrorsim.rendering", "mitsuba"))] == []
 
 
 def test_rendering_imports_no_detection():

@@ -325,7 +325,7 @@ def test_a_jpeg_pencils_foot_is_measured_on_its_stored_chroma():
     linear colour erred far more: benchmarks/jpeg_edges.py.)"""
     from mirrorsim.detection.edges import measure_region, to_linear
     from mirrorsim.formats.files import decode_image, encode_jpeg
-    from mirrorsim.rendering.sensor import to_srgb8
+    from mirrorsim.camera.sensor import to_srgb8
 
     new = []
     for shadow in (1.0, 0.6):
@@ -355,7 +355,7 @@ def test_a_jpeg_pencils_foot_on_rendered_frames_stands_where_the_geometry_puts_i
     from mirrorsim.formats.files import decode_image, encode_jpeg
     from mirrorsim.pipelines.random_scenes import load_spec, sample_scene
     from mirrorsim.rendering.passes import render_frame
-    from mirrorsim.rendering.sensor import to_srgb8
+    from mirrorsim.camera.sensor import to_srgb8
     from mirrorsim.scene.model import pencil_paint_height
     from mirrorsim.truth import optics
 
@@ -449,7 +449,7 @@ def test_lookups_done_by_opencv_give_numpy_values():
     of the reach."""
     from mirrorsim.detection.edges import to_linear
     from mirrorsim.detection.regions import SAME_GREY, _within
-    from mirrorsim.rendering.sensor import LINEAR_OF_CODE
+    from mirrorsim.camera.sensor import LINEAR_OF_CODE
 
     codes = np.arange(256, dtype=np.uint8)
     expected = (255.0 * LINEAR_OF_CODE).astype(np.float32)
@@ -482,7 +482,7 @@ def test_a_jpeg_pencil_between_the_frame_and_a_wall_keeps_a_side():
     contrast against the wall, is not found (the axis then comes from the left)."""
     from mirrorsim.detection import edges
     from mirrorsim.formats.files import decode_image, encode_jpeg
-    from mirrorsim.rendering.sensor import to_srgb8
+    from mirrorsim.camera.sensor import to_srgb8
 
     img = np.tile(np.array([120.0, 90.0, 51.0], np.float32), (220, 120, 1))  # the board
     img[:, 28:44] = 6.0  # the frame's bar: the paint's left edge against it, at 43.5

@@ -647,7 +647,7 @@ def test_a_calibrations_key_covers_all_the_code_it_comes_out_of():
 
     covered = code_modules()
     assert {"mirrorsim.detection.regions", "mirrorsim.detection.edges",
-            "mirrorsim.scene.model", "mirrorsim.rendering.sensor",
+            "mirrorsim.scene.model", "mirrorsim.camera.sensor",
             "mirrorsim.rendering.passes"} <= set(covered)
     assert all(p.is_file() for p in covered.values())
     assert all(n.split(".")[0] in ("mirrorsim", "solver") for n in covered)

@@ -25,7 +25,7 @@ import numpy as np
 from mirrorsim.detection.edges import ImageMeasurement
 from mirrorsim.errors import DetectionError
 from mirrorsim.formats.capture import CaptureRecord
-from mirrorsim.rendering.sensor import undistort
+from mirrorsim.camera.sensor import undistort
 from mirrorsim.scene.model import Board, Camera, camera_axes, project
 from solver.geometry import unit, wrap_bearing
 

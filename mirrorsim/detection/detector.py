@@ -2,7 +2,7 @@
 
 With :mod:`mirrorsim.detection.edges` and :mod:`mirrorsim.detection.regions`, the
 detector; with
-:mod:`mirrorsim.rendering.sensor` (the lens model) and the image encoders, the only
+:mod:`mirrorsim.camera.sensor` (the lens model) and the image encoders, the only
 code that imports OpenCV.  What it may use: the image and its capture record
 (:class:`~mirrorsim.formats.capture.CaptureRecord`: the camera as its mount reports it, the
 beacons' believed positions and heights, the target's size), the objects' appearance,
@@ -58,7 +58,7 @@ from mirrorsim.errors import DetectionError, InputError
 from mirrorsim.formats.capture import CaptureRecord
 from mirrorsim.formats.error_model import ImageFeatures
 from mirrorsim.formats.files import decode_image, read_regular_bytes
-from mirrorsim.rendering.sensor import undistort
+from mirrorsim.camera.sensor import undistort
 from mirrorsim.scene.model import (
     MAX_RESOLUTION,
     Beacon,

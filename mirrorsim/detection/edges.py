@@ -14,7 +14,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from mirrorsim.rendering.sensor import LINEAR_OF_CODE, lookup_codes, to_srgb8
+from mirrorsim.camera.sensor import LINEAR_OF_CODE, lookup_codes, to_srgb8
 
 
 @dataclass(frozen=True)

@@ -28,7 +28,7 @@ from mirrorsim.formats.files import read_regular_bytes
 from mirrorsim.pipelines.calibrate import calibrate
 from mirrorsim.rendering.frames import FrameFiles, capture_of, reused_frame, write_frame
 from mirrorsim.rendering.passes import render_frame, scene_fingerprint
-from mirrorsim.rendering.sensor import to_srgb8
+from mirrorsim.camera.sensor import to_srgb8
 from mirrorsim.scene.model import Scene
 
 

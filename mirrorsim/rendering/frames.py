@@ -45,7 +45,7 @@ from mirrorsim.rendering.passes import (
     render_frame,
     scene_fingerprint,
 )
-from mirrorsim.rendering.sensor import to_srgb8
+from mirrorsim.camera.sensor import to_srgb8
 from mirrorsim.scene.model import Scene
 from mirrorsim.truth import groundtruth
 from mirrorsim.truth.groundtruth import GroundTruth, MirrorPixels

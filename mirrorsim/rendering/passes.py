@@ -33,7 +33,7 @@ from mirrorsim.rendering.mitsuba_scene import (
     build_scene_dict,
     label_of,
 )
-from mirrorsim.rendering.sensor import add_noise, distort, distortion_canvas, to_srgb8
+from mirrorsim.camera.sensor import add_noise, distort, distortion_canvas, to_srgb8
 from mirrorsim.scene.imperfections import optics_of
 from mirrorsim.scene.model import Beacon, Board, Camera, Scene, Target
 from mirrorsim.truth import optics
