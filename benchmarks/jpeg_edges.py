@@ -28,10 +28,10 @@ import numpy as np
 from exact import spec_scenes  # noqa: E402
 from stamp import stamp  # noqa: E402
 
+from mirrorsim.camera.sensor import to_srgb8  # noqa: E402
 from mirrorsim.detection import edges, regions  # noqa: E402
 from mirrorsim.formats.files import decode_image, encode_jpeg  # noqa: E402
 from mirrorsim.rendering.passes import render_frame  # noqa: E402
-from mirrorsim.camera.sensor import to_srgb8  # noqa: E402
 from mirrorsim.scene.model import pencil_paint_height  # noqa: E402
 from mirrorsim.truth.optics import front_face  # noqa: E402
 

@@ -20,11 +20,11 @@ import clone  # noqa: F401  (the clone first on sys.path)
 import numpy as np
 from exact import spec_scenes  # noqa: E402
 
+from mirrorsim.camera.sensor import to_srgb8  # noqa: E402
 from mirrorsim.detection.detector import detect_frame  # noqa: E402
 from mirrorsim.formats.capture import CaptureRecord  # noqa: E402
 from mirrorsim.pipelines.calibrate import calibrate  # noqa: E402
 from mirrorsim.rendering.passes import render_frame  # noqa: E402
-from mirrorsim.camera.sensor import to_srgb8  # noqa: E402
 from mirrorsim.scene.model import pencil_paint_height  # noqa: E402
 from mirrorsim.truth import optics  # noqa: E402
 from mirrorsim.truth.optics import front_face  # noqa: E402

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 import yaml
 
+from mirrorsim.camera.sensor import add_noise, undistort_points
 from mirrorsim.cli.main import main
 from mirrorsim.detection.detector import read_frame
 from mirrorsim.formats.capture import CaptureRecord
@@ -20,7 +21,6 @@ from mirrorsim.pipelines.frame import render_and_measure
 from mirrorsim.rendering.frames import scene_fingerprint
 from mirrorsim.rendering.mitsuba_scene import TARGET_LABEL
 from mirrorsim.rendering.passes import IN_MIRROR
-from mirrorsim.camera.sensor import add_noise, undistort_points
 from mirrorsim.scene import imperfections
 from mirrorsim.scene.model import FRONT_OFFSET, Bench, SensorNoise
 from mirrorsim.truth import groundtruth, optics, visibility

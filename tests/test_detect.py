@@ -323,9 +323,9 @@ def test_a_jpeg_pencils_foot_is_measured_on_its_stored_chroma():
     or without a contact shadow or a hole under it, at the qualities a bench uses.  (On
     rendered frames, whose shadows and holes this band does not copy, measuring on
     linear colour erred far more: benchmarks/jpeg_edges.py.)"""
+    from mirrorsim.camera.sensor import to_srgb8
     from mirrorsim.detection.edges import measure_region, to_linear
     from mirrorsim.formats.files import decode_image, encode_jpeg
-    from mirrorsim.camera.sensor import to_srgb8
 
     new = []
     for shadow in (1.0, 0.6):
@@ -351,11 +351,11 @@ def test_a_jpeg_pencils_foot_on_rendered_frames_stands_where_the_geometry_puts_i
     at quality 90, the pencil's foot measured the JPEG way lies within 0.25 px of the
     exact projection of its front face on average; measured on linear colour, the
     rendered contact shadow and holes put it over 0.3 px low (the way this replaced)."""
+    from mirrorsim.camera.sensor import to_srgb8
     from mirrorsim.detection import edges, regions
     from mirrorsim.formats.files import decode_image, encode_jpeg
     from mirrorsim.pipelines.random_scenes import load_spec, sample_scene
     from mirrorsim.rendering.passes import render_frame
-    from mirrorsim.camera.sensor import to_srgb8
     from mirrorsim.scene.model import pencil_paint_height
     from mirrorsim.truth import optics
 
@@ -447,9 +447,9 @@ def test_lookups_done_by_opencv_give_numpy_values():
     linear radiance (every code, grey and colour images), and the grown region's colour
     test max_c |x − c| < r, on random values and on values a float32 step either side
     of the reach."""
+    from mirrorsim.camera.sensor import LINEAR_OF_CODE
     from mirrorsim.detection.edges import to_linear
     from mirrorsim.detection.regions import SAME_GREY, _within
-    from mirrorsim.camera.sensor import LINEAR_OF_CODE
 
     codes = np.arange(256, dtype=np.uint8)
     expected = (255.0 * LINEAR_OF_CODE).astype(np.float32)
@@ -480,9 +480,9 @@ def test_a_jpeg_pencil_between_the_frame_and_a_wall_keeps_a_side():
     pencil was dropped.  Its sides are then measured on the image's colour, which keeps
     them at full resolution in the luma: the left within 0.15 px; the right, with no
     contrast against the wall, is not found (the axis then comes from the left)."""
+    from mirrorsim.camera.sensor import to_srgb8
     from mirrorsim.detection import edges
     from mirrorsim.formats.files import decode_image, encode_jpeg
-    from mirrorsim.camera.sensor import to_srgb8
 
     img = np.tile(np.array([120.0, 90.0, 51.0], np.float32), (220, 120, 1))  # the board
     img[:, 28:44] = 6.0  # the frame's bar: the paint's left edge against it, at 43.5

@@ -22,10 +22,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from mirrorsim.camera.sensor import undistort
 from mirrorsim.detection.edges import ImageMeasurement
 from mirrorsim.errors import DetectionError
 from mirrorsim.formats.capture import CaptureRecord
-from mirrorsim.camera.sensor import undistort
 from mirrorsim.scene.model import Board, Camera, camera_axes, project
 from solver.geometry import unit, wrap_bearing
 

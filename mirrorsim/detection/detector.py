@@ -46,6 +46,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from mirrorsim.camera.sensor import undistort
 from mirrorsim.detection.assign import assign_beacons
 from mirrorsim.detection.edges import ImageMeasurement, measure_region, to_linear
 from mirrorsim.detection.image_geometry import (
@@ -58,7 +59,6 @@ from mirrorsim.errors import DetectionError, InputError
 from mirrorsim.formats.capture import CaptureRecord
 from mirrorsim.formats.error_model import ImageFeatures
 from mirrorsim.formats.files import decode_image, read_regular_bytes
-from mirrorsim.camera.sensor import undistort
 from mirrorsim.scene.model import (
     MAX_RESOLUTION,
     Beacon,

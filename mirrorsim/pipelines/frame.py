@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mirrorsim.camera.sensor import to_srgb8
 from mirrorsim.detection.detector import (
     Detection,
     detect_frame,
@@ -28,7 +29,6 @@ from mirrorsim.formats.files import read_regular_bytes
 from mirrorsim.pipelines.calibrate import calibrate
 from mirrorsim.rendering.frames import FrameFiles, capture_of, reused_frame, write_frame
 from mirrorsim.rendering.passes import render_frame, scene_fingerprint
-from mirrorsim.camera.sensor import to_srgb8
 from mirrorsim.scene.model import Scene
 
 

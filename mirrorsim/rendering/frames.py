@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mirrorsim.camera.sensor import to_srgb8
 from mirrorsim.formats.cache import seal, unseal
 from mirrorsim.formats.capture import CaptureRecord, load_capture
 from mirrorsim.formats.files import (
@@ -45,7 +46,6 @@ from mirrorsim.rendering.passes import (
     render_frame,
     scene_fingerprint,
 )
-from mirrorsim.camera.sensor import to_srgb8
 from mirrorsim.scene.model import Scene
 from mirrorsim.truth import groundtruth
 from mirrorsim.truth.groundtruth import GroundTruth, MirrorPixels

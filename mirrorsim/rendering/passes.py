@@ -21,6 +21,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from mirrorsim.camera.sensor import add_noise, distort, distortion_canvas, to_srgb8
 from mirrorsim.progress import progress_bar
 from mirrorsim.rendering.backend import choose_variant
 from mirrorsim.rendering.mitsuba_scene import (
@@ -33,7 +34,6 @@ from mirrorsim.rendering.mitsuba_scene import (
     build_scene_dict,
     label_of,
 )
-from mirrorsim.camera.sensor import add_noise, distort, distortion_canvas, to_srgb8
 from mirrorsim.scene.imperfections import optics_of
 from mirrorsim.scene.model import Beacon, Board, Camera, Scene, Target
 from mirrorsim.truth import optics
