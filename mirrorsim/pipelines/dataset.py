@@ -67,8 +67,6 @@ from solver.selfcal import NUISANCES, PLAIN, SelfCalibration, check_nuisances, p
 
 # where the scenes run: warm local worker processes, or a Dask cluster
 EXECUTORS = ("local", "dask")
-# the layout of its rows (dataset_table.ADDED_IN says what each added)
-ROW_SCHEMA_VERSION = table.SCHEMA
 # a worker retires past this resident memory; measured on llvm_ad_rgb, a warm worker
 # holds ~500 MiB after its first full-size scene and no more after 30 (docs/results.md,
 # "Datasets and the error model"), so this only stops a leak that another Mitsuba might bring
@@ -109,7 +107,7 @@ def process_one(i: int, seed: int, spec: DatasetSpec, out: str, spp: int | None,
     out_dir = Path(out)
     name = scene_name(i)
     t0 = time.perf_counter()
-    row: dict = {"index": i, "scene": name, "seed": seed, "schema": ROW_SCHEMA_VERSION}
+    row: dict = {"index": i, "scene": name, "seed": seed, "schema": table.SCHEMA}
     try:
         rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(i,)))
         scene = sample_scene(spec, rng, name)
