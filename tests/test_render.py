@@ -384,7 +384,8 @@ def test_a_new_scene_compiles_no_new_kernel(jit_variant):
 def test_the_id_preview_colours_each_label_apart():
     """The preview gives each label its own colour, what the mirror shows lighter than
     the same object seen directly, and the labels file stays the labels."""
-    from mirrorsim.rendering.passes import IN_MIRROR, colourise_ids
+    from mirrorsim.rendering.id_preview import colourise_ids
+    from mirrorsim.rendering.passes import IN_MIRROR
 
     labels = np.array([[0, 2, IN_MIRROR + 2, 3, IN_MIRROR + 3, 4, IN_MIRROR, 7]], np.uint8)
     rgb = colourise_ids(labels, n_beacons=2)[0]
@@ -392,7 +393,7 @@ def test_the_id_preview_colours_each_label_apart():
     assert rgb[2].sum() > rgb[1].sum() and rgb[4].sum() > rgb[3].sum()  # mirror: lighter
     assert tuple(rgb[7]) == (128, 128, 128)  # an occluder (label 3 + beacons): grey
     # the preview file: the same colours above a legend strip naming each of them
-    from mirrorsim.rendering.passes import id_preview
+    from mirrorsim.rendering.id_preview import id_preview
 
     big = np.repeat(np.repeat(labels, 40, axis=0), 60, axis=1)
     shown = id_preview(big, n_beacons=2)

@@ -132,11 +132,11 @@ def test_top_view_draws_each_object_where_it_stands():
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from mirrorsim.cli.plots import _draw_top_view
+    from mirrorsim.cli.top_view import draw_top_view
 
     s = load_scene(SCENES / "default.yaml")
     fig, ax = plt.subplots()
-    _draw_top_view(ax, s)
+    draw_top_view(ax, s)
     drawn = [np.column_stack(line.get_data()) for line in ax.get_lines()]
     plt.close(fig)
 

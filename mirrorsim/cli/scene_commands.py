@@ -118,7 +118,7 @@ def _plot_options(p):
          "beacons, virtual images and rays.",
          _plot_options)
 def _plot(args) -> int:
-    from mirrorsim.cli.plots import plot_top_view
+    from mirrorsim.cli.top_view import plot_top_view
     from mirrorsim.errors import SceneError
     from mirrorsim.formats.scenefile import scene_and_failures
 

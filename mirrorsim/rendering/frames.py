@@ -32,6 +32,7 @@ from mirrorsim.formats.files import (
 )
 from mirrorsim.formats.scenefile import check_given_scene
 from mirrorsim.rendering.backend import check_variant
+from mirrorsim.rendering.id_preview import id_preview
 from mirrorsim.rendering.mitsuba_scene import (
     BACKGROUND_LABEL,
     BEACON_LABEL,
@@ -42,7 +43,6 @@ from mirrorsim.rendering.passes import (
     IN_MIRROR,
     RenderedFrame,
     encode_ids,
-    id_preview,
     render_frame,
     scene_fingerprint,
 )
