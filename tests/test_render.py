@@ -402,3 +402,19 @@ def test_the_id_preview_colours_each_label_apart():
     strip = shown[40:].reshape(-1, 3)
     for colour in map(tuple, colourise_ids(labels, 2)[0]):  # every colour has a swatch
         assert (strip == colour).all(axis=1).any(), colour
+
+
+def test_a_seed_beyond_32_bits_renders(fast_variant):
+    """A render hashes its seed into Mitsuba's 32-bit ones: a seed of 2⁴⁰ (a track of
+    seed 8649690 renders pose k with 8649690·1000 + k) renders, and differs from seed 0;
+    the bound is a Parquet int64's, 2⁶³ − 1."""
+    from mirrorsim.errors import BadParameter
+    from mirrorsim.rendering.passes import render_frame
+    from mirrorsim.scene.model import MAX_SEED
+
+    scene = small_scene("default", 160, 92, spp=2)
+    big = render_frame(scene.with_render(seed=2**40), variant=fast_variant, progress=False)
+    zero = render_frame(scene.with_render(seed=0), variant=fast_variant, progress=False)
+    assert big.linear.shape == zero.linear.shape and (big.linear != zero.linear).any()
+    with pytest.raises(BadParameter, match="seed"):
+        scene.with_render(seed=MAX_SEED + 1)

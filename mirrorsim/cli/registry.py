@@ -189,10 +189,10 @@ def common(p: argparse.ArgumentParser, *, scene: bool = True, out: str | None = 
     if json:
         output(p, "--json", "file", metavar="FILE", help=f"write {json} here (- = stdout)")
     if spp:
-        from mirrorsim.scene.model import MAX_RENDER_SEED, RenderSettings
+        from mirrorsim.scene.model import MAX_SEED, RenderSettings
 
         spp_option(p, f"the scene's, else {RenderSettings().spp}")
-        p.add_argument("--seed", type=int, help=f"sampler seed, 0..{MAX_RENDER_SEED} (default: "
+        p.add_argument("--seed", type=int, help=f"sampler seed, 0..{MAX_SEED} (default: "
                        "the scene's, else 0)")
         sampler_option(p)
     if variant:

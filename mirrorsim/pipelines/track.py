@@ -37,7 +37,7 @@ from mirrorsim.pipelines.evaluate import model_for
 from mirrorsim.pipelines.frame import FrameNotMeasured, render_and_measure
 from mirrorsim.pipelines.track_paths import HEADINGS, PATHS, beacon_path
 from mirrorsim.rendering.backend import check_variant
-from mirrorsim.scene.model import MAX_RENDER_SEED, Scene, is_whole
+from mirrorsim.scene.model import MAX_SEED, Scene, is_whole
 from solver.errors import SolverError
 from solver.geometry import line_normal
 from solver.measurements import BeaconMeasurement, Sigma
@@ -51,8 +51,8 @@ MAX_STEPS = 500
 MAX_ODOMETRY_SIGMA = 10.0  # cm per move: a robot that errs more than this is not driving
 
 # pose k renders with seed·1000 + k (a fixed beacon's frame with seed·1000 + 999 − i):
-# the largest run seed whose render seeds stay 32-bit
-MAX_TRACK_SEED = (MAX_RENDER_SEED - 999) // 1000
+# the largest run seed whose render seeds stay within MAX_SEED
+MAX_TRACK_SEED = (MAX_SEED - 999) // 1000
 
 
 @dataclass(frozen=True)
@@ -203,7 +203,7 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
             raise BadParameter(name, f"{v!r} must be a whole number ≥ {lo}")
     if seed > MAX_TRACK_SEED:
         raise BadParameter("seed", f"{seed} must be ≤ {MAX_TRACK_SEED} (pose k renders with "
-                           "seed·1000 + k, a 32-bit seed)")
+                           "seed·1000 + k, a seed within 0..2⁶³−1)")
     if particles > MAX_PARTICLES:
         raise BadParameter("particles", f"{particles} must be ≤ {MAX_PARTICLES}")
     try:

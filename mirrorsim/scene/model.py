@@ -256,9 +256,9 @@ class RenderSettings:
             value = getattr(self, name)
             if not (is_whole(value) and 1 <= value <= MAX_SPP):
                 raise BadParameter(name, f"{value!r} must be a whole number within 1..{MAX_SPP}")
-        if not (is_whole(self.seed) and 0 <= self.seed <= MAX_RENDER_SEED):
+        if not (is_whole(self.seed) and 0 <= self.seed <= MAX_SEED):
             raise BadParameter("seed", f"{self.seed!r} must be a whole number within "
-                               f"0..{MAX_RENDER_SEED}")
+                               f"0..{MAX_SEED}")
         if self.sampler not in SAMPLERS:
             raise BadParameter("sampler", f"{self.sampler!r}: expected one of "
                                f"{', '.join(SAMPLERS)}")
@@ -289,9 +289,9 @@ def hfov_of(width: float, fx: float) -> float:
     return math.degrees(2.0 * math.atan(width / 2.0 / fx))
 
 
-# the largest seeds their consumers take: a render's (Mitsuba's sampler seed is a 32-bit
-# unsigned integer) and a run's (numpy's generators take more, a Parquet int64 column not)
-MAX_RENDER_SEED = 2**32 - 1
+# the largest seed every consumer takes, a render's or a run's: numpy's generators take
+# more, and a render hashes its seed into Mitsuba's 32-bit ones (passes._pass_seed), but
+# a Parquet int64 column (a dataset's `seed` and `render_seed`) does not
 MAX_SEED = 2**63 - 1
 
 
