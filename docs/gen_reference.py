@@ -101,7 +101,7 @@ def _rounded(doc):
 
 def scene_template() -> str:
     """The template scene ``mirrorsim new`` writes (named my_bench)."""
-    from mirrorsim.formats.scenefile import scene_template as template
+    from mirrorsim.formats.template import scene_template as template
 
     return "```yaml\n" + template("my_bench.yaml") + "```\n"
 

@@ -138,7 +138,7 @@ def test_every_key_of_the_template_scene_is_in_the_scene_reference():
     every bench key of the registry (its own generated table)."""
     import yaml
 
-    from mirrorsim.formats.scenefile import scene_template
+    from mirrorsim.formats.template import scene_template
 
     doc = re.sub(r'^--8<-- "([^"]+)"',
                  lambda m: (DOCS / m.group(1)).read_text(encoding="utf-8"),

@@ -50,7 +50,7 @@ def _render(args) -> int:
 
 
 def _new_options(p):
-    from mirrorsim.formats.scenefile import BUNDLED
+    from mirrorsim.formats.template import BUNDLED
 
     p.add_argument("scene", type=Path, help="the scene file to write (YAML; must not exist)")
     p.add_argument("--like", choices=BUNDLED,
@@ -68,7 +68,7 @@ def _new_options(p):
          _new_options)
 def _new(args) -> int:
     from mirrorsim.formats.files import check_output_file, write_text
-    from mirrorsim.formats.scenefile import scene_template
+    from mirrorsim.formats.template import scene_template
 
     path = Path(args.scene)
     text = scene_template(path, args.like)  # refuses a name that cannot be a scene's

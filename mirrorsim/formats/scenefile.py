@@ -8,9 +8,7 @@ images that do not reach the camera) use :mod:`mirrorsim.truth.optics`.
 
 from __future__ import annotations
 
-import json
 import math
-import re
 from collections.abc import Callable, Mapping
 from dataclasses import replace
 from pathlib import Path
@@ -442,35 +440,3 @@ def read_pan(r: Reader, raw: Any, key: str) -> float | str:
                          f"{', '.join(PAN_WORDS)}")
         return raw
     return r.number(raw, key)
-
-
-# the bundled scenes ``mirrorsim new --like`` copies (the package's data/scenes/)
-BUNDLED = ("default", "exp1", "exp2", "exp3")
-
-
-def scene_template(path: str | Path, like: str | None = None) -> str:
-    """The commented template scene (``mirrorsim new``), named after ``path``'s stem; or,
-    with ``like``, that bundled scene (:data:`BUNDLED`) renamed so.
-
-    Raises
-    ------
-    SceneError
-        When the file's name cannot be a scene's name.
-    BadParameter
-        A ``like`` that names no bundled scene.
-    """
-    from importlib import resources
-
-    name = Path(path).stem
-    if not NAME_PATTERN.fullmatch(name):
-        raise SceneError(str(path), "", f"{name!r} cannot name a scene (letters, digits, "
-                                        "'.', '_', '-'; starting with a letter or digit)")
-    data = resources.files("mirrorsim") / "data"
-    if like is None:
-        text = (data / "template.yaml").read_text(encoding="utf-8")
-        # quoted: a name such as 123, yes or null would read as another type
-        return text.replace("name: NAME ", f"name: {json.dumps(name)} ", 1)
-    if like not in BUNDLED:
-        raise BadParameter("like", f"{like!r}: choose one of {', '.join(BUNDLED)}")
-    text = (data / "scenes" / f"{like}.yaml").read_text(encoding="utf-8")
-    return re.sub(r"(?m)^name: .*$", f"name: {json.dumps(name)}", text, count=1)
