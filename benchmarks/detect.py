@@ -42,9 +42,11 @@ from mirrorsim.errors import DetectionError, SceneError  # noqa: E402
 from mirrorsim.formats.error_model import default_error_model  # noqa: E402
 from mirrorsim.formats.scenefile import load_scene, scene_from_dict  # noqa: E402
 from mirrorsim.pipelines.calibrate import calibrate  # noqa: E402
-from mirrorsim.pipelines.frame import render_and_measure  # noqa: E402
+from mirrorsim.pipelines.frame import (
+    render_and_measure,  # noqa: E402
+    render_to_files,  # noqa: E402
+)
 from mirrorsim.pipelines.random_scenes import load_spec, sample_scene  # noqa: E402
-from mirrorsim.rendering.frames import render_to_files  # noqa: E402
 from mirrorsim.truth import optics, visibility  # noqa: E402
 from solver.lsq import solve_measurements  # noqa: E402
 

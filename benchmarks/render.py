@@ -24,7 +24,7 @@ from mirrorsim.rendering.backend import VARIANTS, probe  # noqa: E402
 _CHILD = r"""
 import json, sys, time
 from mirrorsim.formats.scenefile import load_scene
-from mirrorsim.rendering.frames import render_to_files
+from mirrorsim.pipelines.frame import render_to_files
 scene = load_scene(sys.argv[1])
 t0 = time.perf_counter()
 res = render_to_files(scene.with_render(spp=int(sys.argv[3])), sys.argv[2],

@@ -44,7 +44,7 @@ _API = {
     "load_scene": ("mirrorsim.formats.scenefile", "load_scene"),
     "edit_scene": ("mirrorsim.formats.scenefile", "edit_scene"),
     "check": ("mirrorsim.truth.groundtruth", "ground_truth"),
-    "render": ("mirrorsim.rendering.frames", "render_to_files"),
+    "render": ("mirrorsim.pipelines.frame", "render_to_files"),
     "load_capture": ("mirrorsim.formats.capture", "load_capture"),
     "detect": ("mirrorsim.pipelines.frame", "measure_frame"),
     "solve": ("solver.lsq", "solve_measurements"),

@@ -535,8 +535,7 @@ def test_frames_that_differ_after_the_render_share_it_bit_for_bit(monkeypatch):
 
 
 def test_a_frame_measured_while_it_is_written_matches_one_read_back(tmp_path):
-    from mirrorsim.pipelines.frame import measure_frame
-    from mirrorsim.rendering.frames import render_to_files
+    from mirrorsim.pipelines.frame import measure_frame, render_to_files
 
     scene = bench_scene(camera=SMALL)
     m = render_and_measure(scene, tmp_path / "a", progress=False)

@@ -26,9 +26,8 @@ from mirrorsim.formats.capture import CaptureRecord
 from mirrorsim.formats.files import claim_output_folder
 from mirrorsim.formats.scenefile import scene_from_dict
 from mirrorsim.pipelines.evaluate import evaluate_scene
-from mirrorsim.pipelines.frame import render_and_measure
+from mirrorsim.pipelines.frame import render_and_measure, render_to_files
 from mirrorsim.pipelines.score import Report
-from mirrorsim.rendering.frames import render_to_files
 from mirrorsim.scene.model import Board, Camera
 from mirrorsim.truth import optics
 

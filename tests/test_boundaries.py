@@ -109,6 +109,14 @@ def test_the_sensor_model_is_below_rendering_and_detection():
     assert [m for m in loaded if m.startswith(("mirrorsim.rendering", "mitsuba"))] == []
 
 
+def test_rendering_reads_no_scene_file():
+    """The renderer renders a Scene it is given: the file reader and its checks belong
+    to the entry points (``ms.render`` is ``pipelines.frame.render_to_files``)."""
+    bad = [(p.name, m) for p in _modules(PACKAGE / "rendering") for m in _imports(p)
+           if m.startswith(("mirrorsim.formats.scenefile", "mirrorsim.formats.scene_checks"))]
+    assert bad == []
+
+
 def test_rendering_imports_no_detection():
     bad = [(p.name, m) for p in _modules(PACKAGE / "rendering") for m in _imports(p)
            if m.startswith(("mirrorsim.detection", "cv2.aruco"))]

@@ -13,7 +13,7 @@ from mirrorsim.errors import DetectionError
 from mirrorsim.formats.capture import CaptureRecord
 from mirrorsim.formats.scenefile import load_scene
 from mirrorsim.pipelines.calibrate import calibrate
-from mirrorsim.rendering.frames import render_to_files
+from mirrorsim.pipelines.frame import render_to_files
 
 from .conftest import SCENES, small_scene
 

@@ -121,7 +121,7 @@ def test_a_cached_frame_is_reused_only_while_its_bytes_verify(tmp_path):
     again with a warning (and the same bytes come back: renders are deterministic)."""
     import warnings
 
-    from mirrorsim.rendering.frames import render_to_files
+    from mirrorsim.pipelines.frame import render_to_files
 
     from .conftest import small_scene
 
@@ -623,7 +623,7 @@ def test_errormodel_plots_never_go_over_a_file_that_is_not_a_models(tmp_path, ca
 
 
 def test_a_cached_frame_without_its_ids_is_rendered_again_when_they_are_asked(tmp_path):
-    from mirrorsim.rendering.frames import render_to_files
+    from mirrorsim.pipelines.frame import render_to_files
 
     from .conftest import small_scene
 

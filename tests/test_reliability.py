@@ -351,7 +351,7 @@ def test_measurement_files_refused_as_bad_input(tmp_path, capsys, edit, key):
 @pytest.fixture(scope="module")
 def half_frames(tmp_path_factory):
     """The default scene and EXP3 at half size, rendered once."""
-    from mirrorsim.rendering.frames import render_to_files
+    from mirrorsim.pipelines.frame import render_to_files
 
     folder = tmp_path_factory.mktemp("frames")
     scenes = {}

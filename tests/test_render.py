@@ -8,7 +8,7 @@ import pytest
 
 from mirrorsim.errors import BadParameter
 from mirrorsim.formats.scenefile import load_scene, scene_from_dict
-from mirrorsim.rendering.frames import render_to_files
+from mirrorsim.pipelines.frame import render_to_files
 from mirrorsim.rendering.mitsuba_scene import BEACON_LABEL, MIRROR_LABEL, TARGET_LABEL
 from mirrorsim.rendering.passes import IN_MIRROR
 from mirrorsim.truth import optics

@@ -39,7 +39,7 @@ def _render_options(p):
          _render_options)
 def _render(args) -> int:
     from mirrorsim.cli.tables import render_summary
-    from mirrorsim.rendering.frames import render_to_files
+    from mirrorsim.pipelines.frame import render_to_files
 
     scene = render_options(args, load(args.scene))
     files = render_to_files(scene, out_folder(args, scene), variant=args.variant,

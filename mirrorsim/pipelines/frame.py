@@ -25,8 +25,10 @@ from mirrorsim.detection.detector import (
 from mirrorsim.detection.image_geometry import Calibration
 from mirrorsim.errors import DetectionError
 from mirrorsim.formats.capture import CaptureError, CaptureRecord, load_capture
-from mirrorsim.formats.files import read_regular_bytes
+from mirrorsim.formats.files import claim_run_folder, default_out, read_regular_bytes
+from mirrorsim.formats.scenefile import check_given_scene
 from mirrorsim.pipelines.calibrate import calibrate
+from mirrorsim.rendering.backend import check_variant
 from mirrorsim.rendering.frames import FrameFiles, capture_of, reused_frame, write_frame
 from mirrorsim.rendering.passes import render_frame, scene_fingerprint
 from mirrorsim.scene.model import Scene
@@ -168,3 +170,20 @@ def render_and_measure(scene: Scene, out: str | Path, *, variant: str = "auto",
         finally:
             files = writing.result()  # the files are whole, measured or not
     return replace(m, files=files)
+
+
+def render_to_files(scene: Scene, out: str | Path | None = None, *, variant: str = "auto",
+                    progress: bool = True, reuse: bool = False, ids: bool = True
+                    ) -> FrameFiles:
+    """Render ``scene`` with its render settings (or, with ``reuse``, take a render of
+    exactly this scene already in ``out``) and write its files (default folder
+    ``renders/<name>/``; the id labels only with ``ids``)."""
+    check_given_scene(scene)  # edited by a script: held to what its file would make
+    check_variant(variant)
+    out = claim_run_folder(out if out is not None else default_out(scene.name), "out",
+                           [("scene", scene.source)])
+    found = reused_frame(scene, out, ids) if reuse else None
+    if found is not None:
+        return found
+    frame = render_frame(scene, variant=variant, progress=progress)
+    return write_frame(scene, frame, out, scene_fingerprint(scene), ids)

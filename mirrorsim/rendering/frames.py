@@ -23,15 +23,11 @@ from mirrorsim.formats.cache import seal, unseal
 from mirrorsim.formats.capture import CaptureRecord, load_capture
 from mirrorsim.formats.files import (
     atomic_path,
-    claim_run_folder,
-    default_out,
     dumps,
     encode_jpeg,
     encode_png,
     read_regular_bytes,
 )
-from mirrorsim.formats.scenefile import check_given_scene
-from mirrorsim.rendering.backend import check_variant
 from mirrorsim.rendering.id_preview import id_preview
 from mirrorsim.rendering.mitsuba_scene import (
     BACKGROUND_LABEL,
@@ -43,7 +39,6 @@ from mirrorsim.rendering.passes import (
     IN_MIRROR,
     RenderedFrame,
     encode_ids,
-    render_frame,
     scene_fingerprint,
 )
 from mirrorsim.scene.model import Scene
@@ -136,23 +131,6 @@ def _paths(scene: Scene, out: Path) -> tuple[Path, Path, Path, Path]:
     frame = ".png" if scene.bench.jpeg_quality is None else ".jpg"
     return tuple(out / f"{scene.name}{ext}"
                  for ext in (frame, ".ids.png", ".json", ".capture.json"))
-
-
-def render_to_files(scene: Scene, out: str | Path | None = None, *, variant: str = "auto",
-                    progress: bool = True, reuse: bool = False, ids: bool = True
-                    ) -> FrameFiles:
-    """Render ``scene`` with its render settings (or, with ``reuse``, take a render of
-    exactly this scene already in ``out``) and write its files (default folder
-    ``renders/<name>/``; the id labels only with ``ids``)."""
-    check_given_scene(scene)  # edited by a script: held to what its file would make
-    check_variant(variant)
-    out = claim_run_folder(out if out is not None else default_out(scene.name), "out",
-                           [("scene", scene.source)])
-    found = reused_frame(scene, out, ids) if reuse else None
-    if found is not None:
-        return found
-    frame = render_frame(scene, variant=variant, progress=progress)
-    return write_frame(scene, frame, out, scene_fingerprint(scene), ids)
 
 
 def reused_frame(scene: Scene, out: Path, ids: bool) -> FrameFiles | None:
