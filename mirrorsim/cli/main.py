@@ -17,7 +17,11 @@ import warnings
 from typing import NoReturn
 
 from mirrorsim import __version__
-from mirrorsim.cli import analysis_commands, scene_commands  # noqa: F401 (they register)
+from mirrorsim.cli import (  # noqa: F401 (they register)
+    analysis_commands,
+    authoring_commands,
+    scene_commands,
+)
 from mirrorsim.cli.registry import COMMANDS, check_outputs, stdout_output
 from mirrorsim.errors import (
     DISK_CAUSES,
