@@ -71,13 +71,13 @@ def _detect_options(p):
 def _detect(args) -> int:
     from mirrorsim.cli.tables import detect_summary
     from mirrorsim.detection.detector import annotate
-    from mirrorsim.formats.capture import CaptureRecord, load_capture
-    from mirrorsim.pipelines.frame import check_pair, measure_frame
+    from mirrorsim.formats.capture import CaptureRecord
+    from mirrorsim.pipelines.frame import measure_frame
 
     reference_error = 0.0  # a capture record cannot know its bench's calibration error
     if args.capture:
-        view, source = load_capture(args.capture), f"capture {args.capture}"
-        check_pair(args.frame, view, args.capture)  # before the calibration's renders
+        # the path: measure_frame reads it and names it if it is another frame's record
+        view, source = args.capture, f"capture {args.capture}"
     else:
         scene = load(args.scene)
         view, source = CaptureRecord.from_scene(scene), f"scene {args.scene}"

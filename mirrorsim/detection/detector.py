@@ -38,6 +38,7 @@ Model
 from __future__ import annotations
 
 import errno
+import hashlib
 import math
 import warnings
 from dataclasses import asdict, dataclass
@@ -282,6 +283,7 @@ class StoredFrame:
     pixels: np.ndarray
     subsampled: bool
     jpeg_quality: int = 0  # the JPEG's quality as its tables say (0: a lossless frame)
+    sha256: str = ""  # of the file's bytes, as read (what a capture record names)
 
 
 def read_frame(path: str | Path, size: tuple[int, int] | None = None) -> np.ndarray:
@@ -329,7 +331,8 @@ def read_stored_frame(path: str | Path, size: tuple[int, int] | None = None) -> 
     if jpeg:
         warnings.warn(f"{path}: a JPEG frame: compression blurs the edges the detector "
                       "measures; expect larger errors", RuntimeWarning, stacklevel=2)
-    return StoredFrame(rgb, jpeg, jpeg_quality(raw) if jpeg else 0)
+    return StoredFrame(rgb, jpeg, jpeg_quality(raw) if jpeg else 0,
+                       hashlib.sha256(raw).hexdigest())
 
 
 # libjpeg's luminance quantization table at quality 50 (ITU-T T.81 Annex K), whose

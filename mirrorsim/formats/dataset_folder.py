@@ -213,11 +213,11 @@ def read_table(folder: str | Path) -> dict[str, list]:
     if failed == n:
         raise DatasetError(path, f"all {n} rows failed (their `error` column says why)")
     described = read_description(folder)
-    n_scenes, seed = described["n"], described["seed"]
+    n_scenes = described["n"]
     # the table is its verified rows, value for value: a row file damaged since, or
     # missing, and another dataset's table of the same size (its own seal intact) are
     # found here
-    rows = collect_rows(folder, n_scenes, seed)
+    rows = collect_rows(folder, n_scenes, described)
     if [r.index for r in rows] != cols["index"] or _arrow_of(rows, set(cols))[1] != \
             seal.decode():
         raise DatasetError(path, "its rows differ from the row files in rows/ (another "

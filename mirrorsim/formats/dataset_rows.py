@@ -215,13 +215,13 @@ def _aside(folder: Path, name: str) -> Path:
     return aside
 
 
-def collect_rows(out: Path, n: int, seed: int | None = None) -> list[table.DatasetRow]:
-    """The finished rows of scenes 0..n-1, in index order, each verified (``seed``: the
-    dataset's, read from its ``dataset.json`` when not given)."""
+def collect_rows(out: Path, n: int, meta: dict | None = None) -> list[table.DatasetRow]:
+    """The finished rows of scenes 0..n-1, in index order, each verified against the
+    dataset's settings (``meta``: its description, read from ``dataset.json`` when not
+    given: a caller that holds it does not read the file again)."""
     out = Path(out)
-    if seed is None:
-        seed = read_description(out)["seed"]
-    digest = dataset_digest(out)
+    meta = read_description(out) if meta is None else meta
+    seed, digest = meta["seed"], settings_digest(meta)
     rows = []
     for i in range(n):
         p = out / "rows" / f"{scene_name(i)}.json"

@@ -383,7 +383,7 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
         finally:
             bar.close()
         wall = time.perf_counter() - t_start
-        rows = collect_rows(out, n, seed)
+        rows = collect_rows(out, n)  # against dataset.json as it is on disk
         write_table(out, rows)
         write_card(out, meta, rows, chosen)
         return DatasetRun(rows=len(rows), computed=len(todo) - len(retry),

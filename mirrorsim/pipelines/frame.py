@@ -8,7 +8,6 @@ record (what the experimenter knows), never the scene.
 
 from __future__ import annotations
 
-import hashlib
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from functools import partial
@@ -25,7 +24,7 @@ from mirrorsim.detection.detector import (
 from mirrorsim.detection.image_geometry import Calibration
 from mirrorsim.errors import DetectionError
 from mirrorsim.formats.capture import CaptureError, CaptureRecord, load_capture
-from mirrorsim.formats.files import claim_run_folder, default_out, read_regular_bytes
+from mirrorsim.formats.files import claim_run_folder, default_out
 from mirrorsim.formats.scenefile import check_given_scene
 from mirrorsim.pipelines.calibrate import calibrate
 from mirrorsim.rendering.backend import check_variant
@@ -86,18 +85,13 @@ def check_one_pencil_height(capture: CaptureRecord) -> None:
                            "detect each beacon in a frame of its own (evaluate does)")
 
 
-def check_pair(image_path: str | Path, capture: CaptureRecord, named: str | Path) -> None:
-    """Refuse a frame that is not the one its capture record was written with (the
-    record's ``frame_sha256``, where it has one): beacon 1's record with beacon 0's frame
-    was measured with the wrong believed position, without a word.  A frame renamed with
-    its own record passes: the bytes decide, not the name."""
-    if not capture.frame_sha256:
-        return
-    try:
-        found = hashlib.sha256(read_regular_bytes(image_path)).hexdigest()
-    except OSError:
-        return  # an unreadable frame is refused by its reader, in its words
-    if found != capture.frame_sha256:
+def check_pair(image_path: str | Path, found: str, capture: CaptureRecord,
+               named: str | Path) -> None:
+    """Refuse a frame (its bytes' SHA-256 ``found``) that is not the one its capture
+    record was written with (the record's ``frame_sha256``, where it has one): beacon 1's
+    record with beacon 0's frame was measured with the wrong believed position, without
+    a word.  A frame renamed with its own record passes: the bytes decide, not the name."""
+    if capture.frame_sha256 and found != capture.frame_sha256:
         raise CaptureError(named, "frame_sha256",
                            f"the record of frame {capture.frame or 'another frame'!r}, not of "
                            f"{str(image_path)!r} (its bytes differ): give the frame's own "
@@ -129,8 +123,8 @@ def measure_frame(image_path: str | Path, capture: CaptureRecord | str | Path, *
         check_one_pencil_height(capture)
     cam = capture.camera
     if pixels is None:
-        check_pair(image_path, capture, named)
         stored = read_stored_frame(image_path, (cam.width, cam.height_px))
+        check_pair(image_path, stored.sha256, capture, named)  # before the calibration
         image, lossy, quality = stored.pixels, stored.subsampled, stored.jpeg_quality
     else:  # a lossless PNG just made
         image, lossy, quality = pixels, False, 0
