@@ -225,7 +225,10 @@ def run_dask(fn: Callable, jobs: Iterable[tuple], scheduler: str | None,
     cluster = None
     with _sigint_held():
         if scheduler is None:
-            cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True)
+            # its dashboard on a free port: the default 8787, taken by another cluster or
+            # run on the machine, made the cluster's start warn (an error under pytest)
+            cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                   dashboard_address=":0")
             client = Client(cluster)
         else:
             client = Client(scheduler)
