@@ -132,7 +132,7 @@ def accepted(doc: dict):
     """The scene if `check` accepts it without a warning and shows every image whole,
     else None."""
     from mirrorsim.errors import SceneError
-    from mirrorsim.formats.scenefile import scene_from_dict
+    from mirrorsim.pipelines.scenes import scene_from_dict
     from mirrorsim.truth import visibility
 
     try:
@@ -188,8 +188,8 @@ def run_one(job: tuple) -> dict:
     """Evaluate one scene as `mirrorsim evaluate` does; its record."""
     import warnings
 
-    from mirrorsim.formats.scenefile import scene_from_dict
     from mirrorsim.pipelines.evaluate import evaluate_scene
+    from mirrorsim.pipelines.scenes import scene_from_dict
 
     doc, tries, out, bench, threads = job
     from mirrorsim.rendering.backend import set_render_threads

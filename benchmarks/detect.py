@@ -40,13 +40,13 @@ from clone import ROOT  # noqa: E402  (the clone first on sys.path)
 from mirrorsim.detection.detector import detect_frame, read_stored_frame  # noqa: E402
 from mirrorsim.errors import DetectionError, SceneError  # noqa: E402
 from mirrorsim.formats.error_model import default_error_model  # noqa: E402
-from mirrorsim.formats.scenefile import load_scene, scene_from_dict  # noqa: E402
 from mirrorsim.pipelines.calibrate import calibrate  # noqa: E402
 from mirrorsim.pipelines.frame import (
     render_and_measure,  # noqa: E402
     render_to_files,  # noqa: E402
 )
 from mirrorsim.pipelines.random_scenes import load_spec, sample_scene  # noqa: E402
+from mirrorsim.pipelines.scenes import load_scene, scene_from_dict  # noqa: E402
 from mirrorsim.truth import optics, visibility  # noqa: E402
 from solver.lsq import solve_measurements  # noqa: E402
 

@@ -26,8 +26,8 @@ from mirrorsim.detection.detector import (  # noqa: E402
 )
 from mirrorsim.detection.edges import measure_region  # noqa: E402
 from mirrorsim.detection.regions import find_pencils  # noqa: E402
-from mirrorsim.formats.scenefile import scene_from_dict  # noqa: E402
 from mirrorsim.pipelines.frame import render_to_files  # noqa: E402
+from mirrorsim.pipelines.scenes import scene_from_dict  # noqa: E402
 from mirrorsim.scene.model import (  # noqa: E402
     PENCIL_RADIUS,
     TARGET_THICKNESS,

@@ -20,7 +20,7 @@ import yaml
 from clone import ROOT  # noqa: E402  (the clone first on sys.path)
 from stamp import stamp  # noqa: E402
 
-from mirrorsim.formats.scenefile import scene_from_dict  # noqa: E402
+from mirrorsim.pipelines.scenes import scene_from_dict  # noqa: E402
 from mirrorsim.rendering.passes import render_frame  # noqa: E402
 
 

@@ -31,11 +31,11 @@ from clone import ROOT  # noqa: E402  (the clone first on sys.path)
 
 from mirrorsim.formats.error_model import default_error_model  # noqa: E402
 from mirrorsim.formats.measurements import load_measurements  # noqa: E402
-from mirrorsim.formats.scenefile import load_scene  # noqa: E402
 from mirrorsim.pipelines.budget import run_budget  # noqa: E402
 from mirrorsim.pipelines.evaluate import evaluate_scene  # noqa: E402
 from mirrorsim.pipelines.frame import FrameNotMeasured  # noqa: E402
 from mirrorsim.pipelines.planning import plan_scene  # noqa: E402
+from mirrorsim.pipelines.scenes import load_scene  # noqa: E402
 from mirrorsim.scene.model import Beacon  # noqa: E402
 from solver.geometry import yaw_difference  # noqa: E402
 from solver.lsq import solve_measurements  # noqa: E402

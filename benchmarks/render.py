@@ -23,7 +23,7 @@ from mirrorsim.rendering.backend import VARIANTS, probe  # noqa: E402
 
 _CHILD = r"""
 import json, sys, time
-from mirrorsim.formats.scenefile import load_scene
+from mirrorsim.pipelines.scenes import load_scene
 from mirrorsim.pipelines.frame import render_to_files
 scene = load_scene(sys.argv[1])
 t0 = time.perf_counter()
@@ -44,7 +44,7 @@ def main() -> None:
                     choices=list(VARIANTS))
     args = ap.parse_args()
 
-    from mirrorsim.formats.scenefile import load_scene
+    from mirrorsim.pipelines.scenes import load_scene
 
     scene = load_scene(args.scene)
     spp = args.spp or scene.render.spp

@@ -25,8 +25,8 @@ import yaml
 from clone import ROOT  # noqa: E402  (the clone first on sys.path)
 
 from mirrorsim.camera.sensor import srgb8_to_linear  # noqa: E402
-from mirrorsim.formats.scenefile import scene_from_dict  # noqa: E402
 from mirrorsim.pipelines.frame import render_and_measure  # noqa: E402
+from mirrorsim.pipelines.scenes import scene_from_dict  # noqa: E402
 
 
 def scene(noise: dict | None = None):

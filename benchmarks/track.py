@@ -42,8 +42,8 @@ import numpy as np
 from stamp import stamp  # noqa: E402
 
 from mirrorsim.errors import BadParameter  # noqa: E402
-from mirrorsim.formats.scenefile import load_scene  # noqa: E402
 from mirrorsim.pipelines.planning import plan_scene  # noqa: E402
+from mirrorsim.pipelines.scenes import load_scene  # noqa: E402
 from mirrorsim.pipelines.track import TrackReport, run_track  # noqa: E402
 from mirrorsim.scene.model import Beacon  # noqa: E402
 

@@ -126,8 +126,8 @@ def renders(path: Path, n: int, seed: int) -> None:
     """Evaluate ``path`` with n render seeds; coverage of its 95 % ellipse."""
     import tempfile
 
-    from mirrorsim.formats.scenefile import load_scene
     from mirrorsim.pipelines.evaluate import evaluate_scene
+    from mirrorsim.pipelines.scenes import load_scene
     from mirrorsim.pipelines.uncertainty import binomial_interval
     from solver.sltr import chi2_2_radius
 

@@ -72,7 +72,7 @@ def examples() -> dict[str, str]:
     """The default scene's ground truth, capture record, exact measurements and their
     solution."""
     from mirrorsim.formats.capture import CaptureRecord
-    from mirrorsim.formats.scenefile import load_scene
+    from mirrorsim.pipelines.scenes import load_scene
     from mirrorsim.truth.groundtruth import ground_truth
     from solver.lsq import solve_measurements
 

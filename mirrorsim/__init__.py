@@ -41,8 +41,8 @@ __version__ = "0.2.0"
 
 # name → (module, attribute): the entry points, each declared once in its wing
 _API = {
-    "load_scene": ("mirrorsim.formats.scenefile", "load_scene"),
-    "edit_scene": ("mirrorsim.formats.scenefile", "edit_scene"),
+    "load_scene": ("mirrorsim.pipelines.scenes", "load_scene"),
+    "edit_scene": ("mirrorsim.pipelines.scenes", "edit_scene"),
     "check": ("mirrorsim.truth.groundtruth", "ground_truth"),
     "render": ("mirrorsim.pipelines.frame", "render_to_files"),
     "load_capture": ("mirrorsim.formats.capture", "load_capture"),

@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import errno
 import sys
-from typing import TextIO
+from collections.abc import Callable
+from typing import Any, TextIO
 
 from solver.errors import BadParameter, InputError, SolverError
 
@@ -20,7 +21,7 @@ EXIT_FAILED = 1
 __all__ = ["InputError", "SolverError", "SceneError", "BadParameter", "BadArgument",
            "OutputError", "RunFailed", "DiskError", "DISK_CAUSES", "write_error",
            "DetectionError", "BackendError", "EXIT_BAD_INPUT", "EXIT_FAILED", "exit_status",
-           "one_line_warning"]
+           "one_line_warning", "Failures"]
 
 
 class SceneError(InputError):
@@ -28,6 +29,40 @@ class SceneError(InputError):
     same file (independent of this one; ``mirrorsim check`` lists them all)."""
 
     others: tuple[SceneError, ...] = ()
+
+
+class Failures:
+    """The failures found so far in one scene: each independent check is attempted, and
+    the first failure is raised with the others attached (``SceneError.others``).  The
+    scene reader and the composer (:mod:`mirrorsim.truth.compose`) share one."""
+
+    def __init__(self, lenient: bool = False):
+        self.found: list[SceneError] = []
+        # lenient: only a block that cannot be read stops the scene being built (plot)
+        self.lenient = lenient
+
+    def attempt(self, fn: Callable, *args, default: Any = None) -> Any:
+        """``fn(*args)``, or ``default`` with its SceneError recorded."""
+        try:
+            return fn(*args)
+        except SceneError as exc:
+            self.found.append(exc)
+            return default
+
+    def raise_any(self, hint: str = "", structural: bool = False) -> None:
+        """Raise the first failure found, the others attached, with ``hint`` added to its
+        line (a value in the wrong units is blamed on another key); when lenient, only
+        ``structural`` failures (a block not read) are raised."""
+        if not self.found:
+            return
+        first = self.found[0]
+        if hint and hint not in first.message:
+            first = self.found[0] = SceneError(first.file, first.key,
+                                               f"{first.message} ({hint})")
+        if self.lenient and not structural:
+            return
+        first.others = tuple(self.found[1:])
+        raise first
 
 
 class BadArgument(InputError):

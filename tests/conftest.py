@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from mirrorsim.formats.scenefile import scene_from_dict
+from mirrorsim.pipelines.scenes import scene_from_dict
 from mirrorsim.scene.model import Scene
 
 ROOT = Path(__file__).resolve().parents[1]

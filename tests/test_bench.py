@@ -16,8 +16,8 @@ from mirrorsim.camera.sensor import add_noise, undistort_points
 from mirrorsim.cli.main import main
 from mirrorsim.detection.detector import read_frame
 from mirrorsim.formats.capture import CaptureRecord
-from mirrorsim.formats.scenefile import scene_from_dict
 from mirrorsim.pipelines.frame import render_and_measure
+from mirrorsim.pipelines.scenes import scene_from_dict
 from mirrorsim.rendering.frames import scene_fingerprint
 from mirrorsim.rendering.mitsuba_scene import TARGET_LABEL
 from mirrorsim.rendering.passes import IN_MIRROR

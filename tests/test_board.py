@@ -24,9 +24,9 @@ from mirrorsim.detection.detector import read_frame
 from mirrorsim.errors import DetectionError
 from mirrorsim.formats.capture import CaptureRecord
 from mirrorsim.formats.files import claim_output_folder
-from mirrorsim.formats.scenefile import scene_from_dict
 from mirrorsim.pipelines.evaluate import evaluate_scene
 from mirrorsim.pipelines.frame import render_and_measure, render_to_files
+from mirrorsim.pipelines.scenes import scene_from_dict
 from mirrorsim.pipelines.score import Report
 from mirrorsim.scene.model import Board, Camera
 from mirrorsim.truth import optics

@@ -16,7 +16,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "mirrorsim"
 # the wings in the order data flows through them: a wing imports only wings before it
-WINGS = ("scene", "truth", "formats", "camera", "rendering", "detection", "pipelines", "cli")
+WINGS = ("scene", "formats", "truth", "camera", "rendering", "detection", "pipelines", "cli")
 SHARED = {"errors", "arguments", "progress", "__init__"}  # the errors, the API's argument
 # check, the progress bars and the package's face: for every wing
 DATA = "data"  # files shipped with the package (the default error model); no code
@@ -113,8 +113,53 @@ def test_rendering_reads_no_scene_file():
     """The renderer renders a Scene it is given: the file reader and its checks belong
     to the entry points (``ms.render`` is ``pipelines.frame.render_to_files``)."""
     bad = [(p.name, m) for p in _modules(PACKAGE / "rendering") for m in _imports(p)
-           if m.startswith(("mirrorsim.formats.scenefile", "mirrorsim.formats.scene_checks"))]
+           if m.startswith(("mirrorsim.formats.scenefile", "mirrorsim.truth.scene_checks",
+                            "mirrorsim.truth.compose", "mirrorsim.pipelines.scenes"))]
     assert bad == []
+
+
+def test_the_file_reader_only_parses():
+    """``formats/`` reads files: it imports nothing of the truth (the optics, the checks
+    between objects, the composer); the wing order holds it, and this says why."""
+    bad = [(p.name, m) for p in _modules(PACKAGE / "formats") for m in _imports(p)
+           if m.startswith("mirrorsim.truth")]
+    assert bad == []
+
+
+# what only the composer derives, and where a scene is made whole
+DERIVED = ("target_facing", "resolve_pan")
+COMPOSES = ("compose_scene", "with_derived")
+
+
+def _calls(path: Path) -> set[str]:
+    """The names ``path`` calls (``f(…)`` or ``module.f(…)``)."""
+    out = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Call):
+            fn = node.func
+            out.add(fn.attr if isinstance(fn, ast.Attribute) else getattr(fn, "id", ""))
+    return out
+
+
+def test_a_scene_is_composed_in_one_place():
+    """The target's facing and the pan are derived by the composer alone
+    (``truth/compose.py``), and a scene is composed only where it enters
+    (``pipelines/scenes.py``) or where the tracker believes one (``track_paths.py``)."""
+    derives = sorted(p.relative_to(PACKAGE).as_posix() for p in _modules(PACKAGE)
+                     if _calls(p) & set(DERIVED))
+    assert derives == ["truth/compose.py"]
+    composes = sorted(p.relative_to(PACKAGE).as_posix() for p in _modules(PACKAGE)
+                      if _calls(p) & set(COMPOSES))
+    assert composes == ["pipelines/scenes.py", "pipelines/track_paths.py", "truth/compose.py"]
+
+
+def test_no_scene_is_written_out_to_be_checked():
+    """A scene is checked by composing it, not by writing it back into a file's document
+    and reading that again: only an edit (which merges into the file's keys) and the
+    value check of a scene given to the API turn a scene back into a document."""
+    users = sorted(p.relative_to(PACKAGE).as_posix() for p in _modules(PACKAGE)
+                   if "scene_document" in _calls(p))
+    assert users == ["pipelines/random_scenes.py", "pipelines/scenes.py"]
 
 
 def test_rendering_imports_no_detection():
@@ -185,6 +230,10 @@ def test_the_checks_above_can_fail(tmp_path):
     consts = [c.value for c in ast.walk(ast.parse(f.read_text()))
               if isinstance(c, ast.Constant) and isinstance(c.value, str)]
     assert any(FLAG.search(c) for c in consts)
+    # the call reader sees a facing derived through a module, and a composer called
+    f.write_text("from mirrorsim.truth import optics\n"
+                 "def g(s):\n    return optics.target_facing(1, 2, 3), compose_scene(s)\n")
+    assert {"target_facing", "compose_scene"} <= _calls(f)
 
 
 def _unannotated(path: Path) -> list[str]:

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from mirrorsim.cli.main import main
-from mirrorsim.formats.scenefile import load_scene
 from mirrorsim.pipelines import errormodel
 from mirrorsim.pipelines.dataset import collect_rows, run_dataset
+from mirrorsim.pipelines.scenes import load_scene
 from solver.selfcal import SelfCalibration
 from tests.conftest import synthetic_columns
 

@@ -11,9 +11,9 @@ from mirrorsim.cli.main import main
 from mirrorsim.detection.detector import detect_frame, read_frame
 from mirrorsim.errors import DetectionError
 from mirrorsim.formats.capture import CaptureRecord
-from mirrorsim.formats.scenefile import load_scene
 from mirrorsim.pipelines.calibrate import calibrate
 from mirrorsim.pipelines.frame import render_to_files
+from mirrorsim.pipelines.scenes import load_scene
 
 from .conftest import SCENES, small_scene
 
@@ -225,7 +225,7 @@ def test_off_axis_target_has_no_bearing_bias_and_is_not_clipped(tmp_path, off_ax
     perspective widens the image by 1/cos φ, which must not read as a clip."""
     import copy
 
-    from mirrorsim.formats.scenefile import scene_from_dict
+    from mirrorsim.pipelines.scenes import scene_from_dict
     from mirrorsim.truth import optics
 
     from .conftest import scene_dict

@@ -9,8 +9,8 @@ import yaml
 
 from mirrorsim.cli.main import main
 from mirrorsim.cli.tables import report_table
-from mirrorsim.formats.scenefile import load_scene, scene_from_dict
 from mirrorsim.pipelines.evaluate import evaluate_scene
+from mirrorsim.pipelines.scenes import load_scene, scene_from_dict
 from mirrorsim.pipelines.score import Report
 from solver.geometry import yaw_difference
 from solver.selfcal import SelfCalibration

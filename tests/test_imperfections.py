@@ -9,8 +9,8 @@ import pytest
 import yaml
 
 from mirrorsim.errors import SceneError
-from mirrorsim.formats.scenefile import scene_from_dict
 from mirrorsim.pipelines import errormodel, random_scenes
+from mirrorsim.pipelines.scenes import scene_from_dict
 from mirrorsim.scene import imperfections
 from mirrorsim.scene.imperfections import REGISTRY
 from mirrorsim.scene.model import Bench

@@ -185,7 +185,7 @@ def test_a_scene_at_the_bounds_renders():
 
     import numpy as np
 
-    from mirrorsim.formats.scenefile import scene_from_dict
+    from mirrorsim.pipelines.scenes import scene_from_dict
     from mirrorsim.rendering.passes import render_frame
     from mirrorsim.scene.model import MAX_BOARD_CM, MAX_CURVATURE_RADIUS, MAX_FULL_WELL
 
@@ -508,7 +508,7 @@ def test_a_huge_frame_is_refused_from_its_header(tmp_path, capsys, kind):
 def _capture(tmp_path) -> Path:
     from mirrorsim.formats.capture import CaptureRecord
     from mirrorsim.formats.files import write_json
-    from mirrorsim.formats.scenefile import load_scene
+    from mirrorsim.pipelines.scenes import load_scene
 
     from .conftest import SCENES
 

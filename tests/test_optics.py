@@ -6,7 +6,7 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from mirrorsim.formats.scenefile import scene_from_dict
+from mirrorsim.pipelines.scenes import scene_from_dict
 from mirrorsim.scene.model import MIRROR_LIP, Camera, Mirror
 from mirrorsim.truth import groundtruth, optics, visibility
 from solver.geometry import signed_distance, unit

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from mirrorsim.formats.scenefile import load_scene
+from mirrorsim.pipelines.scenes import load_scene
 from mirrorsim.scene.model import FRONT_OFFSET, Mirror, pencil_paint_height
 from mirrorsim.truth import optics
 from solver.sltr import solve_single

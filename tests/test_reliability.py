@@ -360,7 +360,7 @@ def half_frames(tmp_path_factory):
         d["camera"]["resolution"] = [960, 544]
         path = folder / f"{name}.yaml"
         path.write_text(yaml.safe_dump(d))
-        from mirrorsim.formats.scenefile import load_scene
+        from mirrorsim.pipelines.scenes import load_scene
 
         files = render_to_files(load_scene(path).with_render(spp=8), folder / name, progress=False)
         scenes[name] = (path, files.image)

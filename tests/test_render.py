@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from mirrorsim.errors import BadParameter
-from mirrorsim.formats.scenefile import load_scene, scene_from_dict
 from mirrorsim.pipelines.frame import render_to_files
+from mirrorsim.pipelines.scenes import load_scene, scene_from_dict
 from mirrorsim.rendering.mitsuba_scene import BEACON_LABEL, MIRROR_LABEL, TARGET_LABEL
 from mirrorsim.rendering.passes import IN_MIRROR
 from mirrorsim.truth import optics

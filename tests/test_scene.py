@@ -8,7 +8,7 @@ import pytest
 
 from mirrorsim.cli.main import main
 from mirrorsim.errors import SceneError
-from mirrorsim.formats.scenefile import load_scene
+from mirrorsim.pipelines.scenes import load_scene
 
 from .conftest import SCENES
 

@@ -82,7 +82,7 @@ def test_plan_places_several_beacons_and_says_what_each_buys(tmp_path):
     import json
 
     from mirrorsim.cli.main import main
-    from mirrorsim.formats.scenefile import load_scene
+    from mirrorsim.pipelines.scenes import load_scene
     from mirrorsim.truth import optics
     from solver.placement import MirrorPrior
 

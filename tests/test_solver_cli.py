@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from mirrorsim.cli.main import main
-from mirrorsim.formats.scenefile import load_scene
+from mirrorsim.pipelines.scenes import load_scene
 from mirrorsim.truth import optics
 from solver.geometry import reflect
 from solver.montecarlo import PAPER_TABLE1, Table1Geometry, run_row, table1
@@ -278,7 +278,7 @@ def test_review_mends_of_the_sweeps(tmp_path, capsys):
     from mirrorsim.cli.registry import stdout_output
     from mirrorsim.formats.dataset_folder import settings_digest
     from mirrorsim.formats.files import check_inputs_outside
-    from mirrorsim.formats.scenefile import load_scene
+    from mirrorsim.pipelines.scenes import load_scene
 
     assert main(["budget", str(SCENES / "exp1.yaml"), "--beacon-sigma", "0.1", "--out",
                  str(tmp_path / "b")]) == 2

@@ -105,7 +105,7 @@ def test_paths_stay_on_the_board_and_in_front_of_the_glass(name, kind):
     planner never saw it: it reads the measurements only)."""
     import numpy as np
 
-    from mirrorsim.formats.scenefile import load_scene
+    from mirrorsim.pipelines.scenes import load_scene
     from mirrorsim.pipelines.track_paths import CLEARANCE_CM, beacon_path
     from mirrorsim.truth.groundtruth import ground_truth
     from solver.geometry import signed_distance
@@ -138,7 +138,7 @@ def test_the_view_heading_keeps_the_beacon_in_the_mirror(name):
     camera's line fewer are seen on exp1 and exp3."""
     from dataclasses import replace
 
-    from mirrorsim.formats.scenefile import load_scene
+    from mirrorsim.pipelines.scenes import load_scene
     from mirrorsim.pipelines.track_paths import beacon_path
     from mirrorsim.truth.groundtruth import ground_truth
     from mirrorsim.truth.visibility import visibility
@@ -177,7 +177,7 @@ def test_the_path_does_not_read_the_scene_s_mirror_or_target():
 
     import numpy as np
 
-    from mirrorsim.formats.scenefile import load_scene
+    from mirrorsim.pipelines.scenes import load_scene
     from mirrorsim.pipelines.track_paths import beacon_path
     from mirrorsim.truth.groundtruth import ground_truth
 
@@ -226,7 +226,7 @@ def test_the_path_keeps_clear_of_fixed_beacons():
 
     import numpy as np
 
-    from mirrorsim.formats.scenefile import load_scene
+    from mirrorsim.pipelines.scenes import load_scene
     from mirrorsim.pipelines.track_paths import FIXED_CLEARANCE_CM, beacon_path
     from mirrorsim.scene.model import Beacon
     from mirrorsim.truth.groundtruth import ground_truth
@@ -256,8 +256,8 @@ def test_a_path_keeps_the_beacon_clear_of_the_target_and_the_walls(tmp_path, mon
 
     import mirrorsim as ms
     from mirrorsim.errors import BadParameter
-    from mirrorsim.formats.scenefile import load_scene
     from mirrorsim.pipelines import track_paths
+    from mirrorsim.pipelines.scenes import load_scene
     from mirrorsim.pipelines.track_paths import OBJECT_CLEARANCE_CM, beacon_path
     from mirrorsim.scene.model import OCCLUDER_THICKNESS, PENCIL_RADIUS
     from mirrorsim.truth.groundtruth import ground_truth

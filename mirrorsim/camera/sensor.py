@@ -38,7 +38,7 @@ def _grid(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
 def undistort_points(x: np.ndarray, y: np.ndarray, k: tuple[float, float]
                      ) -> tuple[np.ndarray, np.ndarray]:
     """The ideal normalized coordinates of distorted ones (inverts the radial model by
-    fixed-point iteration; converges for the lenses :func:`mirrorsim.formats.scenefile`
+    fixed-point iteration; converges for the lenses :mod:`mirrorsim.formats.scenefile`
     accepts, whose r·(1 + k1 r² + k2 r⁴) grows over the frame)."""
     xu, yu = x.copy(), y.copy()
     for _ in range(UNDISTORT_ITERATIONS):

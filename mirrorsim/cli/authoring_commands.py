@@ -89,7 +89,7 @@ def _plot_options(p):
 def _plot(args) -> int:
     from mirrorsim.cli.top_view import plot_top_view
     from mirrorsim.errors import SceneError
-    from mirrorsim.formats.scenefile import scene_and_failures
+    from mirrorsim.pipelines.scenes import scene_and_failures
 
     try:
         scene = load(args.scene)

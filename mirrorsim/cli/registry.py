@@ -382,7 +382,7 @@ def render_options(args: argparse.Namespace, scene: Scene) -> Scene:
 
 def load(path: Path) -> Scene:
     """Load a scene and print its warnings on stderr."""
-    from mirrorsim.formats.scenefile import load_scene
+    from mirrorsim.pipelines.scenes import load_scene
 
     scene = load_scene(path)
     for w in scene.warnings:

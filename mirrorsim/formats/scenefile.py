@@ -1,35 +1,26 @@
-"""Scene files: YAML → :class:`mirrorsim.scene.model.Scene`, with every check.
+"""Scene files parsed: YAML → a :class:`mirrorsim.scene.model.Scene` whose every value is
+checked on its own, and back (:func:`scene_document`).
 
-:func:`load_scene` turns a file into a complete scene or raises
+:func:`parse_scene` reads each block's keys and values or raises
 :class:`~mirrorsim.errors.SceneError`, whose one-line message names the file, the key
-path and the bad value.  The geometric checks (edge-on mirror, objects behind it,
-images that do not reach the camera) use :mod:`mirrorsim.truth.optics`.
+path and the bad value.  It only parses: what the geometry decides (the target panel's
+facing, the camera's pan bearing) is left NaN, and the checks between objects are the
+composer's (:func:`mirrorsim.truth.compose.compose_scene`); the entry points
+(:mod:`mirrorsim.pipelines.scenes`) call one, then the other.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
-from dataclasses import replace
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from mirrorsim.errors import BadParameter, SceneError
+from mirrorsim.errors import BadParameter, Failures, SceneError
 from mirrorsim.formats.capture import read_board, read_distortion
-from mirrorsim.formats.files import jsonable
 from mirrorsim.formats.reader import Reader, read_resolution, read_yaml, show
-from mirrorsim.formats.scene_checks import (
-    Failures,
-    board_check,
-    check_all_on_board,
-    check_mirror_faces,
-    check_overlaps,
-    check_sight,
-    fmt,
-    unit_hints,
-)
 from mirrorsim.scene.imperfections import (
     REGISTRY,
     Imperfection,
@@ -55,26 +46,20 @@ from mirrorsim.scene.model import (
     Scene,
     SensorNoise,
     Target,
-    check_is_scene,
     fx_of,
 )
-from mirrorsim.truth import optics
 
 DEFAULT_RESOLUTION = (1920, 1088)
 
 
 # a scene's name: a plain file name
 
-def load_scene(path: str | Path) -> Scene:
-    """Read and validate a scene file.
-
-    Raises
-    ------
-    SceneError
-        For any bad input, with the file, the key path and what is wrong.
-    """
+def read_scene_file(path: str | Path, *, failures: Failures | None = None
+                    ) -> tuple[Scene, Callable[[int], str]]:
+    """A scene file parsed (:func:`parse_scene`), its file's stem the name it lacks."""
     path = Path(path)
-    return scene_from_dict(read_yaml(path), source=str(path), default_name=path.stem)
+    return parse_scene(read_yaml(path), source=str(path), default_name=path.stem,
+                       failures=failures)
 
 
 def read_camera_model(r: Reader, cam: dict, key: str,
@@ -108,33 +93,20 @@ def read_render(r: Reader, block: Any, key: str = "render", seed: bool = True
         raise r.fail(f"{key}.{exc.parameter}", exc.message) from None
 
 
-def scene_from_dict(data: Any, source: str = "<scene>", default_name: str = "scene") -> Scene:
-    """Build and validate a :class:`Scene` from parsed YAML (see docs/scenes.md).
+def parse_scene(data: Any, *, source: str = "<scene>", default_name: str = "scene",
+                failures: Failures | None = None) -> tuple[Scene, Callable[[int], str]]:
+    """A scene file's parsed YAML (see docs/scenes.md) as a :class:`Scene` whose values
+    are each checked, its derived fields NaN; and how the file names beacon ``i``
+    (``beacon`` or ``beacons[i]``), for the composer's messages.
 
     Raises
     ------
     SceneError
-        The first failure, with every other one found in the file in ``others``: the
-        blocks are read independently, and the checks between objects (on the board,
-        in front of the mirror, overlaps, sight) each run where their blocks were read.
+        The first failure, with every other one found in the file in ``others`` (the
+        blocks are read independently); with a lenient ``failures``, only a block that
+        cannot be read.
     """
-    return _build(data, source, default_name, Failures())
-
-
-def scene_and_failures(path: str | Path) -> tuple[Scene | None, tuple[SceneError, ...]]:
-    """A scene file read as far as it goes: the scene (None where a block cannot be read)
-    and every failure found, for ``mirrorsim plot`` to draw an invalid scene with its
-    failures marked.  Never raises SceneError."""
-    path = Path(path)
-    f = Failures(lenient=True)
-    try:
-        scene = _build(read_yaml(path), str(path), path.stem, f)
-    except SceneError as exc:
-        return None, (exc, *exc.others)
-    return scene, tuple(f.found)
-
-
-def _build(data: Any, source: str, default_name: str, f: Failures) -> Scene:
+    f = Failures() if failures is None else failures
     r = Reader(source, SceneError)
     top = r.mapping(
         data, "",
@@ -160,34 +132,15 @@ def _build(data: Any, source: str, default_name: str, f: Failures) -> Scene:
     f.raise_any(structural=True)  # a block that cannot be read leaves nothing to check
 
     height, hfov, resolution = model
-    hint = unit_hints(board, mirror, hfov, [
-        ("camera.position", position), ("mirror.center", mirror.center),
-        ("target.position", target_position),
-        *((f"{bkey(i)}.position", b.position) for i, b in enumerate(beacons))])
-    on_board = board_check(r, board)
     bench = f.attempt(_bench, r, cam, m, top.get("calibration", {}), mirror, resolution, hfov)
     f.raise_any()  # a bench key out of its bounds is said as it is, without a unit hint
     bench = bench or Bench()  # (lenient, for plot: a bad bench key drawn as the ideal)
-    check_all_on_board(f, on_board, position, mirror, target_position, beacons, bkey,
-                        occluders)
-    f.raise_any(hint)
-    f.attempt(check_mirror_faces, f, r, position, mirror, target_position, beacons, bkey)
-    f.raise_any(hint)
-
-    # derived values, computed once here: the panel faces the camera's virtual image
-    target = Target(target_position, target_size,
-                    optics.target_facing(position, mirror, target_position))
-    for end in target.ends():
-        f.attempt(on_board, end, "target.position", f"the target panel's edge {fmt(end)}")
-    f.raise_any(hint)
-    pan_deg = optics.resolve_pan(position, pan, mirror, target_position, beacons[0].position)
-    camera = Camera(position, height, resolution, hfov, pan, pan_deg)
-    scene = Scene(name=name, board=board, camera=camera, mirror=mirror, target=target,
-                  beacons=beacons, occluders=occluders, render=rs, bench=bench, source=source)
-    check_overlaps(f, scene, r, bkey)
-    warnings = check_sight(f, scene, r, bkey)
-    f.raise_any(hint)
-    return replace(scene, warnings=warnings)
+    # what the geometry decides is the composer's: NaN until it is composed
+    target = Target(target_position, target_size, math.nan)
+    camera = Camera(position, height, resolution, hfov, pan, math.nan)
+    return Scene(name=name, board=board, camera=camera, mirror=mirror, target=target,
+                 beacons=beacons, occluders=occluders, render=rs, bench=bench,
+                 source=source), bkey
 
 
 def scene_document(scene: Scene) -> dict:
@@ -217,82 +170,6 @@ def scene_document(scene: Scene) -> dict:
     if len(scene.beacons) == 1:
         d["beacon"] = d.pop("beacons")[0]
     return d
-
-
-def edit_scene(scene: Scene, changes: Mapping[str, Any]) -> Scene:
-    """``scene`` with some of its file's keys changed, built again as a scene file is:
-    every check runs, and what the file's geometry decides (the target panel's facing, a
-    pan aimed with ``mirror``, ``target`` or ``beacon``) follows the edit.
-    ``dataclasses.replace`` recomputes none of it.
-
-    ``changes`` nests as the file does, ``{"mirror": {"yaw": 20}, "name": "yaw20"}``: a
-    mapping merges into its block, whose other keys keep their values (a beacon moved by
-    ``{"beacon": {"position": …}}`` keeps a ``known_position`` its file gave), and any
-    other value (a list too: ``beacons``) replaces its key.  numpy numbers are taken as
-    numbers.
-
-    Raises
-    ------
-    SceneError
-        An edit the file's checks refuse, naming its key (the source reads
-        ``SOURCE (edited)``).
-    BadParameter
-        ``changes`` is not a mapping.
-    """
-    check_is_scene(scene)
-    if not isinstance(changes, Mapping):
-        raise BadParameter("changes", f"expected a mapping of scene-file keys, not "
-                           f"{type(changes).__name__}")
-    doc = scene_document(scene)
-    if "beacons" in changes:  # the one-beacon form gives way to the list given
-        doc.pop("beacon", None)
-    elif "beacon" in changes and "beacons" in doc:
-        raise BadParameter("changes", f"beacon: {scene.name} has {len(scene.beacons)} beacons; "
-                           "give `beacons`, the whole list")
-    # numpy numbers (a script's np.arange of yaws) as a file's; NaN left to be refused
-    plain = jsonable(changes, nonfinite_as_null=False)
-    edited = scene_from_dict(_merged(doc, plain), source=f"{scene.source} (edited)",
-                             default_name=scene.name)
-    return replace(edited, source=scene.source)
-
-
-def _merged(doc: dict, changes: Mapping[str, Any]) -> dict:
-    out = dict(doc)
-    for key, value in changes.items():
-        if isinstance(value, Mapping) and isinstance(out.get(key), dict):
-            out[key] = _merged(out[key], value)
-        else:
-            out[key] = value
-    return out
-
-
-def check_given_scene(scene: Any) -> Scene:
-    """A scene given to the Python API, held to what its file would make of it: a scene
-    edited with ``dataclasses.replace`` skips the file's checks and keeps the target's
-    facing and the pan that its old geometry decided (a mirror turned by 10° left the
-    panel facing the old mirror).  Returns ``scene``.
-
-    Raises
-    ------
-    SceneError
-        The edited scene fails a check of the scene file (naming the key).
-    BadParameter
-        ``scene`` is not a :class:`Scene`, or what its geometry decides has not followed
-        an edit (use :func:`edit_scene`).
-    """
-    check_is_scene(scene)
-    again = scene_from_dict(scene_document(scene), source=f"{scene.source} (edited)",
-                            default_name=scene.name)
-    stale = [what for what, given, made in (
-        ("target panel's facing", scene.target.facing_deg, again.target.facing_deg),
-        ("camera's pan bearing", scene.camera.pan_deg, again.camera.pan_deg))
-        if not math.isclose(given, made, rel_tol=0, abs_tol=1e-9)]
-    if stale:
-        raise BadParameter("scene", f"{scene.name}: the {' and the '.join(stale)} no longer "
-                           f"follow{'s' if len(stale) == 1 else ''} its geometry (edited with "
-                           "dataclasses.replace, which recomputes nothing): edit it with "
-                           "mirrorsim.edit_scene")
-    return scene
 
 
 def _name(r: Reader, top: dict, default_name: str) -> str:

@@ -23,8 +23,8 @@ from mirrorsim.detection.detector import annotate
 from mirrorsim.errors import BadParameter, DetectionError
 from mirrorsim.formats.error_model import ErrorModel, default_error_model, load_error_model
 from mirrorsim.formats.files import claim_run_folder, default_out, write_png
-from mirrorsim.formats.scenefile import check_given_scene
 from mirrorsim.pipelines.frame import MeasuredFrame, render_and_measure
+from mirrorsim.pipelines.scenes import check_given_scene
 from mirrorsim.pipelines.score import (
     EXTRA_FILES,
     FrameRecord,

@@ -25,8 +25,8 @@ from mirrorsim.detection.image_geometry import Calibration
 from mirrorsim.errors import DetectionError
 from mirrorsim.formats.capture import CaptureError, CaptureRecord, load_capture
 from mirrorsim.formats.files import claim_run_folder, default_out
-from mirrorsim.formats.scenefile import check_given_scene
 from mirrorsim.pipelines.calibrate import calibrate
+from mirrorsim.pipelines.scenes import check_given_scene
 from mirrorsim.rendering.backend import check_variant
 from mirrorsim.rendering.frames import FrameFiles, capture_of, reused_frame, write_frame
 from mirrorsim.rendering.passes import render_frame, scene_fingerprint

@@ -10,7 +10,7 @@ import numpy as np
 
 from mirrorsim.detection.assign import REFLECTION_EXCESS
 from mirrorsim.errors import BadParameter
-from mirrorsim.formats.scenefile import check_given_scene
+from mirrorsim.pipelines.scenes import check_given_scene
 from mirrorsim.scene.model import (
     MIRROR_DEPTH,
     OCCLUDER_THICKNESS,

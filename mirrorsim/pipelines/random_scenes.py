@@ -25,8 +25,8 @@ from mirrorsim.formats.scenefile import (
     read_pan,
     read_render,
     scene_document,
-    scene_from_dict,
 )
+from mirrorsim.pipelines.scenes import scene_from_dict
 from mirrorsim.scene.imperfections import REGISTRY
 from mirrorsim.scene.model import MAX_BOARD_CM, Camera, Scene
 from mirrorsim.truth import visibility

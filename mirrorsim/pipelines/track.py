@@ -32,9 +32,9 @@ from mirrorsim.detection.image_geometry import Calibration
 from mirrorsim.errors import BadParameter, DetectionError
 from mirrorsim.formats.error_model import ErrorModel
 from mirrorsim.formats.files import claim_run_folder
-from mirrorsim.formats.scenefile import check_given_scene
 from mirrorsim.pipelines.evaluate import model_for
 from mirrorsim.pipelines.frame import FrameNotMeasured, render_and_measure
+from mirrorsim.pipelines.scenes import check_given_scene
 from mirrorsim.pipelines.track_paths import HEADINGS, PATHS, beacon_path
 from mirrorsim.rendering.backend import check_variant
 from mirrorsim.scene.model import MAX_SEED, Scene, is_whole

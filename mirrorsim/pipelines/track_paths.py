@@ -9,7 +9,7 @@ import numpy as np
 
 from mirrorsim.errors import BadParameter
 from mirrorsim.scene.model import PENCIL_RADIUS, Bench, Scene, footprints
-from mirrorsim.truth.optics import target_facing
+from mirrorsim.truth.compose import with_derived
 from mirrorsim.truth.visibility import visibility
 from solver.errors import SolverError
 from solver.geometry import bearing_deg, line_normal, segment_distance, wrap_bearing
@@ -125,8 +125,11 @@ def _believed_scene(scene: Scene, o: np.ndarray, yaw: float, mid: np.ndarray,
         centre = hit
     mirror = replace(scene.mirror, yaw=yaw, center=tuple(map(float, centre)))
     target = tuple(map(float, locate(o, mid, yaw, *target_obs)))
-    return replace(scene, mirror=mirror, bench=Bench(), target=replace(
-        scene.target, position=target, facing_deg=target_facing(o, mirror, target)))
+    # the panel's facing follows the believed mirror; the pan stays the bearing the
+    # camera was set to (a believed scene is never checked: it is what was measured)
+    believed = with_derived(replace(scene, mirror=mirror, bench=Bench(), target=replace(
+        scene.target, position=target)))
+    return replace(believed, camera=scene.camera)
 
 
 def _seen_in(scene: Scene, beacon) -> bool:

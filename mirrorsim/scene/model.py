@@ -1,8 +1,9 @@
 """The scene as data: complete, immutable, no I/O.
 
-Every field is known when a :class:`Scene` is made: the camera's resolved pan and the
-target's facing are computed from the geometry by :mod:`mirrorsim.truth.optics` when
-:mod:`mirrorsim.formats.scenefile` builds the model, never left as placeholders.
+A :class:`Scene` from an entry point (:mod:`mirrorsim.pipelines.scenes`) is whole: the
+camera's resolved pan and the target's facing are computed from the geometry by
+:func:`mirrorsim.truth.compose.compose_scene`.  Only the scene reader's own output,
+before it is composed, leaves them NaN.
 """
 
 from __future__ import annotations
@@ -338,7 +339,7 @@ _DERIVED_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,127}")
 
 @dataclass(frozen=True)
 class Scene:
-    """A validated scene.  Build one with :func:`mirrorsim.formats.scenefile.load_scene`."""
+    """A validated scene.  Build one with :func:`mirrorsim.pipelines.scenes.load_scene`."""
 
     name: str
     board: Board

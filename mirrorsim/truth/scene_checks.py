@@ -1,7 +1,7 @@
-"""The checks between a scene's objects, once each block of its file has been read: on
-the board, in front of the mirror's face, not overlapping, seen through the mirror; and
-the failures found, collected so that ``mirrorsim check`` lists them all and ``plot``
-can draw an invalid scene.
+"""The checks between a scene's objects, whatever made the scene (a file, an edit, a
+random draw): on the board, in front of the mirror's face, not overlapping, seen
+through the mirror.  Each failure names its key path; :func:`mirrorsim.truth.compose.compose_scene`
+collects them (``mirrorsim check`` lists them all, ``plot`` draws an invalid scene).
 """
 
 from __future__ import annotations
@@ -13,46 +13,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from mirrorsim.errors import SceneError
-from mirrorsim.formats.reader import Reader
+from mirrorsim.errors import Failures, SceneError
 from mirrorsim.scene.model import PENCIL_RADIUS, Beacon, Board, Mirror, Occluder, Scene, footprints
 from mirrorsim.truth import optics, visibility
 from solver.geometry import segment_distance, signed_distance
 
+Fail = Callable[[str, str], SceneError]  # (key path, message) → the error naming the file
+
 EDGE_ON_LIMIT_DEG = 5.0  # a mirror seen at a more grazing angle than this is edge-on
-
-
-class Failures:
-    """The failures found so far in one file: each independent check is attempted, and
-    the first failure is raised with the others attached (``SceneError.others``)."""
-
-    def __init__(self, lenient: bool = False):
-        self.found: list[SceneError] = []
-        # lenient: only a block that cannot be read stops the scene being built (plot)
-        self.lenient = lenient
-
-    def attempt(self, fn: Callable, *args, default: Any = None) -> Any:
-        """``fn(*args)``, or ``default`` with its SceneError recorded."""
-        try:
-            return fn(*args)
-        except SceneError as exc:
-            self.found.append(exc)
-            return default
-
-    def raise_any(self, hint: str = "", structural: bool = False) -> None:
-        """Raise the first failure found, the others attached, with ``hint`` added to its
-        line (a value in the wrong units is blamed on another key); when lenient, only
-        ``structural`` failures (a block not read) are raised."""
-        if not self.found:
-            return
-        first = self.found[0]
-        if hint and hint not in first.message:
-            first = self.found[0] = SceneError(first.file, first.key,
-                                               f"{first.message} ({hint})")
-        if self.lenient and not structural:
-            return
-        first.others = tuple(self.found[1:])
-        raise first
 
 
 def unit_hints(board: Board, mirror: Mirror, hfov: float, positions: Iterable[ArrayLike]) -> str:
@@ -97,7 +65,7 @@ def check_all_on_board(f: Failures, on_board: Callable[[Any, str, str], bool], p
         f.attempt(on_board, o.end, f"occluders[{i}].end", "the wall's end")
 
 
-def board_check(r: Reader, board: Board) -> Callable[[Any, str, str], bool]:
+def board_check(fail: Fail, board: Board) -> Callable[[Any, str, str], bool]:
     """``on_board(point, key, what)``: True, or raises naming the key where the point
     lies off ``board``."""
     W, H = board.size
@@ -105,13 +73,13 @@ def board_check(r: Reader, board: Board) -> Callable[[Any, str, str], bool]:
     def on_board(p, key: str, what: str) -> bool:
         tol = 1e-9
         if not (-tol <= p[0] <= W + tol and -tol <= p[1] <= H + tol):
-            raise r.fail(key, f"{fmt(p)}: {what} lies off the board [0, {W:g}] × [0, {H:g}]")
+            raise fail(key, f"{fmt(p)}: {what} lies off the board [0, {W:g}] × [0, {H:g}]")
         return True
 
     return on_board
 
 
-def check_mirror_faces(f: Failures, r: Reader, camera_position: ArrayLike, mirror: Mirror,
+def check_mirror_faces(f: Failures, fail: Fail, camera_position: ArrayLike, mirror: Mirror,
                        target_position: ArrayLike, beacons: Sequence[Beacon],
                        bkey: Callable[[int], str]) -> None:
     """The camera must see the mirror's face, and the objects stand in front of it."""
@@ -122,13 +90,13 @@ def check_mirror_faces(f: Failures, r: Reader, camera_position: ArrayLike, mirro
     dist = float(np.hypot(*(np.asarray(mirror.center, float) - cam)))
     graze = math.degrees(math.asin(min(1.0, abs(cam_side) / dist))) if dist > 0 else 0.0
     if graze < EDGE_ON_LIMIT_DEG:
-        raise r.fail("mirror.yaw", f"{mirror.yaw:g}: the camera sees the mirror edge-on "
+        raise fail("mirror.yaw", f"{mirror.yaw:g}: the camera sees the mirror edge-on "
                      f"(line of sight {graze:.2f}° off its surface; need ≥ {EDGE_ON_LIMIT_DEG:g}°)")
 
     def in_front(p, key: str, what: str) -> None:
         s = float(signed_distance(p, mirror.center, mirror.yaw))
         if s * cam_side <= 0.0:
-            raise r.fail(key, f"{fmt(p)}: the {what} stands behind the mirror (on its back, "
+            raise fail(key, f"{fmt(p)}: the {what} stands behind the mirror (on its back, "
                          f"{abs(s):.2f} cm from its surface line), so the mirror cannot show it")
 
     f.attempt(in_front, target_position, "target.position", "target")
@@ -136,7 +104,7 @@ def check_mirror_faces(f: Failures, r: Reader, camera_position: ArrayLike, mirro
         f.attempt(in_front, b.position, f"{bkey(i)}.position", "beacon")
 
 
-def check_sight(f: Failures, scene: Scene, r: Reader, bkey: Callable[[int], str]
+def check_sight(f: Failures, scene: Scene, fail: Fail, bkey: Callable[[int], str]
                 ) -> tuple[str, ...]:
     """Refuse images that do not reach the camera; warn of clipped or direct views."""
     sighted = [("target.position", scene.target, "target")] + [
@@ -148,7 +116,7 @@ def check_sight(f: Failures, scene: Scene, r: Reader, bkey: Callable[[int], str]
             continue
         vis = visibility.visibility(scene, obj)
         if vis.axis_fraction == 0.0:
-            f.found.append(r.fail(key, f"{fmt(obj.position)}: the {what}'s image does not "
+            f.found.append(fail(key, f"{fmt(obj.position)}: the {what}'s image does not "
                                   f"reach the camera through the mirror: {vis.reason}"))
             continue
         if vis.clipped:
@@ -188,7 +156,7 @@ def crossing_images(scene: Scene, bkey: Callable[[int], str]) -> list[str]:
     return out
 
 
-def check_overlaps(f: Failures, scene: Scene, r: Reader, bkey: Callable[[int], str]) -> None:
+def check_overlaps(f: Failures, scene: Scene, fail: Fail, bkey: Callable[[int], str]) -> None:
     """Record footprints that intersect, and a camera standing inside one."""
     fps = footprints(scene, bkey)
     for j in range(len(fps)):
@@ -198,12 +166,12 @@ def check_overlaps(f: Failures, scene: Scene, r: Reader, bkey: Callable[[int], s
             gap = segment_distance(a0, a1, b0, b1) - ra - rb
             if gap < 0.0:
                 what_i = ki.split(".")[0]
-                f.found.append(r.fail(kj, f"overlaps {what_i} (footprints intersect by "
+                f.found.append(fail(kj, f"overlaps {what_i} (footprints intersect by "
                                           f"{-gap:.2f} cm)"))
     cam = np.asarray(scene.camera.position, float)
     for k, a0, a1, ra in fps:
         if segment_distance(cam, cam, a0, a1) < ra:
-            f.found.append(r.fail("camera.position",
+            f.found.append(fail("camera.position",
                                   f"{fmt(cam)}: the camera stands inside {k}"))
 
 

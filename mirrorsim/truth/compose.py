@@ -1,0 +1,98 @@
+"""The scene composed once: whatever made a :class:`Scene` (a file, an edit, a random
+draw), :func:`compose_scene` derives what its geometry decides and runs the checks
+between its objects.
+
+The scene reader (:mod:`mirrorsim.formats.scenefile`) only parses: each block's keys and
+values, with the derived fields (the target panel's facing, the camera's pan bearing)
+left NaN.  The entry points (:mod:`mirrorsim.pipelines.scenes`) read, then compose.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import replace
+
+from mirrorsim.errors import Failures, SceneError
+from mirrorsim.scene.model import Scene
+from mirrorsim.truth import optics
+from mirrorsim.truth.scene_checks import (
+    board_check,
+    check_all_on_board,
+    check_mirror_faces,
+    check_overlaps,
+    check_sight,
+    fmt,
+    unit_hints,
+)
+
+
+def default_beacon_key(scene: Scene) -> Callable[[int], str]:
+    """How a scene file names beacon ``i``: ``beacon`` alone, ``beacons[i]`` in a list."""
+    if len(scene.beacons) == 1:
+        return lambda _i: "beacon"
+    return lambda i: f"beacons[{i}]"
+
+
+def with_derived(scene: Scene) -> Scene:
+    """``scene`` with what its geometry decides computed, unchecked: the target panel
+    faces the camera's virtual image in the mirror, and a pan given as a word
+    (``mirror``, ``target``, ``beacon``) becomes a bearing.  The one place these are
+    derived (the composer; the tracker's believed scene)."""
+    cam, mirror, target = scene.camera, scene.mirror, scene.target
+    target = replace(target, facing_deg=optics.target_facing(cam.position, mirror,
+                                                             target.position))
+    pan_deg = optics.resolve_pan(cam.position, cam.pan, mirror, target.position,
+                                 scene.beacons[0].position)
+    return replace(scene, target=target, camera=replace(cam, pan_deg=pan_deg))
+
+
+def compose_scene(scene: Scene, *, beacon_key: Callable[[int], str] | None = None,
+                  failures: Failures | None = None) -> Scene:
+    """``scene`` made whole and checked: its derived fields computed (:func:`with_derived`)
+    and its objects checked against each other (on the board, in front of the mirror's
+    face, apart, seen through the mirror), its warnings set.
+
+    Parameters
+    ----------
+    scene
+        A scene whose values are each valid (read by the scene reader, or edited); its
+        derived fields may be stale or NaN.
+    beacon_key
+        How the failures name beacon ``i`` (``beacon`` or ``beacons[i]``, as its file
+        wrote it); by default as a file of its beacons would.
+    failures
+        Where failures are collected (the reader's, so that ``check`` lists the file's
+        all); a lenient one (``plot``) lets a scene that fails be composed anyway.
+
+    Raises
+    ------
+    SceneError
+        The first failure, naming ``scene.source`` and the key path, the others in
+        ``others``.
+    """
+    f = Failures() if failures is None else failures
+    bkey = beacon_key or default_beacon_key(scene)
+
+    def fail(key: str, message: str) -> SceneError:
+        return SceneError(scene.source, key, message)
+
+    cam, mirror, target, beacons = scene.camera, scene.mirror, scene.target, scene.beacons
+    hint = unit_hints(scene.board, mirror, cam.hfov, [
+        ("camera.position", cam.position), ("mirror.center", mirror.center),
+        ("target.position", target.position),
+        *((f"{bkey(i)}.position", b.position) for i, b in enumerate(beacons))])
+    on_board = board_check(fail, scene.board)
+    check_all_on_board(f, on_board, cam.position, mirror, target.position, beacons, bkey,
+                       scene.occluders)
+    f.raise_any(hint)
+    f.attempt(check_mirror_faces, f, fail, cam.position, mirror, target.position, beacons,
+              bkey)
+    f.raise_any(hint)
+    scene = with_derived(scene)
+    for end in scene.target.ends():
+        f.attempt(on_board, end, "target.position", f"the target panel's edge {fmt(end)}")
+    f.raise_any(hint)
+    check_overlaps(f, scene, fail, bkey)
+    warnings = check_sight(f, scene, fail, bkey)
+    f.raise_any(hint)
+    return replace(scene, warnings=warnings)
