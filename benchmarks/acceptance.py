@@ -215,7 +215,7 @@ def run_one(job: tuple) -> dict:
 
         m = rep.measurements
         try:
-            plain = solve_measurements(m.observer, m.beacons, m.targets, m.sigma)
+            plain = solve_measurements(m.observer, m.beacons, m.targets, sigma=m.sigma)
             plain_cm = float(np.linalg.norm(plain.target - np.asarray(rep.truth.target.position)))
         except Exception:  # noqa: BLE001 - a plain solve that fails is a result here
             pass

@@ -109,7 +109,7 @@ def measure(scene, tmp: Path) -> dict:
                     subsampled=lossy)
     t0 = time.perf_counter()
     try:
-        out = detect_frame(img, res.capture, cal, lossy)
+        out = detect_frame(img, res.capture, cal, subsampled=lossy)
     except DetectionError as exc:
         return {"scene": scene.name, "spp": spp, "error": str(exc)}
     dt = time.perf_counter() - t0
@@ -120,8 +120,8 @@ def measure(scene, tmp: Path) -> dict:
         meas = out.measurements()
         sigma = default_error_model().sigmas(out.features(out.target),
                                              [out.features(m) for _, m in out.beacons],
-                                             meas.observer_pan_deg, scene.camera.fx)
-        sol = solve_measurements(meas.observer, meas.beacons, meas.targets, sigma)
+                                             meas.observer_pan_deg, fx_px=scene.camera.fx)
+        sol = solve_measurements(meas.observer, meas.beacons, meas.targets, sigma=sigma)
         target_cm = float(np.linalg.norm(sol.target - np.asarray(t.position)))
     return {
         "scene": scene.name, "spp": spp, "seconds": dt, "target_cm": target_cm,

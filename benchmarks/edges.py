@@ -62,7 +62,7 @@ def main() -> None:
     rows = [("target left", min(u[:4]), m.u_left), ("target right", max(u[:4]), m.u_right),
             ("target top", v[5], m.v_top), ("target foot", v[4], m.v_bottom)]
     b = s.beacons[0]
-    ub, vvb = optics.front_face(s, b, pencil_paint_height(b.height), "beacon")
+    ub, vvb = optics.front_face(s, b, pencil_paint_height(b.height), kind="beacon")
     lin = to_linear(img)
     pencils = [measure_region(lin, box, "beacon") for box in find_pencils(img)]
     p = min(pencils, key=lambda q: abs(np.nanmean([q.u_left or np.nan, q.u_right or np.nan])

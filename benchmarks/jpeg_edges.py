@@ -47,7 +47,7 @@ WAYS = {"the detector's, lossless": (True, True, True),
 
 def _exact(scene, obj, height: float, kind: str) -> tuple[float, float]:
     """Rows of the front face's top and foot in the mirror image."""
-    _, v = front_face(scene, obj, height, kind)
+    _, v = front_face(scene, obj, height, kind=kind)
     return v[1], v[0]
 
 

@@ -75,7 +75,7 @@ def main() -> None:
         rep = evaluate_scene(scene, args.out / name, progress=False)
         e = rep.errors
         m = load_measurements(ROOT / "scenes" / "measurements" / f"{name}_paper.json")
-        geo = solve_measurements(m.observer, m.beacons, m.targets, m.sigma)
+        geo = solve_measurements(m.observer, m.beacons, m.targets, sigma=m.sigma)
         geo_err = float(np.linalg.norm(geo.target - truth))
         geo_yaw = yaw_difference(geo.mirror.yaw_deg, scene.mirror.yaw)
         plan = plan_scene(scene)
@@ -168,8 +168,8 @@ def several_beacons(args) -> None:
         # both fits take the believed positions as exact (told they are known to
         # 0.115 cm, as the budget's fits are, the self-calibrated fit of one of the
         # experiments puts a beacon behind the mirror and stops)
-        plain, cal = (solve_measurements(m.observer, m.beacons, m.targets, m.sigma,
-                                         SelfCalibration(n))
+        plain, cal = (solve_measurements(m.observer, m.beacons, m.targets, sigma=m.sigma,
+                                         calibration=SelfCalibration(n))
                       for n in ((), nu))
         truth = np.asarray(scene.target.position, float)
         pan, scale = cal.nuisances["pan_offset_deg"], cal.nuisances["range_scale"]

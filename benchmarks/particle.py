@@ -39,8 +39,9 @@ def batch_yaw_error(start, controls, obs, true, params: PFParams) -> float:
     """|yaw error| of the batch smoother over these steps (started at the truth: it finds
     the optimum nearest it)."""
     k = len(controls)
-    run = smooth_run(OBSERVER, start, controls, obs, params, YAW, line_normal(YAW) @ MIRROR,
-                     true[: k + 1])
+    run = smooth_run(OBSERVER, start, controls, observations=obs, params=params, yaw_deg=YAW,
+                     rho=line_normal(YAW) @ MIRROR,
+                     beacons=true[: k + 1])
     return abs(run.yaw_deg - YAW)
 
 
@@ -55,16 +56,17 @@ def main() -> None:
                     help="the filter's consistency (NEES) instead of its convergence")
     args = ap.parse_args()
     params = PFParams(Sigma(args.sigma_alpha, args.sigma_d / 100), args.sigma_trs)
-    path = path_points("rectangular", (30.0, 60.0), 66.7, 4.0, 1.0, 12)
+    path = path_points("rectangular", (30.0, 60.0), 66.7, a=4.0, b=1.0, n=12)
     rho = line_normal(YAW) @ MIRROR
     if args.nees:
         nees_table(args, params, path, rho)
         return
     yaw_errs, off_errs, batch = [], [], []
     for seed in range(args.seeds):
-        controls, obs, true = simulate_run(OBSERVER, MIRROR, YAW, path, params, seed)
-        est = track(OBSERVER, path[0], controls, obs, (YAW - 15, YAW + 15),
-                    (rho - 8, rho + 8), n=args.particles, params=params, rng=1000 + seed)
+        controls, obs, true = simulate_run(OBSERVER, MIRROR, YAW, path=path, params=params,
+                                           rng=seed)
+        est = track(OBSERVER, path[0], controls, observations=obs, yaw_range=(YAW - 15, YAW + 15),
+                    rho_range=(rho - 8, rho + 8), n=args.particles, params=params, rng=1000 + seed)
         y, o = mirror_errors(est, MIRROR, YAW)
         yaw_errs.append(np.abs(y))
         off_errs.append(o)
@@ -88,7 +90,7 @@ def nees_table(args, params: PFParams, path: np.ndarray, rho: float) -> None:
 
     rows = []
     for seed in range(args.seeds):
-        controls, obs, _ = simulate_run(OBSERVER, MIRROR, YAW, path, params, seed)
+        controls, obs, _ = simulate_run(OBSERVER, MIRROR, YAW, path=path, params=params, rng=seed)
         f = MovingBeaconFilter(OBSERVER, path[0], (YAW - 15, YAW + 15), (rho - 8, rho + 8),
                                args.particles, params, 1000 + seed)
         per = []

@@ -48,7 +48,7 @@ def main() -> None:
         cap = CaptureRecord.from_scene(s, frame=f"{s.name}.png")
         b = s.beacons[0]
         img = optics.mirror_image(s.camera.position, s.mirror, b.position)
-        _, v = front_face(s, b, pencil_paint_height(b.height), "beacon")
+        _, v = front_face(s, b, pencil_paint_height(b.height), kind="beacon")
         errs = []
         for f in (sharp, frame):
             m = detect_frame(to_srgb8(f.linear), cap, cal).beacons[0][1]

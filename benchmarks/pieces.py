@@ -96,7 +96,7 @@ def main() -> None:
         print("\n| dataset scenes done in this process | resident memory (MiB) |\n|---|---|")
         rss = []
         for i in range(a.rss):
-            process_one(i, 0, spec, str(tmp / "ds"), None, "auto")
+            process_one(i, 0, spec, out=str(tmp / "ds"), spp=None, variant="auto")
             with open("/proc/self/statm") as f:
                 rss.append(int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20)
             if i in (0, 1, 4, 9) or i == a.rss - 1 or (i + 1) % 10 == 0:
@@ -129,7 +129,7 @@ def _bare_render(scene) -> float:
         params = mi.traverse(sensor)
         for v in range(v0, v1, t):
             for u in range(u0, u1, t):
-                mitsuba_scene.aim_tile(params, scene.camera, t, u, v)
+                mitsuba_scene.aim_tile(params, scene.camera, t, u0=u, v0=v)
                 per = render._tile_pass(n, t)  # samples per call, as mirrorsim splits them
                 for k, m in enumerate([per] * (n // per) + ([n % per] if n % per else [])):
                     dr.eval(mi.render(mi_scene, sensor=sensor, spp=m, seed=2 + k))
@@ -150,7 +150,7 @@ def _ratio(spec, n: int, tmp: Path, seed: int | None = None) -> None:
     ratios = []
     for i in range(n + 1):
         t0 = time.perf_counter()
-        process_one(i, seed, spec, str(tmp), None, "auto")
+        process_one(i, seed, spec, out=str(tmp), spp=None, variant="auto")
         whole = time.perf_counter() - t0
         rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(i,)))
         bare = _bare_render(draw(spec, rng, f"r{i}").with_render(seed=i))

@@ -76,7 +76,8 @@ def _board_errors(rep, scene, position_sigma: float, nuisances: tuple[str, ...]
     m, truth = rep.measurements, np.asarray(rep.truth.target.position, float)
     exact = _at_exact_positions(m, scene)
     return tuple(float(np.linalg.norm(solve_measurements(
-        m.observer, beacons, m.targets, m.sigma, SelfCalibration(nuisances, ps)).target - truth))
+        m.observer, beacons, m.targets, sigma=m.sigma,
+        calibration=SelfCalibration(nuisances, ps)).target - truth))
         for beacons, ps in ((m.beacons, position_sigma), (exact, 0.0)))
 
 
@@ -91,8 +92,8 @@ def _errors(rep, scene, position_sigma: float, nuisances: tuple[str, ...],
     out = []
     for beacons, ps in ((m.beacons, position_sigma), (exact, 0.0)):
         for nu in ((), nuisances):
-            sol = solve_measurements(m.observer, beacons, m.targets, m.sigma,
-                                     SelfCalibration(nu, ps) if nu else PLAIN)
+            sol = solve_measurements(m.observer, beacons, m.targets, sigma=m.sigma,
+                                     calibration=SelfCalibration(nu, ps) if nu else PLAIN)
             out.append(float(np.linalg.norm(sol.target - truth)))
     # the shared errors as the truth has them: every image's α error and relative
     # d_total error, averaged (the target's image counts once, as the beacons' do)
@@ -109,17 +110,17 @@ def _errors(rep, scene, position_sigma: float, nuisances: tuple[str, ...],
         known = [BeaconMeasurement(b.position, *pick(b.alpha_deg, b.d_total, *t))
                  for b, t in zip(exact, true[:-1], strict=True)]
         targets = [pick(a, d, *true[-1]) for a, d in m.targets]
-        sol = solve_measurements(m.observer, known, targets, m.sigma)
+        sol = solve_measurements(m.observer, known, targets, sigma=m.sigma)
         out.append(float(np.linalg.norm(sol.target - truth)))
     if {"pan", "scale"} < set(nuisances):  # what the nuisances beyond them add
-        sol = solve_measurements(m.observer, m.beacons, m.targets, m.sigma,
-                                 SelfCalibration(("pan", "scale"), position_sigma))
+        sol = solve_measurements(m.observer, m.beacons, m.targets, sigma=m.sigma,
+                                 calibration=SelfCalibration(("pan", "scale"), position_sigma))
         out.append(float(np.linalg.norm(sol.target - truth)))
     else:
         out.append(float("nan"))
     for beacons, ps in ((m.beacons, position_sigma), (exact, 0.0)) if priors else ():
-        sol = solve_measurements(m.observer, beacons, m.targets, m.sigma,
-                                 SelfCalibration(nuisances, ps, priors))
+        sol = solve_measurements(m.observer, beacons, m.targets, sigma=m.sigma,
+                                 calibration=SelfCalibration(nuisances, ps, priors))
         out.append(float(np.linalg.norm(sol.target - truth)))
     return tuple(out)
 
@@ -156,7 +157,7 @@ def _power_check(rep, scene) -> tuple[np.ndarray, np.ndarray]:
     yaw, centre = scene.mirror.yaw, np.asarray(scene.mirror.center, float)
     pts = np.array([o.position for o in objs], float)
     A, _ = power_terms((yaw, float(line_normal(yaw) @ centre)),
-                       np.asarray(m.observer, float), pts, centre)
+                       np.asarray(m.observer, float), pts, vertex=centre)
     pred = A / R if R else np.zeros(len(objs))
     return err - err.mean(), pred - pred.mean()
 

@@ -47,7 +47,7 @@ def _extra_beacons(scene, rng, k: int) -> list[np.ndarray]:
         tries += 1
         p = b0 + rng.uniform(-8, 8, 2)
         try:
-            o = observe(cam.position, m.center, m.yaw, p)
+            o = observe(cam.position, m.center, m.yaw, point=p)
         except SolverError:
             continue
         along = (np.asarray(o.reflection_point) - np.asarray(m.center)) @ np.array(
@@ -89,14 +89,15 @@ def main() -> None:
             if len(beacons) < nb:
                 continue
             t = np.asarray(scene.target.position, float)
-            ob = [observe(cam.position, m.center, m.yaw, b) for b in beacons]
-            ot = observe(cam.position, m.center, m.yaw, t)
+            ob = [observe(cam.position, m.center, m.yaw, point=b) for b in beacons]
+            ot = observe(cam.position, m.center, m.yaw, point=t)
             # the model's typical σ's at this camera (exact measurements hold no pixels)
             typical = model.typical_at(cam.fx)
             sig = replace(typical, beacons=typical.beacons * len(ob))
             n = line_normal(m.yaw % 180)
             rho = float(n @ np.asarray(m.center, float))
-            bound = crlb(cam.position, np.array(beacons), m.yaw % 180, rho, t, sig)
+            bound = crlb(cam.position, np.array(beacons), m.yaw % 180, mirror_rho=rho, target=t,
+                         sigma=sig)
             errs = {"target": [], "yaw": [], "offset": []}
             for _ in range(a.draws):
                 bs = [BeaconMeasurement(tuple(b), float(o.alpha_deg) + rng.normal(0, s.alpha_deg),
@@ -105,7 +106,7 @@ def main() -> None:
                 ts = [(float(ot.alpha_deg) + rng.normal(0, sig.target.alpha_deg),
                        float(ot.d_total) * (1 + rng.normal(0, sig.target.d_total_rel)))]
                 try:
-                    sol = solve_measurements(cam.position, bs, ts, sig)
+                    sol = solve_measurements(cam.position, bs, ts, sigma=sig)
                 except SolverError:
                     continue
                 errs["target"].append(np.sum((sol.target - t) ** 2))

@@ -41,10 +41,10 @@ class Failures:
         # lenient: only a block that cannot be read stops the scene being built (plot)
         self.lenient = lenient
 
-    def attempt(self, fn: Callable, *args, default: Any = None) -> Any:
-        """``fn(*args)``, or ``default`` with its SceneError recorded."""
+    def attempt(self, fn: Callable, *args, default: Any = None, **kwargs) -> Any:
+        """``fn(*args, **kwargs)``, or ``default`` with its SceneError recorded."""
         try:
-            return fn(*args)
+            return fn(*args, **kwargs)
         except SceneError as exc:
             self.found.append(exc)
             return default

@@ -50,7 +50,7 @@ def _information(o: np.ndarray, B: np.ndarray, t_alpha: float, t_d: float, point
     A beacon known to ``position_sigma`` (cm per axis) has its measurements' covariance
     grown by σ_p²·J_p J_pᵀ (J_p: its image's α and d_total against its position): the
     position offset marginalized, exactly to first order."""
-    params, tgt = implied_target(o, t_alpha, t_d, point, yaw)
+    params, tgt = implied_target(o, t_alpha, t_d, point=point, yaw=yaw)
     _, d_b, da_b, dd_b = predict(np.r_[params, 0, 0], o, B)
     _, d_t, da_t, dd_t = predict(np.r_[params, tgt], o, tgt[None])
     P = 4 + len(nuisances)
@@ -61,7 +61,7 @@ def _information(o: np.ndarray, B: np.ndarray, t_alpha: float, t_d: float, point
     # the power's mirror curved about the pose's point (its centre; to first order the
     # vertex changes the mirror, not the target)
     power = (power_terms((params[0], params[1]), o, np.vstack([B, tgt[None]]),
-                         np.asarray(point, float)) if "power" in nuisances else None)
+                         vertex=np.asarray(point, float)) if "power" in nuisances else None)
     ea, ed = nuisance_columns(nuisances, np.r_[d_b, d_t[0]], power)
     ra[:, 4:], rd[:, 4:], ta[4:], td[4:] = ea[:-1], ed[:-1], ea[-1], ed[-1]
     sb, st = sig.beacons[0], sig.target
@@ -89,7 +89,7 @@ def _target_variance(info: np.ndarray, keep: int) -> np.ndarray:
 
 
 def best_beacon_set(observer: ArrayLike, target_alpha_deg: float, target_d_total: float,
-                    poses: list[tuple[np.ndarray, float]], sigma: Sigma | ObjectSigmas,
+                    *, poses: list[tuple[np.ndarray, float]], sigma: Sigma | ObjectSigmas,
                     mirror_size: float, board: tuple[float, float], n: int,
                     calibration: SelfCalibration = PLAIN, step: float = 1.0,
                     keep_out: Sequence[tuple[np.ndarray, np.ndarray, float]] = (),
@@ -123,7 +123,8 @@ def best_beacon_set(observer: ArrayLike, target_alpha_deg: float, target_d_total
         allowed &= point_segment_distance(grid, a, b) >= clear
     per_pose = []
     for point, yaw in poses:
-        allowed &= seen_in_mirror(o, grid, point, yaw, mirror_size, min_depth)
+        allowed &= seen_in_mirror(o, grid, point, yaw=yaw, mirror_size=mirror_size,
+                                  min_depth=min_depth)
         info_b, info_t, _ = _information(o, grid, target_alpha_deg, target_d_total, point, yaw,
                                          sig, nuisances, position_sigma)
         per_pose.append((info_b, info_t))

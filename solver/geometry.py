@@ -57,7 +57,7 @@ def reflect(point: ArrayLike, line_point: ArrayLike, yaw_deg: ArrayLike) -> np.n
     return p - 2.0 * s[..., None] * n
 
 
-def segment_distance(p0: ArrayLike, p1: ArrayLike, q0: ArrayLike, q1: ArrayLike) -> float:
+def segment_distance(p0: ArrayLike, p1: ArrayLike, q0: ArrayLike, *, q1: ArrayLike) -> float:
     """Shortest distance between the segments p0–p1 and q0–q1 (either may be a point)."""
     p0, p1, q0, q1 = (np.asarray(v, dtype=float) for v in (p0, p1, q0, q1))
     if _segments_cross(p0, p1, q0, q1):
@@ -88,7 +88,7 @@ def _segments_cross(p0, p1, q0, q1) -> bool:
 
 
 def segment_crossing(
-    p0: ArrayLike, p1: ArrayLike, q0: ArrayLike, q1: ArrayLike
+    p0: ArrayLike, p1: ArrayLike, q0: ArrayLike, *, q1: ArrayLike
 ) -> float | None:
     """Parameter u in [0, 1] along p0→p1 where it crosses segment q0–q1, or None."""
     p0, p1, q0, q1 = (np.asarray(v, dtype=float) for v in (p0, p1, q0, q1))

@@ -59,7 +59,7 @@ def predict(params: np.ndarray, observer: np.ndarray, points: np.ndarray
 
 
 def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
-              targets: list[tuple[float, float]], sigma: Sigma | ObjectSigmas | None = None,
+              targets: list[tuple[float, float]], *, sigma: Sigma | ObjectSigmas | None = None,
               initial: Solution | None = None,
               calibration: SelfCalibration = PLAIN) -> Solution:
     """Weighted nonlinear least squares for the mirror line and the target.
@@ -96,7 +96,7 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
     if not beacons or not targets:
         raise SolverError("least squares needs at least one beacon and one target observation")
     nuisances, priors = calibration.nuisances, calibration.priors
-    check_nuisances(nuisances, len(beacons), len(targets), priors)
+    check_nuisances(nuisances, len(beacons), len(targets), priors=priors)
     o = np.asarray(observer, float)
     sig = as_object_sigmas(sigma or Sigma())
     bpos, meas_a, meas_d = _measurement_arrays(beacons, targets)
@@ -105,9 +105,10 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
         # start from the plain fit: from the one-beacon closed form, a pan offset and a
         # range scale let the fit wander to a mirror on the far side of a beacon
         initial = solve_lsq(observer, beacons, targets,
-                            replace(sig, shared_alpha_deg=0.0) if shared else sigma)
-    init = initial or solve_single(o, bpos[0], beacons[0].alpha_deg, beacons[0].d_total,
-                                   targets[0][0], targets[0][1])
+                            sigma=replace(sig, shared_alpha_deg=0.0) if shared else sigma)
+    init = initial or solve_single(o, bpos[0], beacons[0].alpha_deg,
+                                   beacon_d_total=beacons[0].d_total,
+                                   target_alpha_deg=targets[0][0], target_d_total=targets[0][1])
     p = _Problem.of(o, bpos, len(targets), sig, calibration, meas_d)
     unknown, free, known, nb, nt = p.unknown, p.free, p.known, len(beacons), len(targets)
     x0 = np.concatenate([[init.mirror.yaw_deg, init.mirror.rho, *init.target], p.neutral[4:]])
@@ -231,7 +232,7 @@ def _forward(x: np.ndarray, o: np.ndarray, bpos: np.ndarray, nt: int,
     power = None
     if "power" in where:  # the mirror's curvature first: the pan and the scale act after it
         # the vertex: the middle of the images' reflection points (the target's once)
-        seen = observe(o, x[1] * line_normal(x[0]), x[0], pts, strict=False)
+        seen = observe(o, x[1] * line_normal(x[0]), x[0], point=pts, strict=False)
         power = _power_of(seen, x[0], x[1], o, pts,
                           vertex=seen.reflection_point[:nb + 1].mean(axis=0))
         a, d = a + x[where["power"]] * power[0], d + x[where["power"]] * power[1]
@@ -265,7 +266,7 @@ def nuisance_columns(nuisances: tuple[str, ...], d: np.ndarray,
 
 
 def power_terms(mirror: tuple[float, float], observer: np.ndarray, points: np.ndarray,
-                vertex: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                *, vertex: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """First-order change of each point's image per unit of the mirror's power c = 1/R
     (1/cm, > 0 concave), the mirror (θ, ρ) curved about ``vertex`` (a point on its
     line).
@@ -285,7 +286,7 @@ def power_terms(mirror: tuple[float, float], observer: np.ndarray, points: np.nd
         α's change (deg) and d_total's change (cm) per unit c.
     """
     theta, rho = mirror
-    obs = observe(observer, rho * line_normal(theta), theta, points, strict=False)
+    obs = observe(observer, rho * line_normal(theta), theta, point=points, strict=False)
     return _power_of(obs, theta, rho, observer, points, vertex)
 
 
@@ -342,14 +343,15 @@ def _solution(o: np.ndarray, x: np.ndarray, bpos: np.ndarray,
     foot = bpos[0] - (line_normal(x[0]) @ bpos[0] - x[1]) * line_normal(x[0])
     mirror = MirrorLine(line.yaw_deg, foot)
     a_t = np.mean([t[0] for t in targets])
-    rt = ray_hits_line(o, a_t, mirror.point, mirror.yaw_deg)
-    rb = np.array([observe(o, mirror.point, mirror.yaw_deg, p).reflection_point for p in bpos])
+    rt = ray_hits_line(o, a_t, mirror.point, yaw_deg=mirror.yaw_deg)
+    rb = np.array([observe(o, mirror.point, mirror.yaw_deg,
+                           point=p).reflection_point for p in bpos])
     return Solution(mirror=mirror, target=x[2:].copy(), target_reflection_point=rt,
                     beacon_reflection_points=rb, covariance=cov,
                     method=f"least squares ({len(bpos)} beacon obs, {len(targets)} target obs)")
 
 
-def crlb(observer: ArrayLike, beacons: ArrayLike, mirror_yaw_deg: float, mirror_rho: float,
+def crlb(observer: ArrayLike, beacons: ArrayLike, mirror_yaw_deg: float, *, mirror_rho: float,
          target: ArrayLike, sigma: Sigma | ObjectSigmas, n_targets: int = 1,
          nuisances: tuple[str, ...] = (), calibration: SelfCalibration | None = None
          ) -> np.ndarray:
@@ -373,7 +375,7 @@ def crlb(observer: ArrayLike, beacons: ArrayLike, mirror_yaw_deg: float, mirror_
     o = np.asarray(observer, float)
     B = np.atleast_2d(np.asarray(beacons, float))
     calibration = SelfCalibration(tuple(nuisances)) if calibration is None else calibration
-    check_nuisances(calibration.nuisances, len(B), n_targets, calibration.priors)
+    check_nuisances(calibration.nuisances, len(B), n_targets, priors=calibration.priors)
     sig = as_object_sigmas(sigma)
     t = np.asarray(target, float)
     x4 = np.array([mirror_yaw_deg, mirror_rho, *t])
@@ -394,7 +396,7 @@ def crlb(observer: ArrayLike, beacons: ArrayLike, mirror_yaw_deg: float, mirror_
 
 def solve_measurements(observer: ArrayLike, beacons: list[BeaconMeasurement],
                        targets: list[tuple[float, float]],
-                       sigma: Sigma | ObjectSigmas | None = None,
+                       *, sigma: Sigma | ObjectSigmas | None = None,
                        calibration: SelfCalibration = PLAIN) -> Solution:
     """The solver's front door: the closed form for one beacon and one target without
     σ's and without self-calibration, weighted least squares (with covariance when σ's
@@ -427,7 +429,8 @@ def solve_measurements(observer: ArrayLike, beacons: list[BeaconMeasurement],
     if (len(beacons) == 1 and len(targets) == 1 and not calibration.nuisances
             and not calibration.position_sigma):
         b = beacons[0]
-        sol = solve_single(observer, b.position, b.alpha_deg, b.d_total, *targets[0])
+        sol = solve_single(observer, b.position, b.alpha_deg, beacon_d_total=b.d_total,
+                           target_alpha_deg=targets[0][0], target_d_total=targets[0][1])
         if sigma is None:
             return sol
         # four measurements, four unknowns: least squares is the closed form, and the
@@ -448,4 +451,4 @@ def solve_measurements(observer: ArrayLike, beacons: list[BeaconMeasurement],
         S[np.ix_([0, 2], [0, 2])] = sig.alpha_covariance(sa)  # rows (α_b, d_b, α_t, d_t)
         cov = Jinv @ S @ Jinv.T
         return replace(sol, covariance=cov, method="closed form with covariance")
-    return solve_lsq(observer, beacons, targets, sigma, calibration=calibration)
+    return solve_lsq(observer, beacons, targets, sigma=sigma, calibration=calibration)

@@ -67,8 +67,8 @@ class Table1Geometry:
         n = n if n @ (-r) > 0 else -n  # towards the observer
         beacon = r + self.beacon_depth * n + self.beacon_along * unit(yaw)
         o = np.zeros(2)
-        ob = observe(o, r, yaw, beacon)
-        ot = observe(o, r, yaw, target)
+        ob = observe(o, r, yaw, point=beacon)
+        ot = observe(o, r, yaw, point=target)
         return Table1Layout(mirror_point=r, yaw_deg=float(yaw), target=target, beacon=beacon,
                             beacon_alpha=float(ob.alpha_deg), beacon_d=float(ob.d_total),
                             target_alpha=float(ot.alpha_deg), target_d=float(ot.d_total),
@@ -141,7 +141,7 @@ class Table1:
 
 
 def run_row(sigma_alpha_deg: float, sigma_d: float, iterations: int = 200,
-            geometry: Table1Geometry | None = None,
+            *, geometry: Table1Geometry | None = None,
             rng: int | np.random.Generator | None = 0,
             beacon_sigma: tuple[float, float] | None = None,
             shared_alpha_deg: float = 0.0) -> RowErrors:
@@ -160,7 +160,8 @@ def run_row(sigma_alpha_deg: float, sigma_d: float, iterations: int = 200,
     if shared_alpha_deg:  # drawn after the others: rows without it draw as before
         delta = rng.normal(0, shared_alpha_deg, k)
         ab, at = ab + delta, at + delta
-    est = closed_form_unchecked(np.zeros(2), g.beacon, ab, db, at, dt)
+    est = closed_form_unchecked(np.zeros(2), g.beacon, ab, beacon_d_total=db, target_alpha_deg=at,
+                                target_d_total=dt)
     ok = np.isfinite(est.target).all(axis=1) & np.isfinite(
         est.target_reflection_point).all(axis=1)
     ref_err = np.linalg.norm(est.target_reflection_point[ok] - g.target_reflection_point,
@@ -184,13 +185,17 @@ def _largest_share(err: np.ndarray) -> float:
 
 def table1(iterations: int = 200, geometry: Table1Geometry | None = None,
            rng: int | np.random.Generator | None = 0,
-           rows: tuple = PAPER_TABLE1) -> Table1:
+           *, rows: tuple = PAPER_TABLE1) -> Table1:
     """All rows of Table 1, ours beside the paper's."""
     rng = np.random.default_rng(rng)
     g = geometry or Table1Geometry()
+    def tail(row: tuple) -> dict:  # a row's optional σ's: the beacon's, a shared α offset
+        return dict(zip(("beacon_sigma", "shared_alpha_deg"), row[4:], strict=False))
+
     return Table1(g, iterations, tuple(
-        Table1Row(sa, sd, p_ref, p_tar, run_row(sa, sd, iterations, g, rng, *extra), *extra)
-        for sa, sd, p_ref, p_tar, *extra in rows))
+        Table1Row(*row[:4], run_row(row[0], row[1], iterations, geometry=g, rng=rng,
+                                    **tail(row)), **tail(row))
+        for row in rows))
 
 
 def table_rows(sigmas: list[tuple[float, float]] | None = None,

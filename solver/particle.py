@@ -164,7 +164,7 @@ def _fixed_loglik(mirror: np.ndarray, prior: Prior, observer, sigma: Sigma) -> n
 
 
 def replay(mirror: np.ndarray, prior: Prior,
-           history: Sequence[tuple[np.ndarray, tuple[float, float] | None]], observer: ArrayLike,
+           history: Sequence[tuple[np.ndarray, tuple[float, float] | None]], *, observer: ArrayLike,
            params: PFParams) -> Particles:
     """The hypotheses ``mirror`` (N, 2) run through ``history`` ((control, observation or
     None), …) from the prior's start: their beacons' Gaussians and log likelihoods (the
@@ -181,7 +181,7 @@ def replay(mirror: np.ndarray, prior: Prior,
 
 
 def pf_step(particles: Particles, weights: np.ndarray, control: np.ndarray,
-            observation: tuple[float, float] | None, observer: np.ndarray, params: PFParams,
+            *, observation: tuple[float, float] | None, observer: np.ndarray, params: PFParams,
             rng: np.random.Generator, prior: Prior,
             history: Sequence[tuple[np.ndarray, tuple[float, float] | None]] = ()
             ) -> tuple[Particles, np.ndarray]:
@@ -240,7 +240,8 @@ def _laplace(p: Particles, prior: Prior, history, observer, params: PFParams
     from scipy.optimize import minimize
 
     def nll(m):
-        ll = replay(np.asarray(m, float)[None], prior, history, observer, params).loglik[0]
+        ll = replay(np.asarray(m, float)[None], prior, history, observer=observer,
+                    params=params).loglik[0]
         return -ll if np.isfinite(ll) else 1e300
 
     best = p.mirror[int(np.argmax(p.loglik))]
@@ -249,7 +250,7 @@ def _laplace(p: Particles, prior: Prior, history, observer, params: PFParams
                         best, best + (0.5, 0.0), best + (0.0, 0.2)]}).x
     h = np.array(SPREAD_FLOOR)
     pts = [mode + np.array([i * h[0], j * h[1]]) for i in (-1, 0, 1) for j in (-1, 0, 1)]
-    f = replay(np.array(pts), prior, history, observer, params).loglik.reshape(3, 3)
+    f = replay(np.array(pts), prior, history, observer=observer, params=params).loglik.reshape(3, 3)
     H = np.array([[(f[2, 1] - 2 * f[1, 1] + f[0, 1]) / h[0] ** 2,
                    (f[2, 2] - f[2, 0] - f[0, 2] + f[0, 0]) / (4 * h[0] * h[1])],
                   [0.0, (f[1, 2] - 2 * f[1, 1] + f[1, 0]) / h[1] ** 2]])
@@ -281,7 +282,7 @@ def _mix_in_laplace(p: Particles, ess: float, mode: np.ndarray, cov: np.ndarray,
     is healthy (ESS ≥ the draws'), it keeps at least half the weight."""
     n = len(p.mirror)
     x = rng.multivariate_normal(mode, cov, n)
-    q = replay(x, prior, history, observer, params)
+    q = replay(x, prior, history, observer=observer, params=params)
     logw = np.where(prior.contains(x), q.loglik - _log_gauss(x, mode, inv), -np.inf)
     if not np.isfinite(logw).any():
         return p
@@ -321,7 +322,7 @@ def _move(p: Particles, prior: Prior, history, observer, params: PFParams,
             proposal[jump] = drawn[jump]
             log_q[jump] = (_log_gauss(p.mirror, mode, inv) - _log_gauss(proposal, mode, inv)
                            )[jump]
-        q = replay(proposal, prior, history, observer, params)
+        q = replay(proposal, prior, history, observer=observer, params=params)
         log_ratio = np.where(prior.contains(proposal), q.loglik - p.loglik + log_q, -np.inf)
         with np.errstate(invalid="ignore"):  # −inf − (−inf): both impossible, stay
             accept = np.log(rng.random(n)) < np.nan_to_num(log_ratio, nan=-np.inf)
@@ -332,14 +333,14 @@ def _move(p: Particles, prior: Prior, history, observer, params: PFParams,
     return p
 
 
-def initial_particles(prior: Prior, n: int, params: PFParams, rng: np.random.Generator,
+def initial_particles(prior: Prior, n: int, params: PFParams, *, rng: np.random.Generator,
                       observer: ArrayLike | None = None) -> Particles:
     """The mirror drawn from the prior's uniform box; the beacon at its known start (to
     σ_trs); each hypothesis' log likelihood of the fixed beacons (they need the
     ``observer``), which :class:`MovingBeaconFilter` then weighs the draws by."""
     mirror = np.column_stack([rng.uniform(*prior.yaw_range, n),
                               rng.uniform(*prior.rho_range, n)])
-    return replay(mirror, prior, (), observer, params)
+    return replay(mirror, prior, (), observer=observer, params=params)
 
 
 class MovingBeaconFilter:
@@ -354,7 +355,8 @@ class MovingBeaconFilter:
         self.rng = np.random.default_rng(rng)
         self.prior = Prior(np.asarray(beacon_start, float), tuple(yaw_range), tuple(rho_range),
                            tuple(fixed), fixed_sigma)
-        self.particles = initial_particles(self.prior, n, self.params, self.rng, observer)
+        self.particles = initial_particles(self.prior, n, self.params, rng=self.rng,
+                                           observer=observer)
         self.weights = np.full(n, 1.0 / n)
         self.history: tuple = ()
         if fixed:  # the uniform draws weighed by the fixed beacons, as any observation
@@ -365,8 +367,9 @@ class MovingBeaconFilter:
     def step(self, control: ArrayLike, observation: tuple[float, float] | None) -> None:
         """Move by ``control`` and weigh by ``observation`` (α, d_total; None: unseen)."""
         self.particles, self.weights = pf_step(self.particles, self.weights, control,
-                                               observation, self.observer, self.params,
-                                               self.rng, self.prior, self.history)
+                                               observation=observation, observer=self.observer,
+                                               params=self.params,
+                                               rng=self.rng, prior=self.prior, history=self.history)
         self.history = (*self.history, (np.asarray(control, float), observation))
 
     def _spread(self) -> tuple[float, float, np.ndarray]:

@@ -15,7 +15,7 @@ from solver.sltr import observe
 
 
 def simulate_run(observer: ArrayLike, mirror_point: ArrayLike, mirror_yaw_deg: float,
-                 path: np.ndarray, params: PFParams, rng: int | np.random.Generator | None = 0
+                 *, path: np.ndarray, params: PFParams, rng: int | np.random.Generator | None = 0
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Noisy commands and observations for a beacon following ``path`` (k, 2).
 
@@ -29,14 +29,14 @@ def simulate_run(observer: ArrayLike, mirror_point: ArrayLike, mirror_yaw_deg: f
     for c in controls:
         true.append(true[-1] + c + rng.normal(0.0, params.sigma_trs, 2))
     true = np.array(true)
-    obs = observe(observer, mirror_point, mirror_yaw_deg, true[1:], strict=False)
+    obs = observe(observer, mirror_point, mirror_yaw_deg, point=true[1:], strict=False)
     a = np.asarray(obs.alpha_deg) + rng.normal(0.0, params.sigma.alpha_deg, len(controls))
     d = np.asarray(obs.d_total) * (1 + rng.normal(0.0, params.sigma.d_total_rel, len(controls)))
     return controls, np.column_stack([a, d]), true
 
 
 def track(observer: ArrayLike, beacon_start: ArrayLike, controls: ArrayLike,
-          observations: Sequence[tuple[float, float] | None], yaw_range: tuple[float, float],
+          *, observations: Sequence[tuple[float, float] | None], yaw_range: tuple[float, float],
           rho_range: tuple[float, float], n: int = DEFAULT_PARTICLES,
           params: PFParams | None = None, rng: int | np.random.Generator | None = 0,
           fixed: tuple[BeaconMeasurement, ...] = (), fixed_sigma: float = 0.0

@@ -55,8 +55,8 @@ class PlacementGeometry:
         return np.array([self.R, self.R + back, self.R + across])
 
 
-def paper_placement(alpha_deg: float, d_total: float, s: float, eps_deg: float,
-                    *, literal: bool = True) -> PlacementGeometry:
+def paper_placement(alpha_deg: float, d_total: float, s: float, *, eps_deg: float,
+                    literal: bool = True) -> PlacementGeometry:
     """Step size b and half-width a/2 of the beacon area, eqs 9–18.
 
     ``literal=True`` follows the paper: the reflector at world angle θ = α − ε (eq 9),
@@ -79,7 +79,8 @@ def paper_placement(alpha_deg: float, d_total: float, s: float, eps_deg: float,
                              n_beacons=2.0 * d_total / b)
 
 
-def visible_region(observer: ArrayLike, alpha_deg: float, d_total: float, s: float, eps_deg: float,
+def visible_region(observer: ArrayLike, alpha_deg: float, d_total: float, *, s: float,
+                   eps_deg: float,
                    grid: np.ndarray, n_orientations: int = 21) -> np.ndarray:
     """Exact version of the paper's area: grid points (k, 2) whose image the observer
     sees through a mirror of width ``s`` centred at R = d_total·u(α), for *every*
@@ -94,14 +95,14 @@ def visible_region(observer: ArrayLike, alpha_deg: float, d_total: float, s: flo
         so = (o - R) @ n
         sp = (grid - R) @ n
         front = sp * so > 0
-        obs = observe(o, R, yaw, np.where(front[:, None], grid, R + so * n * 0.5),
+        obs = observe(o, R, yaw, point=np.where(front[:, None], grid, R + so * n * 0.5),
                       strict=False)
         off = (np.asarray(obs.reflection_point) - R) @ unit(yaw)
         ok &= front & (np.abs(off) <= s / 2.0)
     return ok
 
 
-def region_area(observer: ArrayLike, alpha_deg: float, d_total: float, s: float, eps_deg: float,
+def region_area(observer: ArrayLike, alpha_deg: float, d_total: float, *, s: float, eps_deg: float,
                 cell: float = 0.5, n_orientations: int = 11) -> float:
     """Area of :func:`visible_region`, counting grid cells.
 
@@ -113,7 +114,8 @@ def region_area(observer: ArrayLike, alpha_deg: float, d_total: float, s: float,
     xs = np.arange(-half, half, cell) + cell / 2
     gx, gy = np.meshgrid(xs, xs)
     grid = np.column_stack([gx.ravel(), gy.ravel()]) + R
-    seen = visible_region(observer, alpha_deg, d_total, s, eps_deg, grid, n_orientations)
+    seen = visible_region(observer, alpha_deg, d_total, s=s, eps_deg=eps_deg, grid=grid,
+                          n_orientations=n_orientations)
     return float(seen.sum()) * cell**2
 
 
@@ -131,7 +133,7 @@ def path_lengths(a: float, b: float, n: int) -> dict[str, float]:
     }
 
 
-def path_points(kind: str, origin: ArrayLike, alpha_deg: float, a: float, b: float, n: int
+def path_points(kind: str, origin: ArrayLike, alpha_deg: float, *, a: float, b: float, n: int
                 ) -> np.ndarray:
     """Vertices of a path (for plots and the particle filter's simulated runs).
 
@@ -164,11 +166,11 @@ def polyline_length(points: np.ndarray) -> float:
 # ------------------------------------------------------------------ Algorithm 1
 
 
-def algorithm1(observer: ArrayLike, alpha_deg: float, d_total: float, s: float, eps_deg: float
+def algorithm1(observer: ArrayLike, alpha_deg: float, d_total: float, *, s: float, eps_deg: float
                ) -> list[dict]:
     """The paper's Algorithm 1: reflector positions stepped along the observation line by
     Δd = b, two beacons per step, below the reflector on both sides of the line."""
-    geo = paper_placement(alpha_deg, d_total, s, eps_deg)
+    geo = paper_placement(alpha_deg, d_total, s, eps_deg=eps_deg)
     o = np.asarray(observer, float)
     steps = []
     d = geo.b
@@ -182,7 +184,7 @@ def algorithm1(observer: ArrayLike, alpha_deg: float, d_total: float, s: float, 
 
 
 def orientation_from_beacons(observer: ArrayLike, reflector_point: ArrayLike, beacons: ArrayLike,
-                             alphas_deg: ArrayLike, initial_yaw_deg: float) -> float:
+                             *, alphas_deg: ArrayLike, initial_yaw_deg: float) -> float:
     """Ref. [26]: the yaw of a reflector of known position from the angles of arrival
     of beacons seen in it (two or more; least squares in the one unknown)."""
     o = np.asarray(observer, float)
@@ -223,7 +225,7 @@ class MirrorPrior:
 
 
 def implied_target(observer: np.ndarray, target_alpha_deg: float, target_d_total: float,
-                   point: ArrayLike, yaw: float) -> tuple[np.ndarray, np.ndarray]:
+                   *, point: ArrayLike, yaw: float) -> tuple[np.ndarray, np.ndarray]:
     """A mirror pose's (θ, ρ) and the target it implies for this target measurement: its
     virtual image reflected in the line (the (θ, ρ) form :func:`predict` differentiates)."""
     n = line_normal(yaw)
@@ -232,19 +234,19 @@ def implied_target(observer: np.ndarray, target_alpha_deg: float, target_d_total
     return params, vt - 2.0 * (n @ vt - params[1]) * n
 
 
-def seen_in_mirror(observer: np.ndarray, points: np.ndarray, point: ArrayLike, yaw: float,
+def seen_in_mirror(observer: np.ndarray, points: np.ndarray, point: ArrayLike, *, yaw: float,
                    mirror_size: float, min_depth: float) -> np.ndarray:
     """Which points a mirror pose (a point on the line, its yaw) shows the observer: in
     front of it by ``min_depth``, their image on the glass of width ``mirror_size``."""
     n = line_normal(yaw)
     so, sp = (observer - point) @ n, (points - point) @ n
-    obs = observe(observer, point, yaw, points, strict=False)
+    obs = observe(observer, point, yaw, point=points, strict=False)
     off = (np.asarray(obs.reflection_point) - point) @ unit(yaw)
     return (sp * so > 0) & (np.abs(sp) >= min_depth) & (np.abs(off) <= mirror_size / 2)
 
 
 def expected_target_error(observer: ArrayLike, target_alpha_deg: float, target_d_total: float,
-                          beacons: np.ndarray, poses: list[tuple[np.ndarray, float]],
+                          *, beacons: np.ndarray, poses: list[tuple[np.ndarray, float]],
                           sigma: Sigma | ObjectSigmas, mirror_size: float, min_depth: float = 0.5
                           ) -> tuple[np.ndarray, np.ndarray]:
     """First-order RMS target error for each candidate beacon position over the mirror
@@ -267,7 +269,7 @@ def expected_target_error(observer: ArrayLike, target_alpha_deg: float, target_d
     total = np.zeros(len(B))
     count = np.zeros(len(B))
     for point, yaw in poses:
-        params, tgt = implied_target(o, target_alpha_deg, target_d_total, point, yaw)
+        params, tgt = implied_target(o, target_alpha_deg, target_d_total, point=point, yaw=yaw)
         _, d_b, da_b, dd_b = predict(np.r_[params, 0, 0], o, B)
         _, d_t, da_t, dd_t = predict(np.r_[params, tgt], o, tgt[None])
         J = np.zeros((len(B), 4, 4))
@@ -280,7 +282,8 @@ def expected_target_error(observer: ArrayLike, target_alpha_deg: float, target_d
             Jinv = np.linalg.pinv(J)
             cov_t = np.einsum("kij,kj,klj->kil", Jinv[:, 2:, :], sd**2, Jinv[:, 2:, :])
             err2 = cov_t[:, 0, 0] + cov_t[:, 1, 1]
-        seen = seen_in_mirror(o, B, point, yaw, mirror_size, min_depth) & np.isfinite(err2)
+        seen = seen_in_mirror(o, B, point, yaw=yaw, mirror_size=mirror_size,
+                              min_depth=min_depth) & np.isfinite(err2)
         total += np.where(seen, err2, 0.0)
         count += seen
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -303,7 +306,7 @@ class BeaconSearch:
 
 
 def best_beacon(observer: ArrayLike, target_alpha_deg: float, target_d_total: float,
-                poses: list[tuple[np.ndarray, float]], sigma: Sigma | ObjectSigmas,
+                *, poses: list[tuple[np.ndarray, float]], sigma: Sigma | ObjectSigmas,
                 mirror_size: float, board: tuple[float, float], step: float = 0.5,
                 keep_out: list[tuple[np.ndarray, np.ndarray, float]] = (), min_seen: float = 1.0,
                 accept: Callable[[np.ndarray], bool] | None = None) -> BeaconSearch:
@@ -317,8 +320,8 @@ def best_beacon(observer: ArrayLike, target_alpha_deg: float, target_d_total: fl
     ys = np.arange(step / 2, board[1], step)
     gx, gy = np.meshgrid(xs, ys)
     grid = np.column_stack([gx.ravel(), gy.ravel()])
-    err, seen = expected_target_error(observer, target_alpha_deg, target_d_total, grid,
-                                      poses, sigma, mirror_size)
+    err, seen = expected_target_error(observer, target_alpha_deg, target_d_total, beacons=grid,
+                                      poses=poses, sigma=sigma, mirror_size=mirror_size)
     for a, b, clear in keep_out:
         blocked = point_segment_distance(grid, a, b) < clear
         err[blocked], seen[blocked] = np.inf, 0.0

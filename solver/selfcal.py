@@ -191,7 +191,7 @@ def check_nuisance_sigma(priors: Mapping[str, float], nuisances: tuple[str, ...]
 
 
 def check_nuisances(nuisances: tuple[str, ...], nb: int | None, nt: int,
-                    priors: Mapping[str, float] | None = None) -> None:
+                    *, priors: Mapping[str, float] | None = None) -> None:
     """Refuse unknown nuisances, and more unknowns than measurements (``nb`` None: the
     beacons are not known yet, the names only).  A nuisance with a prior brings its own
     measurement (the prior's row), so it does not count against the beacons."""

@@ -68,7 +68,7 @@ class Observation:
 
 
 def observe(observer: ArrayLike, mirror_point: ArrayLike, yaw_deg: ArrayLike,
-            point: ArrayLike, *, strict: bool = True) -> Observation:
+            *, point: ArrayLike, strict: bool = True) -> Observation:
     """Forward model (eqs 1–6): α, d1, d2 and d_total of ``point`` seen in the mirror.
 
     Broadcasts over leading axes.  The observer and the point must stand on the same
@@ -106,7 +106,7 @@ def virtual_image(observer: ArrayLike, alpha_deg: ArrayLike, d_total: ArrayLike)
 
 
 def locate(observer: ArrayLike, mirror_point: ArrayLike, yaw_deg: ArrayLike,
-           alpha_deg: ArrayLike, d_total: ArrayLike) -> np.ndarray:
+           *, alpha_deg: ArrayLike, d_total: ArrayLike) -> np.ndarray:
     """Inverse of :func:`observe`: the point whose image has this α and d_total."""
     return reflect(virtual_image(observer, alpha_deg, d_total), mirror_point, yaw_deg)
 
@@ -220,7 +220,7 @@ def error_ellipse(cov: ArrayLike, level: float = 0.95) -> tuple[float, float, fl
 
 
 def mirror_from_beacon(observer: ArrayLike, beacon: ArrayLike, alpha_deg: ArrayLike,
-                       d_total: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                       *, d_total: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The mirror line from one beacon: the perpendicular bisector of B and its image B′.
 
     Broadcasts.  Returns ``(yaw_deg, midpoint, beacon_reflection_point)``.
@@ -246,7 +246,7 @@ def mirror_from_beacon(observer: ArrayLike, beacon: ArrayLike, alpha_deg: ArrayL
     if np.any(d < direct - 1e-9 * np.maximum(1.0, d)):
         raise SolverError(f"beacon d_total {_show(d)} is shorter than the beacon's direct "
                           f"distance {_show(direct)}: no mirror can produce this image")
-    r = ray_hits_line(o, alpha_deg, mid, yaw)
+    r = ray_hits_line(o, alpha_deg, mid, yaw_deg=yaw)
     return np.asarray(yaw), mid, r
 
 
@@ -279,7 +279,8 @@ def _ray_parameter(o, alpha_deg, point, yaw_deg) -> tuple[np.ndarray, np.ndarray
     return u, denom, t
 
 
-def ray_hits_line(o: ArrayLike, alpha_deg: float, point: ArrayLike, yaw_deg: float) -> np.ndarray:
+def ray_hits_line(o: ArrayLike, alpha_deg: float, point: ArrayLike, *,
+                  yaw_deg: float) -> np.ndarray:
     """Where the ray from o at bearing α meets the line (raises if parallel or behind)."""
     u, denom, t = _ray_parameter(o, alpha_deg, point, yaw_deg)
     if np.any(np.abs(denom) < 1e-9):
@@ -290,7 +291,7 @@ def ray_hits_line(o: ArrayLike, alpha_deg: float, point: ArrayLike, yaw_deg: flo
 
 
 def solve_single(observer: ArrayLike, beacon: ArrayLike, beacon_alpha_deg: ArrayLike,
-                 beacon_d_total: ArrayLike, target_alpha_deg: ArrayLike,
+                 *, beacon_d_total: ArrayLike, target_alpha_deg: ArrayLike,
                  target_d_total: ArrayLike) -> Solution:
     """Exact solution from one beacon and one target measurement (broadcasts).
 
@@ -302,13 +303,13 @@ def solve_single(observer: ArrayLike, beacon: ArrayLike, beacon_alpha_deg: Array
     dt = np.asarray(target_d_total, float)
     if np.any(~np.isfinite(dt)) or np.any(dt <= 0):
         raise SolverError(f"target d_total must be positive, got {dt}")
-    yaw, mid, rb = mirror_from_beacon(o, beacon, beacon_alpha_deg, beacon_d_total)
-    rt = ray_hits_line(o, target_alpha_deg, mid, yaw)
+    yaw, mid, rb = mirror_from_beacon(o, beacon, beacon_alpha_deg, d_total=beacon_d_total)
+    rt = ray_hits_line(o, target_alpha_deg, mid, yaw_deg=yaw)
     d1 = np.linalg.norm(rt - o, axis=-1)
     if np.any(dt <= d1):
         raise SolverError(f"target d_total {_show(dt)} does not reach past the mirror "
                           f"(the mirror is {_show(d1)} away along the target's ray)")
-    target = locate(o, mid, yaw, target_alpha_deg, dt)
+    target = locate(o, mid, yaw, alpha_deg=target_alpha_deg, d_total=dt)
     mirror = MirrorLine(float(yaw), mid) if np.ndim(yaw) == 0 else MirrorLine(yaw, mid)
     return Solution(mirror=mirror, target=target, target_reflection_point=rt,
                     beacon_reflection_points=np.atleast_2d(rb) if np.ndim(yaw) == 0 else rb)
@@ -325,12 +326,13 @@ class BatchEstimate:
 
 
 def closed_form_unchecked(observer: ArrayLike, beacon: ArrayLike, beacon_alpha_deg: ArrayLike,
-                          beacon_d_total: ArrayLike, target_alpha_deg: ArrayLike,
+                          *, beacon_d_total: ArrayLike, target_alpha_deg: ArrayLike,
                           target_d_total: ArrayLike) -> BatchEstimate:
     """:func:`solve_single`'s arithmetic without its checks, for Monte Carlo batches
     where a few noisy draws may be physically impossible (they still give a line)."""
     o, b = np.asarray(observer, float), np.asarray(beacon, float)
     yaw, mid, _, _ = _bisector(o, b, beacon_alpha_deg, beacon_d_total)
     u, _, t = _ray_parameter(o, target_alpha_deg, mid, yaw)
-    return BatchEstimate(np.asarray(yaw), mid, locate(o, mid, yaw, target_alpha_deg,
-                                                       target_d_total), o + t[..., None] * u)
+    return BatchEstimate(np.asarray(yaw), mid, locate(o, mid, yaw, alpha_deg=target_alpha_deg,
+                                                       d_total=target_d_total),
+                                                       o + t[..., None] * u)

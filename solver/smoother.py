@@ -26,7 +26,7 @@ class SmoothedRun:
 
 
 def smooth_run(observer: ArrayLike, start: ArrayLike, controls: np.ndarray,
-               observations: np.ndarray, params: PFParams, yaw_deg: float, rho: float,
+               *, observations: np.ndarray, params: PFParams, yaw_deg: float, rho: float,
                beacons: np.ndarray, fixed: tuple[BeaconMeasurement, ...] = (),
                fixed_sigma: float = 0.0) -> SmoothedRun:
     """Least squares over the odometry (σ_trs per move, the start as believed) and every
@@ -47,7 +47,7 @@ def smooth_run(observer: ArrayLike, start: ArrayLike, controls: np.ndarray,
     def residuals(x):
         b = x[2:2 + 2 * (k + 1)].reshape(k + 1, 2)
         at = x[2 + 2 * (k + 1):].reshape(-1, 2) if free else known
-        seen = observe(o, x[1] * line_normal(x[0]), x[0], np.vstack([b[1:], at]),
+        seen = observe(o, x[1] * line_normal(x[0]), x[0], point=np.vstack([b[1:], at]),
                        strict=False)
         alpha, d = np.asarray(seen.alpha_deg), np.asarray(seen.d_total)
         return np.concatenate([

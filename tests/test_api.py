@@ -35,8 +35,8 @@ def test_the_api_returns_the_typed_values_the_cli_prints():
     three = ms.load_scene(ROOT / "scenes" / "bench" / "exp1_3beacons.yaml")
     many = ms.check(three).exact_measurements()  # at the beacons' true positions
     assert len(many.beacons) == 3
-    cal = ms.solve(many.observer, many.beacons, many.targets, None,
-                   ms.SelfCalibration(("pan", "scale")))
+    cal = ms.solve(many.observer, many.beacons, many.targets, sigma=None,
+                   calibration=ms.SelfCalibration(("pan", "scale")))
     assert cal.nuisances["pan_offset_deg"] == pytest.approx(0.0, abs=1e-6)
     assert cal.nuisances["range_scale"] == pytest.approx(1.0, abs=1e-8)
     assert cal.target == pytest.approx(three.target.position, abs=1e-6)
@@ -84,7 +84,7 @@ def test_the_api_keeps_the_command_lines_promises(tmp_path):
     with pytest.raises(BadParameter, match="alpha_deg: nan is not a finite number"):
         BeaconMeasurement(b.position, float("nan"), b.d_total)
     with pytest.raises(SolverError, match="outside"):
-        ms.solve(truth.observer, truth.beacons, [(truth.targets[0][0], 1e7)], Sigma())
+        ms.solve(truth.observer, truth.beacons, [(truth.targets[0][0], 1e7)], sigma=Sigma())
     with pytest.raises(BadParameter, match=r"^beacons: .* is not a list of BeaconMeasurements"):
         ms.solve(truth.observer, [(b.position, b.alpha_deg, b.d_total)], truth.targets)
     with pytest.raises(BadParameter, match=r"^targets: .* is not a list of tuples"):
@@ -98,9 +98,9 @@ def test_the_api_keeps_the_command_lines_promises(tmp_path):
         with pytest.raises(BadParameter, match="alpha_deg: .* is not a number"):
             ms.BeaconMeasurement(b.position, odd, b.d_total)
     with pytest.raises(BadParameter, match="sigma: .* is not a Sigma or an ObjectSigmas"):
-        ms.solve(truth.observer, truth.beacons, truth.targets, {"alpha_deg": 0.01})
+        ms.solve(truth.observer, truth.beacons, truth.targets, sigma={"alpha_deg": 0.01})
     with pytest.raises(BadParameter, match="calibration: .* is not a SelfCalibration"):
-        ms.solve(truth.observer, truth.beacons, truth.targets, None, {})
+        ms.solve(truth.observer, truth.beacons, truth.targets, sigma=None, calibration={})
     with pytest.raises(BadParameter, match="nuisances: 'pan' .* is not a tuple of strings"):
         ms.SelfCalibration("pan")
     out = tmp_path / "out"

@@ -614,7 +614,8 @@ def test_jpeg_frames_have_their_own_calibration():
     from mirrorsim.pipelines.calibrate import calibration_key
 
     cam = bench_scene().camera
-    keys = {calibration_key(cam, (9.9, 15.25), 4.2, 0.0, sub) for sub in (False, True)}
+    keys = {calibration_key(cam, (9.9, 15.25), 4.2, distance_error=0.0,
+                            subsampled=sub) for sub in (False, True)}
     assert len(keys) == 2
 
 

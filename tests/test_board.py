@@ -96,14 +96,15 @@ def test_the_pitch_factor_is_the_projection_of_the_truth_wing():
         _, v_level, _ = optics.project(cam, seg)
         _, v_pitched, _ = optics.project(cam, seg, pitch=pitch)
         ratio = (v_pitched[1] - v_pitched[0]) / (v_level[1] - v_level[0])
-        assert pitch_factor(pitch, top, cam.height, d) == pytest.approx(ratio, rel=1e-9)
+        assert pitch_factor(pitch, top, cam.height, distance=d) == pytest.approx(ratio, rel=1e-9)
     # to first order the factor is 1 − (tan φ_top + tan φ_foot)·p: a pencil below the
     # camera looks shorter to one pitched down towards it (−0.3 % at 1°, the size of
     # JPEG's error on its height), taller to one pitched up
     for pitch in (-1.0, 1.0):
         first = -((3.0 - 6.5) / 60.0 + -6.5 / 60.0) * math.radians(pitch)
-        assert pitch_factor(pitch, 3.0, 6.5, 60.0) - 1 == pytest.approx(first, rel=0.15)
-    assert pitch_factor(-1.0, 3.0, 6.5, 60.0) == pytest.approx(1 - 0.0026, abs=5e-5)  # Method
+        assert pitch_factor(pitch, 3.0, 6.5, distance=60.0) - 1 == pytest.approx(first, rel=0.15)
+    assert pitch_factor(-1.0, 3.0, 6.5, distance=60.0) == pytest.approx(1 - 0.0026,
+                                                                        abs=5e-5)  # Method
 
 
 @pytest.mark.parametrize("offset,pitch,roll", [(0.0, 0.0, 0.0), (-0.3, 1.0, 0.0),
@@ -134,7 +135,7 @@ def test_corrected_image_undoes_the_pose(offset, pitch, roll):
                                  v_top=float(v[0]), v_bottom=float(v[1]),
                                  height_px=float(v[1] - v[0]), width_px=None,
                                  d_total=dist * (v_level[1] - v_level[0]) / (v[1] - v[0]))
-        a, d = corrected_image(pose, reported, image, top)
+        a, d = corrected_image(pose, reported, image, top=top)
         assert a == pytest.approx(bearing, abs=1e-9)
         assert d == pytest.approx(dist, rel=2e-4)
 

@@ -221,6 +221,30 @@ def test_no_import_circle():
             visit(node, [])
 
 
+# warnings.showwarning's signature, which Python calls by position
+POSITIONAL_PROTOCOL = {"one_line_warning"}
+
+
+def _long_positional(path: Path) -> list[str]:
+    """Public functions and methods of ``path`` taking more than three arguments by
+    position (``self`` and ``cls`` aside)."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    funcs = [n for n in tree.body if isinstance(n, ast.FunctionDef)]
+    funcs += [m for c in tree.body if isinstance(c, ast.ClassDef) and not c.name.startswith("_")
+              for m in c.body if isinstance(m, ast.FunctionDef)]
+    return [f"{path.name}:{fn.lineno} {fn.name}" for fn in funcs
+            if not fn.name.startswith("_") and fn.name not in POSITIONAL_PROTOCOL
+            and len([a for a in fn.args.posonlyargs + fn.args.args
+                     if a.arg not in ("self", "cls")]) > 3]
+
+
+def test_options_are_given_by_keyword():
+    """No public function takes more than three arguments by position: two options
+    swapped by a caller raise a TypeError rather than run with each other's values."""
+    assert [m for f in _modules(PACKAGE) + _modules(ROOT / "solver")
+            for m in _long_positional(f)] == []
+
+
 def test_the_checks_above_can_fail(tmp_path):
     # the import reader sees a lazy import, and the flag pattern a flag in an f-string
     f = tmp_path / "m.py"
@@ -234,6 +258,9 @@ def test_the_checks_above_can_fail(tmp_path):
     f.write_text("from mirrorsim.truth import optics\n"
                  "def g(s):\n    return optics.target_facing(1, 2, 3), compose_scene(s)\n")
     assert {"target_facing", "compose_scene"} <= _calls(f)
+    # the positional count sees a fourth argument, and not one after the star
+    f.write_text("def g(a, b, c, d):\n    pass\n\n\ndef h(a, b, c, *, d):\n    pass\n")
+    assert [m.split()[1] for m in _long_positional(f)] == ["g"]
 
 
 def _unannotated(path: Path) -> list[str]:

@@ -365,7 +365,7 @@ def test_a_jpeg_pencils_foot_on_rendered_frames_stands_where_the_geometry_puts_i
         scene = sample_scene(spec, np.random.SeedSequence(0, spawn_key=(i,)), f"spec{i:03d}")
         b = scene.beacons[0]
         _, (v_foot, v_top) = optics.front_face(scene, b, pencil_paint_height(b.height),
-                                               "beacon")
+                                               kind="beacon")
         srgb = to_srgb8(render_frame(scene.with_render(seed=0), progress=False).linear)
         jpeg = decode_image(encode_jpeg(srgb, 90)).astype(np.float32)
         linear = edges.to_linear(jpeg)
@@ -524,9 +524,9 @@ def test_a_jpeg_pencil_kept_by_one_side_on_its_colour_is_not_used_when_partly_hi
                          u_axis=float("nan"), v_top=500.0, v_bottom=580.0, height_px=height,
                          width_px=None, u_left=u0 - 0.5, u_right=None,
                          notes=(SIDES_ON_COLOUR,))
-    got = pencil_geometry(cam, m, paint, 5000.0)
+    got = pencil_geometry(cam, m, paint, k=5000.0)
     assert (got.clipped == "") is used and (got.clipped == "left") is not used
-    plain = pencil_geometry(cam, replace(m, notes=()), paint, 5000.0)
+    plain = pencil_geometry(cam, replace(m, notes=()), paint, k=5000.0)
     assert plain.clipped == "" and (plain.alpha_deg == got.alpha_deg) is used
 
 

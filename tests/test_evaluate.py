@@ -28,6 +28,12 @@ VARIANTS = [
 ]
 
 
+def _single(x) -> dict:
+    """The one-beacon solution's four measurements (beacon α, d; target α, d) by name."""
+    return dict(zip(("beacon_alpha_deg", "beacon_d_total", "target_alpha_deg",
+                     "target_d_total"), map(float, x), strict=True))
+
+
 def _half(d: dict, name: str):
     d = copy.deepcopy(d)
     d["name"] = name
@@ -49,8 +55,8 @@ def _worst_case(rep: Report, bounds: np.ndarray) -> tuple[float, float]:
     for k in range(4):
         h = np.zeros(4)
         h[k] = 1e-4 * scale[k]
-        hi = solve_single(t.camera.position, t.beacons[0].position, *(m0 + h))
-        lo = solve_single(t.camera.position, t.beacons[0].position, *(m0 - h))
+        hi = solve_single(t.camera.position, t.beacons[0].position, **_single(m0 + h))
+        lo = solve_single(t.camera.position, t.beacons[0].position, **_single(m0 - h))
         per_unit = bounds[k] * scale[k] / (2 * h[k])
         worst_target += np.linalg.norm(hi.target - lo.target) * per_unit
         worst_yaw += yaw_difference(hi.mirror.yaw_deg, lo.mirror.yaw_deg) * per_unit
@@ -79,8 +85,9 @@ def assert_consistent(report: Report) -> None:
                                                  if k in e.calibrated})
            if e.calibrated else PLAIN)
     at_estimate = crlb(m.observer, [b.position for b in m.beacons], yaw,
-                       float(line_normal(yaw) @ sol.mirror.point), sol.target, m.sigma,
-                       len(m.targets), calibration=cal)
+                       mirror_rho=float(line_normal(yaw) @ sol.mirror.point), target=sol.target,
+                       sigma=m.sigma,
+                       n_targets=len(m.targets), calibration=cal)
     assert np.sqrt(np.trace(at_estimate[2:4, 2:4])) <= 1.01 * rms
     assert e.target_crlb_cm <= 1.25 * rms
     text = report_table(report)

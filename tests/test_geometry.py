@@ -59,8 +59,8 @@ def test_bearing_quadrants():
 
 
 def test_segment_distance_and_crossing():
-    assert segment_distance([0, 0], [2, 0], [1, -1], [1, 1]) == 0.0
-    assert np.isclose(segment_distance([0, 0], [2, 0], [3, 1], [3, 5]), np.sqrt(2))
-    assert np.isclose(segment_distance([0, 0], [0, 0], [1, -1], [1, 1]), 1.0)
-    assert np.isclose(segment_crossing([0, 0], [4, 0], [1, -1], [1, 1]), 0.25)
-    assert segment_crossing([0, 0], [4, 0], [5, -1], [5, 1]) is None
+    assert segment_distance([0, 0], [2, 0], [1, -1], q1=[1, 1]) == 0.0
+    assert np.isclose(segment_distance([0, 0], [2, 0], [3, 1], q1=[3, 5]), np.sqrt(2))
+    assert np.isclose(segment_distance([0, 0], [0, 0], [1, -1], q1=[1, 1]), 1.0)
+    assert np.isclose(segment_crossing([0, 0], [4, 0], [1, -1], q1=[1, 1]), 0.25)
+    assert segment_crossing([0, 0], [4, 0], [5, -1], q1=[5, 1]) is None

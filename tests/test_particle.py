@@ -19,16 +19,17 @@ OBS, M, YAW = np.zeros(2), np.array([27.5, 65.0]), 38.0
 
 
 def _run(seed=1):
-    path = path_points("rectangular", (30.0, 60.0), 66.7, 4.0, 2.0, 6)
+    path = path_points("rectangular", (30.0, 60.0), 66.7, a=4.0, b=2.0, n=6)
     params = PFParams()
-    controls, obs, true = simulate_run(OBS, M, YAW, path, params, seed)
+    controls, obs, true = simulate_run(OBS, M, YAW, path=path, params=params, rng=seed)
     return path, controls, obs, true, params
 
 
 def test_filter_converges_on_the_mirror():
     path, controls, obs, _, params = _run()
     rho = line_normal(YAW) @ M
-    est = track(OBS, path[0], controls, obs, (YAW - 15, YAW + 15), (rho - 8, rho + 8),
+    est = track(OBS, path[0], controls, observations=obs, yaw_range=(YAW - 15, YAW + 15),
+                rho_range=(rho - 8, rho + 8),
                 n=4000, params=params, rng=2)
     yaw_err, off_err = mirror_errors(est, M, YAW)
     assert abs(yaw_err[-1]) < 0.5 and off_err[-1] < 0.2
@@ -45,11 +46,12 @@ def test_pure_step_and_class_agree():
     # replay the class's generator from the same seed: the initial draws come first
     rng = np.random.default_rng(9)
     prior = Prior(path[0], (YAW - 15, YAW + 15), (rho - 8, rho + 8))
-    p = initial_particles(prior, 500, params, rng)
+    p = initial_particles(prior, 500, params, rng=rng)
     history = ()
     for c, z in zip(controls, obs, strict=True):
         f.step(c, z)
-        p, w = pf_step(p, w, c, z, OBS, params, rng, prior, history)
+        p, w = pf_step(p, w, c, observation=z, observer=OBS, params=params, rng=rng, prior=prior,
+                       history=history)
         history = (*history, (c, z))
         for a, b in ((p.mirror, f.particles.mirror), (p.beacon, f.particles.beacon),
                      (p.cov, f.particles.cov), (p.loglik, f.particles.loglik),
@@ -78,16 +80,18 @@ def test_filter_is_as_good_as_the_batch_smoother():
     (the best estimate of the mirror these poses allow; started at the truth): over 8
     runs of 16 steps, the filter's median final yaw error within 0.1° of the smoother's."""
     params = PFParams()
-    path = path_points("rectangular", (30.0, 60.0), 66.7, 4.0, 1.0, 8)
+    path = path_points("rectangular", (30.0, 60.0), 66.7, a=4.0, b=1.0, n=8)
     rho = line_normal(YAW) @ M
     pf, batch = [], []
     for seed in range(8):
-        controls, obs, true = simulate_run(OBS, M, YAW, path, params, seed)
-        est = track(OBS, path[0], controls, obs, (YAW - 15, YAW + 15), (rho - 8, rho + 8),
+        controls, obs, true = simulate_run(OBS, M, YAW, path=path, params=params, rng=seed)
+        est = track(OBS, path[0], controls, observations=obs, yaw_range=(YAW - 15, YAW + 15),
+                    rho_range=(rho - 8, rho + 8),
                     n=2000, params=params, rng=100 + seed)
         pf.append(abs(mirror_errors(est, M, YAW)[0][-1]))
         k = len(controls)
-        run = smooth_run(OBS, path[0], controls, obs, params, YAW, rho, true[: k + 1])
+        run = smooth_run(OBS, path[0], controls, observations=obs, params=params, yaw_deg=YAW,
+                         rho=rho, beacons=true[: k + 1])
         batch.append(abs(run.yaw_deg - YAW))
     assert np.median(pf) <= np.median(batch) + 0.1
 
@@ -100,15 +104,17 @@ def test_a_sharp_likelihood_does_not_strand_the_filter():
     from solver.measurements import Sigma
 
     params = PFParams(sigma=Sigma(0.005, 0.006), sigma_trs=0.001)
-    path = path_points("rectangular", (30.0, 60.0), 66.7, 4.0, 1.0, 7)[:13]
+    path = path_points("rectangular", (30.0, 60.0), 66.7, a=4.0, b=1.0, n=7)[:13]
     rho = line_normal(YAW) @ M
     for seed in range(6):
-        controls, obs, true = simulate_run(OBS, M, YAW, path, params, seed)
-        est = track(OBS, path[0], controls, obs, (YAW - 15, YAW + 15), (rho - 8, rho + 8),
+        controls, obs, true = simulate_run(OBS, M, YAW, path=path, params=params, rng=seed)
+        est = track(OBS, path[0], controls, observations=obs, yaw_range=(YAW - 15, YAW + 15),
+                    rho_range=(rho - 8, rho + 8),
                     n=2000, params=params, rng=200 + seed)
         pf = abs(mirror_errors(est, M, YAW)[0][-1])
         k = len(controls)
-        batch = smooth_run(OBS, path[0], controls, obs, params, YAW, rho, true[: k + 1])
+        batch = smooth_run(OBS, path[0], controls, observations=obs, params=params, yaw_deg=YAW,
+                           rho=rho, beacons=true[: k + 1])
         assert pf <= abs(batch.yaw_deg - YAW) + 0.05
 
 
@@ -126,7 +132,7 @@ def test_replay_gives_the_filter_s_own_beacon_and_likelihood():
     obs[2] = None  # an unseen pose too
     for c, z in zip(controls[:4], obs[:4], strict=True):
         f.step(c, z)
-    again = replay(f.particles.mirror, f.prior, f.history, OBS, params)
+    again = replay(f.particles.mirror, f.prior, f.history, observer=OBS, params=params)
     assert np.allclose(again.beacon, f.particles.beacon)
     assert np.allclose(again.cov, f.particles.cov)
     assert np.allclose(again.loglik, f.particles.loglik)
@@ -169,7 +175,7 @@ def _fixed_beacons(params, rng) -> tuple:
 
     t, n = np.array([np.cos(np.radians(YAW)), np.sin(np.radians(YAW))]), line_normal(YAW)
     pts = np.array([M - 6 * t - 8 * n, M + 6 * t - 5 * n])  # on the camera's side
-    seen = observe(OBS, M, YAW, pts, strict=False)
+    seen = observe(OBS, M, YAW, point=pts, strict=False)
     a = np.asarray(seen.alpha_deg) + rng.normal(0, params.sigma.alpha_deg, 2)
     d = np.asarray(seen.d_total) * (1 + rng.normal(0, params.sigma.d_total_rel, 2))
     return tuple(BeaconMeasurement(tuple(p), float(ai), float(di))
@@ -182,7 +188,7 @@ def test_fixed_beacons_weigh_the_mirror_as_the_smoother_does():
     run, its median final yaw error over 8 runs is within 0.1° of the smoother's on the
     same data, and below the filter's without the fixed beacons."""
     params = PFParams()
-    path = path_points("rectangular", (30.0, 60.0), 66.7, 4.0, 1.0, 8)
+    path = path_points("rectangular", (30.0, 60.0), 66.7, a=4.0, b=1.0, n=8)
     rho = line_normal(YAW) @ M
     box = (YAW - 15, YAW + 15), (rho - 8, rho + 8)
     with_fixed, batch, without = [], [], []
@@ -193,18 +199,21 @@ def test_fixed_beacons_weigh_the_mirror_as_the_smoother_does():
             f = MovingBeaconFilter(OBS, path[0], *box, n=2000, params=params, rng=1,
                                    fixed=fixed)
             e = f.estimate()
-            start = smooth_run(OBS, path[0], np.zeros((0, 2)), np.zeros((0, 2)), params,
-                               YAW, rho, path[:1], fixed)
+            start = smooth_run(OBS, path[0], np.zeros((0, 2)), observations=np.zeros((0, 2)),
+                               params=params,
+                               yaw_deg=YAW, rho=rho, beacons=path[:1], fixed=fixed)
             assert abs(e.yaw_deg - start.yaw_deg) < max(0.1 * e.yaw_sd_deg, 0.01)
             assert 0 < e.yaw_sd_deg < 1.0  # the fixed beacons alone already bound it
-        controls, obs, true = simulate_run(OBS, M, YAW, path, params, seed)
-        est = track(OBS, path[0], controls, obs, *box, n=2000, params=params,
-                    rng=100 + seed, fixed=fixed)
+        controls, obs, true = simulate_run(OBS, M, YAW, path=path, params=params, rng=seed)
+        est = track(OBS, path[0], controls, observations=obs, yaw_range=box[0], rho_range=box[1],
+                    n=2000, params=params, rng=100 + seed, fixed=fixed)
         with_fixed.append(abs(mirror_errors(est, M, YAW)[0][-1]))
-        plain = track(OBS, path[0], controls, obs, *box, n=2000, params=params, rng=100 + seed)
+        plain = track(OBS, path[0], controls, observations=obs, yaw_range=box[0], rho_range=box[1],
+                      n=2000, params=params, rng=100 + seed)
         without.append(abs(mirror_errors(plain, M, YAW)[0][-1]))
         k = len(controls)
-        run = smooth_run(OBS, path[0], controls, obs, params, YAW, rho, true[: k + 1], fixed)
+        run = smooth_run(OBS, path[0], controls, observations=obs, params=params, yaw_deg=YAW,
+                         rho=rho, beacons=true[: k + 1], fixed=fixed)
         batch.append(abs(run.yaw_deg - YAW))
     assert np.median(with_fixed) <= np.median(batch) + 0.1
     assert np.median(with_fixed) < np.median(without)
@@ -233,6 +242,7 @@ def test_a_fixed_beacon_s_believed_position_is_weighed_with_its_sigma():
         e, nees = f.estimate(), f.nees(M, YAW)
         assert (nees < 12) == ok and (nees > 30) != ok, (sd, nees, e)
         if ok:
-            batch = smooth_run(OBS, start, np.zeros((0, 2)), np.zeros((0, 2)), params, YAW,
-                               rho, start[None], off, sd)
+            batch = smooth_run(OBS, start, np.zeros((0, 2)), observations=np.zeros((0, 2)),
+                               params=params, yaw_deg=YAW,
+                               rho=rho, beacons=start[None], fixed=off, fixed_sigma=sd)
             assert abs(e.yaw_deg - batch.yaw_deg) < 0.2 * e.yaw_sd_deg

@@ -40,7 +40,9 @@ def test_solver_one_beacon_closed_form():
     """Mirror y = 10 seen from the origin; beacon (3, 6) → image (3, 14); target (−4, 2)
     → image (−4, 18).  The closed form returns that line and that target exactly."""
     sol = solve_single((0.0, 0.0), (3.0, 6.0), math.degrees(math.atan2(14, 3)),
-                       math.hypot(3, 14), math.degrees(math.atan2(18, -4)), math.hypot(4, 18))
+                       beacon_d_total=math.hypot(3, 14),
+                       target_alpha_deg=math.degrees(math.atan2(18, -4)),
+                       target_d_total=math.hypot(4, 18))
     assert sol.mirror.yaw_deg % 180 == pytest.approx(0.0, abs=1e-9) or \
         sol.mirror.yaw_deg % 180 == pytest.approx(180.0, abs=1e-9)
     assert float(np.asarray(sol.mirror.point)[1]) == pytest.approx(10.0)

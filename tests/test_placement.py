@@ -26,7 +26,7 @@ from solver.sltr import observe
 def test_paper_step_and_width_by_slopes():
     """Eqs 9–18 evaluated literally with tan() slopes, as the paper writes them."""
     alpha, d, s, eps = 66.0, 90.0, 18.2, 5.0
-    g = paper_placement(alpha, d, s, eps)
+    g = paper_placement(alpha, d, s, eps_deg=eps)
     ta, tb = math.tan(math.radians(alpha)), math.tan(math.radians(alpha - 2 * eps))
     xr, yr = d * math.cos(math.radians(alpha)), d * math.sin(math.radians(alpha))
     th = math.radians(alpha - eps)
@@ -44,9 +44,9 @@ def test_paper_step_and_width_by_slopes():
 def test_section7_claim_holds_for_the_formulas_not_for_exact_visibility():
     o = np.zeros(2)
     ds = (50.0, 100.0, 400.0)
-    lit = [paper_placement(66.0, d, 18.2, 5.0).area for d in ds]
+    lit = [paper_placement(66.0, d, 18.2, eps_deg=5.0).area for d in ds]
     assert max(lit) - min(lit) < 1e-9  # the paper's triangle: independent of d_total
-    exact = [region_area(o, 66.0, d, 18.2, 5.0) for d in ds]
+    exact = [region_area(o, 66.0, d, s=18.2, eps_deg=5.0) for d in ds]
     # the exact region shrinks with distance (the mirror subtends a smaller angle)
     assert exact[0] > exact[1] > exact[2] and exact[0] > 1.5 * exact[2]
 
@@ -55,7 +55,7 @@ def test_path_lengths_match_the_polylines():
     for a, b, n in [(2.9, 4.6, 20), (5.0, 1.0, 7), (1.0, 1.0, 1)]:
         eq = path_lengths(a, b, n)
         for kind in ("linear", "rectangular", "sawtooth"):
-            pts = path_points(kind, (0, 0), 66.0, a, b, n)
+            pts = path_points(kind, (0, 0), 66.0, a=a, b=b, n=n)
             # the linear path of eq 19 walks n−1 steps down one side and back the other
             assert polyline_length(pts) == pytest.approx(eq[kind], rel=1e-12), kind
 
@@ -85,8 +85,8 @@ def test_rectangular_shortest_claim_holds_for_b_greater_than_a_only():
 
 
 def test_algorithm1_beacon_count_and_sides():
-    steps = algorithm1((0, 0), 66.0, 90.0, 18.2, 5.0)
-    g = paper_placement(66.0, 90.0, 18.2, 5.0)
+    steps = algorithm1((0, 0), 66.0, 90.0, s=18.2, eps_deg=5.0)
+    g = paper_placement(66.0, 90.0, 18.2, eps_deg=5.0)
     assert len(steps) == math.floor(90.0 / g.b)
     assert 2 * len(steps) == pytest.approx(g.n_beacons, abs=2)  # eq 8, up to rounding
     u = np.array([math.cos(math.radians(66)), math.sin(math.radians(66))])
@@ -98,36 +98,39 @@ def test_algorithm1_beacon_count_and_sides():
 def test_two_beacon_orientation_of_known_reflector():
     o, r, yaw = np.zeros(2), np.array([27.5, 65.0]), 38.0
     beacons = [(32, 62.5), (25, 60)]
-    alphas = [observe(o, r, yaw, b).alpha_deg for b in beacons]
-    assert orientation_from_beacons(o, r, beacons, alphas, 30.0) == pytest.approx(yaw, abs=1e-9)
+    alphas = [observe(o, r, yaw, point=b).alpha_deg for b in beacons]
+    assert orientation_from_beacons(o, r, beacons, alphas_deg=alphas,
+                                    initial_yaw_deg=30.0) == pytest.approx(yaw, abs=1e-9)
 
 
 def test_expected_error_matches_least_squares_and_best_is_much_better():
     """EXP3's own beacon ≈ 2.4 cm at σ = (0.01°, 0.2 %), good positions ≈ 0.2 (figures
     fixed before this code was written)."""
     o, m, yaw = np.zeros(2), np.array([16.0, 34.5]), 38.3
-    ot = observe(o, m, yaw, (65.5, 42.7))
+    ot = observe(o, m, yaw, point=(65.5, 42.7))
     sig = Sigma(0.01, 0.002)
-    err, seen = expected_target_error(o, ot.alpha_deg, ot.d_total, np.array([[17.0, 33.5]]),
-                                      [(m, yaw)], sig, 18.2, min_depth=0.0)
+    err, seen = expected_target_error(o, ot.alpha_deg, ot.d_total, beacons=np.array([[17.0, 33.5]]),
+                                      poses=[(m, yaw)], sigma=sig, mirror_size=18.2, min_depth=0.0)
     assert seen[0] == 1.0 and err[0] == pytest.approx(2.4, abs=0.1)
     # the same figure from the solver's own covariance (least squares with σ's) on the
     # exact measurements of this pose: sqrt(trace) of the target block
-    ob = observe(o, m, yaw, (17.0, 33.5))
+    ob = observe(o, m, yaw, point=(17.0, 33.5))
     sol = solve_measurements(o, [BeaconMeasurement((17.0, 33.5), ob.alpha_deg, ob.d_total)],
-                             [(ot.alpha_deg, ot.d_total)], sig)
+                             [(ot.alpha_deg, ot.d_total)], sigma=sig)
     assert err[0] == pytest.approx(np.sqrt(np.trace(sol.target_covariance)), rel=1e-6)
     lsq = solve_lsq(o, [BeaconMeasurement((17.0, 33.5), ob.alpha_deg, ob.d_total)],
-                    [(ot.alpha_deg, ot.d_total)], sig)
+                    [(ot.alpha_deg, ot.d_total)], sigma=sig)
     assert err[0] == pytest.approx(np.sqrt(np.trace(lsq.target_covariance)), rel=1e-4)
-    best = best_beacon(o, ot.alpha_deg, ot.d_total, [(m, yaw)], sig, 18.2, (80, 80), step=1.0)
+    best = best_beacon(o, ot.alpha_deg, ot.d_total, poses=[(m, yaw)], sigma=sig, mirror_size=18.2,
+                       board=(80, 80), step=1.0)
     assert best.rmse < 0.3
     # with a prior of mirror poses the best position is still an order of magnitude better
     prior = MirrorPrior(d1=float(ot.d1), yaw_deg=yaw, d1_spread=2, yaw_spread_deg=3)
     poses = prior.poses(o, ot.alpha_deg)
-    best = best_beacon(o, ot.alpha_deg, ot.d_total, poses, sig, 18.2, (80, 80), step=1.0)
-    paper, _ = expected_target_error(o, ot.alpha_deg, ot.d_total, np.array([[17.0, 33.5]]),
-                                     poses, sig, 18.2, min_depth=0.0)
+    best = best_beacon(o, ot.alpha_deg, ot.d_total, poses=poses, sigma=sig, mirror_size=18.2,
+                       board=(80, 80), step=1.0)
+    paper, _ = expected_target_error(o, ot.alpha_deg, ot.d_total, beacons=np.array([[17.0, 33.5]]),
+                                     poses=poses, sigma=sig, mirror_size=18.2, min_depth=0.0)
     assert best.rmse < paper[0] / 10 and best.seen_fraction == 1.0
 
 
@@ -136,11 +139,12 @@ def test_best_beacon_falls_back_to_fewer_poses_where_the_test_refuses_every_full
     them all, the best position seen under fewer poses is chosen (it stopped with an
     error after 500 candidates), and where it refuses every position, one line says so."""
     o, m, yaw = np.zeros(2), np.array([16.0, 34.5]), 38.3
-    ot = observe(o, m, yaw, (65.5, 42.7))
+    ot = observe(o, m, yaw, point=(65.5, 42.7))
     sig = Sigma(0.01, 0.002)
     poses = MirrorPrior(d1=float(ot.d1), yaw_deg=yaw, d1_spread=2,
                         yaw_spread_deg=3).poses(o, ot.alpha_deg)
-    free = best_beacon(o, ot.alpha_deg, ot.d_total, poses, sig, 18.2, (80, 80), step=1.0)
+    free = best_beacon(o, ot.alpha_deg, ot.d_total, poses=poses, sigma=sig, mirror_size=18.2,
+                       board=(80, 80), step=1.0)
     full = free.seen >= 1.0
     assert full.any() and (free.seen[(free.seen > 0) & ~full]).any()
     # refuse every position seen under all poses
@@ -152,11 +156,13 @@ def test_best_beacon_falls_back_to_fewer_poses_where_the_test_refuses_every_full
         calls.append(tuple(p))
         return (float(p[0]), float(p[1])) not in refused
 
-    got = best_beacon(o, ot.alpha_deg, ot.d_total, poses, sig, 18.2, (80, 80), step=1.0,
+    got = best_beacon(o, ot.alpha_deg, ot.d_total, poses=poses, sigma=sig, mirror_size=18.2,
+                      board=(80, 80), step=1.0,
                       accept=accept)
     assert got.seen_fraction < 1.0 and tuple(got.position) not in refused
     assert got.seen_fraction == free.seen[free.seen < 1.0].max()
     assert len(calls) == len(set(calls))  # no position tested twice
     with pytest.raises(SolverError, match="no beacon position on the board passes"):
-        best_beacon(o, ot.alpha_deg, ot.d_total, poses, sig, 18.2, (80, 80), step=1.0,
+        best_beacon(o, ot.alpha_deg, ot.d_total, poses=poses, sigma=sig, mirror_size=18.2,
+                    board=(80, 80), step=1.0,
                     accept=lambda _p: False)

@@ -113,7 +113,8 @@ def test_only_the_scenes_own_failures_become_rows(tmp_path, monkeypatch, exc, re
     monkeypatch.setattr(evaluate, "evaluate_into", failing)
     for sub in ("scenes", "rows", "frames"):
         (tmp_path / sub).mkdir()
-    result = dataset.process_one(0, 1, load_spec(SPEC), str(tmp_path), 1, "scalar_rgb")
+    result = dataset.process_one(0, 1, load_spec(SPEC), out=str(tmp_path), spp=1,
+                                 variant="scalar_rgb")
     assert (tmp_path / "rows" / "scene000000.json").exists() == recorded
     assert (result.row is None) != recorded and bool(result.retry) != recorded
     if recorded:

@@ -337,7 +337,7 @@ def test_a_tile_renders_its_window_as_a_crop_of_the_film_does(fast_variant):
         d["sensor_crop"] = _cropped(d["sensor"], (u0, v0, u0 + 64, v0 + 64))
         ms = mi.load_dict(d, optimize=False)
         sensors = {s.id(): s for s in ms.sensors()}
-        aim_tile(mi.traverse(sensors["sensor_tile64"]), scene.camera, 64, u0, v0)
+        aim_tile(mi.traverse(sensors["sensor_tile64"]), scene.camera, 64, u0=u0, v0=v0)
         tile, crop = (np.array(mi.render(ms, sensor=sensors[k], spp=16, seed=7))
                       for k in ("sensor_tile64", "sensor_crop"))
     assert crop.shape == tile.shape == (64, 64, 3) and crop.mean() > 0.01

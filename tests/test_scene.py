@@ -319,7 +319,7 @@ def test_the_evaluation_plot_insets_an_ellipse_too_small_to_see(tmp_path, monkey
     figures = []
     monkeypatch.setattr(plots, "save_figure", lambda fig, out, _dpi: figures.append(fig) or out)
     for scale, inset in ((1.0, False), (1e-2, True)):
-        sol = ms.solve(m.observer, m.beacons, m.targets, Sigma(0.02 * scale, 0.004 * scale))
+        sol = ms.solve(m.observer, m.beacons, m.targets, sigma=Sigma(0.02 * scale, 0.004 * scale))
         err = np.hypot(*(np.asarray(sol.target) - scene.target.position))
         score = Score(float(err), 0.0, 0.0, 0.0, 0.0, 0.0, (0.0,), (0.0,),
                       sol.ellipse95()[0])

@@ -24,10 +24,10 @@ def _measure(rng, delta=0.0, scale=1.0, beacons=BEACONS):
     """Exact images, then the bench's pan offset and range scale, then detector noise."""
     bs = []
     for b in beacons:
-        o = observe(OBS, *MIRROR, b)
+        o = observe(OBS, *MIRROR, point=b)
         bs.append(BeaconMeasurement(tuple(b), float(o.alpha_deg) + delta + rng.normal(0, 0.003),
                                     float(o.d_total) * scale * (1 + rng.normal(0, 0.002))))
-    o = observe(OBS, *MIRROR, TARGET)
+    o = observe(OBS, *MIRROR, point=TARGET)
     return bs, [(float(o.alpha_deg) + delta + rng.normal(0, 0.002),
                  float(o.d_total) * scale * (1 + rng.normal(0, 0.0005)))]
 
@@ -40,22 +40,25 @@ def test_self_calibration_removes_a_pan_offset_and_a_range_scale():
     plain, cal, z = [], [], []
     for _ in range(300):
         bs, ts = _measure(rng, 0.4, 1.008)
-        plain.append(np.linalg.norm(solve_measurements(OBS, bs, ts, SIG).target - TARGET))
-        sol = solve_measurements(OBS, bs, ts, SIG, SelfCalibration(("pan", "scale")))
+        plain.append(np.linalg.norm(solve_measurements(OBS, bs, ts, sigma=SIG).target - TARGET))
+        sol = solve_measurements(OBS, bs, ts, sigma=SIG,
+                                 calibration=SelfCalibration(("pan", "scale")))
         cal.append(np.linalg.norm(sol.target - TARGET))
         sd = np.sqrt(np.diag(sol.covariance))
         z.append([(sol.nuisances["pan_offset_deg"] - 0.4) / sd[4],
                   (sol.nuisances["range_scale"] - 1.008) / sd[5]])
     assert np.median(cal) < np.median(plain) / 3
     assert np.mean(np.abs(np.array(z)) < 3, axis=0).min() > 0.97
-    bound = crlb(OBS, BEACONS, 20.0, RHO, TARGET, SIG, nuisances=("pan", "scale"))
+    bound = crlb(OBS, BEACONS, 20.0, mirror_rho=RHO, target=TARGET, sigma=SIG,
+                 nuisances=("pan", "scale"))
     assert np.sqrt(np.mean(np.square(cal))) == pytest.approx(
         np.sqrt(np.trace(bound[2:4, 2:4])), rel=0.25)
 
 
 def test_the_bound_with_nuisances_is_never_below_the_bound_without():
-    plain = crlb(OBS, BEACONS, 20.0, RHO, TARGET, SIG)[2:4, 2:4]
-    cal = crlb(OBS, BEACONS, 20.0, RHO, TARGET, SIG, nuisances=("pan", "scale"))[2:4, 2:4]
+    plain = crlb(OBS, BEACONS, 20.0, mirror_rho=RHO, target=TARGET, sigma=SIG)[2:4, 2:4]
+    cal = crlb(OBS, BEACONS, 20.0, mirror_rho=RHO, target=TARGET, sigma=SIG,
+               nuisances=("pan", "scale"))[2:4, 2:4]
     assert np.all(np.linalg.eigvalsh(cal - plain) > -1e-12)
 
 
@@ -63,7 +66,8 @@ def test_self_calibration_refuses_what_it_cannot_observe():
     rng = np.random.default_rng(0)
     bs, ts = _measure(rng)
     with pytest.raises(SolverError, match="at least 2 beacon observations"):
-        solve_measurements(OBS, bs[:1], ts, SIG, SelfCalibration(("pan", "scale")))
+        solve_measurements(OBS, bs[:1], ts, sigma=SIG,
+                           calibration=SelfCalibration(("pan", "scale")))
     with pytest.raises(BadParameter, match="^nuisances: unknown nuisance"):
         SelfCalibration(("roll",))
     with pytest.raises(BadParameter, match=r"^nuisances: pan given twice"):
@@ -71,7 +75,7 @@ def test_self_calibration_refuses_what_it_cannot_observe():
     # two beacons standing at one place: their images cannot separate δ and s
     same = [bs[0], BeaconMeasurement(bs[0].position, bs[0].alpha_deg, bs[0].d_total)]
     with pytest.raises(SolverError, match="do not separate"):
-        solve_measurements(OBS, same, ts, SIG, SelfCalibration(("pan", "scale")))
+        solve_measurements(OBS, same, ts, sigma=SIG, calibration=SelfCalibration(("pan", "scale")))
 
 
 def test_plan_places_several_beacons_and_says_what_each_buys(tmp_path):
@@ -114,7 +118,8 @@ def test_plan_places_several_beacons_and_says_what_each_buys(tmp_path):
             vt = o + img.d_total * np.array([np.cos(np.radians(img.alpha_deg)),
                                              np.sin(np.radians(img.alpha_deg))])
             t = vt - 2.0 * (n @ vt - n @ point) * n
-            info = np.linalg.inv(crlb(o, pos, yaw, n @ point, t, s, nuisances=("pan", "scale")))
+            info = np.linalg.inv(crlb(o, pos, yaw, mirror_rho=n @ point, target=t, sigma=s,
+                                      nuisances=("pan", "scale")))
             var.append(np.trace(np.linalg.inv(info + prior_information)[2:4, 2:4]))
         return float(np.sqrt(np.mean(var)))
 
@@ -179,7 +184,7 @@ def test_a_budgets_document_says_how_it_self_calibrated():
 
 
 def _flat_reflection_points(pts) -> np.ndarray:
-    return np.array([observe(OBS, *MIRROR, p).reflection_point for p in pts])
+    return np.array([observe(OBS, *MIRROR, point=p).reflection_point for p in pts])
 
 
 def _cos_incidence(o) -> float:
@@ -207,7 +212,7 @@ def _arc(p, vertex, radius):
     def slope(phi, h=1e-7):
         return (length(phi + h) - length(phi - h)) / (2 * h)
 
-    flat = observe(OBS, *MIRROR, p).reflection_point
+    flat = observe(OBS, *MIRROR, point=p).reflection_point
     phi0 = ((flat - vertex) @ a) / radius
     phi = brentq(slope, phi0 - 0.01, phi0 + 0.01, xtol=1e-15)
     x = point(phi) - OBS
@@ -225,9 +230,9 @@ def test_the_mirror_power_moves_each_image_as_a_curved_mirror_does(radius, shift
 
     pts = np.vstack([*BEACONS, TARGET])
     vertex = _flat_reflection_points(pts).mean(axis=0) + shift * unit(MIRROR[1])
-    dalpha, dd = power_terms((MIRROR[1], RHO), OBS, pts, vertex)
+    dalpha, dd = power_terms((MIRROR[1], RHO), OBS, pts, vertex=vertex)
     for k, p in enumerate(pts):
-        o = observe(OBS, *MIRROR, p)
+        o = observe(OBS, *MIRROR, point=p)
         alpha, path = _arc(p, vertex, radius)
         magnified = -2.0 * _cos_incidence(o) * o.d1 * o.d2
         assert abs(alpha - o.alpha_deg) > 0.002  # the effects are there to be measured
@@ -262,7 +267,7 @@ def _sphere_elevation(p3, vertex, radius, camera_z, vertex_z):
     def slope(q, h=1e-6):
         return [(length(q + h * e) - length(q - h * e)) / (2 * h) for e in np.eye(2)]
 
-    flat = observe(OBS, *MIRROR, p3[:2]).reflection_point
+    flat = observe(OBS, *MIRROR, point=p3[:2]).reflection_point
     s = point(root(slope, [((flat - vertex) @ a) / radius, 0.0], tol=1e-14).x)
     return (s[2] - camera_z) / np.hypot(*(s[:2] - OBS))
 
@@ -282,12 +287,12 @@ def test_the_mirror_power_magnifies_each_image_as_a_spherical_mirror_does(radius
 
     pts = np.vstack([*BEACONS, TARGET])
     vertex = _flat_reflection_points(pts).mean(axis=0)
-    _, dd = power_terms((MIRROR[1], RHO), OBS, pts, vertex)
+    _, dd = power_terms((MIRROR[1], RHO), OBS, pts, vertex=vertex)
     for height, camera_z, vertex_z, rel in ((1.0, 0.5, 0.5, 0.005), (10.0, 6.0, 8.0, 0.16)):
         for k, p in enumerate(pts):
             top, foot = (_sphere_elevation(np.r_[p, z], vertex, radius, camera_z, vertex_z)
                          for z in (height, 0.0))
-            seen = height / (top - foot) - observe(OBS, *MIRROR, p).d_total
+            seen = height / (top - foot) - observe(OBS, *MIRROR, point=p).d_total
             assert abs(seen) > 0.03  # the effect is there to be measured
             assert seen == pytest.approx(dd[k] / radius, rel=rel)
 
@@ -299,7 +304,7 @@ def test_the_powers_vertex_changes_the_mirror_not_the_target():
     middle of the reflection points, then agree)."""
     from solver.beacon_set import _information
 
-    o = observe(OBS, *MIRROR, TARGET)
+    o = observe(OBS, *MIRROR, point=TARGET)
     along = unit(MIRROR[1])
     bounds = []
     for shift in (0.0, 10.0, -30.0):
@@ -310,8 +315,9 @@ def test_the_powers_vertex_changes_the_mirror_not_the_target():
         bounds.append(np.trace(cov[2:4, 2:4]))
     # the power costs information (its bound above pan and scale's), the same at each
     # vertex, and the solver's vertex (crlb: the middle of the reflection points) agrees
-    two = crlb(OBS, BEACONS, 20.0, RHO, TARGET, SIG, nuisances=("pan", "scale"))[2:4, 2:4]
-    three = crlb(OBS, BEACONS, 20.0, RHO, TARGET, SIG,
+    two = crlb(OBS, BEACONS, 20.0, mirror_rho=RHO, target=TARGET, sigma=SIG,
+               nuisances=("pan", "scale"))[2:4, 2:4]
+    three = crlb(OBS, BEACONS, 20.0, mirror_rho=RHO, target=TARGET, sigma=SIG,
                  nuisances=("pan", "scale", "power"))[2:4, 2:4]
     assert np.all(np.linalg.eigvalsh(three - two) > -1e-12)
     assert bounds[0] > 1.5 * np.trace(two)
@@ -332,14 +338,15 @@ def test_self_calibration_removes_a_curved_mirrors_error():
     vertex = _flat_reflection_points(pts).mean(axis=0)
     meas = []
     for p in pts:
-        o = observe(OBS, *MIRROR, p)
+        o = observe(OBS, *MIRROR, point=p)
         alpha, path = _arc(p, vertex, radius)
         d = path - 2.0 * _cos_incidence(o) * o.d1 * o.d2 / radius  # the sagittal image's
         meas.append((alpha + delta, d * scale))
     bs = [BeaconMeasurement(tuple(b), *m) for b, m in zip(BEACONS, meas[:3], strict=True)]
-    two = solve_measurements(OBS, bs, meas[3:], SIG, SelfCalibration(("pan", "scale")))
-    three = solve_measurements(OBS, bs, meas[3:], SIG,
-                               SelfCalibration(("pan", "scale", "power")))
+    two = solve_measurements(OBS, bs, meas[3:], sigma=SIG,
+                             calibration=SelfCalibration(("pan", "scale")))
+    three = solve_measurements(OBS, bs, meas[3:], sigma=SIG,
+                               calibration=SelfCalibration(("pan", "scale", "power")))
     e2, e3 = (np.linalg.norm(s.target - TARGET) for s in (two, three))
     assert e2 > 0.5
     assert e3 < e2 / 10
@@ -357,20 +364,20 @@ def test_the_powers_covariance_holds_and_too_few_beacons_are_refused():
     rng = np.random.default_rng(11)
     c = 1 / 2000
     pts = np.vstack([*BEACONS, TARGET])
-    A, D = power_terms((MIRROR[1], RHO), OBS, pts, _flat_reflection_points(pts).mean(axis=0))
+    A, D = power_terms((MIRROR[1], RHO), OBS, pts, vertex=_flat_reflection_points(pts).mean(axis=0))
     z = []
     for _ in range(300):
         bs, ts = _measure(rng)
         moved = [BeaconMeasurement(b.position, b.alpha_deg + c * A[k], b.d_total + c * D[k])
                  for k, b in enumerate(bs)]
         ts = [(ts[0][0] + c * A[3], ts[0][1] + c * D[3])]
-        sol = solve_measurements(OBS, moved, ts, SIG,
-                                 SelfCalibration(("pan", "scale", "power")))
+        sol = solve_measurements(OBS, moved, ts, sigma=SIG,
+                                 calibration=SelfCalibration(("pan", "scale", "power")))
         z.append((sol.nuisances["mirror_power_per_cm"] - c) / np.sqrt(sol.covariance[6, 6]))
     assert 0.92 < np.mean(np.abs(z) < 2) < 0.98
     with pytest.raises(SolverError, match="at least 3 beacon observations"):
-        solve_measurements(OBS, moved[:2], ts, SIG,
-                           SelfCalibration(("pan", "scale", "power")))
+        solve_measurements(OBS, moved[:2], ts, sigma=SIG,
+                           calibration=SelfCalibration(("pan", "scale", "power")))
 
 
 PRIORS = {"pan": 0.3, "scale": 0.006, "power": 0.0003}
@@ -384,7 +391,7 @@ def test_priors_on_the_nuisances_help_where_the_bench_draws_them_from_the_priors
 
     rng = np.random.default_rng(29)
     pts = np.vstack([*BEACONS, TARGET])
-    A, D = power_terms((MIRROR[1], RHO), OBS, pts, _flat_reflection_points(pts).mean(axis=0))
+    A, D = power_terms((MIRROR[1], RHO), OBS, pts, vertex=_flat_reflection_points(pts).mean(axis=0))
     free, known, inside = [], [], []
     for _ in range(300):
         delta, s, c = (rng.normal(0, PRIORS["pan"]), 1 + rng.normal(0, PRIORS["scale"]),
@@ -394,8 +401,10 @@ def test_priors_on_the_nuisances_help_where_the_bench_draws_them_from_the_priors
               for k, b in enumerate(bs)]
         ts = [(ts[0][0] + c * A[3], ts[0][1] + s * c * D[3])]
         nu = ("pan", "scale", "power")
-        free.append(solve_measurements(OBS, bs, ts, SIG, SelfCalibration(nu)).target - TARGET)
-        sol = solve_measurements(OBS, bs, ts, SIG, SelfCalibration(nu, priors=PRIORS))
+        free.append(solve_measurements(OBS, bs, ts, sigma=SIG,
+                                       calibration=SelfCalibration(nu)).target - TARGET)
+        sol = solve_measurements(OBS, bs, ts, sigma=SIG,
+                                 calibration=SelfCalibration(nu, priors=PRIORS))
         e = sol.target - TARGET
         known.append(e)
         inside.append(e @ np.linalg.solve(sol.covariance[2:4, 2:4], e) < 5.991)
@@ -410,12 +419,14 @@ def test_a_prior_tight_enough_is_the_plain_fit_and_a_wide_one_the_free_fit():
     rng = np.random.default_rng(5)
     bs, ts = _measure(rng, 0.2, 1.004)
     nu = ("pan", "scale")
-    plain = solve_measurements(OBS, bs, ts, SIG).target
-    free = solve_measurements(OBS, bs, ts, SIG, SelfCalibration(nu)).target
-    tight = solve_measurements(OBS, bs, ts, SIG,
-                               SelfCalibration(nu, priors={"pan": 1e-6, "scale": 1e-6})).target
-    wide = solve_measurements(OBS, bs, ts, SIG,
-                              SelfCalibration(nu, priors={"pan": 1e6, "scale": 1e6})).target
+    plain = solve_measurements(OBS, bs, ts, sigma=SIG).target
+    free = solve_measurements(OBS, bs, ts, sigma=SIG, calibration=SelfCalibration(nu)).target
+    tight = solve_measurements(OBS, bs, ts, sigma=SIG,
+                               calibration=SelfCalibration(nu, priors={"pan": 1e-6,
+                                                                       "scale": 1e-6})).target
+    wide = solve_measurements(OBS, bs, ts, sigma=SIG,
+                              calibration=SelfCalibration(nu,
+                                                          priors={"pan": 1e6, "scale": 1e6})).target
     assert np.linalg.norm(free - plain) > 0.05  # the case tells the two apart
     assert tight == pytest.approx(plain, abs=1e-4)
     assert wide == pytest.approx(free, abs=1e-4)
@@ -460,7 +471,7 @@ def test_priors_are_refused_for_nuisances_not_estimated_and_when_not_positive(tm
     # the priors travel with the solution's document and back
     from solver.sltr import Solution
 
-    sol = solve_measurements(OBS, bs, ts, SIG, SelfCalibration(
+    sol = solve_measurements(OBS, bs, ts, sigma=SIG, calibration=SelfCalibration(
         ("pan", "scale"), priors={"pan": 0.3, "scale": 0.006}))
     assert Solution.from_json(sol.to_json()).priors == {"pan": 0.3, "scale": 0.006}
 
@@ -474,11 +485,13 @@ def test_a_pan_prior_adds_to_the_shared_alpha_offset_of_the_sigmas():
     rng = np.random.default_rng(8)
     bs, ts = _measure(rng, 0.1, 1.003)
     shared = replace(SIG, shared_alpha_deg=0.05)
-    both = solve_measurements(OBS, bs, ts, shared,
-                              SelfCalibration(("pan", "scale"), priors={"pan": 0.2}))
+    both = solve_measurements(OBS, bs, ts, sigma=shared,
+                              calibration=SelfCalibration(("pan", "scale"), priors={"pan": 0.2}))
     wider = replace(SIG, shared_alpha_deg=float(np.hypot(0.05, 0.2)))
-    added = solve_measurements(OBS, bs, ts, wider, SelfCalibration(("pan", "scale")))
-    alone = solve_measurements(OBS, bs, ts, shared, SelfCalibration(("pan", "scale")))
+    added = solve_measurements(OBS, bs, ts, sigma=wider,
+                               calibration=SelfCalibration(("pan", "scale")))
+    alone = solve_measurements(OBS, bs, ts, sigma=shared,
+                               calibration=SelfCalibration(("pan", "scale")))
     assert both.target == pytest.approx(added.target, abs=1e-9)
     assert both.covariance[4, 4] == pytest.approx(added.covariance[4, 4], rel=1e-6)
     assert both.covariance[4, 4] > alone.covariance[4, 4]
@@ -535,7 +548,7 @@ def test_sigmas_too_small_to_weigh_are_refused_before_the_solve(tmp_path, capsys
     capsys.readouterr()
     # a library caller gets the solver's one-line refusal, not an overflow
     with pytest.raises(SolverError, match="each σ_α must be within"):
-        solve_measurements(OBS, bs, ts, ObjectSigmas.same(Sigma(1e-320, 0.002)))
+        solve_measurements(OBS, bs, ts, sigma=ObjectSigmas.same(Sigma(1e-320, 0.002)))
 
 
 @pytest.mark.parametrize("calibration, shared", [
@@ -558,12 +571,13 @@ def test_the_reports_bound_is_its_own_estimators_and_never_above_its_covariance(
     beside a 1.2 cm covariance), and the estimates' RMS error is the bound's to 25 %."""
     rng = np.random.default_rng(11)
     sig = ObjectSigmas(SIG.target, SIG.beacons, shared)
-    bound = crlb(OBS, BEACONS, 20.0, RHO, TARGET, sig, calibration=calibration)
+    bound = crlb(OBS, BEACONS, 20.0, mirror_rho=RHO, target=TARGET, sigma=sig,
+                 calibration=calibration)
     crlb_rms = np.sqrt(np.trace(bound[2:4, 2:4]))
     errors, ratio = [], []
     for _ in range(150):
         bs, ts = _measure(rng)
-        sol = solve_measurements(OBS, bs, ts, sig, calibration)
+        sol = solve_measurements(OBS, bs, ts, sigma=sig, calibration=calibration)
         ratio.append(crlb_rms / np.sqrt(np.trace(sol.target_covariance)))
         errors.append(np.linalg.norm(sol.target - TARGET))
         assert sol.covariance.shape[0] == len(sol.params_order)
@@ -580,11 +594,11 @@ def test_a_prior_lets_fewer_beacons_carry_a_nuisance():
     bs, ts = _measure(rng, beacons=BEACONS[:1])
     cal = SelfCalibration(("pan", "scale", "power"),
                           priors={"pan": 0.5, "scale": 0.01, "power": 8e-4})
-    sol = solve_measurements(OBS, bs, ts, SIG, cal)
-    plain = solve_measurements(OBS, bs, ts, SIG)
+    sol = solve_measurements(OBS, bs, ts, sigma=SIG, calibration=cal)
+    plain = solve_measurements(OBS, bs, ts, sigma=SIG)
     assert np.trace(sol.target_covariance) > 10 * np.trace(plain.target_covariance)
     with pytest.raises(SolverError, match="at least 2 beacon observations"):
-        solve_measurements(OBS, bs, ts, SIG, SelfCalibration(("pan", "scale")))
+        solve_measurements(OBS, bs, ts, sigma=SIG, calibration=SelfCalibration(("pan", "scale")))
 
 
 def test_a_nuisance_the_beacons_do_not_separate_is_held_and_said():
@@ -603,17 +617,21 @@ def test_a_nuisance_the_beacons_do_not_separate_is_held_and_said():
     bs, ts = _measure(rng, beacons=close)
     bench = SimpleNamespace(tolerances=BenchTolerances(pan_deg=1.5))
     ideal = SimpleNamespace(tolerances=BenchTolerances())
-    free = solve_measurements(OBS, bs, ts, SIG, SelfCalibration(("pan",)))
+    free = solve_measurements(OBS, bs, ts, sigma=SIG, calibration=SelfCalibration(("pan",)))
     assert free.nuisance_sd["pan_offset_deg"] > SEPARATED_SD["pan"]
-    sol, cal, said = solve_separated(OBS, bs, ts, SIG, SelfCalibration(("pan",)), bench)
+    sol, cal, said = solve_separated(OBS, bs, ts, sigma=SIG, calibration=SelfCalibration(("pan",)),
+                                     model=bench)
     assert cal.priors == {"pan": pytest.approx(1.5 / 3**0.5)}
     assert any("do not separate it" in s and "held at its prior" in s for s in said)
-    sol, cal, said = solve_separated(OBS, bs, ts, SIG, SelfCalibration(("pan",)), ideal)
+    sol, cal, said = solve_separated(OBS, bs, ts, sigma=SIG, calibration=SelfCalibration(("pan",)),
+                                     model=ideal)
     assert cal.nuisances == () and any("held at its neutral value" in s for s in said)
     bs, ts = _measure(rng)  # three beacons spread along the mirror
-    sol, cal, said = solve_separated(OBS, bs, ts, SIG, SelfCalibration(("pan",)), bench)
+    sol, cal, said = solve_separated(OBS, bs, ts, sigma=SIG, calibration=SelfCalibration(("pan",)),
+                                     model=bench)
     assert cal.nuisances == ("pan",) and said == []
     bs, ts = _measure(rng, delta=0.5)
-    _, _, said = solve_separated(OBS, bs, ts, SIG, SelfCalibration(("pan",), priors={
-        "pan": 0.05}), bench)
+    _, _, said = solve_separated(OBS, bs, ts, sigma=SIG,
+                                 calibration=SelfCalibration(("pan",), priors={
+        "pan": 0.05}), model=bench)
     assert any(s.startswith("warning: pan came out") for s in said)

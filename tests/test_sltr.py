@@ -25,10 +25,11 @@ def test_observe_then_solve_recovers_mirror_and_target(mx, my, yaw, bx, by, tx, 
     sb, st_ = signed_distance((bx, by), m, yaw), signed_distance((tx, ty), m, yaw)
     # valid geometry: both in front of the mirror, not on it, not too grazing a ray
     assume(abs(so) > 1 and abs(sb) > 1 and abs(st_) > 1 and so * sb > 0 and so * st_ > 0)
-    ob = observe(o, m, yaw, (bx, by))
-    ot = observe(o, m, yaw, (tx, ty))
+    ob = observe(o, m, yaw, point=(bx, by))
+    ot = observe(o, m, yaw, point=(tx, ty))
     assume(abs(np.dot(unit(ot.alpha_deg), line_normal(yaw))) > 0.05)
-    sol = solve_single(o, (bx, by), ob.alpha_deg, ob.d_total, ot.alpha_deg, ot.d_total)
+    sol = solve_single(o, (bx, by), ob.alpha_deg, beacon_d_total=ob.d_total,
+                       target_alpha_deg=ot.alpha_deg, target_d_total=ot.d_total)
     assert np.allclose(sol.target, (tx, ty), atol=1e-9 * max(1, np.hypot(tx, ty)) * 10)
     dyaw = (sol.mirror.yaw_deg - yaw + 90) % 180 - 90
     assert abs(dyaw) < 1e-9
@@ -40,9 +41,10 @@ def test_closed_form_solves_eqs_6a_6c():
     """With the beacon's measurements, (d1, d2, θ) satisfy eqs 6a–6c exactly, the second
     leg at bearing 2θ − α (the physical form of the paper's α − 2θ)."""
     o, b = np.zeros(2), np.array([32.0, 62.5])
-    ob = observe(o, (27.5, 65), 38.0, b)
-    ot = observe(o, (27.5, 65), 38.0, (55, 70))
-    sol = solve_single(o, b, ob.alpha_deg, ob.d_total, ot.alpha_deg, ot.d_total)
+    ob = observe(o, (27.5, 65), 38.0, point=b)
+    ot = observe(o, (27.5, 65), 38.0, point=(55, 70))
+    sol = solve_single(o, b, ob.alpha_deg, beacon_d_total=ob.d_total,
+                       target_alpha_deg=ot.alpha_deg, target_d_total=ot.d_total)
     th = sol.mirror.yaw_deg
     r = sol.beacon_reflection_points[0]
     d1 = float(np.linalg.norm(r - o))
@@ -60,9 +62,10 @@ def test_closed_form_solves_eqs_6a_6c():
 def test_interface_example_solution():
     """The documented solution example for exp1: mirror point (29.08, 66.24)."""
     o = np.zeros(2)
-    ob = observe(o, (27.5, 65), 38.0, (32, 62.5))
-    ot = observe(o, (27.5, 65), 38.0, (55, 70))
-    sol = solve_single(o, (32, 62.5), ob.alpha_deg, ob.d_total, ot.alpha_deg, ot.d_total)
+    ob = observe(o, (27.5, 65), 38.0, point=(32, 62.5))
+    ot = observe(o, (27.5, 65), 38.0, point=(55, 70))
+    sol = solve_single(o, (32, 62.5), ob.alpha_deg, beacon_d_total=ob.d_total,
+                       target_alpha_deg=ot.alpha_deg, target_d_total=ot.d_total)
     assert sol.mirror.point == pytest.approx([29.08, 66.24], abs=0.01)
     assert sol.target_reflection_point == pytest.approx([28.29, 65.62], abs=0.01)
 
@@ -70,8 +73,8 @@ def test_interface_example_solution():
 def test_locate_inverts_observe():
     o = np.array([1.0, 2.0])
     p = np.array([40.0, 30.0])
-    ob = observe(o, (20, 50), 10.0, p)
-    assert np.allclose(locate(o, (20, 50), 10.0, ob.alpha_deg, ob.d_total), p)
+    ob = observe(o, (20, 50), 10.0, point=p)
+    assert np.allclose(locate(o, (20, 50), 10.0, alpha_deg=ob.alpha_deg, d_total=ob.d_total), p)
 
 
 @pytest.mark.parametrize("case, args, match", [
@@ -85,31 +88,32 @@ def test_locate_inverts_observe():
 def test_degenerate_input_raises_our_error(case, args, match):
     o = np.zeros(2)
     b = np.array(args.get("b", (32.0, 62.5)))
-    ob = observe(o, (27.5, 65), 38.0, (32, 62.5))
-    ot = observe(o, (27.5, 65), 38.0, (55, 70))
+    ob = observe(o, (27.5, 65), 38.0, point=(32, 62.5))
+    ot = observe(o, (27.5, 65), 38.0, point=(55, 70))
     ab = args.get("ab", ob.alpha_deg)
     db = args.get("db", ob.d_total)
     if case == "beacon on the mirror line":
         ab, db = math.degrees(math.atan2(b[1], b[0])), float(np.hypot(*b))
     with pytest.raises(SolverError, match=match):
-        solve_single(o, b, ab, db, args.get("at", ot.alpha_deg), args.get("dt", ot.d_total))
+        solve_single(o, b, ab, beacon_d_total=db, target_alpha_deg=args.get("at", ot.alpha_deg),
+                     target_d_total=args.get("dt", ot.d_total))
 
 
 def test_observe_refuses_point_behind_mirror():
     with pytest.raises(SolverError, match="behind"):
-        observe((0, 0), (10, 10), 0.0, (5, 20))
+        observe((0, 0), (10, 10), 0.0, point=(5, 20))
 
 
 def _measure(o, m, yaw, beacons, target, sigma=None, rng=None):
     out = []
     for b in beacons:
-        ob = observe(o, m, yaw, b)
+        ob = observe(o, m, yaw, point=b)
         a, d = float(ob.alpha_deg), float(ob.d_total)
         if rng is not None:
             a += rng.normal(0, sigma.alpha_deg)
             d *= 1 + rng.normal(0, sigma.d_total_rel)
         out.append(BeaconMeasurement(tuple(b), a, d))
-    ot = observe(o, m, yaw, target)
+    ot = observe(o, m, yaw, point=target)
     a, d = float(ot.alpha_deg), float(ot.d_total)
     if rng is not None:
         a += rng.normal(0, sigma.alpha_deg)
@@ -123,8 +127,9 @@ def test_least_squares_agrees_with_closed_form_on_one_beacon():
     sig = Sigma(0.05, 0.005)
     for _ in range(5):
         bs, ts = _measure(o, m, yaw, [(17, 33.5)], (65.5, 42.7), sig, rng)
-        cf = solve_single(o, bs[0].position, bs[0].alpha_deg, bs[0].d_total, *ts[0])
-        ls = solve_lsq(o, bs, ts, sig)
+        cf = solve_single(o, bs[0].position, bs[0].alpha_deg, beacon_d_total=bs[0].d_total,
+                          target_alpha_deg=ts[0][0], target_d_total=ts[0][1])
+        ls = solve_lsq(o, bs, ts, sigma=sig)
         assert np.allclose(ls.target, cf.target, atol=1e-8)
         assert abs((ls.mirror.yaw_deg - cf.mirror.yaw_deg + 90) % 180 - 90) < 1e-8
 
@@ -135,8 +140,8 @@ def test_closed_form_covariance_equals_least_squares():
     o = np.zeros(2)
     bs, ts = _measure(o, (16.0, 34.5), 38.3, [(17, 33.5)], (65.5, 42.7))
     sig = Sigma(0.01, 0.002)
-    cf = solve_measurements(o, bs, ts, sig)
-    ls = solve_lsq(o, bs, ts, sig)
+    cf = solve_measurements(o, bs, ts, sigma=sig)
+    ls = solve_lsq(o, bs, ts, sigma=sig)
     assert cf.method.startswith("closed form")
     assert np.allclose(cf.covariance, ls.covariance, rtol=1e-6, atol=1e-12)
     assert np.allclose(cf.target, ls.target, atol=1e-9)
@@ -148,11 +153,11 @@ def test_covariance_matches_monte_carlo_spread():
     sig = Sigma(0.05, 0.005)
     rng = np.random.default_rng(11)
     bs0, ts0 = _measure(o, m, yaw, beacons, target)
-    predicted = solve_lsq(o, bs0, ts0, sig).target_covariance
+    predicted = solve_lsq(o, bs0, ts0, sigma=sig).target_covariance
     est = []
     for _ in range(1000):
         bs, ts = _measure(o, m, yaw, beacons, target, sig, rng)
-        est.append(solve_lsq(o, bs, ts, sig).target)
+        est.append(solve_lsq(o, bs, ts, sigma=sig).target)
     emp = np.cov(np.array(est).T)
     # compare the spreads (trace) and the orientation-free size (det) within 10 %
     assert np.trace(emp) == pytest.approx(np.trace(predicted), rel=0.10)
@@ -172,12 +177,12 @@ def test_more_beacons_reduce_error_as_theory_says():
     for n in (1, 4, 16):
         beacons = [(32, 62.5)] * n  # n observations of one beacon
         bs, ts = _measure(o, m, yaw, beacons, target)
-        cov = solve_lsq(o, bs, ts, sig).covariance
+        cov = solve_lsq(o, bs, ts, sigma=sig).covariance
         err[n] = cov
         mc = []
         for _ in range(300):
             bs, ts = _measure(o, m, yaw, beacons, target, sig, rng)
-            mc.append(solve_lsq(o, bs, ts, sig).target)
+            mc.append(solve_lsq(o, bs, ts, sigma=sig).target)
         rms = np.sqrt(np.mean(np.sum((np.array(mc) - target) ** 2, axis=1)))
         assert rms == pytest.approx(np.sqrt(np.trace(cov[2:, 2:])), rel=0.15)
     # the mirror's yaw and offset variances scale as 1/N exactly
@@ -190,7 +195,7 @@ def test_more_beacons_reduce_error_as_theory_says():
 def test_solution_json_and_ellipse():
     o = np.zeros(2)
     bs, ts = _measure(o, (27.5, 65.0), 38.0, [(32, 62.5)], (55, 70))
-    sol = solve_lsq(o, bs, ts, Sigma(0.01, 0.002))
+    sol = solve_lsq(o, bs, ts, sigma=Sigma(0.01, 0.002))
     j = json.loads(json.dumps(sol.to_json()))
     major, minor, _ = sol.ellipse95()
     assert major >= minor > 0

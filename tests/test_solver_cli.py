@@ -19,6 +19,12 @@ from solver.sltr import closed_form_unchecked, observe, solve_single
 from .conftest import SCENES
 
 
+def _single(x) -> dict:
+    """The one-beacon solution's four measurements (beacon α, d; target α, d) by name."""
+    return dict(zip(("beacon_alpha_deg", "beacon_d_total", "target_alpha_deg",
+                     "target_d_total"), map(float, x), strict=True))
+
+
 def test_solver_imports_neither_mirrorsim_mitsuba_nor_opencv():
     code = ("import sys, solver.sltr, solver.placement, solver.particle, solver.particle_runs, "
             "solver.montecarlo, "
@@ -39,8 +45,8 @@ def _first_order_target_rmse(g, sigma_alpha, sigma_d) -> float:
         hi, lo = x0.copy(), x0.copy()
         hi[k] += h[k]
         lo[k] -= h[k]
-        J[:, k] = (solve_single(np.zeros(2), lay.beacon, *hi).target
-                   - solve_single(np.zeros(2), lay.beacon, *lo).target) / (2 * h[k])
+        J[:, k] = (solve_single(np.zeros(2), lay.beacon, **_single(hi)).target
+                   - solve_single(np.zeros(2), lay.beacon, **_single(lo)).target) / (2 * h[k])
     sd = np.array([sigma_alpha, sigma_d, sigma_alpha, sigma_d])
     return float(np.sqrt(np.trace(J @ np.diag(sd**2) @ J.T)))
 
@@ -51,7 +57,7 @@ def test_montecarlo_rmse_matches_first_order_prediction():
     g = Table1Geometry()
     for sa, sd in [(0.02, 0.002), (0.05, 0.001)]:
         predicted = _first_order_target_rmse(g, sa, sd)
-        row = run_row(sa, sd, 4000, g, rng=3)
+        row = run_row(sa, sd, 4000, geometry=g, rng=3)
         assert row.failed == 0
         assert row.rmse_tar == pytest.approx(predicted, rel=0.06)
     assert run_row(0.0, 0.0, 10).rmse_tar < 1e-9
@@ -59,8 +65,8 @@ def test_montecarlo_rmse_matches_first_order_prediction():
     # simulation agree on it
     near, far = Table1Geometry(beacon_depth=0.3), Table1Geometry(beacon_depth=1.5)
     assert _first_order_target_rmse(far, 0.05, 0.002) < _first_order_target_rmse(near, 0.05, 0.002)
-    assert run_row(0.05, 0.002, 2000, far, rng=2).rmse_tar < run_row(
-        0.05, 0.002, 2000, near, rng=2).rmse_tar
+    assert run_row(0.05, 0.002, 2000, geometry=far, rng=2).rmse_tar < run_row(
+        0.05, 0.002, 2000, geometry=near, rng=2).rmse_tar
 
 
 def test_montecarlo_table_is_seeded_and_keeps_the_paper_columns():
@@ -78,9 +84,11 @@ def test_closed_form_unchecked_agrees_with_solve_single():
     db = g.beacon_d + rng.normal(0, 0.02, 50)
     at = g.target_alpha + rng.normal(0, 0.5, 50)
     dt = g.target_d + rng.normal(0, 0.02, 50)
-    batch = closed_form_unchecked(np.zeros(2), g.beacon, ab, db, at, dt)
+    batch = closed_form_unchecked(np.zeros(2), g.beacon, ab, beacon_d_total=db,
+                                  target_alpha_deg=at, target_d_total=dt)
     for k in range(50):
-        one = solve_single(np.zeros(2), g.beacon, ab[k], db[k], at[k], dt[k])
+        one = solve_single(np.zeros(2), g.beacon, ab[k], beacon_d_total=db[k],
+                           target_alpha_deg=at[k], target_d_total=dt[k])
         assert np.allclose(batch.target[k], one.target, atol=1e-12)
         assert np.allclose(batch.target_reflection_point[k], one.target_reflection_point,
                            atol=1e-12)
@@ -207,13 +215,13 @@ def test_plan_command(tmp_path):
     rng = np.random.default_rng(11)
     sq, k = [], 2000
     for point, yaw in poses:
-        b = observe(o, point, yaw, beacon)
+        b = observe(o, point, yaw, point=beacon)
         virtual = o + td * np.array([np.cos(np.radians(ta)), np.sin(np.radians(ta))])
         target = reflect(virtual, point, yaw)  # the target this pose implies
         est = solve_single(o, beacon, b.alpha_deg + rng.normal(0, bs["alpha_deg"], k),
-                           b.d_total * (1 + rng.normal(0, bs["d_total_rel"], k)),
-                           ta + rng.normal(0, ts["alpha_deg"], k),
-                           td * (1 + rng.normal(0, ts["d_total_rel"], k)))
+                           beacon_d_total=b.d_total * (1 + rng.normal(0, bs["d_total_rel"], k)),
+                           target_alpha_deg=ta + rng.normal(0, ts["alpha_deg"], k),
+                           target_d_total=td * (1 + rng.normal(0, ts["d_total_rel"], k)))
         sq.append(np.mean(np.sum((est.target - target) ** 2, axis=1)))
     assert p["best_beacon"]["rmse"] == pytest.approx(np.sqrt(np.mean(sq)), rel=0.05)
 

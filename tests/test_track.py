@@ -113,15 +113,15 @@ def test_paths_stay_on_the_board_and_in_front_of_the_glass(name, kind):
     scene = load_scene(SCENES / f"{name}.yaml")
     gt = ground_truth(scene)
     b = gt.beacons[0]
-    args = (scene, (b.alpha_deg, b.d_total), (gt.target.alpha_deg, gt.target.d_total), kind,
-            20, 4.0, 1.0)
+    args = (scene, (b.alpha_deg, b.d_total), (gt.target.alpha_deg, gt.target.d_total))
+    kw = {"kind": kind, "steps": 20, "side": 4.0, "step": 1.0}
     if name == "exp2" and kind != "linear":  # every way walks the pencil into its wall
         from mirrorsim.errors import BadParameter
 
         with pytest.raises(BadParameter, match="of the target or a wall"):
-            beacon_path(*args)
+            beacon_path(*args, **kw)
         return
-    pts = beacon_path(*args)
+    pts = beacon_path(*args, **kw)
     assert pts.shape == (21, 2) and np.allclose(pts[0], scene.beacons[0].position)
     assert np.all(pts >= 0) and np.all(pts <= np.asarray(scene.board.size))
     side = np.sign(signed_distance(pts[0], scene.mirror.center, scene.mirror.yaw))
@@ -149,8 +149,9 @@ def test_the_view_heading_keeps_the_beacon_in_the_mirror(name):
 
     def seen(heading):
         pts = beacon_path(scene, (b.alpha_deg, b.d_total),
-                          (gt.target.alpha_deg, gt.target.d_total), "rectangular", 20, 4.0,
-                          1.0, heading)
+                          (gt.target.alpha_deg, gt.target.d_total), kind="rectangular", steps=20,
+                          side=4.0,
+                          step=1.0, heading=heading)
         return sum(visibility(replace(scene, beacons=(replace(b0, position=tuple(p)),)),
                               replace(b0, position=tuple(p))).fraction == 1.0 for p in pts)
 
@@ -187,8 +188,10 @@ def test_the_path_does_not_read_the_scene_s_mirror_or_target():
     tobs = (gt.target.alpha_deg, gt.target.d_total)
     moved = replace(scene, mirror=replace(scene.mirror, center=(20.0, 70.0), yaw=50.0),
                     target=replace(scene.target, position=(60.0, 40.0), facing_deg=10.0))
-    assert np.array_equal(beacon_path(scene, obs, tobs, "rectangular", 12, 4.0, 1.0),
-                          beacon_path(moved, obs, tobs, "rectangular", 12, 4.0, 1.0))
+    assert np.array_equal(beacon_path(scene, obs, tobs, kind="rectangular", steps=12, side=4.0,
+                                      step=1.0),
+                          beacon_path(moved, obs, tobs, kind="rectangular", steps=12, side=4.0,
+                                      step=1.0))
 
 
 def test_fixed_beacons_beside_the_moving_one(tmp_path):
@@ -236,10 +239,10 @@ def test_the_path_keeps_clear_of_fixed_beacons():
     obs = (gt.beacons[0].alpha_deg, gt.beacons[0].d_total)
     tobs = (gt.target.alpha_deg, gt.target.d_total)
     assert FIXED_CLEARANCE_CM == 1.3  # the docs' figure, fixed in advance
-    free = beacon_path(scene, obs, tobs, "rectangular", 12, 4.0, 1.0)
+    free = beacon_path(scene, obs, tobs, kind="rectangular", steps=12, side=4.0, step=1.0)
     blocker = Beacon(tuple(free[6]), scene.beacons[0].height)
     path = beacon_path(replace(scene, beacons=(scene.beacons[0], blocker)), obs, tobs,
-                       "rectangular", 12, 4.0, 1.0)
+                       kind="rectangular", steps=12, side=4.0, step=1.0)
     assert np.min(np.linalg.norm(path - free[6], axis=1)) >= FIXED_CLEARANCE_CM
 
 
@@ -267,8 +270,9 @@ def test_a_path_keeps_the_beacon_clear_of_the_target_and_the_walls(tmp_path, mon
         gt = ground_truth(scene)
         b = gt.beacons[0]
         return beacon_path(scene, (b.alpha_deg, b.d_total),
-                           (gt.target.alpha_deg, gt.target.d_total), "rectangular", steps,
-                           side, 1.0)
+                           (gt.target.alpha_deg, gt.target.d_total), kind="rectangular",
+                           steps=steps,
+                           side=side, step=1.0)
 
     d = yaml.safe_load((SCENES / "bench" / "exp1_3beacons.yaml").read_text())
     d["camera"] = {k: d["camera"][k] for k in ("position", "height", "hfov", "pan")}
@@ -295,6 +299,6 @@ def test_a_path_keeps_the_beacon_clear_of_the_target_and_the_walls(tmp_path, mon
     again = path(walled, 6)
     assert not np.allclose(again, first)
     least = OCCLUDER_THICKNESS / 2 + PENCIL_RADIUS
-    gaps = [segment_distance(again[k], again[k + 1], wall["start"], wall["end"]) - least
+    gaps = [segment_distance(again[k], again[k + 1], wall["start"], q1=wall["end"]) - least
             for k in range(1, len(again) - 1)]
     assert min(gaps) >= OBJECT_CLEARANCE_CM

@@ -30,8 +30,14 @@ TARGET = np.array([52.0, 20.0])
 BEACONS = [np.array([30.0, 25.0]), np.array([45.0, 28.0]), np.array([20.0, 30.0])]
 
 
+def _single(x) -> dict:
+    """The one-beacon solution's four measurements (beacon α, d; target α, d) by name."""
+    return dict(zip(("beacon_alpha_deg", "beacon_d_total", "target_alpha_deg",
+                     "target_d_total"), map(float, x), strict=True))
+
+
 def _exact(points):
-    return [observe(OBS, MIRROR[0], MIRROR[1], p) for p in points]
+    return [observe(OBS, MIRROR[0], MIRROR[1], point=p) for p in points]
 
 
 def _noisy(rng, sig: ObjectSigmas, beacons=BEACONS):
@@ -67,14 +73,15 @@ def test_per_object_sigmas_give_ellipses_that_hold_and_meet_the_cramer_rao_bound
     est, dist = [], []
     for _ in range(600):
         bs, ts = _noisy(rng, sig, beacons)
-        sol = solve_measurements(OBS, bs, ts, sig)
+        sol = solve_measurements(OBS, bs, ts, sigma=sig)
         est.append(sol.target)
         dist.append(sol.mahalanobis(TARGET))
     dist = np.array(dist)
     inside = np.mean(dist <= chi2_2_radius(0.95))
     assert 0.925 <= inside <= 0.970
     assert np.median(dist) == pytest.approx(uncertainty.CHI2_MEDIAN, rel=0.1)
-    bound = crlb(OBS, np.array(beacons), MIRROR[1], _rho(), TARGET, sig)[2:, 2:]
+    bound = crlb(OBS, np.array(beacons), MIRROR[1], mirror_rho=_rho(), target=TARGET,
+                 sigma=sig)[2:, 2:]
     mse = np.cov(np.array(est).T, bias=True) + np.outer(np.mean(est, 0) - TARGET,
                                                          np.mean(est, 0) - TARGET)
     assert math.sqrt(np.trace(mse) / np.trace(bound)) == pytest.approx(1.0, abs=0.1)
@@ -95,15 +102,16 @@ def test_a_shared_alpha_offset_gives_ellipses_that_hold(beacons):
     est, dist, naive = [], [], []
     for _ in range(600):
         bs, ts = _noisy(rng, sig, beacons)
-        sol = solve_measurements(OBS, bs, ts, sig)
+        sol = solve_measurements(OBS, bs, ts, sigma=sig)
         est.append(sol.target)
         dist.append(sol.mahalanobis(TARGET))
-        naive.append(solve_measurements(OBS, bs, ts, total).mahalanobis(TARGET))
+        naive.append(solve_measurements(OBS, bs, ts, sigma=total).mahalanobis(TARGET))
     dist = np.array(dist)
     assert 0.925 <= np.mean(dist <= chi2_2_radius(0.95)) <= 0.970
     assert np.median(dist) == pytest.approx(uncertainty.CHI2_MEDIAN, rel=0.1)
     assert abs(np.median(naive) / uncertainty.CHI2_MEDIAN - 1) > 0.2
-    bound = crlb(OBS, np.array(beacons), MIRROR[1], _rho(), TARGET, sig)[2:, 2:]
+    bound = crlb(OBS, np.array(beacons), MIRROR[1], mirror_rho=_rho(), target=TARGET,
+                 sigma=sig)[2:, 2:]
     mse = np.cov(np.array(est).T, bias=True) + np.outer(np.mean(est, 0) - TARGET,
                                                          np.mean(est, 0) - TARGET)
     assert math.sqrt(np.trace(mse) / np.trace(bound)) == pytest.approx(1.0, abs=0.1)
@@ -142,8 +150,8 @@ def test_one_pair_for_both_objects_gives_a_wrong_ellipse():
     per, same = [], []
     for _ in range(300):
         bs, ts = _noisy(rng, sig)
-        per.append(solve_measurements(OBS, bs, ts, sig).mahalanobis(TARGET))
-        same.append(solve_measurements(OBS, bs, ts, one).mahalanobis(TARGET))
+        per.append(solve_measurements(OBS, bs, ts, sigma=sig).mahalanobis(TARGET))
+        same.append(solve_measurements(OBS, bs, ts, sigma=one).mahalanobis(TARGET))
     assert np.median(per) == pytest.approx(1.18, rel=0.15)
     assert np.median(same) < 0.8 * np.median(per)
 
@@ -162,11 +170,11 @@ def test_crlb_of_one_beacon_is_the_closed_forms_first_order_spread():
     for k, h in enumerate((1e-5, 1e-5, 1e-5, 1e-5)):
         e = np.zeros(4)
         e[k] = h
-        cols.append((solve_single(OBS, BEACONS[0], *(x0 + e)).target
-                     - solve_single(OBS, BEACONS[0], *(x0 - e)).target) / (2 * h))
+        cols.append((solve_single(OBS, BEACONS[0], **_single(x0 + e)).target
+                     - solve_single(OBS, BEACONS[0], **_single(x0 - e)).target) / (2 * h))
     J = np.column_stack(cols)
     sd = np.array([0.002, 0.003 * x0[1], 0.004, 0.001 * x0[3]])
-    bound = crlb(OBS, BEACONS[:1], MIRROR[1], _rho(), TARGET, sig)
+    bound = crlb(OBS, BEACONS[:1], MIRROR[1], mirror_rho=_rho(), target=TARGET, sigma=sig)
     np.testing.assert_allclose(bound[2:4, 2:4], J @ np.diag(sd**2) @ J.T, rtol=1e-5)
 
 
@@ -208,14 +216,15 @@ def test_the_sigma_law_recovers_a_known_one_and_stays_positive():
         cols[f"{kind}_alpha_err"] = err
     model = errormodel.fit(cols)
     a = model.fits["target"]["alpha"]
-    x = feature_vector(np.array([100.0, 200.0]), 0.0, 0.55, 0.0125, 0)
+    x = feature_vector(np.array([100.0, 200.0]), 0.0, 0.55, noise=0.0125, jpeg_quality=0)
     s100, s200 = a.log_sigma(x)
     assert s100 == pytest.approx(0.001, rel=0.1)
     assert s100 / s200 == pytest.approx(2.0, rel=0.1)
     assert a.gross_errors == pytest.approx(0.02 * n, rel=0.3)
     assert a.tail >= 1.0
     assert model.fits["beacon"]["d_rel"].typical_sigma == pytest.approx(0.005, rel=0.15)
-    far = feature_vector(np.array([1e-1, 1e5]), np.array([89.0, -89.0]), 1e-6, 1.0, 10)
+    far = feature_vector(np.array([1e-1, 1e5]), np.array([89.0, -89.0]), 1e-6, noise=1.0,
+                         jpeg_quality=10)
     for kind in ("target", "beacon"):
         for q in ("alpha", "d_rel"):
             assert np.all(model.fits[kind][q].log_sigma(far) > 0)
@@ -334,8 +343,8 @@ def test_the_shipped_models_rows_are_what_make_error_model_renders(kind, tmp_pat
     for folder in ("rows", "scenes", "frames"):
         (tmp_path / folder).mkdir()
     for row in prov["check_rows"]:
-        done = process_one(row["index"], prov["dataset_seed"], spec, str(tmp_path), None,
-                           "auto", error_model=model)
+        done = process_one(row["index"], prov["dataset_seed"], spec, out=str(tmp_path), spp=None,
+                           variant="auto", error_model=model)
         assert done.row is not None and not done.row.error
         for c in errormodel.CHECK_COLUMNS:
             assert done.row[c] == pytest.approx(row[c], rel=1e-6, abs=1e-9), c
@@ -349,10 +358,10 @@ def test_one_bad_image_does_not_drag_the_estimate_and_is_named():
     bs, ts = _noisy(np.random.default_rng(5), sig)
     bad = [bs[0], BeaconMeasurement(bs[1].position, bs[1].alpha_deg, bs[1].d_total * 1.05),
            bs[2]]
-    sol = solve_measurements(OBS, bad, ts, sig)
+    sol = solve_measurements(OBS, bad, ts, sigma=sig)
     assert any(name.startswith("beacon 1 d_total") for name in sol.downweighted)
     assert sol.mahalanobis(TARGET) < 3.0
-    clean = solve_measurements(OBS, bs, ts, sig)
+    clean = solve_measurements(OBS, bs, ts, sigma=sig)
     assert clean.downweighted == ()
 
 
@@ -368,7 +377,7 @@ def test_with_a_shared_offset_one_bad_alpha_is_still_the_one_named(bad):
     beacons = [*BEACONS, np.array([38.0, 22.0])]
     bs, ts = _noisy(np.random.default_rng(11), sig, beacons)
     bs[bad] = BeaconMeasurement(bs[bad].position, bs[bad].alpha_deg + 0.2, bs[bad].d_total)
-    sol = solve_measurements(OBS, bs, ts, sig)
+    sol = solve_measurements(OBS, bs, ts, sigma=sig)
     off = {n.split(" (")[0]: float(n.split("(")[1].split(" σ")[0]) for n in sol.downweighted}
     assert max(off, key=off.get) == f"beacon {bad} α" and off[f"beacon {bad} α"] > 30
     assert sol.mahalanobis(TARGET) < 5.0
@@ -406,8 +415,10 @@ def test_beacon_position_sigma_widens_the_ellipse_and_names_the_offsets():
 
     sig = ObjectSigmas(Sigma(0.002, 0.0005), (Sigma(0.003, 0.002),))
     bs, ts = _noisy(np.random.default_rng(2), sig)
-    exact = solve_measurements(OBS, bs, ts, sig, SelfCalibration(("pan", "scale")))
-    loose = solve_measurements(OBS, bs, ts, sig, SelfCalibration(("pan", "scale"), 0.2))
+    exact = solve_measurements(OBS, bs, ts, sigma=sig,
+                               calibration=SelfCalibration(("pan", "scale")))
+    loose = solve_measurements(OBS, bs, ts, sigma=sig,
+                               calibration=SelfCalibration(("pan", "scale"), 0.2))
     assert np.trace(loose.target_covariance) > np.trace(exact.target_covariance)
     assert loose.params_order[-1] == "beacon2_offset_y" and len(loose.params_order) == 12
     assert "pan offset" in solution_summary("m.json", loose)

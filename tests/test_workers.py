@@ -42,8 +42,9 @@ def _fail(i: int) -> int:
 
 def _run(fn, jobs, workers=1, max_rss_mb=0.0):
     got = []
-    run_local(fn, jobs, workers, lambda i: any(g[0] == i for g in got), got.append,
-              max_rss_mb)
+    run_local(fn, jobs, workers, is_done=lambda i: any(g[0] == i for g in got),
+              on_result=got.append,
+              max_rss_mb=max_rss_mb)
     return got
 
 
@@ -65,8 +66,9 @@ def test_each_worker_runs_its_setup_before_its_first_job():
     """Two workers, each with its own setup: every job sees its own process's mark, and
     the parent's environment is untouched."""
     got = []
-    run_local(_setup_seen, [(i,) for i in range(4)], 2, lambda i: any(g[0] == i for g in got),
-              got.append, setup=_mark_setup)
+    run_local(_setup_seen, [(i,) for i in range(4)], 2,
+              is_done=lambda i: any(g[0] == i for g in got),
+              on_result=got.append, setup=_mark_setup)
     assert sorted(i for i, *_ in got) == list(range(4))
     assert all(mark == str(pid) for _, mark, pid in got)
     assert "MIRRORSIM_TEST_SETUP" not in os.environ
@@ -92,8 +94,8 @@ def test_a_worker_retires_after_its_bounded_number_of_jobs():
     """Memory or not, a worker retires after max_jobs (Dr.Jit's kernels of new scenes
     pile up): 7 jobs at 3 a worker take 3 processes, in order, none lost."""
     got = []
-    run_local(_grow, [(i, 0) for i in range(7)], 1, lambda i: any(g[0] == i for g in got),
-              got.append, 0.0, max_jobs=3)
+    run_local(_grow, [(i, 0) for i in range(7)], 1, is_done=lambda i: any(g[0] == i for g in got),
+              on_result=got.append, max_rss_mb=0.0, max_jobs=3)
     assert [i for i, _ in got] == list(range(7))
     pids = [pid for _, pid in got]
     assert [len(set(pids[k:k + 3])) for k in (0, 3, 6)] == [1, 1, 1]

@@ -74,7 +74,7 @@ def distortion_canvas(camera: Camera, k: tuple[float, float]) -> tuple[Camera, i
 
 
 def distort(canvas: np.ndarray, camera: Camera, k: tuple[float, float],
-            nearest: bool = False) -> np.ndarray:
+            *, nearest: bool = False) -> np.ndarray:
     """The distorted frame (camera's size) from a pinhole render of
     :func:`distortion_canvas`: bilinear in linear radiance, or ``nearest`` (labels)."""
     mu, mv, _ = _distort_maps(camera, k)

@@ -45,7 +45,7 @@ def _solve_options(p):
          "target by weighted least squares (one beacon: the exact closed form), with the "
          "target's covariance and 95 % error ellipse.  The σ's: --error-model's if given "
          "(it wins over the file's `sigma`, and says so), else the file's `sigma`, else the "
-         "shipped error model's.", _solve_options)
+         "shipped error model's.", options=_solve_options)
 def _solve(args) -> int:
     from mirrorsim.cli.tables import solution_summary
     from mirrorsim.formats.error_model import default_error_model
@@ -71,7 +71,7 @@ def _solve(args) -> int:
         calibration = model_calibration(model, calibration)  # a bench model's priors
         source = (f"{model.name()}'s typical σ's (a measurements file holds no image "
                   "features: `evaluate` gives each image its own)")
-    sol = solve_measurements(m.observer, m.beacons, m.targets, sigma, calibration)
+    sol = solve_measurements(m.observer, m.beacons, m.targets, sigma=sigma, calibration=calibration)
     print(f"σ's from {source}", file=sys.stderr)
     print(solution_summary(str(args.measurements), sol))
     emit(args, sol.to_json())
@@ -103,7 +103,7 @@ def _montecarlo_options(p):
          "Table 1 of the paper: d_total = 5, alpha = 70 deg, Gaussian noise with the table's "
          "sigmas, ITERATIONS draws per row; RMSE of the reflector (the target's reflection "
          "point) and of the target, next to the paper's.  The paper does not say where the "
-         "mirror and beacon stand: the options below set them.", _montecarlo_options)
+         "mirror and beacon stand: the options below set them.", options=_montecarlo_options)
 def _montecarlo(args) -> int:
     from mirrorsim.cli.tables import montecarlo_table
     from mirrorsim.scene.model import MAX_SEED
@@ -145,7 +145,7 @@ def _montecarlo(args) -> int:
         raise BadArgument("geometry", str(exc)) from None
     model = error_model_of(args)
     rows = table_rows(args.sigma, None if model is None else model.typical, geometry)
-    res = table1(args.iterations, geometry, args.seed, rows)
+    res = table1(args.iterations, geometry, args.seed, rows=rows)
     print(montecarlo_table(res))
     emit(args, res.to_json())
     return 0
@@ -177,7 +177,7 @@ def _plan_options(p):
          "step b, half-width a/2, N_bea, the three paths), the exact region where a beacon is "
          "seen for every mirror orientation within +-eps, and the beacon position on the board "
          "with the least expected target error over a prior of mirror poses around the scene's "
-         "mirror, with a heat map.", _plan_options)
+         "mirror, with a heat map.", options=_plan_options)
 def _plan(args) -> int:
     from mirrorsim.cli.plots import plot_plan
     from mirrorsim.cli.tables import plan_text
@@ -199,7 +199,8 @@ def _plan(args) -> int:
     sigma = (ObjectSigmas.same(Sigma(args.sigma_alpha, args.sigma_d / 100.0))
              if args.sigma_alpha is not None
              else (error_model_of(args) or default_error_model()).typical)
-    plan = plan_scene(scene, sigma, args.eps, args.yaw_spread, args.d1_spread, args.step,
+    plan = plan_scene(scene, sigma, args.eps, yaw_spread_deg=args.yaw_spread,
+                      d1_spread=args.d1_spread, step=args.step,
                       n_beacons=args.beacons, calibration=calibration_of(args))
     summ = plan.to_json()
     print(plan_text(scene, plan))
@@ -253,7 +254,7 @@ def _dataset_options(p):
          "detect, solve and score each, in parallel worker processes (or on a Dask cluster), "
          "and write DIR/dataset.parquet (a row per scene), DIR/scenes/*.yaml, DIR/frames/ and a "
          "dataset card DIR/README.md.  Interrupted runs resume with --resume; the same seed "
-         "gives the same rows whatever the number of workers.", _dataset_options)
+         "gives the same rows whatever the number of workers.", options=_dataset_options)
 def _dataset(args) -> int:
     from mirrorsim.formats.dataset_folder import DatasetError
     from mirrorsim.pipelines.dataset import MAX_SCENES, MAX_WORKERS, run_dataset
@@ -339,7 +340,7 @@ def _errormodel_options(p):
          "HELDOUT: solve each held-out row again with the model's σ's (and its bench's "
          "priors) and say whether its ellipses hold; without DATASET or --error-model, the "
          "shipped model the held-out spec's benches call for.",
-         _errormodel_options)
+         options=_errormodel_options)
 def _errormodel(args) -> int:
     from mirrorsim.formats.error_model import default_error_model
     from mirrorsim.pipelines import errormodel

@@ -34,7 +34,7 @@ def _new_options(p):
          "file, that `mirrorsim check` accepts; or, with --like, one of the bundled scenes "
          "(the package carries them).  Edit it from there; docs/scenes.md lists every key.  "
          "An existing file is never written over.",
-         _new_options)
+         options=_new_options)
 def _new(args) -> int:
     from mirrorsim.formats.files import check_output_file, write_text
     from mirrorsim.formats.template import scene_template
@@ -62,7 +62,7 @@ def _check_options(p):
          "Validate SCENE and print, for the target and each beacon, its virtual image, alpha, "
          "d_total, reflection point and how much of its image reaches the camera through the "
          "mirror. No rendering.",
-         _check_options)
+         options=_check_options)
 def _check(args) -> int:
     from mirrorsim.cli.tables import check_table
     from mirrorsim.truth import groundtruth
@@ -85,7 +85,7 @@ def _plot_options(p):
 @command("plot", "top view of a scene (board, camera, mirror, rays)",
          "Draw the top view: board, camera and its field of view, occluders, mirror, target, "
          "beacons, virtual images and rays.",
-         _plot_options)
+         options=_plot_options)
 def _plot(args) -> int:
     from mirrorsim.cli.top_view import plot_top_view
     from mirrorsim.errors import SceneError

@@ -34,7 +34,7 @@ COMMANDS: dict[str, tuple[str, str, Options, Handler]] = {}
 
 
 def command(name: str, summary: str, description: str,
-            options: Options) -> Callable[[Handler], Handler]:
+            *, options: Options) -> Callable[[Handler], Handler]:
     """Register the decorated handler as subcommand ``name``, with its ``options``."""
     def register(handler: Handler) -> Handler:
         COMMANDS[name] = (summary, description, options, handler)
@@ -43,7 +43,7 @@ def command(name: str, summary: str, description: str,
 
 
 def output(p: argparse.ArgumentParser, flag: str, kind: str,
-           suffixes: tuple[str, ...] = (), **kwargs) -> None:
+           *, suffixes: tuple[str, ...] = (), **kwargs) -> None:
     """Add an output option; ``kind`` "file", "dir" or "dataset" (a folder with its own
     claim, :func:`mirrorsim.formats.dataset_folder.claim_folder`) says how
     :func:`check_outputs` checks it before the command does any work."""
@@ -274,7 +274,7 @@ def calibration_of(args: argparse.Namespace, n_beacons: int | None = None,
     except ValueError as exc:
         raise BadArgument("--prior", str(exc)) from None
     try:  # the names always; the count only where the beacons are known
-        check_nuisances(names, n_beacons, n_targets, priors)
+        check_nuisances(names, n_beacons, n_targets, priors=priors)
     except SolverError as exc:
         raise BadArgument("--calibrate", str(exc)) from None
     try:

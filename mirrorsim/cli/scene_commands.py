@@ -34,7 +34,7 @@ def _render_options(p):
          "Render SCENE with Mitsuba 3 and write DIR/<name>.png (sRGB, 8-bit), DIR/<name>.json "
          "(exact ground truth, with each object's bbox_px and visible_px in the mirror from an "
          "object-id pass) and DIR/<name>.ids.png (the id labels).",
-         _render_options)
+         options=_render_options)
 def _render(args) -> int:
     from mirrorsim.cli.tables import render_summary
     from mirrorsim.pipelines.frame import render_to_files
@@ -67,7 +67,7 @@ def _detect_options(p):
          "record (the camera as its mount reports it, the beacons' believed positions and "
          "heights, the target's size: never the mirror or where the target stands) and the "
          "calibration (`mirrorsim calibrate`, made and cached on first use).",
-         _detect_options)
+         options=_detect_options)
 def _detect(args) -> int:
     from mirrorsim.cli.tables import detect_summary
     from mirrorsim.detection.detector import annotate
@@ -129,7 +129,7 @@ def _calibrate_options(p):
          "its optical axis, measure them as the detector does and cache K = s_px * d per "
          "camera and object.  A scene's calibration.distance_error stands them that much "
          "farther while 100 cm is assumed, as its bench did.",
-         _calibrate_options)
+         options=_calibrate_options)
 def _calibrate(args) -> int:
     from mirrorsim.pipelines.calibrate import D_REF, calibrate
 
@@ -182,7 +182,7 @@ def _evaluate_options(p):
          "record, DIR/<name>.report.json and, with --keep, the id labels, the annotated "
          "frame(s) and a top view.  A scene with several beacons renders one frame per beacon "
          "and reports the error as beacons are added.  Exit 0 whenever it ran.",
-         _evaluate_options)
+         options=_evaluate_options)
 def _evaluate(args) -> int:
     from mirrorsim.cli.tables import report_table
     from mirrorsim.formats.files import write_json
@@ -236,7 +236,7 @@ def _budget_options(p):
          "first-order prediction (the solver's Jacobian times the measured deltas); writes "
          "DIR/budget.json and a tornado chart DIR/budget.png; each run's frames in its own "
          "sub-folder.",
-         _budget_options)
+         options=_budget_options)
 def _budget(args) -> int:
     from mirrorsim.cli.plots import plot_budget
     from mirrorsim.cli.tables import budget_table
@@ -324,7 +324,7 @@ def _track_options(p):
          "measured once, and weighs the filter's mirror from the start.  "
          "Prints a table per step; writes DIR/track.json, DIR/track.png (errors against the "
          "step) and DIR/track.gif (the top view with the filter's mirror lines), the frames "
-         "in DIR/poses/.", _track_options)
+         "in DIR/poses/.", options=_track_options)
 def _track(args) -> int:
     from mirrorsim.cli.plots import animate_track, plot_track
     from mirrorsim.cli.registry import at_least
@@ -338,15 +338,15 @@ def _track(args) -> int:
     )
 
     # before the scene is read (run_track checks again, for callers other than the CLI)
-    check_options(args.path, args.steps, args.odometry_sigma, args.side, args.step,
-                  args.heading)
+    check_options(args.path, args.steps, args.odometry_sigma, side=args.side, step=args.step,
+                  heading=args.heading)
     at_least(("--seed", args.seed, 0, MAX_TRACK_SEED))
     position_sigma = beacon_sigma_of(args)
     scene = load(args.scene)
     if args.spp is not None:  # --seed is the run's (each pose's render seed follows it)
         scene = scene.with_render(spp=args.spp)
-    check_options(args.path, args.steps, args.odometry_sigma, args.side, args.step,
-                  args.heading, scene.board.size)  # side and step within the board
+    check_options(args.path, args.steps, args.odometry_sigma, side=args.side, step=args.step,
+                  heading=args.heading, board=scene.board.size)  # side and step within the board
     check_fixed_beacons(scene, position_sigma)  # before the folder is made
     model = error_model_of(args)  # read and checked before anything is written
     out = out_folder(args, scene, "track")

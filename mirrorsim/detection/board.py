@@ -104,11 +104,11 @@ def hole_blobs(image: np.ndarray) -> np.ndarray:
 
 
 def project_holes(camera: Camera, holes: np.ndarray, pan_offset: float = 0.0,
-                  pitch: float = 0.0, roll: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+                  *, pitch: float = 0.0, roll: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Pixel positions (k, 2) of board points (k, 2) at z = 0 for the camera turned by
     ``pan_offset`` and pitched and rolled; and their depth along the optical axis."""
     u, v, z = project(_turned(camera, pan_offset),
-                      np.column_stack([holes, np.zeros(len(holes))]), pitch, roll)
+                      np.column_stack([holes, np.zeros(len(holes))]), pitch, roll=roll)
     return np.column_stack([u, v]), z
 
 
@@ -122,7 +122,7 @@ def _on_film(camera: Camera, uv: np.ndarray, z: np.ndarray) -> np.ndarray:
 
 
 def measure_camera_pose(image: np.ndarray, camera: Camera, board: Board,
-                        start: tuple[float, float, float] | None = None) -> CameraPose:
+                        *, start: tuple[float, float, float] | None = None) -> CameraPose:
     """The camera's pan offset, pitch and roll from the board's holes in ``image`` (8-bit
     RGB, the pinhole image: undistorted where the lens is calibrated), ``camera`` as the
     mount reports it.  ``start``: fit from this pose (pan offset, pitch, roll; deg)
@@ -147,7 +147,7 @@ def measure_camera_pose(image: np.ndarray, camera: Camera, board: Board,
     tree = cKDTree(blobs)
 
     def matched(x: np.ndarray, gate: float) -> int:
-        uv, z = project_holes(camera, holes, *x)
+        uv, z = project_holes(camera, holes, x[0], pitch=x[1], roll=x[2])
         uv = uv[_on_film(camera, uv, z)]
         if not len(uv):
             return 0
@@ -167,7 +167,7 @@ def measure_camera_pose(image: np.ndarray, camera: Camera, board: Board,
     x, pairs, fit = _fit_pose(camera, holes, blobs, tree, x)
     r = _residuals(camera, holes, blobs, pairs, x).reshape(-1, 2)
     residual = float(np.median(np.hypot(*r.T)))
-    uv, z = project_holes(camera, holes, *x)
+    uv, z = project_holes(camera, holes, x[0], pitch=x[1], roll=x[2])
     # the holes the pose puts on the frame large enough to be found (some are behind
     # the mirror, the target, a wall: a share of them)
     on_film = int((_on_film(camera, uv, z)
@@ -190,7 +190,7 @@ def measure_camera_pose(image: np.ndarray, camera: Camera, board: Board,
 
 def _residuals(camera: Camera, holes: np.ndarray, blobs: np.ndarray,
                pairs: tuple[np.ndarray, np.ndarray], x: np.ndarray) -> np.ndarray:
-    uv, _ = project_holes(camera, holes[pairs[0]], *x)
+    uv, _ = project_holes(camera, holes[pairs[0]], x[0], pitch=x[1], roll=x[2])
     return (uv - blobs[pairs[1]]).ravel()
 
 
@@ -208,7 +208,7 @@ def _fit_pose(camera: Camera, holes: np.ndarray, blobs: np.ndarray, tree, x: np.
 
     gate = FIRST_GATE_PX
     while True:
-        uv, z = project_holes(camera, holes, *x)
+        uv, z = project_holes(camera, holes, x[0], pitch=x[1], roll=x[2])
         seen = np.flatnonzero(_on_film(camera, uv, z))
         dist, which = tree.query(uv[seen], distance_upper_bound=gate)
         near = dist < gate
@@ -260,7 +260,7 @@ def _correlated_poses(blobs: np.ndarray, camera: Camera, holes: np.ndarray,
     out = []
     k = round(SEARCH_DEG / ROLL_STEP_DEG)
     for roll in np.arange(-k, k + 1) * ROLL_STEP_DEG:
-        uv, z = project_holes(camera, holes, 0.0, 0.0, roll)
+        uv, z = project_holes(camera, holes, 0.0, pitch=0.0, roll=roll)
         # the holes a shift within the search could bring onto the frame, and large
         # enough to be found as blobs: the far rows' holes, packed closely, would lay
         # themselves over any blobs and drown the near ones' peak
@@ -282,7 +282,7 @@ def _grid(half: float) -> np.ndarray:
     return np.arange(-k, k + 1) * COARSE_STEP_DEG
 
 
-def pitch_factor(pitch_deg: float, top: float, camera_height: float, distance: float
+def pitch_factor(pitch_deg: float, top: float, camera_height: float, *, distance: float
                  ) -> float:
     """How much taller an upright object ``top`` cm high, standing ``distance`` cm away
     (horizontally), looks to a camera ``camera_height`` cm up pitched by ``pitch_deg``
@@ -345,7 +345,7 @@ def pose_pan_sigma(pose: CameraPose, fx_px: float = FLOOR_FX_PX) -> float:
     return float(math.hypot(pose.pan_sd_deg, floor))
 
 
-def corrected_image(pose: CameraPose, camera: Camera, image: ImageMeasurement, top: float
+def corrected_image(pose: CameraPose, camera: Camera, image: ImageMeasurement, *, top: float
                     ) -> tuple[float, float]:
     """An image's (α, d_total) as a level camera at the board's pan would have measured
     them (``camera`` as the mount reports it; ``top``: how high the measured upright
@@ -366,6 +366,6 @@ def corrected_image(pose: CameraPose, camera: Camera, image: ImageMeasurement, t
     d = float(image.d_total)
     foot = np.asarray(camera.position, float) + d * unit(alpha)
     upright = np.array([[*foot, top], [*foot, 0.0]])
-    _, posed, _ = project(cam, upright, pose.pitch_deg, pose.roll_deg)
+    _, posed, _ = project(cam, upright, pose.pitch_deg, roll=pose.roll_deg)
     _, level, _ = project(cam, upright)
     return float(wrap_bearing(alpha)), d * float((posed[1] - posed[0]) / (level[1] - level[0]))

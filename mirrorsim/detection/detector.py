@@ -123,7 +123,7 @@ class Detection:
 
 
 def measure_object(img: np.ndarray, kind: str, target_ratio: float | None = None,
-                   linear: np.ndarray | None = None, subsampled: bool = False
+                   *, linear: np.ndarray | None = None, subsampled: bool = False
                    ) -> ImageMeasurement:
     """Find and measure the largest image of the target (``kind="target"``, with its
     width/height ``target_ratio``) or of a pencil in an 8-bit RGB image, exactly as
@@ -143,16 +143,16 @@ def measure_object(img: np.ndarray, kind: str, target_ratio: float | None = None
         box = find_target(img, target_ratio)
         if box is None:
             raise DetectionError("no target (grey upright panel) found in the frame")
-        return measure_region(linear, box, "target", subsampled)
+        return measure_region(linear, box, "target", subsampled=subsampled)
     boxes = find_pencils(img)
     if not boxes:
         raise DetectionError("no pencil (yellow upright band) found in the frame")
     box = max(boxes, key=lambda b: (b[2] - b[0]) * (b[3] - b[1]))
-    return measure_region(linear, box, "beacon", subsampled, stored=img)
+    return measure_region(linear, box, "beacon", subsampled=subsampled, stored=img)
 
 
 def detect_frame(image: np.ndarray, view: CaptureRecord, calibration: Calibration,
-                 subsampled: bool = False, *, jpeg_quality: int = 0) -> Detection:
+                 *, subsampled: bool = False, jpeg_quality: int = 0) -> Detection:
     """Measure the target and each beacon in an RGB uint8 frame (``subsampled``: one
     whose colour was stored at half resolution, a JPEG; ``calibration`` measured so;
     ``jpeg_quality``: the quality its file gives, for the error model).
@@ -172,12 +172,13 @@ def detect_frame(image: np.ndarray, view: CaptureRecord, calibration: Calibratio
     linear = to_linear(img)  # from the 8-bit codes: no float copy to read back
     img = img.astype(np.float32)
     target = target_geometry(cam, measure_object(img, "target", view.target_size[0]
-                                                 / view.target_size[1], linear, subsampled),
-                             view.target_size, calibration.target_k)
-    pencils = [measure_region(linear, b, "beacon", subsampled, stored=img)
+                                                 / view.target_size[1], linear=linear,
+                                                 subsampled=subsampled),
+                             view.target_size, k=calibration.target_k)
+    pencils = [measure_region(linear, b, "beacon", subsampled=subsampled, stored=img)
                for b in find_pencils(img)]
     paint = pencil_paint_height(view.beacons[0].height)
-    pencils = [pencil_geometry(cam, p, paint, calibration.pencil_k) for p in pencils
+    pencils = [pencil_geometry(cam, p, paint, k=calibration.pencil_k) for p in pencils
                if p.height_px and (p.u_left, p.u_right) != (None, None)]
     pencils = [p for p in pencils if not p.clipped]  # partly hidden: no bearing to trust
     for m in (target, *pencils):
@@ -222,8 +223,9 @@ def _check_a_mirror_fits(det: Detection) -> None:
     for b, m in det.beacons:
         try:
             if det.target.d_total is not None:
-                solve_single(det.observer, b.position, m.alpha_deg, m.d_total,
-                             det.target.alpha_deg, det.target.d_total)
+                solve_single(det.observer, b.position, m.alpha_deg, beacon_d_total=m.d_total,
+                             target_alpha_deg=det.target.alpha_deg,
+                             target_d_total=det.target.d_total)
         except SolverError as exc:
             raise DetectionError(f"no mirror fits these images ({exc}): a frame of another "
                                  "scene, a mirrored frame, or a beacon not where it is "

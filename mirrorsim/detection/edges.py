@@ -249,7 +249,7 @@ _LINEAR_LUT = (255.0 * LINEAR_OF_CODE).astype(np.float32)
 
 
 def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str,
-                   subsampled: bool = False, stored: np.ndarray | None = None
+                   *, subsampled: bool = False, stored: np.ndarray | None = None
                    ) -> ImageMeasurement:
     """Sub-pixel edges of an object's image in ``box``: top and bottom, left and right,
     with the radiance just outside each (pixels only: :mod:`mirrorsim.detection.detector` turns them

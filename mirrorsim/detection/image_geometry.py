@@ -66,7 +66,7 @@ def _axis_between(camera: Camera, u_left: float, u_right: float) -> tuple[float,
     return float(wrap_bearing(camera.pan_deg - math.degrees(phi))), _column(camera, phi)
 
 
-def distance_of(camera: Camera, u: float, height_px: float, k: float,
+def distance_of(camera: Camera, u: float, height_px: float, *, k: float,
                 front_offset: float = 0.0) -> float:
     """d_total from size constancy: the measured face's depth K/s along the optical axis,
     over cos φ, is its distance along the line of sight; plus the face's offset before
@@ -110,7 +110,7 @@ def _width_ratio(cam: Camera, left: float, right: float, height_px: float,
                                      (a + b) / 2)
 
 
-def pencil_geometry(cam: Camera, m: ImageMeasurement, paint_height: float, k: float
+def pencil_geometry(cam: Camera, m: ImageMeasurement, paint_height: float, *, k: float
                     ) -> ImageMeasurement:
     """A pencil's bearing from its edges and its d_total from its height (K = ``k``);
     with one edge (the other side runs into something of the paint's blue, such as the
@@ -150,10 +150,11 @@ def pencil_geometry(cam: Camera, m: ImageMeasurement, paint_height: float, k: fl
                     *notes, f"its region {r:.2f} of the width its height implies: "
                     f"partly hidden at its {side} edge, not used"))
     return replace(m, alpha_deg=alpha, u_axis=u_axis, notes=notes,
-                   d_total=distance_of(cam, u_axis, m.height_px, k, FRONT_OFFSET["beacon"]))
+                   d_total=distance_of(cam, u_axis, m.height_px, k=k,
+                                       front_offset=FRONT_OFFSET["beacon"]))
 
 
-def target_geometry(cam: Camera, m: ImageMeasurement, size: Point2, k: float
+def target_geometry(cam: Camera, m: ImageMeasurement, size: Point2, *, k: float
                     ) -> ImageMeasurement:
     """The panel's bearing, clipping and distance from its edges.
 
@@ -183,8 +184,8 @@ def target_geometry(cam: Camera, m: ImageMeasurement, size: Point2, k: float
         raise DetectionError("the target's image has neither a measurable height nor two "
                              "side edges")
     if m.height_px is not None:
-        m = replace(m, d_total=distance_of(cam, m.u_axis, m.height_px, k,
-                                           FRONT_OFFSET["target"]))
+        m = replace(m, d_total=distance_of(cam, m.u_axis, m.height_px, k=k,
+                                           front_offset=FRONT_OFFSET["target"]))
     return m
 
 

@@ -32,10 +32,10 @@ REFERENCE_DISTANCE = 100.0  # cm: where calibration stands its reference objects
 
 
 def read_board(r: Reader, raw: Any, required: tuple[str, ...] = ("size",),
-               optional: tuple[str, ...] = ("hole_pitch",)) -> Board:
+               *, optional: tuple[str, ...] = ("hole_pitch",)) -> Board:
     """A ``board`` block: a scene file's (its size, and its hole pitch, 2.5 cm unless
     given) or a capture record's (which names the holes' diameter too)."""
-    b = r.mapping(raw, "board", required, optional)
+    b = r.mapping(raw, "board", required, optional=optional)
     d = Board((1.0, 1.0))  # the defaults
     board = Board(size=r.pair(b["size"], "board.size", positive=True, high=MAX_BOARD_CM),
                   hole_pitch=r.number(b.get("hole_pitch", d.hole_pitch), "board.hole_pitch",
@@ -115,10 +115,10 @@ class CaptureRecord:
         """Parse and check a record (raises :class:`CaptureError` naming file and key)."""
         r = Reader(source, CaptureError)
         top = r.mapping(data, "", ("camera", "beacons", "target"),
-                        ("frame", "calibration", "board", "frame_sha256"))
+                        optional=("frame", "calibration", "board", "frame_sha256"))
         c = r.mapping(top["camera"], "camera", ("position", "height", "pan_deg", "resolution",
                                                 "fx"),
-                      ("fy", "cx", "cy", "hfov_deg", "distortion"))
+                      optional=("fy", "cx", "cy", "hfov_deg", "distortion"))
         resolution = read_resolution(r, c["resolution"], "camera.resolution")
         fx = r.number(c["fx"], "camera.fx", positive=True)
         hfov = (r.number(c["hfov_deg"], "camera.hfov_deg", positive=True, high=MAX_HFOV_DEG)
@@ -140,8 +140,9 @@ class CaptureRecord:
             beacons.append(Beacon(r.pair(b["position"], f"beacons[{i}].position"),
                                   r.number(b["height"], f"beacons[{i}].height", positive=True)))
         t = r.mapping(top["target"], "target", ("size",))
-        cal = r.mapping(top.get("calibration", {}), "calibration", (), ("reference_distance",))
-        board = (read_board(r, top["board"], ("size", "hole_pitch", "hole_diameter"), ())
+        cal = r.mapping(top.get("calibration", {}), "calibration", (),
+                        optional=("reference_distance",))
+        board = (read_board(r, top["board"], ("size", "hole_pitch", "hole_diameter"), optional=())
                  if "board" in top else None)
         sha = top.get("frame_sha256", "")
         if not (isinstance(sha, str) and (sha == "" or re.fullmatch(r"[0-9a-f]{64}", sha))):

@@ -76,7 +76,7 @@ def _model_words(meta: dict) -> str:
             "(dataset.json)")
 
 
-def write_card(out: Path, meta: dict, rows: list[table.DatasetRow], variant: str) -> None:
+def write_card(out: Path, meta: dict, rows: list[table.DatasetRow], *, variant: str) -> None:
     """Write the dataset card DIR/README.md."""
     ok = [r for r in rows if not r.error]
     med = lambda k: float(np.nanmedian([abs(r[k]) for r in ok])) if ok else math.nan  # noqa: E731

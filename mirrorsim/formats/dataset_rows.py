@@ -96,7 +96,7 @@ def row_document(row: table.DatasetRow, digest: str | None) -> dict:
     return seal({**row.to_json(), **({"dataset": digest} if digest else {})})
 
 
-def read_row(path: Path, index: int, seed: int, digest: str | None = None
+def read_row(path: Path, index: int, seed: int, *, digest: str | None = None
              ) -> table.DatasetRow:
     """Scene ``index``'s row file, verified: its checksum, its declared columns, and that
     it is this dataset's (its index and seed, and where ``digest`` is given and the row
@@ -191,7 +191,7 @@ def reject_bad_rows(out: Path, n: int, seed: int) -> None:
         if not path.exists():
             continue
         try:
-            row = read_row(path, i, seed, digest)
+            row = read_row(path, i, seed, digest=digest)
             gone, damaged = files_differ(out, row)
             if gone or damaged:
                 raise ValueError(f"its scene's file {(gone or damaged)[0].name} is "
@@ -227,7 +227,7 @@ def collect_rows(out: Path, n: int, meta: dict | None = None) -> list[table.Data
         p = out / "rows" / f"{scene_name(i)}.json"
         if p.exists():
             try:
-                rows.append(read_row(p, i, seed, digest))
+                rows.append(read_row(p, i, seed, digest=digest))
             except ValueError as exc:
                 raise DatasetError(p, f"not a row of this dataset ({exc}); resuming the "
                                    "dataset redoes it") from None

@@ -81,7 +81,7 @@ class ErrorModelError(InputError):
     """A bad error model file."""
 
 
-def feature_vector(height_px: Any, off_axis_deg: Any, contrast: Any, noise: Any,
+def feature_vector(height_px: Any, off_axis_deg: Any, contrast: Any, *, noise: Any,
                    jpeg_quality: Any) -> np.ndarray:
     """:data:`SIGMA_FEATURES` of images (broadcasts; last axis the features): log of the
     image's height (px), |angle off the optical axis| (deg), log of its edges' relative
@@ -117,7 +117,7 @@ class ImageFeatures:
     def vector(self, pan_deg: float) -> np.ndarray:
         """:func:`feature_vector` of this image for a camera panned to ``pan_deg``."""
         return feature_vector(self.height_px, off_axis(self.alpha_deg, pan_deg),
-                              self.contrast, self.noise, self.jpeg_quality)
+                              self.contrast, noise=self.noise, jpeg_quality=self.jpeg_quality)
 
     def to_json(self) -> dict:
         """As a report's entry (:meth:`from_json` reads it back)."""
@@ -328,7 +328,7 @@ class ErrorModel:
         return float(scale) if scale.ndim == 0 else scale
 
     def own_sigma(self, kind: str, quantity: str, features: np.ndarray,
-                  fx_px: ArrayLike | None) -> np.ndarray:
+                  *, fx_px: ArrayLike | None) -> np.ndarray:
         """Each image's own σ (the frame's shared errors apart) at feature rows and focal
         lengths, clipped to what any σ may be."""
         fit = self.fits[kind][quantity]
@@ -341,28 +341,28 @@ class ErrorModel:
         return np.clip(s, SIGMA_D_REL_MIN, SIGMA_D_REL_MAX)
 
     def whole_sigma(self, kind: str, quantity: str, features: np.ndarray,
-                    fx_px: ArrayLike | None) -> np.ndarray:
+                    *, fx_px: ArrayLike | None) -> np.ndarray:
         """:meth:`own_sigma`, and for α the frame's shared offset besides."""
-        own = self.own_sigma(kind, quantity, features, fx_px)
+        own = self.own_sigma(kind, quantity, features, fx_px=fx_px)
         return np.hypot(own, self.shared_alpha_deg) if quantity == "alpha" else own
 
     def sigma(self, kind: str, image: ImageFeatures, pan_deg: float,
-              fx_px: float | None = None) -> Sigma:
+              *, fx_px: float | None = None) -> Sigma:
         """The σ pair of one ``kind`` image (``fx_px``: the camera's focal length, None:
         the training's)."""
         x = image.vector(pan_deg)
-        return Sigma(float(self.own_sigma(kind, "alpha", x, fx_px)),
-                     float(self.own_sigma(kind, "d_rel", x, fx_px)))
+        return Sigma(float(self.own_sigma(kind, "alpha", x, fx_px=fx_px)),
+                     float(self.own_sigma(kind, "d_rel", x, fx_px=fx_px)))
 
     def sigmas(self, target: ImageFeatures, beacons: list[ImageFeatures], pan_deg: float,
-               fx_px: float | None = None) -> ObjectSigmas:
+               *, fx_px: float | None = None) -> ObjectSigmas:
         """Each observation's σ's: the target's and each beacon's."""
-        return ObjectSigmas(self.sigma("target", target, pan_deg, fx_px),
-                            tuple(self.sigma("beacon", b, pan_deg, fx_px) for b in beacons),
+        return ObjectSigmas(self.sigma("target", target, pan_deg, fx_px=fx_px),
+                            tuple(self.sigma("beacon", b, pan_deg, fx_px=fx_px) for b in beacons),
                             self.shared_alpha_deg)
 
     def domain_warnings(self, target: ImageFeatures, beacons: list[ImageFeatures],
-                        pan_deg: float, scene: dict[str, Any] | None = None,
+                        pan_deg: float, *, scene: dict[str, Any] | None = None,
                         bench: dict[str, float] | None = None) -> list[str]:
         """Every way these images, the scene's facts (:data:`SCENE_DOMAIN`) and its
         bench imperfections lie outside the model's domain, one line each."""
@@ -438,7 +438,7 @@ def model_from_dict(data: Any, source: str | Path) -> ErrorModel:
                                    "it again, or drop the sha256 key to use an edited "
                                    "model)") from None
     top = r.mapping(data, "", ("format", "version", "objects", "domain", "tolerances"),
-                    ("units", "sigma_features", "bias_features", "provenance", "fx_px",
+                    optional=("units", "sigma_features", "bias_features", "provenance", "fx_px",
                      "shared_alpha_deg", "kind"))
     if top["format"] != FORMAT or top["version"] != VERSION:
         raise r.fail("version", f"{top['version']!r}: not a version-{VERSION} {FORMAT}; fit it "
@@ -497,7 +497,7 @@ def _range(r: Reader, value: Any, key: str, low: float | None = None) -> tuple[f
 
 
 def _domain(r: Reader, value: Any) -> Domain:
-    d = r.mapping(value, "domain", ("features", "scene"), ("bench",))
+    d = r.mapping(value, "domain", ("features", "scene"), optional=("bench",))
     feats = r.mapping(d["features"], "domain.features", KINDS)
     features = {}
     for kind in KINDS:
@@ -514,7 +514,8 @@ def _domain(r: Reader, value: Any) -> Domain:
 
 
 def _tolerances(r: Reader, value: Any) -> BenchTolerances:
-    t = r.mapping(value, "tolerances", (), ("pan_deg", "calibration_cm", "curvature_per_cm",
+    t = r.mapping(value, "tolerances", (),
+                  optional=("pan_deg", "calibration_cm", "curvature_per_cm",
                                             "beacon_position_cm"))
     highs = {"pan_deg": 10.0, "calibration_cm": 50.0, "curvature_per_cm": 0.1,
              "beacon_position_cm": 10.0}
@@ -524,7 +525,7 @@ def _tolerances(r: Reader, value: Any) -> BenchTolerances:
 
 def _quantity(r: Reader, value: Any, key: str, q: str) -> QuantityFit:
     f = r.mapping(value, key, ("log_sigma", "n", "typical_sigma", "tail"),
-                  ("gross_errors", "rms", "bias"))
+                  optional=("gross_errors", "rms", "bias"))
     ls = r.mapping(f["log_sigma"], f"{key}.log_sigma", ("intercept", "weights", "mean", "scale"))
     k = len(SIGMA_FEATURES)
     vec = lambda name: tuple(r.number(v, f"{key}.log_sigma.{name}[{i}]")  # noqa: E731

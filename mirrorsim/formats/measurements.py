@@ -42,7 +42,7 @@ def measurements_from_dict(data: Any, source: str | Path = "<measurements>") -> 
     source and the key)."""
     r = Reader(source, MeasurementError)
     top = r.mapping(data, "", ("observer", "target", "beacons"),
-                    ("sigma", "observer_pan_deg", "scene", "detector", "source"))
+                    optional=("sigma", "observer_pan_deg", "scene", "detector", "source"))
     observer = r.pair(top["observer"], "observer")
     raw_t = top["target"]
     listed = isinstance(raw_t, list)
@@ -51,7 +51,7 @@ def measurements_from_dict(data: Any, source: str | Path = "<measurements>") -> 
     targets = []
     for i, t in enumerate(raw_t if listed else [raw_t]):
         key = f"target[{i}]" if listed else "target"
-        t = r.mapping(t, key, ("alpha_deg", "d_total"), _DETECTOR_KEYS)
+        t = r.mapping(t, key, ("alpha_deg", "d_total"), optional=_DETECTOR_KEYS)
         targets.append((r.number(t["alpha_deg"], f"{key}.alpha_deg"),
                         r.number(t["d_total"], f"{key}.d_total", low=D_TOTAL_RANGE_CM[0],
                                  high=D_TOTAL_RANGE_CM[1])))
@@ -60,7 +60,7 @@ def measurements_from_dict(data: Any, source: str | Path = "<measurements>") -> 
     beacons = []
     for i, b in enumerate(top["beacons"]):
         key = f"beacons[{i}]"
-        b = r.mapping(b, key, ("position", "alpha_deg", "d_total"), _DETECTOR_KEYS)
+        b = r.mapping(b, key, ("position", "alpha_deg", "d_total"), optional=_DETECTOR_KEYS)
         beacons.append(BeaconMeasurement(
             r.pair(b["position"], f"{key}.position"),
             r.number(b["alpha_deg"], f"{key}.alpha_deg"),
@@ -72,11 +72,11 @@ def measurements_from_dict(data: Any, source: str | Path = "<measurements>") -> 
     return Measurements(observer, targets, beacons, sigma, pan)
 
 
-def read_sigmas(r: Reader, value: Any, n_beacons: int, key: str = "sigma") -> ObjectSigmas:
+def read_sigmas(r: Reader, value: Any, n_beacons: int, *, key: str = "sigma") -> ObjectSigmas:
     """A ``sigma`` block: one pair for every observation, or ``target`` and ``beacons``
     (one pair for all beacons, or a list of one per beacon)."""
     if isinstance(value, dict) and "target" in value:
-        s = r.mapping(value, key, ("target", "beacons"), ("shared_alpha_deg",))
+        s = r.mapping(value, key, ("target", "beacons"), optional=("shared_alpha_deg",))
         raw = s["beacons"]
         if isinstance(raw, list):
             if len(raw) != n_beacons:

@@ -115,7 +115,7 @@ class Reader:
         return self.error_class(self.source, key, message)
 
     def mapping(self, value: Any, key: str, required: set[str] | tuple[str, ...],
-                optional: set[str] | tuple[str, ...] = ()) -> dict:
+                *, optional: set[str] | tuple[str, ...] = ()) -> dict:
         """A mapping with exactly the allowed keys and all the required ones."""
         allowed = set(required) | set(optional)
         if not isinstance(value, dict):

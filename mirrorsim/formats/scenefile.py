@@ -63,7 +63,7 @@ def read_scene_file(path: str | Path, *, failures: Failures | None = None
 
 
 def read_camera_model(r: Reader, cam: dict, key: str,
-                      default_resolution: tuple[int, int] = DEFAULT_RESOLUTION
+                      *, default_resolution: tuple[int, int] = DEFAULT_RESOLUTION
                       ) -> tuple[float, float, tuple[int, int]]:
     """A camera's model from its block (scene files and specs alike): mount height (cm),
     hfov (°), resolution (px)."""
@@ -73,12 +73,12 @@ def read_camera_model(r: Reader, cam: dict, key: str,
                             f"{key}.resolution"))
 
 
-def read_render(r: Reader, block: Any, key: str = "render", seed: bool = True
+def read_render(r: Reader, block: Any, key: str = "render", *, seed: bool = True
                 ) -> RenderSettings:
     """A ``render`` block (scene files and, with no ``seed``, specs), defaults for what
     it omits."""
     rr = r.mapping(block, key, set(),
-                   {"spp", "sampler", "background_spp", "beacon_spp"}
+                   optional={"spp", "sampler", "background_spp", "beacon_spp"}
                    | ({"seed"} if seed else set()))
     d = RenderSettings()
     try:  # the bounds are RenderSettings' own; here each key's type and its name
@@ -116,14 +116,14 @@ def parse_scene(data: Any, *, source: str = "<scene>", default_name: str = "scen
     name = f.attempt(_name, r, top, default_name)
     board = f.attempt(read_board, r, top["board"])
     cam = f.attempt(r.mapping, top["camera"], "camera", {"position", "height", "hfov", "pan"},
-                    {"resolution", *CAMERA_IMPERFECTIONS})
+                    optional={"resolution", *CAMERA_IMPERFECTIONS})
     pan = position = model = None
     if cam is not None:
         pan = f.attempt(read_pan, r, cam["pan"], "camera.pan")
         position = f.attempt(r.pair, cam["position"], "camera.position")
         model = f.attempt(read_camera_model, r, cam, "camera")
     m = f.attempt(r.mapping, top["mirror"], "mirror", {"center", "yaw", "size"},
-                  set(MIRROR_IMPERFECTIONS))
+                  optional=set(MIRROR_IMPERFECTIONS))
     mirror = None if m is None else f.attempt(_mirror, r, m)
     target_position, target_size = f.attempt(_target, r, top["target"], default=(None, None))
     beacons, bkey = f.attempt(_beacons, r, top, default=(None, None))
@@ -209,7 +209,8 @@ def _bench(r: Reader, cam: dict, m: dict, cal: Any, mirror: Mirror,
     """The bench imperfections (docs/scenes.md), each read in its registry form; every key
     optional, absent = ideal."""
     blocks = {"camera": cam, "mirror": m,
-              "calibration": r.mapping(cal, "calibration", set(), set(_leaves("calibration")))}
+              "calibration": r.mapping(cal, "calibration", set(),
+                                       optional=set(_leaves("calibration")))}
     values = {}
     for imp in REGISTRY:
         # null is "absent" where the ideal bench has none (no lens, noise, JPEG, curvature);
@@ -282,7 +283,7 @@ def _beacons(r: Reader, top: dict) -> tuple[tuple[Beacon, ...], Callable[[int], 
             raise r.fail("beacons", f"expected a non-empty list, got {show(raw_beacons)}")
     beacons = []
     for i, raw in enumerate(raw_beacons):
-        bb = r.mapping(raw, bkey(i), {"position", "height"}, {"known_position"})
+        bb = r.mapping(raw, bkey(i), {"position", "height"}, optional={"known_position"})
         known = bb.get("known_position")
         beacons.append(Beacon(position=r.pair(bb["position"], f"{bkey(i)}.position"),
                               height=r.number(bb["height"], f"{bkey(i)}.height", positive=True,

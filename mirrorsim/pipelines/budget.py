@@ -121,7 +121,7 @@ def _vector(m: Measurements) -> np.ndarray:
 def _estimate(observer, v: np.ndarray, sigma) -> np.ndarray:
     beacons = [BeaconMeasurement((float(v[k + 2]), float(v[k + 3])), float(v[k]),
                                  float(v[k + 1])) for k in range(2, len(v), 4)]
-    return solve_measurements(observer, beacons, [(float(v[0]), float(v[1]))], sigma).target
+    return solve_measurements(observer, beacons, [(float(v[0]), float(v[1]))], sigma=sigma).target
 
 
 def jacobian(m: Measurements) -> np.ndarray:
@@ -145,13 +145,14 @@ def calibrated_error(report: Report, calibration: SelfCalibration) -> float | No
         return None
     m = report.measurements
     try:
-        sol = solve_measurements(m.observer, m.beacons, m.targets, m.sigma, calibration)
+        sol = solve_measurements(m.observer, m.beacons, m.targets, sigma=m.sigma,
+                                 calibration=calibration)
     except SolverError:
         return None
     return float(np.linalg.norm(sol.target - np.asarray(report.truth.target.position, float)))
 
 
-def contribution(source: str, value: Any, ideal: Report, report: Report,
+def contribution(source: str, value: Any, ideal: Report, *, report: Report,
                  J: np.ndarray, calibration: SelfCalibration = PLAIN) -> Contribution:
     """Compare a source's report with the ideal one; predict its effect to first order;
     with ``calibration``'s nuisances, also solve its frames self-calibrated."""
@@ -185,7 +186,7 @@ def check_budget_calibration(scene: Scene, calibration: SelfCalibration) -> Self
                            "budget uses that σ in its self-calibrated column only, which "
                            "needs nuisances to self-calibrate")
     try:
-        check_nuisances(calibration.nuisances, len(scene.beacons), 1, calibration.priors)
+        check_nuisances(calibration.nuisances, len(scene.beacons), 1, priors=calibration.priors)
     except SolverError as exc:
         raise BadParameter("nuisances", str(exc)) from None
     return calibration
@@ -240,7 +241,8 @@ def run_budget(scene: Scene, out: str | Path, *, variant: str = "auto", progress
         # a bench error can make a frame unmeasurable (an image taken for the wrong one
         # is refused) or unsolvable (no mirror fits): that is its effect, recorded
         try:
-            return contribution(label, value, ideal, run(label, sub), J, calibration)
+            return contribution(label, value, ideal, report=run(label, sub), J=J,
+                                calibration=calibration)
         except (DetectionError, SolverError) as exc:
             return Contribution(label, value, None, None, None, None, None, failed=str(exc))
 

@@ -49,7 +49,7 @@ METHOD = "foot-chroma|target-foot-chroma|front-0.338|slope8|seeds-ss"
 
 
 def calibration_key(camera: Camera, target_size: tuple[float, float], pencil_height: float,
-                    distance_error: float = 0.0, subsampled: bool = False) -> str:
+                    *, distance_error: float = 0.0, subsampled: bool = False) -> str:
     """What K depends on: the camera model, the objects' sizes, the method (and whether
     its edges are measured as in a frame of half-resolution colour), and where the
     reference really stood (a bench's error; absent from the key when 0)."""
@@ -141,14 +141,15 @@ def reference_crop(camera: Camera, obj: Target | Beacon) -> tuple[int, int, int,
     across = unit(REFERENCE_PAN + 90)
     pts = np.array([[*(np.asarray(obj.position) + s * half_w * across), z]
                     for s in (-1, 1) for z in (0.0, top)])
-    box = optics.film_box(camera, *optics.project(camera, pts), MARGIN_PX)
+    u, v, depth = optics.project(camera, pts)
+    box = optics.film_box(camera, u, v, depth=depth, margin_px=MARGIN_PX)
     if box is None:  # the reference stands on the optical axis, 100 cm ahead
         raise DetectionError("the calibration's reference object is not on the film")
     return box
 
 
 def measure_reference(camera: Camera, kind: str, size: float | tuple[float, float],
-                      variant: str = "auto", distance: float = D_REF, subsampled: bool = False
+                      *, variant: str = "auto", distance: float = D_REF, subsampled: bool = False
                       ) -> float:
     """Pixel height of the object standing at ``distance``, as the detector measures it
     (``subsampled``: as it measures a JPEG frame)."""
@@ -197,13 +198,16 @@ def calibrate(camera: Camera, target_size: tuple[float, float], pencil_height: f
         A ``distance_error`` that is not a number within the scene key's bounds.
     """
     _check_distance_error(distance_error)
-    key = calibration_key(camera, target_size, pencil_height, distance_error, subsampled)
+    key = calibration_key(camera, target_size, pencil_height, distance_error=distance_error,
+                          subsampled=subsampled)
     found = None if refresh else read_entry("calibration", key, _check_entry)
     if found is not None:
         return Calibration(target_k=found["target_k"], pencil_k=found["pencil_k"], key=key)
     where = D_REF + distance_error
-    s_t = measure_reference(camera, "target", tuple(target_size), variant, where, subsampled)
-    s_p = measure_reference(camera, "beacon", pencil_height, variant, where, subsampled)
+    s_t = measure_reference(camera, "target", tuple(target_size), variant=variant, distance=where,
+                            subsampled=subsampled)
+    s_p = measure_reference(camera, "beacon", pencil_height, variant=variant, distance=where,
+                            subsampled=subsampled)
     cal = Calibration(target_k=s_t * (D_REF - FRONT_OFFSET["target"]),
                       pencil_k=s_p * (D_REF - FRONT_OFFSET["beacon"]), key=key)
     write_entry("calibration", key, {**cal.constants(),

@@ -90,7 +90,7 @@ class SceneResult:
     retry: str = ""
 
 
-def process_one(i: int, seed: int, spec: DatasetSpec, out: str, spp: int | None,
+def process_one(i: int, seed: int, spec: DatasetSpec, *, out: str, spp: int | None,
                 variant: str, keep: tuple[str, ...] = (),
                 error_model: ErrorModel | None = None,
                 calibration: SelfCalibration = PLAIN, digest: str | None = None
@@ -335,7 +335,7 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
     if beacons is not None:  # likewise
         spec = spec.with_beacon_count(beacons)
     try:  # before anything is written
-        check_nuisances(calibration.nuisances, spec.beacon_count, 1, calibration.priors)
+        check_nuisances(calibration.nuisances, spec.beacon_count, 1, priors=calibration.priors)
     except SolverError as exc:
         raise BadParameter("nuisances", f"{exc} (scenes of {spec.beacon_count} beacon(s) "
                            f"drawn from {spec_path or 'the default spec'})") from None
@@ -376,16 +376,20 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
             bar.update()
 
         digest = settings_digest(meta)
-        jobs = [(i, seed, spec, str(out), spp, chosen, tuple(keep), model, calibration,
-                 digest) for i in todo]
+        # a job is its scene's index and the run's seed; the rest is the run's, by name
+        job = partial(process_one, spec=spec, out=str(out), spp=spp, variant=chosen,
+                      keep=tuple(keep), error_model=model, calibration=calibration,
+                      digest=digest)
+        jobs = [(i, seed) for i in todo]
         try:
-            _run_jobs(jobs, executor, workers, scheduler, is_done, on_result, max_rss_mb)
+            _run_jobs(job, jobs, executor, workers, scheduler=scheduler, is_done=is_done,
+                      on_result=on_result, max_rss_mb=max_rss_mb)
         finally:
             bar.close()
         wall = time.perf_counter() - t_start
         rows = collect_rows(out, n)  # against dataset.json as it is on disk
         write_table(out, rows)
-        write_card(out, meta, rows, chosen)
+        write_card(out, meta, rows, variant=chosen)
         return DatasetRun(rows=len(rows), computed=len(todo) - len(retry),
                           already_done=n - len(todo),
                           failed=sum(bool(r.error) for r in rows), retry=retry,
@@ -393,18 +397,19 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
                           per_minute=len(todo) / wall * 60 if todo and wall else 0.0)
 
 
-def _run_jobs(jobs: list[tuple], executor: str, workers: int, scheduler: str | None,
-              is_done: Callable[[int], bool], on_result: Callable[[SceneResult], None],
-              max_rss_mb: float) -> None:
-    """Each job through :func:`process_one`: in this process, in warm local workers, or
-    on a Dask cluster."""
+def _run_jobs(job: Callable[..., SceneResult], jobs: list[tuple], executor: str,
+              workers: int, *, scheduler: str | None, is_done: Callable[[int], bool],
+              on_result: Callable[[SceneResult], None], max_rss_mb: float) -> None:
+    """``job(*each)`` (:func:`process_one`, the run's settings bound) for each of
+    ``jobs``: in warm local workers, or on a Dask cluster."""
     if executor == "dask":
-        run_dask(process_one, jobs, scheduler, on_result)
+        run_dask(job, jobs, scheduler, on_result=on_result)
     else:  # one worker too: a worker process retires, this process could not
         from mirrorsim.rendering.backend import set_render_threads
 
         # each worker renders on its share of the cores
-        run_local(process_one, jobs, workers, is_done, on_result, max_rss_mb,
+        run_local(job, jobs, workers, is_done=is_done, on_result=on_result,
+                  max_rss_mb=max_rss_mb,
                   setup=partial(set_render_threads, usable_cores() // workers))
 
 

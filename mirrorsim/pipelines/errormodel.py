@@ -114,7 +114,7 @@ def _robust_fit(X: np.ndarray, y: np.ndarray, cut: float = 1.345) -> np.ndarray:
 
 
 def fit_log_sigma(X: np.ndarray, y: np.ndarray, ridge: float = 1e-3,
-                  shared_var: float = 0.0) -> LogSigma:
+                  *, shared_var: float = 0.0) -> LogSigma:
     """σ = exp(w·z) by maximum likelihood of y ~ N(0, σ² + shared_var) (z: [1,
     standardized X]), with a small ridge on the slopes so that a feature the rows barely
     vary in stays flat.  σ is the spread about the truth (a bias is part of it: a
@@ -189,7 +189,8 @@ def sigma_features_of(cols: dict, kind: str) -> np.ndarray:
             raise ValueError(f"the dataset has no column {k!r}: it was made by an older "
                              "mirrorsim; make it again")
     h, contrast, noise, jpeg, alpha = (col(k) for k in names)
-    return feature_vector(h, off_axis(alpha, col("observer_pan_deg")), contrast, noise, jpeg)
+    return feature_vector(h, off_axis(alpha, col("observer_pan_deg")), contrast, noise=noise,
+                          jpeg_quality=jpeg)
 
 
 def min_rows(names: tuple[str, ...] | list[str]) -> int:
@@ -264,7 +265,7 @@ def fit(cols: dict, provenance: dict | None = None, bench: dict | None = None) -
                 raise ValueError(f"too few usable rows ({int(m.sum())}) to fit {kind} {q}: "
                                  f"{need} needed")
             bias = _robust_fit(X_all[m], y[m])
-            own = own_errors(cols, kind, q, names, bias, fx_px)
+            own = own_errors(cols, kind, q, names=names, bias=bias, fx_px=fx_px)
             if q == "alpha":
                 own_alpha[kind] = (m, S_all, own)
             law, gross = _sigma_fit(S_all[m], own[m])
@@ -302,7 +303,8 @@ def fit(cols: dict, provenance: dict | None = None, bench: dict | None = None) -
         # each kind's own α law is nearly free in its own likelihood when the shared
         # part dominates: both laws and the shared σ from the pair's likelihood, where
         # the difference of the two errors holds the own parts
-        law_t, law_b, shared = fit_alpha_pair(St[both], et[both], Sb[both], eb[both], shared)
+        law_t, law_b, shared = fit_alpha_pair(St[both], et[both], Sb[both], yb=eb[both],
+                                              shared0=shared)
         for kind, law, S, (m, _, own) in (("target", law_t, St, own_alpha["target"]),
                                           ("beacon", law_b, Sb, own_alpha["beacon"])):
             whole = np.hypot(law(S[m]), shared)
@@ -331,7 +333,7 @@ def stability(S: np.ndarray, y: np.ndarray, draws: int = STABILITY_DRAWS) -> flo
     return float(np.quantile(sig.max(axis=0) / sig.min(axis=0), 0.9))
 
 
-def own_errors(cols: dict, kind: str, q: str, names: tuple[str, ...] | list[str],
+def own_errors(cols: dict, kind: str, q: str, *, names: tuple[str, ...] | list[str],
                bias: tuple[float, ...] | np.ndarray, fx_px: float | None) -> np.ndarray:
     """Each row's own error of ``kind``'s ``q``: its error less the parts every image of
     its frame shares (SHARED_FEATURES' bias coefficients times their values), and for α
@@ -346,10 +348,10 @@ def own_errors(cols: dict, kind: str, q: str, names: tuple[str, ...] | list[str]
     return own
 
 
-def model_own_errors(cols: dict, model: ErrorModel, kind: str, q: str) -> np.ndarray:
+def model_own_errors(cols: dict, model: ErrorModel, kind: str, *, q: str) -> np.ndarray:
     """:func:`own_errors` with ``model``'s bias fit (image rows of a table)."""
-    return own_errors(cols, kind, q, model.bias_features, model.fits[kind][q].bias,
-                      model.fx_px)
+    return own_errors(cols, kind, q, names=model.bias_features, bias=model.fits[kind][q].bias,
+                      fx_px=model.fx_px)
 
 
 def _scene_domain(cols: dict) -> dict[str, tuple[float, float]]:
@@ -380,7 +382,7 @@ def tolerances_of(bench: dict) -> BenchTolerances:
                            beacon_position_cm=half("beacon.known_position_offset"))
 
 
-def fit_alpha_pair(St: np.ndarray, yt: np.ndarray, Sb: np.ndarray, yb: np.ndarray,
+def fit_alpha_pair(St: np.ndarray, yt: np.ndarray, Sb: np.ndarray, *, yb: np.ndarray,
                    shared0: float, ridge: float = 1e-3) -> tuple[LogSigma, LogSigma, float]:
     """The target's and the beacon's own α laws and the shared σ, by maximum likelihood
     of each frame's pair of α errors ~ N(0, [[σt² + s², s²], [s², σb² + s²]]) (z's
@@ -400,7 +402,9 @@ def fit_alpha_pair(St: np.ndarray, yt: np.ndarray, Sb: np.ndarray, yb: np.ndarra
         return (0.5 * np.sum(np.log(det) + q)
                 + ridge * n * (np.sum(w[1:k] ** 2) + np.sum(w[k + 1:2 * k] ** 2)))
 
-    own = lambda y: 0.5 * np.log(max(np.mean(y**2) - shared0**2, 0.01 * np.mean(y**2)))  # noqa: E731
+    def own(y):
+        return 0.5 * np.log(max(np.mean(y**2) - shared0**2, 0.01 * np.mean(y**2)))
+
     w0 = np.r_[own(yt), np.zeros(k - 1), own(yb), np.zeros(k - 1), np.log(shared0)]
     w = minimize(nll, w0, method="BFGS").x
     law = lambda v, mu, sc: LogSigma(float(v[0]), tuple(v[1:].tolist()),  # noqa: E731
@@ -532,10 +536,10 @@ def plot(cols: dict, model: ErrorModel, out: str | Path) -> Path:
     grid = np.linspace(-5, 5, 201)
     for r, (q, scale, unit) in enumerate((("alpha", 1.0, "°"), ("d_rel", 100.0, "% of d_total"))):
         for k, (kind, colour) in enumerate((("target", "#c0392b"), ("beacon", "#b8860b"))):
-            y = model_own_errors(cols, model, kind, q)
+            y = model_own_errors(cols, model, kind, q=q)
             S = sigma_features_of(cols, kind)
             m = ok & once[kind] & np.isfinite(y) & np.isfinite(S).all(axis=1)
-            sd = model.whole_sigma(kind, q, S[m], model.fx_px)  # y is as at its fx
+            sd = model.whole_sigma(kind, q, S[m], fx_px=model.fx_px)  # y is as at its fx
             for c, (x, name) in enumerate(((np.exp(S[m, 0]), "measured image height (px)"),
                                            (S[m, 1], "|off-axis bearing| (°)"))):
                 axes[r, c].errorbar(x + 0.15 * k, y[m] * scale, yerr=2 * sd * scale, fmt="o",

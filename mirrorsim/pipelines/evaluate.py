@@ -145,9 +145,9 @@ def evaluate_into(scene: Scene, out: Path, *, variant: str = "auto", progress: b
         # each image again from its pixels, as the level camera at the board's pan would
         # have measured it (the detections' beacons in the order of beacon_measurements)
         beacons = [BeaconMeasurement(tuple(b.position), *corrected_image(
-            pose, capture.camera, m, pencil_paint_height(b.height)))
+            pose, capture.camera, m, top=pencil_paint_height(b.height)))
             for det in detections for b, m in det.beacons]
-        targets = [corrected_image(pose, capture.camera, d.target, capture.target_size[1])
+        targets = [corrected_image(pose, capture.camera, d.target, top=capture.target_size[1])
                    for d in detections if d.target.d_total is not None]
     mean_target = tuple(float(v) for v in np.mean(targets, axis=0))
     model = model_for(scene, error_model)
@@ -157,7 +157,7 @@ def evaluate_into(scene: Scene, out: Path, *, variant: str = "auto", progress: b
                 *(det.features(m, b.alpha_deg, b.d_total) for (det, m), b in zip(
                     ((det, m) for det in detections for _, m in det.beacons), beacons,
                     strict=True)))
-    sigma = model.sigmas(features[0], list(features[1:]), pan, fx)
+    sigma = model.sigmas(features[0], list(features[1:]), pan, fx_px=fx)
     if model_priors:
         calibration = model_calibration(model, calibration)
     if pose is not None:
@@ -172,18 +172,18 @@ def evaluate_into(scene: Scene, out: Path, *, variant: str = "auto", progress: b
             sigma = replace(sigma, shared_alpha_deg=left)
     notes = model.domain_warnings(
         features[0], list(features[1:]), pan,
-        {"fx_px": fx, "camera_height_cm": capture.camera.height,
+        scene={"fx_px": fx, "camera_height_cm": capture.camera.height,
          "pencil_height_cm": tuple(b.height for b in scene.beacons),
          "beacons": len(scene.beacons)},
-        imperfections.judged_values(scene))
+        bench=imperfections.judged_values(scene))
     measurements = Measurements(observer=cam.position, targets=[mean_target], beacons=beacons,
                                 sigma=sigma, observer_pan_deg=pan)
     # the target once, at its mean over the frames: each frame's detection of the same
     # image shares its errors (bias included), so several would shrink its σ by √frames
     target = [mean_target]
-    sol, calibration, said = solve_separated(cam.position, beacons, target, sigma,
-                                             calibration, model)
-    errors = score(truth, measurements, sol, calibration)
+    sol, calibration, said = solve_separated(cam.position, beacons, target, sigma=sigma,
+                                             calibration=calibration, model=model)
+    errors = score(truth, measurements, sol, calibration=calibration)
     by_count = ()
     if len(beacons) > 1:
         def first(k: int) -> Score:
@@ -195,7 +195,8 @@ def evaluate_into(scene: Scene, out: Path, *, variant: str = "auto", progress: b
             truth_k = replace(truth, beacons=truth.beacons[:k])
             def scored(cal_k: SelfCalibration) -> Score:
                 return score(truth_k, meas_k, solve_measurements(
-                    cam.position, beacons[:k], target, sig_k, cal_k), cal_k)
+                    cam.position, beacons[:k], target, sigma=sig_k, calibration=cal_k),
+                    calibration=cal_k)
 
             for m in range(len(calibration.nuisances), 0, -1):
                 try:
@@ -229,7 +230,7 @@ FAR_SIGMAS = 3.0
 
 
 def solve_separated(observer: tuple[float, float], beacons: list[BeaconMeasurement],
-                    targets: list[tuple[float, float]], sigma: ObjectSigmas,
+                    targets: list[tuple[float, float]], *, sigma: ObjectSigmas,
                     calibration: SelfCalibration, model: ErrorModel
                     ) -> tuple[Solution, SelfCalibration, list[str]]:
     """Solve, then hold every nuisance the beacons do not separate from the mirror.
@@ -244,7 +245,7 @@ def solve_separated(observer: tuple[float, float], beacons: list[BeaconMeasureme
     -------
     solution, the calibration it was solved with, the lines to print
     """
-    sol = solve_measurements(observer, beacons, targets, sigma, calibration)
+    sol = solve_measurements(observer, beacons, targets, sigma=sigma, calibration=calibration)
     said: list[str] = []
     sd = {n: sol.nuisance_sd.get(NUISANCES[n][0], 0.0) for n in calibration.nuisances}
     loose = [n for n in calibration.nuisances
@@ -260,7 +261,7 @@ def solve_separated(observer: tuple[float, float], beacons: list[BeaconMeasureme
                         f"be {describe_priors({n: sd[n]}).split(' ', 1)[1]}); "
                         + (f"held at its prior {describe_priors({n: bench[n]})}" if n in bench
                            else "held at its neutral value"))
-        sol = solve_measurements(observer, beacons, targets, sigma, calibration)
+        sol = solve_measurements(observer, beacons, targets, sigma=sigma, calibration=calibration)
     held, far = [], []
     for n, prior in calibration.priors.items():
         if n == "pan" and sigma.shared_alpha_deg:

@@ -86,7 +86,7 @@ def check_one_pencil_height(capture: CaptureRecord) -> None:
 
 
 def check_pair(image_path: str | Path, found: str, capture: CaptureRecord,
-               named: str | Path) -> None:
+               *, named: str | Path) -> None:
     """Refuse a frame (its bytes' SHA-256 ``found``) that is not the one its capture
     record was written with (the record's ``frame_sha256``, where it has one): beacon 1's
     record with beacon 0's frame was measured with the wrong believed position, without
@@ -124,14 +124,15 @@ def measure_frame(image_path: str | Path, capture: CaptureRecord | str | Path, *
     cam = capture.camera
     if pixels is None:
         stored = read_stored_frame(image_path, (cam.width, cam.height_px))
-        check_pair(image_path, stored.sha256, capture, named)  # before the calibration
+        check_pair(image_path, stored.sha256, capture, named=named)  # before the calibration
         image, lossy, quality = stored.pixels, stored.subsampled, stored.jpeg_quality
     else:  # a lossless PNG just made
         image, lossy, quality = pixels, False, 0
     cal = calibration or calibration_for(capture, variant=variant,
                                          distance_error=distance_error, subsampled=lossy)
     try:
-        det = detect_frame(image, capture, cal, lossy, jpeg_quality=quality)  # never the scene
+        det = detect_frame(image, capture, cal, subsampled=lossy,
+                           jpeg_quality=quality)  # never the scene
     except DetectionError as exc:
         where = f"{image_path} ({source})" if source else str(image_path)
         raise FrameNotMeasured(where, str(exc)) from None
@@ -149,7 +150,7 @@ def render_and_measure(scene: Scene, out: str | Path, *, variant: str = "auto",
     if files is not None:
         return replace(measure(files.image, files.capture), files=files)
     frame = render_frame(scene, variant=variant, progress=progress)
-    write = partial(write_frame, scene, frame, out, scene_fingerprint(scene), ids)
+    write = partial(write_frame, scene, frame, out, fingerprint=scene_fingerprint(scene), ids=ids)
     if scene.bench.jpeg_quality is not None:  # the detector must see a JPEG as decoded
         files = write()
         return replace(measure(files.image, files.capture), files=files)
@@ -180,4 +181,4 @@ def render_to_files(scene: Scene, out: str | Path | None = None, *, variant: str
     if found is not None:
         return found
     frame = render_frame(scene, variant=variant, progress=progress)
-    return write_frame(scene, frame, out, scene_fingerprint(scene), ids)
+    return write_frame(scene, frame, out, fingerprint=scene_fingerprint(scene), ids=ids)

@@ -132,7 +132,7 @@ def _set_json(bs: BeaconSet) -> dict:
 
 
 def plan_scene(scene: Scene, sigma: Sigma | ObjectSigmas | None = None, eps_deg: float = 5.0,
-               yaw_spread_deg: float = 3.0, d1_spread: float = 2.0, step: float = 1.0,
+               *, yaw_spread_deg: float = 3.0, d1_spread: float = 2.0, step: float = 1.0,
                n_poses: int = 5, n_beacons: int = 1,
                calibration: SelfCalibration = PLAIN) -> Plan:
     """Placement numbers, paths, the exact beacon region and the best beacon position.
@@ -169,16 +169,16 @@ def plan_scene(scene: Scene, sigma: Sigma | ObjectSigmas | None = None, eps_deg:
     img = optics.mirror_image(cam.position, mir, scene.target.position)
     o = np.asarray(cam.position, float)
     s = mir.size[0]
-    geo = paper_placement(img.alpha_deg, img.d_total, s, eps_deg)
-    geo_corrected = paper_placement(img.alpha_deg, img.d_total, s, eps_deg, literal=False)
+    geo = paper_placement(img.alpha_deg, img.d_total, s, eps_deg=eps_deg)
+    geo_corrected = paper_placement(img.alpha_deg, img.d_total, s, eps_deg=eps_deg, literal=False)
     n_steps = max(1, math.ceil(img.d_total / geo.b))
     R = o + geo.R
-    paths = {k: path_points(k, R, img.alpha_deg, 2 * geo.half_a, geo.b, n_steps)
+    paths = {k: path_points(k, R, img.alpha_deg, a=2 * geo.half_a, b=geo.b, n=n_steps)
              for k in ("linear", "rectangular", "sawtooth")}
 
     region = _exact_region(o, R, img.alpha_deg, img.d_total, s, eps_deg)
-    area_lit = [paper_placement(img.alpha_deg, d, s, eps_deg).area for d in AREA_DISTANCES]
-    area_exact = [region_area(o, img.alpha_deg, d, s, eps_deg)
+    area_lit = [paper_placement(img.alpha_deg, d, s, eps_deg=eps_deg).area for d in AREA_DISTANCES]
+    area_exact = [region_area(o, img.alpha_deg, d, s=s, eps_deg=eps_deg)
                   for d in AREA_DISTANCES]
 
     prior = MirrorPrior(d1=img.d1, yaw_deg=mir.yaw, d1_spread=d1_spread,
@@ -188,12 +188,15 @@ def plan_scene(scene: Scene, sigma: Sigma | ObjectSigmas | None = None, eps_deg:
     chosen = None
     if n_beacons > 1 or calibration.nuisances or calibration.position_sigma:
         keep_out, accept = _placement_rules(scene)
-        chosen = best_beacon_set(o, img.alpha_deg, img.d_total, poses, sigma, s,
-                                 scene.board.size, n_beacons, calibration, step=step,
+        chosen = best_beacon_set(o, img.alpha_deg, img.d_total, poses=poses, sigma=sigma,
+                                 mirror_size=s,
+                                 board=scene.board.size, n=n_beacons, calibration=calibration,
+                                 step=step,
                                  keep_out=keep_out, accept=accept)
     scene_err, scene_seen = expected_target_error(
-        o, img.alpha_deg, img.d_total, np.array([b.position for b in scene.beacons]), poses,
-        sigma, s, min_depth=0.0)
+        o, img.alpha_deg, img.d_total, beacons=np.array([b.position for b in scene.beacons]),
+        poses=poses,
+        sigma=sigma, mirror_size=s, min_depth=0.0)
     return Plan(
         target_alpha_deg=img.alpha_deg, target_d_total=img.d_total, eps_deg=eps_deg,
         sigma=sigma, geometry=geo, geometry_corrected=geo_corrected, n_steps=n_steps,
@@ -238,8 +241,8 @@ def _exact_region(o: np.ndarray, R: np.ndarray, alpha_deg: float, d_total: float
     xs = np.linspace(R[0] - span, R[0] + span, 241)
     ys = np.linspace(R[1] - span, R[1] + span, 241)
     gx, gy = np.meshgrid(xs, ys)
-    mask = visible_region(o, alpha_deg, d_total, s, eps_deg,
-                          np.column_stack([gx.ravel(), gy.ravel()])).reshape(gx.shape)
+    mask = visible_region(o, alpha_deg, d_total, s=s, eps_deg=eps_deg,
+                          grid=np.column_stack([gx.ravel(), gy.ravel()])).reshape(gx.shape)
     return Region(xs, ys, mask, float(mask.sum() * (xs[1] - xs[0]) * (ys[1] - ys[0])))
 
 
@@ -248,8 +251,9 @@ def _best_position(scene: Scene, o: np.ndarray, alpha_deg: float, d_total: float
     """The board's best beacon position: clear of walls, the mirror and the panel, and
     its image unobstructed through the scene's own mirror."""
     keep_out, unobstructed = _placement_rules(scene)
-    return best_beacon(o, alpha_deg, d_total, poses, sigma, scene.mirror.size[0],
-                       scene.board.size, step=step, keep_out=keep_out, accept=unobstructed)
+    return best_beacon(o, alpha_deg, d_total, poses=poses, sigma=sigma,
+                       mirror_size=scene.mirror.size[0],
+                       board=scene.board.size, step=step, keep_out=keep_out, accept=unobstructed)
 
 
 def _placement_rules(scene: Scene):

@@ -119,11 +119,11 @@ def load_spec(path: str | Path | None = None) -> DatasetSpec:
     spec = read_yaml(path)
     r = Reader(path, SceneError)
     r.mapping(spec, "", {"board", "camera", "mirror", "target", "beacon", "occluder"},
-              {"render", "max_tries", "bench"})
-    r.mapping(spec["board"], "board", {"size"}, {"hole_pitch"})
+              optional={"render", "max_tries", "bench"})
+    r.mapping(spec["board"], "board", {"size"}, optional={"hole_pitch"})
     r.pair(spec["board"]["size"], "board.size", positive=True, high=MAX_BOARD_CM)
     cam = r.mapping(spec["camera"], "camera", {"x", "y"},
-                    {"height", "hfov", "resolution", "pan", "models"})
+                    optional={"height", "hfov", "resolution", "pan", "models"})
     if "models" in cam:
         if not isinstance(cam["models"], list) or not cam["models"]:
             raise r.fail("camera.models", f"expected a list of camera models, got "
@@ -133,7 +133,7 @@ def load_spec(path: str | Path | None = None) -> DatasetSpec:
             raise r.fail(f"camera.{sorted(extra)[0]}", "give it in each of camera.models, "
                          "not beside them")
         for k, m in enumerate(cam["models"]):
-            r.mapping(m, f"camera.models[{k}]", {"height", "hfov"}, {"resolution"})
+            r.mapping(m, f"camera.models[{k}]", {"height", "hfov"}, optional={"resolution"})
     # the resolution (beside models: their default); heights and fields of view drawn
     # from ranges are checked by _value as it draws
     read_resolution(r, cam.get("resolution", DEFAULT_RESOLUTION), "camera.resolution")
@@ -150,7 +150,7 @@ def load_spec(path: str | Path | None = None) -> DatasetSpec:
                          positive=True)
     else:
         r.pair(size, "target.size", positive=True)
-    r.mapping(spec["beacon"], "beacon", {"depth", "along", "height"}, {"count"})
+    r.mapping(spec["beacon"], "beacon", {"depth", "along", "height"}, optional={"count"})
     count = spec["beacon"].get("count", 1)
     for k, c in enumerate(count if isinstance(count, list) and len(count) == 2 else [count]):
         r.integer(c, f"beacon.count[{k}]" if isinstance(count, list) else "beacon.count",
@@ -185,7 +185,8 @@ def _camera_models(spec: dict, r: Reader | None = None) -> list[Camera] | None:
     default = spec["camera"].get("resolution", DEFAULT_RESOLUTION)
     cams = []
     for k, m in enumerate(models):
-        height, hfov, res = read_camera_model(r, m, f"camera.models[{k}]", default)
+        height, hfov, res = read_camera_model(r, m, f"camera.models[{k}]",
+                                              default_resolution=default)
         cams.append(Camera(position=(0.0, 0.0), height=height, hfov=hfov, resolution=res,
                            pan=0.0, pan_deg=0.0))
     return cams
@@ -342,10 +343,10 @@ def _check_bench_keys(spec: dict, r: Reader) -> None:
     bench = spec.get("bench")
     if bench is None:
         return
-    r.mapping(bench, "bench", set(), set(BENCH_SPEC_KEYS))
+    r.mapping(bench, "bench", set(), optional=set(BENCH_SPEC_KEYS))
     for block, keys in BENCH_SPEC_KEYS.items():
         if block in bench:
-            r.mapping(bench[block], f"bench.{block}", set(), keys)
+            r.mapping(bench[block], f"bench.{block}", set(), optional=keys)
 
 
 def _check_bench_ends(spec: dict, r: Reader) -> None:
@@ -387,7 +388,7 @@ def _range_end(raw: Any, end: int) -> Any:
 
 
 def sample_scene(spec: DatasetSpec, rng: int | np.random.Generator | None, name: str,
-                 tries: int | None = None) -> Scene:
+                 *, tries: int | None = None) -> Scene:
     """Draw until a usable scene comes: valid, NLOS, both images whole in the mirror.
 
     Raises

@@ -94,7 +94,7 @@ class Score:
 
 
 def score(truth: GroundTruth, measurements: Measurements, sol: Solution,
-          calibration: SelfCalibration = PLAIN) -> Score:
+          *, calibration: SelfCalibration = PLAIN) -> Score:
     """Errors of measurements and estimate against the ground truth (docs/files.md);
     ``calibration``: how ``sol`` was solved, so that its Cramér–Rao bound is that
     estimator's (its nuisances, their priors, the beacons' position σ)."""
@@ -140,8 +140,9 @@ def _crlb_cm(truth: GroundTruth, m: Measurements, calibration: SelfCalibration
     yaw = truth.mirror_yaw_deg
     rho = float(line_normal(yaw) @ np.asarray(truth.target.reflection_point, float))
     try:
-        bound = crlb(m.observer, [b.position for b in m.beacons], yaw, rho,
-                     truth.target.position, m.sigma, len(m.targets), calibration=calibration)
+        bound = crlb(m.observer, [b.position for b in m.beacons], yaw, mirror_rho=rho,
+                     target=truth.target.position, sigma=m.sigma, n_targets=len(m.targets),
+                     calibration=calibration)
     except SolverError:
         return None
     return float(np.sqrt(np.trace(bound[2:4, 2:4])))

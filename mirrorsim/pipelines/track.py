@@ -129,7 +129,7 @@ class TrackReport:
                           "poses": len(self.steps)}}
 
 
-def check_options(kind: str, steps: int, sigma: float, side: float, step: float,
+def check_options(kind: str, steps: int, sigma: float, *, side: float, step: float,
                   heading: str = "view", board: tuple[float, float] | None = None) -> None:
     """Refuse bad options as bad input (``board``: its size, which bounds side and step;
     whether a whole path fits is known once the start pose is measured)."""
@@ -197,7 +197,8 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
         or a fixed beacon's image is not measured.
     """
     check_given_scene(scene)  # edited by a script: held to what its file would make
-    check_options(kind, steps, odometry_sigma, side, step, heading, scene.board.size)
+    check_options(kind, steps, odometry_sigma, side=side, step=step, heading=heading,
+                  board=scene.board.size)
     for name, v, lo in (("particles", particles, MIN_PARTICLES), ("seed", seed, 0)):
         if not (is_whole(v) and v >= lo):
             raise BadParameter(name, f"{v!r} must be a whole number ≥ {lo}")
@@ -232,7 +233,8 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
                              f"the path no heading: {why or 'the target was not measured'}")
     fixed = tuple(pose.fixed(i) for i in range(1, len(scene.beacons)))
     try:
-        commanded = beacon_path(scene, obs, target_obs, kind, steps, side, step, heading)
+        commanded = beacon_path(scene, obs, target_obs, kind=kind, steps=steps, side=side,
+                                step=step, heading=heading)
         pf = _start_filter(cam.position, start, obs, params, particles, seed, fixed,
                            position_sigma)
     except SolverError as exc:
@@ -332,7 +334,8 @@ def _step_record(scene: Scene, k: int, est, target_obs: np.ndarray, commanded: n
     cam = scene.camera
     yaw_err, off_err = mirror_errors([est], np.asarray(scene.mirror.center, float),
                                      scene.mirror.yaw)
-    target = locate(cam.position, est.point, est.yaw_deg, *target_obs)
+    target = locate(cam.position, est.point, est.yaw_deg, alpha_deg=target_obs[0],
+                    d_total=target_obs[1])
     return TrackStep(
         step=k, commanded=tuple(map(float, commanded)),
         path_length_cm=float(np.sum(np.linalg.norm(moves, axis=1))),
@@ -361,7 +364,7 @@ def _start_filter(observer, start, obs, params: PFParams, n: int, seed: int,
     """The filter with its prior centred on the mirror the first pose's beacon gives
     (the perpendicular bisector of the beacon and its image), weighed by the fixed
     beacons."""
-    yaw, mid, _ = mirror_from_beacon(observer, start, *obs)
+    yaw, mid, _ = mirror_from_beacon(observer, start, obs[0], d_total=obs[1])
     yaw = float(yaw)
     rho = float(line_normal(yaw) @ mid)
     return MovingBeaconFilter(observer, start, (yaw - PRIOR_YAW_DEG, yaw + PRIOR_YAW_DEG),

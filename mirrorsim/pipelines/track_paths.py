@@ -27,7 +27,7 @@ OBJECT_CLEARANCE_CM = 0.5
 
 
 def beacon_path(scene: Scene, first_obs: tuple[float, float],
-                target_obs: tuple[float, float], kind: str, steps: int, side: float,
+                target_obs: tuple[float, float], *, kind: str, steps: int, side: float,
                 step: float, heading: str = "view") -> np.ndarray:
     """The commanded positions, start first: ``steps`` moves along the path ``kind``.
 
@@ -60,7 +60,7 @@ def beacon_path(scene: Scene, first_obs: tuple[float, float],
     s0 = np.asarray(b0.believed, float)
     if kind == "fixed":
         return np.tile(s0, (steps + 1, 1))
-    yaw, mid, hit = mirror_from_beacon(o, s0, *first_obs)
+    yaw, mid, hit = mirror_from_beacon(o, s0, first_obs[0], d_total=first_obs[1])
     yaw = float(yaw)
     front = line_normal(yaw)
     front = front if front @ (s0 - mid) > 0 else -front
@@ -72,8 +72,8 @@ def beacon_path(scene: Scene, first_obs: tuple[float, float],
     for forwards in (True, False):
         for a in (side, -side):
             # path_points steps towards its ``alpha`` origin: alpha = heading + 180°
-            pts = path_points(kind, s0, h + (180.0 if forwards else 0.0), a, step,
-                              steps // 2 + 2)
+            pts = path_points(kind, s0, h + (180.0 if forwards else 0.0), a=a, b=step,
+                              n=steps // 2 + 2)
             pts = (pts - pts[0] + s0)[: steps + 1]
             allowed = (bool(np.all((pts >= 0) & (pts <= size)))
                        and float(np.min((pts - mid) @ front)) >= CLEARANCE_CM
@@ -81,7 +81,7 @@ def beacon_path(scene: Scene, first_obs: tuple[float, float],
                                >= FIXED_CLEARANCE_CM for b in scene.beacons[1:])
                        and _clear_of_objects(believed, pts))
             seen = sum(_seen_in(believed, replace(b0, position=tuple(p))) for p in pts)
-            alphas = observe(o, mid, yaw, pts, strict=False).alpha_deg
+            alphas = observe(o, mid, yaw, point=pts, strict=False).alpha_deg
             spread = float(np.mean(np.abs(wrap_bearing(alphas - target_alpha_deg))))
             score = (allowed, seen, forwards, -spread)
             if best is None or score > best[0]:
@@ -109,7 +109,7 @@ def _clear_of_objects(believed: Scene, pts: np.ndarray) -> bool:
         least = radius + PENCIL_RADIUS
         for k in range(len(pts) - 1):
             margin = OBJECT_CLEARANCE_CM if k else 0.0
-            if segment_distance(pts[k], pts[k + 1], a, b) < least + margin:
+            if segment_distance(pts[k], pts[k + 1], a, q1=b) < least + margin:
                 return False
     return True
 
@@ -120,11 +120,12 @@ def _believed_scene(scene: Scene, o: np.ndarray, yaw: float, mid: np.ndarray,
     mirror line, between the beacon's and the target's reflection points, and the
     target where that mirror puts it, on an ideal bench."""
     try:
-        centre = (hit + ray_hits_line(o, target_obs[0], mid, yaw)) / 2
+        centre = (hit + ray_hits_line(o, target_obs[0], mid, yaw_deg=yaw)) / 2
     except SolverError:  # the target's ray misses the line (parallel, or behind)
         centre = hit
     mirror = replace(scene.mirror, yaw=yaw, center=tuple(map(float, centre)))
-    target = tuple(map(float, locate(o, mid, yaw, *target_obs)))
+    target = tuple(map(float, locate(o, mid, yaw, alpha_deg=target_obs[0],
+                                      d_total=target_obs[1])))
     # the panel's facing follows the believed mirror; the pan stays the bearing the
     # camera was set to (a believed scene is never checked: it is what was measured)
     believed = with_derived(replace(scene, mirror=mirror, bench=Bench(), target=replace(

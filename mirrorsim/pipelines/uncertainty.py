@@ -129,8 +129,8 @@ def validate(model: ErrorModel, cols: dict) -> Validation:
             # as evaluate solves with this model: its bench's shared errors besides
             calibration = model_calibration(model, asked)
             sigma = model.sigmas(t_feat[i], [b_feat[j] for j in np.flatnonzero(scene_of == i)],
-                                 pan[i], fx[i] if np.isfinite(fx[i]) else None)
-            sol = solve_measurements(obs[i], beacons, [t], sigma, calibration)
+                                 pan[i], fx_px=fx[i] if np.isfinite(fx[i]) else None)
+            sol = solve_measurements(obs[i], beacons, [t], sigma=sigma, calibration=calibration)
             dist.append(sol.mahalanobis(truth[i]))
         except (SolverError, np.linalg.LinAlgError):
             failed += 1
@@ -162,9 +162,9 @@ def _within(model: ErrorModel, cols: dict, ok: np.ndarray
         x = sigma_features_of(cols, kind)
         out[kind] = {}
         for q in ("alpha", "d_rel"):
-            err = model_own_errors(cols, model, kind, q)
+            err = model_own_errors(cols, model, kind, q=q)
             m = ok & once[kind] & np.isfinite(err) & np.isfinite(x).all(axis=1)
-            z = np.abs(err[m]) / model.whole_sigma(kind, q, x[m], model.fx_px)
+            z = np.abs(err[m]) / model.whole_sigma(kind, q, x[m], fx_px=model.fx_px)
             out[kind][q] = (float(np.mean(z <= 1.0)), float(np.mean(z <= 2.0))) if z.size \
                 else (math.nan, math.nan)
     return out

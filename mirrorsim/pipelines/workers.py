@@ -144,7 +144,7 @@ class _Slot:
         self.job: tuple | None = None
 
 
-def run_local(fn: Callable, jobs: list[tuple], workers: int, is_done: Callable[[int], bool],
+def run_local(fn: Callable, jobs: list[tuple], workers: int, *, is_done: Callable[[int], bool],
               on_result: Callable[[object], None], max_rss_mb: float = 0.0,
               max_jobs: int = MAX_JOBS_PER_WORKER,
               setup: Callable[[], None] | None = None) -> None:
@@ -217,7 +217,7 @@ def _collect(s: _Slot, slots: list[_Slot], pending: deque, is_done: Callable[[in
 
 
 def run_dask(fn: Callable, jobs: Iterable[tuple], scheduler: str | None,
-             on_result: Callable[[object], None]) -> None:
+             *, on_result: Callable[[object], None]) -> None:
     """The same on a Dask cluster (a local one when no scheduler is given)."""
     from dask.distributed import Client, LocalCluster
     from dask.distributed import as_completed as dask_completed

@@ -90,7 +90,7 @@ def truth_of(scene: Scene, frame: RenderedFrame, fingerprint: str | None) -> Gro
 
 
 def write_frame(scene: Scene, frame: RenderedFrame, out: Path,
-                fingerprint: str | None = None, ids: bool = True,
+                *, fingerprint: str | None = None, ids: bool = True,
                 srgb: np.ndarray | None = None) -> FrameFiles:
     """Write the frame, its capture record, its truth and (``ids``) its id labels into
     ``out``; they appear together.  ``srgb``: the frame's 8-bit pixels, if the caller

@@ -264,7 +264,7 @@ def _tile_sensor(sensor: dict, cam: Camera, t: int) -> dict:
             "film": {**sensor["film"], "width": t, "height": t}}
 
 
-def aim_tile(params: mi.SceneParameters, cam: Camera, t: int, u0: int, v0: int) -> None:
+def aim_tile(params: mi.SceneParameters, cam: Camera, t: int, *, u0: int, v0: int) -> None:
     """Aim a tile sensor (its ``mi.traverse`` parameters) at the full film's window with
     top-left pixel (u0, v0): the full film's optical axis, at (W/2, H/2), falls at
     (W/2 − u0, H/2 − v0) of the tile, so that tile pixel (i, j) is film pixel

@@ -236,7 +236,7 @@ def _render_regions(mi_scene, cam: Camera, whole_spp: int,
         params = mi.traverse(sensor)
         corners = [(u, v) for v in range(v0, v1, t) for u in range(u0, u1, t)]
         for k, (u, v) in enumerate(corners):
-            aim_tile(params, cam, t, u, v)
+            aim_tile(params, cam, t, u0=u, v0=v)
             img = _accumulate(mi_scene, sensor, n, (seed, stream, k),
                               lambda m, px=t * t: step(m * px / 1e6), _tile_pass(n, t))
             # the tile's part inside the region (a tile may reach past it, or the film)

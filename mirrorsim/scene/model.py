@@ -181,7 +181,7 @@ def camera_axes(camera: Camera, pitch: float = 0.0, roll: float = 0.0
     return forward, right, down
 
 
-def project(camera: Camera, points3: ArrayLike, pitch: float = 0.0, roll: float = 0.0
+def project(camera: Camera, points3: ArrayLike, pitch: float = 0.0, *, roll: float = 0.0
             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Pinhole projection of 3-D points (OpenCV pixel convention: centres at integers),
     by the level camera or one pitched and rolled (:func:`camera_axes`).

@@ -41,8 +41,8 @@ def with_derived(scene: Scene) -> Scene:
     cam, mirror, target = scene.camera, scene.mirror, scene.target
     target = replace(target, facing_deg=optics.target_facing(cam.position, mirror,
                                                              target.position))
-    pan_deg = optics.resolve_pan(cam.position, cam.pan, mirror, target.position,
-                                 scene.beacons[0].position)
+    pan_deg = optics.resolve_pan(cam.position, cam.pan, mirror, target_position=target.position,
+                                 beacon_position=scene.beacons[0].position)
     return replace(scene, target=target, camera=replace(cam, pan_deg=pan_deg))
 
 
@@ -77,22 +77,23 @@ def compose_scene(scene: Scene, *, beacon_key: Callable[[int], str] | None = Non
         return SceneError(scene.source, key, message)
 
     cam, mirror, target, beacons = scene.camera, scene.mirror, scene.target, scene.beacons
-    hint = unit_hints(scene.board, mirror, cam.hfov, [
+    hint = unit_hints(scene.board, mirror, cam.hfov, positions=[
         ("camera.position", cam.position), ("mirror.center", mirror.center),
         ("target.position", target.position),
         *((f"{bkey(i)}.position", b.position) for i, b in enumerate(beacons))])
     on_board = board_check(fail, scene.board)
-    check_all_on_board(f, on_board, cam.position, mirror, target.position, beacons, bkey,
-                       scene.occluders)
+    check_all_on_board(f, on_board, cam.position, mirror=mirror, target_position=target.position,
+                       beacons=beacons, bkey=bkey,
+                       occluders=scene.occluders)
     f.raise_any(hint)
-    f.attempt(check_mirror_faces, f, fail, cam.position, mirror, target.position, beacons,
-              bkey)
+    f.attempt(check_mirror_faces, f, fail, cam.position, mirror=mirror,
+              target_position=target.position, beacons=beacons, bkey=bkey)
     f.raise_any(hint)
     scene = with_derived(scene)
     for end in scene.target.ends():
         f.attempt(on_board, end, "target.position", f"the target panel's edge {fmt(end)}")
     f.raise_any(hint)
-    check_overlaps(f, scene, fail, bkey)
-    warnings = check_sight(f, scene, fail, bkey)
+    check_overlaps(f, scene, fail, bkey=bkey)
+    warnings = check_sight(f, scene, fail, bkey=bkey)
     f.raise_any(hint)
     return replace(scene, warnings=warnings)

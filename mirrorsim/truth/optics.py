@@ -35,7 +35,7 @@ from solver.sltr import Observation, observe
 def mirror_image(observer: Point2, mirror: Mirror, point: ArrayLike) -> Observation:
     """Virtual image, α, d_total, d1, d2 and reflection point of a board point seen from
     ``observer`` (the camera's position): the solver's forward model, as plain floats."""
-    obs = observe(observer, mirror.center, mirror.yaw, point, strict=False)
+    obs = observe(observer, mirror.center, mirror.yaw, point=point, strict=False)
     return Observation(alpha_deg=float(obs.alpha_deg), d_total=float(obs.d_total),
                        d1=float(obs.d1), d2=float(obs.d2),
                        virtual=np.asarray(obs.virtual, float),
@@ -56,7 +56,7 @@ def target_facing(observer: Point2, mirror: Mirror, target_position: Point2) -> 
     return math.degrees(math.atan2(rp[1] - target_position[1], rp[0] - target_position[0]))
 
 
-def resolve_pan(observer: Point2, pan: float | str, mirror: Mirror, target_position: Point2,
+def resolve_pan(observer: Point2, pan: float | str, mirror: Mirror, *, target_position: Point2,
                 beacon_position: Point2) -> float:
     """The optical axis's bearing for a pan as written: degrees, or the bearing of the
     mirror's centre, or of the target's or the first beacon's virtual image."""
@@ -105,10 +105,11 @@ def mirror_box(scene: Scene, margin_px: int = 8) -> tuple[int, int, int, int] | 
     lean = unit(m.yaw + 90.0) * top * math.sin(math.radians(abs(bench.tilt)))
     pts = np.array([[*(c + s * d + e * lean), z] for s in (-1, 1) for z in (0.0, top)
                     for e in (-1, 1)])
-    return film_box(cam, *project(cam, pts, bench.pitch, bench.roll), margin_px)
+    u, v, depth = project(cam, pts, bench.pitch, roll=bench.roll)
+    return film_box(cam, u, v, depth=depth, margin_px=margin_px)
 
 
-def film_box(cam: Camera, u: np.ndarray, v: np.ndarray, depth: np.ndarray, margin_px: int
+def film_box(cam: Camera, u: np.ndarray, v: np.ndarray, *, depth: np.ndarray, margin_px: int
               ) -> tuple[int, int, int, int] | None:
     """The film region (end-exclusive) around projected points, ``margin_px`` wider and
     clipped to the film; None if a point lies behind the camera or none on the film."""
@@ -121,7 +122,7 @@ def film_box(cam: Camera, u: np.ndarray, v: np.ndarray, depth: np.ndarray, margi
     return (u0, v0, u1, v1) if u1 > u0 and v1 > v0 else None
 
 
-def front_face(scene: Scene, obj: Target | Beacon, height: float, kind: str
+def front_face(scene: Scene, obj: Target | Beacon, height: float, *, kind: str
                ) -> tuple[np.ndarray, np.ndarray]:
     """Columns and rows (u, v) of the foot and the top (in that order) of ``obj``'s
     front face in its mirror image: the virtual image's axis moved towards the camera by
@@ -145,12 +146,13 @@ def beacon_boxes(scene: Scene, margin_px: int = 16) -> list[tuple[int, int, int,
         v = mirror_image(cam.position, scene.mirror, b.position).virtual
         pts = np.array([[v[0] + dx, v[1] + dy, z] for dx in (-PENCIL_RADIUS, PENCIL_RADIUS)
                         for dy in (-PENCIL_RADIUS, PENCIL_RADIUS) for z in (0.0, b.height)])
-        out.append(film_box(cam, *project(cam, pts, bench.pitch, bench.roll), margin_px))
+        u, w, depth = project(cam, pts, bench.pitch, roll=bench.roll)
+        out.append(film_box(cam, u, w, depth=depth, margin_px=margin_px))
     return out
 
 
 
-def upright_box(cam: Camera, point: ArrayLike, half_width: float, height: float,
+def upright_box(cam: Camera, point: ArrayLike, half_width: float, *, height: float,
                 margin_px: float = 0.0) -> tuple[float, float, float, float] | None:
     """The film box (u0, v0, u1, v1) of an upright object ``half_width`` cm either side of
     its axis at board ``point`` (2-D), ``height`` cm tall, square-on to the camera, as the

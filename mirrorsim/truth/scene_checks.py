@@ -23,7 +23,7 @@ Fail = Callable[[str, str], SceneError]  # (key path, message) → the error nam
 EDGE_ON_LIMIT_DEG = 5.0  # a mirror seen at a more grazing angle than this is edge-on
 
 
-def unit_hints(board: Board, mirror: Mirror, hfov: float, positions: Iterable[ArrayLike]) -> str:
+def unit_hints(board: Board, mirror: Mirror, hfov: float, *, positions: Iterable[ArrayLike]) -> str:
     """Why a geometric check may have failed: a length given in mm, an angle in radians.
     Only said once a check has failed, since each such value is also a valid one."""
     W, H = board.size
@@ -45,7 +45,7 @@ def unit_hints(board: Board, mirror: Mirror, hfov: float, positions: Iterable[Ar
 
 
 def check_all_on_board(f: Failures, on_board: Callable[[Any, str, str], bool], position: ArrayLike,
-                       mirror: Mirror, target_position: ArrayLike, beacons: Sequence[Beacon],
+                       *, mirror: Mirror, target_position: ArrayLike, beacons: Sequence[Beacon],
                        bkey: Callable[[int], str], occluders: Sequence[Occluder]) -> None:
     """Every object stands on the board (the mirror's ends, believed positions too)."""
     f.attempt(on_board, position, "camera.position", "the camera")
@@ -79,7 +79,7 @@ def board_check(fail: Fail, board: Board) -> Callable[[Any, str, str], bool]:
     return on_board
 
 
-def check_mirror_faces(f: Failures, fail: Fail, camera_position: ArrayLike, mirror: Mirror,
+def check_mirror_faces(f: Failures, fail: Fail, camera_position: ArrayLike, *, mirror: Mirror,
                        target_position: ArrayLike, beacons: Sequence[Beacon],
                        bkey: Callable[[int], str]) -> None:
     """The camera must see the mirror's face, and the objects stand in front of it."""
@@ -104,7 +104,7 @@ def check_mirror_faces(f: Failures, fail: Fail, camera_position: ArrayLike, mirr
         f.attempt(in_front, b.position, f"{bkey(i)}.position", "beacon")
 
 
-def check_sight(f: Failures, scene: Scene, fail: Fail, bkey: Callable[[int], str]
+def check_sight(f: Failures, scene: Scene, fail: Fail, *, bkey: Callable[[int], str]
                 ) -> tuple[str, ...]:
     """Refuse images that do not reach the camera; warn of clipped or direct views."""
     sighted = [("target.position", scene.target, "target")] + [
@@ -147,8 +147,9 @@ def crossing_images(scene: Scene, bkey: Callable[[int], str]) -> list[str]:
         if visibility.direct_view_fraction(scene, b) == 0.0:
             continue
         virtual = optics.mirror_image(cam.position, scene.mirror, b.position).virtual
-        reflected = optics.upright_box(cam, virtual, PENCIL_RADIUS, b.height, IMAGE_GAP_PX)
-        direct = optics.upright_box(cam, b.position, PENCIL_RADIUS, b.height)
+        reflected = optics.upright_box(cam, virtual, PENCIL_RADIUS, height=b.height,
+                                       margin_px=IMAGE_GAP_PX)
+        direct = optics.upright_box(cam, b.position, PENCIL_RADIUS, height=b.height)
         if optics.boxes_overlap(direct, reflected):
             out.append(f"{bkey(i)}.position: the pencil stands in front of its own image in "
                        f"the mirror (within {IMAGE_GAP_PX:g} px in the frame): the detector "
@@ -156,21 +157,21 @@ def crossing_images(scene: Scene, bkey: Callable[[int], str]) -> list[str]:
     return out
 
 
-def check_overlaps(f: Failures, scene: Scene, fail: Fail, bkey: Callable[[int], str]) -> None:
+def check_overlaps(f: Failures, scene: Scene, fail: Fail, *, bkey: Callable[[int], str]) -> None:
     """Record footprints that intersect, and a camera standing inside one."""
     fps = footprints(scene, bkey)
     for j in range(len(fps)):
         for i in range(j):
             ki, a0, a1, ra = fps[i]
             kj, b0, b1, rb = fps[j]
-            gap = segment_distance(a0, a1, b0, b1) - ra - rb
+            gap = segment_distance(a0, a1, b0, q1=b1) - ra - rb
             if gap < 0.0:
                 what_i = ki.split(".")[0]
                 f.found.append(fail(kj, f"overlaps {what_i} (footprints intersect by "
                                           f"{-gap:.2f} cm)"))
     cam = np.asarray(scene.camera.position, float)
     for k, a0, a1, ra in fps:
-        if segment_distance(cam, cam, a0, a1) < ra:
+        if segment_distance(cam, cam, a0, q1=a1) < ra:
             f.found.append(fail("camera.position",
                                   f"{fmt(cam)}: the camera stands inside {k}"))
 

@@ -64,7 +64,7 @@ def _box_sides(name: str, start, end, thickness: float, height: float):
 def _blocked(walls, a3: np.ndarray, b3: np.ndarray) -> str:
     """Name of the first wall that the 3-D segment a3→b3 passes through, or ''."""
     for name, w0, w1, h in walls:
-        u = segment_crossing(a3[:2], b3[:2], w0, w1)
+        u = segment_crossing(a3[:2], b3[:2], w0, q1=w1)
         if u is not None and a3[2] + u * (b3[2] - a3[2]) < h:
             return name
     return ""
@@ -214,7 +214,7 @@ def _column_failures(scene: Scene, walls, point, heights: np.ndarray) -> list[st
         a, b, apparent = glass_hits(scene, pts)
         offset, up_glass = sign * a, b + mir.size[1] / 2
     lip = _frame_lip(scene, frame, a, b, pts)
-    u, v, depth = project(cam, apparent, scene.bench.pitch, scene.bench.roll)
+    u, v, depth = project(cam, apparent, scene.bench.pitch, roll=scene.bench.roll)
     outside = (depth <= 0) | (u < -0.5) | (u > cam.width - 0.5) | (v < -0.5) | (
         v > cam.height_px - 0.5)
     blocker = _first_blockers(walls, cam, np.asarray(img.reflection_point, float),
@@ -233,7 +233,7 @@ def _first_blockers(walls, cam: Camera, r2: np.ndarray, point: np.ndarray, zc: n
     for a2, b2, za, zb in ((np.asarray(cam.position, float), r2, np.full(n, cam.height), zc),
                            (r2, point, zc, heights)):
         for name, w0, w1, h in walls:
-            cross = segment_crossing(a2, b2, w0, w1)
+            cross = segment_crossing(a2, b2, w0, q1=w1)
             if cross is not None:
                 hit = (za + cross * (zb - za) < h) & (blocker == "")
                 blocker[hit] = name
