@@ -102,7 +102,7 @@ def draw_scene(rng: np.random.Generator, name: str, bench: bool, beacons: int = 
 
 def _bench(rng: np.random.Generator, doc: dict) -> None:
     """Every imperfection drawn from the shipped bench model's declared population."""
-    from mirrorsim.formats.error_model import default_error_model
+    from mirrorsim.formats.error_model_file import default_error_model
 
     u = rng.uniform
     model = default_error_model("bench")

@@ -39,7 +39,7 @@ from clone import ROOT  # noqa: E402  (the clone first on sys.path)
 
 from mirrorsim.detection.detector import detect_frame, read_stored_frame  # noqa: E402
 from mirrorsim.errors import DetectionError, SceneError  # noqa: E402
-from mirrorsim.formats.error_model import default_error_model  # noqa: E402
+from mirrorsim.formats.error_model_file import default_error_model
 from mirrorsim.pipelines.calibrate import calibrate  # noqa: E402
 from mirrorsim.pipelines.frame import (
     render_and_measure,  # noqa: E402

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 from clone import ROOT  # noqa: E402  (the clone first on sys.path)
 
-from mirrorsim.formats.error_model import default_error_model  # noqa: E402
+from mirrorsim.formats.error_model_file import default_error_model
 from mirrorsim.formats.measurements import load_measurements  # noqa: E402
 from mirrorsim.pipelines.budget import run_budget  # noqa: E402
 from mirrorsim.pipelines.evaluate import evaluate_scene  # noqa: E402

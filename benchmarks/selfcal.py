@@ -45,15 +45,16 @@ from clone import ROOT  # noqa: E402  (the clone first on sys.path)
 from stamp import stamp  # noqa: E402
 
 from mirrorsim.errors import DetectionError, SceneError  # noqa: E402
-from mirrorsim.formats.error_model import default_error_model, load_error_model  # noqa: E402
+from mirrorsim.formats.error_model_file import default_error_model, load_error_model
 from mirrorsim.pipelines.calibrate import D_REF  # noqa: E402
 from mirrorsim.pipelines.evaluate import evaluate_scene  # noqa: E402
 from mirrorsim.pipelines.planning import plan_scene  # noqa: E402
 from mirrorsim.pipelines.random_scenes import load_spec, sample_scene  # noqa: E402
 from mirrorsim.scene.model import Beacon  # noqa: E402
 from solver.errors import SolverError  # noqa: E402
+from solver.fit_model import power_terms
 from solver.geometry import line_normal  # noqa: E402
-from solver.lsq import power_terms, solve_measurements  # noqa: E402
+from solver.lsq import solve_measurements
 from solver.measurements import BeaconMeasurement  # noqa: E402
 from solver.selfcal import (  # noqa: E402
     PLAIN,

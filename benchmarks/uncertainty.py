@@ -29,7 +29,7 @@ import numpy as np
 from clone import ROOT  # noqa: E402  (the clone first on sys.path)
 from stamp import stamp  # noqa: E402
 
-from mirrorsim.formats.error_model import default_error_model  # noqa: E402
+from mirrorsim.formats.error_model_file import default_error_model
 from mirrorsim.pipelines.random_scenes import load_spec, sample_scene  # noqa: E402
 from solver.errors import SolverError  # noqa: E402
 from solver.geometry import line_normal, yaw_difference  # noqa: E402

@@ -58,7 +58,7 @@ _API = {
     "generate_dataset": ("mirrorsim.pipelines.dataset", "run_dataset"),
     "load_dataset": ("mirrorsim.formats.dataset_folder", "load_dataset"),
     "fit_error_model": ("mirrorsim.pipelines.errormodel", "fit_dataset"),
-    "load_error_model": ("mirrorsim.formats.error_model", "load_error_model_or_default"),
+    "load_error_model": ("mirrorsim.formats.error_model_file", "load_error_model_or_default"),
     "model_for": ("mirrorsim.pipelines.evaluate", "model_for"),
 }
 __all__ = ["__version__", *_API]

@@ -19,8 +19,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from solver.errors import SolverError
+from solver.fit_model import nuisance_columns, power_terms, predict
 from solver.geometry import point_segment_distance
-from solver.lsq import nuisance_columns, power_terms, predict
 from solver.measurements import ObjectSigmas, Sigma, as_object_sigmas
 from solver.placement import implied_target, seen_in_mirror
 from solver.selfcal import PLAIN, SelfCalibration

@@ -10,7 +10,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from solver.errors import SolverError
-from solver.geometry import line_normal, unit, wrap_bearing
+from solver.fit_model import FitProblem, forward, predict
+from solver.geometry import line_normal, wrap_bearing
 from solver.measurements import (
     BeaconMeasurement,
     ObjectSigmas,
@@ -24,38 +25,6 @@ from solver.sltr import MirrorLine, Solution, observe, ray_hits_line, solve_sing
 ArrayLike = np.typing.ArrayLike
 # residuals beyond this many σ's weigh less (a Huber loss): a gross error in one image
 HUBER_K = 3.0
-
-
-def predict(params: np.ndarray, observer: np.ndarray, points: np.ndarray
-            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """α, d of ``points`` (k, 2) seen in the mirror (θ, ρ) = params[:2], with derivatives.
-
-    Returns
-    -------
-    alpha_deg, d : (k,)
-    dalpha, dd : (k, 4)
-        Derivatives with respect to (θ [deg], ρ, x, y) of the point.
-    """
-    theta, rho = params[0], params[1]
-    th = np.radians(theta)
-    n = np.array([-np.sin(th), np.cos(th)])
-    dn = np.array([-np.cos(th), -np.sin(th)])  # dn/dθ (per radian)
-    s = points @ n - rho
-    # the reflection written out in (θ, ρ): its derivatives below need s, n and dn
-    v = points - 2.0 * s[:, None] * n
-    rel = v - observer
-    d = np.hypot(rel[:, 0], rel[:, 1])
-    alpha = np.degrees(np.arctan2(rel[:, 1], rel[:, 0]))
-    # dv/dθ = −2 (dn·p) n − 2 s dn ; dv/dρ = 2 n ; dv/dp = I − 2 n nᵀ
-    dv_dth = (-2.0 * (points @ dn)[:, None] * n - 2.0 * s[:, None] * dn) * np.pi / 180.0
-    dv_drho = np.broadcast_to(2.0 * n, v.shape)
-    R = np.eye(2) - 2.0 * np.outer(n, n)
-    # dα/dv = (−rel_y, rel_x)/d² (radians) ; dd/dv = rel/d
-    ga = np.stack([-rel[:, 1], rel[:, 0]], axis=1) / d[:, None] ** 2 * (180.0 / np.pi)
-    gd = rel / d[:, None]
-    dalpha = np.column_stack([np.sum(ga * dv_dth, 1), np.sum(ga * dv_drho, 1), ga @ R])
-    dd = np.column_stack([np.sum(gd * dv_dth, 1), np.sum(gd * dv_drho, 1), gd @ R])
-    return alpha, d, dalpha, dd
 
 
 def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
@@ -109,23 +78,51 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
     init = initial or solve_single(o, bpos[0], beacons[0].alpha_deg,
                                    beacon_d_total=beacons[0].d_total,
                                    target_alpha_deg=targets[0][0], target_d_total=targets[0][1])
-    p = _Problem.of(o, bpos, len(targets), sig, calibration, meas_d)
-    unknown, free, known, nb, nt = p.unknown, p.free, p.known, len(beacons), len(targets)
+    p = FitProblem.of(o, bpos, len(targets), sig, calibration, meas_d)
     x0 = np.concatenate([[init.mirror.yaw_deg, init.mirror.rho, *init.target], p.neutral[4:]])
-    implicit = unknown != nuisances
+    fit = _robust_fit(p, x0, o, bpos, meas_a=meas_a, meas_d=meas_d)
+    if np.linalg.cond(fit.jtj) > 1e14:
+        raise SolverError(_undetermined(nuisances))
+    implicit = p.unknown != nuisances
+    cov = np.linalg.inv(fit.jtj) if sigma is not None else None
+    if cov is not None and implicit:  # the shared α's own unknown: marginalized out
+        keep = [i for i in range(len(x0)) if i != 4 + len(nuisances)]
+        cov = cov[np.ix_(keep, keep)]
+    sol = _solution(o, fit.x[:4], bpos, targets, cov)
+    return replace(sol, downweighted=_downweighted(p, fit, len(beacons), priors),
+                   priors=dict(priors),
+                   nuisances={NUISANCES[n][0]: float(v)
+                              for n, v in zip(nuisances, fit.x[4:4 + len(nuisances)],
+                                              strict=True)},
+                   method=sol.method + _method_notes(calibration, shared, implicit=implicit))
+
+
+@dataclass(frozen=True)
+class _Fit:
+    """A robust fit's end: the parameters, the weighted residuals, each residual's Huber
+    weight (1 inside HUBER_K σ's) and the weighted information JᵀWJ."""
+
+    x: np.ndarray
+    r: np.ndarray
+    w: np.ndarray
+    jtj: np.ndarray
+
+
+def _robust_fit(p: FitProblem, x0: np.ndarray, o: np.ndarray, bpos: np.ndarray, *,
+                meas_a: np.ndarray, meas_d: np.ndarray) -> _Fit:
+    """The least-squares fit of ``p`` from ``x0``: with more measurements than unknowns a
+    Huber loss, so that one bad image (a residual beyond HUBER_K σ's) does not drag the
+    estimate; it is named in the solution."""
+    from scipy.optimize import least_squares  # scipy is slow to import: only when used
 
     def fun(x):
-        a, d, _, _ = _forward(x, o, bpos, nt, unknown, free)
+        a, d, _, _ = forward(x, o, bpos, p.nt, p.unknown, p.free)
         return np.concatenate([p.w_a * wrap_bearing(a - meas_a), p.w_d * (d - meas_d),
                                p.prior @ (x - p.neutral)])
 
     def jac(x):
         return p.jacobian(x, o, bpos)
 
-    from scipy.optimize import least_squares  # scipy is slow to import: only when used
-
-    # more measurements than unknowns: a Huber loss, so that one bad image (a residual
-    # beyond HUBER_K σ's) does not drag the estimate; it is named in the solution
     robust = len(meas_a) * 2 + len(p.prior) > len(x0)
     res = least_squares(fun, x0, jac=jac, method="trf" if robust else "lm",
                         loss="huber" if robust else "linear", f_scale=HUBER_K,
@@ -133,178 +130,26 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
     r = fun(res.x)
     w = np.where(np.abs(r) > HUBER_K, HUBER_K / np.maximum(np.abs(r), 1e-300), 1.0)
     J = jac(res.x)
-    jtj = J.T @ (w[:, None] * J)
-    if np.linalg.cond(jtj) > 1e14:
-        raise SolverError(_undetermined(nuisances))
-    cov = np.linalg.inv(jtj) if sigma is not None else None
-    if cov is not None and implicit:  # the shared α's own unknown: marginalized out
-        keep = [i for i in range(len(x0)) if i != 4 + len(nuisances)]
-        cov = cov[np.ix_(keep, keep)]
-    names = (_residual_names(nb, nt)
+    return _Fit(res.x, r, w, J.T @ (w[:, None] * J))
+
+
+def _downweighted(p: FitProblem, fit: _Fit, nb: int, priors: dict[str, float]
+                  ) -> tuple[str, ...]:
+    """The residuals the Huber loss weighed down, each named with how many σ's off."""
+    names = (_residual_names(nb, p.nt)
              + [f"the {n} prior" if n in priors else "the shared α offset's prior"
-                for n in unknown if n in known]
+                for n in p.unknown if n in p.known]
              + [f"beacon {i} believed {c}" for i in range(nb) for c in "xy"])
-    down = tuple(f"{names[i]} ({abs(r[i]):.1f} σ off)" for i in np.flatnonzero(w < 1.0))
-    sol = _solution(o, res.x[:4], bpos, targets, cov)
-    return replace(sol, downweighted=down, priors=dict(priors),
-                   nuisances={NUISANCES[n][0]: float(v)
-                              for n, v in zip(nuisances, res.x[4:4 + len(nuisances)],
-                                              strict=True)},
-                   method=sol.method + (f", self-calibrated ({', '.join(nuisances)})"
-                                        if nuisances else "")
-                   + (f", with priors ({calibration.describe_priors()})"
-                      if priors else "")
-                   + (f", a shared α offset of prior σ {shared:.3g}° estimated" if implicit
-                      else ""))
+    return tuple(f"{names[i]} ({abs(fit.r[i]):.1f} σ off)" for i in np.flatnonzero(fit.w < 1.0))
 
 
-@dataclass(frozen=True)
-class _Problem:
-    """What a weighted fit of the mirror and the target weighs, declared once for the
-    solve and for its Cramér–Rao bound: the unknowns (the mirror, the target, the
-    nuisances, each beacon's offset where positions are uncertain), the measurements'
-    weights and each prior's row (x − neutral)/σ."""
-
-    unknown: tuple[str, ...]  # the nuisances estimated, "pan" added for a shared α offset
-    free: bool  # each beacon's offset from its believed position estimated
-    known: dict[str, float]  # each nuisance's prior σ, the shared α offset's included
-    nt: int
-    w_a: np.ndarray  # 1/σ of each α (beacons, then targets)
-    w_d: np.ndarray  # 1/σ (cm) of each d_total
-    prior: np.ndarray  # the prior rows
-    neutral: np.ndarray  # every unknown's neutral value (mirror and target: 0)
-
-    @classmethod
-    def of(cls, o: np.ndarray, bpos: np.ndarray, nt: int, sig: ObjectSigmas,
-           calibration: SelfCalibration, d_cm: np.ndarray) -> _Problem:
-        """The problem of ``bpos`` beacons and ``nt`` target observations with σ's
-        ``sig`` (a relative σ_d taken of ``d_cm``: the measured d_totals for a solve, the
-        true ones for a bound)."""
-        del o  # the weights do not depend on the camera: kept for symmetry of callers
-        nuisances, position_sigma = calibration.nuisances, calibration.position_sigma
-        sa, sd = sig.arrays(len(bpos), nt)
-        shared = sig.shared_alpha_deg
-        free = position_sigma > 0
-        # a shared α offset (a bench's pan reading) is an unknown δ on every α with the
-        # prior N(0, shared²): for Gaussian errors the same estimate and covariance as
-        # correlated α's, while each image keeps its own residual row for the Huber loss
-        # to weigh and name (whitened rows would mix a bad image into every later one)
-        implicit = bool(shared) and "pan" not in nuisances
-        unknown = nuisances + (("pan",) if implicit else ())
-        k, nb = len(unknown), len(bpos)
-        n_x = 4 + k + (2 * nb if free else 0)
-        eye = np.eye(n_x)
-        # a pan prior and the σ's shared α offset are independent errors of one reading
-        # (the bench's tolerance, the mount's scatter): their variances add
-        known = {"pan": shared} if shared else {}
-        known |= {n: float(np.hypot(v, known.get(n, 0.0)))
-                  for n, v in calibration.priors.items()}
-        prior = np.vstack([*(eye[[4 + unknown.index(n)]] / known[n] for n in unknown
-                             if n in known),
-                           eye[4 + k:] / position_sigma if free else eye[:0]])
-        neutral = np.concatenate([np.zeros(4), [NUISANCES[n][1] for n in unknown],
-                                  np.zeros(n_x - 4 - k)])
-        return cls(unknown, free, known, nt, 1.0 / sa, 1.0 / (sd * np.asarray(d_cm, float)),
-                   prior, neutral)
-
-    def jacobian(self, x: np.ndarray, o: np.ndarray, bpos: np.ndarray) -> np.ndarray:
-        """The weighted residuals' Jacobian at ``x``: the measurements', then the priors'."""
-        _, _, da, dd = _forward(x, o, bpos, self.nt, self.unknown, self.free)
-        return np.vstack([self.w_a[:, None] * da, self.w_d[:, None] * dd, self.prior])
-
-
-def _forward(x: np.ndarray, o: np.ndarray, bpos: np.ndarray, nt: int,
-             nuisances: tuple[str, ...], free: bool = False) -> tuple[np.ndarray, ...]:
-    """α and d_total of every observation (beacons, then nt of the target) for the
-    parameters x = (θ, ρ, x_t, y_t, *nuisances[, each beacon's offset from its believed
-    position, with ``free``]), and their derivatives (k, len(x))."""
-    nb, k = len(bpos), len(nuisances)
-    offsets = x[4 + k:].reshape(nb, 2) if free else np.zeros((nb, 2))
-    pts = np.vstack([bpos + offsets, np.broadcast_to(x[2:4], (nt, 2))])
-    a, d, da, dd = predict(x[:4], o, pts)
-    oa, od = np.zeros((len(a), 2 * nb if free else 0)), np.zeros((len(a), 2 * nb if free else 0))
-    if free:  # a beacon's image moves with its own position
-        for i in range(nb):
-            oa[i, 2 * i:2 * i + 2], od[i, 2 * i:2 * i + 2] = da[i, 2:], dd[i, 2:]
-    da[:nb, 2:] = 0.0  # a beacon's image does not move with the target
-    dd[:nb, 2:] = 0.0
-    where = {name: 4 + j for j, name in enumerate(nuisances)}
-    power = None
-    if "power" in where:  # the mirror's curvature first: the pan and the scale act after it
-        # the vertex: the middle of the images' reflection points (the target's once)
-        seen = observe(o, x[1] * line_normal(x[0]), x[0], point=pts, strict=False)
-        power = _power_of(seen, x[0], x[1], o, pts,
-                          vertex=seen.reflection_point[:nb + 1].mean(axis=0))
-        a, d = a + x[where["power"]] * power[0], d + x[where["power"]] * power[1]
-    ea, ed = nuisance_columns(nuisances, d, power)
-    if "pan" in where:
-        a = a + x[where["pan"]]
-    if "scale" in where:  # every d_total, and its derivatives, times s
-        j, v = where["scale"], x[where["scale"]]
-        dd, od, ed = dd * v, od * v, ed * v
-        ed[:, j - 4] = d
-        d = d * v
-    return a, d, np.hstack([da, ea, oa]), np.hstack([dd, ed, od])
-
-
-def nuisance_columns(nuisances: tuple[str, ...], d: np.ndarray,
-                     power: tuple[np.ndarray, np.ndarray] | None = None
-                     ) -> tuple[np.ndarray, np.ndarray]:
-    """How each observation's α and d_total move per unit of each nuisance (at s = 1):
-    the pan moves every α by 1, the scale every d_total by itself, the power each image
-    by :func:`power_terms`' (A, D), given as ``power`` (derivatives with respect to the
-    mirror and the target that the power's terms carry are second order, left out)."""
-    ea, ed = np.zeros((len(d), len(nuisances))), np.zeros((len(d), len(nuisances)))
-    for j, name in enumerate(nuisances):
-        if name == "pan":
-            ea[:, j] = 1.0
-        elif name == "scale":
-            ed[:, j] = d
-        else:
-            ea[:, j], ed[:, j] = power
-    return ea, ed
-
-
-def power_terms(mirror: tuple[float, float], observer: np.ndarray, points: np.ndarray,
-                *, vertex: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """First-order change of each point's image per unit of the mirror's power c = 1/R
-    (1/cm, > 0 concave), the mirror (θ, ρ) curved about ``vertex`` (a point on its
-    line).
-
-    At a reflection point u cm along the line from the vertex the glass is turned by
-    c·u and stands c·u²/2 nearer the camera, which moves the virtual image by
-    c·(2u·((q·a)·n + (q·n)·a) + u²·n) (q: the point from the reflection point, a along
-    the line, n its normal toward the camera): across the line of sight that is its
-    α's change, along it a shorter path (c·u²·cos i).  The image is also magnified by
-    the mirror's sagittal power 2·c·cos i, which size constancy reads as nearer
-    (−2·c·cos i·d1·d2, the mirror equation).  To first order a vertex elsewhere on the
-    line is a turn and a shift of the line: it changes (θ, ρ), not the target.
-
-    Returns
-    -------
-    dalpha_deg, dd : (k,)
-        α's change (deg) and d_total's change (cm) per unit c.
-    """
-    theta, rho = mirror
-    obs = observe(observer, rho * line_normal(theta), theta, point=points, strict=False)
-    return _power_of(obs, theta, rho, observer, points, vertex)
-
-
-def _power_of(obs, theta: float, rho: float, observer: np.ndarray, points: np.ndarray,
-              vertex: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`power_terms` from the points' images in the flat mirror, already
-    observed (the solver's forward model has them)."""
-    a, n = unit(theta), line_normal(theta)
-    P = obs.reflection_point
-    rel = obs.virtual - observer  # the line of sight to each image
-    dist = np.asarray(obs.d_total)
-    nc = n if observer @ n > rho else -n  # the normal on the camera's side
-    q = points - P
-    u = ((P - vertex) @ a)[:, None]
-    dv = 2.0 * u * ((q @ a)[:, None] * nc + (q @ nc)[:, None] * a) + u**2 * nc
-    dalpha = np.degrees((rel[:, 0] * dv[:, 1] - rel[:, 1] * dv[:, 0]) / dist**2)
-    cos_i = np.abs(rel @ n) / dist
-    return dalpha, np.sum(rel * dv, axis=1) / dist - 2.0 * cos_i * obs.d1 * obs.d2
+def _method_notes(calibration: SelfCalibration, shared: float, *, implicit: bool) -> str:
+    """What the solution's method adds to the plain fit's: the nuisances, their priors,
+    a shared α offset estimated."""
+    nuisances, priors = calibration.nuisances, calibration.priors
+    return ((f", self-calibrated ({', '.join(nuisances)})" if nuisances else "")
+            + (f", with priors ({calibration.describe_priors()})" if priors else "")
+            + (f", a shared α offset of prior σ {shared:.3g}° estimated" if implicit else ""))
 
 
 def _undetermined(nuisances: tuple[str, ...]) -> str:
@@ -380,7 +225,7 @@ def crlb(observer: ArrayLike, beacons: ArrayLike, mirror_yaw_deg: float, *, mirr
     t = np.asarray(target, float)
     x4 = np.array([mirror_yaw_deg, mirror_rho, *t])
     _, d, _, _ = predict(x4, o, np.vstack([B, np.broadcast_to(t, (n_targets, 2))]))
-    p = _Problem.of(o, B, n_targets, sig, calibration, d)
+    p = FitProblem.of(o, B, n_targets, sig, calibration, d)
     x = np.concatenate([x4, p.neutral[4:]])
     J = p.jacobian(x, o, B)
     info = J.T @ J

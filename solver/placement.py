@@ -12,8 +12,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.optimize import least_squares
 
+from solver.fit_model import predict
 from solver.geometry import line_normal, point_segment_distance, reflect, unit, wrap_bearing
-from solver.lsq import predict
 from solver.measurements import ObjectSigmas, Sigma, as_object_sigmas
 from solver.sltr import SolverError, observe
 

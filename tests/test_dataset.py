@@ -570,7 +570,7 @@ def three_beacons(tmp_path_factory):
 
 def test_a_dataset_of_several_beacons_self_calibrated(three_beacons):
     from mirrorsim.formats.dataset_folder import read_table
-    from mirrorsim.formats.error_model import default_error_model
+    from mirrorsim.formats.error_model_file import default_error_model
     from mirrorsim.pipelines.uncertainty import validate
 
     out, res = three_beacons

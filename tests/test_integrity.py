@@ -691,12 +691,8 @@ def test_an_error_model_is_used_only_while_its_checksum_holds(tmp_path):
     """A model mirrorsim wrote carries its checksum: a σ's digit changed within every
     range (which passes each other check) is refused, naming the key; a model written by
     hand (no checksum) is read as before; the shipped model is sealed."""
-    from mirrorsim.formats.error_model import (
-        ErrorModelError,
-        default_error_model,
-        default_model_path,
-        load_error_model,
-    )
+    from mirrorsim.formats.error_model import ErrorModelError, default_model_path
+    from mirrorsim.formats.error_model_file import default_error_model, load_error_model
     from mirrorsim.pipelines.errormodel import write_model
 
     assert "sha256" in json.loads(default_model_path().read_text())
@@ -723,7 +719,7 @@ def test_a_datasets_card_names_the_error_model_file_it_was_made_with(tmp_path, m
     from dataclasses import replace
 
     from mirrorsim.formats.dataset_card import made_with
-    from mirrorsim.formats.error_model import default_error_model, load_error_model
+    from mirrorsim.formats.error_model_file import default_error_model, load_error_model
     from mirrorsim.pipelines import dataset as ds
     from mirrorsim.pipelines.errormodel import write_model
 

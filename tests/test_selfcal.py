@@ -226,7 +226,7 @@ def test_the_mirror_power_moves_each_image_as_a_curved_mirror_does(radius, shift
     from the reflection points): the α change, and d_total's change less the sagittal
     magnification's (the light's shorter path), equal to first order, the rest within
     80/|R| of them (second order in c: 4 % at R = 2000 cm)."""
-    from solver.lsq import power_terms
+    from solver.fit_model import power_terms
 
     pts = np.vstack([*BEACONS, TARGET])
     vertex = _flat_reflection_points(pts).mean(axis=0) + shift * unit(MIRROR[1])
@@ -283,7 +283,7 @@ def test_the_mirror_power_magnifies_each_image_as_a_spherical_mirror_does(radius
     at the reflection point's height deflects each ray vertically, and tan's slope turns
     that into a size change, first order in c too (measured up to 15 % of the
     predicted change here, about 0.01 cm)."""
-    from solver.lsq import power_terms
+    from solver.fit_model import power_terms
 
     pts = np.vstack([*BEACONS, TARGET])
     vertex = _flat_reflection_points(pts).mean(axis=0)
@@ -359,7 +359,7 @@ def test_the_powers_covariance_holds_and_too_few_beacons_are_refused():
     """Images moved by a power of 1/2000 cm (the first-order model) and detector noise:
     the estimated power lies within 2 of its own σ in about 95 % of 300 draws; two
     beacons cannot carry pan, scale and power (7 unknowns, 6 measurements)."""
-    from solver.lsq import power_terms
+    from solver.fit_model import power_terms
 
     rng = np.random.default_rng(11)
     c = 1 / 2000
@@ -387,7 +387,7 @@ def test_priors_on_the_nuisances_help_where_the_bench_draws_them_from_the_priors
     """Pan, scale and power drawn from N(neutral, σ²) of PRIORS each draw, three beacons:
     with those priors the target's RMS error is smaller than free self-calibration's,
     and its 95 % ellipse holds about 95 % of the errors (the posterior's covariance)."""
-    from solver.lsq import power_terms
+    from solver.fit_model import power_terms
 
     rng = np.random.default_rng(29)
     pts = np.vstack([*BEACONS, TARGET])
@@ -609,7 +609,7 @@ def test_a_nuisance_the_beacons_do_not_separate_is_held_and_said():
     prior is flagged."""
     from types import SimpleNamespace
 
-    from mirrorsim.formats.error_model import BenchTolerances
+    from mirrorsim.formats.error_model_scope import BenchTolerances
     from mirrorsim.pipelines.evaluate import SEPARATED_SD, solve_separated
 
     rng = np.random.default_rng(4)

@@ -179,7 +179,7 @@ def test_montecarlo_command(capsys):
     x0 = np.array([g.beacon_alpha, g.beacon_d, g.target_alpha, g.target_d])
 
     def target(x):
-        return solve_single(np.zeros(2), g.beacon, *x).target
+        return solve_single(np.zeros(2), g.beacon, **_single(x)).target
 
     J = np.column_stack([(target(x0 + h * e) - target(x0 - h * e)) / (2 * h)
                          for e, h in zip(np.eye(4), (1e-5, 1e-6, 1e-5, 1e-6), strict=True)])

@@ -200,7 +200,7 @@ def test_fixed_beacons_beside_the_moving_one(tmp_path):
     than the moving beacon's alone); the report and the table name it."""
     from dataclasses import replace
 
-    from mirrorsim.cli.tables import track_table
+    from mirrorsim.cli.analysis_tables import track_table
     from mirrorsim.scene.model import Beacon
     from mirrorsim.truth import optics
 

@@ -7,16 +7,12 @@ import math
 import numpy as np
 import pytest
 
+from mirrorsim.cli.analysis_tables import error_model_summary
 from mirrorsim.cli.main import main
-from mirrorsim.formats.error_model import (
-    ImageFeatures,
-    default_error_model,
-    default_model_path,
-    feature_vector,
-    model_from_dict,
-)
+from mirrorsim.formats.error_model import ImageFeatures, default_model_path, feature_vector
+from mirrorsim.formats.error_model_file import default_error_model, model_from_dict
 from mirrorsim.formats.measurements import measurements_from_dict
-from mirrorsim.pipelines import errormodel, uncertainty
+from mirrorsim.pipelines import errormodel, sigma_laws, uncertainty
 from solver.lsq import crlb, solve_measurements
 from solver.measurements import BeaconMeasurement, ObjectSigmas, Sigma
 from solver.selfcal import SelfCalibration
@@ -432,7 +428,7 @@ def test_errormodel_help_states_the_fits_minimum_and_its_stability_bounds(capsys
     assert f"factor {errormodel.SPAN_REFUSE:.0f}" in text
     assert f"factor {errormodel.UNSTABLE_REFUSE:.0f}" in text
     assert f"beyond {errormodel.UNSTABLE_WARN:.0f}" in text
-    assert f"{errormodel.STABILITY_DRAWS} resamples" in text
+    assert f"{sigma_laws.STABILITY_DRAWS} resamples" in text
 
 
 def test_an_unstable_law_is_refused_and_a_wide_one_warned():
@@ -459,7 +455,7 @@ def test_an_unstable_law_is_refused_and_a_wide_one_warned():
         cols[f"{kind}_alpha_err"] = 0.001 * np.where(lone, 4.0, rng.normal(0, 1.0, 40))
     model = errormodel.fit(cols)
     assert any("refitted on resamples" in w for w in model.provenance["warnings"])
-    assert "warning: a loosely determined law" in errormodel.summary(model)
+    assert "warning: a loosely determined law" in error_model_summary(model)
     cols = synthetic_columns(400, 9)
     for kind in ("target", "beacon"):
         h = rng.uniform(20, 600, 400)
@@ -467,4 +463,4 @@ def test_an_unstable_law_is_refused_and_a_wide_one_warned():
         cols[f"{kind}_d_rel_err"] = rng.normal(0, 0.3 / h)
     model = errormodel.fit(cols)
     assert "warnings" not in model.provenance
-    assert "warning" not in errormodel.summary(model)
+    assert "warning" not in error_model_summary(model)

@@ -48,7 +48,7 @@ def _solve_options(p):
          "shipped error model's.", options=_solve_options)
 def _solve(args) -> int:
     from mirrorsim.cli.tables import solution_summary
-    from mirrorsim.formats.error_model import default_error_model
+    from mirrorsim.formats.error_model_file import default_error_model
     from mirrorsim.formats.measurements import load_measurements
     from solver.lsq import solve_measurements
 
@@ -105,7 +105,7 @@ def _montecarlo_options(p):
          "point) and of the target, next to the paper's.  The paper does not say where the "
          "mirror and beacon stand: the options below set them.", options=_montecarlo_options)
 def _montecarlo(args) -> int:
-    from mirrorsim.cli.tables import montecarlo_table
+    from mirrorsim.cli.analysis_tables import montecarlo_table
     from mirrorsim.scene.model import MAX_SEED
     from solver.measurements import D_TOTAL_RANGE_CM, SIGMA_ALPHA_MAX_DEG, SIGMA_D_REL_MAX
     from solver.montecarlo import Table1Geometry, table1, table_rows
@@ -179,9 +179,9 @@ def _plan_options(p):
          "with the least expected target error over a prior of mirror poses around the scene's "
          "mirror, with a heat map.", options=_plan_options)
 def _plan(args) -> int:
+    from mirrorsim.cli.analysis_tables import plan_text
     from mirrorsim.cli.plots import plot_plan
-    from mirrorsim.cli.tables import plan_text
-    from mirrorsim.formats.error_model import default_error_model
+    from mirrorsim.formats.error_model_file import default_error_model
     from mirrorsim.pipelines.planning import plan_scene
     from solver.measurements import SIGMA_D_REL_MAX, SIGMA_D_REL_MIN, ObjectSigmas, Sigma
 
@@ -342,7 +342,9 @@ def _errormodel_options(p):
          "shipped model the held-out spec's benches call for.",
          options=_errormodel_options)
 def _errormodel(args) -> int:
-    from mirrorsim.formats.error_model import default_error_model
+    from mirrorsim.cli.analysis_tables import error_model_summary
+    from mirrorsim.cli.plots import plot_error_model
+    from mirrorsim.formats.error_model_file import default_error_model
     from mirrorsim.pipelines import errormodel
 
     if args.dataset is None and args.test is None:
@@ -371,8 +373,8 @@ def _errormodel(args) -> int:
         except ValueError as exc:
             raise BadArgument(str(args.dataset), str(exc)) from None
         errormodel.write_model(model, out)
-        png = errormodel.plot(cols, model, plots)
-        print(errormodel.summary(model))
+        png = plot_error_model(cols, model, plots)
+        print(error_model_summary(model))
         print(f"model: {out}\nplots: {png}")
     else:  # the shipped model the held-out benches call for, as evaluate chooses it
         model = error_model_of(args) or default_error_model(

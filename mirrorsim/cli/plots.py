@@ -19,6 +19,7 @@ from mirrorsim.scene.model import Scene  # noqa: E402
 from solver.geometry import unit  # noqa: E402
 
 if TYPE_CHECKING:  # the budget and the track run renders: no Mitsuba import to draw one
+    from mirrorsim.formats.error_model import ErrorModel
     from mirrorsim.pipelines.budget import Budget
     from mirrorsim.pipelines.planning import Plan
     from mirrorsim.pipelines.track import TrackReport
@@ -300,3 +301,43 @@ def animate_track(scene: Scene, report: TrackReport, out: str | Path, *, fps: fl
     finally:
         plt.close(fig)
     return out
+
+
+def plot_error_model(cols: dict, model: ErrorModel, out: str | Path) -> Path:
+    """Each row's own error (the frame's shared parts apart, α at the model's focal
+    length) against its image's height and off-axis bearing, with the σ the model gives
+    that row (a ±2σ bar on each point), and the errors in σ's against a standard
+    normal."""
+    from mirrorsim.formats import dataset_table as table
+    from mirrorsim.pipelines.errormodel import model_own_errors, sigma_features_of
+
+    fig, axes = plt.subplots(2, 3, figsize=(16, 8.5))
+    cols, beacon_of, _ = table.image_rows(cols)  # every beacon's image; the target once
+    ok = table.usable_rows(cols)
+    once = table.counted_once(beacon_of)
+    grid = np.linspace(-5, 5, 201)
+    for r, (q, scale, units) in enumerate((("alpha", 1.0, "°"),
+                                           ("d_rel", 100.0, "% of d_total"))):
+        for k, (kind, colour) in enumerate((("target", "#c0392b"), ("beacon", "#b8860b"))):
+            y = model_own_errors(cols, model, kind, q=q)
+            S = sigma_features_of(cols, kind)
+            m = ok & once[kind] & np.isfinite(y) & np.isfinite(S).all(axis=1)
+            sd = model.whole_sigma(kind, q, S[m], fx_px=model.fx_px)  # y is as at its fx
+            for c, (x, name) in enumerate(((np.exp(S[m, 0]), "measured image height (px)"),
+                                           (S[m, 1], "|off-axis bearing| (°)"))):
+                axes[r, c].errorbar(x + 0.15 * k, y[m] * scale, yerr=2 * sd * scale, fmt="o",
+                                    ms=3, color=colour, ecolor=colour, elinewidth=0.6,
+                                    alpha=0.6, label=f"{kind} (bar: ±2σ of the model)")
+                axes[r, c].set_xlabel(name)
+                axes[r, c].set_ylabel(f"{q} error ({units})")
+            z = y[m] / sd
+            axes[r, 2].hist(np.clip(z, -5, 5), bins=40, range=(-5, 5), density=True,
+                            histtype="step", color=colour, label=f"{kind}: error / σ")
+        axes[r, 2].plot(grid, np.exp(-grid**2 / 2) / np.sqrt(2 * np.pi), "k--", lw=1,
+                        label="standard normal")
+        axes[r, 2].set_xlabel(f"{q} error / σ (clipped to ±5)")
+        axes[r, 2].set_ylabel("density")
+        for ax in axes[r]:
+            ax.legend(fontsize=8)
+    fig.suptitle("detector errors and the error model's σ per measurement (training rows)")
+    return save_figure(fig, out)

@@ -336,7 +336,7 @@ def error_model_of(args: argparse.Namespace) -> ErrorModel | None:
     """The model of ``--error-model``, or None where it is not given."""
     if not args.error_model:
         return None
-    from mirrorsim.formats.error_model import load_error_model
+    from mirrorsim.formats.error_model_file import load_error_model
 
     return load_error_model(args.error_model)
 

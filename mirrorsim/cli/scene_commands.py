@@ -238,8 +238,8 @@ def _budget_options(p):
          "sub-folder.",
          options=_budget_options)
 def _budget(args) -> int:
+    from mirrorsim.cli.analysis_tables import budget_table
     from mirrorsim.cli.plots import plot_budget
-    from mirrorsim.cli.tables import budget_table
     from mirrorsim.formats.files import write_json
     from mirrorsim.pipelines.budget import budget_runs, check_budget_calibration, run_budget
     from mirrorsim.scene.imperfections import sources
@@ -326,9 +326,9 @@ def _track_options(p):
          "step) and DIR/track.gif (the top view with the filter's mirror lines), the frames "
          "in DIR/poses/.", options=_track_options)
 def _track(args) -> int:
+    from mirrorsim.cli.analysis_tables import track_table
     from mirrorsim.cli.plots import animate_track, plot_track
     from mirrorsim.cli.registry import at_least
-    from mirrorsim.cli.tables import track_table
     from mirrorsim.formats.files import write_json
     from mirrorsim.pipelines.track import (
         MAX_TRACK_SEED,

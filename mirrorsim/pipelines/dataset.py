@@ -53,7 +53,8 @@ from mirrorsim.formats.dataset_folder import (
     write_table,
     writing,
 )
-from mirrorsim.formats.error_model import ErrorModel, default_error_model, load_error_model
+from mirrorsim.formats.error_model import ErrorModel
+from mirrorsim.formats.error_model_file import default_error_model, load_error_model
 from mirrorsim.formats.files import dumps, write_json, write_text
 from mirrorsim.pipelines.random_scenes import DatasetSpec, NoValidScene
 from mirrorsim.pipelines.score import Report

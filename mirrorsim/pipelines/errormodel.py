@@ -26,18 +26,26 @@ import numpy as np
 from mirrorsim.formats import dataset_table as table
 from mirrorsim.formats.error_model import (
     KINDS,
+    ErrorModel,
+    QuantityFit,
+    feature_vector,
+    off_axis,
+)
+from mirrorsim.formats.error_model_file import sealed
+from mirrorsim.formats.error_model_scope import (
     SCENE_DOMAIN,
     SIGMA_FEATURES,
     BenchTolerances,
     Domain,
-    ErrorModel,
-    LogSigma,
-    QuantityFit,
-    feature_vector,
-    off_axis,
-    sealed,
 )
-from mirrorsim.formats.files import save_figure, write_json
+from mirrorsim.formats.files import write_json
+from mirrorsim.pipelines.sigma_laws import (
+    fit_alpha_pair,
+    gross_free_fit,
+    robust_fit,
+    shared_of,
+    stability,
+)
 from mirrorsim.scene import imperfections
 
 FEATURES = ("1", "d_total_cm", "off_axis_deg", "incidence_deg", "inv_height_px")
@@ -46,10 +54,6 @@ FEATURES = ("1", "d_total_cm", "off_axis_deg", "incidence_deg", "inv_height_px")
 # A feature enters the bias fit only where its column varies.
 BENCH_FEATURES = {f.name: f for f in imperfections.FEATURES}
 QUANTITY_COLUMNS = {"alpha": "alpha_err", "d_rel": "d_rel_err"}
-GROSS = 6.0  # errors beyond this many σ's are gross errors, counted apart
-# a shared α error is taken as there when its mean product is this many standard
-# errors above 0 (by chance: about 1 dataset in 700)
-SHARED_T = 3.0
 
 
 def _feature(cols: dict, kind: str, name: str) -> np.ndarray:
@@ -86,89 +90,6 @@ def features_of(cols: dict) -> list[str]:
 def _design(cols: dict, kind: str, names: list[str] | tuple[str, ...] = FEATURES
             ) -> np.ndarray:
     return np.column_stack([_feature(cols, kind, n) for n in names])
-
-
-def _robust_fit(X: np.ndarray, y: np.ndarray, cut: float = 1.345) -> np.ndarray:
-    """A Huber-loss linear fit on standardized features, dropping directions the data do
-    not determine: for one object the image height is ∝ 1/d_total, so those two features
-    are nearly collinear and a plain fit would trade huge opposite coefficients.
-
-    ``cut``: where the loss turns linear, in robust σ's of the first residuals (1.345:
-    95 % efficient for Gaussian errors).
-    """
-    from scipy.optimize import least_squares
-
-    mu = X[:, 1:].mean(axis=0)
-    sd = X[:, 1:].std(axis=0)
-    sd[sd == 0] = 1.0
-    Z = (X[:, 1:] - mu) / sd
-    _, sv, vt = np.linalg.svd(Z, full_matrices=False)
-    basis = vt[sv > 2e-2 * sv[0]].T  # the determined directions
-    A = np.column_stack([np.ones(len(X)), Z @ basis])
-    w0, *_ = np.linalg.lstsq(A, y, rcond=None)
-    r0 = y - A @ w0
-    scale = 1.4826 * float(np.median(np.abs(r0 - np.median(r0)))) or float(np.std(r0)) or 1.0
-    w = least_squares(lambda w: A @ w - y, w0, loss="huber", f_scale=cut * scale).x
-    bz = basis @ w[1:]
-    return np.r_[w[0] - np.sum(bz * mu / sd), bz / sd]
-
-
-def fit_log_sigma(X: np.ndarray, y: np.ndarray, ridge: float = 1e-3,
-                  *, shared_var: float = 0.0) -> LogSigma:
-    """σ = exp(w·z) by maximum likelihood of y ~ N(0, σ² + shared_var) (z: [1,
-    standardized X]), with a small ridge on the slopes so that a feature the rows barely
-    vary in stays flat.  σ is the spread about the truth (a bias is part of it: a
-    measurement cannot be corrected for a bias its features do not predict);
-    ``shared_var``: the variance of an error every image of a frame shares, known."""
-    from scipy.optimize import minimize
-
-    Z, mu, sc = _standardized(X)
-    y2 = np.maximum(y**2, 1e-300)
-    n = len(y)
-
-    def nll(w):
-        eta = Z @ w
-        if shared_var == 0.0:
-            e = y2 * np.exp(-2.0 * eta)
-            value = np.sum(eta + 0.5 * e)
-            g = 1.0 - e
-        else:  # v = σ² + shared: d/dη of ½ log v + ½ y²/v is (σ²/v)(1 − y²/v)
-            own = np.exp(2.0 * eta)
-            v = own + shared_var
-            value = np.sum(0.5 * np.log(v) + 0.5 * y2 / v)
-            g = own / v * (1.0 - y2 / v)
-        value += ridge * n * np.sum(w[1:] ** 2)
-        grad = Z.T @ g + np.r_[0.0, 2.0 * ridge * n * w[1:]]
-        return value, grad
-
-    own0 = max(np.mean(y2) - shared_var, 0.01 * np.mean(y2))
-    w0 = np.r_[0.5 * np.log(own0), np.zeros(X.shape[1])]
-    w = minimize(nll, w0, jac=True, method="BFGS").x
-    return LogSigma(float(w[0]), tuple(w[1:].tolist()), tuple(mu.tolist()), tuple(sc.tolist()))
-
-
-def _standardized(X: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The design z = [1, (X − mean)/SD] (an SD of 0 taken as 1), the means and SDs."""
-    mu, sc = X.mean(axis=0), X.std(axis=0)
-    # a feature the rows do not vary in (to rounding: a constant's SD comes out 1e-16)
-    # is left unscaled, its slope then held near 0 by the ridge
-    sc[sc <= 1e-9 * (1.0 + np.abs(mu))] = 1.0
-    return np.column_stack([np.ones(len(X)), (X - mu) / sc]), mu, sc
-
-
-def _sigma_fit(X: np.ndarray, y: np.ndarray, shared_var: float = 0.0
-               ) -> tuple[LogSigma, np.ndarray]:
-    """The σ law fitted on the rows that are not gross errors, and which rows are (more
-    than GROSS predicted σ's off): a gross error is a detector fault, counted apart."""
-    scale = 1.4826 * float(np.median(np.abs(y))) or float(np.std(y)) or 1.0
-    keep = np.abs(y) <= GROSS * scale
-    for _ in range(4):  # the gross rows by the fitted σ's, until they settle
-        law = fit_log_sigma(X[keep], y[keep], shared_var=shared_var)
-        now = np.abs(y) <= GROSS * np.sqrt(law(X) ** 2 + shared_var)
-        if np.array_equal(now, keep):
-            break
-        keep = now
-    return law, ~keep
 
 
 def sigma_features_of(cols: dict, kind: str) -> np.ndarray:
@@ -212,7 +133,6 @@ MIN_ROWS = 5 * (len(SIGMA_FEATURES) + 1)
 UNSTABLE_REFUSE = 30.0
 UNSTABLE_WARN = 4.0
 SPAN_REFUSE = 1e4
-STABILITY_DRAWS = 20
 # the bias features of the errors every image of a frame shares, which the solver
 # estimates (its nuisances with their priors) rather than each image's σ holding them:
 # the pan reading (α), the calibration's distance and the mirror's curvature (d_total)
@@ -264,11 +184,11 @@ def fit(cols: dict, provenance: dict | None = None, bench: dict | None = None) -
             if m.sum() < need:
                 raise ValueError(f"too few usable rows ({int(m.sum())}) to fit {kind} {q}: "
                                  f"{need} needed")
-            bias = _robust_fit(X_all[m], y[m])
+            bias = robust_fit(X_all[m], y[m])
             own = own_errors(cols, kind, q, names=names, bias=bias, fx_px=fx_px)
             if q == "alpha":
                 own_alpha[kind] = (m, S_all, own)
-            law, gross = _sigma_fit(S_all[m], own[m])
+            law, gross = gross_free_fit(S_all[m], own[m])
             z = np.abs(own[m]) / law(S_all[m])
             tail = max(1.0, float(np.quantile(z, TAIL_LEVEL)) / TAIL_Z)
             sig = tail * law(S_all[m])
@@ -320,19 +240,6 @@ def fit(cols: dict, provenance: dict | None = None, bench: dict | None = None) -
     return model
 
 
-def stability(S: np.ndarray, y: np.ndarray, draws: int = STABILITY_DRAWS) -> float:
-    """How far a σ law's fit moves with the rows drawn: refitted on ``draws`` resamples of
-    (S, y) with replacement (a fixed seed: the same rows, the same answer), the factor
-    between the largest and the smallest σ each row gets, at the 90th percentile of the
-    rows."""
-    rng = np.random.default_rng(0)
-    sig = np.empty((draws, len(y)))
-    for k in range(draws):
-        pick = rng.integers(0, len(y), len(y))
-        sig[k] = _sigma_fit(S[pick], y[pick])[0](S)  # as fitted: gross errors apart
-    return float(np.quantile(sig.max(axis=0) / sig.min(axis=0), 0.9))
-
-
 def own_errors(cols: dict, kind: str, q: str, *, names: tuple[str, ...] | list[str],
                bias: tuple[float, ...] | np.ndarray, fx_px: float | None) -> np.ndarray:
     """Each row's own error of ``kind``'s ``q``: its error less the parts every image of
@@ -380,54 +287,6 @@ def tolerances_of(bench: dict) -> BenchTolerances:
                            calibration_cm=half("calibration.distance_error"),
                            curvature_per_cm=half("mirror.curvature"),
                            beacon_position_cm=half("beacon.known_position_offset"))
-
-
-def fit_alpha_pair(St: np.ndarray, yt: np.ndarray, Sb: np.ndarray, *, yb: np.ndarray,
-                   shared0: float, ridge: float = 1e-3) -> tuple[LogSigma, LogSigma, float]:
-    """The target's and the beacon's own α laws and the shared σ, by maximum likelihood
-    of each frame's pair of α errors ~ N(0, [[σt² + s², s²], [s², σb² + s²]]) (z's
-    standardized as :func:`fit_log_sigma`'s, a small ridge on the slopes); ``shared0``
-    starts s."""
-    from scipy.optimize import minimize
-
-    Zt, mt, ct = _standardized(St)
-    Zb, mb, cb = _standardized(Sb)
-    k = Zt.shape[1]
-    n = len(yt)
-
-    def nll(w):
-        a, b, c = np.exp(2 * (Zt @ w[:k])), np.exp(2 * (Zb @ w[k:2 * k])), np.exp(2 * w[-1])
-        det = a * b + c * (a + b)
-        q = ((b + c) * yt**2 - 2 * c * yt * yb + (a + c) * yb**2) / det
-        return (0.5 * np.sum(np.log(det) + q)
-                + ridge * n * (np.sum(w[1:k] ** 2) + np.sum(w[k + 1:2 * k] ** 2)))
-
-    def own(y):
-        return 0.5 * np.log(max(np.mean(y**2) - shared0**2, 0.01 * np.mean(y**2)))
-
-    w0 = np.r_[own(yt), np.zeros(k - 1), own(yb), np.zeros(k - 1), np.log(shared0)]
-    w = minimize(nll, w0, method="BFGS").x
-    law = lambda v, mu, sc: LogSigma(float(v[0]), tuple(v[1:].tolist()),  # noqa: E731
-                                     tuple(mu.tolist()), tuple(sc.tolist()))
-    return law(w[:k], mt, ct), law(w[k:2 * k], mb, cb), float(np.exp(w[-1]))
-
-
-def shared_of(et: np.ndarray, eb: np.ndarray, m: np.ndarray) -> float:
-    """σ (deg) of the α error every image of a frame shares (beyond what the pan's
-    tolerance holds): √ of the mean product of each frame's target and beacon α errors
-    (``et``, ``eb``: their own errors; independent errors average to 0), gross pairs
-    left out; 0 unless the mean is positive by more than SHARED_T of its standard errors
-    (an ideal bench's errors are independent)."""
-    m = m & np.isfinite(et) & np.isfinite(eb)
-    p = et[m] * eb[m]
-    if p.size < 3:
-        return 0.0
-    med = float(np.median(np.abs(p)))
-    p = p[np.abs(p) <= GROSS**2 * 1.4826**2 * med] if med > 0 else p  # gross pairs out
-    if p.size < 3 or np.std(p) == 0:
-        return 0.0
-    t = np.mean(p) / (np.std(p, ddof=1) / np.sqrt(p.size))
-    return float(np.sqrt(np.mean(p))) if t > SHARED_T else 0.0
 
 
 def fit_dataset(dataset_dir: str | Path) -> ErrorModel:
@@ -485,82 +344,7 @@ def read_columns(dataset_dir: str | Path) -> dict:
     return read_table(dataset_dir)
 
 
-def summary(model: ErrorModel) -> str:
-    """The model in a few printed lines (σ_d in %)."""
-    lines = [f"error model ({model.kind} bench): σ = tail·exp(w·z), z = [1, "
-             + ", ".join(SIGMA_FEATURES) + "] standardized; α in degrees at "
-             f"fx {model.fx_px or float('nan'):.0f} px, d_total in % of d_total"]
-    for kind, qs in model.fits.items():
-        for q, m in qs.items():
-            scale, unit = (1.0, "°") if q == "alpha" else (100.0, " %")
-            w = ", ".join(f"{n} {c:+.3f}" for n, c in zip(SIGMA_FEATURES, m.log_sigma.weights,
-                                                          strict=True))
-            lines.append(f"  {kind:6s} {q:5s}: n={m.n} ({m.gross_errors} gross left out of "
-                         f"the law), RMS own error {scale * m.rms:.4f}{unit}, typical σ "
-                         f"{scale * m.typical_sigma:.4f}{unit}, tail ×{m.tail:.2f}; log σ "
-                         f"slopes: {w}")
-    lines.append(f"  an α offset shared by every image of a frame beyond the tolerances: σ "
-                 f"{model.shared_alpha_deg:.4f}°" + (
-                     " (each α law above is the image's own part)" if model.shared_alpha_deg
-                     else " (none found)"))
-    t = model.tolerances
-    if not t.ideal:
-        lines.append(f"  its benches' shared errors (half-widths), estimated with priors: pan "
-                     f"±{t.pan_deg:g}°, calibration distance ±{t.calibration_cm:g} cm, "
-                     f"curvature ±{t.curvature_per_cm:.3g}/cm, beacon positions "
-                     f"±{t.beacon_position_cm:g} cm")
-    for kind, feats in model.domain.features.items():
-        lines.append(f"  domain, {kind}: " + ", ".join(
-            f"{n} {lo:.3g}–{hi:.3g}" for n, (lo, hi) in feats.items()))
-    lines.append("  domain, scenes: " + ", ".join(
-        f"{n} {lo:.3g}–{hi:.3g}" for n, (lo, hi) in model.domain.scene.items()))
-    for note in (model.provenance or {}).get("warnings", []):
-        lines.append(f"  warning: a loosely determined law: {note}")
-    return "\n".join(lines)
-
-
-def plot(cols: dict, model: ErrorModel, out: str | Path) -> Path:
-    """Each row's own error (the frame's shared parts apart, α at the model's focal
-    length) against its image's height and off-axis bearing, with the σ the model gives
-    that row (a ±2σ bar on each point), and the errors in σ's against a standard
-    normal."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(2, 3, figsize=(16, 8.5))
-    cols, beacon_of, _ = table.image_rows(cols)  # every beacon's image; the target once
-    ok = table.usable_rows(cols)
-    once = table.counted_once(beacon_of)
-    grid = np.linspace(-5, 5, 201)
-    for r, (q, scale, unit) in enumerate((("alpha", 1.0, "°"), ("d_rel", 100.0, "% of d_total"))):
-        for k, (kind, colour) in enumerate((("target", "#c0392b"), ("beacon", "#b8860b"))):
-            y = model_own_errors(cols, model, kind, q=q)
-            S = sigma_features_of(cols, kind)
-            m = ok & once[kind] & np.isfinite(y) & np.isfinite(S).all(axis=1)
-            sd = model.whole_sigma(kind, q, S[m], fx_px=model.fx_px)  # y is as at its fx
-            for c, (x, name) in enumerate(((np.exp(S[m, 0]), "measured image height (px)"),
-                                           (S[m, 1], "|off-axis bearing| (°)"))):
-                axes[r, c].errorbar(x + 0.15 * k, y[m] * scale, yerr=2 * sd * scale, fmt="o",
-                                    ms=3, color=colour, ecolor=colour, elinewidth=0.6,
-                                    alpha=0.6, label=f"{kind} (bar: ±2σ of the model)")
-                axes[r, c].set_xlabel(name)
-                axes[r, c].set_ylabel(f"{q} error ({unit})")
-            z = y[m] / sd
-            axes[r, 2].hist(np.clip(z, -5, 5), bins=40, range=(-5, 5), density=True,
-                            histtype="step", color=colour, label=f"{kind}: error / σ")
-        axes[r, 2].plot(grid, np.exp(-grid**2 / 2) / np.sqrt(2 * np.pi), "k--", lw=1,
-                        label="standard normal")
-        axes[r, 2].set_xlabel(f"{q} error / σ (clipped to ±5)")
-        axes[r, 2].set_ylabel("density")
-        for ax in axes[r]:
-            ax.legend(fontsize=8)
-    fig.suptitle("detector errors and the error model's σ per measurement (training rows)")
-    return save_figure(fig, out)
-
-
 def write_model(model: ErrorModel, path: str | Path) -> None:
     """Write the model file (strict JSON, atomically), sealed (see
-    :func:`~mirrorsim.formats.error_model.sealed`)."""
+    :func:`~mirrorsim.formats.error_model_file.sealed`)."""
     write_json(path, sealed(model))

@@ -21,7 +21,8 @@ from mirrorsim.detection.board import (
 )
 from mirrorsim.detection.detector import annotate
 from mirrorsim.errors import BadParameter, DetectionError
-from mirrorsim.formats.error_model import ErrorModel, default_error_model, load_error_model
+from mirrorsim.formats.error_model import ErrorModel
+from mirrorsim.formats.error_model_file import default_error_model, load_error_model
 from mirrorsim.formats.files import claim_run_folder, default_out, write_png
 from mirrorsim.pipelines.frame import MeasuredFrame, render_and_measure
 from mirrorsim.pipelines.scenes import check_given_scene

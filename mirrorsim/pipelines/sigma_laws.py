@@ -1,0 +1,162 @@
+"""The σ laws fitted: log σ regressed on an image's features by maximum likelihood,
+gross errors apart; the robust bias fit; the shared α error of a frame's images; and
+how far a fit moves with its rows.  numpy and scipy on arrays:
+:mod:`mirrorsim.pipelines.errormodel` gives them a dataset's columns."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from mirrorsim.formats.error_model import LogSigma
+
+GROSS = 6.0  # errors beyond this many σ's are gross errors, counted apart
+# a shared α error is taken as there when its mean product is this many standard
+# errors above 0 (by chance: about 1 dataset in 700)
+SHARED_T = 3.0
+
+
+def robust_fit(X: np.ndarray, y: np.ndarray, cut: float = 1.345) -> np.ndarray:
+    """A Huber-loss linear fit on standardized features, dropping directions the data do
+    not determine: for one object the image height is ∝ 1/d_total, so those two features
+    are nearly collinear and a plain fit would trade huge opposite coefficients.
+
+    ``cut``: where the loss turns linear, in robust σ's of the first residuals (1.345:
+    95 % efficient for Gaussian errors).
+    """
+    from scipy.optimize import least_squares
+
+    mu = X[:, 1:].mean(axis=0)
+    sd = X[:, 1:].std(axis=0)
+    sd[sd == 0] = 1.0
+    Z = (X[:, 1:] - mu) / sd
+    _, sv, vt = np.linalg.svd(Z, full_matrices=False)
+    basis = vt[sv > 2e-2 * sv[0]].T  # the determined directions
+    A = np.column_stack([np.ones(len(X)), Z @ basis])
+    w0, *_ = np.linalg.lstsq(A, y, rcond=None)
+    r0 = y - A @ w0
+    scale = 1.4826 * float(np.median(np.abs(r0 - np.median(r0)))) or float(np.std(r0)) or 1.0
+    w = least_squares(lambda w: A @ w - y, w0, loss="huber", f_scale=cut * scale).x
+    bz = basis @ w[1:]
+    return np.r_[w[0] - np.sum(bz * mu / sd), bz / sd]
+
+
+def fit_log_sigma(X: np.ndarray, y: np.ndarray, ridge: float = 1e-3,
+                  *, shared_var: float = 0.0) -> LogSigma:
+    """σ = exp(w·z) by maximum likelihood of y ~ N(0, σ² + shared_var) (z: [1,
+    standardized X]), with a small ridge on the slopes so that a feature the rows barely
+    vary in stays flat.  σ is the spread about the truth (a bias is part of it: a
+    measurement cannot be corrected for a bias its features do not predict);
+    ``shared_var``: the variance of an error every image of a frame shares, known."""
+    from scipy.optimize import minimize
+
+    Z, mu, sc = standardized(X)
+    y2 = np.maximum(y**2, 1e-300)
+    n = len(y)
+
+    def nll(w):
+        eta = Z @ w
+        if shared_var == 0.0:
+            e = y2 * np.exp(-2.0 * eta)
+            value = np.sum(eta + 0.5 * e)
+            g = 1.0 - e
+        else:  # v = σ² + shared: d/dη of ½ log v + ½ y²/v is (σ²/v)(1 − y²/v)
+            own = np.exp(2.0 * eta)
+            v = own + shared_var
+            value = np.sum(0.5 * np.log(v) + 0.5 * y2 / v)
+            g = own / v * (1.0 - y2 / v)
+        value += ridge * n * np.sum(w[1:] ** 2)
+        grad = Z.T @ g + np.r_[0.0, 2.0 * ridge * n * w[1:]]
+        return value, grad
+
+    own0 = max(np.mean(y2) - shared_var, 0.01 * np.mean(y2))
+    w0 = np.r_[0.5 * np.log(own0), np.zeros(X.shape[1])]
+    w = minimize(nll, w0, jac=True, method="BFGS").x
+    return LogSigma(float(w[0]), tuple(w[1:].tolist()), tuple(mu.tolist()), tuple(sc.tolist()))
+
+
+def standardized(X: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The design z = [1, (X − mean)/SD] (an SD of 0 taken as 1), the means and SDs."""
+    mu, sc = X.mean(axis=0), X.std(axis=0)
+    # a feature the rows do not vary in (to rounding: a constant's SD comes out 1e-16)
+    # is left unscaled, its slope then held near 0 by the ridge
+    sc[sc <= 1e-9 * (1.0 + np.abs(mu))] = 1.0
+    return np.column_stack([np.ones(len(X)), (X - mu) / sc]), mu, sc
+
+
+def gross_free_fit(X: np.ndarray, y: np.ndarray, shared_var: float = 0.0
+               ) -> tuple[LogSigma, np.ndarray]:
+    """The σ law fitted on the rows that are not gross errors, and which rows are (more
+    than GROSS predicted σ's off): a gross error is a detector fault, counted apart."""
+    scale = 1.4826 * float(np.median(np.abs(y))) or float(np.std(y)) or 1.0
+    keep = np.abs(y) <= GROSS * scale
+    for _ in range(4):  # the gross rows by the fitted σ's, until they settle
+        law = fit_log_sigma(X[keep], y[keep], shared_var=shared_var)
+        now = np.abs(y) <= GROSS * np.sqrt(law(X) ** 2 + shared_var)
+        if np.array_equal(now, keep):
+            break
+        keep = now
+    return law, ~keep
+
+
+STABILITY_DRAWS = 20
+
+
+def stability(S: np.ndarray, y: np.ndarray, draws: int = STABILITY_DRAWS) -> float:
+    """How far a σ law's fit moves with the rows drawn: refitted on ``draws`` resamples of
+    (S, y) with replacement (a fixed seed: the same rows, the same answer), the factor
+    between the largest and the smallest σ each row gets, at the 90th percentile of the
+    rows."""
+    rng = np.random.default_rng(0)
+    sig = np.empty((draws, len(y)))
+    for k in range(draws):
+        pick = rng.integers(0, len(y), len(y))
+        sig[k] = gross_free_fit(S[pick], y[pick])[0](S)  # as fitted: gross errors apart
+    return float(np.quantile(sig.max(axis=0) / sig.min(axis=0), 0.9))
+
+
+def fit_alpha_pair(St: np.ndarray, yt: np.ndarray, Sb: np.ndarray, *, yb: np.ndarray,
+                   shared0: float, ridge: float = 1e-3) -> tuple[LogSigma, LogSigma, float]:
+    """The target's and the beacon's own α laws and the shared σ, by maximum likelihood
+    of each frame's pair of α errors ~ N(0, [[σt² + s², s²], [s², σb² + s²]]) (z's
+    standardized as :func:`fit_log_sigma`'s, a small ridge on the slopes); ``shared0``
+    starts s."""
+    from scipy.optimize import minimize
+
+    Zt, mt, ct = standardized(St)
+    Zb, mb, cb = standardized(Sb)
+    k = Zt.shape[1]
+    n = len(yt)
+
+    def nll(w):
+        a, b, c = np.exp(2 * (Zt @ w[:k])), np.exp(2 * (Zb @ w[k:2 * k])), np.exp(2 * w[-1])
+        det = a * b + c * (a + b)
+        q = ((b + c) * yt**2 - 2 * c * yt * yb + (a + c) * yb**2) / det
+        return (0.5 * np.sum(np.log(det) + q)
+                + ridge * n * (np.sum(w[1:k] ** 2) + np.sum(w[k + 1:2 * k] ** 2)))
+
+    def own(y):
+        return 0.5 * np.log(max(np.mean(y**2) - shared0**2, 0.01 * np.mean(y**2)))
+
+    w0 = np.r_[own(yt), np.zeros(k - 1), own(yb), np.zeros(k - 1), np.log(shared0)]
+    w = minimize(nll, w0, method="BFGS").x
+    law = lambda v, mu, sc: LogSigma(float(v[0]), tuple(v[1:].tolist()),  # noqa: E731
+                                     tuple(mu.tolist()), tuple(sc.tolist()))
+    return law(w[:k], mt, ct), law(w[k:2 * k], mb, cb), float(np.exp(w[-1]))
+
+
+def shared_of(et: np.ndarray, eb: np.ndarray, m: np.ndarray) -> float:
+    """σ (deg) of the α error every image of a frame shares (beyond what the pan's
+    tolerance holds): √ of the mean product of each frame's target and beacon α errors
+    (``et``, ``eb``: their own errors; independent errors average to 0), gross pairs
+    left out; 0 unless the mean is positive by more than SHARED_T of its standard errors
+    (an ideal bench's errors are independent)."""
+    m = m & np.isfinite(et) & np.isfinite(eb)
+    p = et[m] * eb[m]
+    if p.size < 3:
+        return 0.0
+    med = float(np.median(np.abs(p)))
+    p = p[np.abs(p) <= GROSS**2 * 1.4826**2 * med] if med > 0 else p  # gross pairs out
+    if p.size < 3 or np.std(p) == 0:
+        return 0.0
+    t = np.mean(p) / (np.std(p, ddof=1) / np.sqrt(p.size))
+    return float(np.sqrt(np.mean(p))) if t > SHARED_T else 0.0
