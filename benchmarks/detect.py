@@ -37,7 +37,8 @@ import numpy as np
 import yaml
 from clone import ROOT  # noqa: E402  (the clone first on sys.path)
 
-from mirrorsim.detection.detector import detect_frame, read_stored_frame  # noqa: E402
+from mirrorsim.detection.detector import detect_frame
+from mirrorsim.detection.frame_files import read_stored_frame
 from mirrorsim.errors import DetectionError, SceneError  # noqa: E402
 from mirrorsim.formats.error_model_file import default_error_model
 from mirrorsim.pipelines.calibrate import calibrate  # noqa: E402

@@ -19,12 +19,9 @@ import numpy as np
 import yaml
 from clone import ROOT  # noqa: E402  (the clone first on sys.path)
 
-from mirrorsim.detection.detector import (  # noqa: E402
-    measure_object,
-    read_frame,
-    to_linear,
-)
+from mirrorsim.detection.detector import measure_object, to_linear
 from mirrorsim.detection.edges import measure_region  # noqa: E402
+from mirrorsim.detection.frame_files import read_frame
 from mirrorsim.detection.regions import find_pencils  # noqa: E402
 from mirrorsim.pipelines.frame import render_to_files  # noqa: E402
 from mirrorsim.pipelines.scenes import scene_from_dict  # noqa: E402
@@ -67,7 +64,7 @@ def main() -> None:
     pencils = [measure_region(lin, box, "beacon") for box in find_pencils(img)]
     p = min(pencils, key=lambda q: abs(np.nanmean([q.u_left or np.nan, q.u_right or np.nan])
                                        - ub[0]))
-    # the hexagon's corners (mirrorsim.rendering.mitsuba_scene._pencil_meshes) at mid-paint height,
+    # the hexagon's corners (mirrorsim.rendering.shapes.pencil_meshes) at mid-paint height,
     # reflected: its silhouette's columns
     ang = np.deg2rad(np.arange(6) * 60.0 + 30.0)
     ring = np.asarray(b.position) + PENCIL_RADIUS * np.stack([np.cos(ang), np.sin(ang)], 1)

@@ -66,12 +66,11 @@ class FitProblem:
     neutral: np.ndarray  # every unknown's neutral value (mirror and target: 0)
 
     @classmethod
-    def of(cls, o: np.ndarray, bpos: np.ndarray, nt: int, sig: ObjectSigmas,
+    def of(cls, bpos: np.ndarray, nt: int, sig: ObjectSigmas, *,
            calibration: SelfCalibration, d_cm: np.ndarray) -> FitProblem:
         """The problem of ``bpos`` beacons and ``nt`` target observations with σ's
         ``sig`` (a relative σ_d taken of ``d_cm``: the measured d_totals for a solve, the
         true ones for a bound)."""
-        del o  # the weights do not depend on the camera: kept for symmetry of callers
         nuisances, position_sigma = calibration.nuisances, calibration.position_sigma
         sa, sd = sig.arrays(len(bpos), nt)
         shared = sig.shared_alpha_deg
@@ -100,12 +99,12 @@ class FitProblem:
 
     def jacobian(self, x: np.ndarray, o: np.ndarray, bpos: np.ndarray) -> np.ndarray:
         """The weighted residuals' Jacobian at ``x``: the measurements', then the priors'."""
-        _, _, da, dd = forward(x, o, bpos, self.nt, self.unknown, self.free)
+        _, _, da, dd = forward(x, o, bpos, nt=self.nt, nuisances=self.unknown, free=self.free)
         return np.vstack([self.w_a[:, None] * da, self.w_d[:, None] * dd, self.prior])
 
 
-def forward(x: np.ndarray, o: np.ndarray, bpos: np.ndarray, nt: int,
-             nuisances: tuple[str, ...], free: bool = False) -> tuple[np.ndarray, ...]:
+def forward(x: np.ndarray, o: np.ndarray, bpos: np.ndarray, *, nt: int,
+            nuisances: tuple[str, ...], free: bool = False) -> tuple[np.ndarray, ...]:
     """α and d_total of every observation (beacons, then nt of the target) for the
     parameters x = (θ, ρ, x_t, y_t, *nuisances[, each beacon's offset from its believed
     position, with ``free``]), and their derivatives (k, len(x))."""
@@ -124,7 +123,7 @@ def forward(x: np.ndarray, o: np.ndarray, bpos: np.ndarray, nt: int,
     if "power" in where:  # the mirror's curvature first: the pan and the scale act after it
         # the vertex: the middle of the images' reflection points (the target's once)
         seen = observe(o, x[1] * line_normal(x[0]), x[0], point=pts, strict=False)
-        power = power_of(seen, x[0], x[1], o, pts,
+        power = _power_of(seen, x[0], x[1], o, pts,
                           vertex=seen.reflection_point[:nb + 1].mean(axis=0))
         a, d = a + x[where["power"]] * power[0], d + x[where["power"]] * power[1]
     ea, ed = nuisance_columns(nuisances, d, power)
@@ -178,10 +177,10 @@ def power_terms(mirror: tuple[float, float], observer: np.ndarray, points: np.nd
     """
     theta, rho = mirror
     obs = observe(observer, rho * line_normal(theta), theta, point=points, strict=False)
-    return power_of(obs, theta, rho, observer, points, vertex)
+    return _power_of(obs, theta, rho, observer, points, vertex)
 
 
-def power_of(obs, theta: float, rho: float, observer: np.ndarray, points: np.ndarray,
+def _power_of(obs, theta: float, rho: float, observer: np.ndarray, points: np.ndarray,
               vertex: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """:func:`power_terms` from the points' images in the flat mirror, already
     observed (the solver's forward model has them)."""

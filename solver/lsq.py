@@ -78,7 +78,7 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
     init = initial or solve_single(o, bpos[0], beacons[0].alpha_deg,
                                    beacon_d_total=beacons[0].d_total,
                                    target_alpha_deg=targets[0][0], target_d_total=targets[0][1])
-    p = FitProblem.of(o, bpos, len(targets), sig, calibration, meas_d)
+    p = FitProblem.of(bpos, len(targets), sig, calibration=calibration, d_cm=meas_d)
     x0 = np.concatenate([[init.mirror.yaw_deg, init.mirror.rho, *init.target], p.neutral[4:]])
     fit = _robust_fit(p, x0, o, bpos, meas_a=meas_a, meas_d=meas_d)
     if np.linalg.cond(fit.jtj) > 1e14:
@@ -116,7 +116,7 @@ def _robust_fit(p: FitProblem, x0: np.ndarray, o: np.ndarray, bpos: np.ndarray, 
     from scipy.optimize import least_squares  # scipy is slow to import: only when used
 
     def fun(x):
-        a, d, _, _ = forward(x, o, bpos, p.nt, p.unknown, p.free)
+        a, d, _, _ = forward(x, o, bpos, nt=p.nt, nuisances=p.unknown, free=p.free)
         return np.concatenate([p.w_a * wrap_bearing(a - meas_a), p.w_d * (d - meas_d),
                                p.prior @ (x - p.neutral)])
 
@@ -225,7 +225,7 @@ def crlb(observer: ArrayLike, beacons: ArrayLike, mirror_yaw_deg: float, *, mirr
     t = np.asarray(target, float)
     x4 = np.array([mirror_yaw_deg, mirror_rho, *t])
     _, d, _, _ = predict(x4, o, np.vstack([B, np.broadcast_to(t, (n_targets, 2))]))
-    p = FitProblem.of(o, B, n_targets, sig, calibration, d)
+    p = FitProblem.of(B, n_targets, sig, calibration=calibration, d_cm=d)
     x = np.concatenate([x4, p.neutral[4:]])
     J = p.jacobian(x, o, B)
     info = J.T @ J

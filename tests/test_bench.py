@@ -14,7 +14,7 @@ import yaml
 
 from mirrorsim.camera.sensor import add_noise, undistort_points
 from mirrorsim.cli.main import main
-from mirrorsim.detection.detector import read_frame
+from mirrorsim.detection.frame_files import read_frame
 from mirrorsim.formats.capture import CaptureRecord
 from mirrorsim.pipelines.frame import render_and_measure
 from mirrorsim.pipelines.scenes import scene_from_dict
@@ -622,7 +622,7 @@ def test_jpeg_frames_have_their_own_calibration():
 def test_a_frame_and_its_kind_come_from_one_read(tmp_path):
     import cv2
 
-    from mirrorsim.detection.detector import read_stored_frame
+    from mirrorsim.detection.frame_files import read_stored_frame
 
     rgb = np.zeros((16, 24, 3), np.uint8)
     rgb[4:12, 6:18] = (200, 180, 40)

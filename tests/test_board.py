@@ -20,7 +20,7 @@ from mirrorsim.detection.board import (
     measure_camera_pose,
     pitch_factor,
 )
-from mirrorsim.detection.detector import read_frame
+from mirrorsim.detection.frame_files import read_frame
 from mirrorsim.errors import DetectionError
 from mirrorsim.formats.capture import CaptureRecord
 from mirrorsim.formats.files import claim_output_folder

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from mirrorsim.cli.main import main
-from mirrorsim.detection.detector import detect_frame, read_frame
+from mirrorsim.detection.detector import detect_frame
+from mirrorsim.detection.frame_files import read_frame
 from mirrorsim.errors import DetectionError
 from mirrorsim.formats.capture import CaptureRecord
 from mirrorsim.pipelines.calibrate import calibrate

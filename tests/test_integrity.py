@@ -596,7 +596,7 @@ def test_frame_sizes_read_from_headers_match_the_decoded_images():
     import cv2
     import numpy as np
 
-    from mirrorsim.detection.detector import header_size
+    from mirrorsim.detection.frame_files import header_size
 
     img = np.zeros((37, 53, 3), np.uint8)
     png = cv2.imencode(".png", img)[1].tobytes()

@@ -302,7 +302,8 @@ def test_mirror_image_lies_where_the_mirror_puts_it(tmp_path, fast_variant):
     the glass).  At 64 spp the edges' noise is ~0.005 px."""
     import copy
 
-    from mirrorsim.detection.detector import measure_object, read_frame
+    from mirrorsim.detection.detector import measure_object
+    from mirrorsim.detection.frame_files import read_frame
     from mirrorsim.scene.model import TARGET_THICKNESS
     from solver.geometry import reflect, unit
 

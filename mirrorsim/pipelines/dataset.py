@@ -28,7 +28,6 @@ Work runs in worker processes (:mod:`mirrorsim.pipelines.workers`) or on a Dask 
 from __future__ import annotations
 
 import hashlib
-import math
 import time
 import traceback
 import warnings
@@ -56,15 +55,11 @@ from mirrorsim.formats.dataset_folder import (
 from mirrorsim.formats.error_model import ErrorModel
 from mirrorsim.formats.error_model_file import default_error_model, load_error_model
 from mirrorsim.formats.files import dumps, write_json, write_text
+from mirrorsim.pipelines.dataset_row import row_of
 from mirrorsim.pipelines.random_scenes import DatasetSpec, NoValidScene
-from mirrorsim.pipelines.score import Report
 from mirrorsim.pipelines.workers import run_dask, run_local, usable_cores
 from mirrorsim.progress import progress_bar
-from mirrorsim.scene import imperfections
-from mirrorsim.scene.model import Scene
-from mirrorsim.truth.groundtruth import ObjectTruth
-from solver.geometry import yaw_difference
-from solver.selfcal import NUISANCES, PLAIN, SelfCalibration, check_nuisances, priors_text
+from solver.selfcal import PLAIN, SelfCalibration, check_nuisances
 
 # where the scenes run: warm local worker processes, or a Dask cluster
 EXECUTORS = ("local", "dask")
@@ -123,7 +118,7 @@ def process_one(i: int, seed: int, spec: DatasetSpec, *, out: str, spp: int | No
                                 calibration=calibration)
         write_json(out_dir / "frames" / name / f"{name}.measurements.json",
                    rep.measurements.to_json())
-        row.update(_flatten(scene, rep))
+        row.update(row_of(scene, rep))
         row["seconds_sample"] = t1 - t0
         row["error"] = ""
     except SCENE_FAILURES as exc:  # the scene's own: recorded, one bad scene must not stop a run
@@ -137,77 +132,6 @@ def process_one(i: int, seed: int, spec: DatasetSpec, *, out: str, spp: int | No
     done = replace(table.DatasetRow.from_json(row), files=scene_files(out_dir, name))
     write_json(out_dir / "rows" / f"{name}.json", row_document(done, digest))
     return SceneResult(i, done)
-
-
-def _flatten(scene: Scene, rep: Report) -> dict:
-    """The row's columns: scene parameters, truth, measurements, solution, errors (each
-    beacon's under its own prefix, :func:`~mirrorsim.formats.dataset_table.beacon_kind`;
-    the self-calibration the report solved with)."""
-    cam, mir, t = scene.camera, scene.mirror, rep.truth
-    meas, sol, err = rep.measurements, rep.solution, rep.errors
-    cov = sol.target_covariance
-    row = {
-        "camera_x": cam.position[0], "camera_y": cam.position[1], "camera_height": cam.height,
-        "camera_pan_deg": cam.pan_deg, "hfov_deg": cam.hfov,
-        "mirror_x": mir.center[0], "mirror_y": mir.center[1], "mirror_yaw_deg": mir.yaw % 180,
-        "mirror_width": mir.size[0], "mirror_height": mir.size[1],
-        "target_x": scene.target.position[0], "target_y": scene.target.position[1],
-        "beacons": len(scene.beacons), "pencil_height_cm": scene.beacons[0].height,
-        "calibrate": ",".join(rep.self_calibration.nuisances),
-        "calibrate_priors": priors_text(rep.self_calibration.priors),
-        "variant": rep.render.variant, "spp": rep.render.spp, "sampler": rep.render.sampler,
-        "background_spp": scene.render.outside_spp(),
-        "beacon_spp": scene.render.beacon_box_spp(),
-        "render_seed": rep.render.seed,
-        **imperfections.row_values(scene),
-    }
-    row.update({"observer_x": meas.observer[0], "observer_y": meas.observer[1],
-                "observer_pan_deg": meas.observer_pan_deg,  # the capture record's
-                "fx_px": scene.camera.fx, "beacon_sigma": rep.self_calibration.position_sigma})
-    sig = meas.sigma
-    # the target as measured (its mean over the frames), clipped as in the first frame;
-    # each beacon from its own frame
-    seen = rep.image_features  # the target's, then each beacon's
-    objects = [("target", t.target, meas.targets[0], rep.frames[0].target_clipped,
-                sig.target, seen[0])]
-    for k, (b, frame) in enumerate(zip(meas.beacons, rep.frames, strict=True)):
-        kind = table.beacon_kind(k)
-        row.update({table.object_column(kind, "known_x"): b.position[0],
-                    table.object_column(kind, "known_y"): b.position[1]})
-        objects.append((kind, t.beacons[k], (b.alpha_deg, b.d_total), frame.beacon_clipped,
-                        sig.beacons[k], seen[1 + k]))
-    for kind, truth, (alpha, d), clipped, s, f in objects:
-        values = {
-            "pos_x": truth.position[0], "pos_y": truth.position[1],
-            "alpha_true": truth.alpha_deg, "d_true": truth.d_total,
-            "d1": truth.d1, "d2": truth.d2,
-            "off_axis_deg": (truth.alpha_deg - cam.pan_deg + 180.0) % 360.0 - 180.0,
-            "incidence_deg": _incidence_deg(scene, truth),
-            "height_px_true": truth.image_px.height,
-            "alpha_meas": alpha, "d_meas": d,
-            "alpha_err": alpha - truth.alpha_deg,
-            "d_rel_err": (d - truth.d_total) / truth.d_total,
-            "clipped": bool(clipped),
-            "height_px_meas": f.height_px, "contrast": f.contrast, "noise": f.noise,
-            "jpeg_quality": f.jpeg_quality,
-            "sigma_alpha_deg": s.alpha_deg, "sigma_d_rel": s.d_total_rel,
-        }
-        row.update({table.object_column(kind, name): v for name, v in values.items()})
-    row.update({
-        "est_target_x": float(sol.target[0]), "est_target_y": float(sol.target[1]),
-        "est_mirror_yaw_deg": sol.mirror.yaw_deg,
-        "err_target_cm": err.target_cm, "err_mirror_yaw_deg": err.mirror_yaw_deg,
-        "err_mirror_offset_cm": err.mirror_offset_cm,
-        "err_reflection_point_cm": err.reflection_point_cm,
-        "target_ellipse95_major_cm": (math.nan if err.target_ellipse95_major_cm is None
-                                      else err.target_ellipse95_major_cm),
-        "target_cov_xx": float(cov[0, 0]), "target_cov_xy": float(cov[0, 1]),
-        "target_cov_yy": float(cov[1, 1]), "target_mahalanobis": err.target_mahalanobis,
-        **{f"est_{key}": sol.nuisances.get(key, math.nan) for key, _ in NUISANCES.values()},
-        **{f"est_{key}_sd": sol.nuisance_sd.get(key, math.nan)
-           for key, _ in NUISANCES.values()},
-    })
-    return row
 
 
 def _calibrate_models(spec: DatasetSpec, variant: str, progress: bool) -> None:
@@ -229,13 +153,6 @@ def _calibrate_models(spec: DatasetSpec, variant: str, progress: bool) -> None:
             calibrate(cam, spec.target_size, float(height), variant=variant,
                       distance_error=float(error))
             bar.update()
-
-
-def _incidence_deg(scene: Scene, truth: ObjectTruth) -> float:
-    """Angle between the camera's ray to the mirror and the mirror's normal."""
-    ray = np.asarray(truth.reflection_point) - np.asarray(scene.camera.position, float)
-    ray_bearing = math.degrees(math.atan2(ray[1], ray[0]))
-    return 90.0 - float(yaw_difference(ray_bearing, scene.mirror.yaw))
 
 
 # ------------------------------------------------------------------- the run
@@ -323,27 +240,67 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
         ``spp`` outside 1..MAX_SPP, an unknown ``sampler``, ``executor`` or ``keep``;
         for nuisances the spec's beacons cannot carry.
     """
-    from mirrorsim.pipelines.random_scenes import load_spec
     from mirrorsim.rendering.backend import choose_variant
 
     _check_run_parameters(n, seed, workers, spp, sampler, executor, keep, variant)
     # plain numbers from here on (numpy's would write themselves into files otherwise)
     n, seed, workers, spp = int(n), int(seed), int(workers), None if spp is None else int(spp)
     out = Path(out)
+    spec = _run_spec(spec_path, sampler=sampler, beacons=beacons, calibration=calibration)
+    # the model shipped for the spec's benches (a spec with a bench block draws
+    # imperfections), as evaluate chooses it for a scene
+    shipped = default_error_model("bench" if spec.data.get("bench") else "ideal")
+    model = error_model or shipped
+    meta = _dataset_meta(spec, n=n, seed=seed, spp=spp, spec_path=spec_path, model=model,
+                         shipped=shipped, calibration=calibration)
+    with writing(out, meta, resume):  # claimed, and locked while it runs
+        make_folders(out, meta)
+        chosen = choose_variant(variant)  # the probe runs once here rather than in every worker
+        _calibrate_models(spec, chosen, progress)
+        # a job is its scene's index and the run's seed; the rest is the run's, by name
+        job = partial(process_one, spec=spec, out=str(out), spp=spp, variant=chosen,
+                      keep=tuple(keep), error_model=model, calibration=calibration,
+                      digest=settings_digest(meta))
+        done = {p.stem for p in (out / "rows").glob("scene*.json")}
+        todo = [i for i in range(n) if scene_name(i) not in done]
+        t_start = time.perf_counter()
+        retry = _run_scenes(out, todo, seed, job=job, executor=executor, workers=workers,
+                            scheduler=scheduler, max_rss_mb=max_rss_mb, progress=progress)
+        wall = time.perf_counter() - t_start
+        rows = collect_rows(out, n)  # against dataset.json as it is on disk
+        write_table(out, rows)
+        write_card(out, meta, rows, variant=chosen)
+        return DatasetRun(rows=len(rows), computed=len(todo) - len(retry),
+                          already_done=n - len(todo),
+                          failed=sum(bool(r.error) for r in rows), retry=retry,
+                          parquet=out / "dataset.parquet", seconds=wall,
+                          per_minute=len(todo) / wall * 60 if todo and wall else 0.0)
+
+
+def _run_spec(spec_path: str | Path | None, *, sampler: str | None, beacons: int | None,
+              calibration: SelfCalibration) -> DatasetSpec:
+    """The run's spec: the file's, with the sampler and the beacon count given (part of
+    the spec, so that ``--resume`` checks them), able to carry the nuisances."""
+    from mirrorsim.pipelines.random_scenes import load_spec
+
     spec = load_spec(spec_path)
-    if sampler is not None:  # part of the spec, so that --resume checks it
+    if sampler is not None:
         spec = spec.with_sampler(sampler)
-    if beacons is not None:  # likewise
+    if beacons is not None:
         spec = spec.with_beacon_count(beacons)
     try:  # before anything is written
         check_nuisances(calibration.nuisances, spec.beacon_count, 1, priors=calibration.priors)
     except SolverError as exc:
         raise BadParameter("nuisances", f"{exc} (scenes of {spec.beacon_count} beacon(s) "
                            f"drawn from {spec_path or 'the default spec'})") from None
-    # the model shipped for the spec's benches (a spec with a bench block draws
-    # imperfections), as evaluate chooses it for a scene
-    shipped = default_error_model("bench" if spec.data.get("bench") else "ideal")
-    model = error_model or shipped
+    return spec
+
+
+def _dataset_meta(spec: DatasetSpec, *, n: int, seed: int, spp: int | None,
+                  spec_path: str | Path | None, model: ErrorModel, shipped: ErrorModel,
+                  calibration: SelfCalibration) -> dict:
+    """What ``dataset.json`` records of the run: its settings (a resume compares them),
+    the error model's digest, and for the card the files it came from."""
     meta = {"format": DATASET_FORMAT, "n": n, "seed": seed, "spp": spp, "spec": spec.data,
             "error_model_sha256": _digest(model),
             # for the card's command only (not settings: a resume compares none of them)
@@ -357,45 +314,32 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
                              "position_sigma": calibration.position_sigma,
                              **({"priors": dict(calibration.priors)}
                                 if calibration.priors else {})}
-    with writing(out, meta, resume):  # claimed, and locked while it runs
-        make_folders(out, meta)
-        chosen = choose_variant(variant)  # the probe runs once here rather than in every worker
-        _calibrate_models(spec, chosen, progress)
-        retry: dict[int, str] = {}
+    return meta
 
-        def is_done(i: int) -> bool:
-            return i in retry or (out / "rows" / f"{scene_name(i)}.json").exists()
 
-        done = {p.stem for p in (out / "rows").glob("scene*.json")}
-        todo = [i for i in range(n) if scene_name(i) not in done]
-        t_start = time.perf_counter()
-        bar = progress_bar(len(todo), unit="scene", enabled=progress, desc="dataset")
+def _run_scenes(out: Path, todo: list[int], seed: int, *, job: Callable[..., SceneResult],
+                executor: str, workers: int, scheduler: str | None, max_rss_mb: float,
+                progress: bool) -> dict[int, str]:
+    """Each scene of ``todo`` through ``job``, with one bar; the scenes to retry (index →
+    why: no row)."""
+    retry: dict[int, str] = {}
 
-        def on_result(result: SceneResult) -> None:
-            if result.row is None:
-                retry[result.index] = result.retry
-            bar.update()
+    def is_done(i: int) -> bool:
+        return i in retry or (out / "rows" / f"{scene_name(i)}.json").exists()
 
-        digest = settings_digest(meta)
-        # a job is its scene's index and the run's seed; the rest is the run's, by name
-        job = partial(process_one, spec=spec, out=str(out), spp=spp, variant=chosen,
-                      keep=tuple(keep), error_model=model, calibration=calibration,
-                      digest=digest)
-        jobs = [(i, seed) for i in todo]
-        try:
-            _run_jobs(job, jobs, executor, workers, scheduler=scheduler, is_done=is_done,
-                      on_result=on_result, max_rss_mb=max_rss_mb)
-        finally:
-            bar.close()
-        wall = time.perf_counter() - t_start
-        rows = collect_rows(out, n)  # against dataset.json as it is on disk
-        write_table(out, rows)
-        write_card(out, meta, rows, variant=chosen)
-        return DatasetRun(rows=len(rows), computed=len(todo) - len(retry),
-                          already_done=n - len(todo),
-                          failed=sum(bool(r.error) for r in rows), retry=retry,
-                          parquet=out / "dataset.parquet", seconds=wall,
-                          per_minute=len(todo) / wall * 60 if todo and wall else 0.0)
+    bar = progress_bar(len(todo), unit="scene", enabled=progress, desc="dataset")
+
+    def on_result(result: SceneResult) -> None:
+        if result.row is None:
+            retry[result.index] = result.retry
+        bar.update()
+
+    try:
+        _run_jobs(job, [(i, seed) for i in todo], executor, workers, scheduler=scheduler,
+                  is_done=is_done, on_result=on_result, max_rss_mb=max_rss_mb)
+    finally:
+        bar.close()
+    return retry
 
 
 def _run_jobs(job: Callable[..., SceneResult], jobs: list[tuple], executor: str,

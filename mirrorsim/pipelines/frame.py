@@ -16,11 +16,8 @@ from pathlib import Path
 import numpy as np
 
 from mirrorsim.camera.sensor import to_srgb8
-from mirrorsim.detection.detector import (
-    Detection,
-    detect_frame,
-    read_stored_frame,
-)
+from mirrorsim.detection.detector import Detection, detect_frame
+from mirrorsim.detection.frame_files import read_stored_frame
 from mirrorsim.detection.image_geometry import Calibration
 from mirrorsim.errors import DetectionError
 from mirrorsim.formats.capture import CaptureError, CaptureRecord, load_capture
@@ -57,7 +54,7 @@ def calibration_for(capture: CaptureRecord, *, variant: str = "auto",
                     distance_error: float = 0.0, subsampled: bool = False) -> Calibration:
     """The size-constancy constants for the camera and objects a capture record names
     (``subsampled``: for its JPEG frames, which the detector measures otherwise; see
-    :func:`~mirrorsim.detection.detector.read_stored_frame`).
+    :func:`~mirrorsim.detection.frame_files.read_stored_frame`).
 
     ``distance_error``: the bench's calibration error (cm), which a capture record cannot
     know; the simulator renders its calibration with it.

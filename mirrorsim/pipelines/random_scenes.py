@@ -26,8 +26,16 @@ from mirrorsim.formats.scenefile import (
     read_render,
     scene_document,
 )
+from mirrorsim.pipelines.random_bench import (
+    BENCH_SPEC_KEYS,
+    BY_SPEC_PATH,
+    OFFSET_IMPERFECTION,
+    check_bench_keys,
+    draw_bench,
+    draw_number,
+    set_key,
+)
 from mirrorsim.pipelines.scenes import scene_from_dict
-from mirrorsim.scene.imperfections import REGISTRY
 from mirrorsim.scene.model import MAX_BOARD_CM, Camera, Scene
 from mirrorsim.truth import visibility
 from solver.measurements import is_number
@@ -158,7 +166,7 @@ def load_spec(path: str | Path | None = None) -> DatasetSpec:
     r.mapping(spec["occluder"], "occluder", {"at", "length", "height"})
     read_render(r, spec.get("render", {}), seed=False)
     r.integer(spec.get("max_tries", 5000), "max_tries", low=1, high=MAX_TRIES)
-    _check_bench_keys(spec, r)
+    check_bench_keys(spec, r)
     # draws find range errors (wrong types, lo > hi) with their key, and a spec under
     # which no usable scene exists
     _draw(spec, np.random.default_rng(0), path)
@@ -166,7 +174,7 @@ def load_spec(path: str | Path | None = None) -> DatasetSpec:
         _sample(spec, 0, "probe", tries=min(PROBE_TRIES, spec.get("max_tries", 5000)))
     except NoValidScene as exc:
         raise r.fail("", str(exc)) from None
-    _check_bench_ends(spec, r)
+    check_bench_ends(spec, r)
     return DatasetSpec(spec)
 
 
@@ -199,7 +207,7 @@ def _value(spec: dict, block: str, key: str, rng: np.random.Generator, where) ->
     v = spec[block].get(key)
     if v is None:
         raise r.fail(f"{block}.{key}", "missing required key (a number or [lo, hi])")
-    return _draw_number(v, f"{block}.{key}", rng, where)
+    return draw_number(v, f"{block}.{key}", rng, where=where)
 
 
 def _draw(spec: dict, rng: np.random.Generator, where="<spec>",
@@ -222,7 +230,7 @@ def _draw(spec: dict, rng: np.random.Generator, where="<spec>",
     mirror = {"center": centre.tolist(), "yaw": yaw,
               "size": [g("mirror", "width"), g("mirror", "height")]}
     target = {"position": [g("target", "x"), g("target", "y")],
-              "size": [_draw_number(x, f"target.size[{k}]", rng, where)
+              "size": [draw_number(x, f"target.size[{k}]", rng, where=where)
                        for k, x in enumerate(spec["target"]["size"])]}
     # the beacon in front of the mirror (on the camera's side)
     n = np.array([-math.sin(math.radians(yaw)), math.cos(math.radians(yaw))])
@@ -245,7 +253,7 @@ def _draw(spec: dict, rng: np.random.Generator, where="<spec>",
            "height": g("occluder", "height")}
     # the other beacons drawn after everything else: a spec of one beacon draws as before
     # (one pencil height for all: the calibration and the detector take one)
-    count = _draw_number(spec["beacon"].get("count", 1), "beacon.count", rng, where,
+    count = draw_number(spec["beacon"].get("count", 1), "beacon.count", rng, where=where,
                          integer=True)
     beacons += [beacon(beacons[0]["height"]) for _ in range(count - 1)]
     # one beacon under the scene file's "beacon" key: a refusal names the key a spec has
@@ -256,135 +264,16 @@ def _draw(spec: dict, rng: np.random.Generator, where="<spec>",
                                                   spec.get("render", {}), seed=False))}
     # from their own stream, so that a bench block leaves the geometry drawn as without it
     bench_rng = bench_rng or rng
-    for path, value in _draw_bench(spec.get("bench") or {}, bench_rng, where).items():
-        _set_key(d, path, value)
-    block, key = _OFFSET.spec_path.split(".")
+    for path, value in draw_bench(spec.get("bench") or {}, bench_rng, where).items():
+        set_key(d, path, value)
+    block, key = OFFSET_IMPERFECTION.spec_path.split(".")
     offset = ((spec.get("bench") or {}).get(block) or {}).get(key)
     if offset is not None:  # each further beacon's believed position off by its own draw
         for b in beacons[1:]:
-            b["known_position"] = [p + _draw_number(offset, f"bench.{_OFFSET.spec_path}",
-                                                    bench_rng, where) for p in b["position"]]
+            key_path = f"bench.{OFFSET_IMPERFECTION.spec_path}"
+            b["known_position"] = [p + draw_number(offset, key_path, bench_rng, where=where)
+                                   for p in b["position"]]
     return d
-
-
-# ------------------------------------------------------------- bench imperfections
-# The spec's optional `bench:` block: each imperfection of the registry under its spec key
-# path, a value or a [lo, hi] range drawn per scene.  Two are drawn in another form: the
-# mirror's `curvature` (1/cm, 0 = flat) instead of its radius, since the effect is linear
-# in 1/R and a range of radii would pass through infinity; and the beacon's
-# `known_position_offset` (cm, drawn for x and y alike) instead of a position.
-BENCH_SPEC_KEYS: dict[str, set[str]] = {}
-for _imp in REGISTRY:
-    _block, _leaf = _imp.spec_path.split(".")
-    BENCH_SPEC_KEYS.setdefault(_block, set()).add(_leaf)
-_BY_SPEC_PATH = {imp.spec_path: imp for imp in REGISTRY}
-_OFFSET = next(imp for imp in REGISTRY if imp.form == "offset")  # a believed position's
-
-
-def _draw_number(raw: Any, key: str, rng: np.random.Generator, where,
-                 integer: bool = False) -> float:
-    """A spec's value, or a uniform draw from its [lo, hi] (integers for an integer key)."""
-    r = Reader(where, SceneError)
-    if isinstance(raw, list) and len(raw) == 2:
-        lo, hi = r.number(raw[0], f"{key}[0]"), r.number(raw[1], f"{key}[1]")
-        if lo > hi:
-            raise r.fail(key, f"{raw}: the range's low end exceeds its high end")
-        if integer:
-            return int(rng.integers(math.ceil(lo), math.floor(hi) + 1))
-        return float(rng.uniform(lo, hi))
-    return int(r.integer(raw, key, low=-2**31, high=2**31)) if integer else r.number(raw, key)
-
-
-def _draw_bench(bench: dict, rng: np.random.Generator, where="<spec>") -> dict[str, Any]:
-    """One draw of the spec's bench block, as scene-file key paths → values."""
-    out: dict[str, Any] = {}
-    for block in BENCH_SPEC_KEYS:  # a fixed order: same seed, same draws
-        raw = bench.get(block) or {}
-        for key in sorted(raw):
-            imp = _BY_SPEC_PATH[f"{block}.{key}"]
-            path, v = f"bench.{block}.{key}", raw[key]
-            if imp.form == "lens":
-                if not isinstance(v, list) or len(v) != 2:
-                    raise Reader(where, SceneError).fail(path, f"expected [k1, k2] (each a "
-                                                         f"value or [lo, hi]), got {show(v)}")
-                out[imp.key] = [_draw_number(v[j], f"{path}[{j}]", rng, where) for j in (0, 1)]
-            elif imp.form == "flag":  # a value (the scene reader checks the bool), or
-                # [true, false]: drawn per scene
-                out[imp.key] = (bool(rng.integers(2)) if v == [True, False] or v == [False, True]
-                                else v)
-            elif imp.form == "noise":
-                n = Reader(where, SceneError).mapping(v, path, {"full_well", "read_noise"})
-                out[imp.key] = {k: _draw_number(n[k], f"{path}.{k}", rng, where)
-                                for k in ("full_well", "read_noise")}
-            elif imp.form == "radius":  # drawn as the curvature 1/R
-                c = _draw_number(v, path, rng, where)
-                if c != 0.0:
-                    out[imp.key] = 1.0 / c
-            elif imp.form == "offset":
-                out[imp.spec_path] = [_draw_number(v, path, rng, where) for _ in (0, 1)]
-            else:
-                out[imp.key] = _draw_number(v, path, rng, where,
-                                            integer=imp.form == "quality")
-    return out
-
-
-def _set_key(d: dict, path: str, value: Any) -> None:
-    block, key = path.split(".")
-    imp = _BY_SPEC_PATH.get(path)
-    if imp is not None and imp.form == "offset":  # the first beacon's (_draw: the others')
-        first = d["beacons"][0] if "beacons" in d else d["beacon"]
-        first["known_position"] = [p + o for p, o in zip(first["position"], value, strict=True)]
-    else:
-        d.setdefault(block, {})[key] = value
-
-
-def _check_bench_keys(spec: dict, r: Reader) -> None:
-    """The bench block's keys (its values are checked as they are drawn)."""
-    bench = spec.get("bench")
-    if bench is None:
-        return
-    r.mapping(bench, "bench", set(), optional=set(BENCH_SPEC_KEYS))
-    for block, keys in BENCH_SPEC_KEYS.items():
-        if block in bench:
-            r.mapping(bench[block], f"bench.{block}", set(), optional=keys)
-
-
-def _check_bench_ends(spec: dict, r: Reader) -> None:
-    """Each of the bench block's ranges at both ends, as a scene file would take it (a
-    tilt range reaching 45° is refused here, not thinned out silently by the draws)."""
-    bench = spec.get("bench")
-    if bench is None:
-        return
-    ideal = _sample({**spec, "bench": None}, 0, "probe",
-                         tries=min(PROBE_TRIES, spec.get("max_tries", 5000)))
-    base = yaml.safe_load(to_yaml(ideal))
-    for block in BENCH_SPEC_KEYS:
-        for key, raw in (bench.get(block) or {}).items():
-            for end in (0, 1):  # each range's low end, then its high end
-                lens = _BY_SPEC_PATH[f"{block}.{key}"].form == "lens"
-                pick = ([_range_end(x, end) for x in raw] if lens and isinstance(raw, list)
-                        else _range_end(raw, end))
-                d = copy.deepcopy(base)
-                for path, value in _draw_bench({block: {key: pick}},
-                                               np.random.default_rng(0), r.source).items():
-                    _set_key(d, path, value)
-                try:
-                    scene_from_dict(d, source=str(r.source), default_name="probe")
-                except SceneError as exc:  # named by the spec's key, with the reason
-                    raise r.fail(f"bench.{block}.{key}", f"{show(raw)}: {exc.key}: "
-                                 f"{exc.message}") from None
-
-
-def _range_end(raw: Any, end: int) -> Any:
-    """A spec value with each [lo, hi] range replaced by its low (0) or high (1) end."""
-    if isinstance(raw, dict):
-        return {k: _range_end(v, end) for k, v in raw.items()}
-    if isinstance(raw, list) and len(raw) == 2 and all(
-            is_number(x) for x in raw):
-        return raw[end]
-    if isinstance(raw, list):
-        return [_range_end(v, end) for v in raw]
-    return raw
 
 
 def sample_scene(spec: DatasetSpec, rng: int | np.random.Generator | None, name: str,
@@ -432,3 +321,41 @@ def _sample(spec: dict, rng: int | np.random.Generator | None, name: str,
 def to_yaml(scene: Scene) -> str:
     """The scene as a scene file (docs/scenes.md's format)."""
     return yaml.safe_dump(scene_document(scene), sort_keys=False)
+
+
+def check_bench_ends(spec: dict, r: Reader) -> None:
+    """Each of the bench block's ranges at both ends, as a scene file would take it (a
+    tilt range reaching 45° is refused here, not thinned out silently by the draws)."""
+    bench = spec.get("bench")
+    if bench is None:
+        return
+    ideal = _sample({**spec, "bench": None}, 0, "probe",
+                         tries=min(PROBE_TRIES, spec.get("max_tries", 5000)))
+    base = yaml.safe_load(to_yaml(ideal))
+    for block in BENCH_SPEC_KEYS:
+        for key, raw in (bench.get(block) or {}).items():
+            for end in (0, 1):  # each range's low end, then its high end
+                lens = BY_SPEC_PATH[f"{block}.{key}"].form == "lens"
+                pick = ([_range_end(x, end) for x in raw] if lens and isinstance(raw, list)
+                        else _range_end(raw, end))
+                d = copy.deepcopy(base)
+                for path, value in draw_bench({block: {key: pick}},
+                                               np.random.default_rng(0), r.source).items():
+                    set_key(d, path, value)
+                try:
+                    scene_from_dict(d, source=str(r.source), default_name="probe")
+                except SceneError as exc:  # named by the spec's key, with the reason
+                    raise r.fail(f"bench.{block}.{key}", f"{show(raw)}: {exc.key}: "
+                                 f"{exc.message}") from None
+
+
+def _range_end(raw: Any, end: int) -> Any:
+    """A spec value with each [lo, hi] range replaced by its low (0) or high (1) end."""
+    if isinstance(raw, dict):
+        return {k: _range_end(v, end) for k, v in raw.items()}
+    if isinstance(raw, list) and len(raw) == 2 and all(
+            is_number(x) for x in raw):
+        return raw[end]
+    if isinstance(raw, list):
+        return [_range_end(v, end) for v in raw]
+    return raw
