@@ -25,9 +25,10 @@ import argparse
 import clone  # noqa: E402, F401  (the clone first on sys.path)
 import numpy as np
 
+from solver.beacon_kalman import PFParams
 from solver.geometry import line_normal  # noqa: E402
 from solver.measurements import Sigma  # noqa: E402
-from solver.particle import MovingBeaconFilter, PFParams  # noqa: E402
+from solver.particle import MovingBeaconFilter
 from solver.particle_runs import mirror_errors, simulate_run, track  # noqa: E402
 from solver.placement import path_points  # noqa: E402
 from solver.smoother import smooth_run  # noqa: E402

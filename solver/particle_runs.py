@@ -8,9 +8,10 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
+from solver.beacon_kalman import PFParams
 from solver.geometry import line_normal
 from solver.measurements import BeaconMeasurement
-from solver.particle import DEFAULT_PARTICLES, MirrorEstimate, MovingBeaconFilter, PFParams
+from solver.particle import DEFAULT_PARTICLES, MirrorEstimate, MovingBeaconFilter
 from solver.sltr import observe
 
 

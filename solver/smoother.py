@@ -10,9 +10,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
+from solver.beacon_kalman import PFParams
 from solver.geometry import line_normal, wrap_bearing
 from solver.measurements import BeaconMeasurement
-from solver.particle import PFParams
 from solver.sltr import observe
 
 

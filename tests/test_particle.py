@@ -3,14 +3,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from solver.beacon_kalman import PFParams, Prior
 from solver.geometry import line_normal
-from solver.particle import (
-    MovingBeaconFilter,
-    PFParams,
-    Prior,
-    initial_particles,
-    pf_step,
-)
+from solver.particle import MovingBeaconFilter, initial_particles, pf_step
 from solver.particle_runs import mirror_errors, simulate_run, track
 from solver.placement import path_points
 from solver.smoother import smooth_run
@@ -122,7 +117,7 @@ def test_replay_gives_the_filter_s_own_beacon_and_likelihood():
     """The move step's replay of the history from the start reproduces, for the same
     mirror hypotheses, the beacons' Gaussians and log likelihoods the filter carried
     step by step (before any resampling: a huge prior so the weights stay spread)."""
-    from solver.particle import replay
+    from solver.beacon_kalman import replay
 
     path, controls, obs, _, params = _run()
     rho = line_normal(YAW) @ M

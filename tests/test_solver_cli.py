@@ -283,7 +283,7 @@ def test_review_mends_of_the_sweeps(tmp_path, capsys):
 
     import numpy as np
 
-    from mirrorsim.cli.registry import stdout_output
+    from mirrorsim.cli.outputs import stdout_output
     from mirrorsim.formats.dataset_folder import settings_digest
     from mirrorsim.formats.files import check_inputs_outside
     from mirrorsim.pipelines.scenes import load_scene

@@ -1,5 +1,5 @@
-"""The commands on measurements and many scenes: solve, montecarlo, plan, dataset,
-errormodel."""
+"""The commands on measurements: solve, montecarlo, plan (the dataset commands are
+:mod:`mirrorsim.cli.dataset_commands`')."""
 
 from __future__ import annotations
 
@@ -7,24 +7,20 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
+from mirrorsim.cli.outputs import out_file
 from mirrorsim.cli.registry import (
     at_least,
     calibrate_option,
     calibration_of,
     command,
     common,
-    default_workers,
     emit,
     error_model_of,
     finite,
     inputs,
     load,
-    out_file,
-    output,
-    sampler_option,
-    spp_option,
 )
-from mirrorsim.errors import BadArgument, BadParameter, RunFailed
+from mirrorsim.errors import BadArgument
 
 MAX_ITERATIONS = 1_000_000  # draws per Monte Carlo row: about a second a row at the most
 
@@ -208,194 +204,3 @@ def _plan(args) -> int:
     print(f"  figure: {plot_plan(scene, plan, out)}")
     emit(args, summ)
     return 0
-
-
-def _dataset_options(p):
-    from mirrorsim.pipelines.dataset import EXECUTORS, MAX_SCENES, MAX_WORKERS
-
-    p.add_argument("--n", type=int, required=True, help=f"number of scenes, 1..{MAX_SCENES}")
-    from mirrorsim.scene.model import MAX_SEED
-
-    p.add_argument("--seed", type=int, required=True,
-                   help=f"the dataset's seed, 0..{MAX_SEED} (scene i is drawn from (seed, i))")
-    output(p, "--out", "dataset", type=Path, required=True,
-           help="a new or empty folder, or (with --resume) one of its datasets")
-    p.add_argument("--workers", type=int, default=default_workers(),
-                   help=f"worker processes, 1..{MAX_WORKERS} (default: half the cores; more "
-                        "than the cores, or than the available memory holds at 1 GiB each, "
-                        "is capped)")
-    p.add_argument("--spec", type=Path, help="ranges of the random scenes (YAML)")
-    inputs(p, ("spec", "--spec", "file"))
-    spp_option(p, "the spec's")
-    sampler_option(p)
-    from mirrorsim.pipelines.score import EXTRA_FILES
-
-    p.add_argument("--keep", nargs="*", action="extend", default=[], choices=EXTRA_FILES,
-                   help="files to write beside each frame besides its PNG, capture record "
-                   "and truth: ids (the id labels), annotated (the detections drawn); "
-                   "default none")
-    p.add_argument("--beacons", type=int, metavar="N",
-                   help="beacons a scene, each drawn from the spec's beacon ranges and "
-                   "rendered in a frame of its own (default: the spec's beacon.count, 1)")
-    calibrate_option(p)  # needs --beacons (or a spec's beacon.count) that carries them
-    common(p, scene=False, variant=True, quiet=True,
-           error_model="each row's measurement σ's, which weight its solve and make its "
-                       "ellipse")
-    p.add_argument("--resume", action="store_true",
-                   help="finish an interrupted run, or extend one to a larger --n (the same "
-                   "seed and settings: the added scenes are those a run of that --n makes)")
-    p.add_argument("--executor", default="local", choices=EXECUTORS)
-    p.add_argument("--scheduler", metavar="ADDRESS",
-                   help="Dask scheduler (tcp://host:8786); default: a local cluster")
-
-
-@command("dataset", "many random scenes, rendered, detected and scored",
-         "Draw N random valid scenes from a spec (default scenes/dataset_spec.yaml), render, "
-         "detect, solve and score each, in parallel worker processes (or on a Dask cluster), "
-         "and write DIR/dataset.parquet (a row per scene), DIR/scenes/*.yaml, DIR/frames/ and a "
-         "dataset card DIR/README.md.  Interrupted runs resume with --resume; the same seed "
-         "gives the same rows whatever the number of workers.", options=_dataset_options)
-def _dataset(args) -> int:
-    from mirrorsim.formats.dataset_folder import DatasetError
-    from mirrorsim.pipelines.dataset import MAX_SCENES, MAX_WORKERS, run_dataset
-    from mirrorsim.pipelines.workers import max_workers
-    from mirrorsim.scene.model import MAX_SEED
-
-    at_least(("--n", args.n, 1, MAX_SCENES), ("--seed", args.seed, 0, MAX_SEED),
-             ("--workers", args.workers, 1, MAX_WORKERS))
-    calibration = calibration_of(args)
-    if args.spp is not None:  # checked as every scene's render settings are
-        from mirrorsim.scene.model import RenderSettings
-
-        RenderSettings(spp=args.spp)
-    workers = args.workers
-    if args.executor == "local":
-        most, why = max_workers()
-        if workers > most:
-            print(f"warning: --workers {workers} capped to {most} ({why})", file=sys.stderr)
-            workers = most
-    try:
-        res = run_dataset(args.n, args.seed, args.out, workers=workers,
-                          spec_path=args.spec, spp=args.spp, sampler=args.sampler,
-                          variant=args.variant, keep=tuple(args.keep), resume=args.resume,
-                          executor=args.executor, scheduler=args.scheduler,
-                          progress=not args.quiet, calibration=calibration,
-                          beacons=args.beacons,
-                          error_model=error_model_of(args))
-    except BadParameter as exc:
-        if exc.parameter != "nuisances":
-            raise
-        raise BadArgument("--calibrate", f"{exc.message}: draw more with --beacons or the "
-                          "spec's beacon.count") from None
-    except DatasetError as exc:
-        if not exc.resumable:
-            raise
-        raise DatasetError(args.out, "already holds a dataset: pass --resume to finish it, "
-                           "or choose another --out") from None
-    except RunFailed as exc:  # the rows done so far are kept: say how to finish
-        raise RunFailed(f"{exc}; rerun with --resume") from None
-    print(f"{args.out}: {res.rows} rows ({res.computed} computed now in "
-          f"{res.seconds:.0f} s, {res.per_minute:.1f} scenes/min; "
-          f"{res.already_done} already done; {res.failed} failed) → {res.parquet}")
-    if res.retry:
-        i, why = next(iter(res.retry.items()))
-        print(f"error: {len(res.retry)} scene(s) failed for a reason outside the scene "
-              f"(scene {i}: {why}); they have no row: rerun with --resume", file=sys.stderr)
-        return 1
-    return 0
-
-
-def _errormodel_options(p):
-    p.add_argument("dataset", type=Path, nargs="?",
-                   help="the dataset to fit (omit it to only --test a model)")
-    inputs(p, ("dataset", "the dataset DIR", "dataset"), ("test", "--test", "dataset"))
-    output(p, "--out", "file", type=Path,
-           help="model file, *.json (default DIR/error_model.json; its plots go beside it, "
-           "*.png, and with --test *.reliability.png)")
-    p.add_argument("--test", type=Path, metavar="HELDOUT",
-                   help="a dataset the model was not fitted on: print the coverage of the "
-                   "target's 50/90/95 %% ellipses, the median Mahalanobis distance and each "
-                   "measurement's errors within 1σ/2σ")
-    common(p, scene=False, json="the validation (with --test)",
-           error_model="the model to --test, when no DATASET is fitted")
-    output(p, "--plot", "file", type=Path, metavar="PNG", suffixes=(".png",),
-           help="the reliability diagram (with --test; default: beside a model fitted "
-           "here, none for a model given with --error-model, whose folder is yours)")
-
-
-@command("errormodel", "fit the detector's error model to a dataset, and test it on another",
-         "Fit each measurement's σ (target and beacon, alpha and d_total) as a function of what "
-         "its frame shows (the image's height in pixels, its angle off the optical axis, its "
-         "edges' contrast, the frame's noise and JPEG quality), with a tail factor that "
-         "holds 95 %% of the errors within 1.96 σ, the domain it was fitted on (a scene "
-         "outside it gets a warning) and, for a spec with a bench block, the benches' shared "
-         "errors as tolerances the solver estimates with priors; and the errors' bias against "
-         "geometry and bench (to explain them).  Needs at least "
-         "30 usable rows of each kind (five per coefficient of a σ law); a law whose σ's "
-         "over its own rows span more than a factor 10000, or move by more than a factor 30 "
-         "when it is refitted on 20 resamples of its rows, is refused as unstable, and one "
-         "that moves beyond 4 is kept with a warning.  "
-         "Writes DIR/error_model.json (give it to evaluate, dataset, budget, track, solve, "
-         "montecarlo or plan with --error-model) and DIR/error_model.png.  With --test "
-         "HELDOUT: solve each held-out row again with the model's σ's (and its bench's "
-         "priors) and say whether its ellipses hold; without DATASET or --error-model, the "
-         "shipped model the held-out spec's benches call for.",
-         options=_errormodel_options)
-def _errormodel(args) -> int:
-    from mirrorsim.cli.analysis_tables import error_model_summary
-    from mirrorsim.cli.plots import plot_error_model
-    from mirrorsim.formats.error_model_file import default_error_model
-    from mirrorsim.pipelines import errormodel
-
-    if args.dataset is None and args.test is None:
-        raise BadArgument("DATASET", "give a dataset to fit, or --test HELDOUT to test a model")
-    if args.dataset is not None and args.error_model:
-        raise BadArgument("--error-model", "it names a model to --test; give it or a DATASET "
-                          "to fit, not both")
-    for flag, value in (("--json", args.json), ("--plot", args.plot)):
-        if value is not None and args.test is None:
-            raise BadArgument(flag, "it writes the validation: give --test HELDOUT too")
-    if args.out is not None and args.out.suffix != ".json":
-        raise BadArgument("--out", f"{args.out}: the model is JSON: give a *.json path (its "
-                          "plots go beside it as *.png)")
-    out = None
-    if args.dataset is not None:
-        out = args.out or args.dataset / "error_model.json"
-        plots = out.with_suffix(".png")
-        if args.out is not None and plots.exists() and not args.out.exists():
-            # the plots' file, named by us, is someone else's unless it came with the model
-            raise BadArgument("--out", f"{args.out}: its plots would go over {str(plots)!r}, "
-                              "which is not a model's: choose another name")
-        cols = errormodel.read_columns(args.dataset)
-        try:
-            model = errormodel.fit(cols, errormodel.provenance_of(args.dataset, cols),
-                                   errormodel.spec_of(args.dataset).get("bench"))
-        except ValueError as exc:
-            raise BadArgument(str(args.dataset), str(exc)) from None
-        errormodel.write_model(model, out)
-        png = plot_error_model(cols, model, plots)
-        print(error_model_summary(model))
-        print(f"model: {out}\nplots: {png}")
-    else:  # the shipped model the held-out benches call for, as evaluate chooses it
-        model = error_model_of(args) or default_error_model(
-            "bench" if errormodel.spec_of(args.test).get("bench") else "ideal")
-    if args.test is not None:
-        _test_model(args, model, out)
-    return 0
-
-
-def _test_model(args, model, out: Path | None) -> None:
-    from mirrorsim.pipelines import errormodel, uncertainty
-
-    try:
-        v = uncertainty.validate(model, errormodel.read_columns(args.test))
-    except ValueError as exc:
-        raise BadArgument(str(args.test), str(exc)) from None
-    name = args.error_model or out or model.name()
-    print(f"{name} on {args.test}:")
-    print("\n".join(uncertainty.report_lines(v)))
-    plot = args.plot or (out.with_suffix(".reliability.png") if out is not None else None)
-    if plot is not None:
-        print(f"reliability diagram: "
-              f"{uncertainty.reliability_plot(v, plot, f'{name} on {args.test}')}")
-    emit(args, v.to_json())

@@ -6,14 +6,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from mirrorsim.cli.registry import (
-    command,
-    common,
-    emit,
-    load,
-    out_file,
-    output,
-)
+from mirrorsim.cli.outputs import out_file
+from mirrorsim.cli.registry import command, common, emit, load, output
 from mirrorsim.errors import BadArgument
 from mirrorsim.formats.files import emit_json
 

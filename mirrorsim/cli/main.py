@@ -1,9 +1,10 @@
 """The ``mirrorsim`` command: argument parsing and printing only.
 
-The commands live in :mod:`mirrorsim.cli.scene_commands` and :mod:`mirrorsim.cli.analysis_commands`,
-each handler declared beside its options.  Errors are told apart by class
-(:mod:`mirrorsim.errors`): bad input exits 2, a failed run 1, each with one line on
-stderr.
+The commands live in :mod:`mirrorsim.cli.authoring_commands`,
+:mod:`mirrorsim.cli.scene_commands`, :mod:`mirrorsim.cli.analysis_commands` and
+:mod:`mirrorsim.cli.dataset_commands`, each handler declared beside its options.
+Errors are told apart by class (:mod:`mirrorsim.errors`): bad input exits 2, a failed
+run 1, each with one line on stderr.
 """
 
 from __future__ import annotations
@@ -20,9 +21,11 @@ from mirrorsim import __version__
 from mirrorsim.cli import (  # noqa: F401 (they register)
     analysis_commands,
     authoring_commands,
+    dataset_commands,
     scene_commands,
 )
-from mirrorsim.cli.registry import COMMANDS, check_outputs, stdout_output
+from mirrorsim.cli.outputs import check_outputs, stdout_output
+from mirrorsim.cli.registry import COMMANDS
 from mirrorsim.errors import (
     DISK_CAUSES,
     BadArgument,

@@ -5,6 +5,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from mirrorsim.cli.outputs import out_folder
 from mirrorsim.cli.registry import (
     beacon_sigma_of,
     beacon_sigma_option,
@@ -16,7 +17,6 @@ from mirrorsim.cli.registry import (
     error_model_of,
     inputs,
     load,
-    out_folder,
     output,
     preload,
     render_options,

@@ -38,10 +38,11 @@ from mirrorsim.pipelines.scenes import check_given_scene
 from mirrorsim.pipelines.track_paths import HEADINGS, PATHS, beacon_path
 from mirrorsim.rendering.backend import check_variant
 from mirrorsim.scene.model import MAX_SEED, Scene, is_whole
+from solver.beacon_kalman import PFParams
 from solver.errors import SolverError
 from solver.geometry import line_normal
 from solver.measurements import BeaconMeasurement, Sigma
-from solver.particle import DEFAULT_PARTICLES, MovingBeaconFilter, PFParams
+from solver.particle import DEFAULT_PARTICLES, MovingBeaconFilter
 from solver.particle_runs import mirror_errors
 from solver.selfcal import check_position_sigma
 from solver.sltr import locate, mirror_from_beacon
@@ -181,7 +182,7 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
 
     The scene's first beacon moves; any others stand still beside it, each rendered and
     measured once (in a frame of its own, ``fixed<i>``) and weighed into the filter's
-    prior on the mirror (:class:`solver.particle.Prior`'s ``fixed``), its believed position
+    prior on the mirror (:class:`solver.beacon_kalman.Prior`'s ``fixed``), its believed position
     known to ``position_sigma`` cm per axis (0: exactly).
 
     Raises
