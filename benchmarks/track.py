@@ -44,7 +44,8 @@ from stamp import stamp  # noqa: E402
 from mirrorsim.errors import BadParameter  # noqa: E402
 from mirrorsim.pipelines.planning import plan_scene  # noqa: E402
 from mirrorsim.pipelines.scenes import load_scene  # noqa: E402
-from mirrorsim.pipelines.track import TrackReport, run_track  # noqa: E402
+from mirrorsim.pipelines.track import run_track
+from mirrorsim.pipelines.track_report import TrackReport
 from mirrorsim.scene.model import Beacon  # noqa: E402
 
 CHI2_2_95 = 5.991  # χ²₂'s 95 % point

@@ -59,7 +59,7 @@ _API = {
     "load_dataset": ("mirrorsim.formats.dataset_folder", "load_dataset"),
     "fit_error_model": ("mirrorsim.pipelines.errormodel", "fit_dataset"),
     "load_error_model": ("mirrorsim.formats.error_model_file", "load_error_model_or_default"),
-    "model_for": ("mirrorsim.pipelines.evaluate", "model_for"),
+    "model_for": ("mirrorsim.pipelines.solving", "model_for"),
 }
 __all__ = ["__version__", *_API]
 

@@ -610,7 +610,7 @@ def test_a_nuisance_the_beacons_do_not_separate_is_held_and_said():
     from types import SimpleNamespace
 
     from mirrorsim.formats.error_model_scope import BenchTolerances
-    from mirrorsim.pipelines.evaluate import SEPARATED_SD, solve_separated
+    from mirrorsim.pipelines.solving import SEPARATED_SD, solve_separated
 
     rng = np.random.default_rng(4)
     close = [BEACONS[0], BEACONS[0] + np.array([0.2, 0.0])]

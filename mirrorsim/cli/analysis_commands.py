@@ -62,7 +62,7 @@ def _solve(args) -> int:
         model = model or default_error_model()
         typical = model.typical
         sigma = replace(typical, beacons=typical.beacons * len(m.beacons))
-        from mirrorsim.pipelines.evaluate import model_calibration
+        from mirrorsim.pipelines.solving import model_calibration
 
         calibration = model_calibration(model, calibration)  # a bench model's priors
         source = (f"{model.name()}'s typical σ's (a measurements file holds no image "

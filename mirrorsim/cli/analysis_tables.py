@@ -17,7 +17,7 @@ from solver.selfcal import describe_priors
 if TYPE_CHECKING:  # budgets, plans and tracks run renders: no Mitsuba import to print one
     from mirrorsim.pipelines.budget import Budget
     from mirrorsim.pipelines.planning import Plan
-    from mirrorsim.pipelines.track import TrackReport
+    from mirrorsim.pipelines.track_report import TrackReport
     from solver.beacon_set import BeaconSet
 
 

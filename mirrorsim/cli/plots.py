@@ -22,7 +22,7 @@ if TYPE_CHECKING:  # the budget and the track run renders: no Mitsuba import to 
     from mirrorsim.formats.error_model import ErrorModel
     from mirrorsim.pipelines.budget import Budget
     from mirrorsim.pipelines.planning import Plan
-    from mirrorsim.pipelines.track import TrackReport
+    from mirrorsim.pipelines.track_report import TrackReport
 
 
 def _save(fig, out: Path, dpi: int) -> Path:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from typing import NamedTuple
 
 import numpy as np
 
@@ -280,62 +281,11 @@ def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str,
     calibration's reference) reads −0.15 ± 0.06 px, so it nearly cancels.
     """
     u0, v0, u1, v1 = box
-    on_chroma = not subsampled
-    sides_note: tuple[str, ...] = ()
     if kind == "beacon":
-        blue = np.ascontiguousarray(img[..., 2:3])
-        foot_img = img
-        if subsampled:
-            foot_img = np.asarray(stored if stored is not None else to_srgb8(img / 255.0),
-                                  np.float32)
-        top, bottom, out_top, out_bottom = _median_edges((img if subsampled else blue, foot_img),
-                                                         v0, v1, u0, u1, axis=0,
-                                                         chroma=(False, True),
-                                                         slope=(True, True),
-                                                         half=(1, 2 if subsampled else 1))
-        if subsampled:  # the board's level below the foot (a mean of stored values) as
-            # linear radiance like the rest: the radiance of that value, within a code's
-            # step of the mean radiance
-            out_bottom = np.interp(out_bottom, np.arange(256), _LINEAR_LUT)
-        # a pencil 3 px from the frame's bar: the bar is the coarse pass's outside, the
-        # board between reads as coverage and a side lands on the other (14 px in)
-        left, right, out_left, out_right = _median_edges((blue, blue), u0, u1, v0, v1, axis=1,
-                                                         near=(True, True),
-                                                         drop_off=SIDE_MAX_OFF_PX)
-        if subsampled and left is None and right is None:
-            # JPEG smears the blue channel (mostly chroma) over 2-3 px: a pencil pressed
-            # against the mirror's frame on one side and 2 px from a wall on the other
-            # had neither side in it (2 of 40 planned benches), and was dropped.  The
-            # image's colour keeps its edges at full resolution in the luma
-            left, right, out_left, out_right = _median_edges((img, img), u0, u1, v0, v1,
-                                                             axis=1, near=(True, True),
-                                                             drop_off=SIDE_MAX_OFF_PX)
-            # a side against a grey wall has little contrast in the colour either, and
-            # can land off the (yellow) region: then the axis comes from the other side
-            left = left if left is not None and abs(left - (u0 - 0.5)) <= SIDE_MAX_OFF_PX else None
-            right = right if right is not None and abs(right - (u1 + 0.5)) <= SIDE_MAX_OFF_PX \
-                else None
-            sides_note = (SIDES_ON_COLOUR,)
+        e = _pencil_edges(img, box, subsampled=subsampled, stored=stored)
     else:
-        top, bottom, out_top, out_bottom = _median_edges((img, img), v0, v1, u0, u1, axis=0,
-                                                         chroma=(False, on_chroma),
-                                                         near=(False, True))
-        if bottom is None and on_chroma:
-            # a panel in shadow is a dark grey with almost no colour across the board's
-            # (a drawn scene's lost its height, 1 of 24): its foot on the image's colour,
-            # where the board's contact shadow counts (as on a JPEG frame)
-            _, bottom, _, out_bottom = _median_edges((img, img), v0, v1, u0, u1, axis=0,
-                                                     near=(False, True))
-            if bottom is not None:
-                sides_note = (FOOT_ON_COLOUR,)
-        # a side 2-3 px from the mirror frame's inner edge leaves a bright strip of glass
-        # between them: the coarse pass's outside level then falls on the dark frame bar,
-        # the strip reads as coverage far above 1 and the edge is pushed 9-13 px out.  The
-        # region (found on the panel's own colour) is right; a side far from it is dropped
-        # and the axis taken from the other side (image_geometry.target_geometry)
-        left, right, out_left, out_right = _median_edges((img, img), u0, u1, v0, v1, axis=1,
-                                                         slope=(True, True),
-                                                         max_off=SIDE_MAX_OFF_PX)
+        e = _panel_edges(img, box, on_chroma=not subsampled)
+    top, bottom, left, right = e.top, e.bottom, e.left, e.right
     core = img[v0 + (v1 - v0) // 4: v1 - (v1 - v0) // 4 + 1,
                u0 + (u1 - u0) // 4: u1 - (u1 - u0) // 4 + 1]
     m = ImageMeasurement(
@@ -344,13 +294,99 @@ def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str,
         height_px=None if top is None or bottom is None else bottom - top,
         width_px=None if left is None or right is None else right - left,
         u_left=left, u_right=right,
-        outside=Surround(*(float(np.mean(o)) for o in (out_left, out_right, out_top,
-                                                       out_bottom))),
+        outside=Surround(*(float(np.mean(o)) for o in (e.out_left, e.out_right, e.out_top,
+                                                       e.out_bottom))),
         inside=float(np.median(core.reshape(-1, img.shape[-1]).mean(axis=1))),
-        notes=sides_note)
+        notes=e.notes)
     if left is not None and right is not None:
         m = replace(m, u_axis=(left + right) / 2)
     if top is None or bottom is None:
         m = replace(m, clipped="top", notes=(*m.notes, "no contrast at the top or bottom "
                                              "edge: height not measured"))
     return m
+
+class _Edges(NamedTuple):
+    """An image's four edges (px; None where not found), the levels just outside each,
+    and what was measured otherwise than usual."""
+
+    top: float | None
+    bottom: float | None
+    left: float | None
+    right: float | None
+    out_top: np.ndarray
+    out_bottom: np.ndarray
+    out_left: np.ndarray
+    out_right: np.ndarray
+    notes: tuple[str, ...]
+
+
+def _pencil_edges(img: np.ndarray, box: tuple[int, int, int, int], *, subsampled: bool,
+                  stored: np.ndarray | None) -> _Edges:
+    """A pencil's edges (:func:`measure_region`): its sides and top on the blue channel,
+    its foot on the colour across the board's."""
+    u0, v0, u1, v1 = box
+    sides_note: tuple[str, ...] = ()
+    blue = np.ascontiguousarray(img[..., 2:3])
+    foot_img = img
+    if subsampled:
+        foot_img = np.asarray(stored if stored is not None else to_srgb8(img / 255.0),
+                              np.float32)
+    top, bottom, out_top, out_bottom = _median_edges((img if subsampled else blue, foot_img),
+                                                     v0, v1, u0, u1, axis=0,
+                                                     chroma=(False, True),
+                                                     slope=(True, True),
+                                                     half=(1, 2 if subsampled else 1))
+    if subsampled:  # the board's level below the foot (a mean of stored values) as
+        # linear radiance like the rest: the radiance of that value, within a code's
+        # step of the mean radiance
+        out_bottom = np.interp(out_bottom, np.arange(256), _LINEAR_LUT)
+    # a pencil 3 px from the frame's bar: the bar is the coarse pass's outside, the
+    # board between reads as coverage and a side lands on the other (14 px in)
+    left, right, out_left, out_right = _median_edges((blue, blue), u0, u1, v0, v1, axis=1,
+                                                     near=(True, True),
+                                                     drop_off=SIDE_MAX_OFF_PX)
+    if subsampled and left is None and right is None:
+        # JPEG smears the blue channel (mostly chroma) over 2-3 px: a pencil pressed
+        # against the mirror's frame on one side and 2 px from a wall on the other
+        # had neither side in it (2 of 40 planned benches), and was dropped.  The
+        # image's colour keeps its edges at full resolution in the luma
+        left, right, out_left, out_right = _median_edges((img, img), u0, u1, v0, v1,
+                                                         axis=1, near=(True, True),
+                                                         drop_off=SIDE_MAX_OFF_PX)
+        # a side against a grey wall has little contrast in the colour either, and
+        # can land off the (yellow) region: then the axis comes from the other side
+        left = left if left is not None and abs(left - (u0 - 0.5)) <= SIDE_MAX_OFF_PX else None
+        right = right if right is not None and abs(right - (u1 + 0.5)) <= SIDE_MAX_OFF_PX \
+            else None
+        sides_note = (SIDES_ON_COLOUR,)
+    return _Edges(top, bottom, left, right, out_top, out_bottom, out_left, out_right,
+                  sides_note)
+
+
+def _panel_edges(img: np.ndarray, box: tuple[int, int, int, int], *, on_chroma: bool
+                 ) -> _Edges:
+    """The target panel's edges (:func:`measure_region`): on its colour against the
+    outside's, the sides with sloped levels."""
+    u0, v0, u1, v1 = box
+    sides_note: tuple[str, ...] = ()
+    top, bottom, out_top, out_bottom = _median_edges((img, img), v0, v1, u0, u1, axis=0,
+                                                     chroma=(False, on_chroma),
+                                                     near=(False, True))
+    if bottom is None and on_chroma:
+        # a panel in shadow is a dark grey with almost no colour across the board's
+        # (a drawn scene's lost its height, 1 of 24): its foot on the image's colour,
+        # where the board's contact shadow counts (as on a JPEG frame)
+        _, bottom, _, out_bottom = _median_edges((img, img), v0, v1, u0, u1, axis=0,
+                                                 near=(False, True))
+        if bottom is not None:
+            sides_note = (FOOT_ON_COLOUR,)
+    # a side 2-3 px from the mirror frame's inner edge leaves a bright strip of glass
+    # between them: the coarse pass's outside level then falls on the dark frame bar,
+    # the strip reads as coverage far above 1 and the edge is pushed 9-13 px out.  The
+    # region (found on the panel's own colour) is right; a side far from it is dropped
+    # and the axis taken from the other side (image_geometry.target_geometry)
+    left, right, out_left, out_right = _median_edges((img, img), u0, u1, v0, v1, axis=1,
+                                                     slope=(True, True),
+                                                     max_off=SIDE_MAX_OFF_PX)
+    return _Edges(top, bottom, left, right, out_top, out_bottom, out_left, out_right,
+                  sides_note)

@@ -20,9 +20,10 @@ import numpy as np
 from mirrorsim.errors import BadParameter, DetectionError, SolverError
 from mirrorsim.formats.error_model import ErrorModel
 from mirrorsim.formats.files import claim_run_folder
-from mirrorsim.pipelines.evaluate import evaluate_into, model_for
+from mirrorsim.pipelines.evaluate import evaluate_into
 from mirrorsim.pipelines.scenes import check_given_scene
 from mirrorsim.pipelines.score import Report, check_keep
+from mirrorsim.pipelines.solving import model_for
 from mirrorsim.rendering.backend import check_variant
 from mirrorsim.rendering.passes import reusing_renders
 from mirrorsim.scene import imperfections

@@ -188,56 +188,73 @@ def fit(cols: dict, provenance: dict | None = None, bench: dict | None = None) -
             own = own_errors(cols, kind, q, names=names, bias=bias, fx_px=fx_px)
             if q == "alpha":
                 own_alpha[kind] = (m, S_all, own)
-            law, gross = gross_free_fit(S_all[m], own[m])
-            z = np.abs(own[m]) / law(S_all[m])
-            tail = max(1.0, float(np.quantile(z, TAIL_LEVEL)) / TAIL_Z)
-            sig = tail * law(S_all[m])
-            span = float(sig.max() / sig.min())
-            if span > SPAN_REFUSE:
-                raise ValueError(f"the {kind} {q} law is unstable: its σ's over its own "
-                                 f"{int(m.sum())} rows span a factor {span:.3g} (from "
-                                 f"{sig.min():.3g}); fit it on more rows, or rows that vary "
-                                 "more evenly")
-            moves = stability(S_all[m], own[m])
-            if moves > UNSTABLE_REFUSE:
-                raise ValueError(f"the {kind} {q} law is unstable: refitted on resamples of "
-                                 f"its own {int(m.sum())} rows, the σ it gives a row moves by "
-                                 f"a factor {moves:.3g} (its rows barely determine it); fit "
-                                 "it on more rows, or rows that vary more evenly")
-            if moves > UNSTABLE_WARN:
-                notes.append(f"{kind} {q}: refitted on resamples of its rows, its σ's move by "
-                             f"a factor {moves:.3g}")
-            fits[kind][q] = QuantityFit(
-                log_sigma=law, n=int(m.sum()), gross_errors=int(gross.sum()),
-                rms=float(np.sqrt(np.mean(own[m] ** 2))),
-                typical_sigma=float(np.sqrt(np.mean(sig[~gross] ** 2))),
-                bias=tuple(bias.tolist()), tail=tail)
+            fits[kind][q] = _law(f"{kind} {q}", S_all[m], own[m], bias=bias, notes=notes)
         used = (ok & once[kind] & np.isfinite(S_all).all(1))
         domain[kind] = {n: (float(S_all[used, j].min()), float(S_all[used, j].max()))
                         for j, n in enumerate(SIGMA_FEATURES)}
-    # each beacon's image beside its scene's target (the target's row is its first)
-    (mt, St, et), (mb, Sb, eb) = (own_alpha[k] for k in KINDS)
-    both = mt[scene_of] & mb
-    shared = shared_of(et, eb, both)
-    if shared:
-        # each kind's own α law is nearly free in its own likelihood when the shared
-        # part dominates: both laws and the shared σ from the pair's likelihood, where
-        # the difference of the two errors holds the own parts
-        law_t, law_b, shared = fit_alpha_pair(St[both], et[both], Sb[both], yb=eb[both],
-                                              shared0=shared)
-        for kind, law, S, (m, _, own) in (("target", law_t, St, own_alpha["target"]),
-                                          ("beacon", law_b, Sb, own_alpha["beacon"])):
-            whole = np.hypot(law(S[m]), shared)
-            tail = max(1.0, float(np.quantile(np.abs(own[m]) / whole, TAIL_LEVEL)) / TAIL_Z)
-            fits[kind]["alpha"] = replace(
-                fits[kind]["alpha"], log_sigma=law, tail=tail,
-                typical_sigma=float(np.sqrt(np.mean((tail * law(S[m])) ** 2))))
+    shared = _shared_alpha(fits, own_alpha, scene_of)
     model = ErrorModel(fits, Domain(domain, _scene_domain(scene_cols),
                                     imperfections.spec_ranges(bench or {})),
                        tolerances_of(bench or {}), tuple(names),
                        {**(provenance or {}), **({"warnings": notes} if notes else {})},
                        fx_px, shared)
     return model
+
+
+def _law(which: str, S: np.ndarray, own: np.ndarray, *, bias: np.ndarray,
+         notes: list[str]) -> QuantityFit:
+    """One quantity's σ law fitted to its rows' own errors (gross errors apart), its tail
+    factor on them all; refused where its σ's span more than SPAN_REFUSE or it moves by
+    more than UNSTABLE_REFUSE on resamples of its rows (a note beyond UNSTABLE_WARN)."""
+    law, gross = gross_free_fit(S, own)
+    z = np.abs(own) / law(S)
+    tail = max(1.0, float(np.quantile(z, TAIL_LEVEL)) / TAIL_Z)
+    sig = tail * law(S)
+    span = float(sig.max() / sig.min())
+    if span > SPAN_REFUSE:
+        raise ValueError(f"the {which} law is unstable: its σ's over its own "
+                         f"{len(own)} rows span a factor {span:.3g} (from "
+                         f"{sig.min():.3g}); fit it on more rows, or rows that vary "
+                         "more evenly")
+    moves = stability(S, own)
+    if moves > UNSTABLE_REFUSE:
+        raise ValueError(f"the {which} law is unstable: refitted on resamples of "
+                         f"its own {len(own)} rows, the σ it gives a row moves by "
+                         f"a factor {moves:.3g} (its rows barely determine it); fit "
+                         "it on more rows, or rows that vary more evenly")
+    if moves > UNSTABLE_WARN:
+        notes.append(f"{which}: refitted on resamples of its rows, its σ's move by "
+                     f"a factor {moves:.3g}")
+    return QuantityFit(log_sigma=law, n=len(own), gross_errors=int(gross.sum()),
+                       rms=float(np.sqrt(np.mean(own ** 2))),
+                       typical_sigma=float(np.sqrt(np.mean(sig[~gross] ** 2))),
+                       bias=tuple(bias.tolist()), tail=tail)
+
+
+def _shared_alpha(fits: dict[str, dict[str, QuantityFit]],
+                  own_alpha: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]],
+                  scene_of: np.ndarray) -> float:
+    """The α error every image of a frame shares (σ, deg; 0 where none is found), from
+    each beacon's image beside its scene's target; where there is one, both α laws
+    refitted with it (in ``fits``)."""
+    (mt, St, et), (mb, Sb, eb) = (own_alpha[k] for k in KINDS)
+    both = mt[scene_of] & mb
+    shared = shared_of(et, eb, both)
+    if not shared:
+        return shared
+    # each kind's own α law is nearly free in its own likelihood when the shared part
+    # dominates: both laws and the shared σ from the pair's likelihood, where the
+    # difference of the two errors holds the own parts
+    law_t, law_b, shared = fit_alpha_pair(St[both], et[both], Sb[both], yb=eb[both],
+                                          shared0=shared)
+    for kind, law, S, (m, _, own) in (("target", law_t, St, own_alpha["target"]),
+                                      ("beacon", law_b, Sb, own_alpha["beacon"])):
+        whole = np.hypot(law(S[m]), shared)
+        tail = max(1.0, float(np.quantile(np.abs(own[m]) / whole, TAIL_LEVEL)) / TAIL_Z)
+        fits[kind]["alpha"] = replace(
+            fits[kind]["alpha"], log_sigma=law, tail=tail,
+            typical_sigma=float(np.sqrt(np.mean((tail * law(S[m])) ** 2))))
+    return shared
 
 
 def own_errors(cols: dict, kind: str, q: str, *, names: tuple[str, ...] | list[str],

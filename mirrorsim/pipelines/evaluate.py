@@ -8,21 +8,21 @@ ground truth.
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from mirrorsim.detection.board import (
+    CameraPose,
     corrected_image,
     frame_pose,
     mean_pose,
     pose_pan_sigma,
 )
-from mirrorsim.detection.detector import annotate
+from mirrorsim.detection.detector import Detection, annotate
 from mirrorsim.errors import BadParameter, DetectionError
-from mirrorsim.formats.error_model import ErrorModel
-from mirrorsim.formats.error_model_file import default_error_model, load_error_model
+from mirrorsim.formats.error_model import ErrorModel, ImageFeatures
 from mirrorsim.formats.files import claim_run_folder, default_out, write_png
 from mirrorsim.pipelines.frame import MeasuredFrame, render_and_measure
 from mirrorsim.pipelines.scenes import check_given_scene
@@ -34,16 +34,21 @@ from mirrorsim.pipelines.score import (
     check_keep,
     score,
 )
+from mirrorsim.pipelines.solving import (
+    as_error_model,
+    model_calibration,
+    model_for,
+    solve_separated,
+)
 from mirrorsim.rendering.backend import check_variant
 from mirrorsim.scene import imperfections
 from mirrorsim.scene.model import Scene, pencil_paint_height
-from mirrorsim.truth.groundtruth import RenderInfo
+from mirrorsim.truth.groundtruth import GroundTruth, RenderInfo
 from solver.errors import SolverError
 from solver.geometry import wrap_bearing
 from solver.lsq import solve_measurements
 from solver.measurements import BeaconMeasurement, Measurements, ObjectSigmas
-from solver.selfcal import NUISANCES, PLAIN, SelfCalibration, as_calibration, describe_priors
-from solver.sltr import Solution
+from solver.selfcal import PLAIN, SelfCalibration, as_calibration
 
 
 def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: str = "auto",
@@ -112,21 +117,68 @@ def evaluate_into(scene: Scene, out: Path, *, variant: str = "auto", progress: b
     model's bench tolerances estimated with their priors (:func:`model_calibration`);
     False solves with ``calibration`` alone (a budget compares runs solved alike)."""
     cam = scene.camera
-
     per_beacon = frames_of(scene)
     measured = [render_and_measure(sub, out, variant=variant, progress=progress, reuse=True,
                                    ids="ids" in keep)
                 for sub in per_beacon]
     frames = [_frame_record(m, out / f"{sub.name}.annotated.png", "annotated" in keep)
               for sub, m in zip(per_beacon, measured, strict=True)]
-    detections = [m.detection for m in measured]
     truths = [m.files.truth for m in measured]
-    cal = measured[-1].calibration
-
     # the scene's truth, computed once per frame: the target from the first, each beacon
     # from its own
     truth = replace(truths[0], scene=scene.name, id_labels=None, render=None,
                     beacons=tuple(t.beacons[0] for t in truths))
+    seen = _seen(scene, measured, board_pose=board_pose)
+    model = model_for(scene, error_model)
+    features, sigma = _sigmas(model, seen)
+    if model_priors:
+        calibration = model_calibration(model, calibration)
+    if seen.pose is not None:
+        calibration, sigma = _after_board(seen.pose, seen.fx, calibration, sigma)
+    capture = measured[0].files.capture
+    notes = model.domain_warnings(
+        features[0], list(features[1:]), seen.pan,
+        scene={"fx_px": seen.fx, "camera_height_cm": capture.camera.height,
+               "pencil_height_cm": tuple(b.height for b in scene.beacons),
+               "beacons": len(scene.beacons)},
+        bench=imperfections.judged_values(scene))
+    measurements = Measurements(observer=cam.position, targets=[seen.target],
+                                beacons=seen.beacons, sigma=sigma, observer_pan_deg=seen.pan)
+    # the target once, at its mean over the frames: each frame's detection of the same
+    # image shares its errors (bias included), so several would shrink its σ by √frames
+    sol, calibration, said = solve_separated(cam.position, seen.beacons, [seen.target],
+                                             sigma=sigma, calibration=calibration, model=model)
+    errors = score(truth, measurements, sol, calibration=calibration)
+    by_count = _error_vs_beacons(truth, measurements, calibration) + (errors,)
+    done = truths[0].render  # how the frames were rendered, read back from the first
+    return Report(scene=scene.name, truth=truth, measurements=measurements, solution=sol,
+                  errors=errors, frames=tuple(frames),
+                  render=RenderInfo(done.variant, done.spp, done.seed, done.sampler),
+                  calibration=measured[-1].calibration,
+                  error_vs_beacons=by_count if len(seen.beacons) > 1 else (),
+                  camera_pose=seen.pose, error_model=model.name(),
+                  model_warnings=tuple(notes), image_features=features,
+                  self_calibration=calibration, calibration_notes=tuple(said))
+
+
+@dataclass(frozen=True)
+class _Seen:
+    """What the experimenter measured: each beacon, the target at its mean over the
+    frames, the pan (the capture record's, or the board's) and the focal length; the
+    camera's pose from the board, where measured."""
+
+    beacons: list[BeaconMeasurement]
+    target: tuple[float, float]
+    pan: float
+    fx: float
+    pose: CameraPose | None
+    detections: list[Detection]
+
+
+def _seen(scene: Scene, measured: list, *, board_pose: bool) -> _Seen:
+    """The measurements of the frames ``measured``: with ``board_pose``, each image again
+    from its pixels, as the level camera at the board's pan would have measured it."""
+    detections = [m.detection for m in measured]
     beacons = [b for det in detections for b in det.beacon_measurements()]
     targets = [(d.target.alpha_deg, d.target.d_total) for d in detections
                if d.target.d_total is not None]
@@ -143,186 +195,67 @@ def evaluate_into(scene: Scene, out: Path, *, variant: str = "auto", progress: b
         pose = mean_pose([frame_pose(m.image, m.files.capture, m.files.image)
                           for m in measured])
         pan = float(wrap_bearing(pan + pose.pan_offset_deg))  # the α's below are turned to it
-        # each image again from its pixels, as the level camera at the board's pan would
-        # have measured it (the detections' beacons in the order of beacon_measurements)
+        # (the detections' beacons in the order of beacon_measurements)
         beacons = [BeaconMeasurement(tuple(b.position), *corrected_image(
             pose, capture.camera, m, top=pencil_paint_height(b.height)))
             for det in detections for b, m in det.beacons]
         targets = [corrected_image(pose, capture.camera, d.target, top=capture.target_size[1])
                    for d in detections if d.target.d_total is not None]
     mean_target = tuple(float(v) for v in np.mean(targets, axis=0))
-    model = model_for(scene, error_model)
-    # what each frame showed of each image, at the measurements the solver sees
+    return _Seen(beacons, mean_target, pan, fx, pose, detections)
+
+
+def _sigmas(model: ErrorModel, seen: _Seen
+            ) -> tuple[tuple[ImageFeatures, ...], ObjectSigmas]:
+    """What each frame showed of each image, at the measurements the solver sees, and
+    the σ's the model gives them."""
+    detections = seen.detections
     first = next(d for d in detections if d.target.d_total is not None)
-    features = (first.features(first.target, *mean_target),
+    features = (first.features(first.target, *seen.target),
                 *(det.features(m, b.alpha_deg, b.d_total) for (det, m), b in zip(
-                    ((det, m) for det in detections for _, m in det.beacons), beacons,
+                    ((det, m) for det in detections for _, m in det.beacons), seen.beacons,
                     strict=True)))
-    sigma = model.sigmas(features[0], list(features[1:]), pan, fx_px=fx)
-    if model_priors:
-        calibration = model_calibration(model, calibration)
-    if pose is not None:
-        # the pan is now the board's to know, to what is left of it after the board: a
-        # prior from the mount's reading (the user's or the bench model's) gives way, and
-        # where the pan is not a nuisance, it is every α's shared offset
-        left = pose_pan_sigma(pose, fx)
-        if "pan" in calibration.nuisances:
-            calibration = replace(calibration, priors={**calibration.priors, "pan": left})
-            sigma = replace(sigma, shared_alpha_deg=0.0)
-        else:
-            sigma = replace(sigma, shared_alpha_deg=left)
-    notes = model.domain_warnings(
-        features[0], list(features[1:]), pan,
-        scene={"fx_px": fx, "camera_height_cm": capture.camera.height,
-         "pencil_height_cm": tuple(b.height for b in scene.beacons),
-         "beacons": len(scene.beacons)},
-        bench=imperfections.judged_values(scene))
-    measurements = Measurements(observer=cam.position, targets=[mean_target], beacons=beacons,
-                                sigma=sigma, observer_pan_deg=pan)
-    # the target once, at its mean over the frames: each frame's detection of the same
-    # image shares its errors (bias included), so several would shrink its σ by √frames
-    target = [mean_target]
-    sol, calibration, said = solve_separated(cam.position, beacons, target, sigma=sigma,
-                                             calibration=calibration, model=model)
-    errors = score(truth, measurements, sol, calibration=calibration)
-    by_count = ()
-    if len(beacons) > 1:
-        def first(k: int) -> Score:
-            # self-calibration from the first k beacons with as many of the nuisances
-            # (in their order) as they can carry and separate; plain at the least.
-            # Scored against those k alone: their errors, and the bound k beacons give
-            sig_k = replace(sigma, beacons=sigma.beacons[:k])
-            meas_k = replace(measurements, beacons=beacons[:k], sigma=sig_k)
-            truth_k = replace(truth, beacons=truth.beacons[:k])
-            def scored(cal_k: SelfCalibration) -> Score:
-                return score(truth_k, meas_k, solve_measurements(
-                    cam.position, beacons[:k], target, sigma=sig_k, calibration=cal_k),
-                    calibration=cal_k)
-
-            for m in range(len(calibration.nuisances), 0, -1):
-                try:
-                    return scored(calibration.first(m))
-                except SolverError:
-                    continue
-            return scored(calibration.first(0))
-
-        # all of them: the solution above
-        by_count = tuple(first(k) for k in range(1, len(beacons))) + (errors,)
-    done = truths[0].render  # how the frames were rendered, read back from the first
-    return Report(scene=scene.name, truth=truth, measurements=measurements, solution=sol,
-                  errors=errors, frames=tuple(frames),
-                  render=RenderInfo(done.variant, done.spp, done.seed, done.sampler),
-                  calibration=cal,
-                  error_vs_beacons=by_count, camera_pose=pose, error_model=model.name(),
-                  model_warnings=tuple(notes), image_features=features,
-                  self_calibration=calibration, calibration_notes=tuple(said))
+    return features, model.sigmas(features[0], list(features[1:]), seen.pan, fx_px=seen.fx)
 
 
-# a nuisance the frames determine no better than this (its σ from the solve's Fisher
-# information, the mirror's pose marginalized) is not separated from the mirror: a
-# pan σ of half a degree, a range scale's of 2 %, a power's of 1/(500 cm)
-SEPARATED_SD = {"pan": 0.5, "scale": 0.02, "power": 2e-3}
-# a nuisance whose prior holds it but which comes out held no tighter than this share
-# of the prior's σ was held by the prior, not measured
-HELD_SHARE = 0.8
-# an estimate this many of its prior's σ's from its neutral value is outside what the
-# bench's tolerances allow
-FAR_SIGMAS = 3.0
+def _after_board(pose: CameraPose, fx: float, calibration: SelfCalibration,
+                 sigma: ObjectSigmas) -> tuple[SelfCalibration, ObjectSigmas]:
+    """The pan is the board's to know now, to what is left of it after the board: a prior
+    from the mount's reading (the user's or the bench model's) gives way, and where the
+    pan is not a nuisance, it is every α's shared offset."""
+    left = pose_pan_sigma(pose, fx)
+    if "pan" in calibration.nuisances:
+        return (replace(calibration, priors={**calibration.priors, "pan": left}),
+                replace(sigma, shared_alpha_deg=0.0))
+    return calibration, replace(sigma, shared_alpha_deg=left)
 
 
-def solve_separated(observer: tuple[float, float], beacons: list[BeaconMeasurement],
-                    targets: list[tuple[float, float]], *, sigma: ObjectSigmas,
-                    calibration: SelfCalibration, model: ErrorModel
-                    ) -> tuple[Solution, SelfCalibration, list[str]]:
-    """Solve, then hold every nuisance the beacons do not separate from the mirror.
+def _error_vs_beacons(truth: GroundTruth, measurements: Measurements,
+                      calibration: SelfCalibration) -> tuple[Score, ...]:
+    """The score from the first k beacons, for each k short of all of them: solved
+    self-calibrated with as many of the nuisances (in their order) as they can carry and
+    separate, plain at the least, and scored against those k alone (their errors, and the
+    bound k beacons give)."""
+    m0 = measurements
 
-    A nuisance estimated without a prior whose σ comes out above :data:`SEPARATED_SD`
-    (the Fisher information's conditioning, whatever the beacon count) is solved again
-    held at the prior the model's bench gives it, or at its neutral value where it gives
-    none; the lines returned say so, and name the nuisances their priors held
-    (:data:`HELD_SHARE`) and any estimate :data:`FAR_SIGMAS` prior σ's from neutral.
+    def first(k: int) -> Score:
+        sig_k = replace(m0.sigma, beacons=m0.sigma.beacons[:k])
+        meas_k = replace(m0, beacons=m0.beacons[:k], sigma=sig_k)
+        truth_k = replace(truth, beacons=truth.beacons[:k])
 
-    Returns
-    -------
-    solution, the calibration it was solved with, the lines to print
-    """
-    sol = solve_measurements(observer, beacons, targets, sigma=sigma, calibration=calibration)
-    said: list[str] = []
-    sd = {n: sol.nuisance_sd.get(NUISANCES[n][0], 0.0) for n in calibration.nuisances}
-    loose = [n for n in calibration.nuisances
-             if n not in calibration.priors and sd[n] > SEPARATED_SD[n]]
-    if loose:
-        bench = model.tolerances.priors()
-        calibration = SelfCalibration(
-            tuple(n for n in calibration.nuisances if n not in loose or n in bench),
-            calibration.position_sigma,
-            {**calibration.priors, **{n: bench[n] for n in loose if n in bench}})
-        for n in loose:
-            said.append(f"{n}: the beacons do not separate it from the mirror (its σ would "
-                        f"be {describe_priors({n: sd[n]}).split(' ', 1)[1]}); "
-                        + (f"held at its prior {describe_priors({n: bench[n]})}" if n in bench
-                           else "held at its neutral value"))
-        sol = solve_measurements(observer, beacons, targets, sigma=sigma, calibration=calibration)
-    held, far = [], []
-    for n, prior in calibration.priors.items():
-        if n == "pan" and sigma.shared_alpha_deg:
-            prior = float(np.hypot(prior, sigma.shared_alpha_deg))
-        name, neutral = NUISANCES[n]
-        if sol.nuisance_sd.get(name, 0.0) > HELD_SHARE * prior:
-            held.append(n)
-        off = abs(sol.nuisances.get(name, neutral) - neutral) / prior
-        if off > FAR_SIGMAS:
-            far.append(f"{n} came out {off:.1f} of its prior's σ's from {neutral:g}")
-    if held:
-        said.append(f"held by their priors (the beacons do not separate them from the "
-                    f"mirror): {', '.join(held)}")
-    if far:
-        said.append("warning: " + "; ".join(far) + ": beyond what the bench's tolerances "
-                    "allow (a bench error larger than stated, or a bad image)")
-    return sol, calibration, said
+        def scored(cal_k: SelfCalibration) -> Score:
+            return score(truth_k, meas_k, solve_measurements(
+                m0.observer, m0.beacons[:k], m0.targets, sigma=sig_k, calibration=cal_k),
+                calibration=cal_k)
 
+        for m in range(len(calibration.nuisances), 0, -1):
+            try:
+                return scored(calibration.first(m))
+            except SolverError:
+                continue
+        return scored(calibration.first(0))
 
-def as_error_model(error_model: object) -> ErrorModel | None:
-    """``error_model`` as a model: None (the shipped one the scene calls for), a model,
-    or a model file's path (read and checked now, before anything renders).
-
-    Raises
-    ------
-    BadParameter
-        Anything else.
-    ErrorModelError
-        A path to a file that is not a valid model.
-    """
-    if error_model is None or isinstance(error_model, ErrorModel):
-        return error_model
-    if isinstance(error_model, str | Path):
-        return load_error_model(error_model)
-    raise BadParameter("error_model", f"{error_model!r}: give an ErrorModel, a model file's "
-                       "path, or None for the shipped model")
-
-
-def model_for(scene: Scene, error_model: ErrorModel | None = None) -> ErrorModel:
-    """``error_model``, or the model shipped for the scene's bench: the bench model for a
-    scene with bench imperfections (their presence, never their values), the ideal
-    model otherwise."""
-    error_model = as_error_model(error_model)
-    if error_model is not None:
-        return error_model
-    return default_error_model("bench" if imperfections.sources(scene) else "ideal")
-
-
-def model_calibration(model: ErrorModel, asked: SelfCalibration = PLAIN) -> SelfCalibration:
-    """What a solve with ``model``'s σ's estimates: the nuisances ``asked`` for, and every
-    shared error of the model's benches (:class:`~mirrorsim.formats.error_model.
-    BenchTolerances`) with its prior; a prior ``asked`` gives (what the user states of
-    their bench) wins over the model's, and a position σ ``asked`` over its own.  An
-    ideal-bench model adds nothing."""
-    bench = model.tolerances.calibration()
-    if not bench.nuisances and not bench.position_sigma:
-        return asked
-    nuisances = asked.nuisances + tuple(n for n in bench.nuisances if n not in asked.nuisances)
-    priors = {**{n: s for n, s in bench.priors.items() if n in nuisances}, **asked.priors}
-    return SelfCalibration(nuisances, asked.position_sigma or bench.position_sigma, priors)
+    return tuple(first(k) for k in range(1, len(m0.beacons)))
 
 
 def frames_of(scene: Scene) -> list[Scene]:

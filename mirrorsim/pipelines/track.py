@@ -22,7 +22,7 @@ measured once, and its likelihood weighs every mirror hypothesis from the start.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -32,10 +32,11 @@ from mirrorsim.detection.image_geometry import Calibration
 from mirrorsim.errors import BadParameter, DetectionError
 from mirrorsim.formats.error_model import ErrorModel
 from mirrorsim.formats.files import claim_run_folder
-from mirrorsim.pipelines.evaluate import model_for
 from mirrorsim.pipelines.frame import FrameNotMeasured, render_and_measure
 from mirrorsim.pipelines.scenes import check_given_scene
+from mirrorsim.pipelines.solving import model_for
 from mirrorsim.pipelines.track_paths import HEADINGS, PATHS, beacon_path
+from mirrorsim.pipelines.track_report import TrackReport, TrackStep
 from mirrorsim.rendering.backend import check_variant
 from mirrorsim.scene.model import MAX_SEED, Scene, is_whole
 from solver.beacon_kalman import PFParams
@@ -54,80 +55,6 @@ MAX_ODOMETRY_SIGMA = 10.0  # cm per move: a robot that errs more than this is no
 # pose k renders with seed·1000 + k (a fixed beacon's frame with seed·1000 + 999 − i):
 # the largest run seed whose render seeds stay within MAX_SEED
 MAX_TRACK_SEED = (MAX_SEED - 999) // 1000
-
-
-@dataclass(frozen=True)
-class TrackStep:
-    """One pose: where the beacon was and what the filter made of it."""
-
-    step: int  # 0: the start
-    commanded: tuple[float, float]  # the believed position
-    path_length_cm: float  # commanded distance travelled so far
-    beacon_position: tuple[float, float]  # the true one
-    seen: bool
-    why_unseen: str
-    mirror_yaw_error_deg: float
-    mirror_offset_error_cm: float
-    target: tuple[float, float]
-    target_error_cm: float
-    yaw_spread_deg: float
-    offset_spread_cm: float
-    # the true mirror's squared Mahalanobis distance in the filter's (yaw, offset)
-    # spread: χ²₂ (≤ 5.99 in 95 % of steps) where the filter's spread is honest
-    mirror_nees: float = float("nan")
-
-    def to_json(self) -> dict:
-        """The step as docs/files.md's track report writes it."""
-        return {"step": self.step, "beacon_position": list(self.beacon_position),
-                "commanded_position": list(self.commanded),
-                "path_length_cm": self.path_length_cm, "seen": self.seen,
-                **({"why_unseen": self.why_unseen} if not self.seen else {}),
-                "mirror_yaw_error_deg": self.mirror_yaw_error_deg,
-                "mirror_offset_error_cm": self.mirror_offset_error_cm,
-                "target": list(self.target), "target_error_cm": self.target_error_cm,
-                "particle_spread": {"yaw_deg": self.yaw_spread_deg,
-                                    "offset_cm": self.offset_spread_cm},
-                "mirror_nees": self.mirror_nees}
-
-
-@dataclass(frozen=True)
-class TrackReport:
-    """A whole track; ``snapshots`` (particles' mirror lines per step) feed the animation."""
-
-    scene: str
-    path: str
-    heading: str
-    odometry_sigma: float
-    seed: int
-    steps: tuple[TrackStep, ...]
-    snapshots: tuple[np.ndarray, ...] = field(default=(), repr=False)
-    # the beacons that stood still beside the moving one: believed position and the
-    # observation (α_deg, d_total) the filter weighed once, the position known to
-    # fixed_sigma cm per axis
-    fixed: tuple[BeaconMeasurement, ...] = ()
-    fixed_sigma: float = 0.0
-
-    @property
-    def final(self) -> TrackStep:
-        """The last step."""
-        return self.steps[-1]
-
-    def to_json(self) -> dict:
-        """docs/files.md's track report."""
-        f = self.final
-        return {"scene": self.scene, "path": self.path, "heading": self.heading,
-                "odometry_sigma_cm": self.odometry_sigma,
-                "seed": self.seed, "steps": [s.to_json() for s in self.steps],
-                "fixed_beacons": [{"known_position": list(b.position),
-                                   "position_sigma_cm": self.fixed_sigma,
-                                   "alpha_deg": b.alpha_deg, "d_total": b.d_total}
-                                  for b in self.fixed],
-                "final": {"target": list(f.target),
-                          "mirror_yaw_error_deg": f.mirror_yaw_error_deg,
-                          "mirror_offset_error_cm": f.mirror_offset_error_cm,
-                          "target_error_cm": f.target_error_cm,
-                          "seen_poses": sum(s.seen for s in self.steps),
-                          "poses": len(self.steps)}}
 
 
 def check_options(kind: str, steps: int, sigma: float, *, side: float, step: float,
@@ -200,18 +127,7 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
     check_given_scene(scene)  # edited by a script: held to what its file would make
     check_options(kind, steps, odometry_sigma, side=side, step=step, heading=heading,
                   board=scene.board.size)
-    for name, v, lo in (("particles", particles, MIN_PARTICLES), ("seed", seed, 0)):
-        if not (is_whole(v) and v >= lo):
-            raise BadParameter(name, f"{v!r} must be a whole number ≥ {lo}")
-    if seed > MAX_TRACK_SEED:
-        raise BadParameter("seed", f"{seed} must be ≤ {MAX_TRACK_SEED} (pose k renders with "
-                           "seed·1000 + k, a seed within 0..2⁶³−1)")
-    if particles > MAX_PARTICLES:
-        raise BadParameter("particles", f"{particles} must be ≤ {MAX_PARTICLES}")
-    try:
-        check_position_sigma(position_sigma)
-    except SolverError as exc:
-        raise BadParameter("position_sigma", str(exc)) from None
+    _check_filter_options(particles=particles, seed=seed, position_sigma=position_sigma)
     check_fixed_beacons(scene, position_sigma)
     model = model_for(scene, error_model)  # read and checked before anything is written
     check_variant(variant)
@@ -219,14 +135,7 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
     rng = np.random.default_rng(seed)
     b0, cam = scene.beacons[0], scene.camera
     start = np.asarray(b0.believed, float)
-    # the filter takes each pose's error whole: its own part, the shared α offset and a
-    # bench model's pan and range-scale tolerances, which the filter does not model apart
-    typical = model.typical_whole(cam.fx).beacons[0]
-    # a particle filter cannot follow a likelihood much narrower than its particles'
-    # spread (they all but one get weight 0): no narrower than FILTER_SIGMA_FLOOR
-    params = PFParams(sigma=Sigma(max(typical.alpha_deg, FILTER_SIGMA_FLOOR.alpha_deg),
-                                  max(typical.d_total_rel, FILTER_SIGMA_FLOOR.d_total_rel)),
-                      sigma_trs=max(odometry_sigma if kind != "fixed" else 0.0, 1e-3))
+    params = _filter_params(model, cam.fx, odometry_sigma if kind != "fixed" else 0.0)
     pose = _Poses(scene, out / "poses", seed, variant, on_pose, steps + 1)
     obs, target_obs, why = pose.measure(0, start, np.asarray(b0.position, float))
     if obs is None or target_obs is None:
@@ -243,10 +152,53 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
                              f"({exc})") from None
     moves = np.diff(commanded, axis=0)
     true = _true_path(np.asarray(b0.position, float), moves, odometry_sigma, rng)
+    records, snapshots = _walk(scene, pf, pose, commanded, true, rng=rng,
+                               start=(obs, target_obs, why))
+    return TrackReport(scene=scene.name, path=kind, heading=heading,
+                       odometry_sigma=odometry_sigma, seed=seed, steps=tuple(records),
+                       snapshots=tuple(snapshots), fixed=fixed, fixed_sigma=position_sigma)
+
+
+def _check_filter_options(*, particles: int, seed: int, position_sigma: float) -> None:
+    """The filter's options, each within its range (:func:`run_track`'s ``BadParameter``)."""
+    for name, v, lo in (("particles", particles, MIN_PARTICLES), ("seed", seed, 0)):
+        if not (is_whole(v) and v >= lo):
+            raise BadParameter(name, f"{v!r} must be a whole number ≥ {lo}")
+    if seed > MAX_TRACK_SEED:
+        raise BadParameter("seed", f"{seed} must be ≤ {MAX_TRACK_SEED} (pose k renders with "
+                           "seed·1000 + k, a seed within 0..2⁶³−1)")
+    if particles > MAX_PARTICLES:
+        raise BadParameter("particles", f"{particles} must be ≤ {MAX_PARTICLES}")
+    try:
+        check_position_sigma(position_sigma)
+    except SolverError as exc:
+        raise BadParameter("position_sigma", str(exc)) from None
+
+
+def _filter_params(model: ErrorModel, fx: float, odometry_sigma: float) -> PFParams:
+    """The filter's noise levels: each pose's error taken whole (its own part, the shared
+    α offset and a bench model's pan and range-scale tolerances, which the filter does
+    not model apart), and the odometry's (a fixed beacon's: none)."""
+    typical = model.typical_whole(fx).beacons[0]
+    # a particle filter cannot follow a likelihood much narrower than its particles'
+    # spread (they all but one get weight 0): no narrower than FILTER_SIGMA_FLOOR
+    return PFParams(sigma=Sigma(max(typical.alpha_deg, FILTER_SIGMA_FLOOR.alpha_deg),
+                                max(typical.d_total_rel, FILTER_SIGMA_FLOOR.d_total_rel)),
+                    sigma_trs=max(odometry_sigma, 1e-3))
+
+
+def _walk(scene: Scene, pf: MovingBeaconFilter, pose: _Poses, commanded: np.ndarray,
+          true: np.ndarray, *, rng: np.random.Generator,
+          start: tuple[tuple[float, float] | None, tuple[float, float] | None, str]
+          ) -> tuple[list[TrackStep], list[np.ndarray]]:
+    """Each pose of the path measured (the start's given) and filtered: its record and
+    a snapshot of the particles."""
+    obs, target_obs, why = start
+    moves = np.diff(commanded, axis=0)
     targets = [target_obs]
     records: list[TrackStep] = []
     snapshots: list[np.ndarray] = []
-    for k in range(steps + 1):
+    for k in range(len(commanded)):
         if k:
             obs, target_obs, why = pose.measure(k, commanded[k], true[k])
             if target_obs is not None:
@@ -257,9 +209,7 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
                          moves[:k], true[k], obs is not None, why),
             mirror_nees=pf.nees(scene.mirror.center, scene.mirror.yaw)))
         snapshots.append(_snapshot(pf, rng))
-    return TrackReport(scene=scene.name, path=kind, heading=heading,
-                       odometry_sigma=odometry_sigma, seed=seed, steps=tuple(records),
-                       snapshots=tuple(snapshots), fixed=fixed, fixed_sigma=position_sigma)
+    return records, snapshots
 
 
 class _Poses:

@@ -23,7 +23,7 @@ import numpy as np
 from mirrorsim.formats import dataset_table as table
 from mirrorsim.formats.error_model import KINDS, ErrorModel, ImageFeatures
 from mirrorsim.formats.files import save_figure
-from mirrorsim.pipelines.evaluate import model_calibration
+from mirrorsim.pipelines.solving import model_calibration
 from solver.errors import SolverError
 from solver.lsq import solve_measurements
 from solver.measurements import BeaconMeasurement
