@@ -129,6 +129,30 @@ def conform(value: Any, tp: Any) -> Any:
         raise Refused(_kind(tp))
     if value is None:
         raise Refused(_kind(tp))
+    if tp in (bool, int, float, str):
+        return _scalar(value, tp)
+    if origin in (tuple, list, cabc.Sequence):
+        return _sequence(value, tp, origin)
+    if origin in (dict, cabc.Mapping) or tp in (dict, cabc.Mapping):
+        return _mapping(value, tp)
+    if origin is cabc.Callable or tp is cabc.Callable:
+        if callable(value):
+            return value
+        raise Refused("a function")
+    if origin is typing.Literal:
+        if value in typing.get_args(tp):
+            return value
+        raise Refused(" or ".join(repr(a) for a in typing.get_args(tp)))
+    if isinstance(tp, type):
+        if isinstance(value, tp):
+            return value
+        raise Refused(_kind(tp))
+    return value  # a hint of a form this module does not check
+
+
+def _scalar(value: Any, tp: type) -> Any:
+    """``value`` as a ``bool``, ``int``, ``float`` or ``str`` (a 0-d array, a numpy
+    scalar taken as the plain one; NaN and infinities refused as numbers)."""
     if isinstance(value, np.ndarray) and value.shape == () and tp in (int, float, bool):
         value = value[()]  # a 0-d array is a number (numpy's reductions give them)
     if tp is bool:
@@ -150,31 +174,20 @@ def conform(value: Any, tp: Any) -> Any:
         if isinstance(value, str):
             return value
         raise Refused("a string")
-    if origin in (tuple, list, cabc.Sequence):
-        return _sequence(value, tp, origin)
-    if origin in (dict, cabc.Mapping) or tp in (dict, cabc.Mapping):
-        if not isinstance(value, cabc.Mapping):
-            raise Refused("a mapping")
-        args = typing.get_args(tp)
-        if len(args) == 2:
-            try:
-                return {conform(k, args[0]): conform(v, args[1]) for k, v in value.items()}
-            except Refused:  # an item's refusal, said of the whole
-                raise Refused(_kind(tp)) from None
-        return value
-    if origin is cabc.Callable or tp is cabc.Callable:
-        if callable(value):
-            return value
-        raise Refused("a function")
-    if origin is typing.Literal:
-        if value in typing.get_args(tp):
-            return value
-        raise Refused(" or ".join(repr(a) for a in typing.get_args(tp)))
-    if isinstance(tp, type):
-        if isinstance(value, tp):
-            return value
-        raise Refused(_kind(tp))
-    return value  # a hint of a form this module does not check
+    raise AssertionError(tp)  # (conform calls it with those four only)
+
+
+def _mapping(value: Any, tp: Any) -> Any:
+    """``value`` as a mapping of the hint's key and value types."""
+    if not isinstance(value, cabc.Mapping):
+        raise Refused("a mapping")
+    args = typing.get_args(tp)
+    if len(args) == 2:
+        try:
+            return {conform(k, args[0]): conform(v, args[1]) for k, v in value.items()}
+        except Refused:  # an item's refusal, said of the whole
+            raise Refused(_kind(tp)) from None
+    return value
 
 
 def _sequence(value: Any, tp: Any, origin: Any) -> Any:

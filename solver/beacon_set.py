@@ -111,23 +111,16 @@ def best_beacon_set(observer: ArrayLike, target_alpha_deg: float, target_d_total
     SolverError
         No position is seen under every pose, or none passes ``accept``.
     """
-    nuisances, position_sigma = calibration.nuisances, calibration.position_sigma
+    nuisances = calibration.nuisances
     o = np.asarray(observer, float)
-    sig = as_object_sigmas(sigma)
     xs = np.arange(step / 2, board[0], step)
     ys = np.arange(step / 2, board[1], step)
     gx, gy = np.meshgrid(xs, ys)
     grid = np.column_stack([gx.ravel(), gy.ravel()])
-    allowed = np.ones(len(grid), bool)
-    for a, b, clear in keep_out:
-        allowed &= point_segment_distance(grid, a, b) >= clear
-    per_pose = []
-    for point, yaw in poses:
-        allowed &= seen_in_mirror(o, grid, point, yaw=yaw, mirror_size=mirror_size,
-                                  min_depth=min_depth)
-        info_b, info_t, _ = _information(o, grid, target_alpha_deg, target_d_total, point, yaw,
-                                         sig, nuisances, position_sigma)
-        per_pose.append((info_b, info_t))
+    allowed, per_pose = _candidates(o, grid, (target_alpha_deg, target_d_total), poses=poses,
+                                    sigma=as_object_sigmas(sigma), calibration=calibration,
+                                    keep_out=keep_out, mirror_size=mirror_size,
+                                    min_depth=min_depth)
     if not allowed.any():
         raise SolverError("no beacon position on the board is seen under every mirror pose")
     P = 4 + len(nuisances)
@@ -136,13 +129,7 @@ def best_beacon_set(observer: ArrayLike, target_alpha_deg: float, target_d_total
     base = [info_t + prior for _, info_t in per_pose]
     chosen, rmse, plain = [], [], []
     for _ in range(n):
-        full = np.zeros(len(grid))
-        only = np.zeros(len(grid))
-        for (info_b, _), b0 in zip(per_pose, base, strict=True):
-            m = b0[None] + info_b
-            full += _target_variance(m, P)
-            only += _target_variance(m, 4)
-        full, only = np.sqrt(full / len(poses)), np.sqrt(only / len(poses))
+        full, only = _rms_errors(per_pose, base, P)
         if 2 * (len(chosen) + 2) < P:  # the set and the target cannot carry the nuisances
             full[:] = np.inf
         ok = allowed.copy()
@@ -160,3 +147,37 @@ def best_beacon_set(observer: ArrayLike, target_alpha_deg: float, target_d_total
         for k, (info_b, _) in enumerate(per_pose):
             base[k] = base[k] + info_b[pick]
     return BeaconSet(grid[chosen], tuple(rmse), tuple(plain), calibration)
+
+
+def _rms_errors(per_pose: list[tuple[np.ndarray, np.ndarray]], base: list[np.ndarray],
+                P: int) -> tuple[np.ndarray, np.ndarray]:
+    """The expected target error (RMS over the poses) with a beacon added at each
+    candidate to the information ``base`` holds: with the nuisances estimated (the first
+    ``P`` parameters), and without them."""
+    full, only = 0.0, 0.0
+    for (info_b, _), b0 in zip(per_pose, base, strict=True):
+        m = b0[None] + info_b
+        full = full + _target_variance(m, P)
+        only = only + _target_variance(m, 4)
+    return np.sqrt(full / len(per_pose)), np.sqrt(only / len(per_pose))
+
+
+def _candidates(o: np.ndarray, grid: np.ndarray, target: tuple[float, float], *,
+                poses: list[tuple[np.ndarray, float]], sigma: ObjectSigmas,
+                calibration: SelfCalibration,
+                keep_out: Sequence[tuple[np.ndarray, np.ndarray, float]],
+                mirror_size: float, min_depth: float
+                ) -> tuple[np.ndarray, list[tuple[np.ndarray, np.ndarray]]]:
+    """Which ``grid`` positions every pose shows, clear of ``keep_out``; and under each
+    pose the information a beacon at each position adds, and the target's own."""
+    allowed = np.ones(len(grid), bool)
+    for a, b, clear in keep_out:
+        allowed &= point_segment_distance(grid, a, b) >= clear
+    per_pose = []
+    for point, yaw in poses:
+        allowed &= seen_in_mirror(o, grid, point, yaw=yaw, mirror_size=mirror_size,
+                                  min_depth=min_depth)
+        info_b, info_t, _ = _information(o, grid, target[0], target[1], point, yaw, sigma,
+                                         calibration.nuisances, calibration.position_sigma)
+        per_pose.append((info_b, info_t))
+    return allowed, per_pose

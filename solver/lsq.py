@@ -70,14 +70,7 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
     sig = as_object_sigmas(sigma or Sigma())
     bpos, meas_a, meas_d = _measurement_arrays(beacons, targets)
     shared = sig.shared_alpha_deg
-    if initial is None and (nuisances or calibration.position_sigma or shared):
-        # start from the plain fit: from the one-beacon closed form, a pan offset and a
-        # range scale let the fit wander to a mirror on the far side of a beacon
-        initial = solve_lsq(observer, beacons, targets,
-                            sigma=replace(sig, shared_alpha_deg=0.0) if shared else sigma)
-    init = initial or solve_single(o, bpos[0], beacons[0].alpha_deg,
-                                   beacon_d_total=beacons[0].d_total,
-                                   target_alpha_deg=targets[0][0], target_d_total=targets[0][1])
+    init = initial or _start(o, beacons, targets, sigma=sigma, calibration=calibration)
     p = FitProblem.of(bpos, len(targets), sig, calibration=calibration, d_cm=meas_d)
     x0 = np.concatenate([[init.mirror.yaw_deg, init.mirror.rho, *init.target], p.neutral[4:]])
     fit = _robust_fit(p, x0, o, bpos, meas_a=meas_a, meas_d=meas_d)
@@ -86,8 +79,7 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
     implicit = p.unknown != nuisances
     cov = np.linalg.inv(fit.jtj) if sigma is not None else None
     if cov is not None and implicit:  # the shared α's own unknown: marginalized out
-        keep = [i for i in range(len(x0)) if i != 4 + len(nuisances)]
-        cov = cov[np.ix_(keep, keep)]
+        cov = np.delete(np.delete(cov, 4 + len(nuisances), 0), 4 + len(nuisances), 1)
     sol = _solution(o, fit.x[:4], bpos, targets, cov)
     return replace(sol, downweighted=_downweighted(p, fit, len(beacons), priors),
                    priors=dict(priors),
@@ -95,6 +87,21 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
                               for n, v in zip(nuisances, fit.x[4:4 + len(nuisances)],
                                               strict=True)},
                    method=sol.method + _method_notes(calibration, shared, implicit=implicit))
+
+
+def _start(o: np.ndarray, beacons: list[BeaconMeasurement], targets: list[tuple[float, float]],
+           *, sigma: Sigma | ObjectSigmas | None, calibration: SelfCalibration) -> Solution:
+    """Where the fit starts: the one-beacon closed form; with nuisances, a position σ or a
+    shared α offset, the plain fit from it (from the closed form, a pan offset and a
+    range scale let the fit wander to a mirror on the far side of a beacon)."""
+    sig = as_object_sigmas(sigma or Sigma())
+    shared = sig.shared_alpha_deg
+    if calibration.nuisances or calibration.position_sigma or shared:
+        return solve_lsq(o, beacons, targets,
+                         sigma=replace(sig, shared_alpha_deg=0.0) if shared else sigma)
+    b = beacons[0]
+    return solve_single(o, b.position, b.alpha_deg, beacon_d_total=b.d_total,
+                        target_alpha_deg=targets[0][0], target_d_total=targets[0][1])
 
 
 @dataclass(frozen=True)

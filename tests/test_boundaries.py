@@ -245,6 +245,28 @@ def test_options_are_given_by_keyword():
             for m in _long_positional(f)] == []
 
 
+MAX_MODULE_LINES = 400
+MAX_FUNCTION_LINES = 60
+
+
+def _long_functions(path: Path) -> list[str]:
+    """The functions and methods of ``path`` (nested ones too) over MAX_FUNCTION_LINES,
+    their docstrings counted."""
+    return [f"{path.name}:{node.lineno} {node.name} {node.end_lineno - node.lineno + 1}"
+            for node in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef)
+            and node.end_lineno - node.lineno + 1 > MAX_FUNCTION_LINES]
+
+
+def test_modules_and_functions_stay_small():
+    """A module holds one idea a reader takes in at once (at most 400 lines), a function
+    one step (at most 60)."""
+    modules = _modules(PACKAGE) + _modules(ROOT / "solver")
+    assert [(p.relative_to(ROOT).as_posix(), n) for p in modules
+            if (n := len(p.read_text(encoding="utf-8").splitlines())) > MAX_MODULE_LINES] == []
+    assert [m for p in modules for m in _long_functions(p)] == []
+
+
 def test_the_checks_above_can_fail(tmp_path):
     # the import reader sees a lazy import, and the flag pattern a flag in an f-string
     f = tmp_path / "m.py"
@@ -261,6 +283,10 @@ def test_the_checks_above_can_fail(tmp_path):
     # the positional count sees a fourth argument, and not one after the star
     f.write_text("def g(a, b, c, d):\n    pass\n\n\ndef h(a, b, c, *, d):\n    pass\n")
     assert [m.split()[1] for m in _long_positional(f)] == ["g"]
+    # the size check sees a nested function over the limit
+    f.write_text("def g():\n    def h():\n" + "        x = 1\n" * MAX_FUNCTION_LINES
+                 + "    return h\n")
+    assert [m.split()[1] for m in _long_functions(f)] == ["g", "h"]
 
 
 def _unannotated(path: Path) -> list[str]:

@@ -160,6 +160,16 @@ def report_table(report: Report, report_scene: Scene | None = None) -> str:
     lines.insert(1, "-" * len(lines[0]))
     if report_scene is not None:
         lines.append(bench_line(report_scene))
+    lines += _report_notes(report)
+    return "\n".join(lines)
+
+
+def _report_notes(report: Report) -> list[str]:
+    """The lines under :func:`report_table`'s table: the board's pose, the σ's, the
+    priors, the images trusted less, the self-calibration, the Mahalanobis distance, the
+    Cramér–Rao bound and the error as beacons are added."""
+    m, s, e = report.measurements, report.solution, report.errors
+    lines: list[str] = []
     if report.camera_pose is not None:
         p = report.camera_pose
         lines.append(f"camera pose from the board's holes: pan {p.pan_offset_deg:+.4f}° from the "
@@ -192,7 +202,7 @@ def report_table(report: Report, report_scene: Scene | None = None) -> str:
         lines.append("target error with the first k beacons: " + ", ".join(
             f"{k + 1}: {r.target_cm:.3f} cm ({', '.join(r.calibrated) or 'plain'})"
             for k, r in enumerate(report.error_vs_beacons)))
-    return "\n".join(lines)
+    return lines
 
 
 def mahalanobis_sentence(distance: float) -> str:

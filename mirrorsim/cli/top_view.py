@@ -123,22 +123,7 @@ def draw_top_view(ax: Axes, scene: Scene) -> None:
     objects = [("target", scene.target, "#c0392b", "*", 14)]
     objects += [(f"beacon {i}" if len(scene.beacons) > 1 else "beacon", b, "#d4a017", "o", 7)
                 for i, b in enumerate(scene.beacons)]
-    placed: list[np.ndarray] = []  # the virtual images labelled so far
-    for label, obj, colour, marker, ms in objects:
-        img = optics.mirror_image(cam.position, scene.mirror, obj.position)
-        p, v, r = np.asarray(obj.position, float), img.virtual, img.reflection_point
-        ax.plot(*zip(c, r, p, strict=True), color=colour, lw=1.2, zorder=3)
-        ax.plot(*zip(r, v, strict=True), color=colour, lw=0.9, ls="--", zorder=3)
-        ax.plot(*p, marker=marker, color=colour, ms=ms, mec="k", zorder=6,
-                label=f"{label}: α {img.alpha_deg:.2f}°, d_total {img.d_total:.2f} cm")
-        ax.plot(*v, marker=marker, color="none", mec=colour, ms=ms, zorder=6)
-        # images a few cm apart (beacons side by side) had their labels on top of each
-        # other: each further one near an earlier one goes a line lower, on the left
-        near = sum(float(np.hypot(*(v - q))) < LABEL_NEAR_CM for q in placed)
-        placed.append(np.asarray(v, float))
-        ax.annotate(f"{label}′", v, textcoords="offset points", fontsize=8, color=colour,
-                    xytext=(6 if near % 2 == 0 else -6, 4 - 11 * near),
-                    ha="left" if near % 2 == 0 else "right")
+    _draw_images(ax, scene, objects)
     t0, t1 = scene.target.ends()
     ax.plot(*zip(t0, t1, strict=True), color="#c0392b", lw=3, zorder=5)
 
@@ -155,6 +140,29 @@ def draw_top_view(ax: Axes, scene: Scene) -> None:
     ax.set_title(f"{scene.name}: top view (dashed: to the virtual images)")
     legend_below(ax)
     ax.grid(alpha=0.2)
+
+
+def _draw_images(ax: Axes, scene: Scene, objects: list[tuple]) -> None:
+    """Each object (label, object, colour, marker, size), its virtual image and the ray
+    through the mirror; the images' labels kept apart."""
+    cam = scene.camera
+    c = np.asarray(cam.position, float)
+    placed: list[np.ndarray] = []  # the virtual images labelled so far
+    for label, obj, colour, marker, ms in objects:
+        img = optics.mirror_image(cam.position, scene.mirror, obj.position)
+        p, v, r = np.asarray(obj.position, float), img.virtual, img.reflection_point
+        ax.plot(*zip(c, r, p, strict=True), color=colour, lw=1.2, zorder=3)
+        ax.plot(*zip(r, v, strict=True), color=colour, lw=0.9, ls="--", zorder=3)
+        ax.plot(*p, marker=marker, color=colour, ms=ms, mec="k", zorder=6,
+                label=f"{label}: α {img.alpha_deg:.2f}°, d_total {img.d_total:.2f} cm")
+        ax.plot(*v, marker=marker, color="none", mec=colour, ms=ms, zorder=6)
+        # images a few cm apart (beacons side by side) had their labels on top of each
+        # other: each further one near an earlier one goes a line lower, on the left
+        near = sum(float(np.hypot(*(v - q))) < LABEL_NEAR_CM for q in placed)
+        placed.append(np.asarray(v, float))
+        ax.annotate(f"{label}′", v, textcoords="offset points", fontsize=8, color=colour,
+                    xytext=(6 if near % 2 == 0 else -6, 4 - 11 * near),
+                    ha="left" if near % 2 == 0 else "right")
 
 
 def legend_below(ax: Axes) -> None:

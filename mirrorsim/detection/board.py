@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -146,24 +147,8 @@ def measure_camera_pose(image: np.ndarray, camera: Camera, board: Board,
                              f"the camera's pose on (need {MIN_HOLES})")
     tree = cKDTree(blobs)
 
-    def matched(x: np.ndarray, gate: float) -> int:
-        uv, z = project_holes(camera, holes, x[0], pitch=x[1], roll=x[2])
-        uv = uv[_on_film(camera, uv, z)]
-        if not len(uv):
-            return 0
-        return int(np.sum(tree.query(uv, distance_upper_bound=gate)[0] < gate))
-
-    # coarse: the pose within the mount's tolerance the correlation finds, then the pan
-    # and pitch near it that put most holes on blobs
-    best, x = -1, np.asarray(start if start is not None else (0.0, 0.0, 0.0), float)
-    for near in ([] if start is not None else
-                 _correlated_poses(blobs, camera, holes, board.hole_diameter)):
-        for dp in _grid(LOCAL_DEG):
-            for pt in _grid(LOCAL_DEG):
-                cand = near + np.array([dp, pt, 0.0])
-                count = matched(cand, COARSE_GATE_PX)
-                if count > best:
-                    best, x = count, cand
+    x = np.asarray(start, float) if start is not None else _coarse_pose(
+        camera, holes, blobs, tree, hole_diameter=board.hole_diameter)
     x, pairs, fit = _fit_pose(camera, holes, blobs, tree, x)
     r = _residuals(camera, holes, blobs, pairs, x).reshape(-1, 2)
     residual = float(np.median(np.hypot(*r.T)))
@@ -186,6 +171,29 @@ def measure_camera_pose(image: np.ndarray, camera: Camera, board: Board,
     return CameraPose(pan_offset_deg=float(x[0]), pitch_deg=float(x[1]), roll_deg=float(x[2]),
                       holes=len(pairs[0]), residual_px=residual,
                       pan_sd_deg=float(math.sqrt(max(cov[0, 0], 0.0))))
+
+
+def _coarse_pose(camera: Camera, holes: np.ndarray, blobs: np.ndarray, tree: Any, *,
+                 hole_diameter: float) -> np.ndarray:
+    """The pose (pan offset, pitch, roll; deg) the fit starts from: of the poses within
+    the mount's tolerance the correlation finds, and the pan and pitch near each, the one
+    that puts most holes on blobs."""
+    def matched(x: np.ndarray, gate: float) -> int:
+        uv, z = project_holes(camera, holes, x[0], pitch=x[1], roll=x[2])
+        uv = uv[_on_film(camera, uv, z)]
+        if not len(uv):
+            return 0
+        return int(np.sum(tree.query(uv, distance_upper_bound=gate)[0] < gate))
+
+    best, x = -1, np.zeros(3)
+    for near in _correlated_poses(blobs, camera, holes, hole_diameter):
+        for dp in _grid(LOCAL_DEG):
+            for pt in _grid(LOCAL_DEG):
+                cand = near + np.array([dp, pt, 0.0])
+                count = matched(cand, COARSE_GATE_PX)
+                if count > best:
+                    best, x = count, cand
+    return x
 
 
 def _residuals(camera: Camera, holes: np.ndarray, blobs: np.ndarray,

@@ -182,10 +182,7 @@ def _median_edges(imgs, lo, hi, cross_lo, cross_hi, axis, band_px=3,
     ``half``: each end's final window, 2·half + 1 px about the edge.
     Returns (edge_lo, edge_hi, outside_lo, outside_hi).
     """
-    span = cross_hi - cross_lo + 1
-    a = cross_lo + int(0.2 * span)
-    b = max(a + 1, cross_hi - int(0.2 * span) + 1)
-    bands = [np.arange(s, min(s + band_px, b)) for s in range(a, b, band_px)]
+    bands = _bands(cross_lo, cross_hi, band_px)
     reach = max(2, (hi - lo) // 2)
     final, outs = [], []
     for end, guess in ((0, lo), (1, hi)):
@@ -222,6 +219,15 @@ def _median_edges(imgs, lo, hi, cross_lo, cross_hi, axis, band_px=3,
         final.append(e)
         outs.append(out)
     return final[0], final[1], outs[0], outs[1]
+
+
+def _bands(cross_lo: int, cross_hi: int, band_px: int) -> list[np.ndarray]:
+    """Bands of ``band_px`` rows (or columns) across the middle 60 % of [cross_lo,
+    cross_hi]."""
+    span = cross_hi - cross_lo + 1
+    a = cross_lo + int(0.2 * span)
+    b = max(a + 1, cross_hi - int(0.2 * span) + 1)
+    return [np.arange(s, min(s + band_px, b)) for s in range(a, b, band_px)]
 
 
 # the note of a JPEG pencil whose sides the blue channel lost and the colour measured

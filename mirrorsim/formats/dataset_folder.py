@@ -183,19 +183,8 @@ def read_table(folder: str | Path) -> dict[str, list]:
     DatasetError
         Saying which of these fails.
     """
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
     path = Path(folder) / "dataset.parquet"
-    if not path.exists():
-        raise DatasetError(path, "no such file (make it with `mirrorsim dataset`)")
-    if not path.is_file():
-        raise DatasetError(path, "not a file")
-    try:
-        arrow = pq.read_table(path)
-    except (pa.ArrowException, OSError) as exc:
-        why = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise DatasetError(path, f"not a readable Parquet table ({why})") from None
+    arrow = _parquet(path)
     cols = arrow.to_pydict()
     seal = (arrow.schema.metadata or {}).get(TABLE_SEAL.encode())
     if seal is None:
@@ -224,21 +213,42 @@ def read_table(folder: str | Path) -> dict[str, list]:
                            "dataset's table, or one written before a row changed; resuming "
                            "the dataset writes the table again)")
     check_scene_files(folder, rows)
-    schemas = cols.get("schema") or [None]
-    if all(s in (*table.OLDER_SCHEMAS, table.SCHEMA) for s in schemas):
-        # a table of older layouts (one resumed by a later version mixes them): each row
-        # takes the values its scene had for the columns added since its layout (one
-        # beacon, plain; no priors); a column its own layout had stays missing
-        older = [table.older_values(s) for s in schemas]
-        for c in set().union(*older) - set(cols):
-            if all(c in o for o in older):
-                cols[c] = [None if e else o[c] for e, o in zip(cols["error"], older,
-                                                                strict=True)]
+    _migrated(cols)
     missing = sorted(set(table.NAMES) - set(cols))
     if missing:
         raise DatasetError(path, f"missing columns {', '.join(missing[:4])}"
                            + (f" and {len(missing) - 4} more" if len(missing) > 4 else ""))
     return cols
+
+
+def _parquet(path: Path) -> Any:
+    """The Parquet table at ``path``, or a one-line :class:`DatasetError`."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    if not path.exists():
+        raise DatasetError(path, "no such file (make it with `mirrorsim dataset`)")
+    if not path.is_file():
+        raise DatasetError(path, "not a file")
+    try:
+        arrow = pq.read_table(path)
+    except (pa.ArrowException, OSError) as exc:
+        why = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise DatasetError(path, f"not a readable Parquet table ({why})") from None
+    return arrow
+
+
+def _migrated(cols: dict[str, list]) -> None:
+    """A table of older layouts (one resumed by a later version mixes them) given, in
+    place, the values its rows' scenes had for the columns added since their layout (one
+    beacon, plain; no priors); a column its own layout had stays missing."""
+    schemas = cols.get("schema") or [None]
+    if all(s in (*table.OLDER_SCHEMAS, table.SCHEMA) for s in schemas):
+        older = [table.older_values(s) for s in schemas]
+        for c in set().union(*older) - set(cols):
+            if all(c in o for o in older):
+                cols[c] = [None if e else o[c] for e, o in zip(cols["error"], older,
+                                                                strict=True)]
 
 
 def load_dataset(folder: str | Path) -> pd.DataFrame:

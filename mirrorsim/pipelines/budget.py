@@ -219,11 +219,8 @@ def run_budget(scene: Scene, out: str | Path, *, variant: str = "auto", progress
     OutputError
         If ``out`` holds files mirrorsim did not write, or the scene's own file.
     """
-    check_given_scene(scene)  # edited by a script: held to what its file would make
-    check_keep(keep)
-    calibration = check_budget_calibration(scene, calibration)
-    model = model_for(scene, error_model)  # read and checked before anything is written
-    check_variant(variant)
+    calibration, model = _checked(scene, keep=keep, calibration=calibration,
+                                  error_model=error_model, variant=variant)
     out = claim_run_folder(out, "out", [("scene", scene.source)])
     found = imperfections.sources(scene)
     runs = budget_runs(scene)
@@ -262,6 +259,19 @@ def run_budget(scene: Scene, out: str | Path, *, variant: str = "auto", progress
     return Budget(scene=scene.name, ideal_cm=ideal.errors.target_cm, all=everything,
                   sources=contributions, calibration=calibration,
                   ideal_calibrated_cm=calibrated_error(ideal, calibration))
+
+
+def _checked(scene: Scene, *, keep: tuple[str, ...], calibration: SelfCalibration,
+             error_model: ErrorModel | None, variant: str
+             ) -> tuple[SelfCalibration, ErrorModel]:
+    """:func:`run_budget`'s arguments checked, and its error model read, before anything
+    is written: the calibration it solves with and the model that weighs every run."""
+    check_given_scene(scene)  # edited by a script: held to what its file would make
+    check_keep(keep)
+    calibration = check_budget_calibration(scene, calibration)
+    model = model_for(scene, error_model)
+    check_variant(variant)
+    return calibration, model
 
 
 def _folder(label: str) -> str:

@@ -245,14 +245,10 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
     _check_run_parameters(n, seed, workers, spp, sampler, executor, keep, variant)
     # plain numbers from here on (numpy's would write themselves into files otherwise)
     n, seed, workers, spp = int(n), int(seed), int(workers), None if spp is None else int(spp)
-    out = Path(out)
-    spec = _run_spec(spec_path, sampler=sampler, beacons=beacons, calibration=calibration)
-    # the model shipped for the spec's benches (a spec with a bench block draws
-    # imperfections), as evaluate chooses it for a scene
-    shipped = default_error_model("bench" if spec.data.get("bench") else "ideal")
-    model = error_model or shipped
-    meta = _dataset_meta(spec, n=n, seed=seed, spp=spp, spec_path=spec_path, model=model,
-                         shipped=shipped, calibration=calibration)
+    out, spec = Path(out), _run_spec(spec_path, sampler=sampler, beacons=beacons,
+                                     calibration=calibration)
+    model, meta = _model_and_meta(spec, error_model, n=n, seed=seed, spp=spp,
+                                  spec_path=spec_path, calibration=calibration)
     with writing(out, meta, resume):  # claimed, and locked while it runs
         make_folders(out, meta)
         chosen = choose_variant(variant)  # the probe runs once here rather than in every worker
@@ -271,9 +267,8 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
         write_table(out, rows)
         write_card(out, meta, rows, variant=chosen)
         return DatasetRun(rows=len(rows), computed=len(todo) - len(retry),
-                          already_done=n - len(todo),
-                          failed=sum(bool(r.error) for r in rows), retry=retry,
-                          parquet=out / "dataset.parquet", seconds=wall,
+                          already_done=n - len(todo), failed=sum(bool(r.error) for r in rows),
+                          retry=retry, parquet=out / "dataset.parquet", seconds=wall,
                           per_minute=len(todo) / wall * 60 if todo and wall else 0.0)
 
 
@@ -296,11 +291,15 @@ def _run_spec(spec_path: str | Path | None, *, sampler: str | None, beacons: int
     return spec
 
 
-def _dataset_meta(spec: DatasetSpec, *, n: int, seed: int, spp: int | None,
-                  spec_path: str | Path | None, model: ErrorModel, shipped: ErrorModel,
-                  calibration: SelfCalibration) -> dict:
-    """What ``dataset.json`` records of the run: its settings (a resume compares them),
-    the error model's digest, and for the card the files it came from."""
+def _model_and_meta(spec: DatasetSpec, error_model: ErrorModel | None, *, n: int, seed: int,
+                    spp: int | None, spec_path: str | Path | None,
+                    calibration: SelfCalibration) -> tuple[ErrorModel, dict]:
+    """The run's error model (the user's, or the one shipped for the spec's benches: a
+    spec with a bench block draws imperfections, as evaluate chooses it for a scene), and
+    what ``dataset.json`` records of the run: its settings (a resume compares them), the
+    model's digest, and for the card the files it came from."""
+    shipped = default_error_model("bench" if spec.data.get("bench") else "ideal")
+    model = error_model or shipped
     meta = {"format": DATASET_FORMAT, "n": n, "seed": seed, "spp": spp, "spec": spec.data,
             "error_model_sha256": _digest(model),
             # for the card's command only (not settings: a resume compares none of them)
@@ -314,7 +313,7 @@ def _dataset_meta(spec: DatasetSpec, *, n: int, seed: int, spp: int | None,
                              "position_sigma": calibration.position_sigma,
                              **({"priors": dict(calibration.priors)}
                                 if calibration.priors else {})}
-    return meta
+    return model, meta
 
 
 def _run_scenes(out: Path, todo: list[int], seed: int, *, job: Callable[..., SceneResult],

@@ -161,26 +161,14 @@ def plan_scene(scene: Scene, sigma: Sigma | ObjectSigmas | None = None, eps_deg:
                            "position the plan tries is a pencil like the others)")
     _check_parameters(sigma, eps_deg, step, yaw_spread_deg, d1_spread)
     calibration = as_calibration(calibration)
-    for name, v, hi in (("n_beacons", n_beacons, MAX_PLANNED_BEACONS), ("n_poses", n_poses,
-                                                                       MAX_POSES)):
+    for name, v, hi in (("n_beacons", n_beacons, MAX_PLANNED_BEACONS),
+                        ("n_poses", n_poses, MAX_POSES)):
         if not (is_whole(v) and 1 <= v <= hi):
             raise BadParameter(name, f"{v!r} must be a whole number within 1..{hi}")
     cam, mir = scene.camera, scene.mirror
     img = optics.mirror_image(cam.position, mir, scene.target.position)
     o = np.asarray(cam.position, float)
     s = mir.size[0]
-    geo = paper_placement(img.alpha_deg, img.d_total, s, eps_deg=eps_deg)
-    geo_corrected = paper_placement(img.alpha_deg, img.d_total, s, eps_deg=eps_deg, literal=False)
-    n_steps = max(1, math.ceil(img.d_total / geo.b))
-    R = o + geo.R
-    paths = {k: path_points(k, R, img.alpha_deg, a=2 * geo.half_a, b=geo.b, n=n_steps)
-             for k in ("linear", "rectangular", "sawtooth")}
-
-    region = _exact_region(o, R, img.alpha_deg, img.d_total, s, eps_deg)
-    area_lit = [paper_placement(img.alpha_deg, d, s, eps_deg=eps_deg).area for d in AREA_DISTANCES]
-    area_exact = [region_area(o, img.alpha_deg, d, s=s, eps_deg=eps_deg)
-                  for d in AREA_DISTANCES]
-
     prior = MirrorPrior(d1=img.d1, yaw_deg=mir.yaw, d1_spread=d1_spread,
                         yaw_spread_deg=yaw_spread_deg, n=n_poses)
     poses = prior.poses(o, img.alpha_deg)
@@ -189,25 +177,42 @@ def plan_scene(scene: Scene, sigma: Sigma | ObjectSigmas | None = None, eps_deg:
     if n_beacons > 1 or calibration.nuisances or calibration.position_sigma:
         keep_out, accept = _placement_rules(scene)
         chosen = best_beacon_set(o, img.alpha_deg, img.d_total, poses=poses, sigma=sigma,
-                                 mirror_size=s,
-                                 board=scene.board.size, n=n_beacons, calibration=calibration,
-                                 step=step,
-                                 keep_out=keep_out, accept=accept)
+                                 mirror_size=s, board=scene.board.size, n=n_beacons,
+                                 calibration=calibration, step=step, keep_out=keep_out,
+                                 accept=accept)
     scene_err, scene_seen = expected_target_error(
         o, img.alpha_deg, img.d_total, beacons=np.array([b.position for b in scene.beacons]),
-        poses=poses,
-        sigma=sigma, mirror_size=s, min_depth=0.0)
+        poses=poses, sigma=sigma, mirror_size=s, min_depth=0.0)
     return Plan(
         target_alpha_deg=img.alpha_deg, target_d_total=img.d_total, eps_deg=eps_deg,
-        sigma=sigma, geometry=geo, geometry_corrected=geo_corrected, n_steps=n_steps,
-        paths=paths, path_lengths=path_lengths(2 * geo.half_a, geo.b, n_steps),
-        path_polyline_lengths={k: polyline_length(v) for k, v in paths.items()},
-        region=region, area_vs_d=(list(AREA_DISTANCES), area_lit, area_exact),
+        sigma=sigma, **_paper_fields(o, img.alpha_deg, img.d_total, s=s, eps_deg=eps_deg),
         n_poses=len(poses), best=best, scene_beacon_rmse=float(scene_err[0]),
         scene_beacon_seen=float(scene_seen[0]),
         scene_beacons=tuple((float(e), float(f)) for e, f in zip(scene_err, scene_seen,
                                                                   strict=True)),
         beacon_set=chosen)
+
+
+def _paper_fields(o: np.ndarray, alpha_deg: float, d_total: float, *, s: float,
+                  eps_deg: float) -> dict:
+    """The paper's placement for the target's image (α, d_total): its numbers, literal
+    and corrected, the paths and their lengths, the exact beacon region and the area
+    against d_total beside the literal one (the :class:`Plan` fields of those names)."""
+    geo = paper_placement(alpha_deg, d_total, s, eps_deg=eps_deg)
+    n_steps = max(1, math.ceil(d_total / geo.b))
+    R = o + geo.R
+    paths = {k: path_points(k, R, alpha_deg, a=2 * geo.half_a, b=geo.b, n=n_steps)
+             for k in ("linear", "rectangular", "sawtooth")}
+    area_lit = [paper_placement(alpha_deg, d, s, eps_deg=eps_deg).area for d in AREA_DISTANCES]
+    area_exact = [region_area(o, alpha_deg, d, s=s, eps_deg=eps_deg) for d in AREA_DISTANCES]
+    return {"geometry": geo,
+            "geometry_corrected": paper_placement(alpha_deg, d_total, s, eps_deg=eps_deg,
+                                                  literal=False),
+            "n_steps": n_steps, "paths": paths,
+            "path_lengths": path_lengths(2 * geo.half_a, geo.b, n_steps),
+            "path_polyline_lengths": {k: polyline_length(v) for k, v in paths.items()},
+            "region": _exact_region(o, R, alpha_deg, d_total, s, eps_deg),
+            "area_vs_d": (list(AREA_DISTANCES), area_lit, area_exact)}
 
 
 # the least orientation range: the region seen under every orientation spans

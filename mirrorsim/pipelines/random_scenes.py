@@ -10,6 +10,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -130,6 +131,27 @@ def load_spec(path: str | Path | None = None) -> DatasetSpec:
               optional={"render", "max_tries", "bench"})
     r.mapping(spec["board"], "board", {"size"}, optional={"hole_pitch"})
     r.pair(spec["board"]["size"], "board.size", positive=True, high=MAX_BOARD_CM)
+    _check_camera_block(spec, r)
+    r.mapping(spec["mirror"], "mirror", {"x", "y", "yaw", "width", "height"})
+    _check_target_and_beacon(spec, r)
+    r.mapping(spec["occluder"], "occluder", {"at", "length", "height"})
+    read_render(r, spec.get("render", {}), seed=False)
+    r.integer(spec.get("max_tries", 5000), "max_tries", low=1, high=MAX_TRIES)
+    check_bench_keys(spec, r)
+    # draws find range errors (wrong types, lo > hi) with their key, and a spec under
+    # which no usable scene exists
+    _draw(spec, np.random.default_rng(0), path)
+    try:
+        _sample(spec, 0, "probe", tries=min(PROBE_TRIES, spec.get("max_tries", 5000)))
+    except NoValidScene as exc:
+        raise r.fail("", str(exc)) from None
+    check_bench_ends(spec, r)
+    return DatasetSpec(spec)
+
+
+def _check_camera_block(spec: dict, r: Reader) -> None:
+    """A spec's ``camera`` block: its keys, its models (or its height and field of view
+    beside none), its resolution and its pan."""
     cam = r.mapping(spec["camera"], "camera", {"x", "y"},
                     optional={"height", "hfov", "resolution", "pan", "models"})
     if "models" in cam:
@@ -148,7 +170,11 @@ def load_spec(path: str | Path | None = None) -> DatasetSpec:
     if "models" in cam:
         _camera_models(spec, r)
     read_pan(r, spec["camera"].get("pan", "mirror"), "camera.pan")
-    r.mapping(spec["mirror"], "mirror", {"x", "y", "yaw", "width", "height"})
+
+
+def _check_target_and_beacon(spec: dict, r: Reader) -> None:
+    """A spec's ``target`` block (its size a pair of values, each a value or a range) and
+    its ``beacon`` block (a count within 1..MAX_BEACONS)."""
     r.mapping(spec["target"], "target", {"x", "y", "size"})
     size = spec["target"]["size"]
     if isinstance(size, list) and len(size) == 2 and any(isinstance(x, list) for x in size):
@@ -163,19 +189,6 @@ def load_spec(path: str | Path | None = None) -> DatasetSpec:
     for k, c in enumerate(count if isinstance(count, list) and len(count) == 2 else [count]):
         r.integer(c, f"beacon.count[{k}]" if isinstance(count, list) else "beacon.count",
                   low=1, high=MAX_BEACONS)
-    r.mapping(spec["occluder"], "occluder", {"at", "length", "height"})
-    read_render(r, spec.get("render", {}), seed=False)
-    r.integer(spec.get("max_tries", 5000), "max_tries", low=1, high=MAX_TRIES)
-    check_bench_keys(spec, r)
-    # draws find range errors (wrong types, lo > hi) with their key, and a spec under
-    # which no usable scene exists
-    _draw(spec, np.random.default_rng(0), path)
-    try:
-        _sample(spec, 0, "probe", tries=min(PROBE_TRIES, spec.get("max_tries", 5000)))
-    except NoValidScene as exc:
-        raise r.fail("", str(exc)) from None
-    check_bench_ends(spec, r)
-    return DatasetSpec(spec)
 
 
 def camera_models(spec: DatasetSpec) -> list[Camera] | None:
@@ -215,16 +228,7 @@ def _draw(spec: dict, rng: np.random.Generator, where="<spec>",
     """One candidate scene dict (not yet validated); the bench imperfections drawn from
     ``bench_rng`` (default: ``rng``)."""
     g = lambda block, key: _value(spec, block, key, rng, where)  # noqa: E731
-    position = [g("camera", "x"), g("camera", "y")]
-    models = _camera_models(spec)
-    if models:  # a lab's few cameras, each on its mount: one calibration each
-        c = models[int(rng.integers(len(models)))]
-        height, hfov, res = c.height, c.hfov, c.resolution
-    else:
-        height, hfov = g("camera", "height"), g("camera", "hfov")
-        res = spec["camera"].get("resolution", DEFAULT_RESOLUTION)
-    cam = {"position": position, "height": height, "hfov": hfov, "resolution": list(res),
-           "pan": spec["camera"].get("pan", "mirror")}
+    cam = _draw_camera(spec, rng, g)
     yaw = g("mirror", "yaw")
     centre = np.array([g("mirror", "x"), g("mirror", "y")])
     mirror = {"center": centre.tolist(), "yaw": yaw,
@@ -263,17 +267,39 @@ def _draw(spec: dict, rng: np.random.Generator, where="<spec>",
          "render": dataclasses.asdict(read_render(Reader(where, SceneError),
                                                   spec.get("render", {}), seed=False))}
     # from their own stream, so that a bench block leaves the geometry drawn as without it
-    bench_rng = bench_rng or rng
+    _draw_bench_into(d, spec, beacons, bench_rng or rng, where)
+    return d
+
+
+def _draw_camera(spec: dict, rng: np.random.Generator, g: Callable[[str, str], Any]) -> dict:
+    """A candidate scene's camera block: its position, and one of the spec's models (a
+    lab's few cameras, each on its mount: one calibration each) or a drawn height and
+    field of view."""
+    position = [g("camera", "x"), g("camera", "y")]
+    models = _camera_models(spec)
+    if models:
+        c = models[int(rng.integers(len(models)))]
+        height, hfov, res = c.height, c.hfov, c.resolution
+    else:
+        height, hfov = g("camera", "height"), g("camera", "hfov")
+        res = spec["camera"].get("resolution", DEFAULT_RESOLUTION)
+    return {"position": position, "height": height, "hfov": hfov, "resolution": list(res),
+            "pan": spec["camera"].get("pan", "mirror")}
+
+
+def _draw_bench_into(d: dict, spec: dict, beacons: list[dict], bench_rng: np.random.Generator,
+                     where: str) -> None:
+    """The spec's bench block drawn into the candidate ``d`` (its ``beacons``), each
+    further beacon's believed position off by its own draw."""
     for path, value in draw_bench(spec.get("bench") or {}, bench_rng, where).items():
         set_key(d, path, value)
     block, key = OFFSET_IMPERFECTION.spec_path.split(".")
     offset = ((spec.get("bench") or {}).get(block) or {}).get(key)
-    if offset is not None:  # each further beacon's believed position off by its own draw
+    if offset is not None:
+        key_path = f"bench.{OFFSET_IMPERFECTION.spec_path}"
         for b in beacons[1:]:
-            key_path = f"bench.{OFFSET_IMPERFECTION.spec_path}"
             b["known_position"] = [p + draw_number(offset, key_path, bench_rng, where=where)
                                    for p in b["position"]]
-    return d
 
 
 def sample_scene(spec: DatasetSpec, rng: int | np.random.Generator | None, name: str,

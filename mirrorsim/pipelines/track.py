@@ -127,31 +127,27 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
     check_given_scene(scene)  # edited by a script: held to what its file would make
     check_options(kind, steps, odometry_sigma, side=side, step=step, heading=heading,
                   board=scene.board.size)
-    _check_filter_options(particles=particles, seed=seed, position_sigma=position_sigma)
-    check_fixed_beacons(scene, position_sigma)
+    _check_filter_options(scene, particles=particles, seed=seed, position_sigma=position_sigma,
+                          variant=variant)
     model = model_for(scene, error_model)  # read and checked before anything is written
-    check_variant(variant)
     out = claim_run_folder(out, "out", [("scene", scene.source)])
     rng = np.random.default_rng(seed)
     b0, cam = scene.beacons[0], scene.camera
     start = np.asarray(b0.believed, float)
-    params = _filter_params(model, cam.fx, odometry_sigma if kind != "fixed" else 0.0)
     pose = _Poses(scene, out / "poses", seed, variant, on_pose, steps + 1)
-    obs, target_obs, why = pose.measure(0, start, np.asarray(b0.position, float))
-    if obs is None or target_obs is None:
-        raise DetectionError(f"{scene.name}: the start pose gives the filter no prior and "
-                             f"the path no heading: {why or 'the target was not measured'}")
+    obs, target_obs, why = pose.start(start, np.asarray(b0.position, float))
     fixed = tuple(pose.fixed(i) for i in range(1, len(scene.beacons)))
     try:
         commanded = beacon_path(scene, obs, target_obs, kind=kind, steps=steps, side=side,
                                 step=step, heading=heading)
-        pf = _start_filter(cam.position, start, obs, params, particles, seed, fixed,
-                           position_sigma)
+        pf = _start_filter(cam.position, start, obs, n=particles, seed=seed, fixed=fixed,
+                           fixed_sigma=position_sigma, params=_filter_params(
+                               model, cam.fx, odometry_sigma if kind != "fixed" else 0.0))
     except SolverError as exc:
         raise DetectionError(f"{scene.name}: the start pose's measurements give no mirror "
                              f"({exc})") from None
-    moves = np.diff(commanded, axis=0)
-    true = _true_path(np.asarray(b0.position, float), moves, odometry_sigma, rng)
+    true = _true_path(np.asarray(b0.position, float), np.diff(commanded, axis=0),
+                      odometry_sigma, rng)
     records, snapshots = _walk(scene, pf, pose, commanded, true, rng=rng,
                                start=(obs, target_obs, why))
     return TrackReport(scene=scene.name, path=kind, heading=heading,
@@ -159,8 +155,10 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
                        snapshots=tuple(snapshots), fixed=fixed, fixed_sigma=position_sigma)
 
 
-def _check_filter_options(*, particles: int, seed: int, position_sigma: float) -> None:
-    """The filter's options, each within its range (:func:`run_track`'s ``BadParameter``)."""
+def _check_filter_options(scene: Scene, *, particles: int, seed: int,
+                          position_sigma: float, variant: str) -> None:
+    """The filter's options, each within its range, the scene's fixed beacons and the
+    render's variant (:func:`run_track`'s ``BadParameter``)."""
     for name, v, lo in (("particles", particles, MIN_PARTICLES), ("seed", seed, 0)):
         if not (is_whole(v) and v >= lo):
             raise BadParameter(name, f"{v!r} must be a whole number ≥ {lo}")
@@ -173,6 +171,8 @@ def _check_filter_options(*, particles: int, seed: int, position_sigma: float) -
         check_position_sigma(position_sigma)
     except SolverError as exc:
         raise BadParameter("position_sigma", str(exc)) from None
+    check_fixed_beacons(scene, position_sigma)
+    check_variant(variant)
 
 
 def _filter_params(model: ErrorModel, fx: float, odometry_sigma: float) -> PFParams:
@@ -240,6 +240,17 @@ class _Poses:
             return None, None, exc.reason
         self.calibration = m.calibration
         return _observations(m.detection)
+
+    def start(self, believed: np.ndarray, true: np.ndarray
+              ) -> tuple[tuple[float, float], tuple[float, float], str]:
+        """The start pose measured; it must see the beacon and the target (the filter's
+        prior, the path's heading)."""
+        obs, target_obs, why = self.measure(0, believed, true)
+        if obs is None or target_obs is None:
+            raise DetectionError(f"{self.scene.name}: the start pose gives the filter no "
+                                 "prior and the path no heading: "
+                                 f"{why or 'the target was not measured'}")
+        return obs, target_obs, why
 
     def fixed(self, i: int) -> BeaconMeasurement:
         """The scene's beacon i, standing still: rendered alone once, its image measured
@@ -309,7 +320,7 @@ def _observations(det: Detection
     return (m.alpha_deg, m.d_total), target, ""
 
 
-def _start_filter(observer, start, obs, params: PFParams, n: int, seed: int,
+def _start_filter(observer, start, obs, *, params: PFParams, n: int, seed: int,
                   fixed: tuple[BeaconMeasurement, ...] = (), fixed_sigma: float = 0.0
                   ) -> MovingBeaconFilter:
     """The filter with its prior centred on the mirror the first pose's beacon gives

@@ -64,10 +64,8 @@ def beacon_path(scene: Scene, first_obs: tuple[float, float],
     yaw = float(yaw)
     front = line_normal(yaw)
     front = front if front @ (s0 - mid) > 0 else -front
-    target_alpha_deg = target_obs[0]
     believed = _believed_scene(scene, o, yaw, mid, hit, target_obs)
     h = float(bearing_deg(hit, s0) if heading == "view" else bearing_deg(s0, o))
-    size = np.asarray(scene.board.size, float)
     best: tuple[tuple, np.ndarray] | None = None
     for forwards in (True, False):
         for a in (side, -side):
@@ -75,15 +73,8 @@ def beacon_path(scene: Scene, first_obs: tuple[float, float],
             pts = path_points(kind, s0, h + (180.0 if forwards else 0.0), a=a, b=step,
                               n=steps // 2 + 2)
             pts = (pts - pts[0] + s0)[: steps + 1]
-            allowed = (bool(np.all((pts >= 0) & (pts <= size)))
-                       and float(np.min((pts - mid) @ front)) >= CLEARANCE_CM
-                       and all(np.min(np.linalg.norm(pts - np.asarray(b.believed), axis=1))
-                               >= FIXED_CLEARANCE_CM for b in scene.beacons[1:])
-                       and _clear_of_objects(believed, pts))
-            seen = sum(_seen_in(believed, replace(b0, position=tuple(p))) for p in pts)
-            alphas = observe(o, mid, yaw, point=pts, strict=False).alpha_deg
-            spread = float(np.mean(np.abs(wrap_bearing(alphas - target_alpha_deg))))
-            score = (allowed, seen, forwards, -spread)
+            score = _ranked(pts, believed, (mid, yaw, front), target_alpha_deg=target_obs[0],
+                            forwards=forwards)
             if best is None or score > best[0]:
                 best = (score, pts)
     if not best[0][0]:
@@ -94,6 +85,27 @@ def beacon_path(scene: Scene, first_obs: tuple[float, float],
                            "of a fixed beacon; make the path smaller, or start the beacon "
                            "farther from what it would meet")
     return best[1]
+
+
+def _ranked(pts: np.ndarray, believed: Scene, line: tuple[np.ndarray, float, np.ndarray], *,
+            target_alpha_deg: float, forwards: bool) -> tuple[bool, int, bool, float]:
+    """How :func:`beacon_path` ranks a way to walk it (``line``: the believed mirror's
+    point, yaw and front): whether it keeps every clearance, how many of its poses are
+    predicted seen in the glass, b forwards, and how near its images are to the
+    target's in α."""
+    mid, yaw, front = line
+    o = np.asarray(believed.camera.position, float)
+    size = np.asarray(believed.board.size, float)
+    b0 = believed.beacons[0]
+    allowed = (bool(np.all((pts >= 0) & (pts <= size)))
+               and float(np.min((pts - mid) @ front)) >= CLEARANCE_CM
+               and all(np.min(np.linalg.norm(pts - np.asarray(b.believed), axis=1))
+                       >= FIXED_CLEARANCE_CM for b in believed.beacons[1:])
+               and _clear_of_objects(believed, pts))
+    seen = sum(_seen_in(believed, replace(b0, position=tuple(p))) for p in pts)
+    alphas = observe(o, mid, yaw, point=pts, strict=False).alpha_deg
+    spread = float(np.mean(np.abs(wrap_bearing(alphas - target_alpha_deg))))
+    return allowed, seen, forwards, -spread
 
 
 def _clear_of_objects(believed: Scene, pts: np.ndarray) -> bool:
