@@ -1,6 +1,6 @@
-"""Whether a change left every command's output alone: ``evaluate --json`` of the four
-bundled scenes, at a commit of before and at this checkout, compared up to timing
-fields and paths.
+"""Whether a change left every command's output alone: ``evaluate``, ``check`` and
+``plan --json`` of the four bundled scenes, at a commit of before and at this checkout,
+compared up to timing fields and paths.
 
     python benchmarks/same_outputs.py --before COMMIT
 
@@ -52,10 +52,16 @@ def differences(a, b, path: str = "") -> list[str]:
     return [] if a == b else [f"{path}: {a!r} -> {b!r}"[:160]]
 
 
-def evaluate(root: Path, scene: str, out: Path) -> dict:
+COMMANDS = ("evaluate", "check", "plan")
+
+
+def output(root: Path, command: str, scene: str, out: Path) -> dict:
+    """``command``'s JSON for ``scene``, run from the checkout at ``root``."""
     env = {**os.environ, "PYTHONPATH": str(root)}
-    subprocess.run([sys.executable, "-m", "mirrorsim", "evaluate", f"scenes/{scene}.yaml",
-                    "--out", str(out), "--json", f"{out}.json", "--quiet"],
+    extra = {"evaluate": ["--out", str(out), "--quiet"], "plan": ["--out", f"{out}.png"],
+             "check": []}[command]
+    subprocess.run([sys.executable, "-m", "mirrorsim", command, f"scenes/{scene}.yaml",
+                    *extra, "--json", f"{out}.json"],
                    cwd=root, env=env, check=True, capture_output=True)
     return _plain(json.loads(Path(f"{out}.json").read_text()))
 
@@ -71,15 +77,19 @@ def main() -> int:
                        cwd=ROOT, check=True, capture_output=True)
         try:
             for scene in SCENES:
-                d = differences(evaluate(old, scene, Path(tmp) / f"b_{scene}"),
-                                evaluate(ROOT, scene, Path(tmp) / f"a_{scene}"))
-                differ += bool(d)
-                print(f"{scene}: {len(d)} field(s) differ" + "".join(f"\n  {x}" for x in d[:5]))
+                for command in COMMANDS:
+                    name = f"{command}_{scene}"
+                    d = differences(output(old, command, scene, Path(tmp) / f"b_{name}"),
+                                    output(ROOT, command, scene, Path(tmp) / f"a_{name}"))
+                    differ += bool(d)
+                    print(f"{command} {scene}: {len(d)} field(s) differ"
+                          + "".join(f"\n  {x}" for x in d[:5]))
         finally:
             subprocess.run(["git", "worktree", "remove", "--force", str(old)], cwd=ROOT,
                            capture_output=True)
-    print(f"{len(SCENES) - differ} of {len(SCENES)} scenes' reports unchanged against "
-          f"{args.before}; {stamp()}")
+    runs = len(SCENES) * len(COMMANDS)
+    print(f"{runs - differ} of {runs} outputs ({', '.join(COMMANDS)} of {len(SCENES)} scenes) "
+          f"unchanged against {args.before}; {stamp()}")
     return 1 if differ else 0
 
 

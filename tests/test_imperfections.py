@@ -131,3 +131,40 @@ def test_null_is_absent_only_where_the_ideal_bench_has_none():
                 "camera.distortion_known"):
         with pytest.raises(SceneError, match=key.replace(".", r"\.")):
             scene_from_dict(_with(key, None))
+
+
+@pytest.mark.parametrize("name", ["default", "exp1", "exp2", "exp3"])
+def test_each_column_s_ideal_value_is_what_an_ideal_bench_gives(name):
+    """A row written before an imperfection existed takes its column's ``ideal`` value:
+    the value the column reads off the same scene on an ideal bench."""
+    from mirrorsim.pipelines.scenes import load_scene
+
+    scene = imperfections.ideal(load_scene(Path(__file__).parents[1] / "scenes"
+                                           / f"{name}.yaml"))
+    for imp in imperfections.REGISTRY:
+        for c in imp.columns:
+            assert c.of(scene) == c.ideal, c.name
+
+
+def test_a_new_imperfection_brings_its_row_layout_and_its_migration(monkeypatch):
+    """Adding an imperfection is its registry entry: with ``since`` the next layout, the
+    table's version moves to it and a row of the layout before takes the new column's
+    ideal value, with no other file touched."""
+    from dataclasses import replace
+
+    from mirrorsim.formats import dataset_table as table
+
+    assert (table.SCHEMA, table.ADDED_IN) == table.layouts()  # today's, from the registry
+    shake = replace(imperfections.REGISTRY[1], field="shake", key="camera.shake",
+                    since=table.SCHEMA + 1, features=(),
+                    columns=(imperfections.Column("bench_shake_deg", "deg", "camera shake",
+                                                  lambda _s: 0.0),))
+    schema, added = table.layouts((*imperfections.REGISTRY, shake))
+    assert schema == table.SCHEMA + 1
+    assert added[schema] == {"bench_shake_deg": 0.0}
+    assert {k: v for k, v in added.items() if k < schema} == table.ADDED_IN
+    monkeypatch.setattr(table, "ADDED_IN", added)
+    older = table.older_values(table.SCHEMA)  # a row of today's layout, read tomorrow
+    assert older == {"bench_shake_deg": 0.0}
+    assert table.older_values(2)["bench_shake_deg"] == 0.0 and "beacons" in \
+        table.older_values(2)

@@ -152,20 +152,35 @@ COLUMNS = (*RUN, *SCENE, *KNOWN,
 NAMES = tuple(c.name for c in COLUMNS)
 # the columns of the second, third… beacon: in a row exactly when its scene has them
 SLOT_NAMES = {k: tuple(c.name for c in _slot_columns(k)) for k in range(1, MAX_BEACONS)}
-# the layout of the rows this mirrorsim writes
-SCHEMA = 5
-# the columns each layout added, with the value a row of an older layout had for them:
-# schema 3 several beacons and self-calibration, schema 4 the self-calibration's priors,
-# schema 5 what the frame showed of each image (unknown for an older row: null)
-ADDED_IN = {3: {"beacons": 1, "calibrate": "", "beacon_sigma": 0.0,
-                **{f"est_{key}{sd}": None for key, _ in NUISANCES.values()
-                   for sd in ("", "_sd")}},
-            4: {"calibrate_priors": ""},
-            5: {"pencil_height_cm": None,
-                **{object_column(k, c): None for k in OBJECTS
-                   for c in ("height_px_meas", "contrast", "noise", "jpeg_quality")}}}
+# the columns each layout added besides the bench imperfections', with the value a row of
+# an older layout had for them: schema 3 several beacons and self-calibration, schema 4
+# the self-calibration's priors, schema 5 what the frame showed of each image (unknown for
+# an older row: null).  The first layout is 2.
+FIRST_SCHEMA = 2
+_ADDED = {3: {"beacons": 1, "calibrate": "", "beacon_sigma": 0.0,
+              **{f"est_{key}{sd}": None for key, _ in NUISANCES.values()
+                 for sd in ("", "_sd")}},
+          4: {"calibrate_priors": ""},
+          5: {"pencil_height_cm": None,
+              **{object_column(k, c): None for k in OBJECTS
+                 for c in ("height_px_meas", "contrast", "noise", "jpeg_quality")}}}
+
+
+def layouts(registry: tuple = REGISTRY) -> tuple[int, dict[int, dict[str, Any]]]:
+    """The row layout this mirrorsim writes, and the columns each layout added with the
+    value an older row had for them: :data:`_ADDED`'s, and each imperfection's from its
+    registry entry (``since``: its layout; an older row's scene was ideal in it)."""
+    added = {k: dict(v) for k, v in _ADDED.items()}
+    for imp in registry:
+        if imp.since > FIRST_SCHEMA:
+            added.setdefault(imp.since, {}).update({c.name: c.ideal for c in imp.columns})
+    return max(added), added
+
+
+# the layout of the rows this mirrorsim writes, and what each layout added
+SCHEMA, ADDED_IN = layouts()
 # the older layouts a table may hold, read with ADDED_IN's values
-OLDER_SCHEMAS = tuple(range(2, SCHEMA))
+OLDER_SCHEMAS = tuple(range(FIRST_SCHEMA, SCHEMA))
 
 
 def older_values(schema: int) -> dict[str, Any]:

@@ -5,7 +5,9 @@ it (on :class:`~mirrorsim.scene.model.Bench`, or each beacon's believed position
 scene-file key path, units and bounds, the form a dataset spec draws it in, its dataset
 columns and its error-model features.  The scene reader, the spec's scene drawer, the
 dataset rows and card and the error model all read it; none lists imperfections of its
-own.  Adding one is an entry here, the field on ``Bench``, its rendering hook and its test.
+own.  Adding one is an entry here (its ``since`` the next row layout), the field on
+``Bench``, its rendering hook and its test: the dataset's columns, its layout's version
+and the values its older rows take follow from the entry.
 
 The error budget (:mod:`mirrorsim.pipelines.budget`) renders a scene ideal, with each
 source alone, and with all; a source is named by its key path (``camera.pan_error``,
@@ -37,6 +39,9 @@ class Column:
     units: str
     doc: str
     of: Callable[[Scene], Any]
+    # its value on an ideal bench: what a row written before the imperfection existed
+    # had (its scene was ideal in it); a test holds ``of`` of an ideal scene to it
+    ideal: Any = 0.0
 
 
 @dataclass(frozen=True)
@@ -78,6 +83,10 @@ class Imperfection:
     # where it acts: "optics" (what Mitsuba renders), "sensor" (after the render: noise,
     # JPEG) or "record" (only what the experimenter believes); see optics_of
     stage: str = "optics"
+    # the dataset row layout its columns arrived in: an imperfection added later says the
+    # next layout here, and the table's version and its older rows' values follow
+    # (:mod:`mirrorsim.formats.dataset_table`)
+    since: int = 2
 
     @property
     def block(self) -> str:
@@ -123,7 +132,8 @@ def _mirror_power(col: Columns, obj: Columns) -> np.ndarray:
 
 
 def _plain(name: str, column: str, units: str, doc: str) -> tuple[Column, ...]:
-    return (Column(column, units, doc, lambda s: getattr(s.bench, name)),)
+    return (Column(column, units, doc, lambda s: getattr(s.bench, name),
+                   ideal=getattr(Bench(), name)),)
 
 
 def _linear(name: str, column: str, doc: str) -> tuple[Feature, ...]:
