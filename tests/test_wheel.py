@@ -41,12 +41,14 @@ def test_a_wheel_installs_in_a_fresh_venv_and_runs_new_check_and_evaluate(tmp_pa
     site = next((venv / "lib").glob("python3*/site-packages"))
     (site / "deps.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
     bin_ = venv / "bin"
-    subprocess.run([bin_ / "pip", "install", "-q", "--no-deps", "--no-index", str(wheel)],
-                   check=True, capture_output=True)
-    work = tmp_path / "work"  # away from the clone: no scenes/, no mirrorsim/ beside it
-    work.mkdir()
+    # this environment's own: a PYTHONPATH holding a clone's mirrorsim made pip take the
+    # wheel as installed already
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
     env["PATH"] = f"{bin_}:{env['PATH']}"
+    subprocess.run([bin_ / "pip", "install", "-q", "--no-deps", "--no-index", str(wheel)],
+                   check=True, capture_output=True, env=env)
+    work = tmp_path / "work"  # away from the clone: no scenes/, no mirrorsim/ beside it
+    work.mkdir()
 
     def run(*argv: str) -> str:
         done = subprocess.run([str(bin_ / "mirrorsim"), *argv], cwd=work, env=env,
