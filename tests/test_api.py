@@ -190,6 +190,20 @@ def test_a_scene_edited_in_a_script_is_built_as_its_file_would_be(tmp_path):
     assert len(two.beacons) == 2
     with pytest.raises(BadParameter, match="give `beacons`"):  # it replaced the whole list
         ms.edit_scene(two, {"beacon": {"position": [36, 53], **pencil}})
+    # each dataclass holds its values to the file's bounds when made, by an edit too
+    with pytest.raises(BadParameter, match=r"size\[0\]: -5 must be > 0"):
+        replace(base.mirror, size=(-5.0, 20.0))
+    with pytest.raises(BadParameter, match="height: nan is not a finite number"):
+        replace(base.beacons[0], height=float("nan"))
+    with pytest.raises(BadParameter, match="hfov: 175 must be ≤ 170"):
+        replace(base.camera, hfov=175.0)
+    # a bench value out of its bounds, or beyond what the mirror allows, is the composer's
+    pitched = replace(base, name="pitched", bench=replace(base.bench, pitch=25.0))
+    curved = replace(base, name="curved", bench=replace(base.bench, curvature_radius=3.0))
+    for bad, key in ((pitched, "camera.pitch"), (curved, "mirror.curvature_radius")):
+        with pytest.raises(SceneError, match=rf"\(edited\): {key}: "):
+            ms.evaluate(bad, tmp_path / "bad")
+        assert not (tmp_path / "bad").exists()
     stale = replace(base, name="stale", mirror=replace(base.mirror, yaw=25))
     off = replace(base, name="off", mirror=replace(base.mirror, center=(500.0, 10.0)))
     out = tmp_path / "out"

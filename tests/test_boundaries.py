@@ -155,11 +155,19 @@ def test_a_scene_is_composed_in_one_place():
 
 def test_no_scene_is_written_out_to_be_checked():
     """A scene is checked by composing it, not by writing it back into a file's document
-    and reading that again: only an edit (which merges into the file's keys) and the
-    value check of a scene given to the API turn a scene back into a document."""
+    and reading that again: only an edit (which merges into the file's keys) and a
+    dataset's scene files turn a scene into a document."""
     users = sorted(p.relative_to(PACKAGE).as_posix() for p in _modules(PACKAGE)
                    if "scene_document" in _calls(p))
     assert users == ["pipelines/random_scenes.py", "pipelines/scenes.py"]
+    # and the API's check of a scene it is given composes that scene, never a document
+    tree = ast.parse((PACKAGE / "pipelines" / "scenes.py").read_text(encoding="utf-8"))
+    given = next(n for n in tree.body if isinstance(n, ast.FunctionDef)
+                 and n.name == "check_given_scene")
+    called = {getattr(c.func, "id", getattr(c.func, "attr", "")) for c in ast.walk(given)
+              if isinstance(c, ast.Call)}
+    assert "compose_scene" in called
+    assert not called & {"scene_document", "parse_scene", "scene_from_dict"}
 
 
 def test_rendering_imports_no_detection():

@@ -27,7 +27,8 @@ from mirrorsim.camera.sensor import undistort
 from mirrorsim.detection.edges import ImageMeasurement
 from mirrorsim.errors import DetectionError
 from mirrorsim.formats.capture import CaptureRecord
-from mirrorsim.scene.model import Board, Camera, camera_axes, project
+from mirrorsim.scene.model import Board, Camera
+from mirrorsim.scene.projection import camera_axes, project
 from solver.geometry import unit, wrap_bearing
 
 # a hand-built bench's mount is good to this (deg) in pan, pitch and roll: the search

@@ -17,7 +17,6 @@ from typing import Any
 from mirrorsim.errors import InputError
 from mirrorsim.formats.reader import Reader, read_json, read_resolution, show
 from mirrorsim.scene.model import (
-    MAX_BOARD_CM,
     MAX_HFOV_DEG,
     Beacon,
     Board,
@@ -37,15 +36,10 @@ def read_board(r: Reader, raw: Any, required: tuple[str, ...] = ("size",),
     given) or a capture record's (which names the holes' diameter too)."""
     b = r.mapping(raw, "board", required, optional=optional)
     d = Board((1.0, 1.0))  # the defaults
-    board = Board(size=r.pair(b["size"], "board.size", positive=True, high=MAX_BOARD_CM),
-                  hole_pitch=r.number(b.get("hole_pitch", d.hole_pitch), "board.hole_pitch",
-                                      low=0.0),
-                  hole_diameter=r.number(b.get("hole_diameter", d.hole_diameter),
-                                         "board.hole_diameter", positive=True))
-    if 0.0 < board.hole_pitch <= board.hole_diameter:
-        raise r.fail("board.hole_pitch", f"{board.hole_pitch:g} must exceed the hole diameter "
-                     f"{board.hole_diameter:g} cm (or be 0 for a plain board)")
-    return board
+    return r.built("board", Board, size=r.pair(b["size"], "board.size"),
+                   hole_pitch=r.number(b.get("hole_pitch", d.hole_pitch), "board.hole_pitch"),
+                   hole_diameter=r.number(b.get("hole_diameter", d.hole_diameter),
+                                          "board.hole_diameter"))
 
 
 def read_distortion(r: Reader, raw: Any, key: str) -> tuple[float, float]:
@@ -129,16 +123,17 @@ class CaptureRecord:
         distortion = (read_distortion(r, c["distortion"], "camera.distortion")
                       if "distortion" in c else (0.0, 0.0))
         pan = r.number(c["pan_deg"], "camera.pan_deg")
-        camera = Camera(position=r.pair(c["position"], "camera.position"),
-                        height=r.number(c["height"], "camera.height", positive=True),
-                        resolution=resolution, hfov=hfov, pan=pan, pan_deg=pan)
+        camera = r.built("camera", Camera, position=r.pair(c["position"], "camera.position"),
+                         height=r.number(c["height"], "camera.height"),
+                         resolution=resolution, hfov=hfov, pan=pan, pan_deg=pan)
         if not isinstance(top["beacons"], list) or not top["beacons"]:
             raise r.fail("beacons", "expected a non-empty list")
         beacons = []
         for i, b in enumerate(top["beacons"]):
             b = r.mapping(b, f"beacons[{i}]", ("position", "height"))
-            beacons.append(Beacon(r.pair(b["position"], f"beacons[{i}].position"),
-                                  r.number(b["height"], f"beacons[{i}].height", positive=True)))
+            beacons.append(r.built(f"beacons[{i}]", Beacon,
+                                   position=r.pair(b["position"], f"beacons[{i}].position"),
+                                   height=r.number(b["height"], f"beacons[{i}].height")))
         t = r.mapping(top["target"], "target", ("size",))
         cal = r.mapping(top.get("calibration", {}), "calibration", (),
                         optional=("reference_distance",))

@@ -15,7 +15,7 @@ import yaml
 
 from mirrorsim.errors import SceneError
 from mirrorsim.scene.model import MAX_RESOLUTION
-from solver.errors import InputError
+from solver.errors import BadParameter, InputError
 
 
 def show(value: Any) -> str:
@@ -113,6 +113,15 @@ class Reader:
     def fail(self, key: str, message: str) -> InputError:
         """The error to raise for ``key`` (not raised here, so callers ``raise`` it)."""
         return self.error_class(self.source, key, message)
+
+    def built(self, key: str, cls: type, **fields: Any) -> Any:
+        """``cls(**fields)``, a model dataclass that checks its own values: a value it
+        refuses (a ``BadParameter`` naming its field) is refused here under ``key``."""
+        try:
+            return cls(**fields)
+        except BadParameter as exc:
+            raise self.fail(f"{key}.{exc.parameter}" if key else exc.parameter,
+                            exc.message) from None
 
     def mapping(self, value: Any, key: str, required: set[str] | tuple[str, ...],
                 *, optional: set[str] | tuple[str, ...] = ()) -> dict:

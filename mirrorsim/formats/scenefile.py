@@ -16,8 +16,6 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from mirrorsim.errors import BadParameter, Failures, SceneError
 from mirrorsim.formats.capture import read_board, read_distortion
 from mirrorsim.formats.reader import Reader, read_resolution, read_yaml, show
@@ -25,15 +23,10 @@ from mirrorsim.scene.imperfections import (
     REGISTRY,
     Imperfection,
     as_keys,
-    check_bounds,
-    radius_bound,
 )
 from mirrorsim.scene.model import (
     MAX_BOARD_CM,
-    MAX_CURVATURE_RADIUS,
-    MAX_FULL_WELL,
     MAX_HFOV_DEG,
-    MAX_READ_NOISE,
     NAME_PATTERN,
     NAME_RULE,
     PAN_WORDS,
@@ -46,7 +39,6 @@ from mirrorsim.scene.model import (
     Scene,
     SensorNoise,
     Target,
-    fx_of,
 )
 
 DEFAULT_RESOLUTION = (1920, 1088)
@@ -125,19 +117,19 @@ def parse_scene(data: Any, *, source: str = "<scene>", default_name: str = "scen
     m = f.attempt(r.mapping, top["mirror"], "mirror", {"center", "yaw", "size"},
                   optional=set(MIRROR_IMPERFECTIONS))
     mirror = None if m is None else f.attempt(_mirror, r, m)
-    target_position, target_size = f.attempt(_target, r, top["target"], default=(None, None))
+    target = f.attempt(_target, r, top["target"])
     beacons, bkey = f.attempt(_beacons, r, top, default=(None, None))
     occluders = f.attempt(_occluders, r, top.get("occluders", []))
     rs = f.attempt(read_render, r, top.get("render", {}))
     f.raise_any(structural=True)  # a block that cannot be read leaves nothing to check
 
     height, hfov, resolution = model
-    bench = f.attempt(_bench, r, cam, m, top.get("calibration", {}), mirror, resolution, hfov)
-    f.raise_any()  # a bench key out of its bounds is said as it is, without a unit hint
+    bench = f.attempt(_bench, r, cam, m, top.get("calibration", {}))
+    f.raise_any()  # a bench key that cannot be read is said as it is, without a unit hint
     bench = bench or Bench()  # (lenient, for plot: a bad bench key drawn as the ideal)
-    # what the geometry decides is the composer's: NaN until it is composed
-    target = Target(target_position, target_size, math.nan)
-    camera = Camera(position, height, resolution, hfov, pan, math.nan)
+    # the pan's bearing is the composer's: NaN until it is composed
+    camera = r.built("camera", Camera, position=position, height=height,
+                     resolution=resolution, hfov=hfov, pan=pan, pan_deg=math.nan)
     return Scene(name=name, board=board, camera=camera, mirror=mirror, target=target,
                  beacons=beacons, occluders=occluders, render=rs, bench=bench,
                  source=source), bkey
@@ -184,15 +176,15 @@ def _name(r: Reader, top: dict, default_name: str) -> str:
 
 
 def _mirror(r: Reader, m: dict) -> Mirror:
-    return Mirror(center=r.pair(m["center"], "mirror.center"),
-                  yaw=r.number(m["yaw"], "mirror.yaw"),
-                  size=r.pair(m["size"], "mirror.size", positive=True, high=MAX_BOARD_CM))
+    return r.built("mirror", Mirror, center=r.pair(m["center"], "mirror.center"),
+                   yaw=r.number(m["yaw"], "mirror.yaw"), size=r.pair(m["size"], "mirror.size"))
 
 
-def _target(r: Reader, raw: Any) -> tuple[tuple[float, float], tuple[float, float]]:
+def _target(r: Reader, raw: Any) -> Target:
     t = r.mapping(raw, "target", {"position", "size"})
-    return (r.pair(t["position"], "target.position"),
-            r.pair(t["size"], "target.size", positive=True, high=MAX_BOARD_CM))
+    # what the geometry decides is the composer's: its facing NaN until it is composed
+    return r.built("target", Target, position=r.pair(t["position"], "target.position"),
+                   size=r.pair(t["size"], "target.size"), facing_deg=math.nan)
 
 
 def _leaves(block: str) -> tuple[str, ...]:
@@ -204,8 +196,7 @@ CAMERA_IMPERFECTIONS = _leaves("camera")
 MIRROR_IMPERFECTIONS = _leaves("mirror")
 
 
-def _bench(r: Reader, cam: dict, m: dict, cal: Any, mirror: Mirror,
-           resolution: tuple[int, int], hfov: float) -> Bench:
+def _bench(r: Reader, cam: dict, m: dict, cal: Any) -> Bench:
     """The bench imperfections (docs/scenes.md), each read in its registry form; every key
     optional, absent = ideal."""
     blocks = {"camera": cam, "mirror": m,
@@ -217,59 +208,33 @@ def _bench(r: Reader, cam: dict, m: dict, cal: Any, mirror: Mirror,
         # a number or a flag must be given as one
         given = imp.block in blocks and imp.leaf in blocks[imp.block]
         if given and (blocks[imp.block][imp.leaf] is not None or imp.form in NUMERIC_FORMS):
-            values[imp.field] = _imperfection(r, imp, blocks[imp.block][imp.leaf], mirror,
-                                              resolution, hfov)
+            values[imp.field] = _imperfection(r, imp, blocks[imp.block][imp.leaf])
     return Bench(**values)
 
 
 NUMERIC_FORMS = ("angle", "number", "flag")
 
 
-def _imperfection(r: Reader, imp: Imperfection, raw: Any, mirror: Mirror,
-                  resolution: tuple[int, int], hfov: float) -> Any:
-    """One imperfection's value as its ``form`` reads it, bounds checked."""
+def _imperfection(r: Reader, imp: Imperfection, raw: Any) -> Any:
+    """One imperfection's value as its ``form`` reads it (its bounds, which relate it to
+    the mirror or the camera, are the composer's:
+    :func:`~mirrorsim.scene.bench_values.value_failure`)."""
     key = imp.key
-    if imp.form in ("angle", "number"):
-        value = r.number(raw, key)
-        why = check_bounds(imp, value)
-        if why:
-            raise r.fail(key, why)
-        return value
+    if imp.form in ("angle", "number", "radius"):
+        return r.number(raw, key)
     if imp.form == "flag":
         if not isinstance(raw, bool):
             raise r.fail(key, f"{show(raw)}: expected true or false")
         return raw
     if imp.form == "quality":
-        return r.integer(raw, key, low=int(imp.low), high=int(imp.high))
+        return r.integer(raw, key)
     if imp.form == "lens":
-        k = read_distortion(r, raw, key)
-        corner = math.hypot(*resolution) / 2 / fx_of(resolution[0], hfov)
-        if not distortion_monotonic(k, corner):
-            raise r.fail(key, f"{list(k)}: the lens folds the image over before the "
-                         "frame's corner (r·(1 + k1 r² + k2 r⁴) must grow)")
-        return k
+        return read_distortion(r, raw, key)
     if imp.form == "noise":
         n = r.mapping(raw, key, {"full_well", "read_noise"})
-        return SensorNoise(r.number(n["full_well"], f"{key}.full_well", positive=True,
-                                    high=MAX_FULL_WELL),
-                           r.number(n["read_noise"], f"{key}.read_noise", low=0.0,
-                                    high=MAX_READ_NOISE))
-    if imp.form == "radius":
-        radius = r.number(raw, key)
-        diagonal = radius_bound(mirror.size)
-        if not diagonal <= abs(radius) <= MAX_CURVATURE_RADIUS:
-            raise r.fail(key, f"{radius:g}: |radius| must be at least the mirror's diagonal "
-                         f"({diagonal:.1f} cm) and at most {MAX_CURVATURE_RADIUS:g} cm "
-                         "(flatter: leave the key out)")
-        return radius
+        return r.built(key, SensorNoise, full_well=r.number(n["full_well"], f"{key}.full_well"),
+                       read_noise=r.number(n["read_noise"], f"{key}.read_noise"))
     raise AssertionError(f"{imp.key}: no scene-file reader for form {imp.form!r}")
-
-
-def distortion_monotonic(k: tuple[float, float], r_max: float) -> bool:
-    """Whether r·(1 + k1 r² + k2 r⁴) grows on [0, r_max] (normalized radius): a lens
-    that folds its image over is no lens."""
-    r = np.linspace(0.0, r_max, 512)
-    return bool((1 + 3 * k[0] * r**2 + 5 * k[1] * r**4 > 0).all())
 
 
 def _beacons(r: Reader, top: dict) -> tuple[tuple[Beacon, ...], Callable[[int], str]]:
@@ -285,11 +250,11 @@ def _beacons(r: Reader, top: dict) -> tuple[tuple[Beacon, ...], Callable[[int], 
     for i, raw in enumerate(raw_beacons):
         bb = r.mapping(raw, bkey(i), {"position", "height"}, optional={"known_position"})
         known = bb.get("known_position")
-        beacons.append(Beacon(position=r.pair(bb["position"], f"{bkey(i)}.position"),
-                              height=r.number(bb["height"], f"{bkey(i)}.height", positive=True,
-                                              high=MAX_BOARD_CM),
-                              known_position=None if known is None else
-                              r.pair(known, f"{bkey(i)}.known_position")))
+        beacons.append(r.built(bkey(i), Beacon,
+                               position=r.pair(bb["position"], f"{bkey(i)}.position"),
+                               height=r.number(bb["height"], f"{bkey(i)}.height"),
+                               known_position=None if known is None else
+                               r.pair(known, f"{bkey(i)}.known_position")))
     return tuple(beacons), bkey
 
 
@@ -299,13 +264,10 @@ def _occluders(r: Reader, raw_occ: Any) -> tuple[Occluder, ...]:
     occluders = []
     for i, raw in enumerate(raw_occ):
         o = r.mapping(raw, f"occluders[{i}]", {"start", "end", "height"})
-        occ = Occluder(start=r.pair(o["start"], f"occluders[{i}].start"),
-                       end=r.pair(o["end"], f"occluders[{i}].end"),
-                       height=r.number(o["height"], f"occluders[{i}].height", positive=True,
-                                       high=MAX_BOARD_CM))
-        if np.hypot(occ.end[0] - occ.start[0], occ.end[1] - occ.start[1]) < 0.1:
-            raise r.fail(f"occluders[{i}].end", f"{list(occ.end)}: the wall has no length")
-        occluders.append(occ)
+        occluders.append(r.built(f"occluders[{i}]", Occluder,
+                                 start=r.pair(o["start"], f"occluders[{i}].start"),
+                                 end=r.pair(o["end"], f"occluders[{i}].end"),
+                                 height=r.number(o["height"], f"occluders[{i}].height")))
     return tuple(occluders)
 
 

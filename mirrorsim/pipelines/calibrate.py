@@ -30,6 +30,7 @@ from mirrorsim.errors import BadParameter, DetectionError
 from mirrorsim.formats.cache import read_entry, write_entry
 from mirrorsim.formats.capture import REFERENCE_DISTANCE
 from mirrorsim.scene import imperfections
+from mirrorsim.scene.bench_values import check_bounds
 from mirrorsim.scene.model import FRONT_OFFSET, PENCIL_RADIUS, Beacon, Board, Camera, Target
 from mirrorsim.truth import optics
 from solver.geometry import unit
@@ -176,7 +177,7 @@ def _check_distance_error(value) -> None:
     imp = next(i for i in imperfections.REGISTRY if i.field == "calibration_distance_error")
     if not is_number(value) or not math.isfinite(value):
         raise BadParameter("distance_error", f"{value!r} is not a finite number (cm)")
-    why = imperfections.check_bounds(imp, float(value))
+    why = check_bounds(imp, float(value))
     if why:
         raise BadParameter("distance_error", why)
 

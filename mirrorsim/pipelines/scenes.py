@@ -114,8 +114,8 @@ def check_given_scene(scene: Any) -> Scene:
     """A scene given to the Python API, held to what its file would make of it: a scene
     edited with ``dataclasses.replace`` skips the file's checks and keeps the target's
     facing and the pan that its old geometry decided (a mirror turned by 10° left the
-    panel facing the old mirror).  Its values are held to the reader's rules, then the
-    scene itself is composed; returns ``scene``.
+    panel facing the old mirror).  The scene is composed as given (no file is written
+    and read again); returns ``scene``.
 
     Raises
     ------
@@ -126,11 +126,9 @@ def check_given_scene(scene: Any) -> Scene:
         an edit (use :func:`edit_scene`).
     """
     check_is_scene(scene)
-    source = f"{scene.source} (edited)"
-    # each value by the reader's own rules (the one place they are written); the scene's
-    # relations and derived fields are then the composer's, on the scene as given
-    _, bkey = parse_scene(scene_document(scene), source=source, default_name=scene.name)
-    again = compose_scene(replace(scene, source=source), beacon_key=bkey)
+    # each value was held to its bounds when its dataclass was made (an edit too); the
+    # bench's, the relations and the derived fields are the composer's
+    again = compose_scene(replace(scene, source=f"{scene.source} (edited)"))
     stale = [what for what, given, made in (
         ("target panel's facing", scene.target.facing_deg, again.target.facing_deg),
         ("camera's pan bearing", scene.camera.pan_deg, again.camera.pan_deg))

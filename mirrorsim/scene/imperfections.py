@@ -16,7 +16,6 @@ source alone, and with all; a source is named by its key path (``camera.pan_erro
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass, fields, replace
 from typing import Any
@@ -237,22 +236,6 @@ ROW_COLUMNS = tuple(c.name for imp in REGISTRY for c in imp.columns)
 # the error model's bench features, each linear in its imperfection's first-order effect
 FEATURES = tuple(f for imp in REGISTRY for f in imp.features)
 _IDEAL = Bench()
-
-
-def check_bounds(imp: Imperfection, value: float) -> str | None:
-    """Why ``value`` is out of ``imp``'s bounds (beyond them a value is a typo, not a
-    bench), or None."""
-    if imp.form == "angle" and abs(value) >= imp.bound:
-        return f"{value:g}: |{imp.leaf}| must stay below {imp.bound:g}°"
-    if imp.form == "number" and not imp.low < value < imp.high:
-        return (f"{value:g}: {imp.why or 'out of range'} (error in ({imp.low:g}, "
-                f"{imp.high:g}) {imp.units})")
-    return None
-
-
-def radius_bound(size: tuple[float, float]) -> float:
-    """The smallest |curvature radius| of a mirror of this size: its diagonal."""
-    return math.hypot(*size)
 
 
 @dataclass(frozen=True)

@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from mirrorsim.errors import BadParameter
+from mirrorsim.scene import values
 from solver.geometry import line_normal, signed_distance, unit
 
 # Physical dimensions of the rendered objects that the scene file does not set (cm).
@@ -67,6 +68,14 @@ class Board:
     hole_pitch: float = 2.5
     hole_diameter: float = 0.6
 
+    def __post_init__(self):
+        values.pair("size", self.size, positive=True, high=MAX_BOARD_CM)
+        values.number("hole_pitch", self.hole_pitch, low=0.0)
+        values.number("hole_diameter", self.hole_diameter, positive=True)
+        if 0.0 < self.hole_pitch <= self.hole_diameter:
+            raise BadParameter("hole_pitch", f"{self.hole_pitch:g} must exceed the hole "
+                               f"diameter {self.hole_diameter:g} cm (or be 0 for a plain board)")
+
     def hole_centres(self) -> np.ndarray:
         """(k, 2) centres of the holes (cm), as the rendered pegboard has them: every whole
         multiple of the pitch inside the board, in x from the near edge (x = 0) and in y
@@ -91,6 +100,17 @@ class Camera:
     hfov: float
     pan: float | str
     pan_deg: float
+
+    def __post_init__(self):
+        values.pair("position", self.position)
+        values.number("height", self.height, positive=True, high=MAX_BOARD_CM)
+        values.resolution("resolution", self.resolution, MAX_RESOLUTION)
+        values.number("hfov", self.hfov, positive=True, high=MAX_HFOV_DEG)
+        if not (isinstance(self.pan, str) and self.pan in PAN_WORDS):
+            if isinstance(self.pan, str):
+                raise BadParameter("pan", f"{self.pan!r}: expected a bearing in degrees or "
+                                   f"one of {', '.join(PAN_WORDS)}")
+            values.number("pan", self.pan)
 
     @property
     def width(self) -> int:
@@ -131,6 +151,11 @@ class Mirror:
     yaw: float
     size: Point2  # width along the surface line, height
 
+    def __post_init__(self):
+        values.pair("center", self.center)
+        values.number("yaw", self.yaw)
+        values.pair("size", self.size, positive=True, high=MAX_BOARD_CM)
+
     def ends(self) -> tuple[np.ndarray, np.ndarray]:
         """The two ends of the reflective bottom edge."""
         c, d = np.asarray(self.center, float), unit(self.yaw) * self.size[0] / 2.0
@@ -150,6 +175,10 @@ class Target:
     size: Point2
     facing_deg: float
 
+    def __post_init__(self):  # (the facing is the composer's: NaN until composed)
+        values.pair("position", self.position)
+        values.pair("size", self.size, positive=True, high=MAX_BOARD_CM)
+
     @property
     def height(self) -> float:
         """Panel height (cm)."""
@@ -159,47 +188,6 @@ class Target:
         """Ends of the panel's footprint (its width runs across the facing direction)."""
         p, d = np.asarray(self.position, float), unit(self.facing_deg + 90.0) * self.size[0] / 2
         return p - d, p + d
-
-
-def camera_axes(camera: Camera, pitch: float = 0.0, roll: float = 0.0
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Forward, right and down unit vectors of the camera (3-D): level unless a bench's
-    ``pitch`` (deg, optical axis raised) or ``roll`` (deg, clockwise as seen from behind)
-    says otherwise."""
-    f = unit(camera.pan_deg)
-    forward = np.array([f[0], f[1], 0.0])
-    right = np.array([f[1], -f[0], 0.0])
-    down = np.array([0.0, 0.0, -1.0])
-    if pitch:
-        p = math.radians(pitch)
-        forward, down = (math.cos(p) * forward - math.sin(p) * down,
-                         math.cos(p) * down + math.sin(p) * forward)
-    if roll:
-        q = math.radians(roll)
-        right, down = (math.cos(q) * right + math.sin(q) * down,
-                       math.cos(q) * down - math.sin(q) * right)
-    return forward, right, down
-
-
-def project(camera: Camera, points3: ArrayLike, pitch: float = 0.0, *, roll: float = 0.0
-            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Pinhole projection of 3-D points (OpenCV pixel convention: centres at integers),
-    by the level camera or one pitched and rolled (:func:`camera_axes`).
-
-    Returns
-    -------
-    u, v : ndarray
-        Pixel coordinates (+u right, +v down).
-    depth : ndarray
-        Distance along the optical axis (negative behind the camera).
-    """
-    p = np.asarray(points3, float) - camera.center3
-    forward, right, down = camera_axes(camera, pitch, roll)
-    z = p @ forward
-    with np.errstate(divide="ignore", invalid="ignore"):
-        u = camera.cx + camera.fx * (p @ right) / z
-        v = camera.cy + camera.fx * (p @ down) / z
-    return u, v, z
 
 
 def pencil_paint_height(height: float) -> float:
@@ -216,6 +204,12 @@ class Beacon:
     height: float
     known_position: Point2 | None = None
 
+    def __post_init__(self):
+        values.pair("position", self.position)
+        values.number("height", self.height, positive=True, high=MAX_BOARD_CM)
+        if self.known_position is not None:
+            values.pair("known_position", self.known_position)
+
     @property
     def believed(self) -> Point2:
         """Where the experimenter believes the pencil stands."""
@@ -229,6 +223,12 @@ class Occluder:
     start: Point2
     end: Point2
     height: float
+
+    def __post_init__(self):
+        start, end = values.pair("start", self.start), values.pair("end", self.end)
+        values.number("height", self.height, positive=True, high=MAX_BOARD_CM)
+        if math.hypot(end[0] - start[0], end[1] - start[1]) < 0.1:
+            raise BadParameter("end", f"{list(self.end)}: the wall has no length")
 
 
 @dataclass(frozen=True)
@@ -308,6 +308,10 @@ class SensorNoise:
 
     full_well: float
     read_noise: float
+
+    def __post_init__(self):
+        values.number("full_well", self.full_well, positive=True, high=MAX_FULL_WELL)
+        values.number("read_noise", self.read_noise, low=0.0, high=MAX_READ_NOISE)
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,8 @@ from collections.abc import Callable
 from dataclasses import replace
 
 from mirrorsim.errors import Failures, SceneError
-from mirrorsim.scene.model import Scene
+from mirrorsim.scene.bench_values import bench_failures
+from mirrorsim.scene.model import Bench, Scene
 from mirrorsim.truth import optics
 from mirrorsim.truth.scene_checks import (
     board_check,
@@ -48,9 +49,10 @@ def with_derived(scene: Scene) -> Scene:
 
 def compose_scene(scene: Scene, *, beacon_key: Callable[[int], str] | None = None,
                   failures: Failures | None = None) -> Scene:
-    """``scene`` made whole and checked: its derived fields computed (:func:`with_derived`)
-    and its objects checked against each other (on the board, in front of the mirror's
-    face, apart, seen through the mirror), its warnings set.
+    """``scene`` made whole and checked: its bench's values held to their bounds (which
+    relate some of them to the mirror and the camera), its derived fields computed
+    (:func:`with_derived`) and its objects checked against each other (on the board, in
+    front of the mirror's face, apart, seen through the mirror), its warnings set.
 
     Parameters
     ----------
@@ -76,6 +78,12 @@ def compose_scene(scene: Scene, *, beacon_key: Callable[[int], str] | None = Non
     def fail(key: str, message: str) -> SceneError:
         return SceneError(scene.source, key, message)
 
+    # each bench value within its bounds, some of which relate it to the mirror or the
+    # camera: said as it is, without a unit hint
+    f.found += [fail(key, why) for key, why in bench_failures(scene)]
+    if f.found and f.lenient:  # (plot: a bad bench key drawn as the ideal)
+        scene = replace(scene, bench=Bench())
+    f.raise_any()
     cam, mirror, target, beacons = scene.camera, scene.mirror, scene.target, scene.beacons
     hint = unit_hints(scene.board, mirror, cam.hfov, positions=[
         ("camera.position", cam.position), ("mirror.center", mirror.center),

@@ -26,8 +26,8 @@ from mirrorsim.scene.model import (
     Point2,
     Scene,
     Target,
-    project,
 )
+from mirrorsim.scene.projection import project
 from solver.geometry import bearing_deg, unit
 from solver.sltr import Observation, observe
 

@@ -1,0 +1,53 @@
+"""The camera's pinhole projection: its axes (level, or pitched and rolled by a bench)
+and 3-D points to pixels, OpenCV's convention."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from mirrorsim.scene.model import Camera
+from solver.geometry import unit
+
+
+def camera_axes(camera: Camera, pitch: float = 0.0, roll: float = 0.0
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Forward, right and down unit vectors of the camera (3-D): level unless a bench's
+    ``pitch`` (deg, optical axis raised) or ``roll`` (deg, clockwise as seen from behind)
+    says otherwise."""
+    f = unit(camera.pan_deg)
+    forward = np.array([f[0], f[1], 0.0])
+    right = np.array([f[1], -f[0], 0.0])
+    down = np.array([0.0, 0.0, -1.0])
+    if pitch:
+        p = math.radians(pitch)
+        forward, down = (math.cos(p) * forward - math.sin(p) * down,
+                         math.cos(p) * down + math.sin(p) * forward)
+    if roll:
+        q = math.radians(roll)
+        right, down = (math.cos(q) * right + math.sin(q) * down,
+                       math.cos(q) * down - math.sin(q) * right)
+    return forward, right, down
+
+
+def project(camera: Camera, points3: ArrayLike, pitch: float = 0.0, *, roll: float = 0.0
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pinhole projection of 3-D points (OpenCV pixel convention: centres at integers),
+    by the level camera or one pitched and rolled (:func:`camera_axes`).
+
+    Returns
+    -------
+    u, v : ndarray
+        Pixel coordinates (+u right, +v down).
+    depth : ndarray
+        Distance along the optical axis (negative behind the camera).
+    """
+    p = np.asarray(points3, float) - camera.center3
+    forward, right, down = camera_axes(camera, pitch, roll)
+    z = p @ forward
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = camera.cx + camera.fx * (p @ right) / z
+        v = camera.cy + camera.fx * (p @ down) / z
+    return u, v, z
