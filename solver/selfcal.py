@@ -20,7 +20,7 @@ from solver.measurements import is_number
 # (self-calibration): "pan", an offset δ (deg) on every α (the mount's pan reading);
 # "scale", a factor s on every d_total (the calibration's K); "power", the mirror's
 # curvature c = 1/R (1/cm, > 0 concave), which moves each image by its own amount
-# (:func:`solver.lsq.power_terms`): α_meas = α + c·A + δ, d_meas = s·(d + c·D).
+# (:func:`solver.fit_model.power_terms`): α_meas = α + c·A + δ, d_meas = s·(d + c·D).
 # Each: its name in a solution and its neutral value
 NUISANCES = {"pan": ("pan_offset_deg", 0.0), "scale": ("range_scale", 1.0),
              "power": ("mirror_power_per_cm", 0.0)}

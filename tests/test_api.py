@@ -190,13 +190,30 @@ def test_a_scene_edited_in_a_script_is_built_as_its_file_would_be(tmp_path):
     assert len(two.beacons) == 2
     with pytest.raises(BadParameter, match="give `beacons`"):  # it replaced the whole list
         ms.edit_scene(two, {"beacon": {"position": [36, 53], **pencil}})
-    # each dataclass holds its values to the file's bounds when made, by an edit too
+    # each dataclass holds its values to what they can be when made, by an edit too
     with pytest.raises(BadParameter, match=r"size\[0\]: -5 must be > 0"):
         replace(base.mirror, size=(-5.0, 20.0))
     with pytest.raises(BadParameter, match="height: nan is not a finite number"):
         replace(base.beacons[0], height=float("nan"))
-    with pytest.raises(BadParameter, match="hfov: 175 must be ≤ 170"):
-        replace(base.camera, hfov=175.0)
+    with pytest.raises(BadParameter, match=r"hfov: 185 must be within \(0, 180\)"):
+        replace(base.camera, hfov=185.0)
+    with pytest.raises(BadParameter, match="scene.beacons: expected at least one beacon"):
+        replace(base, beacons=())
+    # the file's limits on a scene are the composer's: a camera the renderer widens for a
+    # lens (sensor.distortion_canvas) may exceed them, a scene may not
+    from mirrorsim.camera.sensor import distortion_canvas
+
+    wide = replace(base.camera, resolution=(7680, 4320))
+    canvas, margin = distortion_canvas(wide, (-0.02, 0.0))
+    assert canvas.width == 7680 + 2 * margin > 7680
+    for bad, key in ((replace(base, name="a" * 100), "name"),
+                     (replace(base, name="tall", beacons=(replace(base.beacons[0],
+                                                                  height=250.0),)),
+                      r"beacon\.height: 250 must be ≤ 200"),
+                     (replace(base, name="wide", camera=replace(base.camera, hfov=175.0)),
+                      "camera.hfov: 175 must be ≤ 170")):
+        with pytest.raises(SceneError, match=key):
+            ms.evaluate(bad, tmp_path / "bad")
     # a bench value out of its bounds, or beyond what the mirror allows, is the composer's
     pitched = replace(base, name="pitched", bench=replace(base.bench, pitch=25.0))
     curved = replace(base, name="curved", bench=replace(base.bench, curvature_radius=3.0))

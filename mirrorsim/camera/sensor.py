@@ -16,7 +16,8 @@ from dataclasses import replace
 import cv2
 import numpy as np
 
-from mirrorsim.scene.model import Camera, SensorNoise, hfov_of
+from mirrorsim.scene.model import Camera, SensorNoise
+from mirrorsim.scene.projection import hfov_of
 
 # fixed-point steps inverting the radial model at most (tested to 1e-6 px); it stops
 # earlier where a step changes nothing (13 steps for exp1's lens: the same result)

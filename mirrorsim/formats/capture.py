@@ -16,16 +16,8 @@ from typing import Any
 
 from mirrorsim.errors import InputError
 from mirrorsim.formats.reader import Reader, read_json, read_resolution, show
-from mirrorsim.scene.model import (
-    MAX_HFOV_DEG,
-    Beacon,
-    Board,
-    Camera,
-    Point2,
-    Scene,
-    fx_of,
-    hfov_of,
-)
+from mirrorsim.scene.model import MAX_HFOV_DEG, Beacon, Board, Camera, Point2, Scene, fx_of
+from mirrorsim.scene.projection import hfov_of
 
 REFERENCE_DISTANCE = 100.0  # cm: where calibration stands its reference objects
 

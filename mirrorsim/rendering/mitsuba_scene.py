@@ -28,8 +28,8 @@ from mirrorsim.rendering.shapes import (
     target_shapes,
     v3,
 )
-from mirrorsim.scene.model import OCCLUDER_THICKNESS, Beacon, Board, Camera, Scene, Target, hfov_of
-from mirrorsim.scene.projection import camera_axes
+from mirrorsim.scene.model import OCCLUDER_THICKNESS, Beacon, Board, Camera, Scene, Target
+from mirrorsim.scene.projection import camera_axes, hfov_of
 from mirrorsim.truth import visibility
 from solver.geometry import line_normal
 

@@ -11,7 +11,13 @@ from typing import Any
 import numpy as np
 
 from mirrorsim.scene.imperfections import REGISTRY, Imperfection
-from mirrorsim.scene.model import MAX_CURVATURE_RADIUS, Bench, Scene
+from mirrorsim.scene.model import (
+    MAX_CURVATURE_RADIUS,
+    MAX_FULL_WELL,
+    MAX_READ_NOISE,
+    Bench,
+    Scene,
+)
 
 
 def check_bounds(imp: Imperfection, value: float) -> str | None:
@@ -44,8 +50,9 @@ def value_failure(imp: Imperfection, value: Any, scene: Scene) -> str | None:
     scene's alike."""
     if imp.form in ("angle", "number"):
         return check_bounds(imp, value)
-    if imp.form == "quality" and not (imp.low <= value <= imp.high):
-        return f"{value} must be within {imp.low:g}..{imp.high:g}"
+    if imp.form == "quality" and not imp.low <= value <= imp.high:
+        return f"{value} must be {'≥' if value < imp.low else '≤'} " \
+               f"{imp.low if value < imp.low else imp.high:g}"
     if imp.form == "lens":
         if not all(imp.low <= k <= imp.high for k in value):
             return f"{list(value)}: each coefficient must be within {imp.low:g}..{imp.high:g}"
@@ -93,6 +100,11 @@ def bench_failures(scene: Scene) -> list[tuple[str, str]]:
         why = _type_failure(_TYPES.get(imp.form), value)
         if why:
             out.append((imp.key, f"{value!r} is not {why}"))
+            continue
+        if imp.form == "noise":  # each of its two values under its own key
+            out += [(f"{imp.key}.{name}", f"{v:g} must be ≤ {most:g}") for name, v, most in (
+                ("full_well", value.full_well, MAX_FULL_WELL),
+                ("read_noise", value.read_noise, MAX_READ_NOISE)) if v > most]
             continue
         why = value_failure(imp, value, scene)
         if why:

@@ -69,7 +69,7 @@ class Board:
     hole_diameter: float = 0.6
 
     def __post_init__(self):
-        values.pair("size", self.size, positive=True, high=MAX_BOARD_CM)
+        values.pair("size", self.size, positive=True)
         values.number("hole_pitch", self.hole_pitch, low=0.0)
         values.number("hole_diameter", self.hole_diameter, positive=True)
         if 0.0 < self.hole_pitch <= self.hole_diameter:
@@ -103,9 +103,10 @@ class Camera:
 
     def __post_init__(self):
         values.pair("position", self.position)
-        values.number("height", self.height, positive=True, high=MAX_BOARD_CM)
-        values.resolution("resolution", self.resolution, MAX_RESOLUTION)
-        values.number("hfov", self.hfov, positive=True, high=MAX_HFOV_DEG)
+        values.number("height", self.height, positive=True)
+        values.resolution("resolution", self.resolution)
+        if not 0.0 < values.number("hfov", self.hfov) < 180.0:
+            raise BadParameter("hfov", f"{self.hfov:g} must be within (0, 180)° (a pinhole)")
         if not (isinstance(self.pan, str) and self.pan in PAN_WORDS):
             if isinstance(self.pan, str):
                 raise BadParameter("pan", f"{self.pan!r}: expected a bearing in degrees or "
@@ -154,7 +155,7 @@ class Mirror:
     def __post_init__(self):
         values.pair("center", self.center)
         values.number("yaw", self.yaw)
-        values.pair("size", self.size, positive=True, high=MAX_BOARD_CM)
+        values.pair("size", self.size, positive=True)
 
     def ends(self) -> tuple[np.ndarray, np.ndarray]:
         """The two ends of the reflective bottom edge."""
@@ -177,7 +178,7 @@ class Target:
 
     def __post_init__(self):  # (the facing is the composer's: NaN until composed)
         values.pair("position", self.position)
-        values.pair("size", self.size, positive=True, high=MAX_BOARD_CM)
+        values.pair("size", self.size, positive=True)
 
     @property
     def height(self) -> float:
@@ -206,7 +207,7 @@ class Beacon:
 
     def __post_init__(self):
         values.pair("position", self.position)
-        values.number("height", self.height, positive=True, high=MAX_BOARD_CM)
+        values.number("height", self.height, positive=True)
         if self.known_position is not None:
             values.pair("known_position", self.known_position)
 
@@ -226,7 +227,7 @@ class Occluder:
 
     def __post_init__(self):
         start, end = values.pair("start", self.start), values.pair("end", self.end)
-        values.number("height", self.height, positive=True, high=MAX_BOARD_CM)
+        values.number("height", self.height, positive=True)
         if math.hypot(end[0] - start[0], end[1] - start[1]) < 0.1:
             raise BadParameter("end", f"{list(self.end)}: the wall has no length")
 
@@ -284,12 +285,6 @@ def fx_of(width: float, hfov_deg: float) -> float:
     return (width / 2.0) / math.tan(math.radians(hfov_deg) / 2.0)
 
 
-def hfov_of(width: float, fx: float) -> float:
-    """The horizontal field of view (deg) that ``width`` px see at focal length ``fx``
-    px: the inverse of :func:`fx_of`."""
-    return math.degrees(2.0 * math.atan(width / 2.0 / fx))
-
-
 # the largest seed every consumer takes, a render's or a run's: numpy's generators take
 # more, and a render hashes its seed into Mitsuba's 32-bit ones (passes._pass_seed), but
 # a Parquet int64 column (a dataset's `seed` and `render_seed`) does not
@@ -310,8 +305,8 @@ class SensorNoise:
     read_noise: float
 
     def __post_init__(self):
-        values.number("full_well", self.full_well, positive=True, high=MAX_FULL_WELL)
-        values.number("read_noise", self.read_noise, low=0.0, high=MAX_READ_NOISE)
+        values.number("full_well", self.full_well, positive=True)
+        values.number("read_noise", self.read_noise, low=0.0)
 
 
 @dataclass(frozen=True)
@@ -364,6 +359,8 @@ class Scene:
         if not isinstance(self.name, str) or not _DERIVED_NAME.fullmatch(self.name):
             raise BadParameter("scene.name", f"{self.name!r} is not a plain file name "
                                f"({NAME_RULE})")
+        if not self.beacons:  # the pan, the truth and the solve each need one
+            raise BadParameter("scene.beacons", "expected at least one beacon")
 
     def with_render(self, **settings) -> Scene:
         """The same scene rendered with other settings (``spp``, ``seed``, ``sampler``…),

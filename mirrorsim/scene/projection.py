@@ -51,3 +51,9 @@ def project(camera: Camera, points3: ArrayLike, pitch: float = 0.0, *, roll: flo
         u = camera.cx + camera.fx * (p @ right) / z
         v = camera.cy + camera.fx * (p @ down) / z
     return u, v, z
+
+
+def hfov_of(width: float, fx: float) -> float:
+    """The horizontal field of view (deg) that ``width`` px see at focal length ``fx``
+    px: the inverse of :func:`~mirrorsim.scene.model.fx_of`."""
+    return math.degrees(2.0 * math.atan(width / 2.0 / fx))

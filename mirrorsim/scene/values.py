@@ -1,8 +1,10 @@
-"""A scene's values held to their bounds where they are made: each dataclass of
-:mod:`mirrorsim.scene.model` checks its own fields, so a scene from a file, an edit
-(``dataclasses.replace`` too) or a draw carries no value a file would be refused for.
-A refusal is a :class:`~mirrorsim.errors.BadParameter` naming the field (``size[0]``);
-the readers name the key path it came from.
+"""A scene's values held to what they can be where they are made: each dataclass of
+:mod:`mirrorsim.scene.model` checks its own fields (finite, positive, two of them…), an
+edit by ``dataclasses.replace`` too.  A refusal is a
+:class:`~mirrorsim.errors.BadParameter` naming the field (``size[0]``); the readers name
+the key path it came from.  The scene file's limits on a scene (no size beyond
+MAX_BOARD_CM…) are the composer's (:func:`mirrorsim.truth.scene_checks.check_limits`):
+a camera the renderer widens for a lens, or a capture record's, may exceed them.
 """
 
 from __future__ import annotations
@@ -48,7 +50,7 @@ def pair(name: str, value: Any, *, positive: bool = False, high: float | None = 
             number(f"{name}[1]", value[1], positive=positive, high=high))
 
 
-def whole(name: str, value: Any, *, low: int, high: int) -> int:
+def whole(name: str, value: Any, *, low: int, high: int | None = None) -> int:
     """An integer (not a bool) within [low, high]."""
     if isinstance(value, bool) or not isinstance(value, int) and not (
             hasattr(value, "__index__") and not isinstance(value, float)):
@@ -56,14 +58,13 @@ def whole(name: str, value: Any, *, low: int, high: int) -> int:
     v = int(value)
     if v < low:
         raise BadParameter(name, f"{v} must be ≥ {low}")
-    if v > high:
+    if high is not None and v > high:
         raise BadParameter(name, f"{v} must be ≤ {high}")
     return v
 
 
-def resolution(name: str, value: Any, most: tuple[int, int]) -> tuple[int, int]:
-    """[width, height] in px, each within 2..``most``."""
+def resolution(name: str, value: Any) -> tuple[int, int]:
+    """[width, height] in px, each at least 2."""
     if isinstance(value, str) or not hasattr(value, "__len__") or len(value) != 2:
         raise BadParameter(name, f"expected [width, height] in px, got {_shown(value)}")
-    return (whole(f"{name}[0]", value[0], low=2, high=most[0]),
-            whole(f"{name}[1]", value[1], low=2, high=most[1]))
+    return (whole(f"{name}[0]", value[0], low=2), whole(f"{name}[1]", value[1], low=2))

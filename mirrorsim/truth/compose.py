@@ -19,6 +19,7 @@ from mirrorsim.truth import optics
 from mirrorsim.truth.scene_checks import (
     board_check,
     check_all_on_board,
+    check_limits,
     check_mirror_faces,
     check_overlaps,
     check_sight,
@@ -78,8 +79,9 @@ def compose_scene(scene: Scene, *, beacon_key: Callable[[int], str] | None = Non
     def fail(key: str, message: str) -> SceneError:
         return SceneError(scene.source, key, message)
 
-    # each bench value within its bounds, some of which relate it to the mirror or the
-    # camera: said as it is, without a unit hint
+    # the file's limits, and each bench value within its bounds (some relate it to the
+    # mirror or the camera): said as they are, without a unit hint
+    check_limits(f, scene, fail, bkey=bkey)
     f.found += [fail(key, why) for key, why in bench_failures(scene)]
     if f.found and f.lenient:  # (plot: a bad bench key drawn as the ideal)
         scene = replace(scene, bench=Bench())

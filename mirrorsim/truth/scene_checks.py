@@ -14,13 +14,53 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from mirrorsim.errors import Failures, SceneError
-from mirrorsim.scene.model import PENCIL_RADIUS, Beacon, Board, Mirror, Occluder, Scene, footprints
+from mirrorsim.scene.model import (
+    MAX_BOARD_CM,
+    MAX_HFOV_DEG,
+    MAX_RESOLUTION,
+    NAME_PATTERN,
+    NAME_RULE,
+    PENCIL_RADIUS,
+    Beacon,
+    Board,
+    Mirror,
+    Occluder,
+    Scene,
+    footprints,
+)
 from mirrorsim.truth import optics, visibility
 from solver.geometry import segment_distance, signed_distance
 
 Fail = Callable[[str, str], SceneError]  # (key path, message) → the error naming the file
 
 EDGE_ON_LIMIT_DEG = 5.0  # a mirror seen at a more grazing angle than this is edge-on
+
+
+def check_limits(f: Failures, scene: Scene, fail: Fail, *, bkey: Callable[[int], str]) -> None:
+    """The scene file's limits on a scene, whatever made it: a plain name, and no size or
+    height beyond MAX_BOARD_CM, no field of view beyond MAX_HFOV_DEG, no frame beyond
+    MAX_RESOLUTION (so that every scene `check` accepts renders).  The dataclasses hold
+    what a value can be; these are what a scene may be."""
+    if not NAME_PATTERN.fullmatch(scene.name):
+        f.found.append(fail("name", f"{scene.name!r} is not a plain file name ({NAME_RULE})"))
+    cam = scene.camera
+    limits = [("board.size", scene.board.size, MAX_BOARD_CM),
+              ("camera.height", (cam.height,), MAX_BOARD_CM),
+              ("camera.hfov", (cam.hfov,), MAX_HFOV_DEG),
+              ("camera.resolution", cam.resolution, MAX_RESOLUTION),
+              ("mirror.size", scene.mirror.size, MAX_BOARD_CM),
+              ("target.size", scene.target.size, MAX_BOARD_CM),
+              *((f"{bkey(i)}.height", (b.height,), MAX_BOARD_CM)
+                for i, b in enumerate(scene.beacons)),
+              *((f"occluders[{i}].height", (o.height,), MAX_BOARD_CM)
+                for i, o in enumerate(scene.occluders))]
+    for key, vals, most in limits:
+        most = most if isinstance(most, tuple) else (most,) * len(vals)
+        for k, (v, m) in enumerate(zip(vals, most, strict=True)):
+            if v > m:  # the first of a pair, as the file's reader says it
+                where = f"{key}[{k}]" if len(vals) > 1 else key
+                f.found.append(fail(where, f"{v:g} must be ≤ {m:g}"))
+                break
 
 
 def unit_hints(board: Board, mirror: Mirror, hfov: float, *, positions: Iterable[ArrayLike]) -> str:
