@@ -1,0 +1,178 @@
+"""SLTR in three dimensions: a mirror plane that may lean, objects raised off the board.
+
+The paper solves in the board's plane; its conclusion names 3-D as the next step.  The
+same two ideas carry over.
+- **Size constancy.** The camera sees each object's virtual image at ``d_total`` along
+  its line of sight: azimuth α (the bearing in the board's plane, as in 2-D) and
+  elevation ε (above the horizontal).  The image stands at O + d_total·(cos ε cos α,
+  cos ε sin α, sin ε).
+- **The mirror bisects.** The mirror's plane is the perpendicular-bisector plane of a
+  beacon B and its virtual image B′.
+
+With the plane n·x = ρ (n a unit normal, on the camera's side), the target is its
+virtual image reflected across it: T = T′ − 2(n·T′ − ρ) n.
+
+A plane's pose: ``yaw`` is the bearing (deg) of its line on the board, as the planar
+solver's.  ``lean`` (deg) is the turn about that line that tips the top away from the
+reflective face; an upright mirror has lean 0.  With ε = 0 and lean 0 everything here
+is :mod:`solver.sltr` (tested to 1e-9 cm).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from solver.errors import SolverError
+from solver.geometry import line_normal
+
+ZHAT = np.array([0.0, 0.0, 1.0])
+
+
+def direction(alpha_deg: ArrayLike, elevation_deg: ArrayLike) -> np.ndarray:
+    """Unit vector(s) of azimuth α and elevation ε (deg), shape (…, 3)."""
+    a, e = np.radians(alpha_deg), np.radians(elevation_deg)
+    return np.stack([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)], axis=-1)
+
+
+@dataclass(frozen=True)
+class MirrorPlane:
+    """The mirror's plane n·x = ρ: ``normal`` a unit vector on the camera's side."""
+
+    normal: np.ndarray
+    rho: float
+
+    @classmethod
+    def from_pose(cls, point: ArrayLike, yaw_deg: float, lean_deg: float, *,
+                  toward: ArrayLike) -> MirrorPlane:
+        """The plane through ``point`` whose line on the board runs along ``yaw_deg``,
+        leaning by ``lean_deg`` (its top away from its face), facing ``toward`` (the
+        camera: the side its normal points to)."""
+        n2 = line_normal(yaw_deg)
+        face = np.array([n2[0], n2[1], 0.0])
+        p = np.asarray(point, float)
+        if face[:2] @ (np.asarray(toward, float)[:2] - p[:2]) < 0:
+            face = -face
+        lean = np.radians(lean_deg)
+        n = np.cos(lean) * face + np.sin(lean) * ZHAT
+        return cls(n, float(n @ p))
+
+    @property
+    def lean_deg(self) -> float:
+        """How far the top leans away from the face (deg): the normal's elevation."""
+        return float(np.degrees(np.arcsin(np.clip(self.normal[2], -1.0, 1.0))))
+
+    @property
+    def yaw_deg(self) -> float:
+        """The bearing of the plane's line on the board, mod 180 (deg)."""
+        along = np.cross(ZHAT, self.normal)
+        yaw = float(np.degrees(np.arctan2(along[1], along[0])) % 180.0)
+        return 0.0 if yaw > 180.0 - 1e-9 else yaw  # a rounding below 0 folds to ~180
+
+    def reflect(self, points: ArrayLike) -> np.ndarray:
+        """Points (…, 3) reflected across the plane."""
+        p = np.asarray(points, float)
+        return p - 2.0 * (p @ self.normal - self.rho)[..., None] * self.normal
+
+
+@dataclass(frozen=True)
+class Observation3:
+    """What the camera sees of a point in the mirror: azimuth, elevation, d_total (and
+    its legs d1 camera → mirror, d2 mirror → point), the virtual image and the
+    reflection point."""
+
+    alpha_deg: float
+    elevation_deg: float
+    d_total: float
+    d1: float
+    d2: float
+    virtual: np.ndarray
+    reflection_point: np.ndarray
+
+
+def observe3(observer: ArrayLike, plane: MirrorPlane, point: ArrayLike) -> Observation3:
+    """The forward model in 3-D: what ``observer`` (the camera's centre) sees of
+    ``point`` in ``plane``.
+
+    Raises
+    ------
+    SolverError
+        ``point`` or ``observer`` behind the mirror's face.
+    """
+    o, p = np.asarray(observer, float), np.asarray(point, float)
+    if p @ plane.normal - plane.rho <= 0 or o @ plane.normal - plane.rho <= 0:
+        raise SolverError("the point and the camera must stand in front of the mirror")
+    v = plane.reflect(p)
+    rel = v - o
+    d = float(np.linalg.norm(rel))
+    t = (plane.rho - plane.normal @ o) / (plane.normal @ rel)
+    r = o + t * rel
+    return Observation3(alpha_deg=float(np.degrees(np.arctan2(rel[1], rel[0]))),
+                        elevation_deg=float(np.degrees(np.arcsin(rel[2] / d))), d_total=d,
+                        d1=float(np.linalg.norm(r - o)), d2=float(np.linalg.norm(p - r)),
+                        virtual=v, reflection_point=r)
+
+
+def virtual_image3(observer: ArrayLike, seen: tuple[float, float, float]) -> np.ndarray:
+    """Where ``seen`` (α, ε, d_total) puts the virtual image: O + d_total·direction(α, ε)."""
+    alpha_deg, elevation_deg, d_total = seen
+    return np.asarray(observer, float) + d_total * direction(alpha_deg, elevation_deg)
+
+
+def locate3(observer: ArrayLike, plane: MirrorPlane, seen: tuple[float, float, float]
+            ) -> np.ndarray:
+    """The point whose image ``plane`` shows at ``seen`` (α, ε, d_total): its virtual
+    image reflected back."""
+    return plane.reflect(virtual_image3(observer, seen))
+
+
+def plane_from_beacon3(observer: ArrayLike, beacon: ArrayLike,
+                       seen: tuple[float, float, float]) -> MirrorPlane:
+    """The mirror's plane from one beacon at ``beacon`` seen at (α, ε, d_total): the
+    perpendicular-bisector plane of the beacon and its virtual image, its normal
+    towards the beacon (the camera's side).
+
+    Raises
+    ------
+    SolverError
+        The image coincides with the beacon (no plane bisects them).
+    """
+    b = np.asarray(beacon, float)
+    v = virtual_image3(observer, seen)
+    gap = b - v
+    length = float(np.linalg.norm(gap))
+    if length < 1e-9:
+        raise SolverError("the beacon's image coincides with the beacon: no mirror bisects them")
+    n = gap / length
+    return MirrorPlane(n, float(n @ (b + v) / 2.0))
+
+
+@dataclass(frozen=True)
+class Solution3:
+    """One beacon's closed-form 3-D solution: the mirror's plane and the target."""
+
+    plane: MirrorPlane
+    target: np.ndarray
+    target_reflection_point: np.ndarray
+
+
+def solve_single3(observer: ArrayLike, beacon: ArrayLike, beacon_seen: tuple[float, float, float],
+                  *, target_seen: tuple[float, float, float]) -> Solution3:
+    """The closed form from one beacon: the plane from the beacon and its image, then
+    the target's image reflected across it.
+
+    Raises
+    ------
+    SolverError
+        No plane from the beacon, or a target whose image lies on the camera's side of it.
+    """
+    plane = plane_from_beacon3(observer, beacon, beacon_seen)
+    o = np.asarray(observer, float)
+    v = virtual_image3(o, target_seen)
+    if v @ plane.normal - plane.rho >= 0:
+        raise SolverError("the target's image lies in front of the mirror the beacon gives")
+    rel = v - o
+    t = (plane.rho - plane.normal @ o) / (plane.normal @ rel)
+    return Solution3(plane, plane.reflect(v), o + t * rel)

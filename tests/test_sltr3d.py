@@ -1,0 +1,135 @@
+"""SLTR in three dimensions (solver/sltr3d.py): the forward model against a hand-worked
+reflection and pyroomacoustics' image sources; the closed form recovering leaning
+mirrors and raised targets; the planar solver as its special case."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from solver.errors import SolverError
+from solver.sltr import solve_single
+from solver.sltr3d import MirrorPlane, locate3, observe3, solve_single3
+
+CAMERA = np.array([0.0, 0.0, 12.0])  # the board's corner, the lens 12 cm up
+
+
+def _scene(rng: np.random.Generator, lean_range: float = 4.0, z_range: float = 15.0):
+    """A leaning mirror in front of the camera, and a beacon and a target before its
+    face, raised 0..z_range cm (drawn at random)."""
+    centre = np.array([rng.uniform(25, 60), rng.uniform(45, 75), 0.0])
+    yaw, lean = rng.uniform(-50, 50), rng.uniform(-lean_range, lean_range)
+    plane = MirrorPlane.from_pose(centre, yaw, lean, toward=CAMERA)
+    u = np.array([math.cos(math.radians(yaw)), math.sin(math.radians(yaw)), 0.0])
+    face = np.array([plane.normal[0], plane.normal[1], 0.0])
+    face /= np.linalg.norm(face)
+    points = [centre + rng.uniform(-12, 12) * u + rng.uniform(6, 30) * face
+              + np.array([0.0, 0.0, rng.uniform(0, z_range)]) for _ in range(2)]
+    return plane, yaw, lean, points
+
+
+def _seen(o: np.ndarray, plane: MirrorPlane, p: np.ndarray) -> tuple[float, float, float]:
+    ob = observe3(o, plane, p)
+    return ob.alpha_deg, ob.elevation_deg, ob.d_total
+
+
+def test_a_hand_worked_leaning_reflection():
+    """The plane z = y (a mirror along x leaning 45°, facing −y and up) swaps a point's
+    y and z: (0, −10, 0) has its image at (0, 0, −10); seen from (0, −30, 0) that is
+    √(30² + 10²) away at 18.43° below the horizontal."""
+    plane = MirrorPlane.from_pose((0.0, 0.0, 0.0), 0.0, 45.0, toward=(0.0, -30.0, 0.0))
+    assert plane.normal == pytest.approx([0.0, -math.sqrt(0.5), math.sqrt(0.5)], abs=1e-15)
+    assert (plane.lean_deg, plane.yaw_deg) == pytest.approx((45.0, 0.0), abs=1e-12)
+    ob = observe3((0.0, -30.0, 0.0), plane, (0.0, -10.0, 0.0))
+    assert ob.virtual == pytest.approx([0.0, 0.0, -10.0], abs=1e-12)
+    assert ob.d_total == pytest.approx(math.hypot(30.0, 10.0), abs=1e-12)
+    assert ob.elevation_deg == pytest.approx(-math.degrees(math.atan(10 / 30)), abs=1e-12)
+    assert ob.alpha_deg == pytest.approx(90.0, abs=1e-12)
+    assert ob.d1 + ob.d2 == pytest.approx(ob.d_total, abs=1e-12)
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_the_closed_form_recovers_a_leaning_mirror_and_a_raised_target(seed):
+    rng = np.random.default_rng(20261206 + seed)
+    plane, yaw, lean, (beacon, target) = _scene(rng)
+    sol = solve_single3(CAMERA, beacon, _seen(CAMERA, plane, beacon),
+                        target_seen=_seen(CAMERA, plane, target))
+    assert sol.target == pytest.approx(target, abs=1e-9)
+    assert sol.plane.normal == pytest.approx(plane.normal, abs=1e-12)
+    assert sol.plane.rho == pytest.approx(plane.rho, abs=1e-9)
+    assert (sol.plane.lean_deg, sol.plane.yaw_deg) == pytest.approx((lean, yaw % 180),
+                                                                    abs=1e-9)
+    # the reflection point lies on the plane and on the camera's ray to the image
+    r = sol.target_reflection_point
+    assert r @ plane.normal == pytest.approx(plane.rho, abs=1e-9)
+    assert locate3(CAMERA, plane, _seen(CAMERA, plane, target)) == pytest.approx(target,
+                                                                                abs=1e-9)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_planar_solver_is_its_upright_special_case(seed):
+    """An upright mirror (lean 0): the 3-D solve's target and yaw are the planar
+    solver's on the horizontal projections (α, d_total·cos ε), to 1e-9 cm; and on the
+    camera's own plane (ε = 0) the two are the same numbers."""
+    rng = np.random.default_rng(7000 + seed)
+    plane, _, _, (beacon, target) = _scene(rng, lean_range=0.0)
+    bs, ts = _seen(CAMERA, plane, beacon), _seen(CAMERA, plane, target)
+    sol3 = solve_single3(CAMERA, beacon, bs, target_seen=ts)
+
+    def flat(seen):
+        return seen[0], seen[2] * math.cos(math.radians(seen[1]))
+
+    sol2 = solve_single(CAMERA[:2], beacon[:2], flat(bs)[0], beacon_d_total=flat(bs)[1],
+                        target_alpha_deg=flat(ts)[0], target_d_total=flat(ts)[1])
+    assert sol3.target[:2] == pytest.approx(sol2.target, abs=1e-9)
+    assert sol3.target[2] == pytest.approx(target[2], abs=1e-9)
+    assert sol3.plane.yaw_deg == pytest.approx(sol2.mirror.yaw_deg % 180, abs=1e-9)
+    level = [np.array([*p[:2], CAMERA[2]]) for p in (beacon, target)]
+    bl, tl = _seen(CAMERA, plane, level[0]), _seen(CAMERA, plane, level[1])
+    assert (bl[1], tl[1]) == pytest.approx((0.0, 0.0), abs=1e-12)
+    sol2 = solve_single(CAMERA[:2], beacon[:2], bl[0], beacon_d_total=bl[2],
+                        target_alpha_deg=tl[0], target_d_total=tl[2])
+    assert solve_single3(CAMERA, level[0], bl, target_seen=tl).target[:2] == pytest.approx(
+        sol2.target, abs=1e-9)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_images_are_pyroomacoustics_image_sources_in_3d(seed):
+    """An upright mirror as one wall of a 3-D room (pyroomacoustics: a polygon extruded):
+    each raised point's image from observe3 is the library's image source across that
+    wall (within its float32: 1 µm)."""
+    pra = pytest.importorskip("pyroomacoustics")
+    rng = np.random.default_rng(500 + seed)
+    plane, yaw, _, points = _scene(rng, lean_range=0.0)
+    u = np.array([math.cos(math.radians(yaw)), math.sin(math.radians(yaw))])
+    face = plane.normal[:2] / np.linalg.norm(plane.normal[:2])
+    c = plane.rho * plane.normal[:2]  # a point of the wall's line
+    span = 300.0
+    corners = np.array([c - span * u, c + span * u, c + span * u + span * face,
+                        c - span * u + span * face])
+    area = sum(a[0] * b[1] - b[0] * a[1]
+               for a, b in zip(corners, np.roll(corners, -1, 0), strict=True))
+    corners = corners if area > 0 else corners[::-1]  # anticlockwise
+    m = 0.01  # the library works in metres (its walls' planarity to 10 µm, in float32)
+    for p in points:
+        room = pra.Room.from_corners(corners.T * m, fs=8000, max_order=1)
+        room.extrude(2.0)
+        room.add_source(p * m)
+        room.add_microphone(CAMERA * m)
+        room.image_source_model()
+        images = room.sources[0].images.T / m
+        v = observe3(CAMERA, plane, p).virtual
+        assert np.min(np.linalg.norm(images - v, axis=1)) < 1e-4
+
+
+def test_a_point_behind_the_mirror_and_a_beacon_on_its_image_are_refused():
+    plane = MirrorPlane.from_pose((40.0, 60.0, 0.0), 10.0, 2.0, toward=CAMERA)
+    with pytest.raises(SolverError, match="in front of the mirror"):
+        observe3(CAMERA, plane, plane.reflect(np.array([40.0, 50.0, 5.0])))
+    b = np.array([40.0, 50.0, 5.0])
+    seen = (math.degrees(math.atan2(b[1], b[0])), math.degrees(math.atan2(
+        b[2] - CAMERA[2], math.hypot(b[0], b[1]))), float(np.linalg.norm(b - CAMERA)))
+    with pytest.raises(SolverError, match="coincides"):
+        solve_single3(CAMERA, b, seen, target_seen=seen)
