@@ -176,3 +176,81 @@ def solve_single3(observer: ArrayLike, beacon: ArrayLike, beacon_seen: tuple[flo
     rel = v - o
     t = (plane.rho - plane.normal @ o) / (plane.normal @ rel)
     return Solution3(plane, plane.reflect(v), o + t * rel)
+
+
+def plane_of(yaw_deg: float, lean_deg: float, rho: float, *, flip: bool = False) -> MirrorPlane:
+    """The plane of a pose's parameters: its normal the face of ``yaw_deg``'s line
+    (turned +90°, or −90° with ``flip``) raised by ``lean_deg``, at offset ``rho``."""
+    n2 = line_normal(yaw_deg) * (-1.0 if flip else 1.0)
+    lean = np.radians(lean_deg)
+    return MirrorPlane(np.array([np.cos(lean) * n2[0], np.cos(lean) * n2[1], np.sin(lean)]),
+                       float(rho))
+
+
+@dataclass(frozen=True)
+class Fit3:
+    """A weighted least-squares solution in 3-D: the plane, the target, and the
+    covariance of (yaw [deg], lean [deg], ρ [cm], x, y, z [cm]) where σ's were given."""
+
+    plane: MirrorPlane
+    target: np.ndarray
+    covariance: np.ndarray | None
+
+    @property
+    def target_covariance(self) -> np.ndarray | None:
+        """The target's 3×3 covariance (cm²)."""
+        return None if self.covariance is None else self.covariance[3:, 3:]
+
+
+def solve_lsq3(observer: ArrayLike, beacons: list[tuple[ArrayLike, tuple[float, float, float]]],
+               targets: list[tuple[float, float, float]], *,
+               sigma: tuple[float, float, float] | None = None) -> Fit3:
+    """The mirror's plane and the target from every beacon (its position, and what the
+    camera saw of it: α, ε, d_total) and every view of the target, by weighted least
+    squares from the first beacon's closed form.  ``sigma``: (σ_α deg, σ_ε deg, σ_d as a
+    fraction of d_total) of every measurement; without it, unit weights of (0.01°,
+    0.01°, 0.2 %) and no covariance.
+
+    Raises
+    ------
+    SolverError
+        No beacon or target, or a geometry that does not determine the unknowns.
+    """
+    from scipy.optimize import least_squares  # scipy is slow to import: only when used
+
+    if not beacons or not targets:
+        raise SolverError("least squares needs at least one beacon and one target observation")
+    o = np.asarray(observer, float)
+    start = solve_single3(o, beacons[0][0], beacons[0][1], target_seen=targets[0])
+    yaw0 = start.plane.yaw_deg
+    # the normal's side: the face of yaw0's line, or its opposite
+    flip = bool(line_normal(yaw0) @ start.plane.normal[:2] < 0)
+    sa, se, sd = sigma or (0.01, 0.01, 0.002)
+    positions = [np.asarray(b, float) for b, _ in beacons]
+    seen = np.array([s for _, s in beacons] + list(targets), float)
+
+    def residuals(x: np.ndarray) -> np.ndarray:
+        plane = plane_of(x[0], x[1], x[2], flip=flip)
+        predicted = [_seen_of(o, plane, p) for p in positions]
+        predicted += [_seen_of(o, plane, x[3:])] * len(targets)
+        pr = np.array(predicted)
+        da = (pr[:, 0] - seen[:, 0] + 180.0) % 360.0 - 180.0
+        return np.concatenate([da / sa, (pr[:, 1] - seen[:, 1]) / se,
+                               (pr[:, 2] - seen[:, 2]) / (sd * seen[:, 2])])
+
+    x0 = np.array([yaw0, start.plane.lean_deg, start.plane.rho, *start.target])
+    res = least_squares(residuals, x0, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    jtj = res.jac.T @ res.jac
+    if np.linalg.cond(jtj) > 1e14:
+        raise SolverError("the beacons and the target do not determine the mirror's plane")
+    return Fit3(plane_of(res.x[0], res.x[1], res.x[2], flip=flip), res.x[3:].copy(),
+                np.linalg.inv(jtj) if sigma is not None else None)
+
+
+def _seen_of(o: np.ndarray, plane: MirrorPlane, point: np.ndarray) -> tuple[float, float, float]:
+    """(α, ε, d_total) of ``point``'s image, without the in-front check (a fit's step may
+    pass through a plane that a point stands behind)."""
+    rel = plane.reflect(point) - o
+    d = float(np.linalg.norm(rel))
+    return (float(np.degrees(np.arctan2(rel[1], rel[0]))),
+            float(np.degrees(np.arcsin(rel[2] / d))), d)

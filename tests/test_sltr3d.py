@@ -133,3 +133,56 @@ def test_a_point_behind_the_mirror_and_a_beacon_on_its_image_are_refused():
         b[2] - CAMERA[2], math.hypot(b[0], b[1]))), float(np.linalg.norm(b - CAMERA)))
     with pytest.raises(SolverError, match="coincides"):
         solve_single3(CAMERA, b, seen, target_seen=seen)
+
+
+def _more_beacons(rng: np.random.Generator, plane: MirrorPlane, yaw: float, k: int):
+    """``k`` more beacons before the face of ``plane``, raised 0–15 cm."""
+    u = np.array([math.cos(math.radians(yaw)), math.sin(math.radians(yaw)), 0.0])
+    face = np.array([plane.normal[0], plane.normal[1], 0.0])
+    face /= np.linalg.norm(face)
+    foot = plane.rho * plane.normal - (plane.rho * plane.normal)[2] * np.array([0, 0, 1.0])
+    return [foot + rng.uniform(-15, 15) * u + rng.uniform(8, 30) * face
+            + np.array([0.0, 0.0, rng.uniform(0, 15)]) for _ in range(k)]
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_least_squares_recovers_the_plane_from_several_beacons(seed):
+    from solver.sltr3d import solve_lsq3
+
+    rng = np.random.default_rng(900 + seed)
+    plane, yaw, lean, (b0, target) = _scene(rng)
+    beacons = [b0, *_more_beacons(rng, plane, yaw, 2)]
+    fit = solve_lsq3(CAMERA, [(b, _seen(CAMERA, plane, b)) for b in beacons],
+                     [_seen(CAMERA, plane, target)] * 2)
+    assert fit.target == pytest.approx(target, abs=1e-8)
+    assert fit.plane.normal == pytest.approx(plane.normal, abs=1e-10)
+    assert (fit.plane.lean_deg, fit.plane.yaw_deg) == pytest.approx((lean, yaw % 180),
+                                                                    abs=1e-8)
+    assert fit.covariance is None
+
+
+def test_least_squares_covariance_holds_its_errors():
+    """With measurement noise of the σ's given, the target's squared Mahalanobis
+    distance in the fit's 3×3 covariance averages 3 (χ²₃) over 300 draws (its mean's
+    own spread there: ±0.15), and 95 % of the errors lie inside the 95 % ellipsoid."""
+    from scipy.stats import chi2
+
+    from solver.sltr3d import solve_lsq3
+
+    rng = np.random.default_rng(42)
+    plane, yaw, _, (b0, target) = _scene(rng)
+    beacons = [b0, *_more_beacons(rng, plane, yaw, 3)]
+    sigma = (0.01, 0.01, 0.002)
+    m2 = []
+    for _ in range(300):
+        def noisy(p):
+            a, e, d = _seen(CAMERA, plane, p)
+            return (a + rng.normal(0, sigma[0]), e + rng.normal(0, sigma[1]),
+                    d * (1 + rng.normal(0, sigma[2])))
+        fit = solve_lsq3(CAMERA, [(b, noisy(b)) for b in beacons], [noisy(target)],
+                         sigma=sigma)
+        err = fit.target - target
+        m2.append(float(err @ np.linalg.solve(fit.target_covariance, err)))
+    m2 = np.array(m2)
+    assert 2.6 < m2.mean() < 3.4
+    assert 0.92 < np.mean(m2 <= chi2.ppf(0.95, 3)) < 0.98
