@@ -90,6 +90,8 @@ RESULTS: tuple[Result, ...] = (
            about="the default camera's size-constancy calibration"),
     Result("sensor_noise", (f"{PY} benchmarks/sensor_noise.py",),
            about="sensor noise's shift of the target's measurements against first order"),
+    Result("reflector_size", (f"{PY} benchmarks/reflector_size.py",), markdown=True,
+           about="the paper's open question: the target's error as the reflector shrinks"),
     Result("crlb", (f"{PY} benchmarks/uncertainty.py --scenes 40 --draws 1000",),
            markdown=True, about="estimator efficiency against the Cramér–Rao bound"),
     Result("default_ellipse", (f"{PY} benchmarks/uncertainty.py --renders 20",),
