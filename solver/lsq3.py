@@ -1,0 +1,204 @@
+"""3-D SLTR by weighted least squares over every beacon and every view of the target:
+the mirror's plane (yaw, lean, offset) and the target in 3-D, robust to one bad image
+(a Huber loss), self-calibrating for the camera's pan and pitch readings and the range
+scale, with priors on them; its covariance, and the Cramér–Rao bound at the truth.
+
+The nuisances act on every image alike: ``pan`` adds δ (deg) to every azimuth (the
+mount's pan reading), ``pitch`` adds δ to every elevation (its pitch reading: to first
+order, for images near the optical axis), ``scale`` multiplies every d_total (the
+calibration's K).  The forward model is :mod:`solver.sltr3d`'s.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from solver.errors import SolverError
+from solver.geometry import line_normal
+from solver.sltr3d import MirrorPlane, observe3, solve_single3
+
+# each nuisance: its neutral value
+NUISANCES3 = {"pan": 0.0, "pitch": 0.0, "scale": 1.0}
+HUBER_K = 3.0  # residuals beyond this many σ's weigh less
+Seen = tuple[float, float, float]  # what the camera sees of an image: α, ε (deg), d_total
+
+
+def plane_of(yaw_deg: float, lean_deg: float, rho: float, *, flip: bool = False) -> MirrorPlane:
+    """The plane of a pose's parameters: its normal the face of ``yaw_deg``'s line
+    (turned +90°, or −90° with ``flip``) raised by ``lean_deg``, at offset ``rho``."""
+    n2 = line_normal(yaw_deg) * (-1.0 if flip else 1.0)
+    lean = np.radians(lean_deg)
+    return MirrorPlane(np.array([np.cos(lean) * n2[0], np.cos(lean) * n2[1], np.sin(lean)]),
+                       float(rho))
+
+
+@dataclass(frozen=True)
+class Fit3:
+    """A 3-D solution: the plane, the target, the nuisances' estimates, the covariance
+    of (yaw [deg], lean [deg], ρ [cm], x, y, z [cm], *nuisances) where σ's were given,
+    and the measurements the Huber loss trusted less."""
+
+    plane: MirrorPlane
+    target: np.ndarray
+    nuisances: dict[str, float]
+    covariance: np.ndarray | None
+    downweighted: tuple[str, ...] = ()
+
+    @property
+    def target_covariance(self) -> np.ndarray | None:
+        """The target's 3×3 covariance (cm²)."""
+        return None if self.covariance is None else self.covariance[3:6, 3:6]
+
+
+@dataclass(frozen=True)
+class _Problem:
+    """What the fit weighs: the observer, the beacons' positions, what was seen (beacons
+    first), the σ's, the nuisances and their priors, and the normal's side."""
+
+    o: np.ndarray
+    positions: list[np.ndarray]
+    seen: np.ndarray
+    sigma: tuple[float, float, float]
+    nuisances: tuple[str, ...]
+    priors: dict[str, float]
+    flip: bool
+
+    def predicted(self, x: np.ndarray) -> np.ndarray:
+        """(α, ε, d_total) of every observation at parameters ``x``."""
+        plane = plane_of(x[0], x[1], x[2], flip=self.flip)
+        n_t = len(self.seen) - len(self.positions)
+        pr = np.array([_seen_of(self.o, plane, p) for p in self.positions]
+                      + [_seen_of(self.o, plane, x[3:6])] * n_t)
+        for name, value in zip(self.nuisances, x[6:], strict=True):
+            if name == "scale":
+                pr[:, 2] *= value
+            else:
+                pr[:, 0 if name == "pan" else 1] += value
+        return pr
+
+    def residuals(self, x: np.ndarray, seen: np.ndarray | None = None) -> np.ndarray:
+        """The weighted residuals at ``x`` against ``seen`` (default: the measurements),
+        then each prior's row."""
+        seen = self.seen if seen is None else seen
+        pr = self.predicted(x)
+        sa, se, sd = self.sigma
+        da = (pr[:, 0] - seen[:, 0] + 180.0) % 360.0 - 180.0
+        rows = [da / sa, (pr[:, 1] - seen[:, 1]) / se, (pr[:, 2] - seen[:, 2]) / (sd * seen[:, 2])]
+        rows.append(np.array([(v - NUISANCES3[n]) / self.priors[n]
+                              for n, v in zip(self.nuisances, x[6:], strict=True)
+                              if n in self.priors]))
+        return np.concatenate(rows)
+
+    def names(self) -> list[str]:
+        """What each residual measures, in their order."""
+        who = [f"beacon {i}" for i in range(len(self.positions))] + [
+            f"target {k}" for k in range(len(self.seen) - len(self.positions))]
+        return ([f"{w} α" for w in who] + [f"{w} elevation" for w in who]
+                + [f"{w} d_total" for w in who]
+                + [f"the {n} prior" for n in self.nuisances if n in self.priors])
+
+
+def solve_lsq3(observer: ArrayLike, beacons: list[tuple[ArrayLike, Seen]], targets: list[Seen],
+               *, sigma: tuple[float, float, float] | None = None,
+               nuisances: tuple[str, ...] = (), priors: dict[str, float] | None = None
+               ) -> Fit3:
+    """The mirror's plane and the target from every beacon (its position, and what the
+    camera saw of it: α, ε, d_total) and every view of the target, by weighted least
+    squares from the first beacon's closed form.  ``sigma``: (σ_α deg, σ_ε deg, σ_d as a
+    fraction of d_total) of every measurement; without it, unit weights of (0.01°,
+    0.01°, 0.2 %) and no covariance.  ``nuisances``: any of ``pan``, ``pitch``,
+    ``scale``, estimated alongside; ``priors``: the σ of each one known (deg; the
+    scale's as a fraction).
+
+    Raises
+    ------
+    SolverError
+        No beacon or target, an unknown nuisance, or a geometry that does not determine
+        the unknowns.
+    """
+    from scipy.optimize import least_squares  # scipy is slow to import: only when used
+
+    if not beacons or not targets:
+        raise SolverError("least squares needs at least one beacon and one target observation")
+    unknown = [n for n in (*nuisances, *(priors or {})) if n not in NUISANCES3]
+    if unknown or set(priors or {}) - set(nuisances):
+        raise SolverError(f"nuisances are {', '.join(NUISANCES3)}, each prior on one of them")
+    o = np.asarray(observer, float)
+    start = solve_single3(o, beacons[0][0], beacons[0][1], target_seen=targets[0])
+    yaw0 = start.plane.yaw_deg
+    p = _Problem(o, [np.asarray(b, float) for b, _ in beacons],
+                 np.array([s for _, s in beacons] + list(targets), float),
+                 sigma or (0.01, 0.01, 0.002), tuple(nuisances), dict(priors or {}),
+                 flip=bool(line_normal(yaw0) @ start.plane.normal[:2] < 0))
+    x0 = np.array([yaw0, start.plane.lean_deg, start.plane.rho, *start.target,
+                   *(NUISANCES3[n] for n in nuisances)])
+    robust = len(p.residuals(x0)) > len(x0)
+    res = least_squares(p.residuals, x0, method="trf" if robust else "lm",
+                        loss="huber" if robust else "linear", f_scale=HUBER_K,
+                        xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    r = p.residuals(res.x)
+    w = np.where(np.abs(r) > HUBER_K, HUBER_K / np.maximum(np.abs(r), 1e-300), 1.0)
+    J = _jacobian(p, res.x)
+    jtj = J.T @ (w[:, None] * J)
+    if np.linalg.cond(jtj) > 1e14:
+        raise SolverError("the beacons and the target do not determine the mirror's plane"
+                          + (" and the nuisances" if nuisances else ""))
+    names = p.names()
+    return Fit3(plane_of(res.x[0], res.x[1], res.x[2], flip=p.flip), res.x[3:6].copy(),
+                dict(zip(nuisances, map(float, res.x[6:]), strict=True)),
+                np.linalg.inv(jtj) if sigma is not None else None,
+                tuple(f"{names[i]} ({abs(r[i]):.1f} σ off)" for i in np.flatnonzero(w < 1.0)))
+
+
+def crlb3(observer: ArrayLike, beacons: list[ArrayLike], plane: MirrorPlane, *,
+          target: ArrayLike, sigma: tuple[float, float, float], n_targets: int = 1,
+          nuisances: tuple[str, ...] = (), priors: dict[str, float] | None = None
+          ) -> np.ndarray:
+    """The Cramér–Rao bound of (yaw, lean, ρ, x, y, z, *nuisances) at the truth, for
+    Gaussian errors of these σ's: the inverse of the Fisher information the fit of
+    :func:`solve_lsq3` weighs (no estimator that is unbiased does better).
+
+    Raises
+    ------
+    SolverError
+        The geometry does not determine the unknowns.
+    """
+    o, t = np.asarray(observer, float), np.asarray(target, float)
+    seen = [tuple(_seen_of(o, plane, np.asarray(b, float))) for b in beacons]
+    seen += [tuple(_seen_of(o, plane, t))] * n_targets
+    yaw = plane.yaw_deg
+    p = _Problem(o, [np.asarray(b, float) for b in beacons], np.array(seen, float), sigma,
+                 tuple(nuisances), dict(priors or {}),
+                 flip=bool(line_normal(yaw) @ plane.normal[:2] < 0))
+    observe3(o, plane, t)  # the target must stand before the glass
+    x = np.array([yaw, plane.lean_deg, plane.rho, *t, *(NUISANCES3[n] for n in nuisances)])
+    J = _jacobian(p, x)
+    info = J.T @ J
+    if np.linalg.cond(info) > 1e14:
+        raise SolverError("the geometry does not determine the mirror's plane and the target")
+    return np.linalg.inv(info)
+
+
+def _jacobian(p: _Problem, x: np.ndarray) -> np.ndarray:
+    """The weighted residuals' Jacobian at ``x`` by central differences (steps a
+    millionth of each parameter's scale: 1e-6° and 1e-6 cm, 1e-9 in the scale)."""
+    steps = np.full(len(x), 1e-6)
+    steps[6:] = [1e-9 if n == "scale" else 1e-6 for n in p.nuisances]
+    cols = []
+    for k, h in enumerate(steps):
+        e = np.zeros(len(x))
+        e[k] = h
+        cols.append((p.residuals(x + e) - p.residuals(x - e)) / (2 * h))
+    return np.column_stack(cols)
+
+
+def _seen_of(o: np.ndarray, plane: MirrorPlane, point: np.ndarray) -> tuple[float, float, float]:
+    """(α, ε, d_total) of ``point``'s image, without the in-front check (a fit's step may
+    pass through a plane that a point stands behind)."""
+    rel = plane.reflect(point) - o
+    d = float(np.linalg.norm(rel))
+    return (float(np.degrees(np.arctan2(rel[1], rel[0]))),
+            float(np.degrees(np.arcsin(rel[2] / d))), d)
