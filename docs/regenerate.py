@@ -90,6 +90,9 @@ RESULTS: tuple[Result, ...] = (
            about="the default camera's size-constancy calibration"),
     Result("sensor_noise", (f"{PY} benchmarks/sensor_noise.py",),
            about="sensor noise's shift of the target's measurements against first order"),
+    Result("lean_geometry", (f"{PY} benchmarks/lean_geometry.py --scenes 400",),
+           markdown=True, about="3-D SLTR against the planar solver on leaning mirrors: "
+                                "the geometry alone"),
     Result("reflector_size", (f"{PY} benchmarks/reflector_size.py",), markdown=True,
            about="the paper's open question: the target's error as the reflector shrinks"),
     Result("crlb", (f"{PY} benchmarks/uncertainty.py --scenes 40 --draws 1000",),
