@@ -176,3 +176,26 @@ def solve_single3(observer: ArrayLike, beacon: ArrayLike, beacon_seen: tuple[flo
     rel = v - o
     t = (plane.rho - plane.normal @ o) / (plane.normal @ rel)
     return Solution3(plane, plane.reflect(v), o + t * rel)
+
+
+def apparent_height_ratio(observer: ArrayLike, plane: MirrorPlane, base: ArrayLike,
+                          height: float) -> float:
+    """How tall an upright object of ``height`` standing on ``base`` looks in the mirror
+    (rows of a level pinhole camera at ``observer`` facing its image), against an
+    upright object at its image's foot: 1 in an upright mirror.
+
+    A leaning mirror leans the image by twice its lean, so the image looks shorter (to
+    first order by cos 2λ) and its top nearer or farther.  Size constancy (d_total =
+    K / pixels) then reads d_total too long by 1/ratio − 1: what a 3-D detector must
+    correct for once it knows the lean.
+    """
+    o = np.asarray(observer, float)
+    foot = plane.reflect(np.asarray(base, float))
+    top = plane.reflect(np.asarray(base, float) + height * ZHAT)
+    forward = np.array([*(foot[:2] - o[:2]), 0.0])
+    forward /= np.linalg.norm(forward)
+
+    def rows(p: np.ndarray) -> float:  # −v·f: the height on the film over the depth
+        return (p[2] - o[2]) / ((p - o) @ forward)
+
+    return float((rows(top) - rows(foot)) / (rows(foot + height * ZHAT) - rows(foot)))

@@ -254,3 +254,23 @@ def test_one_bad_image_is_trusted_less_and_named(monkeypatch):
     plain, _ = error()
     assert robust < 0.1 and robust < plain / 10
     assert any(d.startswith("beacon 2 α") for d in down)
+
+
+def test_a_leaning_mirror_leans_the_image_twice_and_shortens_it():
+    """An object straight ahead, seen in a mirror facing the camera square-on and leaning
+    by λ, the camera level with the image's foot: the image leans by 2λ, so its top stands
+    H·cos 2λ up and H·sin 2λ farther (a top leaning away), and it looks
+    cos 2λ / (1 + (H/Z)·sin 2λ) as tall as an upright one at its foot, Z the
+    foot's depth (worked by hand); 1 in an upright mirror."""
+    from solver.sltr3d import apparent_height_ratio
+
+    base, h = np.array([0.0, 40.0, 5.0]), 10.0
+    for lean in (0.0, 2.0, 4.0):
+        plane = MirrorPlane.from_pose((0.0, 60.0, 0.0), 0.0, lean, toward=(0.0, 0.0, 5.0))
+        o = np.array([0.0, 0.0, plane.reflect(base)[2]])  # level with the image's foot
+        image_axis = plane.reflect(base + [0, 0, h]) - plane.reflect(base)
+        assert math.degrees(math.acos(image_axis[2] / h)) == pytest.approx(2 * lean, abs=1e-9)
+        z = plane.reflect(base)[1] - o[1]
+        two = math.radians(2 * lean)
+        assert apparent_height_ratio(o, plane, base, h) == pytest.approx(
+            math.cos(two) / (1 + h / z * math.sin(two)), abs=1e-12)
