@@ -76,7 +76,7 @@ def run(lean: float, scenes: int, rng: np.random.Generator) -> dict[str, float]:
     for _ in range(scenes):
         plane, target, beacons = _scene(rng, lean)
         # what size constancy would make of a 10 cm pencil's d_total, not told the lean
-        bias += [1.0 / apparent_height_ratio(CAMERA, plane, b, 10.0) - 1.0 for b in beacons]
+        bias += [1.0 / apparent_height_ratio(CAMERA, plane, b, height=10.0) - 1.0 for b in beacons]
         seen_b = [_noisy(rng, plane, b) for b in beacons]
         seen_t = _noisy(rng, plane, target)
         try:

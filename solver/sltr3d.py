@@ -178,7 +178,7 @@ def solve_single3(observer: ArrayLike, beacon: ArrayLike, beacon_seen: tuple[flo
     return Solution3(plane, plane.reflect(v), o + t * rel)
 
 
-def apparent_height_ratio(observer: ArrayLike, plane: MirrorPlane, base: ArrayLike,
+def apparent_height_ratio(observer: ArrayLike, plane: MirrorPlane, base: ArrayLike, *,
                           height: float) -> float:
     """How tall an upright object of ``height`` standing on ``base`` looks in the mirror
     (rows of a level pinhole camera at ``observer`` facing its image), against an

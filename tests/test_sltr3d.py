@@ -272,5 +272,5 @@ def test_a_leaning_mirror_leans_the_image_twice_and_shortens_it():
         assert math.degrees(math.acos(image_axis[2] / h)) == pytest.approx(2 * lean, abs=1e-9)
         z = plane.reflect(base)[1] - o[1]
         two = math.radians(2 * lean)
-        assert apparent_height_ratio(o, plane, base, h) == pytest.approx(
+        assert apparent_height_ratio(o, plane, base, height=h) == pytest.approx(
             math.cos(two) / (1 + h / z * math.sin(two)), abs=1e-12)
