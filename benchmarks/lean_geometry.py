@@ -10,8 +10,9 @@ is seen):
 - a target and three beacons before its face, raised 0–15 cm;
 - a camera at the board's corner, 12 cm up.
 
-Every measurement is exact, plus Gaussian errors at the detector's σ's: 0.01° in
-azimuth and elevation, 0.2 % in d_total.
+Every measurement is exact, plus Gaussian errors: 0.01° in azimuth and 0.2 % in
+d_total (the detector's σ's), 0.01° in elevation (assumed: no detector measures it
+yet).  They are the σ's the 3-D solve is given, so its coverage checks consistency.
 
 - The 3-D solver (:func:`solver.lsq3.solve_lsq3`) takes (α, ε, d_total).
 - The planar solver (:func:`solver.lsq.solve_measurements`, the one mirrorsim runs
@@ -112,8 +113,10 @@ def main() -> None:
     rng = np.random.default_rng(args.seed)
     print(f"{args.scenes} random scenes a row (seed {args.seed}): a mirror leaning by the "
           "row's lean, the target and three beacons raised 0–15 cm, the camera 12 cm up; "
-          "exact measurements with the detector's σ's (0.01° in azimuth and elevation, "
-          "0.2 % in d_total). Target errors in the board's plane, cm.\n")
+          "exact measurements with Gaussian errors of σ 0.01° in azimuth (the detector's), "
+          "0.01° in elevation (assumed: no detector measures it yet) and 0.2 % in d_total "
+          "(the detector's), the σ's the 3-D solve is given. Target errors in the board's "
+          "plane, cm.\n")
     print("| lean | planar solver: median | p95 | 3-D solver: median | p95 | "
           "height error median | 95 % ellipsoid holds | size-constancy d_total bias |")
     print("|---|---|---|---|---|---|---|---|")
