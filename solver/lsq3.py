@@ -17,22 +17,13 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from solver.errors import SolverError
-from solver.geometry import line_normal
-from solver.sltr3d import MirrorPlane, observe3, solve_single3
+from solver.geometry import wrap_bearing
+from solver.lsq import HUBER_K
+from solver.sltr3d import MirrorPlane, observe3, seen3, solve_single3
 
 # each nuisance: its neutral value
 NUISANCES3 = {"pan": 0.0, "pitch": 0.0, "scale": 1.0}
-HUBER_K = 3.0  # residuals beyond this many σ's weigh less
 Seen = tuple[float, float, float]  # what the camera sees of an image: α, ε (deg), d_total
-
-
-def plane_of(yaw_deg: float, lean_deg: float, rho: float, *, flip: bool = False) -> MirrorPlane:
-    """The plane of a pose's parameters: its normal the face of ``yaw_deg``'s line
-    (turned +90°, or −90° with ``flip``) raised by ``lean_deg``, at offset ``rho``."""
-    n2 = line_normal(yaw_deg) * (-1.0 if flip else 1.0)
-    lean = np.radians(lean_deg)
-    return MirrorPlane(np.array([np.cos(lean) * n2[0], np.cos(lean) * n2[1], np.sin(lean)]),
-                       float(rho))
 
 
 @dataclass(frozen=True)
@@ -68,10 +59,10 @@ class _Problem:
 
     def predicted(self, x: np.ndarray) -> np.ndarray:
         """(α, ε, d_total) of every observation at parameters ``x``."""
-        plane = plane_of(x[0], x[1], x[2], flip=self.flip)
+        plane = MirrorPlane.from_params(x[0], x[1], x[2], flip=self.flip)
         n_t = len(self.seen) - len(self.positions)
-        pr = np.array([_seen_of(self.o, plane, p) for p in self.positions]
-                      + [_seen_of(self.o, plane, x[3:6])] * n_t)
+        pr = np.array([seen3(self.o, plane, p) for p in self.positions]
+                      + [seen3(self.o, plane, x[3:6])] * n_t)
         for name, value in zip(self.nuisances, x[6:], strict=True):
             if name == "scale":
                 pr[:, 2] *= value
@@ -79,13 +70,13 @@ class _Problem:
                 pr[:, 0 if name == "pan" else 1] += value
         return pr
 
-    def residuals(self, x: np.ndarray, seen: np.ndarray | None = None) -> np.ndarray:
-        """The weighted residuals at ``x`` against ``seen`` (default: the measurements),
-        then each prior's row."""
-        seen = self.seen if seen is None else seen
+    def residuals(self, x: np.ndarray) -> np.ndarray:
+        """The weighted residuals at ``x`` against the measurements, then each prior's
+        row."""
+        seen = self.seen
         pr = self.predicted(x)
         sa, se, sd = self.sigma
-        da = (pr[:, 0] - seen[:, 0] + 180.0) % 360.0 - 180.0
+        da = wrap_bearing(pr[:, 0] - seen[:, 0])
         rows = [da / sa, (pr[:, 1] - seen[:, 1]) / se, (pr[:, 2] - seen[:, 2]) / (sd * seen[:, 2])]
         rows.append(np.array([(v - NUISANCES3[n]) / self.priors[n]
                               for n, v in zip(self.nuisances, x[6:], strict=True)
@@ -132,7 +123,7 @@ def solve_lsq3(observer: ArrayLike, beacons: list[tuple[ArrayLike, Seen]], targe
     p = _Problem(o, [np.asarray(b, float) for b, _ in beacons],
                  np.array([s for _, s in beacons] + list(targets), float),
                  sigma or (0.01, 0.01, 0.002), tuple(nuisances), dict(priors or {}),
-                 flip=bool(line_normal(yaw0) @ start.plane.normal[:2] < 0))
+                 flip=start.plane.flip)
     x0 = np.array([yaw0, start.plane.lean_deg, start.plane.rho, *start.target,
                    *(NUISANCES3[n] for n in nuisances)])
     robust = len(p.residuals(x0)) > len(x0)
@@ -147,7 +138,8 @@ def solve_lsq3(observer: ArrayLike, beacons: list[tuple[ArrayLike, Seen]], targe
         raise SolverError("the beacons and the target do not determine the mirror's plane"
                           + (" and the nuisances" if nuisances else ""))
     names = p.names()
-    return Fit3(plane_of(res.x[0], res.x[1], res.x[2], flip=p.flip), res.x[3:6].copy(),
+    plane = MirrorPlane.from_params(res.x[0], res.x[1], res.x[2], flip=p.flip)
+    return Fit3(plane, res.x[3:6].copy(),
                 dict(zip(nuisances, map(float, res.x[6:]), strict=True)),
                 np.linalg.inv(jtj) if sigma is not None else None,
                 tuple(f"{names[i]} ({abs(r[i]):.1f} σ off)" for i in np.flatnonzero(w < 1.0)))
@@ -167,14 +159,13 @@ def crlb3(observer: ArrayLike, beacons: list[ArrayLike], plane: MirrorPlane, *,
         The geometry does not determine the unknowns.
     """
     o, t = np.asarray(observer, float), np.asarray(target, float)
-    seen = [tuple(_seen_of(o, plane, np.asarray(b, float))) for b in beacons]
-    seen += [tuple(_seen_of(o, plane, t))] * n_targets
-    yaw = plane.yaw_deg
+    ot = observe3(o, plane, t)  # the target must stand before the glass
+    seen = [seen3(o, plane, b) for b in beacons]
+    seen += [(ot.alpha_deg, ot.elevation_deg, ot.d_total)] * n_targets
     p = _Problem(o, [np.asarray(b, float) for b in beacons], np.array(seen, float), sigma,
-                 tuple(nuisances), dict(priors or {}),
-                 flip=bool(line_normal(yaw) @ plane.normal[:2] < 0))
-    observe3(o, plane, t)  # the target must stand before the glass
-    x = np.array([yaw, plane.lean_deg, plane.rho, *t, *(NUISANCES3[n] for n in nuisances)])
+                 tuple(nuisances), dict(priors or {}), flip=plane.flip)
+    x = np.array([plane.yaw_deg, plane.lean_deg, plane.rho, *t,
+                  *(NUISANCES3[n] for n in nuisances)])
     J = _jacobian(p, x)
     info = J.T @ J
     if np.linalg.cond(info) > 1e14:
@@ -194,11 +185,3 @@ def _jacobian(p: _Problem, x: np.ndarray) -> np.ndarray:
         cols.append((p.residuals(x + e) - p.residuals(x - e)) / (2 * h))
     return np.column_stack(cols)
 
-
-def _seen_of(o: np.ndarray, plane: MirrorPlane, point: np.ndarray) -> tuple[float, float, float]:
-    """(α, ε, d_total) of ``point``'s image, without the in-front check (a fit's step may
-    pass through a plane that a point stands behind)."""
-    rel = plane.reflect(point) - o
-    d = float(np.linalg.norm(rel))
-    return (float(np.degrees(np.arctan2(rel[1], rel[0]))),
-            float(np.degrees(np.arcsin(rel[2] / d))), d)

@@ -193,9 +193,8 @@ def table1(iterations: int = 200, geometry: Table1Geometry | None = None,
         return dict(zip(("beacon_sigma", "shared_alpha_deg"), row[4:], strict=False))
 
     return Table1(g, iterations, tuple(
-        Table1Row(*row[:4], run_row(row[0], row[1], iterations, geometry=g, rng=rng,
-                                    **tail(row)), **tail(row))
-        for row in rows))
+        Table1Row(*row[:4], run_row(row[0], row[1], iterations, geometry=g, rng=rng, **t), **t)
+        for row, t in ((row, tail(row)) for row in rows)))
 
 
 def table_rows(sigmas: list[tuple[float, float]] | None = None,

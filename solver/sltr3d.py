@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from solver.errors import SolverError
-from solver.geometry import line_normal
+from solver.geometry import line_normal, wrap_yaw
 
 ZHAT = np.array([0.0, 0.0, 1.0])
 
@@ -50,14 +50,25 @@ class MirrorPlane:
         """The plane through ``point`` whose line on the board runs along ``yaw_deg``,
         leaning by ``lean_deg`` (its top away from its face), facing ``toward`` (the
         camera: the side its normal points to)."""
-        n2 = line_normal(yaw_deg)
-        face = np.array([n2[0], n2[1], 0.0])
         p = np.asarray(point, float)
-        if face[:2] @ (np.asarray(toward, float)[:2] - p[:2]) < 0:
-            face = -face
-        lean = np.radians(lean_deg)
-        n = np.cos(lean) * face + np.sin(lean) * ZHAT
+        flip = bool(line_normal(yaw_deg) @ (np.asarray(toward, float)[:2] - p[:2]) < 0)
+        n = cls.from_params(yaw_deg, lean_deg, 0.0, flip=flip).normal
         return cls(n, float(n @ p))
+
+    @classmethod
+    def from_params(cls, yaw_deg: float, lean_deg: float, rho: float, *,
+                    flip: bool = False) -> MirrorPlane:
+        """The plane of a pose's parameters: its normal the face of ``yaw_deg``'s line
+        (turned +90°, or −90° with ``flip``) raised by ``lean_deg``, at offset ``rho``."""
+        n2 = line_normal(yaw_deg) * (-1.0 if flip else 1.0)
+        lean = np.radians(lean_deg)
+        return cls(np.array([np.cos(lean) * n2[0], np.cos(lean) * n2[1], np.sin(lean)]),
+                   float(rho))
+
+    @property
+    def flip(self) -> bool:
+        """Whether the normal faces the −90° side of its yaw's line (:meth:`from_params`)."""
+        return bool(line_normal(self.yaw_deg) @ self.normal[:2] < 0)
 
     @property
     def lean_deg(self) -> float:
@@ -68,13 +79,16 @@ class MirrorPlane:
     def yaw_deg(self) -> float:
         """The bearing of the plane's line on the board, mod 180 (deg)."""
         along = np.cross(ZHAT, self.normal)
-        yaw = float(np.degrees(np.arctan2(along[1], along[0])) % 180.0)
-        return 0.0 if yaw > 180.0 - 1e-9 else yaw  # a rounding below 0 folds to ~180
+        return float(wrap_yaw(np.degrees(np.arctan2(along[1], along[0]))))
 
     def reflect(self, points: ArrayLike) -> np.ndarray:
         """Points (…, 3) reflected across the plane."""
         p = np.asarray(points, float)
         return p - 2.0 * (p @ self.normal - self.rho)[..., None] * self.normal
+
+    def hit(self, o: np.ndarray, ray: np.ndarray) -> np.ndarray:
+        """Where the line o + t·ray meets the plane."""
+        return o + (self.rho - self.normal @ o) / (self.normal @ ray) * ray
 
 
 @dataclass(frozen=True)
@@ -105,14 +119,21 @@ def observe3(observer: ArrayLike, plane: MirrorPlane, point: ArrayLike) -> Obser
     if p @ plane.normal - plane.rho <= 0 or o @ plane.normal - plane.rho <= 0:
         raise SolverError("the point and the camera must stand in front of the mirror")
     v = plane.reflect(p)
-    rel = v - o
-    d = float(np.linalg.norm(rel))
-    t = (plane.rho - plane.normal @ o) / (plane.normal @ rel)
-    r = o + t * rel
-    return Observation3(alpha_deg=float(np.degrees(np.arctan2(rel[1], rel[0]))),
-                        elevation_deg=float(np.degrees(np.arcsin(rel[2] / d))), d_total=d,
+    r = plane.hit(o, v - o)
+    alpha, elevation, d = seen3(o, plane, p)
+    return Observation3(alpha_deg=alpha, elevation_deg=elevation, d_total=d,
                         d1=float(np.linalg.norm(r - o)), d2=float(np.linalg.norm(p - r)),
                         virtual=v, reflection_point=r)
+
+
+def seen3(observer: ArrayLike, plane: MirrorPlane, point: ArrayLike
+          ) -> tuple[float, float, float]:
+    """(α, ε, d_total) of ``point``'s image, without :func:`observe3`'s in-front check
+    (a fit's step may pass through a plane a point stands behind)."""
+    rel = plane.reflect(np.asarray(point, float)) - np.asarray(observer, float)
+    d = float(np.linalg.norm(rel))
+    return (float(np.degrees(np.arctan2(rel[1], rel[0]))),
+            float(np.degrees(np.arcsin(rel[2] / d))), d)
 
 
 def virtual_image3(observer: ArrayLike, seen: tuple[float, float, float]) -> np.ndarray:
@@ -173,9 +194,7 @@ def solve_single3(observer: ArrayLike, beacon: ArrayLike, beacon_seen: tuple[flo
     v = virtual_image3(o, target_seen)
     if v @ plane.normal - plane.rho >= 0:
         raise SolverError("the target's image lies in front of the mirror the beacon gives")
-    rel = v - o
-    t = (plane.rho - plane.normal @ o) / (plane.normal @ rel)
-    return Solution3(plane, plane.reflect(v), o + t * rel)
+    return Solution3(plane, plane.reflect(v), plane.hit(o, v - o))
 
 
 def apparent_height_ratio(observer: ArrayLike, plane: MirrorPlane, base: ArrayLike, *,

@@ -128,7 +128,7 @@ def test_the_file_reader_only_parses():
 
 # what only the composer derives, and where a scene is made whole
 DERIVED = ("target_facing", "resolve_pan")
-COMPOSES = ("compose_scene", "with_derived")
+COMPOSES = ("compose_scene", "with_derived", "with_facing")
 
 
 def _calls(path: Path) -> set[str]:

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from mirrorsim.cli.tables import HEAVY_TAIL_SHARE, columns, show_value
+from mirrorsim.cli.tables import columns, show_value
 from mirrorsim.formats.error_model import ErrorModel
 from mirrorsim.formats.error_model_scope import SIGMA_FEATURES
 from mirrorsim.scene.model import Scene
@@ -19,6 +19,11 @@ if TYPE_CHECKING:  # budgets, plans and tracks run renders: no Mitsuba import to
     from mirrorsim.pipelines.planning import Plan
     from mirrorsim.pipelines.track_report import TrackReport
     from solver.beacon_set import BeaconSet
+
+
+# a row's RMSE is called unsettled where its largest draw holds more than this share of
+# the summed squared error
+HEAVY_TAIL_SHARE = 0.5
 
 
 def budget_table(budget: Budget) -> str:

@@ -212,10 +212,3 @@ def mahalanobis_sentence(distance: float) -> str:
     where = (f"inside the 95 % ellipse, whose edge is at {r95:.2f} σ" if distance <= r95
              else f"outside the 95 % ellipse, whose edge is at {r95:.2f} σ")
     return f"the true target lies {distance:.2f} σ from the estimate: {where}"
-
-
-# a row's RMSE is called unsettled where its largest draw holds more than this share of
-# the summed squared error
-HEAVY_TAIL_SHARE = 0.5
-
-

@@ -1,9 +1,7 @@
 """The detector: α and d_total of the target and the beacons, from a rendered frame.
 
 With :mod:`mirrorsim.detection.edges` and :mod:`mirrorsim.detection.regions`, the
-detector; with
-:mod:`mirrorsim.camera.sensor` (the lens model) and the image encoders, the only
-code that imports OpenCV.  What it may use: the image and its capture record
+detector.  What it may use: the image and its capture record
 (:class:`~mirrorsim.formats.capture.CaptureRecord`: the camera as its mount reports it, the
 beacons' believed positions and heights, the target's size), the objects' appearance,
 and the calibration.  Never the target's or the mirror's pose, nor the ground truth.

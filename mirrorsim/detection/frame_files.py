@@ -14,15 +14,11 @@ import numpy as np
 
 from mirrorsim.errors import InputError
 from mirrorsim.formats.files import decode_image, read_regular_bytes
-from mirrorsim.scene.model import (
-    MAX_RESOLUTION,
-)
+from mirrorsim.scene.model import MAX_RESOLUTION
 
 # a frame file's first bytes: PNG's signature, and JPEG's start-of-image marker and the
 # next marker's 0xFF (a JPEG stores its colour at half resolution: see measure_region)
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
-
-
 JPEG_MAGIC = b"\xff\xd8\xff"
 
 

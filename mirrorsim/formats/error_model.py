@@ -50,9 +50,7 @@ VERSION = 3
 KINDS = ("target", "beacon")
 QUANTITIES = ("alpha", "d_rel")
 UNITS = {"alpha": "deg", "d_rel": "fraction of d_total (0.002 = 0.2 %)"}
-MODEL_KINDS = ("ideal", "bench")
 DEFAULT_NAMES = {"ideal": "error_model.json", "bench": "error_model_bench.json"}
-DEFAULT_NAME = DEFAULT_NAMES["ideal"]
 # the floors of the logged features: a contrast or noise of 0 is "below measurable"
 CONTRAST_FLOOR = 1e-3
 NOISE_FLOOR = 1e-4

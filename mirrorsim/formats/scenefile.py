@@ -16,7 +16,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from mirrorsim.errors import BadParameter, Failures, SceneError
+from mirrorsim.errors import Failures, SceneError
 from mirrorsim.formats.capture import read_board, read_distortion
 from mirrorsim.formats.reader import Reader, read_resolution, read_yaml, show
 from mirrorsim.scene.imperfections import (
@@ -73,16 +73,15 @@ def read_render(r: Reader, block: Any, key: str = "render", *, seed: bool = True
                    optional={"spp", "sampler", "background_spp", "beacon_spp"}
                    | ({"seed"} if seed else set()))
     d = RenderSettings()
-    try:  # the bounds are RenderSettings' own; here each key's type and its name
-        return RenderSettings(
-            spp=r.integer(rr.get("spp", d.spp), f"{key}.spp"),
-            seed=r.integer(rr.get("seed", d.seed), f"{key}.seed"),
-            sampler=rr.get("sampler", d.sampler),
-            background_spp=r.integer(rr.get("background_spp", d.background_spp),
-                                     f"{key}.background_spp"),
-            beacon_spp=r.integer(rr.get("beacon_spp", d.beacon_spp), f"{key}.beacon_spp"))
-    except BadParameter as exc:
-        raise r.fail(f"{key}.{exc.parameter}", exc.message) from None
+    # the bounds are RenderSettings' own; here each key's type and its name
+    return r.built(key, RenderSettings,
+                   spp=r.integer(rr.get("spp", d.spp), f"{key}.spp"),
+                   seed=r.integer(rr.get("seed", d.seed), f"{key}.seed"),
+                   sampler=rr.get("sampler", d.sampler),
+                   background_spp=r.integer(rr.get("background_spp", d.background_spp),
+                                            f"{key}.background_spp"),
+                   beacon_spp=r.integer(rr.get("beacon_spp", d.beacon_spp),
+                                        f"{key}.beacon_spp"))
 
 
 def parse_scene(data: Any, *, source: str = "<scene>", default_name: str = "scene",

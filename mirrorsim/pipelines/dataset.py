@@ -182,9 +182,9 @@ def _check_run_parameters(n, seed, workers, spp, sampler, executor, keep, varian
 
     for name, v, lo, hi in (("n", n, 1, MAX_SCENES), ("seed", seed, 0, MAX_SEED),
                             ("workers", workers, 1, MAX_WORKERS)):
-        if not is_whole(v) or v < lo or (hi is not None and v > hi):
+        if not is_whole(v) or not lo <= v <= hi:
             raise BadParameter(name, f"{v!r} must be a whole number within {lo}.."
-                               f"{hi if hi is not None else ''}")
+                               f"{hi}")
     # the render settings' own check (None: the spec's, checked when it is read)
     RenderSettings(**{k: v for k, v in (("spp", spp), ("sampler", sampler)) if v is not None})
     check_variant(variant)

@@ -14,7 +14,6 @@ from typing import Any
 
 from mirrorsim.errors import BadParameter, Failures, SceneError
 from mirrorsim.formats.files import jsonable
-from mirrorsim.formats.reader import read_yaml
 from mirrorsim.formats.scenefile import parse_scene, read_scene_file, scene_document
 from mirrorsim.scene.model import Scene, check_is_scene
 from mirrorsim.truth.compose import compose_scene
@@ -55,8 +54,7 @@ def scene_and_failures(path: str | Path) -> tuple[Scene | None, tuple[SceneError
     path = Path(path)
     f = Failures(lenient=True)
     try:
-        scene, bkey = parse_scene(read_yaml(path), source=str(path), default_name=path.stem,
-                                  failures=f)
+        scene, bkey = read_scene_file(path, failures=f)
         scene = compose_scene(scene, beacon_key=bkey, failures=f)
     except SceneError as exc:
         return None, (exc, *exc.others)

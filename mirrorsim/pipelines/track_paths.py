@@ -9,7 +9,7 @@ import numpy as np
 
 from mirrorsim.errors import BadParameter
 from mirrorsim.scene.model import PENCIL_RADIUS, Bench, Scene, footprints
-from mirrorsim.truth.compose import with_derived
+from mirrorsim.truth.compose import with_facing
 from mirrorsim.truth.visibility import visibility
 from solver.errors import SolverError
 from solver.geometry import bearing_deg, line_normal, segment_distance, wrap_bearing
@@ -138,11 +138,10 @@ def _believed_scene(scene: Scene, o: np.ndarray, yaw: float, mid: np.ndarray,
     mirror = replace(scene.mirror, yaw=yaw, center=tuple(map(float, centre)))
     target = tuple(map(float, locate(o, mid, yaw, alpha_deg=target_obs[0],
                                       d_total=target_obs[1])))
-    # the panel's facing follows the believed mirror; the pan stays the bearing the
-    # camera was set to (a believed scene is never checked: it is what was measured)
-    believed = with_derived(replace(scene, mirror=mirror, bench=Bench(), target=replace(
+    # the panel's facing follows the believed mirror (a believed scene is never checked:
+    # it is what was measured)
+    return with_facing(replace(scene, mirror=mirror, bench=Bench(), target=replace(
         scene.target, position=target)))
-    return replace(believed, camera=scene.camera)
 
 
 def _seen_in(scene: Scene, beacon) -> bool:

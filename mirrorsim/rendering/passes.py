@@ -364,7 +364,3 @@ def encode_ids(first: np.ndarray, in_mirror: np.ndarray) -> np.ndarray:
     the mirror shows on the glass (so IN_MIRROR alone is glass showing the room)."""
     return np.where(first == MIRROR_LABEL, IN_MIRROR + in_mirror, first).astype(np.uint8)
 
-
-# colours of the id preview (RGB): the room dark, the target orange, each beacon its own
-# hue, occluders grey; what the mirror shows lighter than the same object seen directly,
-# the glass where it shows the room blue (encode_ids never leaves MIRROR_LABEL itself)

@@ -12,6 +12,8 @@ from __future__ import annotations
 import math
 from typing import Any
 
+import numpy as np
+
 from mirrorsim.errors import BadParameter
 
 
@@ -44,7 +46,7 @@ def number(name: str, value: Any, *, positive: bool = False, low: float | None =
 def pair(name: str, value: Any, *, positive: bool = False, high: float | None = None
          ) -> tuple[float, float]:
     """Two numbers (each > 0 and ≤ ``high`` where asked), named ``name[0]``, ``name[1]``."""
-    if isinstance(value, str) or not hasattr(value, "__len__") or len(value) != 2:
+    if not isinstance(value, list | tuple | np.ndarray) or len(value) != 2:
         raise BadParameter(name, f"expected two numbers, got {_shown(value)}")
     return (number(f"{name}[0]", value[0], positive=positive, high=high),
             number(f"{name}[1]", value[1], positive=positive, high=high))
@@ -65,6 +67,6 @@ def whole(name: str, value: Any, *, low: int, high: int | None = None) -> int:
 
 def resolution(name: str, value: Any) -> tuple[int, int]:
     """[width, height] in px, each at least 2."""
-    if isinstance(value, str) or not hasattr(value, "__len__") or len(value) != 2:
+    if not isinstance(value, list | tuple | np.ndarray) or len(value) != 2:
         raise BadParameter(name, f"expected [width, height] in px, got {_shown(value)}")
     return (whole(f"{name}[0]", value[0], low=2), whole(f"{name}[1]", value[1], low=2))

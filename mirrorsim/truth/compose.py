@@ -35,17 +35,24 @@ def default_beacon_key(scene: Scene) -> Callable[[int], str]:
     return lambda i: f"beacons[{i}]"
 
 
+def with_facing(scene: Scene) -> Scene:
+    """``scene`` with its target panel facing the camera's virtual image in its mirror,
+    unchecked (the composer's; the tracker's believed scene, whose pan stays the one
+    the camera was set to)."""
+    cam, target = scene.camera, scene.target
+    return replace(scene, target=replace(target, facing_deg=optics.target_facing(
+        cam.position, scene.mirror, target.position)))
+
+
 def with_derived(scene: Scene) -> Scene:
-    """``scene`` with what its geometry decides computed, unchecked: the target panel
-    faces the camera's virtual image in the mirror, and a pan given as a word
-    (``mirror``, ``target``, ``beacon``) becomes a bearing.  The one place these are
-    derived (the composer; the tracker's believed scene)."""
+    """``scene`` with what its geometry decides computed, unchecked: the target's facing
+    (:func:`with_facing`), and a pan given as a word (``mirror``, ``target``,
+    ``beacon``) as a bearing.  The one place these are derived."""
+    scene = with_facing(scene)
     cam, mirror, target = scene.camera, scene.mirror, scene.target
-    target = replace(target, facing_deg=optics.target_facing(cam.position, mirror,
-                                                             target.position))
     pan_deg = optics.resolve_pan(cam.position, cam.pan, mirror, target_position=target.position,
                                  beacon_position=scene.beacons[0].position)
-    return replace(scene, target=target, camera=replace(cam, pan_deg=pan_deg))
+    return replace(scene, camera=replace(cam, pan_deg=pan_deg))
 
 
 def compose_scene(scene: Scene, *, beacon_key: Callable[[int], str] | None = None,
