@@ -57,7 +57,7 @@ def dataset_columns() -> str:
 
 def render_settings() -> str:
     """The ``render:`` block's keys with their defaults."""
-    from mirrorsim.scene.model import MAX_SPP, RenderSettings
+    from mirrorsim.scene.render_settings import MAX_SPP, RenderSettings
 
     d = RenderSettings()
     rows = ["| key | default | bounds |", "|---|---|---|"]

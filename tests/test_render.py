@@ -411,7 +411,7 @@ def test_a_seed_beyond_32_bits_renders(fast_variant):
     the bound is a Parquet int64's, 2⁶³ − 1."""
     from mirrorsim.errors import BadParameter
     from mirrorsim.rendering.passes import render_frame
-    from mirrorsim.scene.model import MAX_SEED
+    from mirrorsim.scene.render_settings import MAX_SEED
 
     scene = small_scene("default", 160, 92, spp=2)
     big = render_frame(scene.with_render(seed=2**40), variant=fast_variant, progress=False)

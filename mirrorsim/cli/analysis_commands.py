@@ -75,7 +75,7 @@ def _solve(args) -> int:
 
 
 def _montecarlo_options(p):
-    from mirrorsim.scene.model import MAX_SEED
+    from mirrorsim.scene.render_settings import MAX_SEED
 
     p.add_argument("--iterations", type=int, default=200, help="draws per row (default 200)")
     p.add_argument("--seed", type=int, default=0, help=f"0..{MAX_SEED} (default 0)")
@@ -102,7 +102,7 @@ def _montecarlo_options(p):
          "mirror and beacon stand: the options below set them.", options=_montecarlo_options)
 def _montecarlo(args) -> int:
     from mirrorsim.cli.analysis_tables import montecarlo_table
-    from mirrorsim.scene.model import MAX_SEED
+    from mirrorsim.scene.render_settings import MAX_SEED
     from solver.measurements import D_TOTAL_RANGE_CM, SIGMA_ALPHA_MAX_DEG, SIGMA_D_REL_MAX
     from solver.montecarlo import Table1Geometry, table1, table_rows
     from solver.sltr import SolverError

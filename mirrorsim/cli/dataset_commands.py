@@ -27,7 +27,7 @@ def _dataset_options(p):
     from mirrorsim.pipelines.dataset import EXECUTORS, MAX_SCENES, MAX_WORKERS
 
     p.add_argument("--n", type=int, required=True, help=f"number of scenes, 1..{MAX_SCENES}")
-    from mirrorsim.scene.model import MAX_SEED
+    from mirrorsim.scene.render_settings import MAX_SEED
 
     p.add_argument("--seed", type=int, required=True,
                    help=f"the dataset's seed, 0..{MAX_SEED} (scene i is drawn from (seed, i))")
@@ -72,13 +72,13 @@ def _dataset(args) -> int:
     from mirrorsim.formats.dataset_folder import DatasetError
     from mirrorsim.pipelines.dataset import MAX_SCENES, MAX_WORKERS, run_dataset
     from mirrorsim.pipelines.workers import max_workers
-    from mirrorsim.scene.model import MAX_SEED
+    from mirrorsim.scene.render_settings import MAX_SEED
 
     at_least(("--n", args.n, 1, MAX_SCENES), ("--seed", args.seed, 0, MAX_SEED),
              ("--workers", args.workers, 1, MAX_WORKERS))
     calibration = calibration_of(args)
     if args.spp is not None:  # checked as every scene's render settings are
-        from mirrorsim.scene.model import RenderSettings
+        from mirrorsim.scene.render_settings import RenderSettings
 
         RenderSettings(spp=args.spp)
     workers = args.workers

@@ -66,7 +66,7 @@ def common(p: argparse.ArgumentParser, *, scene: bool = True, out: str | None = 
     if json:
         output(p, "--json", "file", metavar="FILE", help=f"write {json} here (- = stdout)")
     if spp:
-        from mirrorsim.scene.model import MAX_SEED, RenderSettings
+        from mirrorsim.scene.render_settings import MAX_SEED, RenderSettings
 
         spp_option(p, f"the scene's, else {RenderSettings().spp}")
         p.add_argument("--seed", type=int, help=f"sampler seed, 0..{MAX_SEED} (default: "
@@ -103,7 +103,7 @@ class _Once(argparse.Action):
 def spp_option(p: argparse.ArgumentParser, default: str) -> None:
     """``--spp N``: samples per pixel in the mirror's image (``default``: what it is when
     not given, in words); declared once for every command that renders."""
-    from mirrorsim.scene.model import MAX_SPP
+    from mirrorsim.scene.render_settings import MAX_SPP
 
     p.add_argument("--spp", type=int, help=f"samples per pixel in the mirror's image, "
                    f"1..{MAX_SPP} (default: {default})")
@@ -241,7 +241,7 @@ def finite(args: argparse.Namespace, *dests: str) -> None:
 
 def sampler_option(p: argparse.ArgumentParser) -> None:
     """--sampler, for commands that render."""
-    from mirrorsim.scene.model import SAMPLERS, RenderSettings
+    from mirrorsim.scene.render_settings import SAMPLERS, RenderSettings
 
     p.add_argument("--sampler", choices=SAMPLERS,
                    help="Mitsuba sampler (default: the scene's render.sampler, else "

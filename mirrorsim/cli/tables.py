@@ -32,19 +32,23 @@ def check_table(scene: Scene) -> str:
              f"pan {cam.pan_deg:.3f}°, hfov {cam.hfov:g}°, {cam.width}×{cam.height_px} px, "
              f"fx {cam.fx:.2f} px",
              f"mirror: centre {list(mir.center)}, yaw {mir.yaw % 180:g}°, "
-             f"{mir.size[0]:g} × {mir.size[1]:g} cm",
+             f"{mir.size[0]:g} × {mir.size[1]:g} cm"
+             + (f", its bottom edge {mir.z:g} cm up" if mir.z else "")
+             + (f", leaning {mir.lean:g}°" if mir.lean else ""),
              f"{'object':<9} {'alpha°':>9} {'d_total':>8} {'d1':>7} {'d2':>7} "
-             f"{'reflection pt':>16} {'on mirror':>9} {'u px':>7} {'h px':>6} {'seen':>5}"]
+             f"{'reflection pt':>16} {'on mirror':>9} {'u px':>7} {'h px':>6} {'seen':>5}"
+             + (f" {'elev°':>7}" if scene.is_3d else "")]
     objs = [("target", scene.target)] + [(f"beacon {i}", b) for i, b in enumerate(scene.beacons)]
     for label, obj in objs:
-        img = optics.mirror_image(cam.position, mir, obj.position)
+        img = optics.object_image(scene, obj)
         ext = optics.image_extent(scene, obj)
         vis = visibility.visibility(scene, obj)
-        rp = f"({img.reflection_point[0]:.2f}, {img.reflection_point[1]:.2f})"
-        along = optics.along_mirror(mir, img.reflection_point)
+        rp = "(" + ", ".join(f"{c:.2f}" for c in img.reflection_point) + ")"
+        along = optics.along_mirror(mir, img.reflection_point[:2])
         lines.append(f"{label:<9} {img.alpha_deg:9.3f} {img.d_total:8.3f} {img.d1:7.2f} "
                      f"{img.d2:7.2f} {rp:>16} {along:+9.2f} {ext.u_axis:7.1f} "
-                     f"{ext.height:6.1f} {100 * vis.fraction:4.0f}%")
+                     f"{ext.height:6.1f} {100 * vis.fraction:4.0f}%"
+                     + (f" {img.elevation_deg:7.3f}" if scene.is_3d else ""))
         if vis.reason:
             lines.append(f"          {vis.reason}")
     direct = visibility.direct_view_fraction(scene, scene.target)

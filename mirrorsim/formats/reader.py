@@ -178,6 +178,22 @@ class Reader:
                 self.number(value[1], f"{key}[1]", positive=positive, high=high))
 
 
+    def point(self, value: Any, key: str) -> tuple[tuple[float, float], float]:
+        """A position on the board, ``[x, y]``, or raised, ``[x, y, z]``: (x, y) and z,
+        the height of the object's base above the board (cm; 0 when omitted, never
+        below the board)."""
+        if not isinstance(value, list | tuple) or len(value) not in (2, 3):
+            raise self.fail(key, f"expected [x, y] or [x, y, z] (cm), got {show(value)}")
+        xy = self.pair(list(value[:2]), key)
+        if len(value) == 2:
+            return xy, 0.0
+        z = self.number(value[2], f"{key}[2]")
+        if z < 0.0:
+            raise self.fail(f"{key}[2]", f"{show(value[2])} lies below the board: a height "
+                            "above it must be ≥ 0")
+        return xy, z
+
+
 def read_resolution(r: Reader, res: Any, key: str) -> tuple[int, int]:
     """[width, height] in px, each within 2..MAX_RESOLUTION."""
     if not isinstance(res, list | tuple) or len(res) != 2:

@@ -27,6 +27,7 @@ from mirrorsim.scene.imperfections import (
 from mirrorsim.scene.model import (
     MAX_BOARD_CM,
     MAX_HFOV_DEG,
+    MAX_LEAN_DEG,
     NAME_PATTERN,
     NAME_RULE,
     PAN_WORDS,
@@ -35,11 +36,11 @@ from mirrorsim.scene.model import (
     Camera,
     Mirror,
     Occluder,
-    RenderSettings,
     Scene,
     SensorNoise,
     Target,
 )
+from mirrorsim.scene.render_settings import RenderSettings
 
 DEFAULT_RESOLUTION = (1920, 1088)
 
@@ -114,7 +115,7 @@ def parse_scene(data: Any, *, source: str = "<scene>", default_name: str = "scen
         position = f.attempt(r.pair, cam["position"], "camera.position")
         model = f.attempt(read_camera_model, r, cam, "camera")
     m = f.attempt(r.mapping, top["mirror"], "mirror", {"center", "yaw", "size"},
-                  optional=set(MIRROR_IMPERFECTIONS))
+                  optional={"lean", *MIRROR_IMPERFECTIONS})
     mirror = None if m is None else f.attempt(_mirror, r, m)
     target = f.attempt(_target, r, top["target"])
     beacons, bkey = f.attempt(_beacons, r, top, default=(None, None))
@@ -142,9 +143,10 @@ def scene_document(scene: Scene) -> dict:
          "board": {"size": list(scene.board.size), "hole_pitch": scene.board.hole_pitch},
          "camera": {"position": list(c.position), "height": c.height,
                     "resolution": list(c.resolution), "hfov": c.hfov, "pan": c.pan},
-         "mirror": {"center": list(m.center), "yaw": m.yaw, "size": list(m.size)},
-         "target": {"position": list(t.position), "size": list(t.size)},
-         "beacons": [{"position": list(b.position), "height": b.height}
+         "mirror": {"center": _point(m.center, m.z), "yaw": m.yaw, "size": list(m.size),
+                    **({"lean": m.lean} if m.lean else {})},
+         "target": {"position": _point(t.position, t.z), "size": list(t.size)},
+         "beacons": [{"position": _point(b.position, b.z), "height": b.height}
                      for b in scene.beacons],
          "occluders": [{"start": list(o.start), "end": list(o.end), "height": o.height}
                        for o in scene.occluders],
@@ -163,6 +165,11 @@ def scene_document(scene: Scene) -> dict:
     return d
 
 
+def _point(xy: tuple[float, float], z: float) -> list[float]:
+    """A position as a scene file writes it: [x, y] on the board, [x, y, z] raised."""
+    return [*xy, z] if z else list(xy)
+
+
 def _name(r: Reader, top: dict, default_name: str) -> str:
     name = top.get("name", default_name)
     if not isinstance(name, str) or not NAME_PATTERN.fullmatch(name):
@@ -175,15 +182,18 @@ def _name(r: Reader, top: dict, default_name: str) -> str:
 
 
 def _mirror(r: Reader, m: dict) -> Mirror:
-    return r.built("mirror", Mirror, center=r.pair(m["center"], "mirror.center"),
-                   yaw=r.number(m["yaw"], "mirror.yaw"), size=r.pair(m["size"], "mirror.size"))
+    center, z = r.point(m["center"], "mirror.center")
+    lean = r.number(m.get("lean", 0.0), "mirror.lean", low=-MAX_LEAN_DEG, high=MAX_LEAN_DEG)
+    return r.built("mirror", Mirror, center=center, yaw=r.number(m["yaw"], "mirror.yaw"),
+                   size=r.pair(m["size"], "mirror.size"), lean=lean, z=z)
 
 
 def _target(r: Reader, raw: Any) -> Target:
     t = r.mapping(raw, "target", {"position", "size"})
+    position, z = r.point(t["position"], "target.position")
     # what the geometry decides is the composer's: its facing NaN until it is composed
-    return r.built("target", Target, position=r.pair(t["position"], "target.position"),
-                   size=r.pair(t["size"], "target.size"), facing_deg=math.nan)
+    return r.built("target", Target, position=position,
+                   size=r.pair(t["size"], "target.size"), facing_deg=math.nan, z=z)
 
 
 def _leaves(block: str) -> tuple[str, ...]:
@@ -249,8 +259,8 @@ def _beacons(r: Reader, top: dict) -> tuple[tuple[Beacon, ...], Callable[[int], 
     for i, raw in enumerate(raw_beacons):
         bb = r.mapping(raw, bkey(i), {"position", "height"}, optional={"known_position"})
         known = bb.get("known_position")
-        beacons.append(r.built(bkey(i), Beacon,
-                               position=r.pair(bb["position"], f"{bkey(i)}.position"),
+        position, z = r.point(bb["position"], f"{bkey(i)}.position")
+        beacons.append(r.built(bkey(i), Beacon, position=position, z=z,
                                height=r.number(bb["height"], f"{bkey(i)}.height"),
                                known_position=None if known is None else
                                r.pair(known, f"{bkey(i)}.known_position")))

@@ -178,7 +178,7 @@ def _check_run_parameters(n, seed, workers, spp, sampler, executor, keep, varian
     written (a bad one had failed after the folder was claimed, or in every scene)."""
     from mirrorsim.pipelines.score import check_keep
     from mirrorsim.rendering.backend import check_variant
-    from mirrorsim.scene.model import MAX_SEED, RenderSettings, is_whole
+    from mirrorsim.scene.render_settings import MAX_SEED, RenderSettings, is_whole
 
     for name, v, lo, hi in (("n", n, 1, MAX_SCENES), ("seed", seed, 0, MAX_SEED),
                             ("workers", workers, 1, MAX_WORKERS)):

@@ -18,8 +18,8 @@ from mirrorsim.scene.model import (
     TARGET_THICKNESS,
     Beacon,
     Scene,
-    is_whole,
 )
+from mirrorsim.scene.render_settings import is_whole
 from mirrorsim.truth import optics, visibility
 from solver.beacon_set import BeaconSet, best_beacon_set
 from solver.measurements import (

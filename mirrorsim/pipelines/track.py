@@ -38,7 +38,8 @@ from mirrorsim.pipelines.solving import model_for
 from mirrorsim.pipelines.track_paths import HEADINGS, PATHS, beacon_path
 from mirrorsim.pipelines.track_report import TrackReport, TrackStep
 from mirrorsim.rendering.backend import check_variant
-from mirrorsim.scene.model import MAX_SEED, Scene, is_whole
+from mirrorsim.scene.model import Scene
+from mirrorsim.scene.render_settings import MAX_SEED, is_whole
 from solver.beacon_kalman import PFParams
 from solver.errors import SolverError
 from solver.geometry import line_normal

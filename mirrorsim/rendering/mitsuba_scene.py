@@ -244,6 +244,8 @@ def label_of(key: str, n_beacons: int) -> int:
     """Id-pass label of a shape, from its key in :func:`build_scene_dict`."""
     if key == "mirror_glass":
         return MIRROR_LABEL
+    if key.endswith("_stand"):  # what holds a raised object is not the object
+        return BACKGROUND_LABEL
     if key.startswith("target"):
         return TARGET_LABEL
     if key.startswith("beacon"):

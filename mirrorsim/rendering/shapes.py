@@ -13,6 +13,7 @@ from mirrorsim.scene.model import (
     MIRROR_FRAME,
     MIRROR_LIP,
     PENCIL_RADIUS,
+    STAND_RADIUS,
     TARGET_THICKNESS,
     Beacon,
     Scene,
@@ -35,6 +36,8 @@ COLOURS = {
     "graphite": (0.03, 0.03, 0.03),
     "mirror_back": (0.02, 0.02, 0.02),
     "frame": (0.04, 0.04, 0.045),
+    # a raised object's post: dark steel, thinner than the pencil and below its paint
+    "stand": (0.06, 0.06, 0.065),
     # Only the target is a neutral grey: walls, floor and occluders are coloured, so the
     # detector can find the panel by its (known) appearance.
     "occluder": (0.25, 0.38, 0.60),  # blue-painted walls
@@ -71,14 +74,16 @@ def v3(v2: np.ndarray | tuple[float, float], z: float = 0.0) -> np.ndarray:
     return np.array([v2[0], v2[1], z], dtype=float)
 
 
-def pencil_meshes(position: tuple[float, float] | np.ndarray, height: float) -> dict[str, mi.Mesh]:
-    """An upright hexagonal pencil: painted prism, sharpened wood cone, graphite tip."""
+def pencil_meshes(position: tuple[float, float] | np.ndarray, height: float, z0: float = 0.0
+                  ) -> dict[str, mi.Mesh]:
+    """An upright hexagonal pencil, its foot ``z0`` above the board: painted prism,
+    sharpened wood cone, graphite tip."""
     cone, lead = height - pencil_paint_height(height), min(0.3, 0.1 * height)
     angles = np.deg2rad(np.arange(6) * 60.0 + 30.0)
 
     def ring(radius: float, z: float) -> np.ndarray:
         return np.stack([position[0] + radius * np.cos(angles),
-                         position[1] + radius * np.sin(angles), np.full(6, z)], axis=1)
+                         position[1] + radius * np.sin(angles), np.full(6, z0 + z)], axis=1)
 
     def band(lower: np.ndarray, upper: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         verts = np.vstack([lower, upper])
@@ -97,7 +102,8 @@ def pencil_meshes(position: tuple[float, float] | np.ndarray, height: float) -> 
     parts = {
         "paint": band(ring(PENCIL_RADIUS, 0.0), ring(PENCIL_RADIUS, height - cone)),
         "wood": band(ring(PENCIL_RADIUS, height - cone), ring(r_lead, height - lead)),
-        "graphite": pyramid(ring(r_lead, height - lead), [position[0], position[1], height]),
+        "graphite": pyramid(ring(r_lead, height - lead),
+                            [position[0], position[1], z0 + height]),
     }
     meshes = {}
     for part, (verts, faces) in parts.items():
@@ -169,6 +175,11 @@ def mirror_shapes(scene: Scene) -> dict:
                                      up * (h + fw) / 2), "frame")
     d["mirror_frame_top"] = box_shape(c + up * (h + fw / 2) + n * mid, (n * depth,
                                  along * (w / 2 + fw), up * fw / 2), "frame")
+    if m.z > 0.0:  # a raised mirror's pedestal, behind its bottom edge: it shows nothing
+        n0 = np.array([n[0], n[1], 0.0]) / math.hypot(n[0], n[1])
+        d["mirror_pedestal"] = box_shape(np.r_[c[:2], m.z / 2] - n0 * 0.31,
+                                         (n0 * 0.3, along * (w / 2 + fw), ZHAT * m.z / 2),
+                                         "frame")
     return d
 
 
@@ -207,14 +218,32 @@ def _spherical_glass(centre, along, up, n, size, radius: float) -> tuple[mi.Mesh
 
 
 def target_shapes(t: Target) -> dict:
-    """The target panel: a grey slab facing ``t.facing_deg``."""
+    """The target panel: a grey slab facing ``t.facing_deg``, on a post when raised."""
     f = v3(unit(t.facing_deg))
     a = v3(unit(t.facing_deg + 90.0))
-    return {"target_panel": box_shape(v3(t.position, t.size[1] / 2), (f * TARGET_THICKNESS / 2,
-                                 a * t.size[0] / 2, ZHAT * t.size[1] / 2), "target")}
+    d = {"target_panel": box_shape(v3(t.position, t.z + t.size[1] / 2),
+                                   (f * TARGET_THICKNESS / 2, a * t.size[0] / 2,
+                                    ZHAT * t.size[1] / 2), "target")}
+    return d | stand_shapes("target", t.position, t.z)
 
 
 def pencil_shapes(i: int, b: Beacon) -> dict:
-    """Beacon ``i``'s pencil meshes, keyed ``beacon<i>_<part>``."""
+    """Beacon ``i``'s pencil meshes, keyed ``beacon<i>_<part>``, on a post when raised."""
     return {f"beacon{i}_{part}": mesh
-            for part, mesh in pencil_meshes(b.position, b.height).items()}
+            for part, mesh in pencil_meshes(b.position, b.height, b.z).items()
+            } | stand_shapes(f"beacon{i}", b.position, b.z)
+
+
+def stand_shapes(key: str, position: tuple[float, float], z: float) -> dict:
+    """A raised object's post from the board to its base, ``<key>_stand`` (none for an
+    object on the board): a dark cylinder of STAND_RADIUS under its axis, thinner than a
+    pencil, so that it hides nothing of the object and is not taken for it (the id pass
+    labels it background: it is not the object)."""
+    if z <= 0.0:
+        return {}
+    # Mitsuba's unit cylinder runs (0,0,0)–(0,0,1) with radius 1; its transform may
+    # scale x and y alike (the radius) and z (the length)
+    to_world = (mi.ScalarTransform4f().translate([float(position[0]), float(position[1]), 0.0])
+                @ mi.ScalarTransform4f().scale([STAND_RADIUS, STAND_RADIUS, float(z)]))
+    return {f"{key}_stand": {"type": "cylinder", "to_world": to_world,
+                             "bsdf": diffuse("stand")}}

@@ -18,6 +18,7 @@ from numpy.typing import ArrayLike
 
 from mirrorsim.errors import BadParameter
 from mirrorsim.scene import values
+from mirrorsim.scene.render_settings import RenderSettings
 from solver.geometry import line_normal, signed_distance, unit
 
 # Physical dimensions of the rendered objects that the scene file does not set (cm).
@@ -29,10 +30,6 @@ MIRROR_FRAME = 0.5  # frame width on the sides and top, outside the reflective a
 # the frame hides that strip of the reflection (visibility.visibility counts it)
 MIRROR_LIP = 0.05
 TARGET_THICKNESS = 0.4
-# Mitsuba samplers a scene may name: plain random, or stratified in every dimension
-# (any sample count; edges converge faster, see docs/performance.md)
-SAMPLERS = ("independent", "multijitter")
-MAX_SPP = 1 << 16  # a documented bound: more samples than this is a typo, not a render
 # Documented bounds on a scene's sizes, so that every scene `check` accepts renders:
 # the pegboard's texture has 24 texels a cm (a 200 cm board: 4800² texels, ~0.3 GiB);
 # no size or height on the bench (mirror, target, pencil, occluder, camera) exceeds it
@@ -54,6 +51,12 @@ PENCIL_RADIUS = 0.4  # circumradius of the hexagonal pencil (0.69 cm across flat
 # 0.035 cm too near (0.05 % at 70 cm, not cancelled by the calibration at 1 m).
 FRONT_OFFSET = {"target": TARGET_THICKNESS / 2, "beacon": 0.338 * PENCIL_RADIUS / 0.4}
 OCCLUDER_THICKNESS = 1.0
+# 3-D scenes (docs/scenes.md): a raised object stands on a post of this radius (thinner
+# than the pencil, so it neither hides the object nor is taken for it), of STAND colour;
+# a mirror may lean by at most MAX_LEAN_DEG (a lab mirror leans a degree or two; beyond
+# 10° its images leave the frame's rows the detector searches)
+STAND_RADIUS = 0.15
+MAX_LEAN_DEG = 10.0
 
 PAN_WORDS = ("mirror", "target", "beacon")
 
@@ -146,16 +149,22 @@ class Camera:
 
 @dataclass(frozen=True)
 class Mirror:
-    """A vertical rectangle standing on the board, its bottom edge along ``yaw``."""
+    """A rectangle standing on the board, its bottom edge along ``yaw``: upright, or
+    leaning by ``lean`` (deg; its top tipped away from its reflective face, a turn about
+    its bottom edge), that edge ``z`` cm above the board (on a stand)."""
 
     center: Point2
     yaw: float
     size: Point2  # width along the surface line, height
+    lean: float = 0.0
+    z: float = 0.0
 
     def __post_init__(self):
         values.pair("center", self.center)
         values.number("yaw", self.yaw)
         values.pair("size", self.size, positive=True)
+        values.number("lean", self.lean, low=-MAX_LEAN_DEG, high=MAX_LEAN_DEG)
+        values.number("z", self.z, low=0.0)
 
     def ends(self) -> tuple[np.ndarray, np.ndarray]:
         """The two ends of the reflective bottom edge."""
@@ -175,10 +184,17 @@ class Target:
     position: Point2
     size: Point2
     facing_deg: float
+    z: float = 0.0  # its bottom edge above the board (cm): on a stand
 
     def __post_init__(self):  # (the facing is the composer's: NaN until composed)
         values.pair("position", self.position)
         values.pair("size", self.size, positive=True)
+        values.number("z", self.z, low=0.0)
+
+    @property
+    def base3(self) -> np.ndarray:
+        """The middle of its bottom edge in 3-D (cm)."""
+        return np.array([self.position[0], self.position[1], self.z])
 
     @property
     def height(self) -> float:
@@ -204,12 +220,19 @@ class Beacon:
     position: Point2
     height: float
     known_position: Point2 | None = None
+    z: float = 0.0  # its foot above the board (cm): on a stand
 
     def __post_init__(self):
         values.pair("position", self.position)
         values.number("height", self.height, positive=True)
         if self.known_position is not None:
             values.pair("known_position", self.known_position)
+        values.number("z", self.z, low=0.0)
+
+    @property
+    def base3(self) -> np.ndarray:
+        """Its foot on its axis in 3-D (cm)."""
+        return np.array([self.position[0], self.position[1], self.z])
 
     @property
     def believed(self) -> Point2:
@@ -232,68 +255,10 @@ class Occluder:
             raise BadParameter("end", f"{list(self.end)}: the wall has no length")
 
 
-@dataclass(frozen=True)
-class RenderSettings:
-    """Samples per pixel, the sampler and its seed."""
-
-    # chosen by benchmarks/detect.py over 40 random scenes (docs/performance.md): multijitter
-    # at 8 spp measures as well as independent sampling at 16, in half the time
-    spp: int = 8
-    seed: int = 0
-    sampler: str = "multijitter"
-    # samples per pixel outside the mirror's image (renders use min(this, spp); set it
-    # to spp for a uniform frame).  Every measurement is made in the mirror's image, so
-    # the samples are spent there (docs/performance.md)
-    background_spp: int = 2
-    # samples per pixel in each beacon's image (renders use max(this, spp)): its painted
-    # band is 45–95 px tall and its d_total rests on two of its edges, whose render noise
-    # at 8 spp was the largest part of its error; the box costs 15 % of a dataset's
-    # throughput (docs/results.md, docs/performance.md)
-    beacon_spp: int = 128
-
-    def __post_init__(self):
-        # the one check of the render settings, wherever they come from (a scene file, a
-        # spec, a flag): the scene reader and the CLI name the key or flag it refuses
-        for name in ("spp", "background_spp", "beacon_spp"):
-            value = getattr(self, name)
-            if not (is_whole(value) and 1 <= value <= MAX_SPP):
-                raise BadParameter(name, f"{value!r} must be a whole number within 1..{MAX_SPP}")
-        if not (is_whole(self.seed) and 0 <= self.seed <= MAX_SEED):
-            raise BadParameter("seed", f"{self.seed!r} must be a whole number within "
-                               f"0..{MAX_SEED}")
-        if self.sampler not in SAMPLERS:
-            raise BadParameter("sampler", f"{self.sampler!r}: expected one of "
-                               f"{', '.join(SAMPLERS)}")
-
-    # the effective sample counts, declared once (the renderer spends them, a dataset's
-    # row records them): never more outside the mirror, never fewer in a beacon's image,
-    # than the frame's spp
-    def outside_spp(self, spp: int | None = None) -> int:
-        """Samples per pixel outside the mirror's image for a frame of ``spp`` (default
-        this setting's): ``min(background_spp, spp)``."""
-        return min(self.background_spp, self.spp if spp is None else spp)
-
-    def beacon_box_spp(self, spp: int | None = None) -> int:
-        """Samples per pixel in each beacon's image for a frame of ``spp`` (default this
-        setting's): ``max(beacon_spp, spp)``."""
-        return max(self.beacon_spp, self.spp if spp is None else spp)
-
-
 def fx_of(width: float, hfov_deg: float) -> float:
     """A pinhole's focal length in px for a frame ``width`` px wide seeing ``hfov_deg``:
     (W/2)/tan(hfov/2) (square pixels, so fy = fx)."""
     return (width / 2.0) / math.tan(math.radians(hfov_deg) / 2.0)
-
-
-# the largest seed every consumer takes, a render's or a run's: numpy's generators take
-# more, and a render hashes its seed into Mitsuba's 32-bit ones (passes._pass_seed), but
-# a Parquet int64 column (a dataset's `seed` and `render_seed`) does not
-MAX_SEED = 2**63 - 1
-
-
-def is_whole(v: object) -> bool:
-    """An integer (numpy's too), not a bool: a count or a seed, wherever one is taken."""
-    return isinstance(v, int | np.integer) and not isinstance(v, bool)
 
 
 @dataclass(frozen=True)
@@ -361,6 +326,13 @@ class Scene:
                                f"({NAME_RULE})")
         if not self.beacons:  # the pan, the truth and the solve each need one
             raise BadParameter("scene.beacons", "expected at least one beacon")
+
+    @property
+    def is_3d(self) -> bool:
+        """Whether anything leaves the board's plane: a raised object or mirror, or a
+        leaning mirror (the 3-D solve is then the default, docs/method.md)."""
+        return bool(self.mirror.lean or self.mirror.z or self.target.z
+                    or any(b.z for b in self.beacons))
 
     def with_render(self, **settings) -> Scene:
         """The same scene rendered with other settings (``spp``, ``seed``, ``sampler``…),

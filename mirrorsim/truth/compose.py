@@ -23,6 +23,7 @@ from mirrorsim.truth.scene_checks import (
     check_mirror_faces,
     check_overlaps,
     check_sight,
+    check_under_glass,
     fmt,
     unit_hints,
 )
@@ -41,7 +42,7 @@ def with_facing(scene: Scene) -> Scene:
     the camera was set to)."""
     cam, target = scene.camera, scene.target
     return replace(scene, target=replace(target, facing_deg=optics.target_facing(
-        cam.position, scene.mirror, target.position)))
+        cam, scene.mirror, target.position)))
 
 
 def with_derived(scene: Scene) -> Scene:
@@ -50,8 +51,7 @@ def with_derived(scene: Scene) -> Scene:
     ``beacon``) as a bearing.  The one place these are derived."""
     scene = with_facing(scene)
     cam, mirror, target = scene.camera, scene.mirror, scene.target
-    pan_deg = optics.resolve_pan(cam.position, cam.pan, mirror, target_position=target.position,
-                                 beacon_position=scene.beacons[0].position)
+    pan_deg = optics.resolve_pan(cam, cam.pan, mirror, target=target, beacon=scene.beacons[0])
     return replace(scene, camera=replace(cam, pan_deg=pan_deg))
 
 
@@ -111,6 +111,7 @@ def compose_scene(scene: Scene, *, beacon_key: Callable[[int], str] | None = Non
         f.attempt(on_board, end, "target.position", f"the target panel's edge {fmt(end)}")
     f.raise_any(hint)
     check_overlaps(f, scene, fail, bkey=bkey)
+    check_under_glass(f, scene, fail, bkey=bkey)
     warnings = check_sight(f, scene, fail, bkey=bkey)
     f.raise_any(hint)
     return replace(scene, warnings=warnings)

@@ -21,18 +21,27 @@ def _pt(v) -> Point2:
     return (float(v[0]), float(v[1]))
 
 
+def _pts(v) -> tuple[float, ...]:
+    """A point as its JSON gives it: two coordinates, or three in a 3-D scene."""
+    return tuple(float(c) for c in v)
+
+
 @dataclass(frozen=True)
 class ObjectTruth:
     """The exact image of the target or a beacon; ``bbox_px``/``visible_px`` come from the
-    renderer's id pass (``visible_px`` None: not rendered)."""
+    renderer's id pass (``visible_px`` None: not rendered).  In a 3-D scene
+    (:attr:`~mirrorsim.scene.model.Scene.is_3d`) the points have three coordinates (the
+    object's base on its axis, its image and the reflection point), ``elevation_deg`` is
+    the image's elevation and d_total the 3-D path's length; in a planar one, two
+    coordinates and no elevation."""
 
-    position: Point2
-    virtual: Point2
+    position: tuple[float, ...]
+    virtual: tuple[float, ...]
     alpha_deg: float
     d_total: float
     d1: float
     d2: float
-    reflection_point: Point2
+    reflection_point: tuple[float, ...]
     mirror_offset: float
     image_px: ImagePx
     visible_fraction: float
@@ -42,6 +51,7 @@ class ObjectTruth:
     height: float | None = None  # a beacon's
     bbox_px: tuple[int, int, int, int] | None = None
     visible_px: int | None = None
+    elevation_deg: float | None = None  # a 3-D scene's
 
     def to_json(self) -> dict:
         """docs/files.md's ``target`` / ``beacons[i]`` entry."""
@@ -53,7 +63,7 @@ class ObjectTruth:
                             "v_bottom": self.image_px.v_bottom,
                             "height": self.image_px.height},
                "visible_fraction": self.visible_fraction, "clipped": self.clipped}
-        for key in ("size", "facing_deg", "height"):
+        for key in ("size", "facing_deg", "height", "elevation_deg"):
             value = getattr(self, key)
             if value is not None:
                 out[key] = list(value) if isinstance(value, tuple) else value
@@ -65,9 +75,10 @@ class ObjectTruth:
     @classmethod
     def from_json(cls, d: dict) -> ObjectTruth:
         """Inverse of :meth:`to_json`."""
-        return cls(position=_pt(d["position"]), virtual=_pt(d["virtual"]),
+        return cls(position=_pts(d["position"]), virtual=_pts(d["virtual"]),
                    alpha_deg=d["alpha_deg"], d_total=d["d_total"], d1=d["d1"], d2=d["d2"],
-                   reflection_point=_pt(d["reflection_point"]),
+                   reflection_point=_pts(d["reflection_point"]),
+                   elevation_deg=d.get("elevation_deg"),
                    mirror_offset=d["mirror_offset"], image_px=ImagePx(**d["image_px"]),
                    visible_fraction=d["visible_fraction"], clipped=d["clipped"],
                    size=_pt(d["size"]) if "size" in d else None,
@@ -146,8 +157,9 @@ class GroundTruth:
     def to_json(self) -> dict:
         """The ground-truth document of docs/files.md."""
         cam, mir = self.camera, self.mirror
-        mirror = {"center": list(mir.center), "yaw_deg": self.mirror_yaw_deg,
-                  "size": list(mir.size)}
+        mirror = {"center": list(mir.center) + ([mir.z] if mir.z else []),
+                  "yaw_deg": self.mirror_yaw_deg, "size": list(mir.size),
+                  **({"lean_deg": mir.lean} if mir.lean else {})}
         if self.mirror_pixels is not None:
             mirror["bbox_px"] = (None if self.mirror_pixels.bbox_px is None
                                  else list(self.mirror_pixels.bbox_px))
@@ -185,7 +197,9 @@ class GroundTruth:
             pixels = MirrorPixels(tuple(m["bbox_px"]) if m["bbox_px"] else None,
                                   m["visible_px"])
         return cls(scene=d["scene"], camera=camera,
-                   mirror=Mirror(_pt(m["center"]), m["yaw_deg"], _pt(m["size"])),
+                   mirror=Mirror(_pt(m["center"]), m["yaw_deg"], _pt(m["size"]),
+                                 lean=m.get("lean_deg", 0.0),
+                                 z=m["center"][2] if len(m["center"]) > 2 else 0.0),
                    target=ObjectTruth.from_json(d["target"]),
                    beacons=tuple(ObjectTruth.from_json(b) for b in d["beacons"]),
                    occluders=tuple(Occluder(_pt(o["start"]), _pt(o["end"]), o["height"])
@@ -216,14 +230,18 @@ def ground_truth(scene: Scene) -> GroundTruth:
     cam, mir = scene.camera, scene.mirror
 
     def entry(obj, **extra) -> ObjectTruth:
-        img = optics.mirror_image(cam.position, mir, obj.position)
+        img = optics.object_image(scene, obj)
+        position = tuple(obj.position)
+        if scene.is_3d:  # the base's image in the mirror's plane, lean and heights counted
+            position = tuple(float(c) for c in optics.object_base(obj))
+            extra["elevation_deg"] = _r(img.elevation_deg)
         ext = optics.image_extent(scene, obj)
         vis = visibility.visibility(scene, obj)
         return ObjectTruth(
-            position=tuple(obj.position), virtual=_r2(img.virtual), alpha_deg=_r(img.alpha_deg),
+            position=position, virtual=_rs(img.virtual), alpha_deg=_r(img.alpha_deg),
             d_total=_r(img.d_total), d1=_r(img.d1), d2=_r(img.d2),
-            reflection_point=_r2(img.reflection_point),
-            mirror_offset=_r(optics.along_mirror(mir, img.reflection_point)),
+            reflection_point=_rs(img.reflection_point),
+            mirror_offset=_r(optics.along_mirror(mir, img.reflection_point[:2])),
             image_px=ImagePx(_r(ext.u_axis), _r(ext.v_top), _r(ext.v_bottom),
                              _r(ext.height)),
             visible_fraction=_r(vis.fraction), clipped=vis.clipped, **extra)
@@ -243,6 +261,7 @@ def _r(x: float) -> float:
     return round(float(x), 9)
 
 
-def _r2(v) -> tuple[float, float]:
-    return (_r(v[0]), _r(v[1]))
+def _rs(v) -> tuple[float, ...]:
+    """A point's coordinates rounded for JSON (two, or three in a 3-D scene)."""
+    return tuple(_r(c) for c in v)
 

@@ -30,6 +30,7 @@ from mirrorsim.scene.model import (
 from mirrorsim.scene.projection import project
 from solver.geometry import bearing_deg, unit
 from solver.sltr import Observation, observe
+from solver.sltr3d import MirrorPlane, Observation3, seen3
 
 
 def mirror_image(observer: Point2, mirror: Mirror, point: ArrayLike) -> Observation:
@@ -42,6 +43,42 @@ def mirror_image(observer: Point2, mirror: Mirror, point: ArrayLike) -> Observat
                        reflection_point=np.asarray(obs.reflection_point, float))
 
 
+def mirror_plane(camera: Camera, mirror: Mirror) -> MirrorPlane:
+    """The mirror's plane as the scene gives it (its lean and its raised bottom edge),
+    its normal towards the camera: the 3-D truth's mirror (a bench's tilt is not
+    part of it)."""
+    return MirrorPlane.from_pose([*mirror.center, mirror.z], mirror.yaw, mirror.lean,
+                                 toward=camera.center3)
+
+
+def image3(camera: Camera, mirror: Mirror, point3: ArrayLike) -> Observation3:
+    """What the camera sees of a 3-D point in the scene's mirror plane (its lean
+    counted): :func:`solver.sltr3d.observe3`'s forward model, the point's image
+    wherever it stands (the composer checks which side of the glass)."""
+    plane = mirror_plane(camera, mirror)
+    o, p = camera.center3, np.asarray(point3, float)
+    v = plane.reflect(p)
+    r = plane.hit(o, v - o)
+    alpha, elevation, d = seen3(o, plane, p)
+    return Observation3(alpha_deg=alpha, elevation_deg=elevation, d_total=d,
+                        d1=float(np.linalg.norm(r - o)), d2=float(np.linalg.norm(p - r)),
+                        virtual=v, reflection_point=r)
+
+
+def object_base(obj: Target | Beacon) -> np.ndarray:
+    """The point of an object whose image the 3-D truth and solve follow: its base on its
+    axis, ``z`` above the board (cm)."""
+    return obj.base3
+
+
+def object_image(scene: Scene, obj: Target | Beacon) -> Observation | Observation3:
+    """The image of an object the truth follows: in a planar scene its position's, in
+    plan (:func:`mirror_image`); in a 3-D one its base's (:func:`image3`)."""
+    if scene.is_3d:
+        return image3(scene.camera, scene.mirror, object_base(obj))
+    return mirror_image(scene.camera.position, scene.mirror, obj.position)
+
+
 def along_mirror(mirror: Mirror, point: ArrayLike) -> float:
     """A point's signed distance from the mirror's centre along its yaw (a reflection
     point's offset: beyond half the width, the glass does not reach it)."""
@@ -49,23 +86,28 @@ def along_mirror(mirror: Mirror, point: ArrayLike) -> float:
                  @ unit(mirror.yaw))
 
 
-def target_facing(observer: Point2, mirror: Mirror, target_position: Point2) -> float:
+def target_facing(camera: Camera, mirror: Mirror, target_position: Point2) -> float:
     """Bearing of the panel's front normal: it faces its reflection point, i.e. the
-    camera's virtual image, so the camera sees its face square-on in the mirror."""
-    rp = mirror_image(observer, mirror, target_position).reflection_point
+    camera's virtual image, so the camera sees its face square-on in the mirror (in a
+    leaning mirror, the camera's virtual image in plan)."""
+    if mirror.lean or mirror.z:
+        rp = mirror_plane(camera, mirror).reflect(camera.center3)
+    else:
+        rp = mirror_image(camera.position, mirror, target_position).reflection_point
     return math.degrees(math.atan2(rp[1] - target_position[1], rp[0] - target_position[0]))
 
 
-def resolve_pan(observer: Point2, pan: float | str, mirror: Mirror, *, target_position: Point2,
-                beacon_position: Point2) -> float:
+def resolve_pan(camera: Camera, pan: float | str, mirror: Mirror, *, target: Target,
+                beacon: Beacon) -> float:
     """The optical axis's bearing for a pan as written: degrees, or the bearing of the
     mirror's centre, or of the target's or the first beacon's virtual image."""
     if pan == "mirror":
-        return float(bearing_deg(observer, mirror.center))
-    if pan == "target":
-        return mirror_image(observer, mirror, target_position).alpha_deg
-    if pan == "beacon":
-        return mirror_image(observer, mirror, beacon_position).alpha_deg
+        return float(bearing_deg(camera.position, mirror.center))
+    if pan in ("target", "beacon"):
+        obj = target if pan == "target" else beacon
+        if mirror.lean or mirror.z or obj.z:
+            return image3(camera, mirror, object_base(obj)).alpha_deg
+        return mirror_image(camera.position, mirror, obj.position).alpha_deg
     return float(pan)
 
 
@@ -81,11 +123,18 @@ class ImagePx:
 
 
 def image_extent(scene: Scene, obj: Target | Beacon) -> ImagePx:
-    """Projection of the virtual image of the object's upright axis."""
-    v = mirror_image(scene.camera.position, scene.mirror, obj.position).virtual
-    top = object_height(obj)
-    u, vv, _ = project(scene.camera, np.array([[v[0], v[1], top], [v[0], v[1], 0.0]]))
-    return ImagePx(float(u[0]), float(vv[0]), float(vv[1]), float(vv[1] - vv[0]))
+    """Projection of the virtual image of the object's upright axis (in a leaning mirror
+    the image leans: the column is its foot's)."""
+    if scene.is_3d:
+        plane = mirror_plane(scene.camera, scene.mirror)
+        base = object_base(obj)
+        pts = plane.reflect(np.array([base + [0.0, 0.0, object_height(obj)], base]))
+    else:
+        v = mirror_image(scene.camera.position, scene.mirror, obj.position).virtual
+        top = object_height(obj)
+        pts = np.array([[v[0], v[1], top], [v[0], v[1], 0.0]])
+    u, vv, _ = project(scene.camera, pts)
+    return ImagePx(float(u[1]), float(vv[0]), float(vv[1]), float(vv[1] - vv[0]))
 
 
 def object_height(obj: Target | Beacon) -> float:
@@ -102,8 +151,8 @@ def mirror_box(scene: Scene, margin_px: int = 8) -> tuple[int, int, int, int] | 
     cam, m, bench = scene.camera, scene.mirror, scene.bench
     c, d = np.asarray(m.center, float), unit(m.yaw) * (m.size[0] / 2 + MIRROR_FRAME)
     top = m.size[1] + MIRROR_FRAME
-    lean = unit(m.yaw + 90.0) * top * math.sin(math.radians(abs(bench.tilt)))
-    pts = np.array([[*(c + s * d + e * lean), z] for s in (-1, 1) for z in (0.0, top)
+    lean = unit(m.yaw + 90.0) * top * math.sin(math.radians(abs(bench.tilt) + abs(m.lean)))
+    pts = np.array([[*(c + s * d + e * lean), m.z + z] for s in (-1, 1) for z in (0.0, top)
                     for e in (-1, 1)])
     u, v, depth = project(cam, pts, bench.pitch, roll=bench.roll)
     return film_box(cam, u, v, depth=depth, margin_px=margin_px)
@@ -143,9 +192,15 @@ def beacon_boxes(scene: Scene, margin_px: int = 16) -> list[tuple[int, int, int,
     cam, bench = scene.camera, scene.bench
     out = []
     for b in scene.beacons:
-        v = mirror_image(cam.position, scene.mirror, b.position).virtual
-        pts = np.array([[v[0] + dx, v[1] + dy, z] for dx in (-PENCIL_RADIUS, PENCIL_RADIUS)
-                        for dy in (-PENCIL_RADIUS, PENCIL_RADIUS) for z in (0.0, b.height)])
+        if scene.is_3d:  # the cylinder's corners reflected: a leaning image leans
+            r = PENCIL_RADIUS
+            pts = mirror_plane(cam, scene.mirror).reflect(np.array(
+                [b.base3 + [dx, dy, z] for dx in (-r, r) for dy in (-r, r)
+                 for z in (0.0, b.height)]))
+        else:
+            v = mirror_image(cam.position, scene.mirror, b.position).virtual
+            pts = np.array([[v[0] + dx, v[1] + dy, z] for dx in (-PENCIL_RADIUS, PENCIL_RADIUS)
+                            for dy in (-PENCIL_RADIUS, PENCIL_RADIUS) for z in (0.0, b.height)])
         u, w, depth = project(cam, pts, bench.pitch, roll=bench.roll)
         out.append(film_box(cam, u, w, depth=depth, margin_px=margin_px))
     return out
@@ -153,14 +208,16 @@ def beacon_boxes(scene: Scene, margin_px: int = 16) -> list[tuple[int, int, int,
 
 
 def upright_box(cam: Camera, point: ArrayLike, half_width: float, *, height: float,
-                margin_px: float = 0.0) -> tuple[float, float, float, float] | None:
+                margin_px: float = 0.0, z0: float = 0.0
+                ) -> tuple[float, float, float, float] | None:
     """The film box (u0, v0, u1, v1) of an upright object ``half_width`` cm either side of
-    its axis at board ``point`` (2-D), ``height`` cm tall, square-on to the camera, as the
-    level camera projects it, ``margin_px`` wider; None behind the camera."""
+    its axis at board ``point`` (2-D), ``height`` cm tall from ``z0`` up, square-on to the
+    camera, as the level camera projects it, ``margin_px`` wider; None behind the
+    camera."""
     p = np.asarray(point, float)
     ray = p - np.asarray(cam.position, float)
     side = np.array([-ray[1], ray[0]]) / max(float(np.hypot(*ray)), 1e-9) * half_width
-    pts = np.array([[*(p + s * side), z] for s in (-1.0, 1.0) for z in (0.0, height)])
+    pts = np.array([[*(p + s * side), z0 + z] for s in (-1.0, 1.0) for z in (0.0, height)])
     u, v, depth = project(cam, pts)
     if (depth <= 0).any():
         return None

@@ -21,6 +21,7 @@ from mirrorsim.scene.model import (
     NAME_PATTERN,
     NAME_RULE,
     PENCIL_RADIUS,
+    TARGET_THICKNESS,
     Beacon,
     Board,
     Mirror,
@@ -54,6 +55,9 @@ def check_limits(f: Failures, scene: Scene, fail: Fail, *, bkey: Callable[[int],
                 for i, b in enumerate(scene.beacons)),
               *((f"occluders[{i}].height", (o.height,), MAX_BOARD_CM)
                 for i, o in enumerate(scene.occluders))]
+    limits += [(key, (z,), MAX_BOARD_CM) for key, z in (
+        ("mirror.center[2]", scene.mirror.z), ("target.position[2]", scene.target.z),
+        *((f"{bkey(i)}.position[2]", b.z) for i, b in enumerate(scene.beacons)))]
     for key, vals, most in limits:
         most = most if isinstance(most, tuple) else (most,) * len(vals)
         for k, (v, m) in enumerate(zip(vals, most, strict=True)):
@@ -177,6 +181,37 @@ def check_sight(f: Failures, scene: Scene, fail: Fail, *, bkey: Callable[[int], 
 IMAGE_GAP_PX = 3.0
 
 
+def check_under_glass(f: Failures, scene: Scene, fail: Fail, *, bkey: Callable[[int], str]
+                      ) -> None:
+    """Refuse an object under a leaning glass: any point of it (its axis, the panel's
+    edges, from its base to its top or the glass's) nearer the glass's plane than its own
+    half-thickness, or behind it, within the glass's width."""
+    m = scene.mirror
+    if not m.lean:
+        return
+    plane = optics.mirror_plane(scene.camera, m)
+    top = m.z + m.size[1] * math.cos(math.radians(m.lean))
+    objects = [("target.position", "target", scene.target, TARGET_THICKNESS / 2,
+                [np.asarray(p, float) for p in scene.target.ends()])] + [
+        (f"{bkey(i)}.position", "beacon", b, PENCIL_RADIUS, [np.asarray(b.position, float)])
+        for i, b in enumerate(scene.beacons)]
+    along = np.r_[np.cos(np.radians(m.yaw)), np.sin(np.radians(m.yaw)), 0.0]
+    centre = np.r_[m.center, m.z]
+    for key, what, obj, radius, columns in objects:
+        if obj.z >= top:  # it stands above the glass
+            continue
+        heights = np.linspace(obj.z, min(obj.z + optics.object_height(obj), top), 9)
+        pts = np.array([[*c, z] for c in columns for z in heights])
+        near = np.abs((pts - centre) @ along) <= m.size[0] / 2 + radius
+        gap = pts @ plane.normal - plane.rho
+        if (near & (gap < radius)).any():
+            worst = float(gap[near].min())
+            f.found.append(fail(key, f"{fmt(obj.base3)}: the {what} stands under the "
+                                f"leaning glass (mirror.lean {m.lean:g}°: {worst:.2f} cm from "
+                                "its plane, within its half-thickness or behind it); move it "
+                                "out from the mirror"))
+
+
 def crossing_images(scene: Scene, bkey: Callable[[int], str]) -> list[str]:
     """Warn of a pencil that stands in front of its own reflection in the frame (its
     direct view and its image in the mirror within IMAGE_GAP_PX): the detector cannot
@@ -186,10 +221,14 @@ def crossing_images(scene: Scene, bkey: Callable[[int], str]) -> list[str]:
     for i, b in enumerate(scene.beacons):
         if visibility.direct_view_fraction(scene, b) == 0.0:
             continue
-        virtual = optics.mirror_image(cam.position, scene.mirror, b.position).virtual
+        if scene.is_3d:
+            v3 = optics.image3(cam, scene.mirror, b.base3).virtual
+            virtual, z0 = v3[:2], float(v3[2])
+        else:
+            virtual, z0 = optics.mirror_image(cam.position, scene.mirror, b.position).virtual, 0.0
         reflected = optics.upright_box(cam, virtual, PENCIL_RADIUS, height=b.height,
-                                       margin_px=IMAGE_GAP_PX)
-        direct = optics.upright_box(cam, b.position, PENCIL_RADIUS, height=b.height)
+                                       margin_px=IMAGE_GAP_PX, z0=z0)
+        direct = optics.upright_box(cam, b.position, PENCIL_RADIUS, height=b.height, z0=b.z)
         if optics.boxes_overlap(direct, reflected):
             out.append(f"{bkey(i)}.position: the pencil stands in front of its own image in "
                        f"the mirror (within {IMAGE_GAP_PX:g} px in the frame): the detector "

@@ -49,7 +49,8 @@ def _walls(scene: Scene, obj) -> list[tuple[str, np.ndarray, np.ndarray, float]]
         walls += _box_sides(f"occluders[{i}]", o.start, o.end, OCCLUDER_THICKNESS, o.height)
     if not isinstance(obj, Target):
         t0, t1 = scene.target.ends()
-        walls += _box_sides("the target panel", t0, t1, TARGET_THICKNESS, scene.target.height)
+        walls += _box_sides("the target panel", t0, t1, TARGET_THICKNESS,
+                            scene.target.z + scene.target.height)
     return walls
 
 
@@ -84,15 +85,16 @@ def _sample_columns(scene: Scene, obj) -> list[np.ndarray]:
 
 def glass_frame(scene: Scene) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The glass as the bench stands it: its centre, and unit vectors along its width,
-    up its face and its normal towards the camera (3-D).  A tilted mirror turns about its
-    bottom edge, its top away from the camera (``up`` turns towards −normal)."""
+    up its face and its normal towards the camera (3-D).  A leaning mirror (the scene's
+    ``lean``, and on top of it a bench's ``tilt``) turns about its bottom edge, ``z``
+    above the board, its top away from the camera (``up`` turns towards −normal)."""
     m = scene.mirror
     n0 = np.r_[m.normal_towards(scene.camera.position), 0.0]
     along = np.array([-n0[1], n0[0], 0.0])  # so that along × z = n (right-handed)
-    t = math.radians(scene.bench.tilt)
+    t = math.radians(scene.bench.tilt + m.lean)
     z = np.array([0.0, 0.0, 1.0])
     up, n = math.cos(t) * z - math.sin(t) * n0, math.cos(t) * n0 + math.sin(t) * z
-    return np.r_[m.center, 0.0] + up * m.size[1] / 2, along, up, n
+    return np.r_[m.center, m.z] + up * m.size[1] / 2, along, up, n
 
 
 def sag(a: np.ndarray, b: np.ndarray, radius: float | None) -> np.ndarray:
@@ -179,7 +181,9 @@ def _past_end(offset: float, half_w: float) -> str:
 
 
 def _flat_upright(scene: Scene) -> bool:
-    return scene.bench.tilt == 0.0 and scene.bench.curvature_radius is None
+    """A flat glass standing upright on the board: what it shows is decided in plan."""
+    return (scene.bench.tilt == 0.0 and scene.bench.curvature_radius is None
+            and not scene.mirror.lean and not scene.mirror.z)
 
 
 def _column_failures(scene: Scene, walls, point, heights: np.ndarray) -> list[str]:
@@ -251,7 +255,8 @@ def _why_lost(scene: Scene, offset: float, up_glass: float, lip: str, outside: b
     if up_glass > mir.size[1]:
         return f"the ray meets the mirror plane {up_glass - mir.size[1]:.2f} cm above its top edge"
     if up_glass < 0.0:
-        return f"the ray meets the mirror plane {-up_glass:.2f} cm below the board"
+        return (f"the ray meets the mirror plane {-up_glass:.2f} cm below "
+                + ("its bottom edge" if mir.z else "the board"))
     if lip:
         leg, part = lip.split()
         gap = half_w - abs(offset) if part == "side" else mir.size[1] - up_glass
@@ -268,7 +273,7 @@ def _why_lost(scene: Scene, offset: float, up_glass: float, lip: str, outside: b
 def visibility(scene: Scene, obj: Target | Beacon) -> Visibility:
     """Sample the object's axis and side edges; say how much reaches the camera and why not."""
     walls = _walls(scene, obj)
-    heights = np.linspace(0.0, object_height(obj), AXIS_SAMPLES)
+    heights = obj.z + np.linspace(0.0, object_height(obj), AXIS_SAMPLES)
     cols = _sample_columns(scene, obj)
     why = [_column_failures(scene, walls, col, heights) for col in cols]
     seen = np.array([[not w for w in col] for col in why])
@@ -276,10 +281,12 @@ def visibility(scene: Scene, obj: Target | Beacon) -> Visibility:
     reason = ""
     if not seen.all():
         # the axis sample nearest mid-height that fails says most about the set-up
-        lost = [j for j in np.argsort(np.abs(heights - heights[-1] / 2)) if not seen[0, j]]
+        tall = heights[-1] - heights[0]
+        lost = [j for j in np.argsort(np.abs(heights - heights[0] - tall / 2))
+                if not seen[0, j]]
         if lost:
-            hidden = (1.0 - axis) * heights[-1]
-            reason = (f"{hidden:.2f} of its {heights[-1]:.2f} cm height lost: "
+            hidden = (1.0 - axis) * tall
+            reason = (f"{hidden:.2f} of its {tall:.2f} cm height lost: "
                       f"{why[0][lost[0]]}")
         else:
             first = next(w for col in why[1:] for w in col if w)
@@ -293,9 +300,9 @@ def direct_view_fraction(scene: Scene, obj: Target | Beacon) -> float:
     The mirror's back counts as a wall, as do the occluders.
     """
     m0, m1 = scene.mirror.ends()
-    walls = _walls(scene, obj) + [("the mirror", m0, m1, scene.mirror.size[1])]
+    walls = _walls(scene, obj) + [("the mirror", m0, m1, scene.mirror.z + scene.mirror.size[1])]
     p = np.asarray(obj.position, float)
-    heights = np.linspace(0.0, object_height(obj), AXIS_SAMPLES)
+    heights = obj.z + np.linspace(0.0, object_height(obj), AXIS_SAMPLES)
     free = [not _blocked(walls, scene.camera.center3, np.array([p[0], p[1], z])) for z in heights]
     return float(np.mean(free))
 
