@@ -19,7 +19,7 @@ from numpy.typing import ArrayLike
 from solver.errors import SolverError
 from solver.geometry import wrap_bearing
 from solver.lsq import HUBER_K
-from solver.sltr3d import MirrorPlane, observe3, seen3, solve_single3
+from solver.sltr3d import MirrorPlane, measured3, observe3, seen3, solve_single3
 
 # each nuisance: its neutral value
 NUISANCES3 = {"pan": 0.0, "pitch": 0.0, "scale": 1.0}
@@ -52,17 +52,25 @@ class _Problem:
     o: np.ndarray
     positions: list[np.ndarray]
     seen: np.ndarray
-    sigma: tuple[float, float, float]
+    sigma: tuple[float, float, float] | np.ndarray  # one triple, or a row per observation
     nuisances: tuple[str, ...]
     priors: dict[str, float]
     flip: bool
+    heights: tuple[float, ...] | None = None  # each object's (beacons', then the target's)
 
     def predicted(self, x: np.ndarray) -> np.ndarray:
-        """(α, ε, d_total) of every observation at parameters ``x``."""
+        """(α, ε, d_total) of every observation at parameters ``x``: of each object's
+        base (:func:`~solver.sltr3d.seen3`), or with ``heights`` as a detector reads
+        its image (:func:`~solver.sltr3d.measured3`)."""
         plane = MirrorPlane.from_params(x[0], x[1], x[2], flip=self.flip)
         n_t = len(self.seen) - len(self.positions)
-        pr = np.array([seen3(self.o, plane, p) for p in self.positions]
-                      + [seen3(self.o, plane, x[3:6])] * n_t)
+        if self.heights is None:
+            pr = np.array([seen3(self.o, plane, p) for p in self.positions]
+                          + [seen3(self.o, plane, x[3:6])] * n_t)
+        else:
+            pr = np.array([measured3(self.o, plane, p, height=h)
+                           for p, h in zip(self.positions, self.heights, strict=False)]
+                          + [measured3(self.o, plane, x[3:6], height=self.heights[-1])] * n_t)
         for name, value in zip(self.nuisances, x[6:], strict=True):
             if name == "scale":
                 pr[:, 2] *= value
@@ -75,7 +83,7 @@ class _Problem:
         row."""
         seen = self.seen
         pr = self.predicted(x)
-        sa, se, sd = self.sigma
+        sa, se, sd = np.broadcast_to(np.asarray(self.sigma, float), seen.shape).T
         da = wrap_bearing(pr[:, 0] - seen[:, 0])
         rows = [da / sa, (pr[:, 1] - seen[:, 1]) / se, (pr[:, 2] - seen[:, 2]) / (sd * seen[:, 2])]
         rows.append(np.array([(v - NUISANCES3[n]) / self.priors[n]
@@ -93,16 +101,20 @@ class _Problem:
 
 
 def solve_lsq3(observer: ArrayLike, beacons: list[tuple[ArrayLike, Seen]], targets: list[Seen],
-               *, sigma: tuple[float, float, float] | None = None,
-               nuisances: tuple[str, ...] = (), priors: dict[str, float] | None = None
-               ) -> Fit3:
+               *, sigma: tuple[float, float, float] | np.ndarray | None = None,
+               nuisances: tuple[str, ...] = (), priors: dict[str, float] | None = None,
+               heights: tuple[float, ...] | None = None) -> Fit3:
     """The mirror's plane and the target from every beacon (its position, and what the
     camera saw of it: α, ε, d_total) and every view of the target, by weighted least
     squares from the first beacon's closed form.  ``sigma``: (σ_α deg, σ_ε deg, σ_d as a
-    fraction of d_total) of every measurement; without it, unit weights of (0.01°,
+    fraction of d_total) of every measurement, or a row of them per observation (the
+    beacons', then the target's); without it, unit weights of (0.01°,
     0.01°, 0.2 %) and no covariance.  ``nuisances``: any of ``pan``, ``pitch``,
     ``scale``, estimated alongside; ``priors``: the σ of each one known (deg; the
-    scale's as a fraction).
+    scale's as a fraction).  ``heights``: each beacon's and the target's measured height
+    (cm, the target's last), to predict what a detector reads off each image
+    (:func:`~solver.sltr3d.measured3`: a leaning mirror's bias removed); without them
+    the measurements are taken as each base's exact image.
 
     Raises
     ------
@@ -122,8 +134,9 @@ def solve_lsq3(observer: ArrayLike, beacons: list[tuple[ArrayLike, Seen]], targe
     yaw0 = start.plane.yaw_deg
     p = _Problem(o, [np.asarray(b, float) for b, _ in beacons],
                  np.array([s for _, s in beacons] + list(targets), float),
-                 sigma or (0.01, 0.01, 0.002), tuple(nuisances), dict(priors or {}),
-                 flip=start.plane.flip)
+                 (0.01, 0.01, 0.002) if sigma is None else np.asarray(sigma, float),
+                 tuple(nuisances), dict(priors or {}),
+                 flip=start.plane.flip, heights=None if heights is None else tuple(heights))
     x0 = np.array([yaw0, start.plane.lean_deg, start.plane.rho, *start.target,
                    *(NUISANCES3[n] for n in nuisances)])
     robust = len(p.residuals(x0)) > len(x0)
@@ -146,9 +159,10 @@ def solve_lsq3(observer: ArrayLike, beacons: list[tuple[ArrayLike, Seen]], targe
 
 
 def crlb3(observer: ArrayLike, beacons: list[ArrayLike], plane: MirrorPlane, *,
-          target: ArrayLike, sigma: tuple[float, float, float], n_targets: int = 1,
-          nuisances: tuple[str, ...] = (), priors: dict[str, float] | None = None
-          ) -> np.ndarray:
+          target: ArrayLike, sigma: tuple[float, float, float] | np.ndarray,
+          n_targets: int = 1,
+          nuisances: tuple[str, ...] = (), priors: dict[str, float] | None = None,
+          heights: tuple[float, ...] | None = None) -> np.ndarray:
     """The Cramér–Rao bound of (yaw, lean, ρ, x, y, z, *nuisances) at the truth, for
     Gaussian errors of these σ's: the inverse of the Fisher information the fit of
     :func:`solve_lsq3` weighs (no estimator that is unbiased does better).
@@ -163,7 +177,8 @@ def crlb3(observer: ArrayLike, beacons: list[ArrayLike], plane: MirrorPlane, *,
     seen = [seen3(o, plane, b) for b in beacons]
     seen += [(ot.alpha_deg, ot.elevation_deg, ot.d_total)] * n_targets
     p = _Problem(o, [np.asarray(b, float) for b in beacons], np.array(seen, float), sigma,
-                 tuple(nuisances), dict(priors or {}), flip=plane.flip)
+                 tuple(nuisances), dict(priors or {}), flip=plane.flip,
+                 heights=None if heights is None else tuple(heights))
     x = np.array([plane.yaw_deg, plane.lean_deg, plane.rho, *t,
                   *(NUISANCES3[n] for n in nuisances)])
     J = _jacobian(p, x)

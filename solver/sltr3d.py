@@ -218,3 +218,30 @@ def apparent_height_ratio(observer: ArrayLike, plane: MirrorPlane, base: ArrayLi
         return (p[2] - o[2]) / ((p - o) @ forward)
 
     return float((rows(top) - rows(foot)) / (rows(foot + height * ZHAT) - rows(foot)))
+
+
+def measured3(observer: ArrayLike, plane: MirrorPlane, base: ArrayLike, *, height: float
+              ) -> tuple[float, float, float]:
+    """(α, ε, d_total) as a detector reads them off the image of an upright object of
+    ``height`` standing on ``base``, by a level pinhole camera at ``observer``: α the
+    bearing of the image's mid-height, the horizontal distance from size constancy
+    (height over the rows it spans, as tangents of the depression), ε of its foot's row
+    at that distance, d_total along that ray.
+
+    In an upright mirror this is :func:`seen3` of ``base`` (to rounding).  In a leaning
+    one the image leans by twice the lean: shorter, its top nearer or farther, and
+    slanted across the line of sight, so each reading is biased; a fit that predicts
+    the readings with this model removes the bias (docs/method.md).
+    """
+    o = np.asarray(observer, float)
+    b = np.asarray(base, float)
+    foot, top = plane.reflect(np.array([b, b + height * ZHAT]))
+    mid = (foot + top) / 2.0 - o
+    alpha = float(np.degrees(np.arctan2(mid[1], mid[0])))
+
+    def tan_rise(p: np.ndarray) -> float:  # the row as a tangent of the elevation
+        return float((p[2] - o[2]) / np.hypot(*(p - o)[:2]))
+
+    horizontal = height / (tan_rise(top) - tan_rise(foot))
+    rise = tan_rise(foot) * horizontal
+    return alpha, float(np.degrees(np.arctan2(rise, horizontal))), float(np.hypot(horizontal, rise))

@@ -274,3 +274,60 @@ def test_a_leaning_mirror_leans_the_image_twice_and_shortens_it():
         two = math.radians(2 * lean)
         assert apparent_height_ratio(o, plane, base, height=h) == pytest.approx(
             math.cos(two) / (1 + h / z * math.sin(two)), abs=1e-12)
+
+
+def test_what_a_detector_reads_is_the_exact_image_in_an_upright_mirror():
+    from solver.sltr3d import measured3, seen3
+
+    plane = MirrorPlane.from_pose([40.0, 60.0, 0.0], 15.0, 0.0, toward=CAMERA)
+    for base in ([35.0, 50.0, 0.0], [50.0, 48.0, 7.5]):
+        np.testing.assert_allclose(measured3(CAMERA, plane, base, height=6.0),
+                                   seen3(CAMERA, plane, base), rtol=0, atol=1e-9)
+
+
+def test_what_a_detector_reads_in_a_leaning_mirror_is_the_pinhole_projection():
+    """The readings of :func:`measured3` against a pinhole camera panned to the image,
+    written out here: project the reflected foot and top, then size constancy on the
+    rows (fy·H/s along the axis) and the foot row's elevation."""
+    from solver.sltr3d import measured3
+
+    plane = MirrorPlane.from_pose([40.0, 60.0, 0.0], 15.0, 4.0, toward=CAMERA)
+    base, h = np.array([35.0, 50.0, 3.0]), 6.0
+    foot, top = (plane.reflect(p) for p in (base, base + [0, 0, h]))
+    mid = (foot + top) / 2 - CAMERA
+    pan = math.atan2(mid[1], mid[0])  # the camera aimed at the image: φ ≈ 0
+    fwd = np.array([math.cos(pan), math.sin(pan), 0.0])
+    f = 1500.0
+
+    def row(p):
+        q = p - CAMERA
+        return -f * q[2] / (q @ fwd)
+
+    s = row(foot) - row(top)
+    horizontal = f * h / s
+    rise = -row(foot) / f * horizontal
+    alpha, elev, d = measured3(CAMERA, plane, base, height=h)
+    assert alpha == pytest.approx(math.degrees(pan), abs=1e-12)
+    # the foot and the top lie off the image's mid bearing by a hair: second order
+    assert d == pytest.approx(math.hypot(horizontal, rise), rel=1e-5)
+    assert elev == pytest.approx(math.degrees(math.atan2(rise, horizontal)), abs=1e-4)
+    # and the lean biases them: the base's exact image is elsewhere
+    exact = observe3(CAMERA, plane, base)
+    assert abs(d - exact.d_total) > 0.1
+
+
+def test_a_fit_that_models_the_readings_removes_a_leaning_mirrors_bias():
+    from solver.lsq3 import solve_lsq3
+    from solver.sltr3d import measured3
+
+    plane = MirrorPlane.from_pose([40.0, 60.0, 0.0], 15.0, -4.0, toward=CAMERA)
+    beacons = [np.array([32.0, 50.0, 0.0]), np.array([46.0, 52.0, 5.0])]
+    target, heights = np.array([55.0, 45.0, 2.0]), (6.0, 6.0, 10.0)
+    read = [measured3(CAMERA, plane, p, height=h)
+            for p, h in zip([*beacons, target], heights, strict=True)]
+    fit = solve_lsq3(CAMERA, list(zip(beacons, read[:2], strict=True)), [read[2]],
+                     heights=heights)
+    np.testing.assert_allclose(fit.target, target, atol=1e-6)
+    assert fit.plane.lean_deg == pytest.approx(-4.0, abs=1e-7)
+    naive = solve_lsq3(CAMERA, list(zip(beacons, read[:2], strict=True)), [read[2]])
+    assert np.linalg.norm(naive.target - target) > 0.1

@@ -170,8 +170,9 @@ def detect_frame(image: np.ndarray, view: CaptureRecord, calibration: Calibratio
     pencils = [pencil_geometry(cam, p, paint, k=calibration.pencil_k) for p in pencils
                if p.height_px and (p.u_left, p.u_right) != (None, None)]
     pencils = [p for p in pencils if not p.clipped]  # partly hidden: no bearing to trust
-    for m in (target, *pencils):
-        _check_stands_on_board(cam, m, view)
+    if view.geometry == "planar":  # (in 3-D an image's foot lies where its object stands)
+        for m in (target, *pencils):
+            _check_stands_on_board(cam, m, view)
     images, mirror_imgs = assign_beacons(pencils, view)
     det = Detection(observer=tuple(cam.position), pan_deg=cam.pan_deg, target=target,
                     beacons=list(zip(view.beacons, mirror_imgs, strict=True)), images=images,

@@ -74,6 +74,27 @@ def distance_of(camera: Camera, u: float, height_px: float, *, k: float,
     return k / height_px / math.cos(_off_axis(camera, u)) + front_offset
 
 
+def elevation_of(camera: Camera, m: ImageMeasurement) -> tuple[float, float]:
+    """An image's elevation ε (deg) and its 3-D d_total (cm), for the 3-D solve
+    (docs/method.md): the foot's row at the axis column, as the level camera sees it,
+    gives the tangent of the measured face's foot's elevation, (cy − v)·cos φ / f; its
+    horizontal distance (size constancy, ``m.d_total`` less the face's offset) puts the
+    foot that far above or below the lens; ε is that rise over the axis's horizontal
+    distance, d_total their hypotenuse.
+
+    Raises
+    ------
+    DetectionError
+        The image has no measured foot or distance.
+    """
+    if m.v_bottom is None or m.d_total is None:
+        raise DetectionError(f"the {m.kind}'s image has no measured foot or height: no "
+                             "elevation")
+    tan_face = (camera.cy - m.v_bottom) * math.cos(_off_axis(camera, m.u_axis)) / camera.fx
+    rise = tan_face * (m.d_total - FRONT_OFFSET[m.kind])
+    return math.degrees(math.atan2(rise, m.d_total)), math.hypot(m.d_total, rise)
+
+
 # a pencil image's angular width over what its height implies: beyond this, one side is
 # wrong
 PENCIL_WIDTH_RATIO = (0.8, 1.25)

@@ -20,6 +20,7 @@ from mirrorsim.scene.model import MAX_HFOV_DEG, Beacon, Board, Camera, Point2, S
 from mirrorsim.scene.projection import hfov_of
 
 REFERENCE_DISTANCE = 100.0  # cm: where calibration stands its reference objects
+GEOMETRIES = ("planar", "3d")  # how a frame's set-up is solved (docs/method.md)
 
 
 def read_board(r: Reader, raw: Any, required: tuple[str, ...] = ("size",),
@@ -63,6 +64,9 @@ class CaptureRecord:
     # hand-written record): `detect` refuses a frame whose bytes differ, the record of
     # another frame (beacon 1's record with beacon 0's frame gave a wrong position)
     frame_sha256: str = ""
+    # "3d": objects may stand off the board and the mirror lean (docs/method.md), so the
+    # detector holds no image to the board's plane; "planar" otherwise
+    geometry: str = "planar"
 
     @classmethod
     def from_scene(cls, scene: Scene, frame: str = "") -> CaptureRecord:
@@ -72,9 +76,9 @@ class CaptureRecord:
         bench = scene.bench
         reported = scene.camera.pan_deg + bench.pan_error
         camera = replace(scene.camera, pan=reported, pan_deg=reported)
-        beacons = tuple(Beacon(b.believed, b.height) for b in scene.beacons)
+        beacons = tuple(Beacon(b.believed, b.height, z=b.z) for b in scene.beacons)
         return cls(camera=camera, beacons=beacons, target_size=scene.target.size,
-                   frame=frame,
+                   frame=frame, geometry="3d" if scene.is_3d else "planar",
                    distortion=bench.distortion if bench.distortion_known else (0.0, 0.0),
                    board=scene.board)
 
@@ -86,22 +90,23 @@ class CaptureRecord:
                            "pan_deg": c.pan_deg, "resolution": list(c.resolution),
                            "fx": c.fx, "fy": c.fx, "cx": c.cx, "cy": c.cy,
                            "hfov_deg": c.hfov, "distortion": list(self.distortion)},
-                "beacons": [{"position": list(b.position), "height": b.height}
-                            for b in self.beacons],
+                "beacons": [{"position": list(b.position) + ([b.z] if b.z else []),
+                             "height": b.height} for b in self.beacons],
                 "target": {"size": list(self.target_size)},
                 "calibration": {"reference_distance": self.reference_distance},
                 **({"board": {"size": list(self.board.size),
                               "hole_pitch": self.board.hole_pitch,
                               "hole_diameter": self.board.hole_diameter}}
                    if self.board is not None else {}),
-                **({"frame_sha256": self.frame_sha256} if self.frame_sha256 else {})}
+                **({"frame_sha256": self.frame_sha256} if self.frame_sha256 else {}),
+                **({"geometry": self.geometry} if self.geometry != "planar" else {})}
 
     @classmethod
     def from_json(cls, data: Any, source: str | Path = "<capture>") -> CaptureRecord:
         """Parse and check a record (raises :class:`CaptureError` naming file and key)."""
         r = Reader(source, CaptureError)
         top = r.mapping(data, "", ("camera", "beacons", "target"),
-                        optional=("frame", "calibration", "board", "frame_sha256"))
+                        optional=("frame", "calibration", "board", "frame_sha256", "geometry"))
         c = r.mapping(top["camera"], "camera", ("position", "height", "pan_deg", "resolution",
                                                 "fx"),
                       optional=("fy", "cx", "cy", "hfov_deg", "distortion"))
@@ -123,18 +128,21 @@ class CaptureRecord:
         beacons = []
         for i, b in enumerate(top["beacons"]):
             b = r.mapping(b, f"beacons[{i}]", ("position", "height"))
-            beacons.append(r.built(f"beacons[{i}]", Beacon,
-                                   position=r.pair(b["position"], f"beacons[{i}].position"),
+            position, z = r.point(b["position"], f"beacons[{i}].position")
+            beacons.append(r.built(f"beacons[{i}]", Beacon, position=position, z=z,
                                    height=r.number(b["height"], f"beacons[{i}].height")))
         t = r.mapping(top["target"], "target", ("size",))
         cal = r.mapping(top.get("calibration", {}), "calibration", (),
                         optional=("reference_distance",))
         board = (read_board(r, top["board"], ("size", "hole_pitch", "hole_diameter"), optional=())
                  if "board" in top else None)
+        geometry = top.get("geometry", "planar")
+        if geometry not in GEOMETRIES:
+            raise r.fail("geometry", f"{show(geometry)}: expected one of {', '.join(GEOMETRIES)}")
         sha = top.get("frame_sha256", "")
         if not (isinstance(sha, str) and (sha == "" or re.fullmatch(r"[0-9a-f]{64}", sha))):
             raise r.fail("frame_sha256", f"{sha!r} is not a SHA-256 (64 hexadecimal digits)")
-        return cls(camera=camera, beacons=tuple(beacons), board=board,
+        return cls(camera=camera, beacons=tuple(beacons), board=board, geometry=geometry,
                    target_size=r.pair(t["size"], "target.size", positive=True),
                    frame=str(top.get("frame", "")), distortion=distortion, frame_sha256=sha,
                    reference_distance=r.number(cal.get("reference_distance", REFERENCE_DISTANCE),
