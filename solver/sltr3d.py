@@ -223,10 +223,10 @@ def apparent_height_ratio(observer: ArrayLike, plane: MirrorPlane, base: ArrayLi
 def measured3(observer: ArrayLike, plane: MirrorPlane, base: ArrayLike, *, height: float
               ) -> tuple[float, float, float]:
     """(α, ε, d_total) as a detector reads them off the image of an upright object of
-    ``height`` standing on ``base``, by a level pinhole camera at ``observer``: α the
-    bearing of the image's mid-height, the horizontal distance from size constancy
-    (height over the rows it spans, as tangents of the depression), ε of its foot's row
-    at that distance, d_total along that ray.
+    ``height`` standing on ``base``, by a level pinhole camera at ``observer`` turned to
+    the image: α the bearing of the image's mid-height, the horizontal distance from
+    size constancy (height over the image's length along its axis, in tangents of the
+    camera's angles), ε of its foot's ray at that distance, d_total along that ray.
 
     In an upright mirror this is :func:`seen3` of ``base`` (to rounding).  In a leaning
     one the image leans by twice the lean: shorter, its top nearer or farther, and
@@ -239,9 +239,13 @@ def measured3(observer: ArrayLike, plane: MirrorPlane, base: ArrayLike, *, heigh
     mid = (foot + top) / 2.0 - o
     alpha = float(np.degrees(np.arctan2(mid[1], mid[0])))
 
-    def tan_rise(p: np.ndarray) -> float:  # the row as a tangent of the elevation
-        return float((p[2] - o[2]) / np.hypot(*(p - o)[:2]))
+    ahead = np.array([mid[0], mid[1], 0.0]) / np.hypot(mid[0], mid[1])
+    right = np.array([ahead[1], -ahead[0], 0.0])
 
-    horizontal = height / (tan_rise(top) - tan_rise(foot))
-    rise = tan_rise(foot) * horizontal
+    def film(p: np.ndarray) -> np.ndarray:  # where the camera turned to mid sees p
+        q = p - o
+        return np.array([q @ right, q[2]]) / (q @ ahead)
+
+    horizontal = height / float(np.linalg.norm(film(top) - film(foot)))
+    rise = float((foot[2] - o[2]) / np.hypot(*(foot - o)[:2])) * horizontal
     return alpha, float(np.degrees(np.arctan2(rise, horizontal))), float(np.hypot(horizontal, rise))

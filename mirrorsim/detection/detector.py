@@ -50,6 +50,7 @@ from mirrorsim.detection.image_geometry import (
     target_geometry,
 )
 from mirrorsim.detection.regions import find_pencils, find_target
+from mirrorsim.detection.rolled import measure_rolled
 from mirrorsim.errors import DetectionError
 from mirrorsim.formats.capture import CaptureRecord
 from mirrorsim.formats.error_model import ImageFeatures
@@ -160,12 +161,20 @@ def detect_frame(image: np.ndarray, view: CaptureRecord, calibration: Calibratio
         img = undistort(img, cam, view.distortion)
     linear = to_linear(img)  # from the 8-bit codes: no float copy to read back
     img = img.astype(np.float32)
-    target = target_geometry(cam, measure_object(img, "target", view.target_size[0]
-                                                 / view.target_size[1], linear=linear,
-                                                 subsampled=subsampled),
-                             view.target_size, k=calibration.target_k)
-    pencils = [measure_region(linear, b, "beacon", subsampled=subsampled, stored=img)
-               for b in find_pencils(img)]
+    ratio = view.target_size[0] / view.target_size[1]
+    if view.geometry == "3d":  # a leaning mirror rolls its images: each measured upright
+        box = find_target(img, ratio)
+        if box is None:
+            raise DetectionError("no target (grey upright panel) found in the frame")
+        measured = measure_rolled(linear, img, box, "target", subsampled=subsampled,
+                                  target_ratio=ratio)
+        pencils = [measure_rolled(linear, img, b, "beacon", subsampled=subsampled)
+                   for b in find_pencils(img)]
+    else:
+        measured = measure_object(img, "target", ratio, linear=linear, subsampled=subsampled)
+        pencils = [measure_region(linear, b, "beacon", subsampled=subsampled, stored=img)
+                   for b in find_pencils(img)]
+    target = target_geometry(cam, measured, view.target_size, k=calibration.target_k)
     paint = pencil_paint_height(view.beacons[0].height)
     pencils = [pencil_geometry(cam, p, paint, k=calibration.pencil_k) for p in pencils
                if p.height_px and (p.u_left, p.u_right) != (None, None)]

@@ -71,7 +71,7 @@ def find_target(img: np.ndarray, ratio: float) -> tuple[int, int, int, int] | No
     neutral = (vmax - vmin) < 0.12 * vmax + 6
     grey = neutral & (vmax > 20) & (vmax < 135)
     plain = _find_panel(blur, neutral, grey, np.zeros(grey.shape, bool), ratio)
-    inside = _between(_pencil_mask(img), grey)
+    inside = _between(pencil_mask(img), grey)
     if not inside.any():
         return plain
     filled = _find_panel(blur, neutral, grey, inside, ratio)
@@ -151,7 +151,7 @@ def _regrow(blur, neutral, inside, labels, k, box, whole: bool, ratio: float, ke
     return out
 
 
-def _pencil_mask(img: np.ndarray) -> np.ndarray:
+def pencil_mask(img: np.ndarray) -> np.ndarray:
     """uint8 mask of the painted (yellow, saturated) pixels of an 8-bit RGB image."""
     blur = cv2.GaussianBlur(img, (3, 3), 0)
     r, g, b = blur[..., 0], blur[..., 1], blur[..., 2]
@@ -181,6 +181,6 @@ def _between(pencil: np.ndarray, grey: np.ndarray) -> np.ndarray:
 
 def find_pencils(img: np.ndarray) -> list[tuple[int, int, int, int]]:
     """Bounding boxes of painted (yellow) pencil bands."""
-    mask = _pencil_mask(img)
+    mask = pencil_mask(img)
     _, comps = _components(mask, 30)
     return [(x, y, x + w - 1, y + h - 1) for _, x, y, w, h, _ in comps if h >= 2 * w * 0.8]

@@ -1,0 +1,155 @@
+"""Images that lean in the frame: a leaning mirror (a 3-D scene) leans each virtual
+image by twice its lean, and seen at a slant that lean shows as a roll of the image in
+the frame (4° and more at a 4° lean).  The edge measurement of
+:mod:`mirrorsim.detection.edges` takes an image's edges across bands of rows or
+columns, which holds for an upright image: on one rolled by a few degrees its top and
+foot read 1–1.5 px outwards (a 150 px panel's height 1.6 % long, on a frame rendered at
+a 3° lean).
+
+So an image is measured where it stands upright: its roll is found on its own pixels
+(the pencil's painted region's long axis, the panel's top and bottom boundaries), the
+frame's neighbourhood turned by it, the object found and measured there as an upright
+one, and its foot and top taken back to the frame.  The measurement's height is then
+the image's length along its axis, its axis column and foot row those of its foot and
+top as they stand in the frame (what :func:`solver.sltr3d.measured3` predicts).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import cv2
+import numpy as np
+
+from mirrorsim.detection.edges import ImageMeasurement, measure_region
+from mirrorsim.detection.regions import find_pencils, find_target, pencil_mask
+
+# an image rolled by less than this (deg) is measured as it stands: turning the frame
+# would only blur it (across a 200 px panel, 0.25° moves an edge 0.4 px end to end,
+# symmetric about its middle; an upright mirror's images read within ±0.1°)
+MIN_ROLL_DEG = 0.25
+MARGIN_PX = 28  # around the object: the edges' windows and levels reach 8 px past it
+
+
+def image_roll(img: np.ndarray, box: tuple[int, int, int, int], kind: str) -> float:
+    """The roll (deg) of the object's image in ``box`` of the 8-bit frame ``img``: the
+    angle of its axis from the frame's vertical, positive with its top to the right.
+    A pencil's from its painted region's long axis (its second moments), a panel's from
+    the slopes of its top and bottom boundaries (robust line fits, which drop the
+    columns a pencil in front of it covers); 0 where neither can be found."""
+    u0, v0, u1, v1 = box
+    crop = np.asarray(img[v0:v1 + 1, u0:u1 + 1], np.float32)
+    if kind == "beacon":
+        ys, xs = np.nonzero(pencil_mask(crop))
+        if len(xs) < 10:
+            return 0.0
+        c = np.cov(np.vstack([xs, ys]).astype(float))
+        w, v = np.linalg.eigh(c)
+        ax = v[:, np.argmax(w)]
+        if ax[1] > 0:  # point it up the frame (−v)
+            ax = -ax
+        return math.degrees(math.atan2(ax[0], -ax[1]))
+    grey = _grey_mask(crop)
+    slopes = [s for s in (_boundary_slope(grey, top=True), _boundary_slope(grey, top=False))
+              if s is not None]
+    return math.degrees(math.atan(float(np.mean(slopes)))) if slopes else 0.0
+
+
+def _grey_mask(crop: np.ndarray) -> np.ndarray:
+    """The panel's pixels in its box: near the median colour of its middle (the panel's
+    grey), a little blurred against noise."""
+    blur = cv2.GaussianBlur(crop, (5, 5), 0)
+    h, w = blur.shape[:2]
+    core = blur[h // 3: 2 * h // 3 + 1, w // 3: 2 * w // 3 + 1].reshape(-1, 3)
+    ref = np.median(core, axis=0)
+    return np.max(np.abs(blur - ref), axis=-1) < 0.12 * float(ref.max()) + 8
+
+
+def _boundary_slope(mask: np.ndarray, *, top: bool) -> float | None:
+    """The slope (rows per column) of a mask's top or bottom boundary over the middle 60 %
+    of its columns: a line fitted to each column's first (last) masked row, columns
+    more than 1.5 px off it dropped twice."""
+    h, w = mask.shape
+    cols = np.arange(int(0.2 * w), max(int(0.2 * w) + 1, int(0.8 * w)))
+    us, vs = [], []
+    for c in cols:
+        rows = np.flatnonzero(mask[:, c])
+        if len(rows):
+            us.append(c)
+            vs.append(rows[0] if top else rows[-1])
+    if len(us) < 6:
+        return None
+    u, v = np.asarray(us, float), np.asarray(vs, float)
+    # the first fit takes every column; the next ones only those within 1.5 px of it
+    # (columns a pencil in front of the panel covers lie far off)
+    keep = np.ones(len(u), bool)
+    for _ in range(3):
+        if keep.sum() < 6:
+            return None
+        b, a = np.polyfit(u[keep], v[keep], 1)
+        keep = np.abs(v - (a + b * u)) <= 1.5
+    return float(b)
+
+
+def measure_rolled(linear: np.ndarray, img: np.ndarray, box: tuple[int, int, int, int],
+                   kind: str, *, subsampled: bool = False, target_ratio: float | None = None
+                   ) -> ImageMeasurement:
+    """:func:`~mirrorsim.detection.edges.measure_region` of an image that may be rolled:
+    measured upright in its neighbourhood turned by :func:`image_roll`, its foot and top
+    taken back to the frame (see the module's text).  ``linear``: the frame's linear
+    radiance; ``img``: its 8-bit values (float), where the regions are found (and a
+    JPEG's pencil foot measured); ``target_ratio``: the panel's width over height."""
+    roll = image_roll(img, box, kind)
+    if abs(roll) < MIN_ROLL_DEG:
+        return measure_region(linear, box, kind, subsampled=subsampled, stored=img)
+    u0, v0, u1, v1 = box
+    h, w = linear.shape[:2]
+    a0, b0 = max(0, u0 - MARGIN_PX), max(0, v0 - MARGIN_PX)
+    a1, b1 = min(w, u1 + MARGIN_PX + 1), min(h, v1 + MARGIN_PX + 1)
+    centre = ((u0 + u1) / 2 - a0, (v0 + v1) / 2 - b0)
+    # turn the neighbourhood so the image stands upright (OpenCV: +angle counter-clockwise)
+    M = cv2.getRotationMatrix2D(centre, roll, 1.0)
+    size = (a1 - a0, b1 - b0)
+
+    def turned(a: np.ndarray) -> np.ndarray:
+        return cv2.warpAffine(np.ascontiguousarray(a[b0:b1, a0:a1], np.float32), M, size,
+                              flags=cv2.INTER_CUBIC, borderMode=cv2.BORDER_REPLICATE)
+
+    lin_r, img_r = turned(linear), np.clip(turned(img), 0.0, 255.0)
+    found = (find_pencils(img_r) if kind == "beacon"
+             else [b for b in [find_target(img_r, target_ratio)] if b is not None])
+    if not found:
+        return measure_region(linear, box, kind, subsampled=subsampled, stored=img)
+    near = min(found, key=lambda b: math.hypot((b[0] + b[2]) / 2 - centre[0],
+                                               (b[1] + b[3]) / 2 - centre[1]))
+    m = measure_region(lin_r, near, kind, subsampled=subsampled, stored=img_r)
+    return _back(m, M, (a0, b0), roll)
+
+
+def _back(m: ImageMeasurement, M: np.ndarray, offset: tuple[int, int], roll: float
+          ) -> ImageMeasurement:
+    """A measurement made in the turned neighbourhood, in the frame's coordinates: its
+    foot and top on its axis taken back; its height and width stay lengths along and
+    across its axis; its sides, the axis column ∓ half its width."""
+    inv = cv2.invertAffineTransform(M)
+
+    def frame(u: float, v: float) -> tuple[float, float]:
+        x, y = inv @ np.array([u, v, 1.0])
+        return float(x + offset[0]), float(y + offset[1])
+
+    note = f"measured turned upright by its roll of {roll:+.2f}°"
+    if m.u_left is None or m.u_right is None or m.v_top is None or m.v_bottom is None:
+        return replace(m, notes=(*m.notes, note, "not all four edges found: its roll "
+                                 "not undone"), clipped=m.clipped or "top")
+    axis = (m.u_left + m.u_right) / 2
+    (uf, vf), (ut, vt) = frame(axis, m.v_bottom), frame(axis, m.v_top)
+    mid = (uf + ut) / 2
+    half = m.width_px / 2
+    x0, y0 = frame(m.bbox_px[0], m.bbox_px[1])
+    x1, y1 = frame(m.bbox_px[2], m.bbox_px[3])
+    return replace(m, u_axis=mid, v_top=vt, v_bottom=vf, height_px=m.height_px,
+                   u_left=mid - half, u_right=mid + half,
+                   bbox_px=[int(min(x0, x1)), int(min(y0, y1)), int(max(x0, x1)),
+                            int(max(y0, y1))],
+                   notes=(*m.notes, note))

@@ -1,0 +1,277 @@
+"""End to end in three dimensions: render → detect (α, elevation, d_total of each image)
+→ the 3-D solve (:func:`solver.lsq3.solve_lsq3`: the mirror's plane, its lean, the
+target in 3-D) → score against the exact ground truth, with the planar solve of the
+same frames beside it.  ``evaluate --geometry 3d`` (the default for a scene with a
+raised object or a leaning mirror, docs/method.md).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from mirrorsim.detection.image_geometry import elevation_of
+from mirrorsim.errors import BadParameter, DetectionError
+from mirrorsim.formats.error_model import ErrorModel
+from mirrorsim.pipelines.evaluate import _frame_record, _seen, _sigmas, frames_of
+from mirrorsim.pipelines.frame import render_and_measure
+from mirrorsim.pipelines.score import EXTRA_FILES, FrameRecord
+from mirrorsim.pipelines.solving import model_for
+from mirrorsim.scene import imperfections
+from mirrorsim.scene.model import Scene, pencil_paint_height
+from mirrorsim.truth import optics
+from mirrorsim.truth.groundtruth import GroundTruth, RenderInfo
+from solver.errors import SolverError
+from solver.geometry import wrap_yaw
+from solver.lsq import solve_measurements
+from solver.lsq3 import Fit3, crlb3, solve_lsq3
+from solver.measurements import ObjectSigmas, Sigma
+
+GEOMETRIES = ("auto", "3d", "planar")
+# the Mahalanobis radius of a 3-D Gaussian's 95 % region: √(χ²₃'s 0.95 quantile)
+CHI2_3_R95 = math.sqrt(7.814727903251178)
+
+
+def geometry_of(scene: Scene, geometry: str) -> str:
+    """The solve a scene gets: ``3d`` or ``planar`` as asked, or for ``auto`` 3d where an
+    object is raised or the mirror leans (:attr:`Scene.is_3d`), planar otherwise.
+
+    Raises
+    ------
+    BadParameter
+        Anything but :data:`GEOMETRIES`.
+    """
+    if geometry not in GEOMETRIES:
+        raise BadParameter("geometry", f"{geometry!r}: expected one of {', '.join(GEOMETRIES)}")
+    if geometry == "auto":
+        return "3d" if scene.is_3d else "planar"
+    return geometry
+
+
+def elevation_sigma_deg(sigma: Sigma, height_px: float, fx: float) -> float:
+    """σ of an image's elevation (deg) from its d_total's: the elevation rests on one
+    edge (the foot's row), d_total on two (the foot's and the top's), so an edge's σ is
+    σ_d·s/√2 px and the elevation's that over f (radians)."""
+    return math.degrees(sigma.d_total_rel * height_px / math.sqrt(2.0) / fx)
+
+
+@dataclass(frozen=True)
+class Seen3:
+    """What the experimenter measured, in 3-D: the lens's position, each beacon's base
+    (where it is believed to stand) with its image's (α, ε, d_total), the target's
+    (mean over the frames), the heights measured (each beacon's painted band, then the
+    target's), and each observation's σ's (α deg, ε deg, d_total relative; the
+    beacons', then the target's)."""
+
+    observer: tuple[float, float, float]
+    beacons: tuple[tuple[tuple[float, ...], tuple[float, float, float]], ...]
+    target: tuple[float, float, float]
+    heights: tuple[float, ...]
+    sigma: tuple[tuple[float, float, float], ...]
+
+    def to_json(self) -> dict:
+        """The report's ``measurements`` block."""
+        def image(s):
+            return {"alpha_deg": s[0], "elevation_deg": s[1], "d_total": s[2]}
+
+        return {"observer": list(self.observer), "target": image(self.target),
+                "beacons": [{"position": list(p), **image(s)} for p, s in self.beacons],
+                "heights": list(self.heights),
+                "sigma": [{"alpha_deg": a, "elevation_deg": e, "d_total_rel": d}
+                          for a, e, d in self.sigma]}
+
+
+@dataclass(frozen=True)
+class Score3:
+    """The 3-D estimate against the truth: the target's 3-D, plan and height errors (cm),
+    the mirror's yaw and lean errors (deg), the true target's Mahalanobis distance from
+    the estimate in its 3×3 covariance (the 95 % ellipsoid holds it below
+    :data:`CHI2_3_R95`), the Cramér–Rao bound's and the covariance's RMS (cm), and the
+    planar solve's plan error on the same frames (None where it failed)."""
+
+    target_cm: float
+    target_plan_cm: float
+    target_height_cm: float
+    mirror_yaw_deg: float
+    mirror_lean_deg: float
+    target_mahalanobis: float
+    target_crlb_cm: float | None
+    target_covariance_rms_cm: float
+    planar_target_cm: float | None
+
+    @property
+    def inside95(self) -> bool:
+        """Whether the truth lies inside the estimate's 95 % ellipsoid."""
+        return self.target_mahalanobis <= CHI2_3_R95
+
+    def to_json(self) -> dict:
+        """The report's ``errors`` block."""
+        return {**{k: getattr(self, k) for k in self.__dataclass_fields__},
+                "inside95": self.inside95}
+
+
+@dataclass(frozen=True)
+class Report3:
+    """What ``mirrorsim evaluate --geometry 3d`` makes of a scene (docs/files.md)."""
+
+    scene: str
+    truth: GroundTruth
+    seen: Seen3
+    fit: Fit3
+    planar_target: tuple[float, float] | None
+    errors: Score3
+    frames: tuple[FrameRecord, ...]
+    render: RenderInfo
+    error_model: str
+    model_warnings: tuple[str, ...] = ()
+
+    @property
+    def reused(self) -> bool:
+        """Whether every frame was a cached render."""
+        return all(f.reused for f in self.frames)
+
+    def to_json(self) -> dict:
+        """The report document (``<name>.report.json``)."""
+        f = self.fit
+        cov = f.target_covariance
+        return {"scene": self.scene, "geometry": "3d", "truth": self.truth.to_json(),
+                "measurements": self.seen.to_json(),
+                "solution": {"mirror": {"yaw_deg": f.plane.yaw_deg,
+                                        "lean_deg": f.plane.lean_deg,
+                                        "normal": f.plane.normal.tolist(),
+                                        "offset_cm": f.plane.rho},
+                             "target": f.target.tolist(),
+                             "target_covariance": None if cov is None else cov.tolist(),
+                             "nuisances": dict(f.nuisances),
+                             "downweighted": list(f.downweighted)},
+                "planar_solution": {"target": None if self.planar_target is None
+                                    else list(self.planar_target)},
+                "errors": self.errors.to_json(),
+                "frames": [vars(fr) for fr in self.frames],
+                "render": self.render.to_json(), "error_model": self.error_model,
+                "model_warnings": list(self.model_warnings)}
+
+
+def evaluate_into3(scene: Scene, out: Path, *, variant: str = "auto", progress: bool = True,
+                   error_model: ErrorModel | None = None,
+                   keep: tuple[str, ...] = EXTRA_FILES) -> Report3:
+    """Render (or reuse), detect in 3-D, solve in 3-D and score ``scene`` into ``out``, a
+    folder its caller has claimed, its parameters checked
+    (:func:`mirrorsim.pipelines.evaluate.evaluate_scene` with ``geometry``).
+
+    Raises
+    ------
+    DetectionError
+        An object not found, or the target's d_total in no frame.
+    SolverError
+        The measurements do not determine the mirror's plane and the target.
+    """
+    per_beacon = frames_of(scene)
+    measured = [render_and_measure(sub, out, variant=variant, progress=progress, reuse=True,
+                                   ids="ids" in keep)
+                for sub in per_beacon]
+    frames = tuple(_frame_record(m, out / f"{sub.name}.annotated.png", "annotated" in keep)
+                   for sub, m in zip(per_beacon, measured, strict=True))
+    truths = [m.files.truth for m in measured]
+    truth = replace(truths[0], scene=scene.name, id_labels=None, render=None,
+                    beacons=tuple(t.beacons[0] for t in truths))
+    seen2 = _seen(scene, measured, board_pose=False)
+    model = model_for(scene, error_model)
+    features, sigma = _sigmas(model, seen2)
+    seen = _seen3(scene, measured, sigma, fx=seen2.fx)
+    nuisances, priors = _bench_nuisances(model, sigma)
+    fit = solve_lsq3(seen.observer, list(seen.beacons), [seen.target],
+                     sigma=np.array(seen.sigma), heights=seen.heights,
+                     nuisances=nuisances, priors=priors)
+    try:  # the planar solve of the same frames, beside it
+        planar = solve_measurements(scene.camera.position, seen2.beacons, [seen2.target],
+                                    sigma=sigma).target
+        planar_target = (float(planar[0]), float(planar[1]))
+    except SolverError:
+        planar_target = None
+    errors = _score3(scene, truth, fit, seen, planar_target, nuisances=nuisances,
+                     priors=priors)
+    done = truths[0].render
+    notes = model.domain_warnings(features[0], list(features[1:]), seen2.pan,
+                                  scene={"fx_px": seen2.fx,
+                                         "camera_height_cm": scene.camera.height,
+                                         "pencil_height_cm": tuple(b.height
+                                                                   for b in scene.beacons),
+                                         "beacons": len(scene.beacons)},
+                                  bench=imperfections.judged_values(scene))
+    return Report3(scene=scene.name, truth=truth, seen=seen, fit=fit,
+                   planar_target=planar_target, errors=errors, frames=frames,
+                   render=RenderInfo(done.variant, done.spp, done.seed, done.sampler),
+                   error_model=model.name(), model_warnings=tuple(notes))
+
+
+def _seen3(scene: Scene, measured: list, sigma: ObjectSigmas, *, fx: float) -> Seen3:
+    """Each image's (α, ε, d_total) from the frames' detections, the target's mean over
+    them, the heights measured and each observation's σ's."""
+    capture = measured[0].files.capture
+    detections = [m.detection for m in measured]
+    beacons, heights, px = [], [], []
+    for det, m in zip(detections, measured, strict=True):
+        for b, im in det.beacons:
+            elevation, d3 = elevation_of(m.files.capture.camera, im)
+            beacons.append((tuple(float(c) for c in b.base3), (im.alpha_deg, elevation, d3)))
+            heights.append(pencil_paint_height(b.height))
+            px.append(im.height_px)
+    measured_t = [d.target for d in detections if d.target.d_total is not None]
+    if not measured_t:
+        raise DetectionError(f"{scene.name}: the target's d_total could not be measured")
+    # the target once, at its mean over the frames (each frame's view shares its errors)
+    target = tuple(float(v) for v in np.mean(
+        [(t.alpha_deg, *elevation_of(capture.camera, t)) for t in measured_t], axis=0))
+    per_beacon = (sigma.beacons if len(sigma.beacons) == len(beacons)
+                  else sigma.beacons[:1] * len(beacons))
+    sig = [(s.alpha_deg, elevation_sigma_deg(s, h, fx), s.d_total_rel)
+           for s, h in zip(per_beacon, px, strict=True)]
+    t = sigma.target
+    sig.append((t.alpha_deg, elevation_sigma_deg(t, measured_t[0].height_px, fx),
+                t.d_total_rel))
+    return Seen3(observer=tuple(float(c) for c in capture.camera.center3),
+                 beacons=tuple(beacons), target=target,
+                 heights=(*heights, capture.target_size[1]), sigma=tuple(sig))
+
+
+def _bench_nuisances(model: ErrorModel, sigma: ObjectSigmas
+                     ) -> tuple[tuple[str, ...], dict[str, float]]:
+    """The bench's shared errors the 3-D solve estimates with their priors: the pan and
+    the range scale a bench model's tolerances give, and an α error every image of a
+    frame shares as the pan's (an ideal-bench model: none)."""
+    priors = {n: s for n, s in model.tolerances.priors().items() if n in ("pan", "scale")}
+    if sigma.shared_alpha_deg:
+        priors["pan"] = math.hypot(priors.get("pan", 0.0), sigma.shared_alpha_deg)
+    return tuple(priors), priors
+
+
+def _score3(scene: Scene, truth: GroundTruth, fit: Fit3, seen: Seen3,
+            planar_target: tuple[float, float] | None, *, nuisances: tuple[str, ...],
+            priors: dict[str, float]) -> Score3:
+    """The 3-D estimate against the truth (:class:`Score3`)."""
+    t_true = np.asarray(truth.target.position, float)
+    if len(t_true) == 2:  # a planar scene solved in 3-D: its target stands on the board
+        t_true = np.r_[t_true, scene.target.z]
+    err = fit.target - t_true
+    cov = fit.target_covariance
+    plane = optics.mirror_plane(scene.camera, scene.mirror)
+    try:
+        bound = crlb3(seen.observer, [p for p, _ in seen.beacons], plane, target=t_true,
+                      sigma=np.array(seen.sigma), heights=seen.heights,
+                      nuisances=nuisances, priors=priors)
+        crlb = float(np.sqrt(np.trace(bound[3:6, 3:6])))
+    except SolverError:
+        crlb = None
+    yaw_err = abs(float(wrap_yaw(fit.plane.yaw_deg - scene.mirror.yaw + 90.0)) - 90.0)
+    return Score3(
+        target_cm=float(np.linalg.norm(err)), target_plan_cm=float(np.hypot(*err[:2])),
+        target_height_cm=float(err[2]), mirror_yaw_deg=yaw_err,
+        mirror_lean_deg=float(fit.plane.lean_deg - scene.mirror.lean),
+        target_mahalanobis=float(np.sqrt(err @ np.linalg.solve(cov, err))),
+        target_crlb_cm=crlb, target_covariance_rms_cm=float(np.sqrt(np.trace(cov))),
+        planar_target_cm=None if planar_target is None else float(
+            np.hypot(planar_target[0] - t_true[0], planar_target[1] - t_true[1])))
