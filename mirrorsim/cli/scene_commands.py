@@ -22,6 +22,7 @@ from mirrorsim.cli.registry import (
     render_options,
     spp_option,
 )
+from mirrorsim.errors import BadArgument
 from mirrorsim.formats.files import write_png
 
 
@@ -173,6 +174,12 @@ def _evaluate_options(p):
                         "bench calibrates its mount (its pan then known to ~0.002°; a "
                         "--prior on pan gives way to it); a mount off by up to ±3.2° in "
                         "pan, pitch and roll.  About 1 s a frame")
+    p.add_argument("--geometry", choices=("auto", "3d", "planar"), default="auto",
+                   help="3d: measure each image's elevation and solve for the mirror's "
+                        "plane (its lean) and the target in 3-D, beside the planar solve "
+                        "of the same frames; planar: in the board's plane; auto (default): "
+                        "3d for a scene with a raised object (position [x, y, z]) or a "
+                        "leaning mirror (mirror.lean), planar otherwise")
 
 
 @command("evaluate", "render, detect, solve and score against ground truth",
@@ -186,7 +193,7 @@ def _evaluate_options(p):
 def _evaluate(args) -> int:
     from mirrorsim.cli.tables import report_table
     from mirrorsim.formats.files import write_json
-    from mirrorsim.pipelines.evaluate import check_board_pose, evaluate_scene
+    from mirrorsim.pipelines.evaluate import check_board_pose, check_geometry, evaluate_scene
 
     scene = render_options(args, load(args.scene))
     calibration = calibration_of(args, len(scene.beacons))  # before anything renders
@@ -194,14 +201,24 @@ def _evaluate(args) -> int:
         preload("mirrorsim.cli.plots")  # matplotlib imports while the frame renders
     model = error_model_of(args)  # read and checked before anything is written
     check_board_pose(scene, args.board_pose)
+    three_d = check_geometry(scene, args.geometry, board_pose=args.board_pose,
+                             calibration=calibration) == "3d"
+    if three_d and "plot" in args.keep:
+        raise BadArgument("--keep", "plot: the top view draws a planar report; give "
+                           "--geometry planar for it")
     out = out_folder(args, scene)
     report = evaluate_scene(scene, out, variant=args.variant, progress=not args.quiet,
                             keep=tuple(k for k in args.keep if k != "plot"),
                             error_model=model, calibration=calibration,
-                            board_pose=args.board_pose)
+                            board_pose=args.board_pose, geometry=args.geometry)
     print(f"{scene.name}: {len(report.frames)} frame(s), {report.render.spp} spp, "
           f"{report.render.variant}{' (reused)' if report.reused else ''}")
-    print(report_table(report, scene))
+    if three_d:
+        from mirrorsim.cli.tables3d import report3_table
+
+        print(report3_table(report, scene))
+    else:
+        print(report_table(report, scene))
     for line in report.model_warnings:
         print(f"warning: error model: {line}", file=sys.stderr)
     print(f"report: {write_json(out / f'{scene.name}.report.json', report.to_json())}")

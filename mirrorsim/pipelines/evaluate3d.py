@@ -16,8 +16,8 @@ import numpy as np
 from mirrorsim.detection.image_geometry import elevation_of
 from mirrorsim.errors import BadParameter, DetectionError
 from mirrorsim.formats.error_model import ErrorModel
-from mirrorsim.pipelines.evaluate import _frame_record, _seen, _sigmas, frames_of
 from mirrorsim.pipelines.frame import render_and_measure
+from mirrorsim.pipelines.measured import frame_record, frames_of, seen_of, sigmas_of
 from mirrorsim.pipelines.score import EXTRA_FILES, FrameRecord
 from mirrorsim.pipelines.solving import model_for
 from mirrorsim.scene import imperfections
@@ -29,6 +29,7 @@ from solver.geometry import wrap_yaw
 from solver.lsq import solve_measurements
 from solver.lsq3 import Fit3, crlb3, solve_lsq3
 from solver.measurements import ObjectSigmas, Sigma
+from solver.sltr3d import measured3
 
 GEOMETRIES = ("auto", "3d", "planar")
 # the Mahalanobis radius of a 3-D Gaussian's 95 % region: √(χ²₃'s 0.95 quantile)
@@ -90,7 +91,11 @@ class Score3:
     the mirror's yaw and lean errors (deg), the true target's Mahalanobis distance from
     the estimate in its 3×3 covariance (the 95 % ellipsoid holds it below
     :data:`CHI2_3_R95`), the Cramér–Rao bound's and the covariance's RMS (cm), and the
-    planar solve's plan error on the same frames (None where it failed)."""
+    planar solve's plan error on the same frames (None where it failed); and what an
+    exact detector reads off each image ((α, ε, d_total) of
+    :func:`~solver.sltr3d.measured3` at the true geometry: the beacons', then the
+    target's), against which the measurements' own errors are taken (in a leaning
+    mirror they differ from the base's image, :class:`ObjectTruth`'s)."""
 
     target_cm: float
     target_plan_cm: float
@@ -101,6 +106,7 @@ class Score3:
     target_crlb_cm: float | None
     target_covariance_rms_cm: float
     planar_target_cm: float | None
+    exact_readings: tuple[tuple[float, float, float], ...] = ()
 
     @property
     def inside95(self) -> bool:
@@ -109,8 +115,10 @@ class Score3:
 
     def to_json(self) -> dict:
         """The report's ``errors`` block."""
-        return {**{k: getattr(self, k) for k in self.__dataclass_fields__},
-                "inside95": self.inside95}
+        out = {k: getattr(self, k) for k in self.__dataclass_fields__}
+        out["exact_readings"] = [{"alpha_deg": a, "elevation_deg": e, "d_total": d}
+                                 for a, e, d in self.exact_readings]
+        return {**out, "inside95": self.inside95}
 
 
 @dataclass(frozen=True)
@@ -173,14 +181,14 @@ def evaluate_into3(scene: Scene, out: Path, *, variant: str = "auto", progress: 
     measured = [render_and_measure(sub, out, variant=variant, progress=progress, reuse=True,
                                    ids="ids" in keep)
                 for sub in per_beacon]
-    frames = tuple(_frame_record(m, out / f"{sub.name}.annotated.png", "annotated" in keep)
+    frames = tuple(frame_record(m, out / f"{sub.name}.annotated.png", "annotated" in keep)
                    for sub, m in zip(per_beacon, measured, strict=True))
     truths = [m.files.truth for m in measured]
     truth = replace(truths[0], scene=scene.name, id_labels=None, render=None,
                     beacons=tuple(t.beacons[0] for t in truths))
-    seen2 = _seen(scene, measured, board_pose=False)
+    seen2 = seen_of(scene, measured, board_pose=False)
     model = model_for(scene, error_model)
-    features, sigma = _sigmas(model, seen2)
+    features, sigma = sigmas_of(model, seen2)
     seen = _seen3(scene, measured, sigma, fx=seen2.fx)
     nuisances, priors = _bench_nuisances(model, sigma)
     fit = solve_lsq3(seen.observer, list(seen.beacons), [seen.target],
@@ -267,6 +275,9 @@ def _score3(scene: Scene, truth: GroundTruth, fit: Fit3, seen: Seen3,
     except SolverError:
         crlb = None
     yaw_err = abs(float(wrap_yaw(fit.plane.yaw_deg - scene.mirror.yaw + 90.0)) - 90.0)
+    bases = [b.base3 for b in scene.beacons] + [scene.target.base3]
+    exact = tuple(measured3(seen.observer, plane, p, height=h)
+                  for p, h in zip(bases, seen.heights, strict=True))
     return Score3(
         target_cm=float(np.linalg.norm(err)), target_plan_cm=float(np.hypot(*err[:2])),
         target_height_cm=float(err[2]), mirror_yaw_deg=yaw_err,
@@ -274,4 +285,5 @@ def _score3(scene: Scene, truth: GroundTruth, fit: Fit3, seen: Seen3,
         target_mahalanobis=float(np.sqrt(err @ np.linalg.solve(cov, err))),
         target_crlb_cm=crlb, target_covariance_rms_cm=float(np.sqrt(np.trace(cov))),
         planar_target_cm=None if planar_target is None else float(
-            np.hypot(planar_target[0] - t_true[0], planar_target[1] - t_true[1])))
+            np.hypot(planar_target[0] - t_true[0], planar_target[1] - t_true[1])),
+        exact_readings=exact)
