@@ -57,6 +57,7 @@ class _Problem:
     priors: dict[str, float]
     flip: bool
     heights: tuple[float, ...] | None = None  # each object's (beacons', then the target's)
+    fronts: tuple[float, ...] | None = None  # each measured face's offset (likewise)
 
     def predicted(self, x: np.ndarray) -> np.ndarray:
         """(α, ε, d_total) of every observation at parameters ``x``: of each object's
@@ -68,9 +69,12 @@ class _Problem:
             pr = np.array([seen3(self.o, plane, p) for p in self.positions]
                           + [seen3(self.o, plane, x[3:6])] * n_t)
         else:
-            pr = np.array([measured3(self.o, plane, p, height=h)
-                           for p, h in zip(self.positions, self.heights, strict=False)]
-                          + [measured3(self.o, plane, x[3:6], height=self.heights[-1])] * n_t)
+            fronts = self.fronts or (0.0,) * len(self.heights)
+            pr = np.array([measured3(self.o, plane, p, height=h, front=f)
+                           for p, h, f in zip(self.positions, self.heights, fronts,
+                                              strict=False)]
+                          + [measured3(self.o, plane, x[3:6], height=self.heights[-1],
+                                       front=fronts[-1])] * n_t)
         for name, value in zip(self.nuisances, x[6:], strict=True):
             if name == "scale":
                 pr[:, 2] *= value
@@ -103,7 +107,8 @@ class _Problem:
 def solve_lsq3(observer: ArrayLike, beacons: list[tuple[ArrayLike, Seen]], targets: list[Seen],
                *, sigma: tuple[float, float, float] | np.ndarray | None = None,
                nuisances: tuple[str, ...] = (), priors: dict[str, float] | None = None,
-               heights: tuple[float, ...] | None = None) -> Fit3:
+               heights: tuple[float, ...] | None = None,
+               fronts: tuple[float, ...] | None = None) -> Fit3:
     """The mirror's plane and the target from every beacon (its position, and what the
     camera saw of it: α, ε, d_total) and every view of the target, by weighted least
     squares from the first beacon's closed form.  ``sigma``: (σ_α deg, σ_ε deg, σ_d as a
@@ -114,7 +119,8 @@ def solve_lsq3(observer: ArrayLike, beacons: list[tuple[ArrayLike, Seen]], targe
     scale's as a fraction).  ``heights``: each beacon's and the target's measured height
     (cm, the target's last), to predict what a detector reads off each image
     (:func:`~solver.sltr3d.measured3`: a leaning mirror's bias removed); without them
-    the measurements are taken as each base's exact image.
+    the measurements are taken as each base's exact image.  ``fronts``: with them, how
+    far before each object's axis the face its detector measures stands (cm).
 
     Raises
     ------
@@ -136,7 +142,8 @@ def solve_lsq3(observer: ArrayLike, beacons: list[tuple[ArrayLike, Seen]], targe
                  np.array([s for _, s in beacons] + list(targets), float),
                  (0.01, 0.01, 0.002) if sigma is None else np.asarray(sigma, float),
                  tuple(nuisances), dict(priors or {}),
-                 flip=start.plane.flip, heights=None if heights is None else tuple(heights))
+                 flip=start.plane.flip, heights=None if heights is None else tuple(heights),
+                 fronts=None if fronts is None else tuple(fronts))
     x0 = np.array([yaw0, start.plane.lean_deg, start.plane.rho, *start.target,
                    *(NUISANCES3[n] for n in nuisances)])
     robust = len(p.residuals(x0)) > len(x0)
@@ -162,7 +169,8 @@ def crlb3(observer: ArrayLike, beacons: list[ArrayLike], plane: MirrorPlane, *,
           target: ArrayLike, sigma: tuple[float, float, float] | np.ndarray,
           n_targets: int = 1,
           nuisances: tuple[str, ...] = (), priors: dict[str, float] | None = None,
-          heights: tuple[float, ...] | None = None) -> np.ndarray:
+          heights: tuple[float, ...] | None = None,
+          fronts: tuple[float, ...] | None = None) -> np.ndarray:
     """The Cramér–Rao bound of (yaw, lean, ρ, x, y, z, *nuisances) at the truth, for
     Gaussian errors of these σ's: the inverse of the Fisher information the fit of
     :func:`solve_lsq3` weighs (no estimator that is unbiased does better).
@@ -178,7 +186,8 @@ def crlb3(observer: ArrayLike, beacons: list[ArrayLike], plane: MirrorPlane, *,
     seen += [(ot.alpha_deg, ot.elevation_deg, ot.d_total)] * n_targets
     p = _Problem(o, [np.asarray(b, float) for b in beacons], np.array(seen, float), sigma,
                  tuple(nuisances), dict(priors or {}), flip=plane.flip,
-                 heights=None if heights is None else tuple(heights))
+                 heights=None if heights is None else tuple(heights),
+                 fronts=None if fronts is None else tuple(fronts))
     x = np.array([plane.yaw_deg, plane.lean_deg, plane.rho, *t,
                   *(NUISANCES3[n] for n in nuisances)])
     J = _jacobian(p, x)

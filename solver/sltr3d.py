@@ -220,13 +220,17 @@ def apparent_height_ratio(observer: ArrayLike, plane: MirrorPlane, base: ArrayLi
     return float((rows(top) - rows(foot)) / (rows(foot + height * ZHAT) - rows(foot)))
 
 
-def measured3(observer: ArrayLike, plane: MirrorPlane, base: ArrayLike, *, height: float
-              ) -> tuple[float, float, float]:
+def measured3(observer: ArrayLike, plane: MirrorPlane, base: ArrayLike, *, height: float,
+              front: float = 0.0) -> tuple[float, float, float]:
     """(α, ε, d_total) as a detector reads them off the image of an upright object of
     ``height`` standing on ``base``, by a level pinhole camera at ``observer`` turned to
     the image: α the bearing of the image's mid-height, the horizontal distance from
     size constancy (height over the image's length along its axis, in tangents of the
     camera's angles), ε of its foot's ray at that distance, d_total along that ray.
+    ``front``: how far before the axis the face the detector measures stands (cm): the
+    foot it sees is that face's, which drops or rises with the image's lean towards
+    the camera (the detector takes that face's foot at the axis's distance less
+    ``front``).
 
     In an upright mirror this is :func:`seen3` of ``base`` (to rounding).  In a leaning
     one the image leans by twice the lean: shorter, its top nearer or farther, and
@@ -247,5 +251,10 @@ def measured3(observer: ArrayLike, plane: MirrorPlane, base: ArrayLike, *, heigh
         return np.array([q @ right, q[2]]) / (q @ ahead)
 
     horizontal = height / float(np.linalg.norm(film(top) - film(foot)))
-    rise = float((foot[2] - o[2]) / np.hypot(*(foot - o)[:2])) * horizontal
+    seen = foot
+    if front:  # the near face's foot: towards the camera, across the image's axis
+        axis = (top - foot) / height
+        toward = (o - foot) - ((o - foot) @ axis) * axis
+        seen = foot + front * toward / np.linalg.norm(toward)
+    rise = float((seen[2] - o[2]) / np.hypot(*(seen - o)[:2])) * (horizontal - front)
     return alpha, float(np.degrees(np.arctan2(rise, horizontal))), float(np.hypot(horizontal, rise))

@@ -115,7 +115,7 @@ def test_corrected_image_undoes_the_pose(offset, pitch, roll):
     level camera's K reads it: corrected, its bearing (every point of an upright axis has
     it) and its distance come back."""
     from mirrorsim.detection.board import CameraPose
-    from mirrorsim.detection.edges import ImageMeasurement
+    from mirrorsim.detection.image_measurement import ImageMeasurement
 
     reported = Camera(position=(3.0, 2.0), height=6.5, resolution=(1920, 1088), hfov=65.2,
                       pan=60.0, pan_deg=60.0)

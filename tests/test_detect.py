@@ -245,7 +245,7 @@ def test_off_axis_target_has_no_bearing_bias_and_is_not_clipped(tmp_path, off_ax
 
 
 def _image(alpha, d):
-    from mirrorsim.detection.edges import ImageMeasurement
+    from mirrorsim.detection.image_measurement import ImageMeasurement
 
     return ImageMeasurement(kind="beacon", source="mirror", bbox_px=[0, 0, 1, 1], u_axis=0.0,
                             v_top=0.0, v_bottom=10.0, height_px=10.0, width_px=2.0,
@@ -510,8 +510,9 @@ def test_a_jpeg_pencil_kept_by_one_side_on_its_colour_is_not_used_when_partly_hi
     px, r̄ the mean silhouette half-width), is used when as wide (a whole one's: 1.03–1.12
     of it) and marked clipped, not used, when 0.85 of it.  The same image measured in
     the blue channel keeps its one-sided axis as before."""
-    from mirrorsim.detection.edges import SIDES_ON_COLOUR, ImageMeasurement
+    from mirrorsim.detection.edges import SIDES_ON_COLOUR
     from mirrorsim.detection.image_geometry import PENCIL_HALF_WIDTH, pencil_geometry
+    from mirrorsim.detection.image_measurement import ImageMeasurement
     from mirrorsim.scene.model import Camera, pencil_paint_height
 
     cam = Camera(position=(0.0, 0.0), height=6.0, resolution=(1920, 1088), hfov=65.2,
@@ -585,7 +586,7 @@ def test_a_benchs_direct_view_is_not_taken_for_the_reflection():
     'ambiguous' with 1° and 10 %); two images both far from the direct view stay
     ambiguous."""
     from mirrorsim.detection.assign import _direct, _the_mirror_image
-    from mirrorsim.detection.edges import ImageMeasurement
+    from mirrorsim.detection.image_measurement import ImageMeasurement
     from mirrorsim.errors import DetectionError as Err
 
     scene = load_scene(SCENES / "default.yaml")

@@ -28,9 +28,18 @@ LABEL_NEAR_CM = 4.0
 def plot_top_view(scene: Scene, out: str | Path, *, dpi: int = 150,
                   failures: tuple = ()) -> Path:
     """Draw board, camera and field of view, occluders, mirror, target, beacons,
-    virtual images and the rays camera → mirror → object; write a PNG atomically.
+    virtual images and the rays camera → mirror → object (a 3-D scene: with its side
+    view beside, :func:`~mirrorsim.cli.side_view.draw_side_view`); write a PNG
+    atomically.
     ``failures`` (SceneErrors of an invalid scene): each marked in red where its key's
     object stands, and listed under the view."""
+    if not failures and scene.is_3d:  # a side view across the mirror beside it
+        from mirrorsim.cli.side_view import draw_side_view
+
+        fig, (ax, side) = plt.subplots(1, 2, figsize=(15, 7.5))
+        draw_top_view(ax, scene)
+        draw_side_view(side, scene)
+        return save_figure(fig, Path(out), dpi)
     if not failures:
         fig, ax = plt.subplots(figsize=(7.5, 7.5))
         draw_top_view(ax, scene)
@@ -128,8 +137,7 @@ def draw_top_view(ax: Axes, scene: Scene) -> None:
     ax.plot(*zip(t0, t1, strict=True), color="#c0392b", lw=3, zorder=5)
 
     pts = [np.array([0, 0]), np.array([sx, sy])]
-    pts += [optics.mirror_image(cam.position, scene.mirror, o.position).virtual
-            for _, o, *_ in objects]
+    pts += [optics.object_image(scene, o).virtual[:2] for _, o, *_ in objects]
     pts = np.array(pts)
     lo, hi = pts.min(axis=0) - 5, pts.max(axis=0) + 5
     ax.set_xlim(lo[0], hi[0])
@@ -149,8 +157,8 @@ def _draw_images(ax: Axes, scene: Scene, objects: list[tuple]) -> None:
     c = np.asarray(cam.position, float)
     placed: list[np.ndarray] = []  # the virtual images labelled so far
     for label, obj, colour, marker, ms in objects:
-        img = optics.mirror_image(cam.position, scene.mirror, obj.position)
-        p, v, r = np.asarray(obj.position, float), img.virtual, img.reflection_point
+        img = optics.object_image(scene, obj)  # (a 3-D scene's: drawn in plan)
+        p, v, r = np.asarray(obj.position, float), img.virtual[:2], img.reflection_point[:2]
         ax.plot(*zip(c, r, p, strict=True), color=colour, lw=1.2, zorder=3)
         ax.plot(*zip(r, v, strict=True), color=colour, lw=0.9, ls="--", zorder=3)
         ax.plot(*p, marker=marker, color=colour, ms=ms, mec="k", zorder=6,

@@ -9,7 +9,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from mirrorsim.detection.edges import ImageMeasurement
+from mirrorsim.detection.image_measurement import ImageMeasurement
 from mirrorsim.errors import DetectionError
 from mirrorsim.formats.capture import CaptureRecord
 from mirrorsim.scene.model import Beacon, Camera

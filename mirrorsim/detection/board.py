@@ -24,7 +24,7 @@ import cv2
 import numpy as np
 
 from mirrorsim.camera.sensor import undistort
-from mirrorsim.detection.edges import ImageMeasurement
+from mirrorsim.detection.image_measurement import ImageMeasurement
 from mirrorsim.errors import DetectionError
 from mirrorsim.formats.capture import CaptureRecord
 from mirrorsim.scene.model import Board, Camera

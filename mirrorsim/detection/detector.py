@@ -43,12 +43,13 @@ import numpy as np
 
 from mirrorsim.camera.sensor import undistort
 from mirrorsim.detection.assign import assign_beacons
-from mirrorsim.detection.edges import ImageMeasurement, measure_region, to_linear
+from mirrorsim.detection.edges import measure_region, to_linear
 from mirrorsim.detection.image_geometry import (
     Calibration,
     pencil_geometry,
     target_geometry,
 )
+from mirrorsim.detection.image_measurement import ImageMeasurement
 from mirrorsim.detection.regions import find_pencils, find_target
 from mirrorsim.detection.rolled import measure_rolled
 from mirrorsim.errors import DetectionError
@@ -163,12 +164,12 @@ def detect_frame(image: np.ndarray, view: CaptureRecord, calibration: Calibratio
     img = img.astype(np.float32)
     ratio = view.target_size[0] / view.target_size[1]
     if view.geometry == "3d":  # a leaning mirror rolls its images: each measured upright
-        box = find_target(img, ratio)
+        box = find_target(img, ratio, posts=True)
         if box is None:
             raise DetectionError("no target (grey upright panel) found in the frame")
-        measured = measure_rolled(linear, img, box, "target", subsampled=subsampled,
+        measured = measure_rolled(linear, img, box, kind="target", subsampled=subsampled,
                                   target_ratio=ratio)
-        pencils = [measure_rolled(linear, img, b, "beacon", subsampled=subsampled)
+        pencils = [measure_rolled(linear, img, b, kind="beacon", subsampled=subsampled)
                    for b in find_pencils(img)]
     else:
         measured = measure_object(img, "target", ratio, linear=linear, subsampled=subsampled)

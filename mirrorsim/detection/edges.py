@@ -10,50 +10,13 @@ independent estimates; their median resists partial occlusion.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from typing import NamedTuple
 
 import numpy as np
 
 from mirrorsim.camera.sensor import LINEAR_OF_CODE, lookup_codes, to_srgb8
-
-
-@dataclass(frozen=True)
-class Surround:
-    """Mean linear radiance just outside each edge of an image (NaN: not measured)."""
-
-    left: float = float("nan")
-    right: float = float("nan")
-    top: float = float("nan")
-    bottom: float = float("nan")
-
-
-@dataclass(frozen=True)
-class ImageMeasurement:
-    """One object's image: its upright axis, vertical extent and derived α, d_total.
-
-    Frozen: each stage of the detector (edges here, then the pixel geometry, then the
-    beacons' assignment) returns a new value with what it found."""
-
-    kind: str  # "target" or "beacon"
-    source: str  # "mirror" or "direct"
-    bbox_px: list[int]
-    u_axis: float  # the column of the upright axis's bearing (see mirrorsim.detection.detector)
-    v_top: float | None
-    v_bottom: float | None
-    height_px: float | None
-    width_px: float | None
-    u_left: float | None = None  # the side edges (None: no contrast there)
-    u_right: float | None = None
-    # mean linear radiance just outside each edge, and inside (for the clip decision)
-    outside: Surround = Surround()
-    inside: float = float("nan")
-    clipped: str = ""  # '', 'top', 'left', 'right'
-    alpha_deg: float = float("nan")
-    d_total: float | None = None
-    beacon_index: int | None = None
-    notes: tuple[str, ...] = ()
-
+from mirrorsim.detection.image_measurement import ImageMeasurement, Surround
 
 # ---------------------------------------------------------------- edge measurement
 
@@ -238,6 +201,11 @@ SIDES_ON_COLOUR = "sides on the image's colour: JPEG's smeared blue lost both"
 # shadow) and was measured on the image's colour
 FOOT_ON_COLOUR = "foot on the image's colour: no colour contrast with the board"
 
+# the note of a raised panel whose foot, against something as neutral as itself, was
+# measured on the image's colour
+FOOT_AGAINST_ROOM = ("foot on the image's colour: against something as neutral as the "
+                     "panel (a raised panel before the room's baseboard)")
+
 # how far a side edge may lie from its region's boundary (px): good images are within
 # 1.1 px (198 random scenes), a side measured on the mirror frame 8-17 px
 SIDE_MAX_OFF_PX = 2.5
@@ -256,8 +224,8 @@ _LINEAR_LUT = (255.0 * LINEAR_OF_CODE).astype(np.float32)
 
 
 def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str,
-                   *, subsampled: bool = False, stored: np.ndarray | None = None
-                   ) -> ImageMeasurement:
+                   *, subsampled: bool = False, stored: np.ndarray | None = None,
+                   raised: bool = False) -> ImageMeasurement:
     """Sub-pixel edges of an object's image in ``box``: top and bottom, left and right,
     with the radiance just outside each (pixels only: :mod:`mirrorsim.detection.detector` turns them
     into a bearing and a distance with the camera's geometry).
@@ -285,12 +253,17 @@ def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str,
     colour, where the contact shadow and holes count, +0.26 ± 0.35 px); the −0.15 px is
     coverage summed on gamma-encoded values, and a lossless frame measured so (the
     calibration's reference) reads −0.15 ± 0.06 px, so it nearly cancels.
+
+    ``raised`` (a 3-D scene's frame): the panel may stand off the board, its foot seen
+    against the room (its pale baseboard is as neutral as the panel: across the
+    outside's colour the two are one, and the foot read 2.5 px low); the foot is then
+    measured on the image's colour too, and taken so where the two differ by a pixel.
     """
     u0, v0, u1, v1 = box
     if kind == "beacon":
         e = _pencil_edges(img, box, subsampled=subsampled, stored=stored)
     else:
-        e = _panel_edges(img, box, on_chroma=not subsampled)
+        e = _panel_edges(img, box, on_chroma=not subsampled, raised=raised)
     top, bottom, left, right = e.top, e.bottom, e.left, e.right
     core = img[v0 + (v1 - v0) // 4: v1 - (v1 - v0) // 4 + 1,
                u0 + (u1 - u0) // 4: u1 - (u1 - u0) // 4 + 1]
@@ -369,8 +342,8 @@ def _pencil_edges(img: np.ndarray, box: tuple[int, int, int, int], *, subsampled
                   sides_note)
 
 
-def _panel_edges(img: np.ndarray, box: tuple[int, int, int, int], *, on_chroma: bool
-                 ) -> _Edges:
+def _panel_edges(img: np.ndarray, box: tuple[int, int, int, int], *, on_chroma: bool,
+                 raised: bool = False) -> _Edges:
     """The target panel's edges (:func:`measure_region`): on its colour against the
     outside's, the sides with sloped levels."""
     u0, v0, u1, v1 = box
@@ -378,6 +351,16 @@ def _panel_edges(img: np.ndarray, box: tuple[int, int, int, int], *, on_chroma: 
     top, bottom, out_top, out_bottom = _median_edges((img, img), v0, v1, u0, u1, axis=0,
                                                      chroma=(False, on_chroma),
                                                      near=(False, True))
+    if raised and on_chroma and bottom is not None:
+        # a raised panel's foot may stand against the room's pale baseboard, as neutral
+        # as the panel: across the outside's colour the two read as one and the foot
+        # lands on the baseboard's far side (2.5 px low).  On the image's colour it is
+        # found; where the two disagree by more than a pixel (a foot on the board reads
+        # 0.3-0.6 px apart, its contact shadow counted), the image's colour is taken
+        _, plain, _, out_plain = _median_edges((img, img), v0, v1, u0, u1, axis=0,
+                                               near=(False, True))
+        if plain is not None and abs(plain - bottom) > 1.0:
+            bottom, out_bottom, sides_note = plain, out_plain, (FOOT_AGAINST_ROOM,)
     if bottom is None and on_chroma:
         # a panel in shadow is a dark grey with almost no colour across the board's
         # (a drawn scene's lost its height, 1 of 24): its foot on the image's colour,

@@ -9,7 +9,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 
-from mirrorsim.detection.edges import SIDES_ON_COLOUR, ImageMeasurement
+from mirrorsim.detection.edges import SIDES_ON_COLOUR
+from mirrorsim.detection.image_measurement import ImageMeasurement
 from mirrorsim.errors import DetectionError
 from mirrorsim.scene.model import FRONT_OFFSET, PENCIL_RADIUS, Camera, Point2
 from solver.geometry import wrap_bearing

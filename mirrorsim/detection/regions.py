@@ -54,9 +54,13 @@ def _within(img: np.ndarray, centre: np.ndarray, reach: float) -> np.ndarray:
 # a pencil's image in front of the panel's splits it in two: its pixels count as the
 # panel's where the panel's grey lies within this many px on both sides of it in its row
 PENCIL_FILL_PX = 25
+# a raised pencil's post (0.3 cm across) is 3-8 px wide at 60-100 cm in a full-size frame
+POST_FILL_PX = 10
+POST_DARK = 60  # 8-bit: a post's pixels read 20-45 across a lit panel (sRGB of 0.06)
 
 
-def find_target(img: np.ndarray, ratio: float) -> tuple[int, int, int, int] | None:
+def find_target(img: np.ndarray, ratio: float, *, posts: bool = False
+                ) -> tuple[int, int, int, int] | None:
     """Bounding box (u0, v0, u1, v1) of the grey panel's image, or None.
 
     A pencil standing in front of the panel (its reflection or its direct view crossing
@@ -65,13 +69,19 @@ def find_target(img: np.ndarray, ratio: float) -> tuple[int, int, int, int] | No
     pixels that lie between grey ones taken for the panel's, and of the two boxes the
     one whose width over height is nearer the panel's (``ratio``: seen square-on in the
     mirror, its image has the panel's proportions) is kept.  A pencil beside the panel,
-    grey beyond it, would have widened the filled one."""
+    grey beyond it, would have widened the filled one.  ``posts`` (a 3-D scene's frame):
+    a raised pencil's post, a dark line a few px wide, may cross the panel's image and
+    split it (one of its shades is not neutral); its dark pixels between grey ones
+    within POST_FILL_PX in their row are then taken for the panel's too."""
     blur = cv2.GaussianBlur(img, (5, 5), 0)
     vmax, vmin = _channel_max(blur), _channel_min(blur)
     neutral = (vmax - vmin) < 0.12 * vmax + 6
     grey = neutral & (vmax > 20) & (vmax < 135)
     plain = _find_panel(blur, neutral, grey, np.zeros(grey.shape, bool), ratio)
     inside = _between(pencil_mask(img), grey)
+    if posts:  # dark pixels (a post's shade) that are not the panel's grey, between it
+        dark = (~grey & (vmax < POST_DARK)).astype(np.uint8)
+        inside |= _between(dark, grey, reach_px=POST_FILL_PX)
     if not inside.any():
         return plain
     filled = _find_panel(blur, neutral, grey, inside, ratio)
@@ -162,13 +172,14 @@ def pencil_mask(img: np.ndarray) -> np.ndarray:
     return cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
 
 
-def _between(pencil: np.ndarray, grey: np.ndarray) -> np.ndarray:
-    """The pencil pixels that have ``grey`` pixels within PENCIL_FILL_PX on their left and
+def _between(pencil: np.ndarray, grey: np.ndarray, reach_px: int = PENCIL_FILL_PX
+             ) -> np.ndarray:
+    """The pencil pixels that have ``grey`` pixels within ``reach_px`` on their left and
     on their right in their row (bool)."""
     if not pencil.any():
         return np.zeros(pencil.shape, bool)
     g = grey.astype(np.uint8)
-    reach = PENCIL_FILL_PX + 1
+    reach = reach_px + 1
     # a one-sided dilation: the kernel's anchor at its right end spreads each grey pixel
     # rightwards (a grey pixel on the left), at its left end leftwards
     row = np.ones((1, reach), np.uint8)

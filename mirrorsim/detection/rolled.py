@@ -22,7 +22,8 @@ from dataclasses import replace
 import cv2
 import numpy as np
 
-from mirrorsim.detection.edges import ImageMeasurement, measure_region
+from mirrorsim.detection.edges import measure_region
+from mirrorsim.detection.image_measurement import ImageMeasurement
 from mirrorsim.detection.regions import find_pencils, find_target, pencil_mask
 
 # an image rolled by less than this (deg) is measured as it stands: turning the frame
@@ -80,20 +81,21 @@ def _boundary_slope(mask: np.ndarray, *, top: bool) -> float | None:
             vs.append(rows[0] if top else rows[-1])
     if len(us) < 6:
         return None
+    from scipy.stats import siegelslopes
+
     u, v = np.asarray(us, float), np.asarray(vs, float)
-    # the first fit takes every column; the next ones only those within 1.5 px of it
-    # (columns a pencil in front of the panel covers lie far off)
-    keep = np.ones(len(u), bool)
-    for _ in range(3):
-        if keep.sum() < 6:
-            return None
-        b, a = np.polyfit(u[keep], v[keep], 1)
-        keep = np.abs(v - (a + b * u)) <= 1.5
+    # repeated medians first (half the columns may be a pencil's or a post's in front of
+    # the panel), then least squares on the columns within 1.5 px of that line
+    b, a = siegelslopes(v, u)
+    keep = np.abs(v - (a + b * u)) <= 1.5
+    if keep.sum() < 6:
+        return None
+    b, a = np.polyfit(u[keep], v[keep], 1)
     return float(b)
 
 
 def measure_rolled(linear: np.ndarray, img: np.ndarray, box: tuple[int, int, int, int],
-                   kind: str, *, subsampled: bool = False, target_ratio: float | None = None
+                   *, kind: str, subsampled: bool = False, target_ratio: float | None = None
                    ) -> ImageMeasurement:
     """:func:`~mirrorsim.detection.edges.measure_region` of an image that may be rolled:
     measured upright in its neighbourhood turned by :func:`image_roll`, its foot and top
@@ -102,7 +104,7 @@ def measure_rolled(linear: np.ndarray, img: np.ndarray, box: tuple[int, int, int
     JPEG's pencil foot measured); ``target_ratio``: the panel's width over height."""
     roll = image_roll(img, box, kind)
     if abs(roll) < MIN_ROLL_DEG:
-        return measure_region(linear, box, kind, subsampled=subsampled, stored=img)
+        return measure_region(linear, box, kind, subsampled=subsampled, stored=img, raised=True)
     u0, v0, u1, v1 = box
     h, w = linear.shape[:2]
     a0, b0 = max(0, u0 - MARGIN_PX), max(0, v0 - MARGIN_PX)
@@ -118,38 +120,46 @@ def measure_rolled(linear: np.ndarray, img: np.ndarray, box: tuple[int, int, int
 
     lin_r, img_r = turned(linear), np.clip(turned(img), 0.0, 255.0)
     found = (find_pencils(img_r) if kind == "beacon"
-             else [b for b in [find_target(img_r, target_ratio)] if b is not None])
+             else [b for b in [find_target(img_r, target_ratio, posts=True)] if b is not None])
     if not found:
-        return measure_region(linear, box, kind, subsampled=subsampled, stored=img)
+        return measure_region(linear, box, kind, subsampled=subsampled, stored=img, raised=True)
     near = min(found, key=lambda b: math.hypot((b[0] + b[2]) / 2 - centre[0],
                                                (b[1] + b[3]) / 2 - centre[1]))
-    m = measure_region(lin_r, near, kind, subsampled=subsampled, stored=img_r)
+    m = measure_region(lin_r, near, kind, subsampled=subsampled, stored=img_r, raised=True)
     return _back(m, M, (a0, b0), roll)
 
 
 def _back(m: ImageMeasurement, M: np.ndarray, offset: tuple[int, int], roll: float
           ) -> ImageMeasurement:
     """A measurement made in the turned neighbourhood, in the frame's coordinates: its
-    foot and top on its axis taken back; its height and width stay lengths along and
-    across its axis; its sides, the axis column ∓ half its width."""
+    foot and top, on its axis, taken back, and each side at mid-height; its height and
+    width stay lengths along and across its axis.  An edge not found stays None (the
+    axis then on the region's middle column, as the pixel geometry takes it)."""
     inv = cv2.invertAffineTransform(M)
 
     def frame(u: float, v: float) -> tuple[float, float]:
         x, y = inv @ np.array([u, v, 1.0])
         return float(x + offset[0]), float(y + offset[1])
 
-    note = f"measured turned upright by its roll of {roll:+.2f}°"
-    if m.u_left is None or m.u_right is None or m.v_top is None or m.v_bottom is None:
-        return replace(m, notes=(*m.notes, note, "not all four edges found: its roll "
-                                 "not undone"), clipped=m.clipped or "top")
-    axis = (m.u_left + m.u_right) / 2
-    (uf, vf), (ut, vt) = frame(axis, m.v_bottom), frame(axis, m.v_top)
-    mid = (uf + ut) / 2
-    half = m.width_px / 2
-    x0, y0 = frame(m.bbox_px[0], m.bbox_px[1])
-    x1, y1 = frame(m.bbox_px[2], m.bbox_px[3])
-    return replace(m, u_axis=mid, v_top=vt, v_bottom=vf, height_px=m.height_px,
-                   u_left=mid - half, u_right=mid + half,
-                   bbox_px=[int(min(x0, x1)), int(min(y0, y1)), int(max(x0, x1)),
-                            int(max(y0, y1))],
-                   notes=(*m.notes, note))
+    u0, v0, u1, v1 = m.bbox_px
+    axis = ((m.u_left + m.u_right) / 2 if m.u_left is not None and m.u_right is not None
+            else (u0 + u1) / 2)
+    mid_row = ((m.v_top + m.v_bottom) / 2 if m.v_top is not None and m.v_bottom is not None
+               else (v0 + v1) / 2)
+    top = None if m.v_top is None else frame(axis, m.v_top)
+    foot = None if m.v_bottom is None else frame(axis, m.v_bottom)
+    left = None if m.u_left is None else frame(m.u_left, mid_row)[0]
+    right = None if m.u_right is None else frame(m.u_right, mid_row)[0]
+    if left is not None and right is not None and top is not None and foot is not None:
+        # the sides at the foot's and the top's mid-point: the bearing of the image's
+        # mid-height (what solver.sltr3d.measured3 predicts)
+        mid = (foot[0] + top[0]) / 2
+        left, right = mid - m.width_px / 2, mid + m.width_px / 2
+    corners = [frame(u, v) for u in (u0, u1) for v in (v0, v1)]
+    xs, ys = [c[0] for c in corners], [c[1] for c in corners]
+    return replace(m, u_axis=frame(axis, mid_row)[0],
+                   v_top=None if top is None else top[1],
+                   v_bottom=None if foot is None else foot[1],
+                   u_left=left, u_right=right,
+                   bbox_px=[int(min(xs)), int(min(ys)), int(max(xs)), int(max(ys))],
+                   notes=(*m.notes, f"measured turned upright by its roll of {roll:+.2f}°"))

@@ -66,12 +66,9 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
     camera's pan, pitch and roll measured on the pegboard's holes in each frame
     (:func:`mirrorsim.detection.board.measure_camera_pose`), every α and d_total
     corrected by them, and the pan then known to the board's precision (a pan prior of
-    ``calibration`` gives way to it); the pose is in the report.  ``geometry``: ``3d``
-    detects each image's elevation and solves for the mirror's plane (its lean) and the
-    target in 3-D (:func:`mirrorsim.pipelines.evaluate3d.evaluate_into3`, a
-    :class:`~mirrorsim.pipelines.evaluate3d.Report3`), ``planar`` in the board's plane
-    (a :class:`Report`), ``auto`` (the default) 3d for a scene with a raised object or
-    a leaning mirror, planar otherwise.
+    ``calibration`` gives way to it); the pose is in the report.  ``geometry``: 3d
+    solves in 3-D (a :class:`~mirrorsim.pipelines.evaluate3d.Report3`), planar in the
+    board's plane, auto 3d for a scene with a raised object or a leaning mirror.
 
     Raises
     ------
@@ -81,10 +78,8 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
     OutputError
         If ``out_dir`` holds files mirrorsim did not write, or the scene's own file.
     BadParameter
-        A ``keep`` that names no extra file; ``board_pose`` on a plain board; a
-        ``geometry`` not among auto, 3d, planar; with 3d, ``board_pose`` or a
-        calibration other than plain (the 3-D solve estimates a bench model's pan and
-        range scale with their priors, and nothing else yet).
+        A ``keep`` that names no extra file; ``board_pose`` on a plain board; a bad
+        ``geometry``; with 3d, ``board_pose`` or a calibration other than plain.
     SolverError
         If the measurements do not determine the mirror and the target, or
         ``calibration`` is not a :class:`~solver.selfcal.SelfCalibration`.
@@ -116,12 +111,12 @@ def check_geometry(scene: Scene, geometry: str, *, board_pose: bool = False,
     folder)."""
     chosen = geometry_of(scene, geometry)
     if chosen == "3d" and board_pose:
-        raise BadParameter("board_pose", f"{scene.name}: not with the 3-D solve yet (give "
-                           "--geometry planar for a scene on the board)")
+        raise BadParameter("board_pose", f"{scene.name}: not with the 3-D solve yet (the planar "
+                           "solve takes it)")
     if chosen == "3d" and calibration != PLAIN:
         raise BadParameter("calibration", f"{scene.name}: the 3-D solve estimates a bench "
                            "model's pan and range scale with their priors, and takes no "
-                           "--calibrate or --prior yet")
+                           "other calibration yet (the planar solve does)")
     return chosen
 
 

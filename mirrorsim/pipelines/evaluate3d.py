@@ -21,7 +21,7 @@ from mirrorsim.pipelines.measured import frame_record, frames_of, seen_of, sigma
 from mirrorsim.pipelines.score import EXTRA_FILES, FrameRecord
 from mirrorsim.pipelines.solving import model_for
 from mirrorsim.scene import imperfections
-from mirrorsim.scene.model import Scene, pencil_paint_height
+from mirrorsim.scene.model import FRONT_OFFSET, Scene, pencil_paint_height
 from mirrorsim.truth import optics
 from mirrorsim.truth.groundtruth import GroundTruth, RenderInfo
 from solver.errors import SolverError
@@ -72,6 +72,12 @@ class Seen3:
     target: tuple[float, float, float]
     heights: tuple[float, ...]
     sigma: tuple[tuple[float, float, float], ...]
+
+    @property
+    def fronts(self) -> tuple[float, ...]:
+        """How far before each object's axis the face the detector measures stands (cm):
+        the beacons', then the target's (:data:`~mirrorsim.scene.model.FRONT_OFFSET`)."""
+        return (FRONT_OFFSET["beacon"],) * len(self.beacons) + (FRONT_OFFSET["target"],)
 
     def to_json(self) -> dict:
         """The report's ``measurements`` block."""
@@ -192,7 +198,7 @@ def evaluate_into3(scene: Scene, out: Path, *, variant: str = "auto", progress: 
     seen = _seen3(scene, measured, sigma, fx=seen2.fx)
     nuisances, priors = _bench_nuisances(model, sigma)
     fit = solve_lsq3(seen.observer, list(seen.beacons), [seen.target],
-                     sigma=np.array(seen.sigma), heights=seen.heights,
+                     sigma=np.array(seen.sigma), heights=seen.heights, fronts=seen.fronts,
                      nuisances=nuisances, priors=priors)
     try:  # the planar solve of the same frames, beside it
         planar = solve_measurements(scene.camera.position, seen2.beacons, [seen2.target],
@@ -269,15 +275,15 @@ def _score3(scene: Scene, truth: GroundTruth, fit: Fit3, seen: Seen3,
     plane = optics.mirror_plane(scene.camera, scene.mirror)
     try:
         bound = crlb3(seen.observer, [p for p, _ in seen.beacons], plane, target=t_true,
-                      sigma=np.array(seen.sigma), heights=seen.heights,
+                      sigma=np.array(seen.sigma), heights=seen.heights, fronts=seen.fronts,
                       nuisances=nuisances, priors=priors)
         crlb = float(np.sqrt(np.trace(bound[3:6, 3:6])))
     except SolverError:
         crlb = None
     yaw_err = abs(float(wrap_yaw(fit.plane.yaw_deg - scene.mirror.yaw + 90.0)) - 90.0)
     bases = [b.base3 for b in scene.beacons] + [scene.target.base3]
-    exact = tuple(measured3(seen.observer, plane, p, height=h)
-                  for p, h in zip(bases, seen.heights, strict=True))
+    exact = tuple(measured3(seen.observer, plane, p, height=h, front=f)
+                  for p, h, f in zip(bases, seen.heights, seen.fronts, strict=True))
     return Score3(
         target_cm=float(np.linalg.norm(err)), target_plan_cm=float(np.hypot(*err[:2])),
         target_height_cm=float(err[2]), mirror_yaw_deg=yaw_err,

@@ -1,0 +1,117 @@
+"""The 3-D evaluation: which solve a scene gets, what it refuses, the detector's
+measurements of a leaning mirror's images against their exact projection, and the
+command end to end on ``scenes/raised.yaml``."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mirrorsim.errors import BadParameter
+from mirrorsim.pipelines.evaluate import check_geometry, evaluate_scene
+from mirrorsim.pipelines.evaluate3d import CHI2_3_R95, geometry_of
+from mirrorsim.pipelines.scenes import load_scene
+from mirrorsim.scene.model import pencil_paint_height
+from mirrorsim.scene.projection import project
+from mirrorsim.truth import optics
+from solver.selfcal import SelfCalibration
+from tests.conftest import ROOT, SCENES, small_scene
+
+
+def test_auto_solves_a_3d_scene_in_3d_and_a_planar_one_in_the_plane():
+    raised, default = load_scene(SCENES / "raised.yaml"), load_scene(SCENES / "default.yaml")
+    assert geometry_of(raised, "auto") == "3d" and geometry_of(default, "auto") == "planar"
+    assert geometry_of(default, "3d") == "3d" and geometry_of(raised, "planar") == "planar"
+    with pytest.raises(BadParameter, match="geometry"):
+        geometry_of(raised, "2d")
+
+
+@pytest.mark.parametrize("kw", [{"board_pose": True},
+                                {"calibration": SelfCalibration(("pan",))}])
+def test_what_the_3d_solve_does_not_do_is_refused_before_a_folder_is_claimed(tmp_path, kw):
+    out = tmp_path / "out"
+    with pytest.raises(BadParameter):
+        evaluate_scene(load_scene(SCENES / "raised.yaml"), out, **kw)
+    assert not out.exists()
+    check_geometry(load_scene(SCENES / "raised.yaml"), "planar", **kw)  # planar takes them
+
+
+@pytest.fixture(scope="module")
+def raised_report(tmp_path_factory):
+    # full size: at half size the pencil's image is 9 px wide, and its roll undone moves
+    # its axis by half a pixel (0.036°, where σ_α is 0.003°)
+    scene = small_scene("raised", 1920, 1088)
+    return scene, evaluate_scene(scene, tmp_path_factory.mktemp("raised"), progress=False,
+                                 keep=())
+
+
+@pytest.mark.slow
+def test_each_image_of_a_leaning_mirror_is_measured_where_it_projects(raised_report):
+    """The detector's foot and top (its roll undone) against the exact pinhole projection
+    of the reflected foot and top, computed here from the scene's numbers."""
+    from mirrorsim.pipelines.frame import render_and_measure
+
+    scene, report = raised_report
+    m = render_and_measure(scene, Path(report.frames[0].png).parent, progress=False,
+                           reuse=True, ids=False)
+    n = np.array([np.cos(np.radians(3)) * -np.sin(np.radians(20)),
+                  np.cos(np.radians(3)) * np.cos(np.radians(20)), np.sin(np.radians(3))])
+    if n[:2] @ (np.array([0.0, 0.0]) - [30, 62]) < 0:
+        n[:2] *= -1
+    rho = n @ np.array([30.0, 62.0, 0.0])
+    for obj, h, im in [(scene.target, scene.target.size[1], m.detection.target),
+                       (scene.beacons[0], pencil_paint_height(scene.beacons[0].height),
+                        m.detection.beacons[0][1])]:
+        foot, top = (p - 2 * (p @ n - rho) * n for p in (obj.base3, obj.base3 + [0, 0, h]))
+        u, v, _ = project(scene.camera, np.array([foot, top]))
+        assert any("roll" in note for note in im.notes)
+        assert im.v_bottom == pytest.approx(v[0], abs=0.6)
+        assert im.v_top == pytest.approx(v[1], abs=0.6)
+    # and each reading within 4 of its σ's of what an exact detector reads
+    seen = report.seen
+    for got, exact, sig in zip([*(b for _, b in seen.beacons), seen.target],
+                               report.errors.exact_readings, seen.sigma, strict=True):
+        assert abs(got[0] - exact[0]) < 4 * sig[0]
+        assert abs(got[1] - exact[1]) < 4 * sig[1]
+        assert abs(got[2] - exact[2]) < 4 * sig[2] * exact[2]
+
+
+@pytest.mark.slow
+def test_the_3d_report_is_consistent_and_beats_the_planar_solve(raised_report):
+    scene, report = raised_report
+    e = report.errors
+    assert report.fit.target.shape == (3,)
+    assert e.target_cm < 0.6 and abs(e.mirror_lean_deg) < 0.3
+    assert e.planar_target_cm > e.target_cm
+    assert e.inside95 == (e.target_mahalanobis <= CHI2_3_R95)
+    doc = json.loads(json.dumps(report.to_json()))
+    assert doc["geometry"] == "3d" and len(doc["solution"]["target_covariance"]) == 3
+    assert doc["truth"]["mirror"]["lean_deg"] == 3.0
+    assert len(doc["measurements"]["beacons"][0]["position"]) == 3
+    # the exact readings, at the truth, are the reflection model's
+    plane = optics.mirror_plane(scene.camera, scene.mirror)
+    from solver.sltr3d import measured3
+
+    np.testing.assert_allclose(
+        doc["errors"]["exact_readings"][-1]["d_total"],
+        measured3(scene.camera.center3, plane, scene.target.base3,
+                  height=scene.target.size[1])[2], rtol=1e-12)
+
+
+@pytest.mark.slow
+def test_evaluate_solves_the_bundled_3d_scene_at_full_size(tmp_path):
+    out = tmp_path / "raised"
+    run = subprocess.run([sys.executable, "-m", "mirrorsim.cli.main", "evaluate",
+                          str(SCENES / "raised.yaml"), "--out", str(out), "--quiet"],
+                         cwd=ROOT, capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    assert "mirror lean (°)" in run.stdout and "95 % ellipsoid" in run.stdout
+    doc = json.loads((out / "raised.report.json").read_text())
+    e = doc["errors"]
+    assert e["target_cm"] < 0.6 and abs(e["target_height_cm"]) < 0.3
+    assert e["planar_target_cm"] > e["target_cm"]
