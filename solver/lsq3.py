@@ -43,6 +43,58 @@ class Fit3:
         """The target's 3×3 covariance (cm²)."""
         return None if self.covariance is None else self.covariance[3:6, 3:6]
 
+    def to_json(self) -> dict:
+        """The 3-D solution document (docs/files.md): the mirror's plane n·x = offset,
+        its yaw and lean, the target, its covariance (None without σ's), the nuisances
+        and the measurements the robust fit trusted less."""
+        cov = self.target_covariance
+        return {"mirror": {"yaw_deg": self.plane.yaw_deg, "lean_deg": self.plane.lean_deg,
+                           "normal": self.plane.normal.tolist(), "offset_cm": self.plane.rho},
+                "target": self.target.tolist(),
+                "target_covariance": None if cov is None else cov.tolist(),
+                "nuisances": dict(self.nuisances), "downweighted": list(self.downweighted)}
+
+
+@dataclass(frozen=True)
+class Measurements3:
+    """What the experimenter measured in 3-D (docs/files.md's 3-D measurements): the
+    lens's position, each beacon's believed base with its image's (α, ε, d_total), the
+    target's; optionally the heights measured (each beacon's, then the target's: the
+    readings are then modelled as a detector's, :func:`~solver.sltr3d.measured3`), how
+    far before each axis the measured face stands, and each observation's σ's (α deg,
+    ε deg, d_total relative; the beacons', then the target's)."""
+
+    observer: tuple[float, float, float]
+    beacons: tuple[tuple[tuple[float, float, float], Seen], ...]
+    target: Seen
+    heights: tuple[float, ...] | None = None
+    fronts: tuple[float, ...] | None = None
+    sigma: tuple[tuple[float, float, float], ...] | None = None
+
+    def to_json(self) -> dict:
+        """The 3-D measurements document."""
+        def image(s: Seen) -> dict:
+            return {"alpha_deg": s[0], "elevation_deg": s[1], "d_total": s[2]}
+
+        out = {"observer": list(self.observer), "target": image(self.target),
+               "beacons": [{"position": list(p), **image(s)} for p, s in self.beacons]}
+        if self.heights is not None:
+            out["heights"] = list(self.heights)
+        if self.fronts is not None:
+            out["fronts"] = list(self.fronts)
+        if self.sigma is not None:
+            out["sigma"] = [{"alpha_deg": a, "elevation_deg": e, "d_total_rel": d}
+                            for a, e, d in self.sigma]
+        return out
+
+    def solve(self, *, nuisances: tuple[str, ...] = (),
+              priors: dict[str, float] | None = None) -> Fit3:
+        """:func:`solve_lsq3` of these measurements."""
+        return solve_lsq3(self.observer, list(self.beacons), [self.target],
+                          sigma=None if self.sigma is None else np.array(self.sigma),
+                          heights=self.heights, fronts=self.fronts, nuisances=nuisances,
+                          priors=priors)
+
 
 @dataclass(frozen=True)
 class _Problem:

@@ -115,3 +115,63 @@ def test_evaluate_solves_the_bundled_3d_scene_at_full_size(tmp_path):
     e = doc["errors"]
     assert e["target_cm"] < 0.6 and abs(e["target_height_cm"]) < 0.3
     assert e["planar_target_cm"] > e["target_cm"]
+
+
+@pytest.mark.parametrize("command", ["track", "budget", "plan"])
+def test_commands_in_the_plane_refuse_a_3d_scene_in_one_line(tmp_path, command):
+    out = tmp_path / ("out.png" if command == "plan" else "out")
+    run = subprocess.run([sys.executable, "-m", "mirrorsim.cli.main", command,
+                          str(SCENES / "raised.yaml"), "--out", str(out)],
+                         cwd=ROOT, capture_output=True, text=True)
+    assert run.returncode == 2
+    assert run.stderr.strip().splitlines()[-1].startswith(
+        f"error: {SCENES / 'raised.yaml'}: mirror.lean: 3: {command} works in the board's")
+    assert not out.exists()
+
+
+def test_solve_takes_3d_measurements(tmp_path):
+    """A measurement file with an observer's height and elevations is solved in 3-D: the
+    exact readings of a leaning mirror (written out here with measured3) give back its
+    plane and the target."""
+    from solver.sltr3d import MirrorPlane, measured3
+
+    cam = np.array([0.0, 0.0, 9.0])
+    plane = MirrorPlane.from_pose([35.0, 62.0, 0.0], 18.0, 2.5, toward=cam)
+    beacons = [np.array([33.0, 53.0, 4.0]), np.array([42.0, 56.0, 0.0])]
+    target = np.array([57.0, 50.0, 6.0])
+    heights, fronts = (4.8, 4.8, 10.0), (0.338, 0.338, 0.2)
+    read = [measured3(cam, plane, p, height=h, front=f)
+            for p, h, f in zip([*beacons, target], heights, fronts, strict=True)]
+
+    def image(s):
+        return {"alpha_deg": s[0], "elevation_deg": s[1], "d_total": s[2]}
+
+    doc = {"observer": cam.tolist(), "target": image(read[2]),
+           "beacons": [{"position": b.tolist(), **image(s)}
+                       for b, s in zip(beacons, read, strict=False)],
+           "heights": list(heights), "fronts": list(fronts)}
+    f = tmp_path / "m3.json"
+    f.write_text(json.dumps(doc))
+    run = subprocess.run([sys.executable, "-m", "mirrorsim.cli.main", "solve", str(f),
+                          "--json", "-"], cwd=ROOT, capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    sol = json.loads(run.stdout[run.stdout.index("{"):])
+    np.testing.assert_allclose(sol["target"], target, atol=1e-5)
+    assert sol["mirror"]["lean_deg"] == pytest.approx(2.5, abs=1e-6)
+    assert len(sol["target_covariance"]) == 3
+    doc["beacons"][0]["elevation_deg"] = 95
+    f.write_text(json.dumps(doc))
+    bad = subprocess.run([sys.executable, "-m", "mirrorsim.cli.main", "solve", str(f)],
+                         cwd=ROOT, capture_output=True, text=True)
+    assert bad.returncode == 2 and "beacons[0].elevation_deg" in bad.stderr
+
+
+def test_a_3d_capture_record_reads_back_as_written():
+    from mirrorsim.formats.capture import CaptureRecord
+
+    rec = CaptureRecord.from_scene(load_scene(SCENES / "raised.yaml"))
+    doc = json.loads(json.dumps(rec.to_json()))
+    assert doc["geometry"] == "3d" and doc["beacons"][0]["position"] == [36.0, 56.0, 2.0]
+    back = CaptureRecord.from_json(doc)
+    assert back.geometry == "3d" and back.beacons[0].z == 2.0
+    assert "geometry" not in CaptureRecord.from_scene(load_scene(SCENES / "default.yaml")).to_json()

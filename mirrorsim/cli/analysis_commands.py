@@ -47,8 +47,11 @@ def _solve(args) -> int:
     from mirrorsim.formats.error_model_file import default_error_model
     from mirrorsim.formats.measurements import load_measurements
     from solver.lsq import solve_measurements
+    from solver.lsq3 import Measurements3
 
     m = load_measurements(args.measurements)
+    if isinstance(m, Measurements3):
+        return _solve3(args, m)
     calibration = calibration_of(args, len(m.beacons), len(m.targets))
     model = error_model_of(args)
     if model is not None and m.sigma is not None:
@@ -71,6 +74,33 @@ def _solve(args) -> int:
     print(f"σ's from {source}", file=sys.stderr)
     print(solution_summary(str(args.measurements), sol))
     emit(args, sol.to_json())
+    return 0
+
+
+def _solve3(args, m) -> int:
+    """``solve`` of 3-D measurements (an observer with a height, each image with an
+    elevation): the mirror's plane, its lean and the target in 3-D."""
+    from mirrorsim.cli.tables3d import solution3_summary
+    from mirrorsim.formats.error_model_file import default_error_model
+
+    calibration = calibration_of(args, len(m.beacons), 1)
+    if calibration.nuisances or calibration.position_sigma:
+        raise BadArgument("--calibrate", "the 3-D solve takes no self-calibration from "
+                          "the command line yet (solver.lsq3 estimates pan, pitch and scale "
+                          "through its API)")
+    model = error_model_of(args)
+    source = f"`sigma` of {args.measurements}"
+    if model is not None or m.sigma is None:
+        t = (model or default_error_model()).typical
+        b = t.beacons[0]
+        m = replace(m, sigma=((b.alpha_deg, b.alpha_deg, b.d_total_rel),) * len(m.beacons)
+                    + ((t.target.alpha_deg, t.target.alpha_deg, t.target.d_total_rel),))
+        source = (f"{(model or default_error_model()).name()}'s typical σ's, the "
+                  "elevation's taken as the azimuth's (a measurements file holds no pixels)")
+    fit = m.solve()
+    print(f"σ's from {source}", file=sys.stderr)
+    print(solution3_summary(str(args.measurements), fit))
+    emit(args, fit.to_json())
     return 0
 
 
@@ -179,6 +209,7 @@ def _plan(args) -> int:
     from mirrorsim.cli.plots import plot_plan
     from mirrorsim.formats.error_model_file import default_error_model
     from mirrorsim.pipelines.planning import plan_scene
+    from mirrorsim.pipelines.scenes import refuse_3d
     from solver.measurements import SIGMA_D_REL_MAX, SIGMA_D_REL_MIN, ObjectSigmas, Sigma
 
     finite(args, "sigma_alpha", "sigma_d", "eps", "yaw_spread", "d1_spread", "step")
@@ -192,6 +223,7 @@ def _plan(args) -> int:
         raise BadArgument("--sigma-d", f"{args.sigma_d:g}: need {100 * SIGMA_D_REL_MIN:g} ≤ "
                           f"σ_d ≤ {100 * SIGMA_D_REL_MAX:g} (% of d_total)")
     scene = load(args.scene)
+    refuse_3d(scene, "plan")
     sigma = (ObjectSigmas.same(Sigma(args.sigma_alpha, args.sigma_d / 100.0))
              if args.sigma_alpha is not None
              else (error_model_of(args) or default_error_model()).typical)

@@ -259,9 +259,11 @@ def _budget(args) -> int:
     from mirrorsim.cli.plots import plot_budget
     from mirrorsim.formats.files import write_json
     from mirrorsim.pipelines.budget import budget_runs, check_budget_calibration, run_budget
+    from mirrorsim.pipelines.scenes import refuse_3d
     from mirrorsim.scene.imperfections import sources
 
     scene = render_options(args, load(args.scene))
+    refuse_3d(scene, "budget")
     # before anything renders or is written
     calibration = check_budget_calibration(scene, calibration_of(args, len(scene.beacons)))
     model = error_model_of(args)  # read and checked before anything is written
@@ -347,6 +349,7 @@ def _track(args) -> int:
     from mirrorsim.cli.plots import animate_track, plot_track
     from mirrorsim.cli.registry import at_least
     from mirrorsim.formats.files import write_json
+    from mirrorsim.pipelines.scenes import refuse_3d
     from mirrorsim.pipelines.track import (
         MAX_TRACK_SEED,
         check_fixed_beacons,
@@ -360,6 +363,7 @@ def _track(args) -> int:
     at_least(("--seed", args.seed, 0, MAX_TRACK_SEED))
     position_sigma = beacon_sigma_of(args)
     scene = load(args.scene)
+    refuse_3d(scene, "track")
     if args.spp is not None:  # --seed is the run's (each pose's render seed follows it)
         scene = scene.with_render(spp=args.spp)
     check_options(args.path, args.steps, args.odometry_sigma, side=args.side, step=args.step,

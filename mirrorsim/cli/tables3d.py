@@ -9,6 +9,7 @@ import numpy as np
 from mirrorsim.cli.tables import bench_line, columns
 from mirrorsim.pipelines.evaluate3d import CHI2_3_R95, Report3
 from mirrorsim.scene.model import Scene
+from solver.lsq3 import Fit3
 
 
 def _xyz(p) -> str:
@@ -65,6 +66,22 @@ def report3_table(report: Report3, report_scene: Scene | None = None) -> str:
         lines.append(f"Cramér–Rao bound of the target's RMS error: {e.target_crlb_cm:.3f} cm "
                      f"at the truth; its covariance's RMS at the estimate: "
                      f"{e.target_covariance_rms_cm:.3f} cm")
+    return "\n".join(lines)
+
+
+def solution3_summary(source: str, fit: Fit3) -> str:
+    """A 3-D solution as ``mirrorsim solve`` prints it."""
+    p = fit.plane
+    lines = [f"{source}: 3-D weighted least squares",
+             f"  mirror  yaw {p.yaw_deg:.4f}°  lean {p.lean_deg:+.4f}°  plane n·x = "
+             f"{p.rho:.3f} cm, n = {_xyz(p.normal)}",
+             f"  target  {_xyz(fit.target)}"]
+    axes = _ellipsoid95(fit.target_covariance)
+    if axes:
+        lines.append("  95 % ellipsoid of the target: " + " × ".join(f"{a:.3f}" for a in axes)
+                     + " cm (semi-axes)")
+    if fit.downweighted:
+        lines.append("  trusted less (a Huber loss): " + ", ".join(fit.downweighted))
     return "\n".join(lines)
 
 

@@ -8,6 +8,7 @@ from typing import Any
 
 from mirrorsim.formats.reader import Reader, parse_json, read_json, read_stdin_text
 from solver.errors import InputError
+from solver.lsq3 import Measurements3
 from solver.measurements import (
     D_TOTAL_RANGE_CM,
     SIGMA_ALPHA_MAX_DEG,
@@ -28,7 +29,7 @@ class MeasurementError(InputError):
     """A bad measurement file."""
 
 
-def load_measurements(path: str | Path) -> Measurements:
+def load_measurements(path: str | Path) -> Measurements | Measurements3:
     """Parse and validate a measurements file (raises :class:`MeasurementError`); ``-``
     reads standard input (``check --measurements - | solve -``)."""
     if str(path) == "-":
@@ -37,9 +38,14 @@ def load_measurements(path: str | Path) -> Measurements:
     return measurements_from_dict(read_json(path, MeasurementError), path)
 
 
-def measurements_from_dict(data: Any, source: str | Path = "<measurements>") -> Measurements:
+def measurements_from_dict(data: Any, source: str | Path = "<measurements>"
+                           ) -> Measurements | Measurements3:
     """Validate parsed measurement JSON (raises :class:`MeasurementError` naming the
-    source and the key)."""
+    source and the key): planar, or 3-D where the observer has a height and every image
+    an ``elevation_deg`` (:func:`measurements3_from_dict`)."""
+    if (isinstance(data, dict) and isinstance(data.get("observer"), list)
+            and len(data["observer"]) == 3):
+        return measurements3_from_dict(data, source)
     r = Reader(source, MeasurementError)
     top = r.mapping(data, "", ("observer", "target", "beacons"),
                     optional=("sigma", "observer_pan_deg", "scene", "detector", "source"))
@@ -105,3 +111,71 @@ def read_shared_alpha(r: Reader, value: Any, key: str) -> float:
     if 0 < shared < SIGMA_ALPHA_MIN_DEG:
         raise r.fail(key, f"{shared:g} must be 0 (none) or ≥ {SIGMA_ALPHA_MIN_DEG:g}")
     return shared
+
+
+_IMAGE3 = ("alpha_deg", "elevation_deg", "d_total")
+
+
+def measurements3_from_dict(data: Any, source: str | Path = "<measurements>"
+                            ) -> Measurements3:
+    """Validate parsed 3-D measurement JSON (docs/files.md): the observer [x, y, z], the
+    target's and each beacon's ``alpha_deg``, ``elevation_deg`` and ``d_total``, each
+    beacon's ``position`` [x, y] or [x, y, z]; optionally ``heights`` and ``fronts`` (one
+    per beacon, then the target's) and ``sigma`` (one ``{alpha_deg, elevation_deg,
+    d_total_rel}`` for every observation, or a list, the beacons' then the target's)."""
+    r = Reader(source, MeasurementError)
+    top = r.mapping(data, "", ("observer", "target", "beacons"),
+                    optional=("heights", "fronts", "sigma", "scene", "source"))
+    raw = top["observer"]
+    observer = (*r.pair(raw[:2], "observer"), r.number(raw[2], "observer[2]"))
+
+    def image(value: Any, key: str) -> tuple[float, float, float]:
+        v = r.mapping(value, key, _IMAGE3, optional=("position",) if key != "target" else ())
+        return (r.number(v["alpha_deg"], f"{key}.alpha_deg"),
+                r.number(v["elevation_deg"], f"{key}.elevation_deg", low=-90.0, high=90.0),
+                r.number(v["d_total"], f"{key}.d_total", low=D_TOTAL_RANGE_CM[0],
+                         high=D_TOTAL_RANGE_CM[1]))
+
+    if not isinstance(top["beacons"], list) or not top["beacons"]:
+        raise r.fail("beacons", "expected a non-empty list")
+    beacons = []
+    for i, b in enumerate(top["beacons"]):
+        key = f"beacons[{i}]"
+        if not isinstance(b, dict) or "position" not in b:
+            raise r.fail(f"{key}.position", "missing required key")
+        xy, z = r.point(b["position"], f"{key}.position")
+        beacons.append(((*xy, z), image(b, key)))
+    n = len(beacons) + 1
+
+    def per_object(key: str) -> tuple[float, ...] | None:
+        if key not in top:
+            return None
+        v = top[key]
+        if not isinstance(v, list) or len(v) != n:
+            raise r.fail(key, f"expected {n} numbers (each beacon's, then the target's)")
+        return tuple(r.number(x, f"{key}[{k}]", low=0.0) for k, x in enumerate(v))
+
+    sigma = None
+    if "sigma" in top:
+        raw_s = top["sigma"] if isinstance(top["sigma"], list) else [top["sigma"]] * n
+        if len(raw_s) != n:
+            raise r.fail("sigma", f"expected one σ triple, or {n} (each beacon's, then the "
+                         "target's)")
+        sigma = tuple(_sigma3(r, v, f"sigma[{k}]") for k, v in enumerate(raw_s))
+    heights = per_object("heights")
+    if heights is not None and min(heights) <= 0:
+        raise r.fail("heights", "each height must be > 0")
+    return Measurements3(observer=observer, beacons=tuple(beacons),
+                         target=image(top["target"], "target"), heights=heights,
+                         fronts=per_object("fronts"), sigma=sigma)
+
+
+def _sigma3(r: Reader, value: Any, key: str) -> tuple[float, float, float]:
+    """A 3-D observation's σ's: α and elevation in degrees, d_total relative."""
+    s = r.mapping(value, key, ("alpha_deg", "elevation_deg", "d_total_rel"))
+    return (r.number(s["alpha_deg"], f"{key}.alpha_deg", low=SIGMA_ALPHA_MIN_DEG,
+                     high=SIGMA_ALPHA_MAX_DEG),
+            r.number(s["elevation_deg"], f"{key}.elevation_deg", low=SIGMA_ALPHA_MIN_DEG,
+                     high=SIGMA_ALPHA_MAX_DEG),
+            r.number(s["d_total_rel"], f"{key}.d_total_rel", low=SIGMA_D_REL_MIN,
+                     high=SIGMA_D_REL_MAX))

@@ -21,7 +21,7 @@ from mirrorsim.errors import BadParameter, DetectionError, SolverError
 from mirrorsim.formats.error_model import ErrorModel
 from mirrorsim.formats.files import claim_run_folder
 from mirrorsim.pipelines.evaluate import evaluate_into
-from mirrorsim.pipelines.scenes import check_given_scene
+from mirrorsim.pipelines.scenes import check_given_scene, refuse_3d
 from mirrorsim.pipelines.score import Report, check_keep
 from mirrorsim.pipelines.solving import model_for
 from mirrorsim.rendering.backend import check_variant
@@ -267,6 +267,7 @@ def _checked(scene: Scene, *, keep: tuple[str, ...], calibration: SelfCalibratio
     """:func:`run_budget`'s arguments checked, and its error model read, before anything
     is written: the calibration it solves with and the model that weighs every run."""
     check_given_scene(scene)  # edited by a script: held to what its file would make
+    refuse_3d(scene, "budget")
     check_keep(keep)
     calibration = check_budget_calibration(scene, calibration)
     model = model_for(scene, error_model)

@@ -27,7 +27,7 @@ from mirrorsim.truth.groundtruth import GroundTruth, RenderInfo
 from solver.errors import SolverError
 from solver.geometry import wrap_yaw
 from solver.lsq import solve_measurements
-from solver.lsq3 import Fit3, crlb3, solve_lsq3
+from solver.lsq3 import Fit3, Measurements3, crlb3
 from solver.measurements import ObjectSigmas, Sigma
 from solver.sltr3d import measured3
 
@@ -57,38 +57,6 @@ def elevation_sigma_deg(sigma: Sigma, height_px: float, fx: float) -> float:
     edge (the foot's row), d_total on two (the foot's and the top's), so an edge's σ is
     σ_d·s/√2 px and the elevation's that over f (radians)."""
     return math.degrees(sigma.d_total_rel * height_px / math.sqrt(2.0) / fx)
-
-
-@dataclass(frozen=True)
-class Seen3:
-    """What the experimenter measured, in 3-D: the lens's position, each beacon's base
-    (where it is believed to stand) with its image's (α, ε, d_total), the target's
-    (mean over the frames), the heights measured (each beacon's painted band, then the
-    target's), and each observation's σ's (α deg, ε deg, d_total relative; the
-    beacons', then the target's)."""
-
-    observer: tuple[float, float, float]
-    beacons: tuple[tuple[tuple[float, ...], tuple[float, float, float]], ...]
-    target: tuple[float, float, float]
-    heights: tuple[float, ...]
-    sigma: tuple[tuple[float, float, float], ...]
-
-    @property
-    def fronts(self) -> tuple[float, ...]:
-        """How far before each object's axis the face the detector measures stands (cm):
-        the beacons', then the target's (:data:`~mirrorsim.scene.model.FRONT_OFFSET`)."""
-        return (FRONT_OFFSET["beacon"],) * len(self.beacons) + (FRONT_OFFSET["target"],)
-
-    def to_json(self) -> dict:
-        """The report's ``measurements`` block."""
-        def image(s):
-            return {"alpha_deg": s[0], "elevation_deg": s[1], "d_total": s[2]}
-
-        return {"observer": list(self.observer), "target": image(self.target),
-                "beacons": [{"position": list(p), **image(s)} for p, s in self.beacons],
-                "heights": list(self.heights),
-                "sigma": [{"alpha_deg": a, "elevation_deg": e, "d_total_rel": d}
-                          for a, e, d in self.sigma]}
 
 
 @dataclass(frozen=True)
@@ -133,7 +101,7 @@ class Report3:
 
     scene: str
     truth: GroundTruth
-    seen: Seen3
+    seen: Measurements3
     fit: Fit3
     planar_target: tuple[float, float] | None
     errors: Score3
@@ -149,18 +117,8 @@ class Report3:
 
     def to_json(self) -> dict:
         """The report document (``<name>.report.json``)."""
-        f = self.fit
-        cov = f.target_covariance
         return {"scene": self.scene, "geometry": "3d", "truth": self.truth.to_json(),
-                "measurements": self.seen.to_json(),
-                "solution": {"mirror": {"yaw_deg": f.plane.yaw_deg,
-                                        "lean_deg": f.plane.lean_deg,
-                                        "normal": f.plane.normal.tolist(),
-                                        "offset_cm": f.plane.rho},
-                             "target": f.target.tolist(),
-                             "target_covariance": None if cov is None else cov.tolist(),
-                             "nuisances": dict(f.nuisances),
-                             "downweighted": list(f.downweighted)},
+                "measurements": self.seen.to_json(), "solution": self.fit.to_json(),
                 "planar_solution": {"target": None if self.planar_target is None
                                     else list(self.planar_target)},
                 "errors": self.errors.to_json(),
@@ -197,9 +155,7 @@ def evaluate_into3(scene: Scene, out: Path, *, variant: str = "auto", progress: 
     features, sigma = sigmas_of(model, seen2)
     seen = _seen3(scene, measured, sigma, fx=seen2.fx)
     nuisances, priors = _bench_nuisances(model, sigma)
-    fit = solve_lsq3(seen.observer, list(seen.beacons), [seen.target],
-                     sigma=np.array(seen.sigma), heights=seen.heights, fronts=seen.fronts,
-                     nuisances=nuisances, priors=priors)
+    fit = seen.solve(nuisances=nuisances, priors=priors)
     try:  # the planar solve of the same frames, beside it
         planar = solve_measurements(scene.camera.position, seen2.beacons, [seen2.target],
                                     sigma=sigma).target
@@ -222,7 +178,7 @@ def evaluate_into3(scene: Scene, out: Path, *, variant: str = "auto", progress: 
                    error_model=model.name(), model_warnings=tuple(notes))
 
 
-def _seen3(scene: Scene, measured: list, sigma: ObjectSigmas, *, fx: float) -> Seen3:
+def _seen3(scene: Scene, measured: list, sigma: ObjectSigmas, *, fx: float) -> Measurements3:
     """Each image's (α, ε, d_total) from the frames' detections, the target's mean over
     them, the heights measured and each observation's σ's."""
     capture = measured[0].files.capture
@@ -247,9 +203,11 @@ def _seen3(scene: Scene, measured: list, sigma: ObjectSigmas, *, fx: float) -> S
     t = sigma.target
     sig.append((t.alpha_deg, elevation_sigma_deg(t, measured_t[0].height_px, fx),
                 t.d_total_rel))
-    return Seen3(observer=tuple(float(c) for c in capture.camera.center3),
-                 beacons=tuple(beacons), target=target,
-                 heights=(*heights, capture.target_size[1]), sigma=tuple(sig))
+    return Measurements3(observer=tuple(float(c) for c in capture.camera.center3),
+                         beacons=tuple(beacons), target=target,
+                         heights=(*heights, capture.target_size[1]),
+                         fronts=(FRONT_OFFSET["beacon"],) * len(beacons)
+                         + (FRONT_OFFSET["target"],), sigma=tuple(sig))
 
 
 def _bench_nuisances(model: ErrorModel, sigma: ObjectSigmas
@@ -263,7 +221,7 @@ def _bench_nuisances(model: ErrorModel, sigma: ObjectSigmas
     return tuple(priors), priors
 
 
-def _score3(scene: Scene, truth: GroundTruth, fit: Fit3, seen: Seen3,
+def _score3(scene: Scene, truth: GroundTruth, fit: Fit3, seen: Measurements3,
             planar_target: tuple[float, float] | None, *, nuisances: tuple[str, ...],
             priors: dict[str, float]) -> Score3:
     """The 3-D estimate against the truth (:class:`Score3`)."""

@@ -10,7 +10,7 @@ import numpy as np
 
 from mirrorsim.detection.assign import REFLECTION_EXCESS
 from mirrorsim.errors import BadParameter
-from mirrorsim.pipelines.scenes import check_given_scene
+from mirrorsim.pipelines.scenes import check_given_scene, refuse_3d
 from mirrorsim.scene.model import (
     MIRROR_DEPTH,
     OCCLUDER_THICKNESS,
@@ -153,6 +153,7 @@ def plan_scene(scene: Scene, sigma: Sigma | ObjectSigmas | None = None, eps_deg:
         A ``calibration`` that is not a :class:`~solver.selfcal.SelfCalibration`.
     """
     check_given_scene(scene)  # edited by a script: held to what its file would make
+    refuse_3d(scene, "plan")
     # the placement's Fisher information takes independent errors: a shared α offset
     # enters each α whole (the conservative choice; see docs/limitations.md)
     sigma = as_object_sigmas(sigma or Sigma()).independent()

@@ -137,3 +137,24 @@ def check_given_scene(scene: Any) -> Scene:
                            "dataclasses.replace, which recomputes nothing): edit it with "
                            "mirrorsim.edit_scene")
     return scene
+
+
+def refuse_3d(scene: Scene, command: str) -> None:
+    """Refuse a 3-D scene (a raised object or mirror, a leaning mirror) where ``command``
+    works in the board's plane only: one line naming the scene's file and the first key
+    that makes it 3-D, before anything is claimed or rendered.
+
+    Raises
+    ------
+    SceneError
+        ``scene`` is 3-D.
+    """
+    if not scene.is_3d:
+        return
+    m = scene.mirror
+    key, value = next((k, v) for k, v in (
+        ("mirror.lean", m.lean), ("mirror.center[2]", m.z),
+        ("target.position[2]", scene.target.z),
+        *((f"beacons[{i}].position[2]", b.z) for i, b in enumerate(scene.beacons))) if v)
+    raise SceneError(scene.source, key, f"{value:g}: {command} works in the board's plane "
+                     "and this scene is 3-D; `evaluate` solves it in 3-D")

@@ -33,7 +33,7 @@ from mirrorsim.errors import BadParameter, DetectionError
 from mirrorsim.formats.error_model import ErrorModel
 from mirrorsim.formats.files import claim_run_folder
 from mirrorsim.pipelines.frame import FrameNotMeasured, render_and_measure
-from mirrorsim.pipelines.scenes import check_given_scene
+from mirrorsim.pipelines.scenes import check_given_scene, refuse_3d
 from mirrorsim.pipelines.solving import model_for
 from mirrorsim.pipelines.track_paths import HEADINGS, PATHS, beacon_path
 from mirrorsim.pipelines.track_report import TrackReport, TrackStep
@@ -126,6 +126,7 @@ def run_track(scene: Scene, out: str | Path, *, kind: str = "rectangular", steps
         or a fixed beacon's image is not measured.
     """
     check_given_scene(scene)  # edited by a script: held to what its file would make
+    refuse_3d(scene, "track")
     check_options(kind, steps, odometry_sigma, side=side, step=step, heading=heading,
                   board=scene.board.size)
     _check_filter_options(scene, particles=particles, seed=seed, position_sigma=position_sigma,
