@@ -100,7 +100,16 @@ def test_the_3d_report_is_consistent_and_beats_the_planar_solve(raised_report):
     np.testing.assert_allclose(
         doc["errors"]["exact_readings"][-1]["d_total"],
         measured3(scene.camera.center3, plane, scene.target.base3,
-                  height=scene.target.size[1])[2], rtol=1e-12)
+                  height=scene.target.size[1], front=0.2)[2], rtol=1e-12)
+    # detect writes a 3-D capture's frame's measurements in 3-D: solve reads them
+    frame = report.frames[0].png
+    run = subprocess.run([sys.executable, "-m", "mirrorsim.cli.main", "detect", frame,
+                          "--capture", frame.replace(".png", ".capture.json"),
+                          "--json", "-"], cwd=ROOT, capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    m3 = json.loads(run.stdout[run.stdout.index("{"):])
+    assert len(m3["observer"]) == 3 and "elevation_deg" in m3["target"]
+    assert m3["target"]["alpha_deg"] == pytest.approx(report.seen.target[0], abs=1e-9)
 
 
 @pytest.mark.slow

@@ -72,7 +72,7 @@ def _detect_options(p):
 def _detect(args) -> int:
     from mirrorsim.cli.tables import detect_summary
     from mirrorsim.detection.detector import annotate
-    from mirrorsim.formats.capture import CaptureRecord
+    from mirrorsim.formats.capture import CaptureRecord, load_capture
     from mirrorsim.pipelines.frame import measure_frame
 
     reference_error = 0.0  # a capture record cannot know its bench's calibration error
@@ -90,6 +90,13 @@ def _detect(args) -> int:
     if args.annotate:
         write_png(args.annotate, annotate(m.image, m.detection))
         print(f"  annotated: {args.annotate}")
+    record = load_capture(view) if isinstance(view, Path | str) else view
+    if record.geometry == "3d":  # the 3-D measurements (solve reads them), and the pixels
+        from mirrorsim.pipelines.evaluate3d import frame_measurements3
+
+        emit(args, {**frame_measurements3(m.detection, record).to_json(),
+                    "detector": m.detection.to_json()["detector"]})
+        return 0
     emit(args, m.detection.to_json())
     return 0
 

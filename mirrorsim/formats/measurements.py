@@ -125,7 +125,7 @@ def measurements3_from_dict(data: Any, source: str | Path = "<measurements>"
     d_total_rel}`` for every observation, or a list, the beacons' then the target's)."""
     r = Reader(source, MeasurementError)
     top = r.mapping(data, "", ("observer", "target", "beacons"),
-                    optional=("heights", "fronts", "sigma", "scene", "source"))
+                    optional=("heights", "fronts", "sigma", "scene", "source", "detector"))
     raw = top["observer"]
     observer = (*r.pair(raw[:2], "observer"), r.number(raw[2], "observer[2]"))
 

@@ -13,8 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
+from mirrorsim.detection.detector import Detection
 from mirrorsim.detection.image_geometry import elevation_of
 from mirrorsim.errors import BadParameter, DetectionError
+from mirrorsim.formats.capture import CaptureRecord
 from mirrorsim.formats.error_model import ErrorModel
 from mirrorsim.pipelines.frame import render_and_measure
 from mirrorsim.pipelines.measured import frame_record, frames_of, seen_of, sigmas_of
@@ -178,36 +180,62 @@ def evaluate_into3(scene: Scene, out: Path, *, variant: str = "auto", progress: 
                    error_model=model.name(), model_warnings=tuple(notes))
 
 
+def frame_measurements3(det: Detection, capture: CaptureRecord) -> Measurements3:
+    """One frame's measurements in 3-D (what ``detect`` writes for a 3-D capture record):
+    each beacon's believed base with its mirror image's (α, ε, d_total)
+    (:func:`~mirrorsim.detection.image_geometry.elevation_of`), the target's, the heights
+    measured and the measured faces' offsets; no σ's.
+
+    Raises
+    ------
+    DetectionError
+        The target's d_total was not measured.
+    """
+    if det.target.d_total is None:
+        raise DetectionError("the target's d_total could not be measured (its image is "
+                             "clipped at the top)")
+    cam = capture.camera
+    beacons = _beacons3(det, capture)
+    return Measurements3(
+        observer=tuple(float(c) for c in cam.center3), beacons=beacons,
+        target=(det.target.alpha_deg, *elevation_of(cam, det.target)),
+        heights=(*(pencil_paint_height(b.height) for b, _ in det.beacons),
+                 capture.target_size[1]),
+        fronts=(FRONT_OFFSET["beacon"],) * len(beacons) + (FRONT_OFFSET["target"],))
+
+
+def _beacons3(det: Detection, capture: CaptureRecord) -> tuple:
+    """Each beacon's believed base and its mirror image's (α, ε, d_total)."""
+    return tuple((tuple(float(c) for c in b.base3),
+                  (im.alpha_deg, *elevation_of(capture.camera, im))) for b, im in det.beacons)
+
+
 def _seen3(scene: Scene, measured: list, sigma: ObjectSigmas, *, fx: float) -> Measurements3:
-    """Each image's (α, ε, d_total) from the frames' detections, the target's mean over
-    them, the heights measured and each observation's σ's."""
-    capture = measured[0].files.capture
-    detections = [m.detection for m in measured]
-    beacons, heights, px = [], [], []
-    for det, m in zip(detections, measured, strict=True):
-        for b, im in det.beacons:
-            elevation, d3 = elevation_of(m.files.capture.camera, im)
-            beacons.append((tuple(float(c) for c in b.base3), (im.alpha_deg, elevation, d3)))
-            heights.append(pencil_paint_height(b.height))
-            px.append(im.height_px)
-    measured_t = [d.target for d in detections if d.target.d_total is not None]
-    if not measured_t:
+    """The frames' measurements together: every beacon's, the target's mean over the
+    frames that measured it (each frame's view shares its errors), and each
+    observation's σ's."""
+    with_target = [m for m in measured if m.detection.target.d_total is not None]
+    if not with_target:
         raise DetectionError(f"{scene.name}: the target's d_total could not be measured")
-    # the target once, at its mean over the frames (each frame's view shares its errors)
-    target = tuple(float(v) for v in np.mean(
-        [(t.alpha_deg, *elevation_of(capture.camera, t)) for t in measured_t], axis=0))
+    first = frame_measurements3(with_target[0].detection, with_target[0].files.capture)
+    beacons = [b for m in measured for b in _beacons3(m.detection, m.files.capture)]
+    pencils = [(b, im) for m in measured for b, im in m.detection.beacons]
     per_beacon = (sigma.beacons if len(sigma.beacons) == len(beacons)
                   else sigma.beacons[:1] * len(beacons))
-    sig = [(s.alpha_deg, elevation_sigma_deg(s, h, fx), s.d_total_rel)
-           for s, h in zip(per_beacon, px, strict=True)]
+    sig = [(s.alpha_deg, elevation_sigma_deg(s, im.height_px, fx), s.d_total_rel)
+           for s, (_, im) in zip(per_beacon, pencils, strict=True)]
     t = sigma.target
-    sig.append((t.alpha_deg, elevation_sigma_deg(t, measured_t[0].height_px, fx),
-                t.d_total_rel))
-    return Measurements3(observer=tuple(float(c) for c in capture.camera.center3),
-                         beacons=tuple(beacons), target=target,
-                         heights=(*heights, capture.target_size[1]),
-                         fronts=(FRONT_OFFSET["beacon"],) * len(beacons)
-                         + (FRONT_OFFSET["target"],), sigma=tuple(sig))
+    sig.append((t.alpha_deg, elevation_sigma_deg(t, with_target[0].detection.target.height_px,
+                                                 fx), t.d_total_rel))
+    target = tuple(float(v) for v in np.mean(
+        [(m.detection.target.alpha_deg, *elevation_of(m.files.capture.camera,
+                                                      m.detection.target))
+         for m in with_target], axis=0))
+    return replace(first, beacons=tuple(beacons), target=target,
+                   heights=(*(pencil_paint_height(b.height) for b, _ in pencils),
+                            first.heights[-1]),
+                   fronts=(FRONT_OFFSET["beacon"],) * len(beacons) + (FRONT_OFFSET["target"],),
+                   sigma=tuple(sig))
 
 
 def _bench_nuisances(model: ErrorModel, sigma: ObjectSigmas
