@@ -49,6 +49,16 @@ def main() -> None:
                                                                   quality=88)
     Image.fromarray(frame[330:720, 760:1180]).save(DOCS / "default_mirror_crop.jpg", quality=92)
     curved_mirrors()
+    scene3d()
+
+
+def scene3d() -> None:
+    """The bundled 3-D scene as rendered (its mirror's part, enlarged) and its top and
+    side views (`mirrorsim plot`)."""
+    run("render", "scenes/raised.yaml", "--out", "renders/raised", "--quiet")
+    frame = np.asarray(Image.open(ROOT / "renders" / "raised" / "raised.png").convert("RGB"))
+    Image.fromarray(frame[400:760, 700:1250]).save(DOCS / "scene3d_frame.jpg", quality=90)
+    run("plot", "scenes/raised.yaml", "--out", str(DOCS / "scene3d_views.png"))
 
 
 def curved_mirrors(radius: float = 300.0) -> None:

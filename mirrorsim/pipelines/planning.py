@@ -147,15 +147,14 @@ def plan_scene(scene: Scene, sigma: Sigma | ObjectSigmas | None = None, eps_deg:
     Raises
     ------
     BadParameter
-        For a σ, ε or step that is not > 0, ε ≥ 45° or a negative spread; ``n_beacons``
-        or ``n_poses`` not a whole number within its range.
+        A σ, ε or step not > 0, ε ≥ 45°, a negative spread, ``n_beacons`` or ``n_poses``
+        not a whole number within its range.
     SolverError
         A ``calibration`` that is not a :class:`~solver.selfcal.SelfCalibration`.
     """
     check_given_scene(scene)  # edited by a script: held to what its file would make
     refuse_3d(scene, "plan")
-    # the placement's Fisher information takes independent errors: a shared α offset
-    # enters each α whole (the conservative choice; see docs/limitations.md)
+    # independent errors: a shared α offset enters each α whole (docs/limitations.md)
     sigma = as_object_sigmas(sigma or Sigma()).independent()
     if len(sigma.beacons) > 1:  # it was silently taken for the first beacon's
         raise BadParameter("sigma", f"{len(sigma.beacons)} beacon σ pairs: give one (every "
