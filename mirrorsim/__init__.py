@@ -20,7 +20,8 @@ cheap)::
 ``load_measurements(path)``  a measurements file (what ``detect`` writes)
 ``SelfCalibration(...)``  what ``solve``, ``evaluate``, ``budget``, ``plan`` and
                           ``generate_dataset`` self-calibrate (``calibration=``)
-``evaluate(scene, out)``  render → detect → solve → score (:class:`Report`)
+``evaluate(scene, out)``  render → detect → solve → score (:class:`Report`; a 3-D
+                          scene's: :class:`Report3`)
 ``budget(scene, out)``    the error budget of a bench (:class:`Budget`)
 ``track(scene, out)``     the moving beacon on rendered frames (:class:`TrackReport`)
 ``plan(scene)``           beacon placement (:class:`Plan`)

@@ -61,8 +61,8 @@ class Measurements3:
     lens's position, each beacon's believed base with its image's (α, ε, d_total), the
     target's; optionally the heights measured (each beacon's, then the target's: the
     readings are then modelled as a detector's, :func:`~solver.sltr3d.measured3`), how
-    far before each axis the measured face stands, and each observation's σ's (α deg,
-    ε deg, d_total relative; the beacons', then the target's)."""
+    far before each axis the measured face stands, each observation's σ's (α deg,
+    ε deg, d_total relative; the beacons', then the target's) and the camera's pan."""
 
     observer: tuple[float, float, float]
     beacons: tuple[tuple[tuple[float, float, float], Seen], ...]
@@ -70,6 +70,7 @@ class Measurements3:
     heights: tuple[float, ...] | None = None
     fronts: tuple[float, ...] | None = None
     sigma: tuple[tuple[float, float, float], ...] | None = None
+    pan_deg: float | None = None  # the camera's pan as its mount reports it
 
     def to_json(self) -> dict:
         """The 3-D measurements document."""
@@ -85,6 +86,8 @@ class Measurements3:
         if self.sigma is not None:
             out["sigma"] = [{"alpha_deg": a, "elevation_deg": e, "d_total_rel": d}
                             for a, e, d in self.sigma]
+        if self.pan_deg is not None:
+            out["observer_pan_deg"] = self.pan_deg
         return out
 
     def solve(self, *, nuisances: tuple[str, ...] = (),
@@ -92,8 +95,8 @@ class Measurements3:
         """:func:`solve_lsq3` of these measurements."""
         return solve_lsq3(self.observer, list(self.beacons), [self.target],
                           sigma=None if self.sigma is None else np.array(self.sigma),
-                          heights=self.heights, fronts=self.fronts, nuisances=nuisances,
-                          priors=priors)
+                          heights=self.heights, fronts=self.fronts, pan_deg=self.pan_deg,
+                          nuisances=nuisances, priors=priors)
 
 
 @dataclass(frozen=True)
@@ -110,6 +113,7 @@ class _Problem:
     flip: bool
     heights: tuple[float, ...] | None = None  # each object's (beacons', then the target's)
     fronts: tuple[float, ...] | None = None  # each measured face's offset (likewise)
+    pan_deg: float | None = None  # the camera's pan, where the readings are a detector's
 
     def predicted(self, x: np.ndarray) -> np.ndarray:
         """(α, ε, d_total) of every observation at parameters ``x``: of each object's
@@ -122,11 +126,11 @@ class _Problem:
                           + [seen3(self.o, plane, x[3:6])] * n_t)
         else:
             fronts = self.fronts or (0.0,) * len(self.heights)
-            pr = np.array([measured3(self.o, plane, p, height=h, front=f)
-                           for p, h, f in zip(self.positions, self.heights, fronts,
-                                              strict=False)]
-                          + [measured3(self.o, plane, x[3:6], height=self.heights[-1],
-                                       front=fronts[-1])] * n_t)
+            objects = [*self.positions, x[3:6]]
+            pr = np.array([measured3(self.o, plane, p, height=h, front=f, pan_deg=self.pan_deg)
+                           for p, h, f in zip(objects, self.heights, fronts, strict=True)]
+                          + [[np.nan] * 3] * (n_t - 1))
+            pr[len(self.positions):] = pr[len(self.positions)]  # every view of the target
         for name, value in zip(self.nuisances, x[6:], strict=True):
             if name == "scale":
                 pr[:, 2] *= value
@@ -160,7 +164,8 @@ def solve_lsq3(observer: ArrayLike, beacons: list[tuple[ArrayLike, Seen]], targe
                *, sigma: tuple[float, float, float] | np.ndarray | None = None,
                nuisances: tuple[str, ...] = (), priors: dict[str, float] | None = None,
                heights: tuple[float, ...] | None = None,
-               fronts: tuple[float, ...] | None = None) -> Fit3:
+               fronts: tuple[float, ...] | None = None,
+               pan_deg: float | None = None) -> Fit3:
     """The mirror's plane and the target from every beacon (its position, and what the
     camera saw of it: α, ε, d_total) and every view of the target, by weighted least
     squares from the first beacon's closed form.  ``sigma``: (σ_α deg, σ_ε deg, σ_d as a
@@ -172,7 +177,9 @@ def solve_lsq3(observer: ArrayLike, beacons: list[tuple[ArrayLike, Seen]], targe
     (cm, the target's last), to predict what a detector reads off each image
     (:func:`~solver.sltr3d.measured3`: a leaning mirror's bias removed); without them
     the measurements are taken as each base's exact image.  ``fronts``: with them, how
-    far before each object's axis the face its detector measures stands (cm).
+    far before each object's axis the face its detector measures stands (cm);
+    ``pan_deg``: the camera's pan the readings were made at (None: each image on the
+    optical axis).
 
     Raises
     ------
@@ -187,6 +194,7 @@ def solve_lsq3(observer: ArrayLike, beacons: list[tuple[ArrayLike, Seen]], targe
     unknown = [n for n in (*nuisances, *(priors or {})) if n not in NUISANCES3]
     if unknown or set(priors or {}) - set(nuisances):
         raise SolverError(f"nuisances are {', '.join(NUISANCES3)}, each prior on one of them")
+    _check_objects(len(beacons), heights, fronts)
     o = np.asarray(observer, float)
     start = solve_single3(o, beacons[0][0], beacons[0][1], target_seen=targets[0])
     yaw0 = start.plane.yaw_deg
@@ -195,7 +203,7 @@ def solve_lsq3(observer: ArrayLike, beacons: list[tuple[ArrayLike, Seen]], targe
                  (0.01, 0.01, 0.002) if sigma is None else np.asarray(sigma, float),
                  tuple(nuisances), dict(priors or {}),
                  flip=start.plane.flip, heights=None if heights is None else tuple(heights),
-                 fronts=None if fronts is None else tuple(fronts))
+                 fronts=None if fronts is None else tuple(fronts), pan_deg=pan_deg)
     x0 = np.array([yaw0, start.plane.lean_deg, start.plane.rho, *start.target,
                    *(NUISANCES3[n] for n in nuisances)])
     robust = len(p.residuals(x0)) > len(x0)
@@ -222,7 +230,8 @@ def crlb3(observer: ArrayLike, beacons: list[ArrayLike], plane: MirrorPlane, *,
           n_targets: int = 1,
           nuisances: tuple[str, ...] = (), priors: dict[str, float] | None = None,
           heights: tuple[float, ...] | None = None,
-          fronts: tuple[float, ...] | None = None) -> np.ndarray:
+          fronts: tuple[float, ...] | None = None,
+          pan_deg: float | None = None) -> np.ndarray:
     """The Cramér–Rao bound of (yaw, lean, ρ, x, y, z, *nuisances) at the truth, for
     Gaussian errors of these σ's: the inverse of the Fisher information the fit of
     :func:`solve_lsq3` weighs (no estimator that is unbiased does better).
@@ -232,6 +241,7 @@ def crlb3(observer: ArrayLike, beacons: list[ArrayLike], plane: MirrorPlane, *,
     SolverError
         The geometry does not determine the unknowns.
     """
+    _check_objects(len(beacons), heights, fronts)
     o, t = np.asarray(observer, float), np.asarray(target, float)
     ot = observe3(o, plane, t)  # the target must stand before the glass
     seen = [seen3(o, plane, b) for b in beacons]
@@ -239,7 +249,7 @@ def crlb3(observer: ArrayLike, beacons: list[ArrayLike], plane: MirrorPlane, *,
     p = _Problem(o, [np.asarray(b, float) for b in beacons], np.array(seen, float), sigma,
                  tuple(nuisances), dict(priors or {}), flip=plane.flip,
                  heights=None if heights is None else tuple(heights),
-                 fronts=None if fronts is None else tuple(fronts))
+                 fronts=None if fronts is None else tuple(fronts), pan_deg=pan_deg)
     x = np.array([plane.yaw_deg, plane.lean_deg, plane.rho, *t,
                   *(NUISANCES3[n] for n in nuisances)])
     J = _jacobian(p, x)
@@ -247,6 +257,17 @@ def crlb3(observer: ArrayLike, beacons: list[ArrayLike], plane: MirrorPlane, *,
     if np.linalg.cond(info) > 1e14:
         raise SolverError("the geometry does not determine the mirror's plane and the target")
     return np.linalg.inv(info)
+
+
+def _check_objects(n_beacons: int, heights: tuple[float, ...] | None,
+                   fronts: tuple[float, ...] | None) -> None:
+    """One height (and face offset) per beacon and one for the target, or none."""
+    for name, values in (("heights", heights), ("fronts", fronts)):
+        if values is not None and len(values) != n_beacons + 1:
+            raise SolverError(f"{name}: {len(values)} given for {n_beacons} beacon(s) and the "
+                              f"target ({n_beacons + 1} expected)")
+    if fronts is not None and heights is None:
+        raise SolverError("fronts: given without heights (they model a detector's readings)")
 
 
 def _jacobian(p: _Problem, x: np.ndarray) -> np.ndarray:

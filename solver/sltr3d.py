@@ -106,17 +106,18 @@ class Observation3:
     reflection_point: np.ndarray
 
 
-def observe3(observer: ArrayLike, plane: MirrorPlane, point: ArrayLike) -> Observation3:
+def observe3(observer: ArrayLike, plane: MirrorPlane, point: ArrayLike, *,
+             strict: bool = True) -> Observation3:
     """The forward model in 3-D: what ``observer`` (the camera's centre) sees of
-    ``point`` in ``plane``.
+    ``point`` in ``plane`` (``strict=False``: wherever the point stands).
 
     Raises
     ------
     SolverError
-        ``point`` or ``observer`` behind the mirror's face.
+        ``point`` or ``observer`` behind the mirror's face (with ``strict``).
     """
     o, p = np.asarray(observer, float), np.asarray(point, float)
-    if p @ plane.normal - plane.rho <= 0 or o @ plane.normal - plane.rho <= 0:
+    if strict and (p @ plane.normal - plane.rho <= 0 or o @ plane.normal - plane.rho <= 0):
         raise SolverError("the point and the camera must stand in front of the mirror")
     v = plane.reflect(p)
     r = plane.hit(o, v - o)
@@ -221,40 +222,49 @@ def apparent_height_ratio(observer: ArrayLike, plane: MirrorPlane, base: ArrayLi
 
 
 def measured3(observer: ArrayLike, plane: MirrorPlane, base: ArrayLike, *, height: float,
-              front: float = 0.0) -> tuple[float, float, float]:
+              front: float = 0.0, pan_deg: float | None = None
+              ) -> tuple[float, float, float]:
     """(α, ε, d_total) as a detector reads them off the image of an upright object of
-    ``height`` standing on ``base``, by a level pinhole camera at ``observer`` turned to
-    the image: α the bearing of the image's mid-height, the horizontal distance from
-    size constancy (height over the image's length along its axis, in tangents of the
-    camera's angles), ε of its foot's ray at that distance, d_total along that ray.
-    ``front``: how far before the axis the face the detector measures stands (cm): the
-    foot it sees is that face's, which drops or rises with the image's lean towards
-    the camera (the detector takes that face's foot at the axis's distance less
-    ``front``).
+    ``height`` standing on ``base``, by a level pinhole camera at ``observer`` panned to
+    ``pan_deg`` (None: turned to the image).  On the film (tangents of the camera's
+    angles) the image runs from its foot to its top; the detector takes
+    - α at the column of their midpoint, φ off the optical axis: pan − φ;
+    - the horizontal distance by size constancy, height over the image's length along
+      its axis, over cos φ;
+    - the foot's row: its elevation's tangent is the row's times cos φ, and it stands
+      that far above the lens at the distance less ``front`` (how far before the axis
+      the measured face stands: the foot it sees is that face's, which drops or rises
+      with the image's lean towards the camera); ε is that rise at the distance.
 
-    In an upright mirror this is :func:`seen3` of ``base`` (to rounding).  In a leaning
-    one the image leans by twice the lean: shorter, its top nearer or farther, and
-    slanted across the line of sight, so each reading is biased; a fit that predicts
-    the readings with this model removes the bias (docs/method.md).
+    In an upright mirror this is :func:`seen3` of ``base`` exactly, at any pan (tested
+    to 1e-9).  In a leaning one the image leans by twice the lean: shorter, its top
+    nearer or farther, slanted across the line of sight, so each reading is biased; a
+    fit that predicts the readings with this model removes the bias (docs/method.md).
     """
     o = np.asarray(observer, float)
     b = np.asarray(base, float)
     foot, top = plane.reflect(np.array([b, b + height * ZHAT]))
-    mid = (foot + top) / 2.0 - o
-    alpha = float(np.degrees(np.arctan2(mid[1], mid[0])))
+    if pan_deg is None:
+        mid = (foot + top) / 2.0 - o
+        pan = float(np.arctan2(mid[1], mid[0]))
+    else:
+        pan = float(np.radians(pan_deg))
+    ahead = np.array([np.cos(pan), np.sin(pan), 0.0])
+    right = np.array([np.sin(pan), -np.cos(pan), 0.0])
 
-    ahead = np.array([mid[0], mid[1], 0.0]) / np.hypot(mid[0], mid[1])
-    right = np.array([ahead[1], -ahead[0], 0.0])
-
-    def film(p: np.ndarray) -> np.ndarray:  # where the camera turned to mid sees p
+    def film(p: np.ndarray) -> np.ndarray:  # (right, up) over the depth along the axis
         q = p - o
         return np.array([q @ right, q[2]]) / (q @ ahead)
 
-    horizontal = height / float(np.linalg.norm(film(top) - film(foot)))
+    f_foot, f_top = film(foot), film(top)
+    phi = float(np.arctan((f_foot[0] + f_top[0]) / 2.0))
+    horizontal = height / float(np.linalg.norm(f_top - f_foot)) / np.cos(phi)
     seen = foot
     if front:  # the near face's foot: towards the camera, across the image's axis
         axis = (top - foot) / height
         toward = (o - foot) - ((o - foot) @ axis) * axis
         seen = foot + front * toward / np.linalg.norm(toward)
-    rise = float((seen[2] - o[2]) / np.hypot(*(seen - o)[:2])) * (horizontal - front)
+    rise = float(film(seen)[1] * np.cos(phi)) * (horizontal - front)
+    alpha = float(np.degrees(pan - phi))
+    alpha = (alpha + 180.0) % 360.0 - 180.0
     return alpha, float(np.degrees(np.arctan2(rise, horizontal))), float(np.hypot(horizontal, rise))

@@ -282,41 +282,44 @@ def test_what_a_detector_reads_is_the_exact_image_in_an_upright_mirror():
     plane = MirrorPlane.from_pose([40.0, 60.0, 0.0], 15.0, 0.0, toward=CAMERA)
     for base in ([35.0, 50.0, 0.0], [50.0, 48.0, 7.5]):
         for front in (0.0, 0.338):  # the near face's foot, taken at its own distance
-            np.testing.assert_allclose(measured3(CAMERA, plane, base, height=6.0, front=front),
-                                       seen3(CAMERA, plane, base), rtol=0, atol=1e-9)
+            for pan in (None, 40.0, 75.0):  # the image on the axis, or 20-30° off it
+                np.testing.assert_allclose(
+                    measured3(CAMERA, plane, base, height=6.0, front=front, pan_deg=pan),
+                    seen3(CAMERA, plane, base), rtol=0, atol=1e-9)
 
 
-def test_what_a_detector_reads_in_a_leaning_mirror_is_the_pinhole_projection():
-    """The readings of :func:`measured3` against a pinhole camera panned to the image,
-    written out here: project the reflected foot and top, then size constancy on the
-    image's length between them (f·H/s) and the foot row's elevation."""
+@pytest.mark.parametrize("pan_off", [0.0, 18.0, -25.0])
+def test_what_a_detector_reads_in_a_leaning_mirror_is_the_pinhole_projection(pan_off):
+    """The readings of :func:`measured3` against a pinhole camera written out here, in
+    pixels, read as the detector reads them (image_geometry's formulas): the reflected
+    foot, top and near face's foot projected; α at the foot and top's middle column;
+    d_total = f·H / s / cos φ with s the image's length; the foot row's elevation."""
     from solver.sltr3d import measured3
 
     plane = MirrorPlane.from_pose([40.0, 60.0, 0.0], 15.0, 4.0, toward=CAMERA)
-    base, h = np.array([35.0, 50.0, 3.0]), 6.0
+    base, h, front = np.array([35.0, 50.0, 3.0]), 6.0, 0.338
     foot, top = (plane.reflect(p) for p in (base, base + [0, 0, h]))
+    axis = (top - foot) / h
+    toward = (CAMERA - foot) - ((CAMERA - foot) @ axis) * axis
+    near = foot + front * toward / np.linalg.norm(toward)
     mid = (foot + top) / 2 - CAMERA
-    pan = math.atan2(mid[1], mid[0])  # the camera aimed at the image: φ ≈ 0
-    fwd = np.array([math.cos(pan), math.sin(pan), 0.0])
-    f = 1500.0
-
-    right = np.array([math.sin(pan), -math.cos(pan), 0.0])
+    pan = math.degrees(math.atan2(mid[1], mid[0])) + pan_off
+    f, cx, cy = 1500.0, 959.5, 543.5
+    fwd = np.array([math.cos(math.radians(pan)), math.sin(math.radians(pan)), 0.0])
+    right = np.array([math.sin(math.radians(pan)), -math.cos(math.radians(pan)), 0.0])
 
     def pixel(p):
         q = p - CAMERA
-        return np.array([f * (q @ right) / (q @ fwd), -f * q[2] / (q @ fwd)])
+        return np.array([cx + f * (q @ right) / (q @ fwd), cy - f * q[2] / (q @ fwd)])
 
-    def row(p):
-        return pixel(p)[1]
-
-    s = float(np.linalg.norm(pixel(foot) - pixel(top)))
-    horizontal = f * h / s
-    rise = -row(foot) / f * horizontal
-    alpha, elev, d = measured3(CAMERA, plane, base, height=h)
-    assert alpha == pytest.approx(math.degrees(pan), abs=1e-12)
-    # the foot and the top lie off the image's mid bearing by a hair: second order
-    assert d == pytest.approx(math.hypot(horizontal, rise), rel=1e-5)
-    assert elev == pytest.approx(math.degrees(math.atan2(rise, horizontal)), abs=1e-4)
+    pf, pt, pn = pixel(foot), pixel(top), pixel(near)
+    phi = math.atan(((pf[0] + pt[0]) / 2 - cx) / f)
+    d = f * h / float(np.linalg.norm(pf - pt)) / math.cos(phi)
+    rise = (cy - pn[1]) * math.cos(phi) / f * (d - front)
+    alpha, elev, dist = measured3(CAMERA, plane, base, height=h, front=front, pan_deg=pan)
+    assert alpha == pytest.approx(pan - math.degrees(phi), abs=1e-9)
+    assert dist == pytest.approx(math.hypot(d, rise), rel=1e-12)
+    assert elev == pytest.approx(math.degrees(math.atan2(rise, d)), abs=1e-9)
     # and the lean biases them: the base's exact image is elsewhere (its bearing, the
     # mid-height's, by a tenth of a degree and more)
     exact = observe3(CAMERA, plane, base)

@@ -66,7 +66,9 @@ def _check(args) -> int:
     truth = groundtruth.ground_truth(scene)
     emit(args, truth.to_json())
     if args.measurements:
-        emit_json(args.measurements, {**truth.exact_measurements().to_json(),
+        exact = (truth.exact_measurements3() if scene.is_3d  # (solve takes either)
+                 else truth.exact_measurements())
+        emit_json(args.measurements, {**exact.to_json(),
                                       "source": "exact geometry (mirrorsim check)"},
                   getattr(args, "json_stdout", None))
     return 0

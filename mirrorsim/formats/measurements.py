@@ -121,11 +121,13 @@ def measurements3_from_dict(data: Any, source: str | Path = "<measurements>"
     """Validate parsed 3-D measurement JSON (docs/files.md): the observer [x, y, z], the
     target's and each beacon's ``alpha_deg``, ``elevation_deg`` and ``d_total``, each
     beacon's ``position`` [x, y] or [x, y, z]; optionally ``heights`` and ``fronts`` (one
-    per beacon, then the target's) and ``sigma`` (one ``{alpha_deg, elevation_deg,
-    d_total_rel}`` for every observation, or a list, the beacons' then the target's)."""
+    per beacon, then the target's), ``sigma`` (one ``{alpha_deg, elevation_deg,
+    d_total_rel}`` for every observation, or a list, the beacons' then the target's) and
+    ``observer_pan_deg`` (the pan the readings were made at)."""
     r = Reader(source, MeasurementError)
     top = r.mapping(data, "", ("observer", "target", "beacons"),
-                    optional=("heights", "fronts", "sigma", "scene", "source", "detector"))
+                    optional=("heights", "fronts", "sigma", "observer_pan_deg", "scene",
+                              "source", "detector"))
     raw = top["observer"]
     observer = (*r.pair(raw[:2], "observer"), r.number(raw[2], "observer[2]"))
 
@@ -165,9 +167,14 @@ def measurements3_from_dict(data: Any, source: str | Path = "<measurements>"
     heights = per_object("heights")
     if heights is not None and min(heights) <= 0:
         raise r.fail("heights", "each height must be > 0")
+    fronts = per_object("fronts")
+    if fronts is not None and heights is None:
+        raise r.fail("fronts", "given without `heights` (they model a detector's readings)")
+    pan = (r.number(top["observer_pan_deg"], "observer_pan_deg", low=-360.0, high=360.0)
+           if "observer_pan_deg" in top else None)
     return Measurements3(observer=observer, beacons=tuple(beacons),
                          target=image(top["target"], "target"), heights=heights,
-                         fronts=per_object("fronts"), sigma=sigma)
+                         fronts=fronts, sigma=sigma, pan_deg=pan)
 
 
 def _sigma3(r: Reader, value: Any, key: str) -> tuple[float, float, float]:

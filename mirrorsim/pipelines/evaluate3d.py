@@ -27,7 +27,7 @@ from mirrorsim.scene.model import FRONT_OFFSET, Scene, pencil_paint_height
 from mirrorsim.truth import optics
 from mirrorsim.truth.groundtruth import GroundTruth, RenderInfo
 from solver.errors import SolverError
-from solver.geometry import wrap_yaw
+from solver.geometry import yaw_difference
 from solver.lsq import solve_measurements
 from solver.lsq3 import Fit3, Measurements3, crlb3
 from solver.measurements import ObjectSigmas, Sigma
@@ -201,7 +201,8 @@ def frame_measurements3(det: Detection, capture: CaptureRecord) -> Measurements3
         target=(det.target.alpha_deg, *elevation_of(cam, det.target)),
         heights=(*(pencil_paint_height(b.height) for b, _ in det.beacons),
                  capture.target_size[1]),
-        fronts=(FRONT_OFFSET["beacon"],) * len(beacons) + (FRONT_OFFSET["target"],))
+        fronts=(FRONT_OFFSET["beacon"],) * len(beacons) + (FRONT_OFFSET["target"],),
+        pan_deg=cam.pan_deg)
 
 
 def _beacons3(det: Detection, capture: CaptureRecord) -> tuple:
@@ -262,13 +263,13 @@ def _score3(scene: Scene, truth: GroundTruth, fit: Fit3, seen: Measurements3,
     try:
         bound = crlb3(seen.observer, [p for p, _ in seen.beacons], plane, target=t_true,
                       sigma=np.array(seen.sigma), heights=seen.heights, fronts=seen.fronts,
-                      nuisances=nuisances, priors=priors)
+                      pan_deg=seen.pan_deg, nuisances=nuisances, priors=priors)
         crlb = float(np.sqrt(np.trace(bound[3:6, 3:6])))
     except SolverError:
         crlb = None
-    yaw_err = abs(float(wrap_yaw(fit.plane.yaw_deg - scene.mirror.yaw + 90.0)) - 90.0)
+    yaw_err = float(yaw_difference(fit.plane.yaw_deg, scene.mirror.yaw))
     bases = [b.base3 for b in scene.beacons] + [scene.target.base3]
-    exact = tuple(measured3(seen.observer, plane, p, height=h, front=f)
+    exact = tuple(measured3(seen.observer, plane, p, height=h, front=f, pan_deg=seen.pan_deg)
                   for p, h, f in zip(bases, seen.heights, seen.fronts, strict=True))
     return Score3(
         target_cm=float(np.linalg.norm(err)), target_plan_cm=float(np.hypot(*err[:2])),

@@ -151,10 +151,6 @@ def refuse_3d(scene: Scene, command: str) -> None:
     """
     if not scene.is_3d:
         return
-    m = scene.mirror
-    key, value = next((k, v) for k, v in (
-        ("mirror.lean", m.lean), ("mirror.center[2]", m.z),
-        ("target.position[2]", scene.target.z),
-        *((f"beacons[{i}].position[2]", b.z) for i, b in enumerate(scene.beacons))) if v)
+    key, value = scene.raised()[0]
     raise SceneError(scene.source, key, f"{value:g}: {command} works in the board's plane "
                      "and this scene is 3-D; `evaluate` solves it in 3-D")

@@ -113,6 +113,12 @@ def scene_fingerprint(scene: Scene) -> str:
     """What a render depends on: the scene's content with its render settings (not the
     file it came from) and the way frames are rendered."""
     d = asdict(replace(scene, source="", warnings=()))
+    # the 3-D fields at their planar values are left out: a planar scene keeps the
+    # fingerprint (and the cached frames) it had before there were any
+    for block in (d["mirror"], d["target"], *d["beacons"]):
+        for key in ("lean", "z"):
+            if block.get(key) == 0.0:
+                del block[key]
     text = json.dumps(d, sort_keys=True, default=str) + f"|{RENDER_METHOD}"
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 

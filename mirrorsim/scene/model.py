@@ -327,12 +327,23 @@ class Scene:
         if not self.beacons:  # the pan, the truth and the solve each need one
             raise BadParameter("scene.beacons", "expected at least one beacon")
 
+    def raised(self, bkey: Callable[[int], str] | None = None) -> list[tuple[str, float]]:
+        """What takes the scene off the board's plane, as (key path, value) where it
+        is not 0: the mirror's lean, the raised mirror's, target's and pencils' heights
+        (``bkey(i)``: how the file names beacon ``i``)."""
+        if bkey is None:
+            bkey = (lambda i: f"beacons[{i}]") if len(self.beacons) > 1 else (lambda _i: "beacon")
+        m = self.mirror
+        return [(k, v) for k, v in (
+            ("mirror.lean", m.lean), ("mirror.center[2]", m.z),
+            ("target.position[2]", self.target.z),
+            *((f"{bkey(i)}.position[2]", b.z) for i, b in enumerate(self.beacons))) if v]
+
     @property
     def is_3d(self) -> bool:
         """Whether anything leaves the board's plane: a raised object or mirror, or a
         leaning mirror (the 3-D solve is then the default, docs/method.md)."""
-        return bool(self.mirror.lean or self.mirror.z or self.target.z
-                    or any(b.z for b in self.beacons))
+        return bool(self.raised())
 
     def with_render(self, **settings) -> Scene:
         """The same scene rendered with other settings (``spp``, ``seed``, ``sampler``…),

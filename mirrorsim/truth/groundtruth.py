@@ -6,7 +6,8 @@ Every consumer (the CLI's tables, the plots, the dataset's rows) reads attribute
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, replace
 from typing import Any
 
 from mirrorsim.scene.imperfections import as_keys
@@ -14,6 +15,7 @@ from mirrorsim.scene.model import Camera, Mirror, Occluder, Point2, Scene, check
 from mirrorsim.truth import optics, visibility
 from mirrorsim.truth.optics import ImagePx
 from solver.geometry import wrap_yaw
+from solver.lsq3 import Measurements3
 from solver.measurements import BeaconMeasurement, Measurements
 
 
@@ -209,8 +211,38 @@ class GroundTruth:
                    render=RenderInfo.from_json(d["render"]) if "render" in d else None,
                    bench=d.get("bench"))
 
+    def in_plan(self) -> GroundTruth:
+        """The truth as the planar solve sees it: a 3-D scene's points in plan, its
+        d_total's horizontal part (d_total·cos ε), no elevation (a planar truth as it
+        is)."""
+        if self.target.elevation_deg is None:
+            return self
+
+        def flat(o: ObjectTruth) -> ObjectTruth:
+            c = math.cos(math.radians(o.elevation_deg))
+            return replace(o, position=o.position[:2], virtual=o.virtual[:2],
+                           reflection_point=o.reflection_point[:2], d_total=_r(o.d_total * c),
+                           d1=_r(o.d1 * c), d2=_r(o.d2 * c), elevation_deg=None)
+
+        return replace(self, target=flat(self.target),
+                       beacons=tuple(flat(b) for b in self.beacons))
+
+    def exact_measurements3(self) -> Measurements3:
+        """A 3-D truth's noise-free measurements in 3-D: each base's exact image (α, ε,
+        d_total), the beacons' bases and the lens's position (``check --measurements``
+        of a 3-D scene, which ``solve`` solves in 3-D)."""
+        def seen(o: ObjectTruth) -> tuple[float, float, float]:
+            return (o.alpha_deg, o.elevation_deg, o.d_total)
+
+        return Measurements3(observer=tuple(float(c) for c in self.camera.center3),
+                             beacons=tuple((b.position, seen(b)) for b in self.beacons),
+                             target=seen(self.target), pan_deg=self.camera.pan_deg)
+
     def exact_measurements(self) -> Measurements:
-        """The noise-free measurements of this truth (what a perfect detector reports)."""
+        """The noise-free measurements of this truth (what a perfect detector reports);
+        a 3-D truth's in plan (:meth:`in_plan`: what a planar solve can be given)."""
+        if self.target.elevation_deg is not None:
+            return self.in_plan().exact_measurements()
         return Measurements(
             observer=self.camera.position,
             targets=[(self.target.alpha_deg, self.target.d_total)],

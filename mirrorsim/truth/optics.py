@@ -30,7 +30,7 @@ from mirrorsim.scene.model import (
 from mirrorsim.scene.projection import project
 from solver.geometry import bearing_deg, unit
 from solver.sltr import Observation, observe
-from solver.sltr3d import MirrorPlane, Observation3, seen3
+from solver.sltr3d import MirrorPlane, Observation3, observe3
 
 
 def mirror_image(observer: Point2, mirror: Mirror, point: ArrayLike) -> Observation:
@@ -55,14 +55,7 @@ def image3(camera: Camera, mirror: Mirror, point3: ArrayLike) -> Observation3:
     """What the camera sees of a 3-D point in the scene's mirror plane (its lean
     counted): :func:`solver.sltr3d.observe3`'s forward model, the point's image
     wherever it stands (the composer checks which side of the glass)."""
-    plane = mirror_plane(camera, mirror)
-    o, p = camera.center3, np.asarray(point3, float)
-    v = plane.reflect(p)
-    r = plane.hit(o, v - o)
-    alpha, elevation, d = seen3(o, plane, p)
-    return Observation3(alpha_deg=alpha, elevation_deg=elevation, d_total=d,
-                        d1=float(np.linalg.norm(r - o)), d2=float(np.linalg.norm(p - r)),
-                        virtual=v, reflection_point=r)
+    return observe3(camera.center3, mirror_plane(camera, mirror), point3, strict=False)
 
 
 def object_base(obj: Target | Beacon) -> np.ndarray:

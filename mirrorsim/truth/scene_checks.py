@@ -30,7 +30,7 @@ from mirrorsim.scene.model import (
     footprints,
 )
 from mirrorsim.truth import optics, visibility
-from solver.geometry import segment_distance, signed_distance
+from solver.geometry import segment_distance, signed_distance, unit
 
 Fail = Callable[[str, str], SceneError]  # (key path, message) → the error naming the file
 
@@ -55,9 +55,8 @@ def check_limits(f: Failures, scene: Scene, fail: Fail, *, bkey: Callable[[int],
                 for i, b in enumerate(scene.beacons)),
               *((f"occluders[{i}].height", (o.height,), MAX_BOARD_CM)
                 for i, o in enumerate(scene.occluders))]
-    limits += [(key, (z,), MAX_BOARD_CM) for key, z in (
-        ("mirror.center[2]", scene.mirror.z), ("target.position[2]", scene.target.z),
-        *((f"{bkey(i)}.position[2]", b.z) for i, b in enumerate(scene.beacons)))]
+    limits += [(key, (z,), MAX_BOARD_CM) for key, z in scene.raised(bkey)
+               if key != "mirror.lean"]  # (the lean's bound is the mirror's own)
     for key, vals, most in limits:
         most = most if isinstance(most, tuple) else (most,) * len(vals)
         for k, (v, m) in enumerate(zip(vals, most, strict=True)):
@@ -195,7 +194,7 @@ def check_under_glass(f: Failures, scene: Scene, fail: Fail, *, bkey: Callable[[
                 [np.asarray(p, float) for p in scene.target.ends()])] + [
         (f"{bkey(i)}.position", "beacon", b, PENCIL_RADIUS, [np.asarray(b.position, float)])
         for i, b in enumerate(scene.beacons)]
-    along = np.r_[np.cos(np.radians(m.yaw)), np.sin(np.radians(m.yaw)), 0.0]
+    along = np.r_[unit(m.yaw), 0.0]
     centre = np.r_[m.center, m.z]
     for key, what, obj, radius, columns in objects:
         if obj.z >= top:  # it stands above the glass

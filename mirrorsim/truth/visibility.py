@@ -39,8 +39,9 @@ class Visibility:
         return self.fraction < 1.0
 
 
-def _walls(scene: Scene, obj) -> list[tuple[str, np.ndarray, np.ndarray, float]]:
-    """Upright blockers as (name, start, end, height) segments; the target blocks beacons.
+def _walls(scene: Scene, obj) -> list[tuple[str, np.ndarray, np.ndarray, float, float]]:
+    """Upright blockers as (name, start, end, top, bottom) segments; the target blocks
+    beacons (a raised panel from its bottom edge up: under it stands only its post).
 
     Walls and the panel are boxes: each contributes the four sides of its footprint.
     """
@@ -48,25 +49,25 @@ def _walls(scene: Scene, obj) -> list[tuple[str, np.ndarray, np.ndarray, float]]
     for i, o in enumerate(scene.occluders):
         walls += _box_sides(f"occluders[{i}]", o.start, o.end, OCCLUDER_THICKNESS, o.height)
     if not isinstance(obj, Target):
-        t0, t1 = scene.target.ends()
-        walls += _box_sides("the target panel", t0, t1, TARGET_THICKNESS,
-                            scene.target.z + scene.target.height)
+        t = scene.target
+        walls += _box_sides("the target panel", *t.ends(), TARGET_THICKNESS, t.z + t.height,
+                            bottom=t.z)
     return walls
 
 
-def _box_sides(name: str, start, end, thickness: float, height: float):
+def _box_sides(name: str, start, end, thickness: float, height: float, bottom: float = 0.0):
     a, b = np.asarray(start, float), np.asarray(end, float)
     d = (b - a) / np.linalg.norm(b - a)
     n = np.array([-d[1], d[0]]) * thickness / 2.0
     c = [a - n, b - n, b + n, a + n]
-    return [(name, c[k], c[(k + 1) % 4], height) for k in range(4)]
+    return [(name, c[k], c[(k + 1) % 4], height, bottom) for k in range(4)]
 
 
 def _blocked(walls, a3: np.ndarray, b3: np.ndarray) -> str:
     """Name of the first wall that the 3-D segment a3→b3 passes through, or ''."""
-    for name, w0, w1, h in walls:
+    for name, w0, w1, h, bottom in walls:
         u = segment_crossing(a3[:2], b3[:2], w0, q1=w1)
-        if u is not None and a3[2] + u * (b3[2] - a3[2]) < h:
+        if u is not None and bottom <= a3[2] + u * (b3[2] - a3[2]) < h:
             return name
     return ""
 
@@ -236,10 +237,11 @@ def _first_blockers(walls, cam: Camera, r2: np.ndarray, point: np.ndarray, zc: n
     blocker = np.full(n, "", dtype=object)
     for a2, b2, za, zb in ((np.asarray(cam.position, float), r2, np.full(n, cam.height), zc),
                            (r2, point, zc, heights)):
-        for name, w0, w1, h in walls:
+        for name, w0, w1, h, bottom in walls:
             cross = segment_crossing(a2, b2, w0, q1=w1)
             if cross is not None:
-                hit = (za + cross * (zb - za) < h) & (blocker == "")
+                z = za + cross * (zb - za)
+                hit = (z < h) & (z >= bottom) & (blocker == "")
                 blocker[hit] = name
     return blocker
 
@@ -300,7 +302,8 @@ def direct_view_fraction(scene: Scene, obj: Target | Beacon) -> float:
     The mirror's back counts as a wall, as do the occluders.
     """
     m0, m1 = scene.mirror.ends()
-    walls = _walls(scene, obj) + [("the mirror", m0, m1, scene.mirror.z + scene.mirror.size[1])]
+    walls = _walls(scene, obj) + [("the mirror", m0, m1, scene.mirror.z + scene.mirror.size[1],
+                                   0.0)]
     p = np.asarray(obj.position, float)
     heights = obj.z + np.linspace(0.0, object_height(obj), AXIS_SAMPLES)
     free = [not _blocked(walls, scene.camera.center3, np.array([p[0], p[1], z])) for z in heights]
