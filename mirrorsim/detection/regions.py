@@ -56,7 +56,7 @@ def _within(img: np.ndarray, centre: np.ndarray, reach: float) -> np.ndarray:
 PENCIL_FILL_PX = 25
 # a raised pencil's post (0.3 cm across) is 3-8 px wide at 60-100 cm in a full-size frame
 POST_FILL_PX = 10
-POST_DARK = 60  # 8-bit: a post's pixels read 20-45 across a lit panel (sRGB of 0.06)
+POST_DARK = 60  # 8-bit: a pencil's post reads 20-45 across a lit panel (sRGB of 0.06)
 
 
 def find_target(img: np.ndarray, ratio: float, *, posts: bool = False
@@ -79,7 +79,7 @@ def find_target(img: np.ndarray, ratio: float, *, posts: bool = False
     grey = neutral & (vmax > 20) & (vmax < 135)
     plain = _find_panel(blur, neutral, grey, np.zeros(grey.shape, bool), ratio)
     inside = _between(pencil_mask(img), grey)
-    if posts:  # dark pixels (a post's shade) that are not the panel's grey, between it
+    if posts:  # dark pixels (a pencil's post's shade) that are not the panel's grey
         dark = (~grey & (vmax < POST_DARK)).astype(np.uint8)
         inside |= _between(dark, grey, reach_px=POST_FILL_PX)
     if not inside.any():

@@ -32,8 +32,9 @@ from mirrorsim.rendering.mitsuba_scene import (
     build_scene_dict,
     label_of,
 )
+from mirrorsim.rendering.shapes import COLOURS
 from mirrorsim.scene.imperfections import optics_of
-from mirrorsim.scene.model import Beacon, Board, Camera, Scene, Target
+from mirrorsim.scene.model import STAND_RADIUS, Beacon, Board, Camera, Scene, Target
 from mirrorsim.truth import optics
 from mirrorsim.truth.groundtruth import RenderInfo
 
@@ -120,6 +121,8 @@ def scene_fingerprint(scene: Scene) -> str:
             if block.get(key) == 0.0:
                 del block[key]
     text = json.dumps(d, sort_keys=True, default=str) + f"|{RENDER_METHOD}"
+    if scene.is_3d:  # what only a 3-D scene renders: its posts
+        text += f"|posts {COLOURS['stand']} {COLOURS['panel_stand']} {STAND_RADIUS}"
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 

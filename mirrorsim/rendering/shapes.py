@@ -36,8 +36,13 @@ COLOURS = {
     "graphite": (0.03, 0.03, 0.03),
     "mirror_back": (0.02, 0.02, 0.02),
     "frame": (0.04, 0.04, 0.045),
-    # a raised object's post: dark steel, thinner than the pencil and below its paint
+    # a raised object's post, thinner than the pencil and below its paint.  A pencil's
+    # is dark steel (its foot measures on it as on the board: 0.2 σ of elevation on the
+    # development scenes; a teal one read it 5 σ low); the panel's is painted teal, a
+    # colour nothing else has, so that its foot stands against it as against the board
+    # (a dark one continued the panel's grey below its foot, read 2 px low)
     "stand": (0.06, 0.06, 0.065),
+    "panel_stand": (0.02, 0.25, 0.30),
     # Only the target is a neutral grey: walls, floor and occluders are coloured, so the
     # detector can find the panel by its (known) appearance.
     "occluder": (0.25, 0.38, 0.60),  # blue-painted walls
@@ -224,7 +229,7 @@ def target_shapes(t: Target) -> dict:
     d = {"target_panel": box_shape(v3(t.position, t.z + t.size[1] / 2),
                                    (f * TARGET_THICKNESS / 2, a * t.size[0] / 2,
                                     ZHAT * t.size[1] / 2), "target")}
-    return d | stand_shapes("target", t.position, t.z)
+    return d | stand_shapes("target", t.position, t.z, colour="panel_stand")
 
 
 def pencil_shapes(i: int, b: Beacon) -> dict:
@@ -234,11 +239,13 @@ def pencil_shapes(i: int, b: Beacon) -> dict:
             } | stand_shapes(f"beacon{i}", b.position, b.z)
 
 
-def stand_shapes(key: str, position: tuple[float, float], z: float) -> dict:
+def stand_shapes(key: str, position: tuple[float, float], z: float, *, colour: str = "stand"
+                 ) -> dict:
     """A raised object's post from the board to its base, ``<key>_stand`` (none for an
-    object on the board): a dark cylinder of STAND_RADIUS under its axis, thinner than a
-    pencil, so that it hides nothing of the object and is not taken for it (the id pass
-    labels it background: it is not the object)."""
+    object on the board): a cylinder of STAND_RADIUS under its axis, thinner than a
+    pencil, so that it hides nothing of the object and is not taken for it, of
+    ``colour`` (:data:`COLOURS`; the id pass labels it background: it is not the
+    object)."""
     if z <= 0.0:
         return {}
     # Mitsuba's unit cylinder runs (0,0,0)–(0,0,1) with radius 1; its transform may
@@ -246,4 +253,4 @@ def stand_shapes(key: str, position: tuple[float, float], z: float) -> dict:
     to_world = (mi.ScalarTransform4f().translate([float(position[0]), float(position[1]), 0.0])
                 @ mi.ScalarTransform4f().scale([STAND_RADIUS, STAND_RADIUS, float(z)]))
     return {f"{key}_stand": {"type": "cylinder", "to_world": to_world,
-                             "bsdf": diffuse("stand")}}
+                             "bsdf": diffuse(colour)}}
