@@ -169,17 +169,14 @@ def solve_lsq3(observer: ArrayLike, beacons: list[tuple[ArrayLike, Seen]], targe
     """The mirror's plane and the target from every beacon (its position, and what the
     camera saw of it: α, ε, d_total) and every view of the target, by weighted least
     squares from the first beacon's closed form.  ``sigma``: (σ_α deg, σ_ε deg, σ_d as a
-    fraction of d_total) of every measurement, or a row of them per observation (the
-    beacons', then the target's); without it, unit weights of (0.01°,
-    0.01°, 0.2 %) and no covariance.  ``nuisances``: any of ``pan``, ``pitch``,
-    ``scale``, estimated alongside; ``priors``: the σ of each one known (deg; the
-    scale's as a fraction).  ``heights``: each beacon's and the target's measured height
-    (cm, the target's last), to predict what a detector reads off each image
+    fraction of d_total) of every measurement, or a row per observation (the beacons',
+    then the target's); without it, weights of (0.01°, 0.01°, 0.2 %) and no covariance.
+    ``nuisances``: any of ``pan``, ``pitch``, ``scale``, estimated alongside; ``priors``:
+    the σ of each one known (deg; the scale's as a fraction).  ``heights``, ``fronts``,
+    ``pan_deg``: each beacon's and the target's measured height and face offset (cm)
+    and the camera's pan, to predict each reading as a detector makes it
     (:func:`~solver.sltr3d.measured3`: a leaning mirror's bias removed); without them
-    the measurements are taken as each base's exact image.  ``fronts``: with them, how
-    far before each object's axis the face its detector measures stands (cm);
-    ``pan_deg``: the camera's pan the readings were made at (None: each image on the
-    optical axis).
+    the measurements are taken as each base's exact image.
 
     Raises
     ------
