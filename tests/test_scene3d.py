@@ -111,13 +111,27 @@ def test_the_truth_of_a_raised_scene_is_the_reflection_in_the_leaning_plane():
     assert len(p.target.position) == 2 and p.target.elevation_deg is None
 
 
-def test_a_leaning_mirror_leans_the_image_by_twice_its_lean():
-    s = scene_from_dict(raised(mirror__lean=4))
-    n, rho = _plane([30.0, 62.0, 0.0], 20.0, 4.0, [0, 0, 8])
+@pytest.mark.parametrize("lean", [-4.0, 2.5, 4.0])
+def test_a_leaning_mirror_leans_the_image_by_twice_its_lean(lean):
+    """The scene's mirror plane (the truth's and the renderer's glass) reflects an upright
+    pencil into one leaning by 2λ, away from the camera for a positive lean (its top
+    tipped away from the face): the glass's frame (what is rendered) and the truth's
+    plane agree."""
+    from mirrorsim.truth import optics, visibility
+
+    s = scene_from_dict(raised(mirror__lean=lean))
+    plane = optics.mirror_plane(s.camera, s.mirror)
     b = s.beacons[0]
-    foot, top = (p - 2 * (p @ n - rho) * n for p in (b.base3, b.base3 + [0, 0, b.height]))
+    foot, top = plane.reflect(np.array([b.base3, b.base3 + [0, 0, b.height]]))
     axis = (top - foot) / b.height
-    assert math.degrees(math.acos(axis[2])) == pytest.approx(8.0, abs=1e-9)
+    assert math.degrees(math.acos(axis[2])) == pytest.approx(2 * abs(lean), abs=1e-9)
+    n, rho = _plane([30.0, 62.0, 0.0], 20.0, lean, [0, 0, 8])
+    np.testing.assert_allclose(plane.normal, n, atol=1e-12)
+    assert plane.rho == pytest.approx(rho, abs=1e-9)
+    _, _, _, glass_n = visibility.glass_frame(s)
+    np.testing.assert_allclose(glass_n, n, atol=1e-12)
+    # a positive lean tips the image's top away from the camera's side of the glass
+    assert np.sign(axis[:2] @ n[:2]) == -np.sign(lean)
 
 
 def test_a_truth_of_a_3d_scene_reads_back_as_written():
