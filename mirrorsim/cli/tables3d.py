@@ -57,8 +57,9 @@ def report3_table(report: Report3, report_scene: Scene | None = None) -> str:
     if f.downweighted:
         lines.append("trusted less by the solver (a Huber loss): " + ", ".join(f.downweighted))
     if f.nuisances:
-        lines.append("the bench's shared errors estimated: " + ", ".join(
-            f"{k} {v:+.4g}" for k, v in f.nuisances.items()))
+        lines.append("the bench's shared errors estimated (with their priors): " + ", ".join(
+            f"{k} {v:.5f}" if k == "scale" else f"{k} {v:+.4f}°"
+            for k, v in f.nuisances.items()))
     where = "inside" if e.inside95 else "outside"
     lines.append(f"the true target lies {e.target_mahalanobis:.2f} σ from the estimate: "
                  f"{where} the 95 % ellipsoid, whose edge is at {CHI2_3_R95:.2f} σ")
