@@ -11,8 +11,9 @@ is seen):
 - a camera at the board's corner, 12 cm up.
 
 Every measurement is exact, plus Gaussian errors: 0.01° in azimuth and 0.2 % in
-d_total (the detector's σ's), 0.01° in elevation (assumed: no detector measures it
-yet).  They are the σ's the 3-D solve is given, so its coverage checks consistency.
+d_total (the detector's σ's), 0.01° in elevation (assumed; the rendered scenes'
+elevation σ's are docs/method.md's, measured by benchmarks/evaluate3d.py).  They are
+the σ's the 3-D solve is given, so its coverage checks consistency.
 
 - The 3-D solver (:func:`solver.lsq3.solve_lsq3`) takes (α, ε, d_total).
 - The planar solver (:func:`solver.lsq.solve_measurements`, the one mirrorsim runs
@@ -114,7 +115,7 @@ def main() -> None:
     print(f"{args.scenes} random scenes a row (seed {args.seed}): a mirror leaning by the "
           "row's lean, the target and three beacons raised 0–15 cm, the camera 12 cm up; "
           "exact measurements with Gaussian errors of σ 0.01° in azimuth (the detector's), "
-          "0.01° in elevation (assumed: no detector measures it yet) and 0.2 % in d_total "
+          "0.01° in elevation (assumed) and 0.2 % in d_total "
           "(the detector's), the σ's the 3-D solve is given. Target errors in the board's "
           "plane, cm.\n")
     print("| lean | planar solver: median | p95 | 3-D solver: median | p95 | "
