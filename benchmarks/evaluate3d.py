@@ -73,13 +73,67 @@ def draw(rng: np.random.Generator, k: int) -> dict:
     }
 
 
-def scenes(seed: int, count: int):
-    """``count`` scenes ``check`` accepts with every image whole, and how many draws
-    were refused."""
+def draw_wide(rng: np.random.Generator, k: int) -> dict:
+    """One scene drawn wider than :func:`draw`, across more of what ``check`` accepts
+    (the acceptance set: nothing was fitted or mended on it): a board 60–120 cm, the
+    camera anywhere 0–15 cm in from its corner, 4–15 cm up, a 40–85° field at 1920,
+    1280 or 960 px, panned to the mirror or the target; the mirror 40–90 cm out, seen
+    15–75° from square-on, 18–35 × 14–26 cm, its bottom edge raised 0–3 cm in a quarter
+    of the scenes; pencils 3–8 cm tall 4–15 cm before the glass; the panel 6–12 × 6–14
+    cm; a wall across the camera's direct line to the target."""
+    lean = float(LEANS[k % len(LEANS)] * rng.choice((-1.0, 1.0)))
+    size = float(rng.uniform(60, 120))
+    cam = rng.uniform(0, 15, 2)
+    bearing = math.radians(rng.uniform(40, 70))
+    dist = rng.uniform(40, 90)
+    c = cam + dist * np.array([math.cos(bearing), math.sin(bearing)])
+    # the face's normal turned 15-75° from the ray back to the camera
+    back = math.degrees(bearing) + 180.0 + rng.choice((-1, 1)) * rng.uniform(15, 75)
+    n = np.array([math.cos(math.radians(back)), math.sin(math.radians(back))])
+    u = np.array([-n[1], n[0]])
+    w, h = float(rng.uniform(18, 35)), float(rng.uniform(14, 26))
+
+    def before(along: float, out: float) -> np.ndarray:
+        return c + u * along + n * out
+
+    beacons = [{"position": [*np.round(before(rng.uniform(-w / 2 + 2, w / 2 - 2),
+                                                rng.uniform(4, 15)), 2).tolist(),
+                             round(float(rng.uniform(0, 15)), 2)],
+                "height": round(float(rng.uniform(3, 8)), 2)}
+               for _ in range(int(rng.integers(1, 4)))]
+    t = before(rng.uniform(-w / 2, w / 2), rng.uniform(15, 35))
+    tw, th, tz = float(rng.uniform(6, 12)), float(rng.uniform(6, 14)), float(rng.uniform(0, 15))
+    mid = (cam + t) / 2  # a wall across the direct line, at its middle
+    ray = (t - cam) / np.linalg.norm(t - cam)
+    across = np.array([-ray[1], ray[0]]) * (tw / 2 + 3)
+    res = [[1920, 1088], [1280, 720], [960, 544]][int(rng.integers(0, 3))]
+    return {
+        "name": f"w3d{k:04d}",
+        "board": {"size": [round(size, 2), round(size, 2)], "hole_pitch": 2.5},
+        "camera": {"position": np.round(cam, 2).tolist(),
+                   "height": round(float(rng.uniform(4, 15)), 2), "resolution": res,
+                   "hfov": round(float(rng.uniform(40, 85)), 2),
+                   "pan": str(rng.choice(("mirror", "target")))},
+        "mirror": {"center": [*np.round(c, 2).tolist(),
+                              round(float(rng.uniform(0, 3)) if k % 4 == 3 else 0.0, 2)],
+                   "yaw": round(math.degrees(math.atan2(u[1], u[0])), 2),
+                   "size": [round(w, 2), round(h, 2)], "lean": lean},
+        "target": {"position": [*np.round(t, 2).tolist(), round(tz, 2)],
+                   "size": [round(tw, 2), round(th, 2)]},
+        "beacons": beacons,
+        "occluders": [{"start": np.round(mid - across, 2).tolist(),
+                       "end": np.round(mid + across, 2).tolist(),
+                       "height": round(tz + th + 10, 2)}],
+    }
+
+
+def scenes(seed: int, count: int, *, wide: bool = False):
+    """``count`` scenes ``check`` accepts with every image whole (drawn by :func:`draw`,
+    or :func:`draw_wide`), and how many draws were refused."""
     rng = np.random.default_rng(seed)
     out, refused, k = [], 0, 0
     while len(out) < count:
-        d = draw(rng, k)
+        d = (draw_wide if wide else draw)(rng, k)
         k += 1
         try:
             s = scene_from_dict(d)
@@ -94,9 +148,9 @@ def scenes(seed: int, count: int):
 
 
 def run(args) -> Path:
-    out = Path(args.out or f"renders/evaluate3d-{args.seed}")
+    out = Path(args.out or f"renders/evaluate3d-{'wide-' if args.wide else ''}{args.seed}")
     (out / "rows").mkdir(parents=True, exist_ok=True)
-    chosen, refused = scenes(args.seed, args.scenes)
+    chosen, refused = scenes(args.seed, args.scenes, wide=args.wide)
     (out / "drawn.json").write_text(json.dumps({"refused": refused}))
     for i, s in enumerate(chosen):
         row = out / "rows" / f"{s.name}.json"
@@ -187,17 +241,20 @@ def main() -> None:
     p.add_argument("--seed", type=int, default=61206302)
     p.add_argument("--out", default=None)
     p.add_argument("--report", action="store_true", help="only print the finished rows")
+    p.add_argument("--wide", action="store_true",
+                   help="draw the scenes wider, across more of what check accepts "
+                        "(draw_wide): the acceptance set")
     p.add_argument("--residuals", nargs="+", type=Path, metavar="DIR",
                    help="print the σ factors the runs in DIR... call for, and stop")
     args = p.parse_args()
     if args.residuals:
         print(residuals(args.residuals))
         return
-    out = Path(args.out or f"renders/evaluate3d-{args.seed}")
+    out = Path(args.out or f"renders/evaluate3d-{'wide-' if args.wide else ''}{args.seed}")
     if not args.report:
         out = run(args)
     print(report(out, f"python benchmarks/evaluate3d.py --scenes {args.scenes} "
-                      f"--seed {args.seed}"))
+                      f"--seed {args.seed}{' --wide' if args.wide else ''}"))
 
 
 if __name__ == "__main__":

@@ -97,6 +97,11 @@ RESULTS: tuple[Result, ...] = (
            markdown=True, about="3-D scenes rendered end to end: the 3-D solve beside the "
                                 "planar solve on the same frames",
            fresh=("renders/evaluate3d-61206302",)),
+    Result("evaluate3d_wide",
+           (f"{PY} benchmarks/evaluate3d.py --scenes 40 --seed 61206303 --wide",),
+           markdown=True, about="3-D scenes drawn wider than the σ factors' development "
+                                "scenes: the acceptance set",
+           fresh=("renders/evaluate3d-wide-61206303",)),
     Result("reflector_size", (f"{PY} benchmarks/reflector_size.py",), markdown=True,
            about="the paper's open question: the target's error as the reflector shrinks"),
     Result("crlb", (f"{PY} benchmarks/uncertainty.py --scenes 40 --draws 1000",),

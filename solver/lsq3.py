@@ -120,17 +120,16 @@ class _Problem:
         base (:func:`~solver.sltr3d.seen3`), or with ``heights`` as a detector reads
         its image (:func:`~solver.sltr3d.measured3`)."""
         plane = MirrorPlane.from_params(x[0], x[1], x[2], flip=self.flip)
-        n_t = len(self.seen) - len(self.positions)
-        if self.heights is None:
-            pr = np.array([seen3(self.o, plane, p) for p in self.positions]
-                          + [seen3(self.o, plane, x[3:6])] * n_t)
-        else:
-            fronts = self.fronts or (0.0,) * len(self.heights)
-            objects = [*self.positions, x[3:6]]
-            pr = np.array([measured3(self.o, plane, p, height=h, front=f, pan_deg=self.pan_deg)
-                           for p, h, f in zip(objects, self.heights, fronts, strict=True)]
-                          + [[np.nan] * 3] * (n_t - 1))
-            pr[len(self.positions):] = pr[len(self.positions)]  # every view of the target
+        n_b = len(self.positions)
+
+        def image(p: np.ndarray, k: int) -> tuple[float, float, float]:  # object k's
+            if self.heights is None:
+                return seen3(self.o, plane, p)
+            return measured3(self.o, plane, p, height=self.heights[k],
+                             front=self.fronts[k] if self.fronts else 0.0, pan_deg=self.pan_deg)
+
+        pr = np.array([image(p, k) for k, p in enumerate(self.positions)]
+                      + [image(x[3:6], n_b)] * (len(self.seen) - n_b))
         for name, value in zip(self.nuisances, x[6:], strict=True):
             if name == "scale":
                 pr[:, 2] *= value

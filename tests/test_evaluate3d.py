@@ -87,6 +87,9 @@ def test_the_3d_report_is_consistent_and_beats_the_planar_solve(raised_report):
     assert report.fit.target.shape == (3,)
     assert e.target_cm < 0.6 and abs(e.mirror_lean_deg) < 0.3
     assert e.planar_target_cm > e.target_cm
+    err = report.fit.target - np.r_[scene.target.position, scene.target.z]
+    assert e.target_mahalanobis == pytest.approx(
+        float(np.sqrt(err @ np.linalg.solve(report.fit.target_covariance, err))), rel=1e-9)
     assert e.inside95 == (e.target_mahalanobis <= CHI2_3_R95)
     doc = json.loads(json.dumps(report.to_json()))
     assert doc["geometry"] == "3d" and len(doc["solution"]["target_covariance"]) == 3

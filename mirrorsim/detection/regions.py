@@ -40,7 +40,7 @@ def _channel_min(img: np.ndarray) -> np.ndarray:
     return np.minimum(np.minimum(img[..., 0], img[..., 1]), img[..., 2])
 
 
-def _within(img: np.ndarray, centre: np.ndarray, reach: float) -> np.ndarray:
+def within(img: np.ndarray, centre: np.ndarray, reach: float) -> np.ndarray:
     """uint8 mask, nonzero where every channel of an (H, W, 3) image lies less than
     ``reach`` from ``centre`` (RGB): ``max_c |img - centre| < reach`` in float32, the
     same arithmetic done by OpenCV, five times faster than numpy's."""
@@ -136,7 +136,7 @@ def _regrow(blur, neutral, inside, labels, k, box, whole: bool, ratio: float, ke
     mine = labels[win] == k
     own = mine & ~inside[win]  # its grey, the pencils in front of it apart
     med = np.median(blur[win][own if own.any() else mine], axis=0)
-    similar = (_within(blur[win], med, SAME_GREY) & neutral[win]) | inside[win]
+    similar = (within(blur[win], med, SAME_GREY) & neutral[win]) | inside[win]
     similar = cv2.morphologyEx(similar, cv2.MORPH_OPEN, kernel)
     lab2, comps2 = _components(similar, 300)
     # the region's own component: the one most of its pixels fall in (its centre may be

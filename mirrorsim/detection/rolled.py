@@ -24,7 +24,7 @@ import numpy as np
 
 from mirrorsim.detection.edges import measure_region
 from mirrorsim.detection.image_measurement import ImageMeasurement
-from mirrorsim.detection.regions import find_pencils, find_target, pencil_mask
+from mirrorsim.detection.regions import find_pencils, find_target, pencil_mask, within
 
 # an image rolled by less than this (deg) is measured as it stands: turning the frame
 # would only blur it (across a 200 px panel, 0.25° moves an edge 0.4 px end to end,
@@ -64,7 +64,7 @@ def _grey_mask(crop: np.ndarray) -> np.ndarray:
     h, w = blur.shape[:2]
     core = blur[h // 3: 2 * h // 3 + 1, w // 3: 2 * w // 3 + 1].reshape(-1, 3)
     ref = np.median(core, axis=0)
-    return np.max(np.abs(blur - ref), axis=-1) < 0.12 * float(ref.max()) + 8
+    return within(blur, ref, 0.12 * float(ref.max()) + 8) > 0
 
 
 def _boundary_slope(mask: np.ndarray, *, top: bool) -> float | None:

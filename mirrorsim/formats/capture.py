@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from mirrorsim.errors import InputError
-from mirrorsim.formats.reader import Reader, read_json, read_resolution, show
+from mirrorsim.formats.reader import Reader, point_list, read_json, read_resolution, show
 from mirrorsim.scene.model import MAX_HFOV_DEG, Beacon, Board, Camera, Point2, Scene, fx_of
 from mirrorsim.scene.projection import hfov_of
 
@@ -90,7 +90,7 @@ class CaptureRecord:
                            "pan_deg": c.pan_deg, "resolution": list(c.resolution),
                            "fx": c.fx, "fy": c.fx, "cx": c.cx, "cy": c.cy,
                            "hfov_deg": c.hfov, "distortion": list(self.distortion)},
-                "beacons": [{"position": list(b.position) + ([b.z] if b.z else []),
+                "beacons": [{"position": point_list(b.position, b.z),
                              "height": b.height} for b in self.beacons],
                 "target": {"size": list(self.target_size)},
                 "calibration": {"reference_distance": self.reference_distance},

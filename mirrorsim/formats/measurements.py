@@ -6,7 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from mirrorsim.formats.reader import Reader, parse_json, read_json, read_stdin_text
+from mirrorsim.formats.reader import Reader, parse_json, read_json, read_stdin_text, show
 from solver.errors import InputError
 from solver.lsq3 import Measurements3
 from solver.measurements import (
@@ -129,6 +129,9 @@ def measurements3_from_dict(data: Any, source: str | Path = "<measurements>"
                     optional=("heights", "fronts", "sigma", "observer_pan_deg", "scene",
                               "source", "detector"))
     raw = top["observer"]
+    if not isinstance(raw, list) or len(raw) != 3:
+        raise r.fail("observer", f"expected [x, y, z] (the lens's height: 3-D measurements), "
+                     f"got {show(raw)}")
     observer = (*r.pair(raw[:2], "observer"), r.number(raw[2], "observer[2]"))
 
     def image(value: Any, key: str) -> tuple[float, float, float]:

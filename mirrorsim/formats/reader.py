@@ -194,6 +194,12 @@ class Reader:
         return xy, z
 
 
+def point_list(xy: tuple[float, float], z: float) -> list[float]:
+    """A position as a file writes it (what :meth:`Reader.point` reads): [x, y] on the
+    board, [x, y, z] raised."""
+    return [*xy, z] if z else list(xy)
+
+
 def read_resolution(r: Reader, res: Any, key: str) -> tuple[int, int]:
     """[width, height] in px, each within 2..MAX_RESOLUTION."""
     if not isinstance(res, list | tuple) or len(res) != 2:

@@ -18,7 +18,7 @@ from typing import Any
 
 from mirrorsim.errors import Failures, SceneError
 from mirrorsim.formats.capture import read_board, read_distortion
-from mirrorsim.formats.reader import Reader, read_resolution, read_yaml, show
+from mirrorsim.formats.reader import Reader, point_list, read_resolution, read_yaml, show
 from mirrorsim.scene.imperfections import (
     REGISTRY,
     Imperfection,
@@ -143,10 +143,10 @@ def scene_document(scene: Scene) -> dict:
          "board": {"size": list(scene.board.size), "hole_pitch": scene.board.hole_pitch},
          "camera": {"position": list(c.position), "height": c.height,
                     "resolution": list(c.resolution), "hfov": c.hfov, "pan": c.pan},
-         "mirror": {"center": _point(m.center, m.z), "yaw": m.yaw, "size": list(m.size),
+         "mirror": {"center": point_list(m.center, m.z), "yaw": m.yaw, "size": list(m.size),
                     **({"lean": m.lean} if m.lean else {})},
-         "target": {"position": _point(t.position, t.z), "size": list(t.size)},
-         "beacons": [{"position": _point(b.position, b.z), "height": b.height}
+         "target": {"position": point_list(t.position, t.z), "size": list(t.size)},
+         "beacons": [{"position": point_list(b.position, b.z), "height": b.height}
                      for b in scene.beacons],
          "occluders": [{"start": list(o.start), "end": list(o.end), "height": o.height}
                        for o in scene.occluders],
@@ -163,11 +163,6 @@ def scene_document(scene: Scene) -> dict:
     if len(scene.beacons) == 1:
         d["beacon"] = d.pop("beacons")[0]
     return d
-
-
-def _point(xy: tuple[float, float], z: float) -> list[float]:
-    """A position as a scene file writes it: [x, y] on the board, [x, y, z] raised."""
-    return [*xy, z] if z else list(xy)
 
 
 def _name(r: Reader, top: dict, default_name: str) -> str:

@@ -15,6 +15,7 @@ import numpy as np
 
 from mirrorsim.detection.detector import Detection
 from mirrorsim.detection.image_geometry import elevation_of
+from mirrorsim.detection.image_measurement import ImageMeasurement
 from mirrorsim.errors import BadParameter, DetectionError
 from mirrorsim.formats.capture import CaptureRecord
 from mirrorsim.formats.error_model import ErrorModel
@@ -203,21 +204,27 @@ def frame_measurements3(det: Detection, capture: CaptureRecord) -> Measurements3
     if det.target.d_total is None:
         raise DetectionError("the target's d_total could not be measured (its image is "
                              "clipped at the top)")
-    cam = capture.camera
-    beacons = _beacons3(det, capture)
+    return _measurements3(capture, [(b, _reading(capture, im)) for b, im in det.beacons],
+                          _reading(capture, det.target))
+
+
+def _reading(capture: CaptureRecord, m: ImageMeasurement) -> tuple[float, float, float]:
+    """An image's (α, ε, d_total) as the capture record's camera sees it."""
+    return (m.alpha_deg, *elevation_of(capture.camera, m))
+
+
+def _measurements3(capture: CaptureRecord, pencils: list, target: tuple[float, float, float],
+                   sigma: tuple | None = None) -> Measurements3:
+    """Measurements3 of ``pencils`` (each beacon and its image's reading) and the
+    target's reading, with what the capture record says: the lens, the pan, the
+    heights measured (each painted band, the panel's) and the faces' offsets."""
     return Measurements3(
-        observer=tuple(float(c) for c in cam.center3), beacons=beacons,
-        target=(det.target.alpha_deg, *elevation_of(cam, det.target)),
-        heights=(*(pencil_paint_height(b.height) for b, _ in det.beacons),
-                 capture.target_size[1]),
-        fronts=(FRONT_OFFSET["beacon"],) * len(beacons) + (FRONT_OFFSET["target"],),
-        pan_deg=cam.pan_deg)
-
-
-def _beacons3(det: Detection, capture: CaptureRecord) -> tuple:
-    """Each beacon's believed base and its mirror image's (α, ε, d_total)."""
-    return tuple((tuple(float(c) for c in b.base3),
-                  (im.alpha_deg, *elevation_of(capture.camera, im))) for b, im in det.beacons)
+        observer=tuple(float(c) for c in capture.camera.center3),
+        beacons=tuple((tuple(float(c) for c in b.base3), seen) for b, seen in pencils),
+        target=target,
+        heights=(*(pencil_paint_height(b.height) for b, _ in pencils), capture.target_size[1]),
+        fronts=(FRONT_OFFSET["beacon"],) * len(pencils) + (FRONT_OFFSET["target"],),
+        sigma=sigma, pan_deg=capture.camera.pan_deg)
 
 
 def _seen3(scene: Scene, measured: list, sigma: ObjectSigmas, *, fx: float) -> Measurements3:
@@ -227,27 +234,21 @@ def _seen3(scene: Scene, measured: list, sigma: ObjectSigmas, *, fx: float) -> M
     with_target = [m for m in measured if m.detection.target.d_total is not None]
     if not with_target:
         raise DetectionError(f"{scene.name}: the target's d_total could not be measured")
-    first = frame_measurements3(with_target[0].detection, with_target[0].files.capture)
-    beacons = [b for m in measured for b in _beacons3(m.detection, m.files.capture)]
-    pencils = [(b, im) for m in measured for b, im in m.detection.beacons]
-    per_beacon = (sigma.beacons if len(sigma.beacons) == len(beacons)
-                  else sigma.beacons[:1] * len(beacons))
+    pencils = [(b, im, m.files.capture) for m in measured for b, im in m.detection.beacons]
+    per_beacon = (sigma.beacons if len(sigma.beacons) == len(pencils)
+                  else sigma.beacons[:1] * len(pencils))
     fb, ft = SIGMA3_FACTORS["beacon"], SIGMA3_FACTORS["target"]
     sig = [(fb[0] * s.alpha_deg, fb[1] * elevation_sigma_deg(s, im.height_px, fx),
-            fb[2] * s.d_total_rel) for s, (_, im) in zip(per_beacon, pencils, strict=True)]
+            fb[2] * s.d_total_rel) for s, (_, im, _) in zip(per_beacon, pencils, strict=True)]
     t = sigma.target
     sig.append((ft[0] * t.alpha_deg,
                 ft[1] * elevation_sigma_deg(t, with_target[0].detection.target.height_px, fx),
                 ft[2] * t.d_total_rel))
     target = tuple(float(v) for v in np.mean(
-        [(m.detection.target.alpha_deg, *elevation_of(m.files.capture.camera,
-                                                      m.detection.target))
-         for m in with_target], axis=0))
-    return replace(first, beacons=tuple(beacons), target=target,
-                   heights=(*(pencil_paint_height(b.height) for b, _ in pencils),
-                            first.heights[-1]),
-                   fronts=(FRONT_OFFSET["beacon"],) * len(beacons) + (FRONT_OFFSET["target"],),
-                   sigma=tuple(sig))
+        [_reading(m.files.capture, m.detection.target) for m in with_target], axis=0))
+    return _measurements3(with_target[0].files.capture,
+                          [(b, _reading(c, im)) for b, im, c in pencils], target,
+                          sigma=tuple(sig))
 
 
 def _bench_nuisances(model: ErrorModel, sigma: ObjectSigmas

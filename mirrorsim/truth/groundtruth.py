@@ -10,6 +10,7 @@ import math
 from dataclasses import dataclass, replace
 from typing import Any
 
+from mirrorsim.formats.reader import point_list
 from mirrorsim.scene.imperfections import as_keys
 from mirrorsim.scene.model import Camera, Mirror, Occluder, Point2, Scene, check_is_scene
 from mirrorsim.truth import optics, visibility
@@ -159,7 +160,7 @@ class GroundTruth:
     def to_json(self) -> dict:
         """The ground-truth document of docs/files.md."""
         cam, mir = self.camera, self.mirror
-        mirror = {"center": list(mir.center) + ([mir.z] if mir.z else []),
+        mirror = {"center": point_list(mir.center, mir.z),
                   "yaw_deg": self.mirror_yaw_deg, "size": list(mir.size),
                   **({"lean_deg": mir.lean} if mir.lean else {})}
         if self.mirror_pixels is not None:
@@ -265,7 +266,7 @@ def ground_truth(scene: Scene) -> GroundTruth:
         img = optics.object_image(scene, obj)
         position = tuple(obj.position)
         if scene.is_3d:  # the base's image in the mirror's plane, lean and heights counted
-            position = tuple(float(c) for c in optics.object_base(obj))
+            position = tuple(float(c) for c in obj.base3)
             extra["elevation_deg"] = _r(img.elevation_deg)
         ext = optics.image_extent(scene, obj)
         vis = visibility.visibility(scene, obj)

@@ -58,17 +58,11 @@ def image3(camera: Camera, mirror: Mirror, point3: ArrayLike) -> Observation3:
     return observe3(camera.center3, mirror_plane(camera, mirror), point3, strict=False)
 
 
-def object_base(obj: Target | Beacon) -> np.ndarray:
-    """The point of an object whose image the 3-D truth and solve follow: its base on its
-    axis, ``z`` above the board (cm)."""
-    return obj.base3
-
-
 def object_image(scene: Scene, obj: Target | Beacon) -> Observation | Observation3:
     """The image of an object the truth follows: in a planar scene its position's, in
     plan (:func:`mirror_image`); in a 3-D one its base's (:func:`image3`)."""
     if scene.is_3d:
-        return image3(scene.camera, scene.mirror, object_base(obj))
+        return image3(scene.camera, scene.mirror, obj.base3)
     return mirror_image(scene.camera.position, scene.mirror, obj.position)
 
 
@@ -99,7 +93,7 @@ def resolve_pan(camera: Camera, pan: float | str, mirror: Mirror, *, target: Tar
     if pan in ("target", "beacon"):
         obj = target if pan == "target" else beacon
         if mirror.lean or mirror.z or obj.z:
-            return image3(camera, mirror, object_base(obj)).alpha_deg
+            return image3(camera, mirror, obj.base3).alpha_deg
         return mirror_image(camera.position, mirror, obj.position).alpha_deg
     return float(pan)
 
@@ -120,7 +114,7 @@ def image_extent(scene: Scene, obj: Target | Beacon) -> ImagePx:
     the image leans: the column is its foot's)."""
     if scene.is_3d:
         plane = mirror_plane(scene.camera, scene.mirror)
-        base = object_base(obj)
+        base = obj.base3
         pts = plane.reflect(np.array([base + [0.0, 0.0, object_height(obj)], base]))
     else:
         v = mirror_image(scene.camera.position, scene.mirror, obj.position).virtual
