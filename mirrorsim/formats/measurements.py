@@ -141,15 +141,7 @@ def measurements3_from_dict(data: Any, source: str | Path = "<measurements>"
                 r.number(v["d_total"], f"{key}.d_total", low=D_TOTAL_RANGE_CM[0],
                          high=D_TOTAL_RANGE_CM[1]))
 
-    if not isinstance(top["beacons"], list) or not top["beacons"]:
-        raise r.fail("beacons", "expected a non-empty list")
-    beacons = []
-    for i, b in enumerate(top["beacons"]):
-        key = f"beacons[{i}]"
-        if not isinstance(b, dict) or "position" not in b:
-            raise r.fail(f"{key}.position", "missing required key")
-        xy, z = r.point(b["position"], f"{key}.position")
-        beacons.append(((*xy, z), image(b, key)))
+    beacons = _beacons3(r, top["beacons"], image)
     n = len(beacons) + 1
 
     def per_object(key: str) -> tuple[float, ...] | None:
@@ -178,6 +170,20 @@ def measurements3_from_dict(data: Any, source: str | Path = "<measurements>"
     return Measurements3(observer=observer, beacons=tuple(beacons),
                          target=image(top["target"], "target"), heights=heights,
                          fronts=fronts, sigma=sigma, pan_deg=pan)
+
+
+def _beacons3(r: Reader, raw: Any, image: Any) -> list:
+    """Each beacon's believed base [x, y(, z)] and its image's reading (``image``)."""
+    if not isinstance(raw, list) or not raw:
+        raise r.fail("beacons", "expected a non-empty list")
+    beacons = []
+    for i, b in enumerate(raw):
+        key = f"beacons[{i}]"
+        if not isinstance(b, dict) or "position" not in b:
+            raise r.fail(f"{key}.position", "missing required key")
+        xy, z = r.point(b["position"], f"{key}.position")
+        beacons.append(((*xy, z), image(b, key)))
+    return beacons
 
 
 def _sigma3(r: Reader, value: Any, key: str) -> tuple[float, float, float]:
