@@ -450,7 +450,7 @@ def test_lookups_done_by_opencv_give_numpy_values():
     of the reach."""
     from mirrorsim.camera.sensor import LINEAR_OF_CODE
     from mirrorsim.detection.edges import to_linear
-    from mirrorsim.detection.regions import SAME_GREY, _within
+    from mirrorsim.detection.regions import SAME_GREY, within
 
     codes = np.arange(256, dtype=np.uint8)
     expected = (255.0 * LINEAR_OF_CODE).astype(np.float32)
@@ -470,7 +470,7 @@ def test_lookups_done_by_opencv_give_numpy_values():
             x[k, j, :] = centre
             x[k, j, k] = centre[k] + sign * np.nextafter(edge, edge + step)
     numpy_says = np.max(np.abs(x - centre), axis=2) < SAME_GREY
-    assert np.array_equal(_within(x, centre, SAME_GREY) > 0, numpy_says)
+    assert np.array_equal(within(x, centre, SAME_GREY) > 0, numpy_says)
     assert 0.2 < numpy_says.mean() < 0.8
 
 
