@@ -302,5 +302,7 @@ def solve_measurements(observer: ArrayLike, beacons: list[BeaconMeasurement],
         S = np.diag(sd**2)
         S[np.ix_([0, 2], [0, 2])] = sig.alpha_covariance(sa)  # rows (α_b, d_b, α_t, d_t)
         cov = Jinv @ S @ Jinv.T
-        return replace(sol, covariance=cov, method="closed form with covariance")
-    return solve_lsq(observer, beacons, targets, sigma=sigma, calibration=calibration)
+        return replace(sol, covariance=cov, method="closed form with covariance",
+                       tail=sig.tail)
+    sol = solve_lsq(observer, beacons, targets, sigma=sigma, calibration=calibration)
+    return sol if sigma is None else replace(sol, tail=as_object_sigmas(sigma).tail)

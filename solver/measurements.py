@@ -3,6 +3,7 @@ them as one value (reading them from a file is :mod:`mirrorsim.formats.measureme
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,6 +23,60 @@ class BeaconMeasurement:
 
     def __post_init__(self) -> None:
         check_fields(self)  # finite numbers, made plain (BadParameter naming the field)
+
+
+@dataclass(frozen=True)
+class Tail:
+    """How far the truth lies from an estimate in its covariance's σ's: that distance
+    over ``scale`` follows the radial law of a 2-D Student-t of ``dof`` degrees of freedom
+    (∞: a Gaussian's, √χ²₂).  The default, scale 1 and dof ∞, takes the σ's at their
+    word.  An error model fits its own on the rows it was fitted on (the detector's
+    errors are heavier-tailed than a Gaussian's, and its σ's cannot foresee every
+    fault), and a level's ellipse is drawn at :meth:`radius`."""
+
+    scale: float = 1.0
+    dof: float = math.inf
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.scale) and self.scale > 0 and self.dof > 0):
+            raise SolverError(f"a tail needs a finite scale > 0 and dof > 0, got scale "
+                              f"{self.scale!r}, dof {self.dof!r}")
+
+    @property
+    def gaussian(self) -> bool:
+        """Whether the σ's are taken at their word (scale 1, dof ∞)."""
+        return self.scale == 1.0 and math.isinf(self.dof)
+
+    def radius(self, level: float) -> float:
+        """The Mahalanobis radius of the ``level`` region: scale·√(2 F₂,ν⁻¹(level)), in
+        closed form √(ν((1 − level)^(−2/ν) − 1)); √(−2 ln(1 − level)) as ν → ∞."""
+        if math.isinf(self.dof):
+            return self.scale * math.sqrt(-2.0 * math.log1p(-level))
+        nu = self.dof
+        return self.scale * math.sqrt(nu * math.expm1(-2.0 / nu * math.log1p(-level)))
+
+    def level(self, distance: float) -> float:
+        """The level whose region's edge lies at ``distance`` σ's (inverse of
+        :meth:`radius`)."""
+        s2 = (distance / self.scale) ** 2
+        if math.isinf(self.dof):
+            return -math.expm1(-s2 / 2.0)
+        return 1.0 - (1.0 + s2 / self.dof) ** (-self.dof / 2.0)
+
+    def to_json(self) -> dict:
+        """As files keep it (an infinite dof as null)."""
+        return {"scale": self.scale, "dof": None if math.isinf(self.dof) else self.dof}
+
+    @classmethod
+    def from_json(cls, d: dict | None) -> Tail:
+        """Inverse of :meth:`to_json` (None or a missing dof: a Gaussian's)."""
+        if not d:
+            return cls()
+        dof = d.get("dof")
+        return cls(float(d.get("scale", 1.0)), math.inf if dof is None else float(dof))
+
+
+GAUSSIAN = Tail()  # the σ's at their word
 
 
 @dataclass(frozen=True)
@@ -46,6 +101,9 @@ class ObjectSigmas:
     # per image it would misplace the ellipse (errors that move every α alike largely
     # cancel in the target); the α σ's above are then each image's own part
     shared_alpha_deg: float = 0.0
+    # how the truth's distance from an estimate made with these σ's is spread (their
+    # error model's): where a level's ellipse is drawn
+    tail: Tail = Tail()
 
     @classmethod
     def same(cls, sigma: Sigma) -> ObjectSigmas:
@@ -68,7 +126,8 @@ class ObjectSigmas:
             return self
         whole = lambda s: Sigma(float(np.hypot(s.alpha_deg, self.shared_alpha_deg)),  # noqa: E731
                                 s.d_total_rel)
-        return ObjectSigmas(whole(self.target), tuple(whole(b) for b in self.beacons))
+        return ObjectSigmas(whole(self.target), tuple(whole(b) for b in self.beacons),
+                            tail=self.tail)
 
     def describe(self) -> str:
         """The σ's in words: α in degrees, d_total in % of d_total."""

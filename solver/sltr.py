@@ -27,6 +27,7 @@ import numpy as np
 
 from solver.errors import SolverError
 from solver.geometry import line_normal, reflect, unit, wrap_bearing, wrap_yaw
+from solver.measurements import GAUSSIAN, Tail
 
 ArrayLike = np.typing.ArrayLike
 EPS = 1e-9
@@ -130,6 +131,9 @@ class Solution:
     nuisances: dict[str, float] = field(default_factory=dict)
     # the priors' σ's the bench gave some of them (solver.selfcal.SelfCalibration's)
     priors: dict[str, float] = field(default_factory=dict)
+    # how far the truth lies from the estimate in the covariance's σ's (the σ's' error
+    # model's): where :meth:`ellipse95` and :meth:`inside95` draw the edge
+    tail: Tail = Tail()
 
     @property
     def target_covariance(self) -> np.ndarray | None:
@@ -154,7 +158,7 @@ class Solution:
 
     def mahalanobis(self, point: ArrayLike) -> float | None:
         """How many σ's ``point`` lies from the estimated target, by its covariance
-        (√(Δᵀ C⁻¹ Δ); its median over honest estimates is χ₂'s, 1.18)."""
+        (√(Δᵀ C⁻¹ Δ); its median over honest Gaussian estimates is χ₂'s, 1.18)."""
         cov = self.target_covariance
         if cov is None:
             return None
@@ -163,9 +167,14 @@ class Solution:
 
     def ellipse95(self) -> tuple[float, float, float] | None:
         """The target's 95 % error ellipse: semi-axes (major, minor) and the major axis's
-        bearing in degrees."""
+        bearing in degrees (its edge at :attr:`tail`'s 95 % radius)."""
         cov = self.target_covariance
-        return None if cov is None else error_ellipse(cov, 0.95)
+        return None if cov is None else error_ellipse(cov, 0.95, tail=self.tail)
+
+    def inside95(self, point: ArrayLike) -> bool | None:
+        """Whether ``point`` lies inside the target's 95 % ellipse (None without σ's)."""
+        m = self.mahalanobis(point)
+        return None if m is None else bool(m <= self.tail.radius(0.95))
 
     def to_json(self) -> dict:
         """The solution document of docs/files.md."""
@@ -189,6 +198,7 @@ class Solution:
                 "params": self.covariance.tolist(),
                 "params_order": self.params_order,
                 "target_ellipse95": {"major": major, "minor": minor, "angle_deg": angle},
+                "tail": self.tail.to_json(),
             }
         return out
 
@@ -203,18 +213,22 @@ class Solution:
                    covariance=None if cov is None else np.asarray(cov, float),
                    method=d["method"], downweighted=tuple(d.get("downweighted", ())),
                    nuisances=dict(d.get("self_calibration", {})),
-                   priors=dict(d.get("self_calibration_priors", {})))
+                   priors=dict(d.get("self_calibration_priors", {})),
+                   tail=Tail.from_json(d.get("covariance", {}).get("tail")))
 
 
 def chi2_2_radius(level: float) -> float:
     """The Mahalanobis radius of a 2-D Gaussian's ``level`` region, √(χ²₂ quantile)."""
-    return float(np.sqrt(-2.0 * np.log(1.0 - level)))
+    return Tail().radius(level)
 
 
-def error_ellipse(cov: ArrayLike, level: float = 0.95) -> tuple[float, float, float]:
-    """Semi-axes (major, minor) and major-axis bearing of a 2-D Gaussian's ``level`` region."""
+def error_ellipse(cov: ArrayLike, level: float = 0.95, *, tail: Tail = GAUSSIAN
+                  ) -> tuple[float, float, float]:
+    """Semi-axes (major, minor) and major-axis bearing of the ``level`` region of an
+    estimate of covariance ``cov`` whose errors spread as ``tail`` says (default: a
+    Gaussian's)."""
     vals, vecs = np.linalg.eigh(np.asarray(cov, float))
-    major, minor = chi2_2_radius(level) * np.sqrt(np.maximum(vals[::-1], 0.0))
+    major, minor = tail.radius(level) * np.sqrt(np.maximum(vals[::-1], 0.0))
     v = vecs[:, 1]
     return float(major), float(minor), float(wrap_yaw(np.degrees(np.arctan2(v[1], v[0]))))
 

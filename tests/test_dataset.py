@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from mirrorsim.cli.main import main
-from mirrorsim.pipelines import errormodel
+from mirrorsim.pipelines import error_features, errormodel
 from mirrorsim.pipelines.dataset import collect_rows, run_dataset
 from mirrorsim.pipelines.scenes import load_scene
 from solver.selfcal import SelfCalibration
@@ -163,7 +163,7 @@ def test_error_model_fits_a_signed_off_axis_bias_through_outliers():
         cols[f"{kind}_alpha_err"] = err
     model = errormodel.fit(cols)
     a = model.fits["target"]["alpha"]
-    assert errormodel.FEATURES[2] == "off_axis_deg"
+    assert error_features.FEATURES[2] == "off_axis_deg"
     assert a.bias[2] == pytest.approx(0.0003, rel=0.05)
     assert a.gross_errors == pytest.approx(0.03 * n, rel=0.25)
     assert a.typical_sigma < 0.02  # the ±0.5° errors left out of the σ
@@ -358,7 +358,7 @@ def test_error_model_fits_bias_against_bench_imperfections():
                                            + rng.normal(0, 0.002, n))})
     model = errormodel.fit(cols)
     names = model.bias_features
-    assert set(names) - set(errormodel.FEATURES) == {"pan_error_deg", "calibration_error_cm",
+    assert set(names) - set(error_features.FEATURES) == {"pan_error_deg", "calibration_error_cm",
                                                       "mirror_power"}
     for kind in ("target", "beacon"):
         a, d = model.fits[kind]["alpha"], model.fits[kind]["d_rel"]

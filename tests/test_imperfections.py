@@ -9,7 +9,7 @@ import pytest
 import yaml
 
 from mirrorsim.errors import SceneError
-from mirrorsim.pipelines import errormodel, random_scenes
+from mirrorsim.pipelines import error_features, random_scenes
 from mirrorsim.pipelines.scenes import scene_from_dict
 from mirrorsim.scene import imperfections
 from mirrorsim.scene.imperfections import REGISTRY
@@ -86,7 +86,7 @@ def test_a_row_holds_each_imperfection_as_declared():
 def test_the_spec_and_the_error_model_know_every_imperfection():
     spec_paths = {f"{b}.{k}" for b, keys in random_scenes.BENCH_SPEC_KEYS.items() for k in keys}
     assert spec_paths == {imp.spec_path for imp in REGISTRY}
-    assert set(errormodel.BENCH_FEATURES) == {f.name for f in imperfections.FEATURES}
+    assert set(error_features.BENCH_FEATURES) == {f.name for f in imperfections.FEATURES}
 
 
 def test_features_against_their_first_order_forms():
@@ -97,7 +97,8 @@ def test_features_against_their_first_order_forms():
             "bench_distortion_known": [False, True], "target_off_axis_deg": [20.0, 20.0],
             "bench_full_well": [0.0, 10000.0], "bench_read_noise": [0.0, 5.0],
             "bench_jpeg_quality": [0, 90]}
-    f = {name: errormodel._feature(cols, "target", name) for name in errormodel.BENCH_FEATURES
+    f = {name: error_features._feature(cols, "target", name)
+         for name in error_features.BENCH_FEATURES
          if name not in ("pan_error_deg", "pitch_deg", "roll_deg", "tilt_deg",
                          "calibration_error_cm")}
     power = 2 * np.cos(np.radians(30)) * 40 * 60 / (200 * 100)

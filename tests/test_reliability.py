@@ -298,6 +298,11 @@ def test_spec_values_that_would_fail_every_scene_are_refused(tmp_path, capsys, e
     (lambda m: m["domain"]["features"]["target"].update(log_height_px=[7.0, 8.0]),
      "objects.target.alpha.log_sigma.mean"),
     (lambda m: m.update(kind="bench"), "kind"),
+    # the target's tail: a scale > 0, a dof > 0 or null
+    (lambda m: m.update(target_tail={"scale": 0, "dof": 2.0}), "target_tail.scale"),
+    (lambda m: m.update(target_tail={"scale": 0.5, "dof": -1}), "target_tail.dof"),
+    (lambda m: m.update(target_tail={"scale": None, "dof": 2.0}), "target_tail.scale"),
+    (lambda m: m.update(target_tail={"scale": 0.5}), "target_tail"),
 ])
 def test_error_model_files_are_checked_as_measurement_files_are(tmp_path, capsys, edit, key):
     from mirrorsim.pipelines import errormodel

@@ -3,6 +3,7 @@ its validation on held-out rows, and the commands that take --error-model."""
 
 import json
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -246,11 +247,18 @@ def test_validation_of_an_honest_model_on_held_out_rows():
         for q in ("alpha", "d_rel"):
             one, two = v.within[kind][q]
             assert one == pytest.approx(0.683, abs=0.06) and two == pytest.approx(0.954, abs=0.03)
-    # a model whose σ's are 3× too small fails visibly
-    small = errormodel.fit({**train, **{f"{k}_{q}": np.asarray(train[f"{k}_{q}"]) / 3
-                                         for k in ("target", "beacon")
-                                         for q in ("alpha_err", "d_rel_err")}})
+    assert model.tail.dof > 20 and model.tail.scale == pytest.approx(1.0, abs=0.1)
+    # a model whose σ's are 3× too small (its tail the honest one's) fails visibly
+    small = replace(model, fits={k: {q: replace(f, tail=f.tail / 3) for q, f in qs.items()}
+                                 for k, qs in model.fits.items()})
     assert uncertainty.validate(small, test).coverage[2].fraction < 0.5
+    # fitted on rows whose σ's were 3× too small, the tail says so: it widens the ellipse
+    train_small = {**train, **{f"{k}_{q}": np.asarray(train[f"{k}_{q}"]) / 3
+                               for k in ("target", "beacon") for q in ("alpha_err", "d_rel_err")}}
+    widened = errormodel.fit(train_small)
+    assert widened.tail.scale == pytest.approx(3.0, rel=0.15)
+    c95 = uncertainty.validate(widened, test).coverage[2]
+    assert 0.90 <= c95.fraction <= 0.99
 
 
 def _simulated_rows(n: int, seed: int, shared: float = 0.0) -> dict:
@@ -462,5 +470,59 @@ def test_an_unstable_law_is_refused_and_a_wide_one_warned():
         cols[f"{kind}_height_px_meas"] = h
         cols[f"{kind}_d_rel_err"] = rng.normal(0, 0.3 / h)
     model = errormodel.fit(cols)
+    # a table made by hand holds no geometry to solve its rows again: no tail, said so
+    assert model.tail.gaussian and "observer_x" in model.provenance["tail_not_fitted"]
     assert "warnings" not in model.provenance
     assert "warning" not in error_model_summary(model)
+
+
+def test_a_tail_draws_its_ellipses_at_a_student_t_s_radii():
+    """The Tail's radius is the quantile of √(2F₂,ν)·scale, worked here by scipy (the
+    code has its closed form), its level the inverse, and ν → ∞ gives χ₂'s."""
+    from scipy.stats import f
+
+    from solver.measurements import Tail
+
+    for scale, dof in ((0.44, 1.28), (1.0, 3.0), (2.0, 40.0)):
+        t = Tail(scale, dof)
+        for p in (0.5, 0.9, 0.95):
+            assert t.radius(p) == pytest.approx(scale * math.sqrt(2 * f.ppf(p, 2, dof)), rel=1e-9)
+            assert t.level(t.radius(p)) == pytest.approx(p, abs=1e-12)
+    assert Tail().radius(0.95) == pytest.approx(math.sqrt(-2 * math.log(0.05)), rel=1e-12)
+    assert Tail(1.0, 1e8).radius(0.95) == pytest.approx(Tail().radius(0.95), rel=1e-6)
+    assert Tail.from_json(Tail(0.5, 2.0).to_json()) == Tail(0.5, 2.0)
+    assert Tail.from_json(Tail().to_json()) == Tail() and Tail.from_json(None).gaussian
+
+
+def test_a_tail_is_fitted_back_from_distances_drawn_from_it():
+    """Distances of truths drawn from a scaled 2-D Student-t (scale 0.5, ν 2) give that
+    scale and ν back; Gaussian ones a scale near 1 and a large ν."""
+    rng = np.random.default_rng(3)
+    n = 4000
+    x = rng.standard_normal((n, 2)) / np.sqrt(rng.chisquare(2.0, n) / 2.0)[:, None]
+    t = sigma_laws.fit_tail(0.5 * np.linalg.norm(x, axis=1))
+    assert t.scale == pytest.approx(0.5, rel=0.06) and t.dof == pytest.approx(2.0, rel=0.15)
+    g = sigma_laws.fit_tail(np.linalg.norm(rng.standard_normal((n, 2)), axis=1))
+    assert g.scale == pytest.approx(1.0, rel=0.05) and g.dof > 30
+    assert sigma_laws.fit_tail(np.ones(10)).gaussian  # too few to fit: at their word
+
+
+def test_the_solution_carries_its_sigmas_tail_to_its_ellipse_and_its_sentence():
+    from mirrorsim.cli.tables import mahalanobis_sentence
+    from solver.measurements import Tail
+    from solver.sltr import Solution
+
+    tail = Tail(0.44, 1.28)
+    sig = ObjectSigmas(Sigma(0.01, 0.002), (Sigma(0.01, 0.002),), tail=tail)
+    b = [BeaconMeasurement((60.0, 40.0), 40.0, 90.0)]
+    sol = solve_measurements((0.0, 0.0), b, [(35.0, 110.0)], sigma=sig)
+    plain = solve_measurements((0.0, 0.0), b, [(35.0, 110.0)], sigma=replace(sig, tail=Tail()))
+    assert sol.tail == tail and plain.tail.gaussian
+    ratio = tail.radius(0.95) / Tail().radius(0.95)
+    assert sol.ellipse95()[0] == pytest.approx(ratio * plain.ellipse95()[0], rel=1e-12)
+    back = Solution.from_json(json.loads(json.dumps(sol.to_json())))
+    assert back.tail == tail and back.ellipse95()[0] == pytest.approx(sol.ellipse95()[0])
+    # 4 σ: outside a Gaussian's 95 % ellipse, inside this tail's (its edge at 5.15 σ)
+    said = mahalanobis_sentence(4.0, tail)
+    assert "inside" in said and "5.15 σ" in said
+    assert "outside" in mahalanobis_sentence(4.0) and "outside" in mahalanobis_sentence(5.2, tail)

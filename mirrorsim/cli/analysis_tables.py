@@ -11,6 +11,7 @@ from mirrorsim.cli.tables import columns, show_value
 from mirrorsim.formats.error_model import ErrorModel
 from mirrorsim.formats.error_model_scope import SIGMA_FEATURES
 from mirrorsim.scene.model import Scene
+from solver.measurements import Tail
 from solver.montecarlo import Table1
 from solver.selfcal import describe_priors
 
@@ -196,6 +197,7 @@ def error_model_summary(model: ErrorModel) -> str:
                  f"{model.shared_alpha_deg:.4f}°" + (
                      " (each α law above is the image's own part)" if model.shared_alpha_deg
                      else " (none found)"))
+    lines.append(tail_line(model.tail))
     t = model.tolerances
     if not t.ideal:
         lines.append(f"  its benches' shared errors (half-widths), estimated with priors: pan "
@@ -210,3 +212,15 @@ def error_model_summary(model: ErrorModel) -> str:
     for note in (model.provenance or {}).get("warnings", []):
         lines.append(f"  warning: a loosely determined law: {note}")
     return "\n".join(lines)
+
+
+def tail_line(tail: Tail) -> str:
+    """How an error model's ellipses are drawn, in words."""
+    if tail.gaussian:
+        return ("  the target's distance from an estimate taken as Gaussian: its 95 % ellipse "
+                "at 2.45 σ")
+    return (f"  the target's distance from an estimate, fitted on these rows solved again: a "
+            f"2-D Student-t of scale {tail.scale:.3f} and {tail.dof:.3g} degrees of freedom "
+            f"(median {tail.radius(0.5):.2f} σ): its 95 % ellipse at "
+            f"{tail.radius(0.95):.2f} σ, not a Gaussian's 2.45 (the detector's errors are "
+            "heavier-tailed)")

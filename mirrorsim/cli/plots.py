@@ -309,7 +309,7 @@ def plot_error_model(cols: dict, model: ErrorModel, out: str | Path) -> Path:
     that row (a ±2σ bar on each point), and the errors in σ's against a standard
     normal."""
     from mirrorsim.formats import dataset_table as table
-    from mirrorsim.pipelines.errormodel import model_own_errors, sigma_features_of
+    from mirrorsim.pipelines.error_features import model_own_errors, sigma_features_of
 
     fig, axes = plt.subplots(2, 3, figsize=(16, 8.5))
     cols, beacon_of, _ = table.image_rows(cols)  # every beacon's image; the target once

@@ -11,8 +11,9 @@ from mirrorsim.detection.detector import Detection
 from mirrorsim.pipelines.score import Report
 from mirrorsim.scene.model import Scene
 from mirrorsim.truth import optics, visibility
+from solver.measurements import GAUSSIAN, Tail
 from solver.selfcal import describe_estimates
-from solver.sltr import Solution, chi2_2_radius
+from solver.sltr import Solution
 
 if TYPE_CHECKING:  # renders, budgets and tracks: no Mitsuba import to print a table
     from mirrorsim.rendering.frames import FrameFiles
@@ -196,7 +197,7 @@ def _report_notes(report: Report) -> list[str]:
     lines += [note if note.startswith("warning: ") else f"self-calibration: {note}"
               for note in report.calibration_notes]
     if e.target_mahalanobis is not None:
-        lines.append(mahalanobis_sentence(e.target_mahalanobis))
+        lines.append(mahalanobis_sentence(e.target_mahalanobis, report.solution.tail))
     if e.target_crlb_cm is not None and s.target_covariance is not None:
         lines.append(f"Cramér–Rao bound of the target's RMS error: {e.target_crlb_cm:.3f} cm "
                      f"at the truth, for this estimator (its nuisances and priors); its "
@@ -209,10 +210,11 @@ def _report_notes(report: Report) -> list[str]:
     return lines
 
 
-def mahalanobis_sentence(distance: float) -> str:
+def mahalanobis_sentence(distance: float, tail: Tail = GAUSSIAN) -> str:
     """Where the true target lies against the estimate's 95 % ellipse, in words that
-    follow the distance: inside below χ₂'s 95 % radius, outside beyond it."""
-    r95 = chi2_2_radius(0.95)
+    follow the distance: inside below the ``tail``'s 95 % radius (χ₂'s by default),
+    outside beyond it."""
+    r95 = tail.radius(0.95)
     where = (f"inside the 95 % ellipse, whose edge is at {r95:.2f} σ" if distance <= r95
              else f"outside the 95 % ellipse, whose edge is at {r95:.2f} σ")
     return f"the true target lies {distance:.2f} σ from the estimate: {where}"

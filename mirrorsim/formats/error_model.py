@@ -43,6 +43,7 @@ from solver.measurements import (
     SIGMA_D_REL_MIN,
     ObjectSigmas,
     Sigma,
+    Tail,
 )
 
 FORMAT = "mirrorsim error model"
@@ -170,6 +171,11 @@ class ErrorModel:
     # σ (deg) of an α offset every image of a frame shares beyond what the tolerances
     # hold (found in the training rows' pairs of target and beacon α errors)
     shared_alpha_deg: float = 0.0
+    # how far the truth lies from an estimate in σ's of the covariance these σ's give
+    # (fitted on the training rows solved again: the detector's errors are heavier-
+    # tailed than a Gaussian's), so that a 95 % ellipse holds 95 % (a file without it:
+    # the σ's at their word)
+    tail: Tail = Tail()
     # the file it was read from (None: made in memory), for records that name it (a
     # dataset's card); not part of the model, so not in its file, digest or equality
     source: str | None = field(default=None, compare=False)
@@ -227,7 +233,7 @@ class ErrorModel:
         """Each observation's σ's: the target's and each beacon's."""
         return ObjectSigmas(self.sigma("target", target, pan_deg, fx_px=fx_px),
                             tuple(self.sigma("beacon", b, pan_deg, fx_px=fx_px) for b in beacons),
-                            self.shared_alpha_deg)
+                            self.shared_alpha_deg, self.tail)
 
     def domain_warnings(self, target: ImageFeatures, beacons: list[ImageFeatures],
                         pan_deg: float, *, scene: dict[str, Any] | None = None,
@@ -273,6 +279,7 @@ class ErrorModel:
         """The model file's contents (:func:`sealed` adds their checksum)."""
         out = {"format": FORMAT, "version": VERSION, "kind": self.kind, "units": UNITS,
                "fx_px": self.fx_px, "shared_alpha_deg": self.shared_alpha_deg,
+               "target_tail": self.tail.to_json(),
                "sigma_features": list(SIGMA_FEATURES),
                "bias_features": list(self.bias_features),
                "domain": self.domain.to_json(), "tolerances": self.tolerances.to_json(),

@@ -4,6 +4,7 @@ shipped with the package (``mirrorsim/data/``).  The model itself is
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -35,6 +36,7 @@ from solver.measurements import (
     SIGMA_ALPHA_MIN_DEG,
     SIGMA_D_REL_MAX,
     SIGMA_D_REL_MIN,
+    Tail,
 )
 
 
@@ -62,7 +64,7 @@ def model_from_dict(data: Any, source: str | Path) -> ErrorModel:
                                    "model)") from None
     top = r.mapping(data, "", ("format", "version", "objects", "domain", "tolerances"),
                     optional=("units", "sigma_features", "bias_features", "provenance", "fx_px",
-                     "shared_alpha_deg", "kind"))
+                     "shared_alpha_deg", "kind", "target_tail"))
     if top["format"] != FORMAT or top["version"] != VERSION:
         raise r.fail("version", f"{top['version']!r}: not a version-{VERSION} {FORMAT}; fit it "
                                 "again with this mirrorsim (`mirrorsim errormodel DATASET`)")
@@ -83,7 +85,7 @@ def model_from_dict(data: Any, source: str | Path) -> ErrorModel:
     shared = read_shared_alpha(r, top.get("shared_alpha_deg", 0.0), "shared_alpha_deg")
     model = ErrorModel(fits, _domain(r, top["domain"]), _tolerances(r, top["tolerances"]),
                        tuple(bias_features), prov if isinstance(prov, dict) else None, fx,
-                       shared)
+                       shared, _tail(r, top.get("target_tail")))
     _check_consistent(r, model)
     if "kind" in top and top["kind"] != model.kind:
         raise r.fail("kind", f"{top['kind']!r}, but its tolerances and bench domain make it "
@@ -109,6 +111,18 @@ def _check_consistent(r: Reader, model: ErrorModel) -> None:
                 raise r.fail(f"{key}.typical_sigma", f"{fit.typical_sigma:.3g}, but the law "
                              f"gives {at_mean:.3g} at its rows' mean: they are of different "
                              "fits")
+
+
+def _tail(r: Reader, value: Any) -> Tail:
+    """The ``target_tail`` entry (missing: the σ's at their word): a scale > 0 and a dof
+    > 0 or null (a Gaussian's)."""
+    if value is None:
+        return Tail()
+    d = r.mapping(value, "target_tail", ("scale", "dof"))
+    scale = r.number(d["scale"], "target_tail.scale", positive=True, high=1e3)
+    dof = None if d["dof"] is None else r.number(d["dof"], "target_tail.dof", positive=True,
+                                                   high=1e9)
+    return Tail(scale, math.inf if dof is None else dof)
 
 
 def _range(r: Reader, value: Any, key: str, low: float | None = None) -> tuple[float, float]:

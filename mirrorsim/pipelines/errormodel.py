@@ -11,9 +11,13 @@ error):
 * **bias** (diagnostic): a robust linear fit (Huber loss, scipy's ``least_squares``) in
   the geometry [1, d_total, signed off-axis bearing, mirror incidence, 1/image height]
   and, for a dataset drawn with bench imperfections, each imperfection that varies in it
-  (:data:`BENCH_FEATURES`: the pan error, the calibration error, the mirror's
-  curvature…).  These features come from the truth and from values an experimenter
-  does not know, so the bias says what drives the errors; it never sets a σ.
+  (:data:`~mirrorsim.pipelines.error_features.BENCH_FEATURES`: the pan error, the
+  calibration error, the mirror's curvature…).  These features come from the truth and
+  from values an experimenter does not know, so the bias says what drives the errors;
+  it never sets a σ.
+* **the target's tail**: each row solved again with the model's σ's, the truths'
+  Mahalanobis distances fitted as a scaled 2-D Student-t
+  (:class:`~solver.measurements.Tail`), where the model's ellipses are drawn.
 """
 
 from __future__ import annotations
@@ -28,8 +32,6 @@ from mirrorsim.formats.error_model import (
     KINDS,
     ErrorModel,
     QuantityFit,
-    feature_vector,
-    off_axis,
 )
 from mirrorsim.formats.error_model_file import sealed
 from mirrorsim.formats.error_model_scope import (
@@ -39,79 +41,23 @@ from mirrorsim.formats.error_model_scope import (
     Domain,
 )
 from mirrorsim.formats.files import write_json
+from mirrorsim.pipelines.error_features import (
+    QUANTITY_COLUMNS,
+    _design,
+    features_of,
+    own_errors,
+    sigma_features_of,
+)
 from mirrorsim.pipelines.sigma_laws import (
     fit_alpha_pair,
+    fit_tail,
     gross_free_fit,
     robust_fit,
     shared_of,
     stability,
 )
+from mirrorsim.pipelines.uncertainty import validate
 from mirrorsim.scene import imperfections
-
-FEATURES = ("1", "d_total_cm", "off_axis_deg", "incidence_deg", "inv_height_px")
-# A bench's imperfections (a dataset's bench_* columns) as bias features, each in the form
-# its first-order effect is linear in (declared with its imperfection in the registry).
-# A feature enters the bias fit only where its column varies.
-BENCH_FEATURES = {f.name: f for f in imperfections.FEATURES}
-QUANTITY_COLUMNS = {"alpha": "alpha_err", "d_rel": "d_rel_err"}
-
-
-def _feature(cols: dict, kind: str, name: str) -> np.ndarray:
-    """One feature column for ``kind`` (target or beacon)."""
-    col = lambda k: np.asarray(cols[k], float)  # noqa: E731
-    if name == "1":
-        return np.ones(len(cols[table.object_column(kind, "d_true")]))
-    if name in ("d_total_cm", "off_axis_deg", "incidence_deg"):
-        return col(table.object_column(kind, {"d_total_cm": "d_true"}.get(name, name)))
-    if name == "inv_height_px":
-        return 1.0 / col(table.object_column(kind, "height_px_true"))
-    if name in BENCH_FEATURES:
-        return BENCH_FEATURES[name].of(col, lambda k: col(table.object_column(kind, k)))
-    raise KeyError(name)
-
-
-def features_of(cols: dict) -> list[str]:
-    """The model's features for these columns: FEATURES, then each bench feature whose
-    column varies (for either object)."""
-    names = list(FEATURES)
-    if imperfections.ROW_COLUMNS[0] not in cols:  # a dataset from before the bench
-        return names
-    ok = table.usable_rows(cols)
-    for name in BENCH_FEATURES:
-        for kind in ("target", "beacon"):
-            v = _feature(cols, kind, name)[ok]
-            v = v[np.isfinite(v)]
-            if v.size and np.ptp(v) > 0:
-                names.append(name)
-                break
-    return names
-
-
-def _design(cols: dict, kind: str, names: list[str] | tuple[str, ...] = FEATURES
-            ) -> np.ndarray:
-    return np.column_stack([_feature(cols, kind, n) for n in names])
-
-
-def sigma_features_of(cols: dict, kind: str) -> np.ndarray:
-    """The σ law's features (SIGMA_FEATURES) of ``kind``'s images in dataset columns:
-    what each frame showed of the image, and its bearing off the pan the capture record
-    gives, as at measurement time (NaN where not measured).
-
-    Raises
-    ------
-    ValueError
-        For a table made before these were recorded.
-    """
-    col = lambda k: np.asarray(cols[k], float)  # noqa: E731
-    names = [table.object_column(kind, c) for c in ("height_px_meas", "contrast", "noise",
-                                                    "jpeg_quality", "alpha_meas")]
-    for k in (*names, "observer_pan_deg"):
-        if k not in cols or all(v is None for v in cols[k]):
-            raise ValueError(f"the dataset has no column {k!r}: it was made by an older "
-                             "mirrorsim; make it again")
-    h, contrast, noise, jpeg, alpha = (col(k) for k in names)
-    return feature_vector(h, off_axis(alpha, col("observer_pan_deg")), contrast, noise=noise,
-                          jpeg_quality=jpeg)
 
 
 def min_rows(names: tuple[str, ...] | list[str]) -> int:
@@ -133,11 +79,6 @@ MIN_ROWS = 5 * (len(SIGMA_FEATURES) + 1)
 UNSTABLE_REFUSE = 30.0
 UNSTABLE_WARN = 4.0
 SPAN_REFUSE = 1e4
-# the bias features of the errors every image of a frame shares, which the solver
-# estimates (its nuisances with their priors) rather than each image's σ holding them:
-# the pan reading (α), the calibration's distance and the mirror's curvature (d_total)
-SHARED_FEATURES = {"alpha": ("pan_error_deg",),
-                   "d_rel": ("calibration_error_cm", "mirror_power")}
 TAIL_LEVEL = 0.95  # the tail factor puts this share of the training errors within z σ's
 TAIL_Z = 1.959964
 
@@ -150,7 +91,9 @@ def fit(cols: dict, provenance: dict | None = None, bench: dict | None = None) -
     Each image's own error is its error less the parts every image of its frame shares
     (the pan reading, the calibration, the mirror's curvature: their bias coefficients
     times their values), which the solver estimates as nuisances with the tolerances'
-    priors; the σ law is fitted to the own errors, its tail factor on them all.
+    priors; the σ law is fitted to the own errors, its tail factor on them all.  Then
+    each row is solved again with the model's σ's, and the truths' distances from the
+    estimates give the model's target tail (where its ellipses are drawn).
 
     Raises
     ------
@@ -198,7 +141,19 @@ def fit(cols: dict, provenance: dict | None = None, bench: dict | None = None) -
                        tolerances_of(bench or {}), tuple(names),
                        {**(provenance or {}), **({"warnings": notes} if notes else {})},
                        fx_px, shared)
-    return model
+    return _with_tail(model, scene_cols)
+
+
+def _with_tail(model: ErrorModel, cols: dict) -> ErrorModel:
+    """``model`` with the tail of its own rows solved again with its σ's
+    (:func:`~mirrorsim.pipelines.sigma_laws.fit_tail`); rows without the geometry to
+    solve them again (a table made by hand) leave the σ's at their word, and say so."""
+    try:
+        distances = validate(model, cols).mahalanobis
+    except ValueError as exc:  # a column the solve needs is missing
+        return replace(model, provenance={**(model.provenance or {}),
+                                          "tail_not_fitted": str(exc)})
+    return replace(model, tail=fit_tail(distances))
 
 
 def _law(which: str, S: np.ndarray, own: np.ndarray, *, bias: np.ndarray,
@@ -255,27 +210,6 @@ def _shared_alpha(fits: dict[str, dict[str, QuantityFit]],
             fits[kind]["alpha"], log_sigma=law, tail=tail,
             typical_sigma=float(np.sqrt(np.mean((tail * law(S[m])) ** 2))))
     return shared
-
-
-def own_errors(cols: dict, kind: str, q: str, *, names: tuple[str, ...] | list[str],
-               bias: tuple[float, ...] | np.ndarray, fx_px: float | None) -> np.ndarray:
-    """Each row's own error of ``kind``'s ``q``: its error less the parts every image of
-    its frame shares (SHARED_FEATURES' bias coefficients times their values), and for α
-    as at the focal length ``fx_px`` (pixel errors scale as 1/fx)."""
-    y = np.asarray(cols[table.object_column(kind, QUANTITY_COLUMNS[q])], float)
-    X = _design(cols, kind, names)
-    idx = [list(names).index(f) for f in SHARED_FEATURES[q] if f in names]
-    own = y - X[:, idx] @ np.asarray(bias, float)[idx] if idx else y
-    if q == "alpha":
-        fx = table.focal_lengths(cols)
-        own = own * np.where(np.isfinite(fx), fx / (fx_px or 1.0), 1.0)
-    return own
-
-
-def model_own_errors(cols: dict, model: ErrorModel, kind: str, *, q: str) -> np.ndarray:
-    """:func:`own_errors` with ``model``'s bias fit (image rows of a table)."""
-    return own_errors(cols, kind, q, names=model.bias_features, bias=model.fits[kind][q].bias,
-                      fx_px=model.fx_px)
 
 
 def _scene_domain(cols: dict) -> dict[str, tuple[float, float]]:

@@ -45,8 +45,10 @@ class Score:
     target_ellipse95_major_cm : float or None
         The semi-major axis of the solver's 95 % ellipse (cm; None without σ's).
     target_mahalanobis : float or None
-        The true target's distance from the estimate in σ's of its covariance (inside
-        the 95 % ellipse below 2.45).
+        The true target's distance from the estimate in σ's of its covariance.
+    target_inside95 : bool or None
+        Whether the true target lies inside the solver's 95 % ellipse (drawn at the error
+        model's tail's radius: :class:`~solver.measurements.Tail`).
     target_crlb_cm : float or None
         √trace of the Cramér–Rao bound of the estimator that ran, at the true geometry
         (cm): no unbiased estimate's RMS error is smaller.
@@ -64,8 +66,9 @@ class Score:
     beacon_d_total_pct: tuple[float, ...]
     target_ellipse95_major_cm: float | None  # the solver's own bound: the ellipse's semi-major
     # the true target's distance from the estimate in σ's of its covariance (an honest
-    # 95 % ellipse holds it below 2.45 in 95 % of scenes; median 1.18)
+    # 95 % ellipse holds it below its edge, at the tail's 95 % radius, in 95 % of scenes)
     target_mahalanobis: float | None = None
+    target_inside95: bool | None = None
     # √trace of the Cramér–Rao bound of the target at the true geometry for the
     # measurements' σ's: no unbiased estimate's RMS error is smaller
     target_crlb_cm: float | None = None
@@ -83,6 +86,7 @@ class Score:
                 "beacon_d_total_pct": list(self.beacon_d_total_pct),
                 "target_ellipse95_major_cm": self.target_ellipse95_major_cm,
                 "target_mahalanobis": self.target_mahalanobis,
+                "target_inside95": self.target_inside95,
                 "target_crlb_cm": self.target_crlb_cm, "calibrated": list(self.calibrated)}
 
     @classmethod
@@ -121,6 +125,7 @@ def score(truth: GroundTruth, measurements: Measurements, sol: Solution,
                                  zip(measurements.beacons, truth.beacons, strict=True)),
         target_ellipse95_major_cm=None if ellipse is None else float(ellipse[0]),
         target_mahalanobis=sol.mahalanobis(t_true),
+        target_inside95=sol.inside95(t_true),
         target_crlb_cm=_crlb_cm(truth, measurements, calibration),
         calibrated=calibrated_of(sol),
     )

@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from mirrorsim.formats.error_model import LogSigma
+from solver.measurements import Tail
 
 GROSS = 6.0  # errors beyond this many σ's are gross errors, counted apart
 # a shared α error is taken as there when its mean product is this many standard
@@ -160,3 +161,31 @@ def shared_of(et: np.ndarray, eb: np.ndarray, m: np.ndarray) -> float:
         return 0.0
     t = np.mean(p) / (np.std(p, ddof=1) / np.sqrt(p.size))
     return float(np.sqrt(np.mean(p))) if t > SHARED_T else 0.0
+
+
+# the fewest solved rows a tail is fitted on; fewer leave the σ's at their word
+TAIL_MIN_ROWS = 30
+TAIL_DOF_RANGE = (0.5, 1e4)
+
+
+def fit_tail(distances: np.ndarray) -> Tail:
+    """The :class:`~solver.measurements.Tail` of truths' Mahalanobis distances m from
+    their estimates: (scale c, dof ν) by maximum likelihood of m/c ~ the radius of a 2-D
+    Student-t, density s (1 + s²/ν)^−(ν/2+1) (a Gaussian's s e^(−s²/2) as ν → ∞).  With
+    fewer than TAIL_MIN_ROWS finite distances: the σ's at their word."""
+    from scipy.optimize import minimize
+
+    m = np.asarray(distances, float)
+    m = m[np.isfinite(m) & (m > 0)]
+    if m.size < TAIL_MIN_ROWS:
+        return Tail()
+    lo, hi = np.log(TAIL_DOF_RANGE)
+
+    def nll(p):
+        c, nu = np.exp(p[0]), np.exp(np.clip(p[1], lo, hi))
+        s = m / c
+        return -np.sum(np.log(s / c) - (nu / 2 + 1) * np.log1p(s * s / nu))
+
+    start = [np.log(np.median(m) / 1.1774), np.log(10.0)]
+    p = minimize(nll, start, method="Nelder-Mead", options={"xatol": 1e-6, "fatol": 1e-9}).x
+    return Tail(float(np.exp(p[0])), float(np.exp(np.clip(p[1], lo, hi))))

@@ -4,9 +4,10 @@ Each held-out dataset row's measurements (what the solver saw: the observer, the
 beacon's believed position, the measured α and d_total) are solved again with the σ's
 the model gives them, and the estimate's covariance is held against the true target:
 
-* the coverage of the target's 50, 90 and 95 % ellipses, with a Clopper–Pearson 95 %
+* the coverage of the target's 50, 90 and 95 % ellipses (drawn at the radii of the
+  model's tail, :class:`~solver.measurements.Tail`), with a Clopper–Pearson 95 %
   interval (a model is honest where the interval holds the nominal level);
-* the median Mahalanobis distance, against χ₂'s median √(2 ln 2) = 1.18;
+* the median Mahalanobis distance, against its tail's median and χ₂'s, √(2 ln 2) = 1.18;
 * for each measurement (target and beacon, α and d_total), the fraction of errors within
   1σ and 2σ (0.683 and 0.954 for Gaussian errors of those σ's);
 * a reliability diagram: nominal against empirical coverage.
@@ -23,12 +24,12 @@ import numpy as np
 from mirrorsim.formats import dataset_table as table
 from mirrorsim.formats.error_model import KINDS, ErrorModel, ImageFeatures
 from mirrorsim.formats.files import save_figure
+from mirrorsim.pipelines.error_features import model_own_errors, sigma_features_of
 from mirrorsim.pipelines.solving import model_calibration
 from solver.errors import SolverError
 from solver.lsq import solve_measurements
-from solver.measurements import BeaconMeasurement
+from solver.measurements import BeaconMeasurement, Tail
 from solver.selfcal import SelfCalibration, parse_priors
-from solver.sltr import chi2_2_radius
 
 LEVELS = (0.5, 0.9, 0.95)
 CHI2_MEDIAN = math.sqrt(2.0 * math.log(2.0))  # the median of a χ with 2 degrees of freedom
@@ -74,10 +75,12 @@ class Validation:
     coverage: tuple[Coverage, ...]
     within: dict[str, dict[str, tuple[float, float]]]  # kind → quantity → (1σ, 2σ)
     n_scene_failed: int = 0  # rows whose scene had failed in the dataset (not attempted)
+    tail: Tail = Tail()  # the model's: where each level's ellipse is drawn
 
     @property
     def median_mahalanobis(self) -> float:
-        """The median distance in σ's (1.18 for honest Gaussian ellipses)."""
+        """The median distance in σ's (the tail's median for an honest model: 1.18 for
+        Gaussian ellipses)."""
         return float(np.median(self.mahalanobis)) if self.mahalanobis.size else math.nan
 
     def to_json(self) -> dict:
@@ -86,7 +89,8 @@ class Validation:
                 "scenes_failed": self.n_scene_failed,
                 "coverage": [c.to_json() for c in self.coverage],
                 "median_mahalanobis": self.median_mahalanobis,
-                "chi2_2_median": CHI2_MEDIAN,
+                "chi2_2_median": CHI2_MEDIAN, "tail": self.tail.to_json(),
+                "tail_median": self.tail.radius(0.5),
                 "within": {k: {q: {"1sigma": a, "2sigma": b} for q, (a, b) in qs.items()}
                            for k, qs in self.within.items()},
                 "expected_within": {"1sigma": 0.6827, "2sigma": 0.9545}}
@@ -135,9 +139,10 @@ def validate(model: ErrorModel, cols: dict) -> Validation:
         except (SolverError, np.linalg.LinAlgError):
             failed += 1
     m = np.asarray(dist, float)
-    coverage = tuple(Coverage(p, int(np.sum(m <= chi2_2_radius(p))), len(m)) for p in LEVELS)
+    coverage = tuple(Coverage(p, int(np.sum(m <= model.tail.radius(p))), len(m))
+                     for p in LEVELS)
     return Validation(int(ok.sum()), failed, m, coverage, _within(model, cols, ok),
-                      int((~ok).sum()))
+                      int((~ok).sum()), model.tail)
 
 
 def _features(cols: dict, kind: str) -> list[ImageFeatures]:
@@ -152,8 +157,6 @@ def _within(model: ErrorModel, cols: dict, ok: np.ndarray
             ) -> dict[str, dict[str, tuple[float, float]]]:
     """Each measurement's own errors (the frame's shared parts apart) in the model's
     σ's: the fractions within 1σ and 2σ."""
-    from mirrorsim.pipelines.errormodel import model_own_errors, sigma_features_of
-
     out: dict[str, dict[str, tuple[float, float]]] = {}
     cols, beacon_of, scene_of = table.image_rows(cols)  # every beacon's image, the target once
     ok = ok[scene_of]
@@ -179,7 +182,9 @@ def report_lines(v: Validation) -> list[str]:
         lines.append(f"  {100 * c.level:.0f} % ellipse: {c.inside}/{c.n} inside = "
                      f"{c.fraction:.3f} (95 % interval {lo:.3f}–{hi:.3f})")
     lines.append(f"  median Mahalanobis distance {v.median_mahalanobis:.2f} (honest: "
-                 f"{CHI2_MEDIAN:.2f})")
+                 + (f"{CHI2_MEDIAN:.2f})" if v.tail.gaussian else
+                    f"{v.tail.radius(0.5):.2f} by the model's tail, {CHI2_MEDIAN:.2f} for "
+                    "Gaussian errors)"))
     for kind, qs in v.within.items():
         for q, (a, b) in qs.items():
             lines.append(f"  {kind:6s} {q:5s} errors within 1σ {a:.3f} (0.683), within 2σ "
@@ -197,7 +202,7 @@ def reliability_plot(v: Validation, out: str | Path, title: str = "") -> Path:
 
     levels = np.linspace(0.05, 0.99, 40)
     m = v.mahalanobis
-    inside = np.array([np.sum(m <= chi2_2_radius(p)) for p in levels])
+    inside = np.array([np.sum(m <= v.tail.radius(p)) for p in levels])
     band = np.array([binomial_interval(int(round(p * m.size)), m.size) for p in levels])
     fig, (a, b) = plt.subplots(1, 2, figsize=(12, 5))
     a.plot([0, 1], [0, 1], "k--", lw=1, label="honest")
@@ -213,8 +218,12 @@ def reliability_plot(v: Validation, out: str | Path, title: str = "") -> Path:
     b.hist(m, bins=30, range=(0, r[-1]), density=True, color="#c0392b", alpha=0.6,
            label="held-out rows")
     b.plot(r, r * np.exp(-r**2 / 2), "k--", lw=1, label="χ with 2 degrees of freedom")
+    if not v.tail.gaussian:
+        c, nu = v.tail.scale, v.tail.dof
+        b.plot(r, r / c**2 * (1 + (r / c) ** 2 / nu) ** -(nu / 2 + 1), "k:", lw=1.5,
+               label=f"the model's tail (scale {c:.2f}, ν {nu:.2f})")
     b.axvline(v.median_mahalanobis, color="#c0392b", lw=1,
-              label=f"median {v.median_mahalanobis:.2f} (honest {CHI2_MEDIAN:.2f})")
+              label=f"median {v.median_mahalanobis:.2f} (honest {v.tail.radius(0.5):.2f})")
     b.set_xlabel("Mahalanobis distance of the true target (σ's)")
     b.set_ylabel("density")
     b.legend(fontsize=8)
