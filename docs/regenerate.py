@@ -134,14 +134,14 @@ RESULTS: tuple[Result, ...] = (
                  "self-calibrated (about 12 min)",
            fresh=("renders/bench_train3", "renders/bench3_test")),
     Result("acceptance",
-           (f"{PY} benchmarks/acceptance.py --scenes 120 --seed 61206001",
-            f"{PY} benchmarks/acceptance.py --scenes 120 --seed 61206002 --bench",
-            f"{PY} benchmarks/acceptance.py --report renders/acceptance-61206001-ideal "
-            "renders/acceptance-61206002-bench"),
+           (f"{PY} benchmarks/acceptance.py --scenes 120 --seed 61206011",
+            f"{PY} benchmarks/acceptance.py --scenes 120 --seed 61206012 --bench",
+            f"{PY} benchmarks/acceptance.py --report renders/acceptance-61206011-ideal "
+            "renders/acceptance-61206012-bench"),
            markdown=True,
            about="the error bars on 240 scenes of the acceptance generator's own, ideal "
                  "and bench, with the default model choice (about 50 min)",
-           fresh=("renders/acceptance-61206001-ideal", "renders/acceptance-61206002-bench")),
+           fresh=("renders/acceptance-61206011-ideal", "renders/acceptance-61206012-bench")),
     Result("acceptance_selfcal",
            (f"{PY} benchmarks/acceptance.py --scenes 40 --seed 61206003 --bench --beacons 3",),
            markdown=True,
