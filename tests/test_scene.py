@@ -331,3 +331,25 @@ def test_the_evaluation_plot_insets_an_ellipse_too_small_to_see(tmp_path, monkey
         plots.plot_evaluation(scene, report, tmp_path / "e.png")
         close_up = figures[-1].axes[1]
         assert (len(close_up.child_axes) == 1) is inset, (scale, sol.ellipse95())
+
+
+def test_check_warns_of_a_pencil_image_too_thin_for_its_sides():
+    """A pencil whose image in the mirror is under 4 px across gets one warning naming
+    its key and its width, that width as the pinhole gives it (worked here: the flats'
+    0.69 cm at the virtual image's depth along the optical axis); the default scene's
+    pencil, 13 px across, gets none."""
+    from mirrorsim.pipelines.scenes import edit_scene
+
+    scene = load_scene(SCENES / "default.yaml")
+    assert not any("px across" in w for w in scene.warnings)
+    small = edit_scene(scene, {"camera": {"resolution": [320, 180]}})
+    said = [w for w in small.warnings if "px across" in w]
+    assert len(said) == 1 and said[0].startswith("beacon.position: ")
+    cam, m, b = small.camera, small.mirror, small.beacons[0]
+    n = np.array([-math.sin(math.radians(m.yaw)), math.cos(math.radians(m.yaw))])
+    p = np.asarray(b.position) - 2 * ((np.asarray(b.position) - m.center) @ n) * n
+    axis = np.array([math.cos(math.radians(cam.pan_deg)), math.sin(math.radians(cam.pan_deg))])
+    depth = (p - cam.position) @ axis
+    fx = cam.resolution[0] / 2 / math.tan(math.radians(cam.hfov) / 2)
+    width = float(said[0].split(" px across")[0].rsplit(" ", 1)[1])
+    assert width == pytest.approx(0.69 * fx / depth, rel=0.05) and width < 4

@@ -169,7 +169,7 @@ def check_sight(f: Failures, scene: Scene, fail: Fail, *, bkey: Callable[[int], 
         warnings.append(f"target.position: the camera also sees the target directly "
                         f"({100 * direct:.0f}% of its axis unobstructed): not an NLOS set-up")
     if not f.found:
-        warnings += crossing_images(scene, bkey)
+        warnings += crossing_images(scene, bkey) + thin_images(scene, bkey)
     return tuple(warnings)
 
 
@@ -232,6 +232,34 @@ def crossing_images(scene: Scene, bkey: Callable[[int], str]) -> list[str]:
             out.append(f"{bkey(i)}.position: the pencil stands in front of its own image in "
                        f"the mirror (within {IMAGE_GAP_PX:g} px in the frame): the detector "
                        "cannot tell the two apart; move it along the mirror")
+    return out
+
+
+# the narrowest pencil image (px across its flats) the detector is known to measure:
+# the shipped models' domain dataset (scenes/dataset_spec_domain.yaml) held pencil
+# images from 4.0 px across, all measured; of the acceptance generator's scenes, one
+# 3.1 px across showed no side edges, and its frame was not measured
+MIN_PENCIL_PX = 4.0
+PENCIL_FLATS_HALF = 0.345  # cm: half the hexagon's width across flats, its narrowest
+
+
+def thin_images(scene: Scene, bkey: Callable[[int], str]) -> list[str]:
+    """Warn of a pencil whose image in the mirror is narrower than MIN_PENCIL_PX: the
+    detector cannot find its sides, so neither its bearing."""
+    cam = scene.camera
+    out = []
+    for i, b in enumerate(scene.beacons):
+        if scene.is_3d:
+            v3 = optics.image3(cam, scene.mirror, b.base3).virtual
+            virtual, z0 = v3[:2], float(v3[2])
+        else:
+            virtual, z0 = optics.mirror_image(cam.position, scene.mirror, b.position).virtual, 0.0
+        box = optics.upright_box(cam, virtual, PENCIL_FLATS_HALF, height=b.height, z0=z0)
+        if box is not None and box[2] - box[0] < MIN_PENCIL_PX:
+            out.append(f"{bkey(i)}.position: the pencil's image in the mirror is "
+                       f"{box[2] - box[0]:.1f} px across, and the detector finds a pencil's "
+                       f"sides from {MIN_PENCIL_PX:g} px: bring it or the camera nearer the "
+                       "mirror, or widen the frame")
     return out
 
 
