@@ -235,11 +235,12 @@ def crossing_images(scene: Scene, bkey: Callable[[int], str]) -> list[str]:
     return out
 
 
-# the narrowest pencil image (px across its flats) the detector is known to measure:
-# the shipped models' domain dataset (scenes/dataset_spec_domain.yaml) held pencil
-# images from 4.0 px across, all measured; of the acceptance generator's scenes, one
-# 3.1 px across showed no side edges, and its frame was not measured
-MIN_PENCIL_PX = 4.0
+# the narrowest pencil image (px across its flats, as :func:`thin_images` projects it)
+# the detector measures: the acceptance generator's one image under it (3.1 px) showed
+# no side edges, and its frame was not measured; the shipped models' domain datasets
+# (scenes/dataset_spec_domain*.yaml) held images from 3.53 px, and of their four under
+# 4 px that the pencil's width alone decided, two were measured
+MIN_PENCIL_PX = 3.5
 PENCIL_FLATS_HALF = 0.345  # cm: half the hexagon's width across flats, its narrowest
 
 
