@@ -79,6 +79,11 @@ RESULTS: tuple[Result, ...] = (
            about="the pencil's top and foot against the truth, 12 scenes"),
     Result("plan_exp3", (f"{MS} plan scenes/exp3.yaml --out docs/plan_exp3.png",),
            about="the placement analysis of EXP3 (and its figure)"),
+    Result("montecarlo3d",
+           (f"{MS} montecarlo --iterations 2000 --lean 2 --target-z 0.5 --camera-height 0.3 "
+            "--sigma 0.02 0.2 --sigma 0.1 0.5 --sigma 0.5 1 --sigma 1.73 3.2",),
+           about="the Table 1 protocol with a leaning mirror and a raised target: the 3-D "
+                 "closed form beside the planar one on the same draws"),
     Result("montecarlo", (f"{MS} montecarlo --iterations 2000",),
            about="the paper's Table 1 protocol"),
     Result("paper", (f"{PY} benchmarks/paper.py",), markdown=True,

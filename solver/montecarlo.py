@@ -173,11 +173,11 @@ def run_row(sigma_alpha_deg: float, sigma_d: float, iterations: int = 200,
                      rmse_yaw_deg=float(np.sqrt(np.mean(yaw_err ** 2))),
                      failed=int(k - ok.sum()),
                      median_ref=float(np.median(ref_err)), median_tar=float(np.median(tar_err)),
-                     largest_share_ref=_largest_share(ref_err),
-                     largest_share_tar=_largest_share(tar_err))
+                     largest_share_ref=largest_share(ref_err),
+                     largest_share_tar=largest_share(tar_err))
 
 
-def _largest_share(err: np.ndarray) -> float:
+def largest_share(err: np.ndarray) -> float:
     """The share of ``sum(err²)`` that the largest draw holds (NaN for no draws)."""
     sq = np.asarray(err, float) ** 2
     return float(sq.max() / sq.sum()) if sq.size and sq.sum() > 0 else float("nan")
@@ -199,13 +199,16 @@ def table1(iterations: int = 200, geometry: Table1Geometry | None = None,
 
 def table_rows(sigmas: list[tuple[float, float]] | None = None,
                relative: ObjectSigmas | None = None,
-               geometry: Table1Geometry | None = None) -> tuple:
+               geometry: Table1Geometry | None = None,
+               *, d_totals: tuple[float, float] | None = None) -> tuple:
     """The rows to run: the paper's (or ``sigmas``: (σ_α deg, σ_d relative) pairs without
     paper figures), plus one for an error model's relative σ's (the target's and the
-    beacon's); relative σ_d's become absolute at each object's own d_total."""
+    beacon's); relative σ_d's become absolute at each object's own d_total (the
+    geometry's, or ``d_totals``: the target's and the beacon's, as a 3-D set-up sees
+    them)."""
     nan = float("nan")
     lay = (geometry or Table1Geometry()).layout()
-    d_t, d_b = lay.target_d, lay.beacon_d
+    d_t, d_b = d_totals or (lay.target_d, lay.beacon_d)
     rows = PAPER_TABLE1 if not sigmas else tuple((a, d * d_t, nan, nan, (a, d * d_b))
                                                  for a, d in sigmas)
     if relative is not None:

@@ -341,3 +341,50 @@ def test_a_fit_that_models_the_readings_removes_a_leaning_mirrors_bias():
     assert fit.plane.lean_deg == pytest.approx(-4.0, abs=1e-7)
     naive = solve_lsq3(CAMERA, list(zip(beacons, read[:2], strict=True)), [read[2]])
     assert np.linalg.norm(naive.target - target) > 0.1
+
+
+def test_the_3d_monte_carlo_solves_each_draw_as_the_closed_form_does():
+    """The batch closed form gives solve_single3's plane and target on every draw, and on
+    a flat set-up with no elevation noise it is the planar closed form, draw for draw."""
+    from solver.montecarlo import Table1Geometry
+    from solver.montecarlo3 import Rise, closed_form3_unchecked, layout3, run_row3
+
+    lay = layout3(Table1Geometry(), Rise(lean_deg=3.0, target_z=0.5, beacon_z=0.2,
+                                         camera_z=0.3))
+    rng = np.random.default_rng(5)
+    bs = np.asarray(lay.beacon_seen) + rng.normal(0, [1.0, 1.0, 0.05], (20, 3))
+    ts = np.asarray(lay.target_seen) + rng.normal(0, [1.0, 1.0, 0.05], (20, 3))
+    est = closed_form3_unchecked(lay.observer, lay.beacon, tuple(bs.T), target_seen=tuple(ts.T))
+    for i in range(20):
+        try:
+            one = solve_single3(lay.observer, lay.beacon, tuple(bs[i]), target_seen=tuple(ts[i]))
+        except SolverError:
+            assert np.isnan(est.target[i]).all()
+            continue
+        assert np.allclose(one.target, est.target[i], atol=1e-12)
+        assert np.allclose(one.target_reflection_point, est.target_reflection_point[i],
+                           atol=1e-12)
+        assert one.plane.lean_deg == pytest.approx(est.lean_deg[i], abs=1e-9)
+        assert one.plane.yaw_deg == pytest.approx(est.yaw_deg[i], abs=1e-9)
+    flat = layout3(Table1Geometry(), Rise())
+    row = run_row3(1.73, 0.16, 500, layout=flat, rng=3, sigma_elevation_deg=0.0)
+    assert row.rmse_tar == pytest.approx(row.rmse_tar_planar, rel=1e-9)
+    assert row.rmse_lean_deg == 0.0
+
+
+def test_the_3d_monte_carlo_sees_the_bias_a_planar_solve_makes_of_a_leaning_mirror():
+    """Without noise the 3-D solve is exact, and the planar solve of the same readings
+    misses the raised target by the error its flat geometry makes: its plan position from
+    α and d_total as if they lay on the board, worked here by the planar closed form."""
+    from solver.montecarlo import Table1Geometry
+    from solver.montecarlo3 import Rise, layout3, run_row3
+
+    lay = layout3(Table1Geometry(), Rise(lean_deg=2.0, target_z=3.0))
+    row = run_row3(0.0, 0.0, 10, layout=lay, rng=0)
+    assert row.rmse_tar < 1e-9 and row.rmse_ref < 1e-9 and row.failed == 0
+    (ab, _, db), (at, _, dt) = lay.beacon_seen, lay.target_seen
+    flat = solve_single(lay.observer[:2], lay.beacon[:2], ab, beacon_d_total=db,
+                        target_alpha_deg=at, target_d_total=dt)
+    assert row.rmse_tar_planar == pytest.approx(np.linalg.norm(flat.target - lay.target[:2]),
+                                                rel=1e-9)
+    assert row.rmse_tar_planar > 0.5

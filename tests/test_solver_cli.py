@@ -27,7 +27,7 @@ def _single(x) -> dict:
 
 def test_solver_imports_neither_mirrorsim_mitsuba_nor_opencv():
     code = ("import sys, solver.sltr, solver.placement, solver.particle, solver.particle_runs, "
-            "solver.montecarlo, "
+            "solver.montecarlo, solver.montecarlo3, "
             "solver.measurements; bad = [m for m in ('mirrorsim', 'mitsuba', 'drjit', 'cv2') "
             "if m in sys.modules]; print(bad)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
@@ -359,3 +359,19 @@ def test_montecarlo_says_where_one_draw_holds_a_rows_rmse(capsys):
     assert main(["montecarlo", "--iterations", "1000"]) == 0
     notes = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("note:")]
     assert len(notes) == 1 and notes[0].startswith("note: row 2: one draw of 1000 holds")
+
+
+def test_montecarlo_in_3d_prints_both_solves_and_refuses_bad_rises(tmp_path, capsys):
+    out = tmp_path / "mc3.json"
+    assert main(["montecarlo", "--lean", "2", "--target-z", "0.5", "--iterations", "50",
+                 "--json", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "in 3-D" in printed and "planar tar" in printed
+    doc = json.loads(out.read_text())
+    assert doc["geometry"]["mirror_lean_deg"] == pytest.approx(2.0)
+    assert len(doc["rows"]) == 3 and all("rmse_tar_planar" in r for r in doc["rows"])
+    for argv, flag in ((["--lean", "11"], "--lean"), (["--target-z", "-1"], "--target-z"),
+                       (["--camera-height", "nan"], "--camera-height"),
+                       (["--lean", "1", "--sigma-elevation", "99"], "--sigma-elevation")):
+        assert main(["montecarlo", *argv]) == 2
+        assert flag in capsys.readouterr().err

@@ -526,3 +526,14 @@ def test_the_solution_carries_its_sigmas_tail_to_its_ellipse_and_its_sentence():
     said = mahalanobis_sentence(4.0, tail)
     assert "inside" in said and "5.15 σ" in said
     assert "outside" in mahalanobis_sentence(4.0) and "outside" in mahalanobis_sentence(5.2, tail)
+
+
+def test_the_model_summary_says_what_its_tail_says_of_its_sigmas():
+    from mirrorsim.cli.analysis_tables import tail_line
+    from solver.measurements import Tail
+
+    assert "heavier-tailed" in tail_line(Tail(0.44, 1.28)) and "5.15 σ" in tail_line(
+        Tail(0.44, 1.28))
+    assert "smaller than the σ's say" in tail_line(Tail(0.387, 1e4))
+    assert "larger than the σ's say" in tail_line(Tail(2.0, 1e4))
+    assert "taken as Gaussian" in tail_line(Tail())

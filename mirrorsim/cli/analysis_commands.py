@@ -118,6 +118,19 @@ def _montecarlo_options(p):
                    help="beacon's distance in front of the mirror")
     p.add_argument("--beacon-along", type=float, default=0.3,
                    help="beacon's offset along the mirror from the reflection point")
+    p.add_argument("--lean", type=float, default=0.0,
+                   help="3-D: the mirror's lean (deg, its top away from its face; within "
+                   "±10)")
+    p.add_argument("--target-z", type=float, default=0.0,
+                   help="3-D: the target's base above the board (the table's units)")
+    p.add_argument("--beacon-z", type=float, default=0.0,
+                   help="3-D: the beacon's base above the board")
+    p.add_argument("--camera-height", type=float, default=0.0,
+                   help="3-D: the camera above the board (with any of these four "
+                   "non-zero, each image is seen at azimuth, elevation and d_total and "
+                   "solved in 3-D, beside the planar solve of the same draws)")
+    p.add_argument("--sigma-elevation", type=float, default=None, metavar="DEG",
+                   help="3-D: the elevation's σ (deg; default each image's σ_α)")
     p.add_argument("--sigma", nargs=2, type=float, action="append", metavar=("ALPHA", "DPCT"),
                    help="a row of your own: σ_α in degrees and σ_d in %% of d_total (0.2 = "
                    "0.2 %%; files hold it as a fraction, 0.002); repeatable")
@@ -140,7 +153,8 @@ def _montecarlo(args) -> int:
     at_least(("--iterations", args.iterations, 2), ("--seed", args.seed, 0, MAX_SEED))
     if args.iterations > MAX_ITERATIONS:
         raise BadArgument("--iterations", f"{args.iterations} must be ≤ {MAX_ITERATIONS}")
-    finite(args, "alpha", "d_total", "d1", "incidence", "beacon_depth", "beacon_along", "sigma")
+    finite(args, "alpha", "d_total", "d1", "incidence", "beacon_depth", "beacon_along", "sigma",
+           "lean", "target_z", "beacon_z", "camera_height", "sigma_elevation")
     # the protocol's lengths are in the table's units; a measured d_total's range bounds
     # them, so that no row turns to inf
     lo, hi = D_TOTAL_RANGE_CM
@@ -170,9 +184,50 @@ def _montecarlo(args) -> int:
     except (ValueError, SolverError) as exc:
         raise BadArgument("geometry", str(exc)) from None
     model = error_model_of(args)
+    rise = _rise(args)
+    if not rise.flat:
+        return _montecarlo3(args, geometry, rise, None if model is None else model.typical)
     rows = table_rows(args.sigma, None if model is None else model.typical, geometry)
     res = table1(args.iterations, geometry, args.seed, rows=rows)
     print(montecarlo_table(res))
+    emit(args, res.to_json())
+    return 0
+
+
+def _rise(args):
+    """The 3-D options as a :class:`~solver.montecarlo3.Rise`, each within its bounds."""
+    from mirrorsim.scene.model import MAX_LEAN_DEG
+    from solver.measurements import D_TOTAL_RANGE_CM, SIGMA_ALPHA_MAX_DEG
+    from solver.montecarlo3 import Rise
+
+    if abs(args.lean) > MAX_LEAN_DEG:
+        raise BadArgument("--lean", f"{args.lean:g}°: must be within ±{MAX_LEAN_DEG:g}°")
+    for flag, value in (("--target-z", args.target_z), ("--beacon-z", args.beacon_z),
+                        ("--camera-height", args.camera_height)):
+        if not 0.0 <= value <= D_TOTAL_RANGE_CM[1]:
+            raise BadArgument(flag, f"{value:g}: must be within 0…{D_TOTAL_RANGE_CM[1]:g}")
+    if args.sigma_elevation is not None and not 0 <= args.sigma_elevation <= SIGMA_ALPHA_MAX_DEG:
+        raise BadArgument("--sigma-elevation", f"{args.sigma_elevation:g}°: must be within "
+                          f"0…{SIGMA_ALPHA_MAX_DEG:g}°")
+    return Rise(args.lean, args.target_z, args.beacon_z, args.camera_height)
+
+
+def _montecarlo3(args, geometry, rise, typical) -> int:
+    """The protocol in 3-D (``montecarlo --lean/--target-z/…``)."""
+    from mirrorsim.cli.analysis_tables import montecarlo3_table
+    from solver.montecarlo import table_rows
+    from solver.montecarlo3 import layout3, table3
+    from solver.sltr import SolverError
+
+    try:
+        lay = layout3(geometry, rise)
+    except SolverError as exc:
+        raise BadArgument("--lean", f"{rise.lean_deg:g}°: {exc}") from None
+    rows = table_rows(args.sigma, typical, geometry,
+                      d_totals=(lay.target_seen[2], lay.beacon_seen[2]))
+    res = table3(args.iterations, geometry, rise, rows=rows, rng=args.seed,
+                 sigma_elevation_deg=args.sigma_elevation)
+    print(montecarlo3_table(res))
     emit(args, res.to_json())
     return 0
 

@@ -13,6 +13,7 @@ from mirrorsim.formats.error_model_scope import SIGMA_FEATURES
 from mirrorsim.scene.model import Scene
 from solver.measurements import Tail
 from solver.montecarlo import Table1
+from solver.montecarlo3 import Table3, layout3
 from solver.selfcal import describe_priors
 
 if TYPE_CHECKING:  # budgets, plans and tracks run renders: no Mitsuba import to print one
@@ -108,6 +109,27 @@ def montecarlo_table(res: Table1) -> str:
                     f"note: row {i}: one draw of {res.iterations} holds {100 * share:.0f} % of "
                     f"the {what}'s squared error{why}, so its RMSE follows that draw and does "
                     f"not settle as draws grow; its median error is {median:.3f}")
+    return "\n".join(lines)
+
+
+def montecarlo3_table(res: Table3) -> str:
+    """The Table 1 protocol in 3-D (``mirrorsim montecarlo --lean …``): each row's
+    RMSEs, the 3-D solve's beside the planar solve's of the same draws."""
+    r, lay = res.rise, layout3(res.geometry, res.rise)
+    (ta, te, td), (ba, be, bd) = lay.target_seen, lay.beacon_seen
+    lines = [f"Table 1 protocol in 3-D: {res.iterations} draws per row; mirror leaning "
+             f"{r.lean_deg:g}° at yaw {lay.plane.yaw_deg:.1f}°; camera {r.camera_z:g} up; "
+             f"target {r.target_z:g} up, seen at alpha {ta:.3f}°, elevation {te:.3f}°, "
+             f"d_total {td:.4g}; beacon {r.beacon_z:g} up, at {ba:.3f}°, {be:.3f}°, {bd:.4g}",
+             "σ_α and σ_ε (each image's elevation; σ_α's unless --sigma-elevation) in deg; "
+             "σ_d in % of d_total; RMSEs in the table's units (the 3-D solve's in 3-D, the "
+             "planar solve's target in plan)",
+             f"{'σ_α (°)':>9} {'σ_d (%)':>7} | {'3-D ref':>9} {'3-D tar':>9} {'yaw (°)':>8} "
+             f"{'lean (°)':>8} | {'planar tar':>10} | {'failed':>6}"]
+    for row, e in res.rows:
+        lines.append(f"{row[0]:9.4g} {100 * row[1] / td:7.4g} | {e.rmse_ref:9.3f} "
+                     f"{e.rmse_tar:9.3f} {e.rmse_yaw_deg:8.2f} {e.rmse_lean_deg:8.2f} | "
+                     f"{e.rmse_tar_planar:10.3f} | {e.failed:6d}")
     return "\n".join(lines)
 
 
@@ -219,8 +241,16 @@ def tail_line(tail: Tail) -> str:
     if tail.gaussian:
         return ("  the target's distance from an estimate taken as Gaussian: its 95 % ellipse "
                 "at 2.45 σ")
+    # what the fit says of the σ's: heavier tails than a Gaussian's, or σ's wider or
+    # narrower than the errors they were fitted to (a bench model's priors, say)
+    why = ("the detector's errors are heavier-tailed" if tail.dof < HEAVY_DOF else
+           f"the errors are {'smaller' if tail.scale < 1 else 'larger'} than the σ's say")
     return (f"  the target's distance from an estimate, fitted on these rows solved again: a "
             f"2-D Student-t of scale {tail.scale:.3f} and {tail.dof:.3g} degrees of freedom "
             f"(median {tail.radius(0.5):.2f} σ): its 95 % ellipse at "
-            f"{tail.radius(0.95):.2f} σ, not a Gaussian's 2.45 (the detector's errors are "
-            "heavier-tailed)")
+            f"{tail.radius(0.95):.2f} σ, not a Gaussian's 2.45 ({why})")
+
+
+# degrees of freedom below which a tail is said heavier than a Gaussian's (at 30 its
+# 95 % radius is 5 % beyond a Gaussian's)
+HEAVY_DOF = 30.0
