@@ -15,7 +15,7 @@ from mirrorsim.formats.error_model_file import default_error_model, model_from_d
 from mirrorsim.formats.measurements import measurements_from_dict
 from mirrorsim.pipelines import errormodel, sigma_laws, uncertainty
 from solver.lsq import crlb, solve_measurements
-from solver.measurements import BeaconMeasurement, ObjectSigmas, Sigma
+from solver.measurements import BeaconMeasurement, ObjectSigmas, Sigma, Tail
 from solver.selfcal import SelfCalibration
 from solver.sltr import chi2_2_radius, observe
 
@@ -495,15 +495,18 @@ def test_a_tail_draws_its_ellipses_at_a_student_t_s_radii():
 
 
 def test_a_tail_is_fitted_back_from_distances_drawn_from_it():
-    """Distances of truths drawn from a scaled 2-D Student-t (scale 0.5, ν 2) give that
-    scale and ν back; Gaussian ones a scale near 1 and a large ν."""
+    """Distances of truths drawn from a scaled 2-D Student-t (scale 2, ν 2) give that
+    scale and ν back; Gaussian ones a scale near 1 and a large ν; and distances half
+    what the σ's say leave the scale at 1: a tail never narrows an ellipse."""
     rng = np.random.default_rng(3)
     n = 4000
     x = rng.standard_normal((n, 2)) / np.sqrt(rng.chisquare(2.0, n) / 2.0)[:, None]
-    t = sigma_laws.fit_tail(0.5 * np.linalg.norm(x, axis=1))
-    assert t.scale == pytest.approx(0.5, rel=0.06) and t.dof == pytest.approx(2.0, rel=0.15)
+    t = sigma_laws.fit_tail(2.0 * np.linalg.norm(x, axis=1))
+    assert t.scale == pytest.approx(2.0, rel=0.06) and t.dof == pytest.approx(2.0, rel=0.15)
     g = sigma_laws.fit_tail(np.linalg.norm(rng.standard_normal((n, 2)), axis=1))
     assert g.scale == pytest.approx(1.0, rel=0.05) and g.dof > 30
+    half = sigma_laws.fit_tail(0.5 * np.linalg.norm(rng.standard_normal((n, 2)), axis=1))
+    assert half.scale == 1.0 and half.radius(0.95) >= Tail().radius(0.95)
     assert sigma_laws.fit_tail(np.ones(10)).gaussian  # too few to fit: at their word
 
 
