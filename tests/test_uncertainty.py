@@ -540,3 +540,4 @@ def test_the_model_summary_says_what_its_tail_says_of_its_sigmas():
     assert "smaller than the σ's say" in tail_line(Tail(0.387, 1e4))
     assert "larger than the σ's say" in tail_line(Tail(2.0, 1e4))
     assert "taken as Gaussian" in tail_line(Tail())
+    assert tail_line(Tail(1.0, 1e4)).endswith("at 2.45 σ, as a Gaussian's")

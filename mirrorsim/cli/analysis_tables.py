@@ -244,11 +244,13 @@ def tail_line(tail: Tail) -> str:
     # what the fit says of the σ's: heavier tails than a Gaussian's, or σ's wider or
     # narrower than the errors they were fitted to (a bench model's priors, say)
     why = ("the detector's errors are heavier-tailed" if tail.dof < HEAVY_DOF else
-           f"the errors are {'smaller' if tail.scale < 1 else 'larger'} than the σ's say")
+           "the errors are larger than the σ's say" if tail.scale > 1 else
+           "the errors are smaller than the σ's say" if tail.scale < 1 else "")
     return (f"  the target's distance from an estimate, fitted on these rows solved again: a "
             f"2-D Student-t of scale {tail.scale:.3f} and {tail.dof:.3g} degrees of freedom "
             f"(median {tail.radius(0.5):.2f} σ): its 95 % ellipse at "
-            f"{tail.radius(0.95):.2f} σ, not a Gaussian's 2.45 ({why})")
+            f"{tail.radius(0.95):.2f} σ" + (f", not a Gaussian's 2.45 ({why})" if why else
+                                            ", as a Gaussian's"))
 
 
 # degrees of freedom below which a tail is said heavier than a Gaussian's (at 30 its
