@@ -55,13 +55,13 @@ class Tail:
         nu = self.dof
         return self.scale * math.sqrt(nu * math.expm1(-2.0 / nu * math.log1p(-level)))
 
-    def level(self, distance: float) -> float:
-        """The level whose region's edge lies at ``distance`` σ's (inverse of
-        :meth:`radius`)."""
-        s2 = (distance / self.scale) ** 2
+    def density(self, distance: ArrayLike) -> np.ndarray:
+        """The probability density of the distance m (broadcasts): with s = m/scale,
+        s (1 + s²/ν)^−(ν/2+1) / scale; s e^(−s²/2) / scale as ν → ∞."""
+        s = np.asarray(distance, float) / self.scale
         if math.isinf(self.dof):
-            return -math.expm1(-s2 / 2.0)
-        return 1.0 - (1.0 + s2 / self.dof) ** (-self.dof / 2.0)
+            return s * np.exp(-s * s / 2.0) / self.scale
+        return s * (1.0 + s * s / self.dof) ** -(self.dof / 2.0 + 1.0) / self.scale
 
     def to_json(self) -> dict:
         """As files keep it (an infinite dof as null)."""
@@ -103,7 +103,7 @@ class ObjectSigmas:
     shared_alpha_deg: float = 0.0
     # how the truth's distance from an estimate made with these σ's is spread (their
     # error model's): where a level's ellipse is drawn
-    tail: Tail = Tail()
+    tail: Tail = GAUSSIAN
 
     @classmethod
     def same(cls, sigma: Sigma) -> ObjectSigmas:

@@ -34,7 +34,7 @@ EPS = 1e-9
 
 __all__ = ["SolverError", "MirrorLine", "Observation", "Solution", "BatchEstimate", "observe",
            "locate", "mirror_from_beacon", "ray_hits_line", "solve_single",
-           "closed_form_unchecked", "chi2_2_radius", "error_ellipse"]
+           "closed_form_unchecked", "error_ellipse"]
 
 
 @dataclass(frozen=True)
@@ -133,7 +133,7 @@ class Solution:
     priors: dict[str, float] = field(default_factory=dict)
     # how far the truth lies from the estimate in the covariance's σ's (the σ's' error
     # model's): where :meth:`ellipse95` and :meth:`inside95` draw the edge
-    tail: Tail = Tail()
+    tail: Tail = GAUSSIAN
 
     @property
     def target_covariance(self) -> np.ndarray | None:
@@ -215,11 +215,6 @@ class Solution:
                    nuisances=dict(d.get("self_calibration", {})),
                    priors=dict(d.get("self_calibration_priors", {})),
                    tail=Tail.from_json(d.get("covariance", {}).get("tail")))
-
-
-def chi2_2_radius(level: float) -> float:
-    """The Mahalanobis radius of a 2-D Gaussian's ``level`` region, √(χ²₂ quantile)."""
-    return Tail().radius(level)
 
 
 def error_ellipse(cov: ArrayLike, level: float = 0.95, *, tail: Tail = GAUSSIAN

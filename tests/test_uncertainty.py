@@ -17,7 +17,7 @@ from mirrorsim.pipelines import errormodel, sigma_laws, uncertainty
 from solver.lsq import crlb, solve_measurements
 from solver.measurements import BeaconMeasurement, ObjectSigmas, Sigma, Tail
 from solver.selfcal import SelfCalibration
-from solver.sltr import chi2_2_radius, observe
+from solver.sltr import observe
 
 from .conftest import SCENES, synthetic_columns, with_frame_columns
 
@@ -74,7 +74,7 @@ def test_per_object_sigmas_give_ellipses_that_hold_and_meet_the_cramer_rao_bound
         est.append(sol.target)
         dist.append(sol.mahalanobis(TARGET))
     dist = np.array(dist)
-    inside = np.mean(dist <= chi2_2_radius(0.95))
+    inside = np.mean(dist <= Tail().radius(0.95))
     assert 0.925 <= inside <= 0.970
     assert np.median(dist) == pytest.approx(uncertainty.CHI2_MEDIAN, rel=0.1)
     bound = crlb(OBS, np.array(beacons), MIRROR[1], mirror_rho=_rho(), target=TARGET,
@@ -104,7 +104,7 @@ def test_a_shared_alpha_offset_gives_ellipses_that_hold(beacons):
         dist.append(sol.mahalanobis(TARGET))
         naive.append(solve_measurements(OBS, bs, ts, sigma=total).mahalanobis(TARGET))
     dist = np.array(dist)
-    assert 0.925 <= np.mean(dist <= chi2_2_radius(0.95)) <= 0.970
+    assert 0.925 <= np.mean(dist <= Tail().radius(0.95)) <= 0.970
     assert np.median(dist) == pytest.approx(uncertainty.CHI2_MEDIAN, rel=0.1)
     assert abs(np.median(naive) / uncertainty.CHI2_MEDIAN - 1) > 0.2
     bound = crlb(OBS, np.array(beacons), MIRROR[1], mirror_rho=_rho(), target=TARGET,
@@ -487,7 +487,13 @@ def test_a_tail_draws_its_ellipses_at_a_student_t_s_radii():
         t = Tail(scale, dof)
         for p in (0.5, 0.9, 0.95):
             assert t.radius(p) == pytest.approx(scale * math.sqrt(2 * f.ppf(p, 2, dof)), rel=1e-9)
-            assert t.level(t.radius(p)) == pytest.approx(p, abs=1e-12)
+            # the radius's level by the F CDF's closed form, 1 − (1 + s²/ν)^(−ν/2)
+            s2 = (t.radius(p) / scale) ** 2
+            assert 1 - (1 + s2 / dof) ** (-dof / 2) == pytest.approx(p, abs=1e-12)
+    # the density integrates to 1 and is a Gaussian's radius's as ν → ∞
+    r = np.linspace(0, 2000, 2_000_001)
+    assert np.trapezoid(Tail(0.5, 3.0).density(r), r) == pytest.approx(1.0, abs=1e-3)
+    assert np.allclose(Tail().density(r[:5000]), r[:5000] * np.exp(-r[:5000] ** 2 / 2))
     assert Tail().radius(0.95) == pytest.approx(math.sqrt(-2 * math.log(0.05)), rel=1e-12)
     assert Tail(1.0, 1e8).radius(0.95) == pytest.approx(Tail().radius(0.95), rel=1e-6)
     assert Tail.from_json(Tail(0.5, 2.0).to_json()) == Tail(0.5, 2.0)

@@ -37,6 +37,7 @@ from numpy.typing import ArrayLike
 from mirrorsim.formats.error_model_scope import SIGMA_FEATURES, BenchTolerances, Domain
 from solver.errors import InputError
 from solver.measurements import (
+    GAUSSIAN,
     SIGMA_ALPHA_MAX_DEG,
     SIGMA_ALPHA_MIN_DEG,
     SIGMA_D_REL_MAX,
@@ -175,7 +176,7 @@ class ErrorModel:
     # (fitted on the training rows solved again: the detector's errors are heavier-
     # tailed than a Gaussian's), so that a 95 % ellipse holds 95 % (a file without it:
     # the σ's at their word)
-    tail: Tail = Tail()
+    tail: Tail = GAUSSIAN
     # the file it was read from (None: made in memory), for records that name it (a
     # dataset's card); not part of the model, so not in its file, digest or equality
     source: str | None = field(default=None, compare=False)

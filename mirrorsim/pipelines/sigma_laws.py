@@ -171,7 +171,7 @@ TAIL_DOF_RANGE = (0.5, 1e4)
 def fit_tail(distances: np.ndarray) -> Tail:
     """The :class:`~solver.measurements.Tail` of truths' Mahalanobis distances m from
     their estimates: (scale c ≥ 1, dof ν) by maximum likelihood of m/c ~ the radius of a
-    2-D Student-t, density s (1 + s²/ν)^−(ν/2+1) (a Gaussian's s e^(−s²/2) as ν → ∞).
+    2-D Student-t (:meth:`~solver.measurements.Tail.density`).
     With fewer than TAIL_MIN_ROWS finite distances: the σ's at their word.
 
     A tail widens the ellipses, never narrows them (c ≥ 1): rows whose covariance was
@@ -188,9 +188,8 @@ def fit_tail(distances: np.ndarray) -> Tail:
     lo, hi = np.log(TAIL_DOF_RANGE)
 
     def nll(p):
-        c, nu = np.exp(max(p[0], 0.0)), np.exp(np.clip(p[1], lo, hi))
-        s = m / c
-        return -np.sum(np.log(s / c) - (nu / 2 + 1) * np.log1p(s * s / nu))
+        tail = Tail(float(np.exp(max(p[0], 0.0))), float(np.exp(np.clip(p[1], lo, hi))))
+        return -np.sum(np.log(tail.density(m)))
 
     start = [max(np.log(np.median(m) / 1.1774), 0.0), np.log(10.0)]
     p = minimize(nll, start, method="Nelder-Mead", options={"xatol": 1e-6, "fatol": 1e-9}).x

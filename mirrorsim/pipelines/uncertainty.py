@@ -28,7 +28,7 @@ from mirrorsim.pipelines.error_features import model_own_errors, sigma_features_
 from mirrorsim.pipelines.solving import model_calibration
 from solver.errors import SolverError
 from solver.lsq import solve_measurements
-from solver.measurements import BeaconMeasurement, Tail
+from solver.measurements import GAUSSIAN, BeaconMeasurement, Tail
 from solver.selfcal import SelfCalibration, parse_priors
 
 LEVELS = (0.5, 0.9, 0.95)
@@ -75,7 +75,7 @@ class Validation:
     coverage: tuple[Coverage, ...]
     within: dict[str, dict[str, tuple[float, float]]]  # kind → quantity → (1σ, 2σ)
     n_scene_failed: int = 0  # rows whose scene had failed in the dataset (not attempted)
-    tail: Tail = Tail()  # the model's: where each level's ellipse is drawn
+    tail: Tail = GAUSSIAN  # the model's: where each level's ellipse is drawn
 
     @property
     def median_mahalanobis(self) -> float:
@@ -217,11 +217,10 @@ def reliability_plot(v: Validation, out: str | Path, title: str = "") -> Path:
     r = np.linspace(0, max(4.0, float(np.percentile(m, 99)) if m.size else 4.0), 200)
     b.hist(m, bins=30, range=(0, r[-1]), density=True, color="#c0392b", alpha=0.6,
            label="held-out rows")
-    b.plot(r, r * np.exp(-r**2 / 2), "k--", lw=1, label="χ with 2 degrees of freedom")
+    b.plot(r, Tail().density(r), "k--", lw=1, label="χ with 2 degrees of freedom")
     if not v.tail.gaussian:
-        c, nu = v.tail.scale, v.tail.dof
-        b.plot(r, r / c**2 * (1 + (r / c) ** 2 / nu) ** -(nu / 2 + 1), "k:", lw=1.5,
-               label=f"the model's tail (scale {c:.2f}, ν {nu:.2f})")
+        b.plot(r, v.tail.density(r), "k:", lw=1.5,
+               label=f"the model's tail (scale {v.tail.scale:.2f}, ν {v.tail.dof:.2f})")
     b.axvline(v.median_mahalanobis, color="#c0392b", lw=1,
               label=f"median {v.median_mahalanobis:.2f} (honest {v.tail.radius(0.5):.2f})")
     b.set_xlabel("Mahalanobis distance of the true target (σ's)")

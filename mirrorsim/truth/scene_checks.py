@@ -220,11 +220,7 @@ def crossing_images(scene: Scene, bkey: Callable[[int], str]) -> list[str]:
     for i, b in enumerate(scene.beacons):
         if visibility.direct_view_fraction(scene, b) == 0.0:
             continue
-        if scene.is_3d:
-            v3 = optics.image3(cam, scene.mirror, b.base3).virtual
-            virtual, z0 = v3[:2], float(v3[2])
-        else:
-            virtual, z0 = optics.mirror_image(cam.position, scene.mirror, b.position).virtual, 0.0
+        virtual, z0 = _virtual_base(scene, b)
         reflected = optics.upright_box(cam, virtual, PENCIL_RADIUS, height=b.height,
                                        margin_px=IMAGE_GAP_PX, z0=z0)
         direct = optics.upright_box(cam, b.position, PENCIL_RADIUS, height=b.height, z0=b.z)
@@ -247,21 +243,26 @@ PENCIL_FLATS_HALF = 0.345  # cm: half the hexagon's width across flats, its narr
 def thin_images(scene: Scene, bkey: Callable[[int], str]) -> list[str]:
     """Warn of a pencil whose image in the mirror is narrower than MIN_PENCIL_PX: the
     detector cannot find its sides, so neither its bearing."""
-    cam = scene.camera
     out = []
     for i, b in enumerate(scene.beacons):
-        if scene.is_3d:
-            v3 = optics.image3(cam, scene.mirror, b.base3).virtual
-            virtual, z0 = v3[:2], float(v3[2])
-        else:
-            virtual, z0 = optics.mirror_image(cam.position, scene.mirror, b.position).virtual, 0.0
-        box = optics.upright_box(cam, virtual, PENCIL_FLATS_HALF, height=b.height, z0=z0)
+        virtual, z0 = _virtual_base(scene, b)
+        box = optics.upright_box(scene.camera, virtual, PENCIL_FLATS_HALF, height=b.height,
+                                 z0=z0)
         if box is not None and box[2] - box[0] < MIN_PENCIL_PX:
             out.append(f"{bkey(i)}.position: the pencil's image in the mirror is "
                        f"{box[2] - box[0]:.1f} px across, and the detector finds a pencil's "
                        f"sides from {MIN_PENCIL_PX:g} px: bring it or the camera nearer the "
                        "mirror, or widen the frame")
     return out
+
+
+def _virtual_base(scene: Scene, b: Beacon) -> tuple[np.ndarray, float]:
+    """Where a pencil's base stands in the mirror: its virtual image's board point and
+    height (0 for a planar scene)."""
+    if scene.is_3d:
+        v3 = optics.image3(scene.camera, scene.mirror, b.base3).virtual
+        return v3[:2], float(v3[2])
+    return optics.mirror_image(scene.camera.position, scene.mirror, b.position).virtual, 0.0
 
 
 def check_overlaps(f: Failures, scene: Scene, fail: Fail, *, bkey: Callable[[int], str]) -> None:
