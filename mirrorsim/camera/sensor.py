@@ -17,16 +17,11 @@ import cv2
 import numpy as np
 
 from mirrorsim.scene.model import Camera, SensorNoise
-from mirrorsim.scene.projection import hfov_of
+from mirrorsim.scene.projection import hfov_of, radial_factor
 
 # fixed-point steps inverting the radial model at most (tested to 1e-6 px); it stops
 # earlier where a step changes nothing (13 steps for exp1's lens: the same result)
 UNDISTORT_ITERATIONS = 40
-
-
-def _radial(x: np.ndarray, y: np.ndarray, k: tuple[float, float]) -> np.ndarray:
-    r2 = x * x + y * y
-    return 1.0 + k[0] * r2 + k[1] * r2 * r2
 
 
 def _grid(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
@@ -43,7 +38,7 @@ def undistort_points(x: np.ndarray, y: np.ndarray, k: tuple[float, float]
     accepts, whose r·(1 + k1 r² + k2 r⁴) grows over the frame)."""
     xu, yu = x.copy(), y.copy()
     for _ in range(UNDISTORT_ITERATIONS):
-        f = _radial(xu, yu, k)
+        f = radial_factor(xu, yu, k)
         nx, ny = x / f, y / f
         if np.array_equal(nx, xu) and np.array_equal(ny, yu):
             break  # a fixed point: every further step gives the same bits
@@ -86,7 +81,7 @@ def distort(canvas: np.ndarray, camera: Camera, k: tuple[float, float],
 def _undistort_maps(camera: Camera, k: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
     """For each pixel of the ideal pinhole frame, where the lens imaged it (closed form)."""
     xu, yu = _grid(camera)
-    f = _radial(xu, yu, k)
+    f = radial_factor(xu, yu, k)
     return ((camera.cx + camera.fx * xu * f).astype(np.float32),
             (camera.cy + camera.fx * yu * f).astype(np.float32))
 

@@ -55,6 +55,8 @@ from mirrorsim.formats.dataset_folder import (
 from mirrorsim.formats.error_model import ErrorModel
 from mirrorsim.formats.error_model_file import default_error_model, load_error_model
 from mirrorsim.formats.files import dumps, write_json, write_text
+from mirrorsim.pipelines.dataset_exports import dataset_frames as frames_of
+from mirrorsim.pipelines.dataset_exports import export_rows
 from mirrorsim.pipelines.dataset_row import row_of
 from mirrorsim.pipelines.random_scenes import DatasetSpec, NoValidScene
 from mirrorsim.pipelines.workers import run_dask, run_local, usable_cores
@@ -264,12 +266,21 @@ def run_dataset(n: int, seed: int, out: str | Path, *, workers: int = 1,
                             scheduler=scheduler, max_rss_mb=max_rss_mb, progress=progress)
         wall = time.perf_counter() - t_start
         rows = collect_rows(out, n)  # against dataset.json as it is on disk
-        write_table(out, rows)
-        write_card(out, meta, rows, variant=chosen)
+        _write_table_and_card(out, meta, rows, variant=chosen)
         return DatasetRun(rows=len(rows), computed=len(todo) - len(retry),
                           already_done=n - len(todo), failed=sum(bool(r.error) for r in rows),
                           retry=retry, parquet=out / "dataset.parquet", seconds=wall,
                           per_minute=len(todo) / wall * 60 if todo and wall else 0.0)
+
+
+def _write_table_and_card(out: Path, meta: dict, rows: list[table.DatasetRow], *,
+                          variant: str) -> None:
+    """The table, the card, and the frames as learning pipelines take them (COCO, the
+    Hub's front matter and Croissant: :mod:`~mirrorsim.pipelines.dataset_exports`)."""
+    write_table(out, rows)
+    write_card(out, meta, rows, variant=variant)
+    if frames_of(rows):  # (a dataset of failed draws alone has none)
+        export_rows(out, rows, meta)
 
 
 def _run_spec(spec_path: str | Path | None, *, sampler: str | None, beacons: int | None,

@@ -146,7 +146,7 @@ def evaluate_into(scene: Scene, out: Path, *, variant: str = "auto", progress: b
     # the scene's truth, computed once per frame: the target from the first, each beacon
     # from its own
     # (a 3-D scene solved in the plane is scored against its truth in plan)
-    truth = replace(truths[0], scene=scene.name, id_labels=None, render=None,
+    truth = replace(truths[0], scene=scene.name, id_labels=None, render=None, annotations=None,
                     beacons=tuple(t.beacons[0] for t in truths)).in_plan()
     seen = seen_of(scene, measured, board_pose=board_pose)
     model = model_for(scene, error_model)

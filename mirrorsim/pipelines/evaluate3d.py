@@ -160,7 +160,7 @@ def evaluate_into3(scene: Scene, out: Path, *, variant: str = "auto", progress: 
     frames = tuple(frame_record(m, out / f"{sub.name}.annotated.png", "annotated" in keep)
                    for sub, m in zip(per_beacon, measured, strict=True))
     truths = [m.files.truth for m in measured]
-    truth = replace(truths[0], scene=scene.name, id_labels=None, render=None,
+    truth = replace(truths[0], scene=scene.name, id_labels=None, render=None, annotations=None,
                     beacons=tuple(t.beacons[0] for t in truths))
     seen2 = seen_of(scene, measured, board_pose=False)
     model = model_for(scene, error_model)

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
-import json
 import warnings
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -19,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from mirrorsim.camera.sensor import to_srgb8
-from mirrorsim.formats.cache import seal, unseal
+from mirrorsim.formats.cache import seal
 from mirrorsim.formats.capture import CaptureRecord, load_capture
 from mirrorsim.formats.files import (
     atomic_path,
@@ -43,7 +42,8 @@ from mirrorsim.rendering.passes import (
 )
 from mirrorsim.scene.model import Scene
 from mirrorsim.truth import groundtruth
-from mirrorsim.truth.groundtruth import GroundTruth, MirrorPixels
+from mirrorsim.truth.annotations import frame_annotations
+from mirrorsim.truth.groundtruth import GroundTruth, MirrorPixels, load_truth
 
 
 @dataclass(frozen=True)
@@ -77,8 +77,11 @@ def truth_of(scene: Scene, frame: RenderedFrame, fingerprint: str | None) -> Gro
         bbox, n = _mask_stats(frame.in_mirror == label)
         return replace(obj, bbox_px=bbox, visible_px=n)
 
+    labels = {"target": TARGET_LABEL, "mirror": MIRROR_LABEL,
+              **{f"beacons[{i}]": BEACON_LABEL + i for i in range(len(scene.beacons))}}
     return replace(
         truth,
+        annotations=frame_annotations(scene, frame.first, frame.in_mirror, labels=labels),
         target=seen(truth.target, TARGET_LABEL),
         beacons=tuple(seen(b, BEACON_LABEL + i) for i, b in enumerate(truth.beacons)),
         mirror_pixels=MirrorPixels(*_mask_stats(frame.first == MIRROR_LABEL)),
@@ -147,7 +150,7 @@ def _reusable(scene: Scene, out: Path, fingerprint: str) -> FrameFiles | None:
     if not (image.exists() and js.exists() and cap.exists()):
         return None
     try:
-        truth = GroundTruth.from_json(unseal(json.loads(read_regular_bytes(js)), js.name))
+        truth = load_truth(js)
     except (OSError, ValueError, KeyError, TypeError, RecursionError) as exc:
         return _rerender(image, str(exc))
     if truth.render is None or truth.render.fingerprint != fingerprint:

@@ -57,3 +57,18 @@ def hfov_of(width: float, fx: float) -> float:
     """The horizontal field of view (deg) that ``width`` px see at focal length ``fx``
     px: the inverse of :func:`~mirrorsim.scene.model.fx_of`."""
     return math.degrees(2.0 * math.atan(width / 2.0 / fx))
+
+
+def radial_factor(x: np.ndarray, y: np.ndarray, k: tuple[float, float]) -> np.ndarray:
+    """The Brown–Conrady radial factor 1 + k1·r² + k2·r⁴ at normalized coordinates
+    (x, y): a lens images the pinhole's (x, y) at (x, y) times it."""
+    r2 = x * x + y * y
+    return 1.0 + k[0] * r2 + k[1] * r2 * r2
+
+
+def distort_pixels(camera: Camera, u: np.ndarray, v: np.ndarray, *, k: tuple[float, float]
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Where a lens of radial distortion ``k`` images the pinhole pixels (u, v)."""
+    x, y = (u - camera.cx) / camera.fx, (v - camera.cy) / camera.fx
+    f = radial_factor(x, y, k)
+    return camera.cx + camera.fx * x * f, camera.cy + camera.fx * y * f

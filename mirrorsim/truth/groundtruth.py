@@ -6,14 +6,19 @@ Every consumer (the CLI's tables, the plots, the dataset's rows) reads attribute
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any
 
+from mirrorsim.formats.cache import unseal
+from mirrorsim.formats.files import read_regular_bytes
 from mirrorsim.formats.reader import point_list
 from mirrorsim.scene.imperfections import as_keys
 from mirrorsim.scene.model import Camera, Mirror, Occluder, Point2, Scene, check_is_scene
 from mirrorsim.truth import optics, visibility
+from mirrorsim.truth.annotations import Annotations
 from mirrorsim.truth.optics import ImagePx
 from solver.geometry import wrap_yaw
 from solver.lsq3 import Measurements3
@@ -150,6 +155,8 @@ class GroundTruth:
     # the bench's imperfections by key path (None: an ideal bench), so that a frame's
     # truth says what it was rendered with
     bench: dict[str, Any] | None = None
+    # the frame's masks, keypoints and virtual camera (a rendered frame's; None: none)
+    annotations: Annotations | None = None
 
     @property
     def mirror_yaw_deg(self) -> float:
@@ -186,6 +193,8 @@ class GroundTruth:
             out["render"] = self.render.to_json()
         if self.bench:
             out["bench"] = dict(self.bench)
+        if self.annotations is not None:
+            out["annotations"] = self.annotations.to_json()
         return out
 
     @classmethod
@@ -210,7 +219,9 @@ class GroundTruth:
                    direct_view_fraction=d["direct_view_fraction"], mirror_pixels=pixels,
                    id_labels=d.get("id_labels"),
                    render=RenderInfo.from_json(d["render"]) if "render" in d else None,
-                   bench=d.get("bench"))
+                   bench=d.get("bench"),
+                   annotations=Annotations.from_json(d["annotations"])
+                   if "annotations" in d else None)
 
     def in_plan(self) -> GroundTruth:
         """The truth as the planar solve sees it: a 3-D scene's points in plan, its
@@ -298,3 +309,13 @@ def _rs(v) -> tuple[float, ...]:
     """A point's coordinates rounded for JSON (two, or three in a 3-D scene)."""
     return tuple(_r(c) for c in v)
 
+
+def load_truth(path: Path) -> GroundTruth:
+    """A frame's truth file, its checksum verified (:func:`~mirrorsim.formats.cache.unseal`).
+
+    Raises
+    ------
+    ValueError
+        For a file that is not a sealed truth document (OSError: unreadable).
+    """
+    return GroundTruth.from_json(unseal(json.loads(read_regular_bytes(path)), path.name))
