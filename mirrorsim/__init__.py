@@ -27,6 +27,9 @@ cheap)::
 ``plan(scene)``           beacon placement (:class:`Plan`)
 ``generate_dataset(n, seed, out)``  a dataset of random scenes (:class:`DatasetRun`)
 ``load_dataset(folder)``  a dataset's table, verified, as a pandas DataFrame
+``FrameDataset(folder)``  a dataset's frames with masks, keypoints, truth and
+                          measurements, as a sequence (a PyTorch ``DataLoader`` takes it)
+``export_dataset(folder)``  a dataset's COCO file, Hugging Face card and Croissant file
 ``fit_error_model(folder)``  the error model of a dataset
 ``load_error_model(path, kind)``  an error model file (``None``: the shipped one of
                           ``kind``, ``"ideal"`` or ``"bench"``)
@@ -58,6 +61,8 @@ _API = {
     "plan": ("mirrorsim.pipelines.planning", "plan_scene"),
     "generate_dataset": ("mirrorsim.pipelines.dataset", "run_dataset"),
     "load_dataset": ("mirrorsim.formats.dataset_folder", "load_dataset"),
+    "FrameDataset": ("mirrorsim.pipelines.frame_dataset", "FrameDataset"),
+    "export_dataset": ("mirrorsim.pipelines.dataset_exports", "write_exports"),
     "fit_error_model": ("mirrorsim.pipelines.errormodel", "fit_dataset"),
     "load_error_model": ("mirrorsim.formats.error_model_file", "load_error_model_or_default"),
     "model_for": ("mirrorsim.pipelines.solving", "model_for"),

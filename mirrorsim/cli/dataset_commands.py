@@ -43,10 +43,17 @@ def _dataset_options(p):
     sampler_option(p)
     from mirrorsim.pipelines.score import EXTRA_FILES
 
-    p.add_argument("--keep", nargs="*", action="extend", default=[], choices=EXTRA_FILES,
+    p.add_argument("--keep", nargs="*", action="extend", default=[],
+                   choices=[f for f in EXTRA_FILES if f in ("ids", "annotated")],
                    help="files to write beside each frame besides its PNG, capture record "
                    "and truth: ids (the id labels), annotated (the detections drawn); "
                    "default none")
+    from mirrorsim.scene.render_settings import AOVS
+
+    p.add_argument("--aov", type=lambda v: tuple(v.split(",")), default=(), metavar="NAMES",
+                   help="besides each frame, from Mitsuba's aov integrator: "
+                   f"{','.join(AOVS)} (<frame>.depth.npy: cm along each ray to the first "
+                   "surface; <frame>.normals.npy: its unit normal; float32)")
     p.add_argument("--beacons", type=int, metavar="N",
                    help="beacons a scene, each drawn from the spec's beacon ranges and "
                    "rendered in a frame of its own (default: the spec's beacon.count, 1)")
@@ -77,6 +84,11 @@ def _dataset(args) -> int:
     at_least(("--n", args.n, 1, MAX_SCENES), ("--seed", args.seed, 0, MAX_SEED),
              ("--workers", args.workers, 1, MAX_WORKERS))
     calibration = calibration_of(args)
+    from mirrorsim.scene.render_settings import AOVS
+
+    bad = [a for a in args.aov if a not in AOVS]
+    if bad:
+        raise BadArgument("--aov", f"{bad[0]!r}: choose from {','.join(AOVS)}")
     if args.spp is not None:  # checked as every scene's render settings are
         from mirrorsim.scene.render_settings import RenderSettings
 
@@ -90,7 +102,7 @@ def _dataset(args) -> int:
     try:
         res = run_dataset(args.n, args.seed, args.out, workers=workers,
                           spec_path=args.spec, spp=args.spp, sampler=args.sampler,
-                          variant=args.variant, keep=tuple(args.keep), resume=args.resume,
+                          variant=args.variant, keep=(*args.keep, *args.aov), resume=args.resume,
                           executor=args.executor, scheduler=args.scheduler,
                           progress=not args.quiet, calibration=calibration,
                           beacons=args.beacons,
@@ -115,6 +127,31 @@ def _dataset(args) -> int:
         print(f"error: {len(res.retry)} scene(s) failed for a reason outside the scene "
               f"(scene {i}: {why}); they have no row: rerun with --resume", file=sys.stderr)
         return 1
+    return 0
+
+
+def _export_options(p):
+    from mirrorsim.pipelines.dataset_exports import EXPORTS
+
+    p.add_argument("dataset", type=Path, help="a dataset folder (`mirrorsim dataset --out`)")
+    p.add_argument("--to", nargs="+", choices=EXPORTS, default=list(EXPORTS),
+                   help="what to write into it (default all): coco (DIR/coco.json), hf "
+                   "(DIR/metadata.jsonl and the card's Hugging Face front matter), croissant "
+                   "(DIR/croissant.json, with DIR/metadata.jsonl)")
+
+
+@command("export", "a dataset's frames for learning pipelines: COCO, Hugging Face, Croissant",
+         "Verify a dataset's table, rows and files, then write its frames' annotations "
+         "(masks, boxes, keypoints, the mirror's virtual camera) as COCO's instances and "
+         "keypoints (DIR/coco.json), as a Hugging Face dataset (DIR/metadata.jsonl and the "
+         "card's front matter: datasets.load_dataset(DIR, split='train')) and as Croissant "
+         "(DIR/croissant.json).  `mirrorsim dataset` writes all three itself; this is for a "
+         "folder made earlier or changed since.", options=_export_options)
+def _export(args) -> int:
+    from mirrorsim.pipelines.dataset_exports import write_exports
+
+    for kind, path in write_exports(args.dataset, tuple(args.to)).items():
+        print(f"{kind}: {path}")
     return 0
 
 

@@ -44,7 +44,7 @@ FLAG_OF = {"kind": "--path", "eps_deg": "--eps", "yaw_spread_deg": "--yaw-spread
 
 # the order of `mirrorsim --help`: the main job first
 ORDER = ("evaluate", "render", "check", "plot", "detect", "calibrate", "budget", "dataset",
-         "errormodel", "solve", "montecarlo", "plan")
+         "export", "errormodel", "solve", "montecarlo", "plan")
 
 
 class _OneLineParser(argparse.ArgumentParser):

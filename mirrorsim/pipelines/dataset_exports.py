@@ -14,6 +14,7 @@ import hashlib
 from dataclasses import dataclass
 from pathlib import Path
 
+from mirrorsim.errors import BadParameter
 from mirrorsim.formats import dataset_table as table
 from mirrorsim.formats import frame_table
 from mirrorsim.formats.dataset_folder import collect_rows, read_table
@@ -154,7 +155,12 @@ def write_exports(folder: str | Path, what: tuple[str, ...] = EXPORTS) -> dict[s
     DatasetError
         For a folder whose table, rows or files fail verification, or whose frames hold
         no annotations.
+    BadParameter
+        For an export not in :data:`EXPORTS`.
     """
+    bad = [w for w in what if w not in EXPORTS]
+    if bad:
+        raise BadParameter("what", f"{bad[0]!r}: choose from {', '.join(EXPORTS)}")
     folder = Path(folder)
     read_table(folder)  # the table, its rows and every file they record, verified
     meta = read_description(folder)

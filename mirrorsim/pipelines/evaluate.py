@@ -38,6 +38,7 @@ from mirrorsim.pipelines.solving import (
 from mirrorsim.rendering.backend import check_variant
 from mirrorsim.scene import imperfections
 from mirrorsim.scene.model import Scene
+from mirrorsim.scene.render_settings import AOVS
 from mirrorsim.truth.groundtruth import GroundTruth, RenderInfo
 from solver.errors import SolverError
 from solver.lsq import solve_measurements
@@ -138,7 +139,8 @@ def evaluate_into(scene: Scene, out: Path, *, variant: str = "auto", progress: b
     cam = scene.camera
     per_beacon = frames_of(scene)
     measured = [render_and_measure(sub, out, variant=variant, progress=progress, reuse=True,
-                                   ids="ids" in keep)
+                                   ids="ids" in keep,
+                                   aov=tuple(k for k in keep if k in AOVS))
                 for sub in per_beacon]
     frames = [frame_record(m, out / f"{sub.name}.annotated.png", "annotated" in keep)
               for sub, m in zip(per_beacon, measured, strict=True)]

@@ -25,6 +25,7 @@ from mirrorsim.pipelines.score import EXTRA_FILES, FrameRecord
 from mirrorsim.pipelines.solving import model_for
 from mirrorsim.scene import imperfections
 from mirrorsim.scene.model import FRONT_OFFSET, Scene, pencil_paint_height
+from mirrorsim.scene.render_settings import AOVS
 from mirrorsim.truth import optics
 from mirrorsim.truth.groundtruth import GroundTruth, RenderInfo
 from solver.errors import SolverError
@@ -155,7 +156,8 @@ def evaluate_into3(scene: Scene, out: Path, *, variant: str = "auto", progress: 
     """
     per_beacon = frames_of(scene)
     measured = [render_and_measure(sub, out, variant=variant, progress=progress, reuse=True,
-                                   ids="ids" in keep)
+                                   ids="ids" in keep,
+                                   aov=tuple(k for k in keep if k in AOVS))
                 for sub in per_beacon]
     frames = tuple(frame_record(m, out / f"{sub.name}.annotated.png", "annotated" in keep)
                    for sub, m in zip(per_beacon, measured, strict=True))

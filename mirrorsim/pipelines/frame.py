@@ -21,7 +21,7 @@ from mirrorsim.detection.frame_files import read_stored_frame
 from mirrorsim.detection.image_geometry import Calibration
 from mirrorsim.errors import DetectionError
 from mirrorsim.formats.capture import CaptureError, CaptureRecord, load_capture
-from mirrorsim.formats.files import claim_run_folder, default_out
+from mirrorsim.formats.files import atomic_path, claim_run_folder, default_out
 from mirrorsim.pipelines.calibrate import calibrate
 from mirrorsim.pipelines.scenes import check_given_scene
 from mirrorsim.rendering.backend import check_variant
@@ -138,9 +138,12 @@ def measure_frame(image_path: str | Path, capture: CaptureRecord | str | Path, *
 
 def render_and_measure(scene: Scene, out: str | Path, *, variant: str = "auto",
                        progress: bool = True, reuse: bool = True, ids: bool = True,
-                       calibration: Calibration | None = None) -> MeasuredFrame:
-    """Render ``scene`` into ``out`` (or reuse its render), then :func:`measure_frame`."""
+                       calibration: Calibration | None = None,
+                       aov: tuple[str, ...] = ()) -> MeasuredFrame:
+    """Render ``scene`` into ``out`` (or reuse its render), then :func:`measure_frame`;
+    ``aov``: the frame's depth and normals besides (:mod:`mirrorsim.rendering.aov`)."""
     out = Path(out)
+    write_aovs(scene, out, aov, variant=variant)
     measure = partial(measure_frame, calibration=calibration, variant=variant,
                       distance_error=scene.bench.calibration_distance_error)
     files = reused_frame(scene, out, ids) if reuse else None
@@ -162,6 +165,19 @@ def render_and_measure(scene: Scene, out: str | Path, *, variant: str = "auto",
         finally:
             files = writing.result()  # the files are whole, measured or not
     return replace(m, files=files)
+
+
+def write_aovs(scene: Scene, out: Path, names: tuple[str, ...], *, variant: str) -> None:
+    """``out/<frame>.<name>.npy`` for each of ``names`` not there yet (float32 arrays)."""
+    from mirrorsim.rendering.aov import render_aovs
+
+    todo = [n for n in names if not (out / f"{scene.name}.{n}.npy").exists()]
+    if not todo:
+        return
+    out.mkdir(parents=True, exist_ok=True)
+    for name, array in render_aovs(scene, tuple(todo), variant=variant).items():
+        with atomic_path(out / f"{scene.name}.{name}.npy") as tmp, open(tmp, "wb") as fh:
+            np.save(fh, array, allow_pickle=False)
 
 
 def render_to_files(scene: Scene, out: str | Path | None = None, *, variant: str = "auto",

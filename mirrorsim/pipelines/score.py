@@ -14,6 +14,7 @@ from mirrorsim.detection.image_geometry import Calibration
 from mirrorsim.errors import BadParameter
 from mirrorsim.formats.error_model import ImageFeatures
 from mirrorsim.formats.measurements import measurements_from_dict
+from mirrorsim.scene.render_settings import AOVS
 from mirrorsim.truth.groundtruth import GroundTruth, RenderInfo
 from solver.errors import SolverError
 from solver.geometry import line_normal, yaw_difference
@@ -156,7 +157,8 @@ def _crlb_cm(truth: GroundTruth, m: Measurements, calibration: SelfCalibration
 # the report's render block: how its frames were rendered (the truth files hold the rest)
 REPORT_RENDER_KEYS = ("spp", "seed", "sampler", "variant")
 # optional files beside each frame (its PNG, truth and capture record are always written)
-EXTRA_FILES = ("ids", "annotated")
+# (depth and normals: Mitsuba's aov integrator's, ``<frame>.depth.npy``…)
+EXTRA_FILES = ("ids", "annotated", *AOVS)
 
 
 def check_keep(keep: object) -> None:

@@ -14,6 +14,10 @@ from mirrorsim.errors import BadParameter
 SAMPLERS = ("independent", "multijitter")
 MAX_SPP = 1 << 16  # a documented bound: more samples than this is a typo, not a render
 
+# what Mitsuba's aov integrator renders besides a frame, where asked
+# (mirrorsim.rendering.aov): each a file beside the frame, <frame>.<name>.npy
+AOVS = ("depth", "normals")
+
 
 @dataclass(frozen=True)
 class RenderSettings:
