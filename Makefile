@@ -39,7 +39,14 @@ llvm:
 demo: setup
 	$(BIN)/mirrorsim evaluate scenes/default.yaml --keep plot annotated
 
-test: setup docs-build
+# the loaders a learning pipeline uses (Hugging Face's datasets, mlcroissant, pycocotools):
+# the extra `ml`, which tests/test_dataset_exports.py loads each dataset export with
+ML_STAMP := $(VENV)/.ml-installed
+$(ML_STAMP): pyproject.toml $(STAMP)
+	$(BIN)/pip install -q -e '.[ml]'
+	touch $@
+
+test: setup docs-build $(ML_STAMP)
 	$(BIN)/python -m pytest
 	$(BIN)/ruff check .
 

@@ -68,6 +68,16 @@ def render_settings() -> str:
     return "\n".join(rows) + "\n"
 
 
+def frame_fields() -> str:
+    """The frame table's fields (docs/annotations.md), from their declaration."""
+    from mirrorsim.formats.frame_table import FIELDS, OBJECT_FIELDS
+
+    rows = ["| field | type | meaning |", "|---|---|---|"]
+    rows += [f"| `{f.name}` | {f.dtype} | {f.doc} |" for f in FIELDS]
+    rows += [f"| `objects[].{f.name}` | {f.dtype} | {f.doc} |" for f in OBJECT_FIELDS]
+    return "\n".join(rows) + "\n"
+
+
 def examples() -> dict[str, str]:
     """The default scene's ground truth, capture record, exact measurements and their
     solution."""
@@ -110,6 +120,7 @@ def pages() -> dict[str, str]:
     """Every generated file's text."""
     out = {"scene_template.md": scene_template(), "bench_keys.md": bench_keys(),
            "dataset_columns.md": dataset_columns(), "render_settings.md": render_settings(),
+           "frame_fields.md": frame_fields(),
            **examples()}
     return {name: HEADER + text for name, text in out.items()}
 

@@ -60,10 +60,16 @@ def _every_parameter():
     for name in ms.__all__[1:]:
         obj = getattr(ms, name)
         hints = (field_hints(obj) if isinstance(obj, type) and dataclasses.is_dataclass(obj)
-                 else parameter_hints(obj.__wrapped__))
+                 else parameter_hints(_checked_function(obj)))
         for param, tp in hints.items():
             for label, value in _hostile_values(tp):
                 yield pytest.param(name, param, value, id=f"{name}({param}=<{label}>)")
+
+
+def _checked_function(obj):
+    """What a public name checks its arguments with: a function's own, a class's
+    ``__init__`` (a class that is not a dataclass checks there)."""
+    return obj.__init__.__wrapped__ if isinstance(obj, type) else obj.__wrapped__
 
 
 @pytest.mark.parametrize("name, param, value", list(_every_parameter()))
@@ -80,7 +86,7 @@ def test_every_public_name_refuses_each_hostile_value_by_its_hint(name, param, v
 
     obj = getattr(ms, name)
     with pytest.raises(BadParameter, match=f"^{param}: "):
-        if isinstance(obj, type):  # a dataclass: its field check, the others valid
+        if isinstance(obj, type) and dataclasses.is_dataclass(obj):  # its field check
             made = object.__new__(obj)
             for f in dataclasses.fields(obj):
                 object.__setattr__(made, f.name, value if f.name == param
@@ -89,11 +95,13 @@ def test_every_public_name_refuses_each_hostile_value_by_its_hint(name, param, v
         else:
             import inspect
 
-            sig = inspect.signature(obj.__wrapped__)
-            check_arguments(obj.__wrapped__, (), {
+            fn = _checked_function(obj)
+            sig = inspect.signature(fn)
+            this = (None,) if isinstance(obj, type) else ()  # an __init__'s self
+            check_arguments(fn, this, {
                 p: (value if p == param else _valid(sig.parameters[p]))
-                for p in sig.parameters if p == param or
-                sig.parameters[p].default is inspect.Parameter.empty})
+                for p in sig.parameters if p != "self" and (p == param or
+                sig.parameters[p].default is inspect.Parameter.empty)})
 
 
 _FIELD_OK = {"position": (1.0, 2.0), "alpha_deg": 1.0, "d_total": 50.0, "nuisances": (),

@@ -101,5 +101,26 @@ Median |errors| here: target α {med('target_alpha_err'):.4f}°, target d
 Scene i is drawn from `SeedSequence({meta['seed']}).spawn({meta['n']})[i]` with the spec in
 `dataset.json` and rendered with seed i.  `mirrorsim errormodel DIR` fits the error
 model.
+
+## Loading it
+
+Each frame's truth file (`frames/<scene>/<frame>.json`) holds its annotations: per
+object and view a mask (COCO RLE), box and keypoints, and the mirror's virtual camera.
+The same frames, one line each (`pip install 'mirrorsim[ml]'` brings the loaders):
+
+```python
+import mirrorsim as ms
+table = ms.load_dataset("{out}")                  # this table, verified (pandas)
+frames = ms.FrameDataset("{out}")                 # images, masks, keypoints, truth
+
+import datasets                                   # Hugging Face: metadata.jsonl + frames
+ds = datasets.load_dataset("{out}", split="train")
+
+import mlcroissant as mlc                         # Croissant: record sets frames, images
+records = mlc.Dataset("{out}/croissant.json").records("frames")
+
+from pycocotools.coco import COCO                 # COCO instances and keypoints
+coco = COCO("{out}/coco.json")
+```
 """
     write_text(Path(out) / "README.md", text)

@@ -186,8 +186,9 @@ def export_rows(folder: Path, rows: list[table.DatasetRow], meta: dict, *,
         written["hf"] = _write_front_matter(folder, len(entries), image_globs(entries))
     if "croissant" in what:
         digest = hashlib.sha256(read_regular_bytes(folder / "metadata.jsonl")).hexdigest()
-        doc = frame_table.croissant(folder.resolve().name, description=desc,
-                                    image_globs=image_globs(entries), metadata_sha256=digest,
+        name = f"mirrorsim-seed{meta['seed']}-n{meta['n']}"  # not the folder's: it moves
+        doc = frame_table.croissant(name, description=desc, image_globs=image_globs(entries),
+                                    metadata_sha256=digest,
                                     date=datetime.date.today().isoformat())
         written["croissant"] = write_json(folder / "croissant.json", doc)
     return written

@@ -15,6 +15,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from mirrorsim.arguments import checked
 from mirrorsim.formats import rle
 from mirrorsim.formats.dataset_folder import collect_rows, read_table
 from mirrorsim.formats.dataset_rows import DatasetError, read_description
@@ -50,6 +51,7 @@ class FrameDataset:
         For a folder whose table, rows or files fail verification, or without frames.
     """
 
+    @checked  # each argument held to its hint, as every public entry point's
     def __init__(self, folder: str | Path, *, masks: bool = True,
                  transform: Callable[[dict], Any] | None = None):
         self.folder = Path(folder)

@@ -29,6 +29,9 @@ VIEWS = ("direct", "mirror")
 # COCO's visibility flags: 0 off the film (or behind the camera), 1 on it but hidden
 # (behind something, or outside the glass), 2 seen
 OFF, HIDDEN, SEEN = 0, 1, 2
+# a keypoint is seen where its object's mask reaches within this many pixels of it: a
+# pencil's graphite cone is 0.8 px across 2 px below its point at full size
+SEEN_WITHIN_PX = 2
 CORNERS = ("top_left", "top_right", "bottom_right", "bottom_left")
 
 
@@ -232,8 +235,9 @@ def frame_annotations(scene: Scene, first: np.ndarray, in_mirror: np.ndarray, *,
 
 def _keypoints(scene: Scene, pts: np.ndarray, mask: np.ndarray, *, names: tuple[str, ...]
                ) -> tuple[Keypoint, ...]:
-    """Each point's pixel and flag: seen where the mask holds the object within a pixel
-    of it (a pencil's point is thinner than a pixel: its centre may see the board)."""
+    """Each point's pixel and flag: seen where the mask holds the object within
+    :data:`SEEN_WITHIN_PX` of it (a pencil's point is thinner than a pixel: the pixel
+    centres next to it may see the board)."""
     u, v, depth = pixels(scene, pts)
     h, w = mask.shape
     out = []
@@ -242,7 +246,8 @@ def _keypoints(scene: Scene, pts: np.ndarray, mask: np.ndarray, *, names: tuple[
         if d <= 0 or not (0 <= iu < w and 0 <= iv < h):
             flag = OFF
         else:
-            near = mask[max(iv - 1, 0):iv + 2, max(iu - 1, 0):iu + 2]
+            r = SEEN_WITHIN_PX
+            near = mask[max(iv - r, 0):iv + r + 1, max(iu - r, 0):iu + r + 1]
             flag = SEEN if near.any() else HIDDEN
         out.append(Keypoint(name, round(float(uu), 4), round(float(vv), 4), flag))
     return tuple(out)
