@@ -23,7 +23,7 @@ from mirrorsim.pipelines.frame import render_and_measure
 from mirrorsim.pipelines.measured import frame_record, frames_of, seen_of, sigmas_of
 from mirrorsim.pipelines.scenes import check_given_scene
 from mirrorsim.pipelines.score import (
-    EXTRA_FILES,
+    KEPT_BY_DEFAULT,
     Report,
     Score,
     check_keep,
@@ -48,7 +48,7 @@ from solver.selfcal import PLAIN, SelfCalibration, as_calibration
 
 def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: str = "auto",
                    progress: bool = True, error_model: ErrorModel | None = None,
-                   keep: tuple[str, ...] = EXTRA_FILES,
+                   keep: tuple[str, ...] = KEPT_BY_DEFAULT,
                    calibration: SelfCalibration = PLAIN, board_pose: bool = False,
                    geometry: str = "auto") -> Report | Report3:
     """Render (or reuse) with the scene's render settings, detect, solve and score
@@ -57,7 +57,8 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
     ``error_model``: gives each measurement its σ's, which weight the solver and make
     its error ellipse (default: the model shipped for the ideal bench at the default
     render settings).  ``keep``: which of EXTRA_FILES to write beside each frame (the id
-    labels, the annotated frame; both by default, where the command line keeps none).
+    labels, the annotated frame, the frame's depth and normals; the first two by
+    default, where the command line keeps none).
     The report is returned, not written: ``report.to_json()`` is the document the
     command line writes as ``<name>.report.json``; the top view is the command line's
     (``--keep plot``).  ``calibration``: the bench errors to estimate with
@@ -129,7 +130,7 @@ def check_board_pose(scene: Scene, board_pose: bool) -> None:
 
 
 def evaluate_into(scene: Scene, out: Path, *, variant: str = "auto", progress: bool = True,
-                  error_model: ErrorModel | None = None, keep: tuple[str, ...] = EXTRA_FILES,
+                  error_model: ErrorModel | None = None, keep: tuple[str, ...] = KEPT_BY_DEFAULT,
                   calibration: SelfCalibration = PLAIN, board_pose: bool = False,
                   model_priors: bool = True) -> Report:
     """:func:`evaluate_scene` into ``out``, a folder inside one its caller has claimed

@@ -21,7 +21,7 @@ from mirrorsim.formats.capture import CaptureRecord
 from mirrorsim.formats.error_model import ErrorModel
 from mirrorsim.pipelines.frame import render_and_measure
 from mirrorsim.pipelines.measured import frame_record, frames_of, seen_of, sigmas_of
-from mirrorsim.pipelines.score import EXTRA_FILES, FrameRecord
+from mirrorsim.pipelines.score import KEPT_BY_DEFAULT, FrameRecord
 from mirrorsim.pipelines.solving import model_for
 from mirrorsim.scene import imperfections
 from mirrorsim.scene.model import FRONT_OFFSET, Scene, pencil_paint_height
@@ -142,7 +142,7 @@ class Report3:
 
 def evaluate_into3(scene: Scene, out: Path, *, variant: str = "auto", progress: bool = True,
                    error_model: ErrorModel | None = None,
-                   keep: tuple[str, ...] = EXTRA_FILES) -> Report3:
+                   keep: tuple[str, ...] = KEPT_BY_DEFAULT) -> Report3:
     """Render (or reuse), detect in 3-D, solve in 3-D and score ``scene`` into ``out``, a
     folder its caller has claimed, its parameters checked
     (:func:`mirrorsim.pipelines.evaluate.evaluate_scene` with ``geometry``).

@@ -157,8 +157,10 @@ def _crlb_cm(truth: GroundTruth, m: Measurements, calibration: SelfCalibration
 # the report's render block: how its frames were rendered (the truth files hold the rest)
 REPORT_RENDER_KEYS = ("spp", "seed", "sampler", "variant")
 # optional files beside each frame (its PNG, truth and capture record are always written)
-# (depth and normals: Mitsuba's aov integrator's, ``<frame>.depth.npy``…)
-EXTRA_FILES = ("ids", "annotated", *AOVS)
+# (depth and normals: Mitsuba's aov integrator's, ``<frame>.depth.npy``…); the API's
+# evaluate keeps the first two unless told otherwise (the arrays cost a render each)
+KEPT_BY_DEFAULT = ("ids", "annotated")
+EXTRA_FILES = (*KEPT_BY_DEFAULT, *AOVS)
 
 
 def check_keep(keep: object) -> None:
