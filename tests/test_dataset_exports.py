@@ -136,3 +136,22 @@ def test_metadata_lines_match_the_truth_files(four):
         h, w = d["height"], d["width"]
         for o in d["objects"]:
             assert rle.decode({"size": [h, w], "counts": o["mask_counts"]}).sum() == o["area"]
+
+
+def _frame_name(args):
+    ds, i = args
+    return ds[i]["frame"]
+
+
+def test_frame_dataset_travels_to_worker_processes(four):
+    # what a DataLoader's workers do with it (torch or not): pickled to fresh processes,
+    # indexed there
+    import multiprocessing
+    import pickle
+
+    out, frames = four
+    ds = FrameDataset(out)
+    assert pickle.loads(pickle.dumps(ds))[0]["frame"] == ds[0]["frame"]
+    with multiprocessing.get_context("spawn").Pool(2) as pool:
+        names = pool.map(_frame_name, [(ds, i) for i in range(len(ds))])
+    assert sorted(names) == sorted(p.stem for p in frames)
