@@ -224,9 +224,9 @@ def frame_annotations(scene: Scene, first: np.ndarray, in_mirror: np.ndarray, *,
                 continue
             pts = reflect(scene, points[obj]) if view == "mirror" else points[obj]
             cat = category_of(obj, view)
-            vs, us = np.nonzero(mask)
-            bbox = (int(us.min()), int(vs.min()), int(us.max() - us.min() + 1),
-                    int(vs.max() - vs.min() + 1))
+            cols, rows = np.flatnonzero(mask.any(axis=0)), np.flatnonzero(mask.any(axis=1))
+            bbox = (int(cols[0]), int(rows[0]), int(cols[-1] - cols[0] + 1),
+                    int(rows[-1] - rows[0] + 1))
             out.append(Instance(obj, view, cat.name, bbox, int(mask.sum()), rle.encode(mask),
                                 _keypoints(scene, pts, mask, names=cat.keypoints)))
     cam = scene.camera
