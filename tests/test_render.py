@@ -419,3 +419,48 @@ def test_a_seed_beyond_32_bits_renders(fast_variant):
     assert big.linear.shape == zero.linear.shape and (big.linear != zero.linear).any()
     with pytest.raises(BadParameter, match="seed"):
         scene.with_render(seed=MAX_SEED + 1)
+
+
+def test_frozen_renders_are_the_traced_ones_bit_for_bit(monkeypatch, jit_variant):
+    """Frames rendered with recorded kernels replayed (Dr.Jit's freeze) and traced
+    afresh (MIRRORSIM_FREEZE=0) are the same bits: for a scene, the same scene with its
+    mirror and target elsewhere and another seed, and a scene of other objects and
+    another film size; and a frame's tiles replay: fewer recordings than renders."""
+    import copy
+
+    from mirrorsim.rendering import frozen, passes
+    from mirrorsim.rendering.passes import render_frame
+
+    from .conftest import scene_dict
+
+    def shifted(d: dict, dx: float, seed: int):
+        d = copy.deepcopy(d)
+        d["mirror"]["center"][0] += dx
+        d["target"]["position"][0] += dx
+        d["render"] = {**d.get("render", {}), "seed": seed}
+        return scene_from_dict(d, "shifted.yaml", "shifted")
+
+    base = copy.deepcopy(scene_dict("default"))
+    base["camera"]["resolution"] = [480, 272]
+    scenes = [shifted(base, 0.0, 1), shifted(base, 1.3, 2), small_scene("exp1", 400, 228)]
+    calls, made = [], []
+
+    def counted(*args, **kwargs):
+        calls.append(frozen.freezing())
+        return frozen.render_call(*args, **kwargs)
+
+    def kept():  # each scene's frozen function, to count its recordings
+        f = make()
+        made.append(f)
+        return f
+
+    make = frozen._frozen
+    monkeypatch.setattr(passes, "render_call", counted)
+    monkeypatch.setattr(frozen, "_frozen", kept)
+    for scene in scenes:
+        frames = {}
+        for freeze in ("1", "0"):
+            monkeypatch.setenv("MIRRORSIM_FREEZE", freeze)
+            frames[freeze] = render_frame(scene, variant=jit_variant, progress=False).linear
+        assert np.array_equal(frames["1"], frames["0"]), scene.name
+    assert sum(f.n_recordings for f in made) <= sum(calls)

@@ -24,6 +24,7 @@ import numpy as np
 from mirrorsim.camera.sensor import add_noise, distort, distortion_canvas, to_srgb8
 from mirrorsim.progress import progress_bar
 from mirrorsim.rendering.backend import choose_variant
+from mirrorsim.rendering.frozen import frozen_renders, render_call
 from mirrorsim.rendering.mitsuba_scene import (
     BACKGROUND_LABEL,
     MIRROR_LABEL,
@@ -192,9 +193,10 @@ def _render_optics(scene: Scene, chosen: str, progress: bool) -> _Optics:
                           leave=False, desc=f"rendering {scene.name} ({chosen})",
                           bar_format="{l_bar}{bar}| {n:.1f}/{total:.1f} M samples "
                                      "[{elapsed}<{remaining}, {rate_fmt}]") as bar:
-            linear = _render_regions(mi_scene, pinhole.camera,
-                                     spp if box is None else background, passes, seed,
-                                     bar.update)
+            with frozen_renders():  # a frame's tiles replay one recording a size
+                linear = _render_regions(mi_scene, pinhole.camera,
+                                         spp if box is None else background, passes, seed,
+                                         bar.update)
         t_render = time.perf_counter() - t0
         first, in_mirror = id_pass(mi_scene, pinhole)
     if lens:
@@ -287,13 +289,13 @@ def _accumulate(mi_scene, sensor, spp: int, seed: tuple[int, ...],
     each); ``seed`` is (the render's seed, a stream number[, a tile])."""
     passes = [per_pass] * (spp // per_pass) + ([spp % per_pass] if spp % per_pass else [])
     if len(passes) == 1:  # the common case in datasets: no float64 sum to make
-        img = np.array(mi.render(mi_scene, sensor=sensor, spp=spp, seed=_pass_seed(seed, 0)),
+        img = np.array(render_call(mi_scene, sensor, spp=spp, seed=_pass_seed(seed, 0)),
                        dtype=np.float32)
         step(spp)
         return img
     acc = None
     for k, n in enumerate(passes):
-        img = np.asarray(mi.render(mi_scene, sensor=sensor, spp=n, seed=_pass_seed(seed, k)),
+        img = np.asarray(render_call(mi_scene, sensor, spp=n, seed=_pass_seed(seed, k)),
                          dtype=np.float64)
         acc = img * n if acc is None else acc + img * n
         step(n)
