@@ -155,3 +155,37 @@ def test_frame_dataset_travels_to_worker_processes(four):
     with multiprocessing.get_context("spawn").Pool(2) as pool:
         names = pool.map(_frame_name, [(ds, i) for i in range(len(ds))])
     assert sorted(names) == sorted(p.stem for p in frames)
+
+
+def test_a_frame_made_before_annotations_gets_them_from_its_scene(four, tmp_path):
+    # a truth file as an older mirrorsim wrote it (no annotations, sealed): the same
+    # annotations come from its scene file and its id pass, rendered again; in a frame
+    # per beacon the exports name the scene's beacon (its truth holds it alone)
+    from dataclasses import replace
+
+    from mirrorsim.formats.cache import seal
+    from mirrorsim.formats.dataset_folder import collect_rows
+    from mirrorsim.formats.files import write_json
+    from mirrorsim.pipelines.dataset_exports import annotations_of, dataset_frames, scene_object
+    from mirrorsim.truth.groundtruth import load_truth
+
+    out, _ = four
+    copy = tmp_path / "old"
+    shutil.copytree(out, copy)
+    entries = dataset_frames(collect_rows(copy, 4))
+    entry = next(e for e in entries if e.frame.endswith("_b1"))
+    path = copy / entry.truth_file
+    truth = load_truth(path)
+    write_json(path, seal(replace(truth, annotations=None).to_json()))
+    again, ann = annotations_of(copy, entry)
+    assert load_truth(path).annotations is None and ann == truth.annotations
+    assert scene_object(entry, "beacons[0]") == "beacons[1]"
+    assert scene_object(entry, "target") == "target"
+    # another scene's file in its place is refused, naming the truth file
+    other = next(e for e in entries if e.row["scene"] != entry.row["scene"])
+    (copy / "scenes" / f"{entry.row['scene']}.yaml").write_bytes(
+        (copy / "scenes" / f"{other.row['scene']}.yaml").read_bytes())
+    from mirrorsim.formats.dataset_rows import DatasetError
+
+    with pytest.raises(DatasetError, match=path.name):
+        annotations_of(copy, entry)

@@ -146,7 +146,8 @@ def _export_options(p):
          "keypoints (DIR/coco.json), as a Hugging Face dataset (DIR/metadata.jsonl and the "
          "card's front matter: datasets.load_dataset(DIR, split='train')) and as Croissant "
          "(DIR/croissant.json).  `mirrorsim dataset` writes all three itself; this is for a "
-         "folder made earlier or changed since.", options=_export_options)
+         "folder made earlier (a frame made before annotations gets them from its scene "
+         "file and its id pass, rendered again) or changed since.", options=_export_options)
 def _export(args) -> int:
     from mirrorsim.pipelines.dataset_exports import write_exports
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import datetime
 import hashlib
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -20,7 +21,11 @@ from mirrorsim.formats import frame_table
 from mirrorsim.formats.dataset_folder import collect_rows, read_table
 from mirrorsim.formats.dataset_rows import DatasetError, read_description
 from mirrorsim.formats.files import dumps, read_regular_bytes, write_json, write_text
-from mirrorsim.truth.annotations import CATEGORIES, Annotations
+from mirrorsim.pipelines.measured import frames_of
+from mirrorsim.pipelines.scenes import load_scene
+from mirrorsim.rendering.frames import object_labels
+from mirrorsim.rendering.passes import render_ids, scene_fingerprint
+from mirrorsim.truth.annotations import CATEGORIES, Annotations, frame_annotations
 from mirrorsim.truth.groundtruth import GroundTruth, load_truth
 
 EXPORTS = ("coco", "hf", "croissant")
@@ -57,24 +62,41 @@ def dataset_frames(rows: list[table.DatasetRow]) -> list[FrameEntry]:
     return out
 
 
-def _annotations(folder: Path, entry: FrameEntry) -> tuple[GroundTruth, Annotations]:
-    """A frame's truth and its annotations, read and verified.
+def annotations_of(folder: Path, entry: FrameEntry) -> tuple[GroundTruth, Annotations]:
+    """A frame's truth and its annotations, read and verified; for a frame made before
+    truth files held them, made now from its scene file and its id pass (rendered again:
+    ray casts at pixel centres, no path tracing), once the scene is shown to be the
+    frame's (its render fingerprint).
 
     Raises
     ------
     DatasetError
-        For a truth file that cannot be read, or one without annotations (a frame made
-        by a mirrorsim before them).
+        For a truth file that cannot be read, or an older frame whose scene file is not
+        the one it was rendered from.
     """
     path = folder / entry.truth_file
     try:
         truth = load_truth(path)
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise DatasetError(path, f"not a readable truth file ({exc})") from None
-    if truth.annotations is None:
-        raise DatasetError(path, "holds no annotations (made by a mirrorsim before them): "
-                           "make the dataset again to export it")
-    return truth, truth.annotations
+    if truth.annotations is not None:
+        return truth, truth.annotations
+    scene_file = folder / "scenes" / f"{entry.row['scene']}.yaml"
+    frame = next((f for f in frames_of(load_scene(scene_file)) if f.name == entry.frame), None)
+    if frame is None or truth.render is None or \
+            truth.render.fingerprint != scene_fingerprint(frame):
+        raise DatasetError(path, f"holds no annotations, and {scene_file.name} is not the "
+                           "scene it was rendered from: make the dataset again")
+    first, in_mirror = render_ids(frame)
+    return truth, frame_annotations(frame, first, in_mirror, labels=object_labels(frame))
+
+
+def scene_object(entry: FrameEntry, name: str) -> str:
+    """An instance's object as its scene names it: a frame per beacon
+    (``<scene>_b<k>``) holds that beacon alone, its truth's ``beacons[0]``, which is
+    the scene's ``beacons[k]``."""
+    k = re.fullmatch(r".*_b(\d+)", entry.frame)
+    return f"beacons[{k.group(1)}]" if k and name == "beacons[0]" else name
 
 
 def _number(row: table.DatasetRow, name: str) -> float | None:
@@ -86,7 +108,7 @@ def _number(row: table.DatasetRow, name: str) -> float | None:
 def frame_line(entry: FrameEntry, truth: GroundTruth, ann: Annotations) -> dict:
     """The frame's line of ``metadata.jsonl`` (:data:`~mirrorsim.formats.frame_table.FIELDS`)."""
     row = entry.row
-    objects = [{"object": i.object, "view": i.view, "category": i.category,
+    objects = [{"object": scene_object(entry, i.object), "view": i.view, "category": i.category,
                 "bbox": list(i.bbox), "area": i.area, "mask_counts": i.mask["counts"],
                 "keypoints": _flat_keypoints(i)} for i in ann.instances]
     line = {"file_name": entry.image, "scene": row["scene"], "index": row.index,
@@ -113,13 +135,14 @@ def _flat_keypoints(instance) -> list[float]:
     return out
 
 
-def coco_document(folder: Path, entries: list[FrameEntry], description: str) -> dict:
-    """COCO's instances and keypoints document of the frames: masks as compressed RLE,
-    keypoints per category (:data:`~mirrorsim.truth.annotations.CATEGORIES`)."""
+def coco_document(frames: list[tuple[FrameEntry, GroundTruth, Annotations]],
+                  description: str) -> dict:
+    """COCO's instances and keypoints document of the frames (each with its truth and
+    annotations: :func:`annotations_of`): masks as compressed RLE, keypoints per
+    category (:data:`~mirrorsim.truth.annotations.CATEGORIES`)."""
     cats = {c.name: k + 1 for k, c in enumerate(CATEGORIES)}
     images, annotations = [], []
-    for n, entry in enumerate(entries, start=1):
-        _, ann = _annotations(folder, entry)
+    for n, (entry, _, ann) in enumerate(frames, start=1):
         images.append({"id": n, "file_name": entry.image, "width": ann.width,
                        "height": ann.height})
         for inst in ann.instances:
@@ -128,7 +151,7 @@ def coco_document(folder: Path, entries: list[FrameEntry], description: str) -> 
                 "id": len(annotations) + 1, "image_id": n, "category_id": cats[inst.category],
                 "segmentation": dict(inst.mask), "area": inst.area, "bbox": list(inst.bbox),
                 "iscrowd": 0, "keypoints": kp, "num_keypoints": sum(v > 0 for v in kp[2::3]),
-                "object": inst.object})
+                "object": scene_object(entry, inst.object)})
     return {"info": {"description": description, "version": "1.0",
                      "date_created": datetime.date.today().isoformat()},
             "licenses": [], "images": images, "annotations": annotations,
@@ -175,11 +198,12 @@ def export_rows(folder: Path, rows: list[table.DatasetRow], meta: dict, *,
     if not entries:
         raise DatasetError(folder, "has no frames to export")
     desc = f"mirrorsim dataset of {meta['n']} scenes (seed {meta['seed']}), {len(entries)} frames"
+    frames = [(e, *annotations_of(folder, e)) for e in entries]
     written: dict[str, Path] = {}
     if "coco" in what:
-        written["coco"] = write_json(folder / "coco.json", coco_document(folder, entries, desc))
+        written["coco"] = write_json(folder / "coco.json", coco_document(frames, desc))
     if "hf" in what or "croissant" in what:
-        lines = [frame_line(e, *_annotations(folder, e)) for e in entries]
+        lines = [frame_line(*f) for f in frames]
         text = "".join(dumps(line, indent=None) for line in lines)
         written["metadata"] = write_text(folder / "metadata.jsonl", text)
     if "hf" in what:

@@ -20,8 +20,12 @@ from mirrorsim.formats import rle
 from mirrorsim.formats.dataset_folder import collect_rows, read_table
 from mirrorsim.formats.dataset_rows import DatasetError, read_description
 from mirrorsim.formats.measurements import load_measurements
-from mirrorsim.pipelines.dataset_exports import FrameEntry, dataset_frames
-from mirrorsim.truth.groundtruth import load_truth
+from mirrorsim.pipelines.dataset_exports import (
+    FrameEntry,
+    annotations_of,
+    dataset_frames,
+    scene_object,
+)
 
 
 class FrameDataset:
@@ -73,18 +77,15 @@ class FrameDataset:
         return self.transform(item) if self.transform is not None else item
 
     def _item(self, entry: FrameEntry) -> dict:
-        truth = load_truth(self.folder / entry.truth_file)
-        ann = truth.annotations
-        if ann is None:
-            raise DatasetError(self.folder / entry.truth_file, "holds no annotations (made "
-                               "by a mirrorsim before them): make the dataset again")
+        truth, ann = annotations_of(self.folder, entry)
         bgr = cv2.imread(str(self.folder / entry.image), cv2.IMREAD_COLOR)
         if bgr is None:
             raise DatasetError(self.folder / entry.image, "cannot be decoded as an image")
         inst = ann.instances
         item = {"image": cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB),
                 "boxes": np.array([i.bbox for i in inst], float).reshape(-1, 4),
-                "categories": [i.category for i in inst], "objects": [i.object for i in inst],
+                "categories": [i.category for i in inst],
+                "objects": [scene_object(entry, i.object) for i in inst],
                 "views": [i.view for i in inst],
                 "keypoints": [np.array([[k.u, k.v, k.visible] for k in i.keypoints])
                               for i in inst],

@@ -77,11 +77,10 @@ def truth_of(scene: Scene, frame: RenderedFrame, fingerprint: str | None) -> Gro
         bbox, n = _mask_stats(frame.in_mirror == label)
         return replace(obj, bbox_px=bbox, visible_px=n)
 
-    labels = {"target": TARGET_LABEL, "mirror": MIRROR_LABEL,
-              **{f"beacons[{i}]": BEACON_LABEL + i for i in range(len(scene.beacons))}}
     return replace(
         truth,
-        annotations=frame_annotations(scene, frame.first, frame.in_mirror, labels=labels),
+        annotations=frame_annotations(scene, frame.first, frame.in_mirror,
+                                      labels=object_labels(scene)),
         target=seen(truth.target, TARGET_LABEL),
         beacons=tuple(seen(b, BEACON_LABEL + i) for i, b in enumerate(truth.beacons)),
         mirror_pixels=MirrorPixels(*_mask_stats(frame.first == MIRROR_LABEL)),
@@ -90,6 +89,12 @@ def truth_of(scene: Scene, frame: RenderedFrame, fingerprint: str | None) -> Gro
                    "occluders": BEACON_LABEL + len(scene.beacons),
                    "seen_in_mirror_offset": IN_MIRROR},
         render=replace(frame.info, fingerprint=fingerprint))
+
+
+def object_labels(scene: Scene) -> dict[str, int]:
+    """Each object's label in the id pass, by its name in the annotations."""
+    return {"target": TARGET_LABEL, "mirror": MIRROR_LABEL,
+            **{f"beacons[{i}]": BEACON_LABEL + i for i in range(len(scene.beacons))}}
 
 
 def write_frame(scene: Scene, frame: RenderedFrame, out: Path,

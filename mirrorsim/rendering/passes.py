@@ -302,6 +302,20 @@ def _accumulate(mi_scene, sensor, spp: int, seed: tuple[int, ...],
     return (acc / spp).astype(np.float32)
 
 
+def render_ids(scene: Scene, *, variant: str = "auto") -> tuple[np.ndarray, np.ndarray]:
+    """The id pass of ``scene``'s frame alone (no path tracing): :func:`id_pass`'s
+    labels as :func:`render_frame` makes them, a distorting lens's warp included."""
+    k = scene.bench.distortion
+    lens = k != (0.0, 0.0)
+    pinhole = replace(scene, camera=distortion_canvas(scene.camera, k)[0]) if lens else scene
+    with variant_scope(choose_variant(variant)):
+        first, in_mirror = id_pass(mi.load_dict(build_scene_dict(pinhole), optimize=False),
+                                   pinhole)
+    if lens:
+        first, in_mirror = (distort(a, scene.camera, k, nearest=True) for a in (first, in_mirror))
+    return first, in_mirror
+
+
 def id_pass(mi_scene: mi.Scene, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
     """Object ids at pixel centres: the first surface hit, and what the mirror shows.
 
