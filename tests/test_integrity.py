@@ -662,6 +662,34 @@ def test_a_calibrations_key_covers_all_the_code_it_comes_out_of():
     assert set(out[1].split()) <= set(covered), set(out[1].split()) - set(covered)
 
 
+def test_the_code_fingerprint_cached_is_the_one_computed(tmp_path, monkeypatch):
+    """The fingerprint cached by the digest of every source file is the one its modules'
+    sources give; a damaged entry is distrusted (one warning) and made again."""
+    import hashlib
+    import json
+
+    from mirrorsim.formats import cache
+    from mirrorsim.pipelines import calibrate
+
+    monkeypatch.setenv("MIRRORSIM_CACHE_DIR", str(tmp_path / "cache"))
+    h = hashlib.sha256()
+    for name, path in calibrate.code_modules().items():
+        h.update(name.encode() + b"\0" + path.read_bytes())
+    calibrate.code_fingerprint.cache_clear()
+    assert calibrate.code_fingerprint() == h.hexdigest()[:12]  # computed, then cached
+    entry = cache.entry_path("code", calibrate._all_sources_digest())
+    assert entry.is_file()
+    calibrate.code_fingerprint.cache_clear()
+    assert calibrate.code_fingerprint() == h.hexdigest()[:12]  # read back
+    doc = json.loads(entry.read_text())
+    doc["value"]["fingerprint"] = "0" * 12  # another code's, checksum now wrong
+    entry.write_text(json.dumps(doc))
+    calibrate.code_fingerprint.cache_clear()
+    with pytest.warns(RuntimeWarning, match="not trusted"):
+        assert calibrate.code_fingerprint() == h.hexdigest()[:12]
+    calibrate.code_fingerprint.cache_clear()
+
+
 def test_a_fifo_where_a_file_is_read_back_is_distrusted_not_waited_on(tmp_path,
                                                                        monkeypatch):
     """A FIFO in place of a cache entry, a frame's file or a row made the read wait for
