@@ -189,3 +189,14 @@ def test_a_frame_made_before_annotations_gets_them_from_its_scene(four, tmp_path
 
     with pytest.raises(DatasetError, match=path.name):
         annotations_of(copy, entry)
+
+
+def test_each_metadata_line_holds_the_declared_fields(four):
+    from mirrorsim.formats.frame_table import FIELDS, OBJECT_FIELDS
+
+    out, _ = four
+    names = {"file_name"} | {f.name for f in FIELDS} - {"image"}
+    for line in (out / "metadata.jsonl").read_text().splitlines():
+        d = json.loads(line)
+        assert set(d) == names
+        assert all(set(o) == {f.name for f in OBJECT_FIELDS} for o in d["objects"])

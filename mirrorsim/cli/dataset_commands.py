@@ -41,10 +41,10 @@ def _dataset_options(p):
     inputs(p, ("spec", "--spec", "file"))
     spp_option(p, "the spec's")
     sampler_option(p)
-    from mirrorsim.pipelines.score import EXTRA_FILES
+    from mirrorsim.pipelines.score import KEPT_BY_DEFAULT
 
     p.add_argument("--keep", nargs="*", action="extend", default=[],
-                   choices=[f for f in EXTRA_FILES if f in ("ids", "annotated")],
+                   choices=KEPT_BY_DEFAULT,
                    help="files to write beside each frame besides its PNG, capture record "
                    "and truth: ids (the id labels), annotated (the detections drawn); "
                    "default none")

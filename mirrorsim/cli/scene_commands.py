@@ -172,9 +172,10 @@ def _evaluate_options(p):
     p.add_argument("--keep", nargs="*", action="extend", default=[], choices=(*EXTRA_FILES, "plot"),
                    help="write also: ids, each frame's object-id labels (<name>.ids.png); "
                         "annotated, each frame with its detections drawn "
-                        "(<name>.annotated.png); plot, the top view of truth and estimate "
-                        "with the 95 %% error ellipse (<name>.eval.png).  Each costs "
-                        "0.1-2 s, so none by default")
+                        "(<name>.annotated.png); depth and normals, each frame's from "
+                        "Mitsuba's aov integrator (<name>.depth.npy, <name>.normals.npy); "
+                        "plot, the top view of truth and estimate with the 95 %% error "
+                        "ellipse (<name>.eval.png).  Each costs 0.1-2 s, so none by default")
     p.add_argument("--board-pose", action="store_true",
                    help="measure the camera's pan, pitch and roll on the pegboard's holes "
                         "seen in each frame and correct every α and d_total by them: the "
@@ -248,8 +249,8 @@ def _budget_options(p):
 
     p.add_argument("--keep", nargs="*", action="extend", default=[], choices=EXTRA_FILES,
                    help="files to write beside each run's frame besides its image, capture "
-                   "record and truth: ids (the id labels), annotated (the detections drawn); "
-                   "default none")
+                   "record and truth: ids (the id labels), annotated (the detections drawn), "
+                   "depth and normals (Mitsuba's aov integrator); default none")
 
 
 @command("budget", "error budget of a bench: each imperfection alone, then all",

@@ -54,6 +54,8 @@ FIELDS = (
     Field("camera_intrinsics", "list float64", "the 3×3 camera matrix, row by row (px)"),
     Field("virtual_camera", "list float64", "the mirror's virtual camera: the 4×4 "
                                             "world-to-camera matrix, row by row (cm)"),
+    Field("lens_distortion", "list float64", "the lens's radial distortion k1, k2 (the "
+                                             "keypoints include it; 0, 0: none)"),
     Field("objects", "objects", "each object seen each way: mask, box, keypoints"),
 )
 _CROISSANT_TYPES = {"string": "sc:Text", "int64": "sc:Integer", "float64": "sc:Float"}
@@ -73,7 +75,8 @@ def front_matter(frames: int, image_globs: tuple[str, ...]) -> str:
     configuration's train split (``metadata.jsonl`` and the frames it names), and its
     features."""
     size = ("n<1K" if frames < 1_000 else "1K<n<10K" if frames < 10_000
-            else "10K<n<100K" if frames < 100_000 else "100K<n<1M")
+            else "10K<n<100K" if frames < 100_000 else "100K<n<1M" if frames < 1_000_000
+            else "n>1M")
     doc = {"license": "cc-by-4.0",
            "task_categories": ["object-detection", "image-segmentation", "keypoint-detection"],
            "tags": ["synthetic", "mirror", "non-line-of-sight", "mitsuba", "mirrorsim"],
@@ -87,8 +90,10 @@ def front_matter(frames: int, image_globs: tuple[str, ...]) -> str:
 def croissant(name: str, *, description: str, image_globs: tuple[str, ...],
               metadata_sha256: str, date: str) -> dict:
     """``croissant.json``: the frame table (``metadata.jsonl``) as the record set
-    ``frames`` (its scalar and list fields), and the frames' files as ``images`` (each
-    one's path in the folder and content: join the two on ``file_name``)."""
+    ``frames`` (its scalar and list fields: the instances' list is the frame table's and
+    the COCO file's), and the frames' files as ``images`` (each one's path in the
+    folder and content: join the two on ``file_name``; a dataset of PNG and JPEG frames
+    has a file set and a record set of each, ``images`` and ``images1``)."""
     def field(rs: str, f: Field) -> dict:
         out = {"@type": "cr:Field", "@id": f"{rs}/{f.name}", "name": f.name,
                "description": f.doc, "dataType": _CROISSANT_TYPES[f.dtype.split()[-1]],
@@ -101,16 +106,23 @@ def croissant(name: str, *, description: str, image_globs: tuple[str, ...],
     scalars = [f for f in FIELDS if f.dtype not in ("image", "objects")]
     frames = [field("frames", Field("file_name", "string", "the frame's path in the folder")),
               *(field("frames", f) for f in scalars)]
-    images = [{"@type": "cr:Field", "@id": "images/file_name", "name": "file_name",
-               "description": "the frame's path in the folder", "dataType": "sc:Text",
-               "source": {"fileSet": {"@id": "frame-files"},
-                          "extract": {"fileProperty": "filepath"},
-                          # its path in the folder, as the frame table names it
-                          "transform": {"regex": "^.*/(frames/[^/]+/[^/]+)$"}}},
-              {"@type": "cr:Field", "@id": "images/image", "name": "image",
-               "description": "the frame", "dataType": "sc:ImageObject",
-               "source": {"fileSet": {"@id": "frame-files"},
-                          "extract": {"fileProperty": "content"}}}]
+
+    def images(k: int) -> dict:
+        """The record set of file set k's frames: each one's path and content."""
+        rs, files = ("images" if k == 0 else f"images{k}"), {"@id": f"frame-files{k}"}
+        return {"@type": "cr:RecordSet", "@id": rs, "name": rs,
+                "description": "the frames' files (join with frames on file_name)",
+                "field": [{"@type": "cr:Field", "@id": f"{rs}/file_name", "name": "file_name",
+                           "description": "the frame's path in the folder",
+                           "dataType": "sc:Text",
+                           "source": {"fileSet": files, "extract": {"fileProperty": "filepath"},
+                                      # its path in the folder, as the frame table names it
+                                      "transform": {"regex": "^.*/(frames/[^/]+/[^/]+)$"}}},
+                          {"@type": "cr:Field", "@id": f"{rs}/image", "name": "image",
+                           "description": "the frame", "dataType": "sc:ImageObject",
+                           "source": {"fileSet": files,
+                                      "extract": {"fileProperty": "content"}}}]}
+
     return {
         "@context": _CONTEXT, "@type": "sc:Dataset", "name": name,
         "citeAs": "mirrorsim: a physically rendered simulator of a mirror space for NLOS "
@@ -122,12 +134,12 @@ def croissant(name: str, *, description: str, image_globs: tuple[str, ...],
             {"@type": "cr:FileObject", "@id": "metadata", "name": "metadata",
              "contentUrl": "metadata.jsonl", "encodingFormat": "application/jsonlines",
              "sha256": metadata_sha256},
-            {"@type": "cr:FileSet", "@id": "frame-files", "name": "frame-files",
-             "encodingFormat": "image/png", "includes": list(image_globs)}],
+            *({"@type": "cr:FileSet", "@id": f"frame-files{k}", "name": f"frame-files{k}",
+               "encodingFormat": "image/jpeg" if g.endswith(".jpg") else "image/png",
+               "includes": [g]} for k, g in enumerate(image_globs))],
         "recordSet": [{"@type": "cr:RecordSet", "@id": "frames", "name": "frames",
                        "description": "one record per frame", "field": frames},
-                      {"@type": "cr:RecordSet", "@id": "images", "name": "images",
-                       "description": "the frames' files", "field": images}]}
+                      *(images(k) for k in range(len(image_globs)))]}
 
 
 # Croissant 1.0's JSON-LD context (its specification's, section "Dataset-level

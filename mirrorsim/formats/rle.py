@@ -41,9 +41,11 @@ def encode(mask: np.ndarray) -> dict:
 
 
 def decode(rle: dict) -> np.ndarray:
-    """The boolean mask of a compressed RLE (:func:`encode`'s inverse)."""
+    """The boolean mask of a compressed RLE (:func:`encode`'s inverse; its counts as
+    text, or as the bytes pycocotools gives)."""
     h, w = (int(v) for v in rle["size"])
     s, counts, p = rle["counts"], [], 0
+    s = s.decode("ascii") if isinstance(s, bytes) else s
     while p < len(s):
         x = k = 0
         more = True

@@ -52,10 +52,11 @@ from mirrorsim.formats.dataset_folder import (
     write_table,
     writing,
 )
+from mirrorsim.formats.dataset_rows import DatasetError
 from mirrorsim.formats.error_model import ErrorModel
 from mirrorsim.formats.error_model_file import default_error_model, load_error_model
 from mirrorsim.formats.files import dumps, write_json, write_text
-from mirrorsim.pipelines.dataset_exports import dataset_frames as frames_of
+from mirrorsim.pipelines.dataset_exports import dataset_frames as frames_in_rows
 from mirrorsim.pipelines.dataset_exports import export_rows
 from mirrorsim.pipelines.dataset_row import row_of
 from mirrorsim.pipelines.random_scenes import DatasetSpec, NoValidScene
@@ -279,8 +280,12 @@ def _write_table_and_card(out: Path, meta: dict, rows: list[table.DatasetRow], *
     Hub's front matter and Croissant: :mod:`~mirrorsim.pipelines.dataset_exports`)."""
     write_table(out, rows)
     write_card(out, meta, rows, variant=variant)
-    if frames_of(rows):  # (a dataset of failed draws alone has none)
-        export_rows(out, rows, meta)
+    if frames_in_rows(rows):  # (a dataset of failed draws alone has none)
+        try:
+            export_rows(out, rows, meta)
+        except DatasetError as exc:  # the run's rows stand; `mirrorsim export` redoes it
+            warnings.warn(f"{out}: its frames were not exported ({exc})", RuntimeWarning,
+                          stacklevel=2)
 
 
 def _run_spec(spec_path: str | Path | None, *, sampler: str | None, beacons: int | None,

@@ -21,11 +21,7 @@ from mirrorsim.formats import frame_table
 from mirrorsim.formats.dataset_folder import collect_rows, read_table
 from mirrorsim.formats.dataset_rows import DatasetError, read_description
 from mirrorsim.formats.files import dumps, read_regular_bytes, write_json, write_text
-from mirrorsim.pipelines.measured import frames_of
-from mirrorsim.pipelines.scenes import load_scene
-from mirrorsim.rendering.frames import object_labels
-from mirrorsim.rendering.passes import render_ids, scene_fingerprint
-from mirrorsim.truth.annotations import CATEGORIES, Annotations, frame_annotations
+from mirrorsim.truth.annotations import CATEGORIES, Annotations, Instance, frame_annotations
 from mirrorsim.truth.groundtruth import GroundTruth, load_truth
 
 EXPORTS = ("coco", "hf", "croissant")
@@ -81,8 +77,20 @@ def annotations_of(folder: Path, entry: FrameEntry) -> tuple[GroundTruth, Annota
         raise DatasetError(path, f"not a readable truth file ({exc})") from None
     if truth.annotations is not None:
         return truth, truth.annotations
+    # (Mitsuba only here: reading a dataset's frames and exporting them need none)
+    from mirrorsim.errors import InputError
+    from mirrorsim.pipelines.measured import frames_of
+    from mirrorsim.pipelines.scenes import load_scene
+    from mirrorsim.rendering.frames import object_labels
+    from mirrorsim.rendering.passes import render_ids, scene_fingerprint
+
     scene_file = folder / "scenes" / f"{entry.row['scene']}.yaml"
-    frame = next((f for f in frames_of(load_scene(scene_file)) if f.name == entry.frame), None)
+    try:
+        scenes = frames_of(load_scene(scene_file))
+    except InputError as exc:
+        raise DatasetError(path, f"holds no annotations, and its scene file cannot make "
+                           f"them ({exc})") from None
+    frame = next((f for f in scenes if f.name == entry.frame), None)
     if frame is None or truth.render is None or \
             truth.render.fingerprint != scene_fingerprint(frame):
         raise DatasetError(path, f"holds no annotations, and {scene_file.name} is not the "
@@ -110,7 +118,7 @@ def frame_line(entry: FrameEntry, truth: GroundTruth, ann: Annotations) -> dict:
     row = entry.row
     objects = [{"object": scene_object(entry, i.object), "view": i.view, "category": i.category,
                 "bbox": list(i.bbox), "area": i.area, "mask_counts": i.mask["counts"],
-                "keypoints": _flat_keypoints(i)} for i in ann.instances]
+                "keypoints": flat_keypoints(i)} for i in ann.instances]
     line = {"file_name": entry.image, "scene": row["scene"], "index": row.index,
             "frame": entry.frame, "truth_file": entry.truth_file,
             "measurements_file": entry.measurements_file, "width": ann.width,
@@ -121,12 +129,12 @@ def frame_line(entry: FrameEntry, truth: GroundTruth, ann: Annotations) -> dict:
             "err_target_cm": _number(row, "err_target_cm"),
             "camera_intrinsics": [c for r in ann.virtual_camera.intrinsics for c in r],
             "virtual_camera": [c for r in ann.virtual_camera.world_to_camera for c in r],
+            "lens_distortion": list(ann.virtual_camera.distortion),
             "objects": objects}
-    assert set(line) == {"file_name"} | {f.name for f in frame_table.FIELDS} - {"image"}
     return line
 
 
-def _flat_keypoints(instance) -> list[float]:
+def flat_keypoints(instance: Instance) -> list[float]:
     """An instance's keypoints as COCO lists them: u, v, visibility each (0, 0, 0 for
     one off the frame)."""
     out: list[float] = []
@@ -146,7 +154,7 @@ def coco_document(frames: list[tuple[FrameEntry, GroundTruth, Annotations]],
         images.append({"id": n, "file_name": entry.image, "width": ann.width,
                        "height": ann.height})
         for inst in ann.instances:
-            kp = _flat_keypoints(inst)
+            kp = flat_keypoints(inst)
             annotations.append({
                 "id": len(annotations) + 1, "image_id": n, "category_id": cats[inst.category],
                 "segmentation": dict(inst.mask), "area": inst.area, "bbox": list(inst.bbox),
@@ -196,12 +204,16 @@ def export_rows(folder: Path, rows: list[table.DatasetRow], meta: dict, *,
     its description); the files written, by export."""
     entries = dataset_frames(rows)
     if not entries:
-        raise DatasetError(folder, "has no frames to export")
+        raise DatasetError(folder, "has no frames to export (its rows record no files: "
+                           "made by a mirrorsim before rows recorded them, or every scene "
+                           "failed before its render)")
     desc = f"mirrorsim dataset of {meta['n']} scenes (seed {meta['seed']}), {len(entries)} frames"
     frames = [(e, *annotations_of(folder, e)) for e in entries]
     written: dict[str, Path] = {}
     if "coco" in what:
         written["coco"] = write_json(folder / "coco.json", coco_document(frames, desc))
+    if "hf" in what and (folder / "croissant.json").exists():
+        what = (*what, "croissant")  # it names the metadata's SHA-256: made again with it
     if "hf" in what or "croissant" in what:
         lines = [frame_line(*f) for f in frames]
         text = "".join(dumps(line, indent=None) for line in lines)

@@ -28,6 +28,7 @@ from mirrorsim.rendering.backend import check_variant
 from mirrorsim.rendering.frames import FrameFiles, capture_of, reused_frame, write_frame
 from mirrorsim.rendering.passes import render_frame, scene_fingerprint
 from mirrorsim.scene.model import Scene
+from mirrorsim.scene.render_settings import AOVS
 
 
 class FrameNotMeasured(DetectionError):
@@ -143,10 +144,10 @@ def render_and_measure(scene: Scene, out: str | Path, *, variant: str = "auto",
     """Render ``scene`` into ``out`` (or reuse its render), then :func:`measure_frame`;
     ``aov``: the frame's depth and normals besides (:mod:`mirrorsim.rendering.aov`)."""
     out = Path(out)
-    write_aovs(scene, out, aov, variant=variant)
     measure = partial(measure_frame, calibration=calibration, variant=variant,
                       distance_error=scene.bench.calibration_distance_error)
     files = reused_frame(scene, out, ids) if reuse else None
+    write_aovs(scene, out, aov, variant=variant, fresh=files is None)
     if files is not None:
         return replace(measure(files.image, files.capture), files=files)
     frame = render_frame(scene, variant=variant, progress=progress)
@@ -167,11 +168,18 @@ def render_and_measure(scene: Scene, out: str | Path, *, variant: str = "auto",
     return replace(m, files=files)
 
 
-def write_aovs(scene: Scene, out: Path, names: tuple[str, ...], *, variant: str) -> None:
-    """``out/<frame>.<name>.npy`` for each of ``names`` not there yet (float32 arrays)."""
+def write_aovs(scene: Scene, out: Path, names: tuple[str, ...], *, variant: str,
+               fresh: bool = True) -> None:
+    """``out/<frame>.<name>.npy`` for each of ``names`` (float32 arrays).  ``fresh``: the
+    frame is rendered now, so that any such file of an earlier render of that name is
+    not its own: each is made again, or removed where not asked for; otherwise (a
+    frame reused) only those missing are made."""
     from mirrorsim.rendering.aov import render_aovs
 
-    todo = [n for n in names if not (out / f"{scene.name}.{n}.npy").exists()]
+    if fresh:
+        for name in set(AOVS) - set(names):
+            (out / f"{scene.name}.{name}.npy").unlink(missing_ok=True)
+    todo = [n for n in names if fresh or not (out / f"{scene.name}.{n}.npy").exists()]
     if not todo:
         return
     out.mkdir(parents=True, exist_ok=True)

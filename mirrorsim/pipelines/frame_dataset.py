@@ -24,8 +24,10 @@ from mirrorsim.pipelines.dataset_exports import (
     FrameEntry,
     annotations_of,
     dataset_frames,
+    flat_keypoints,
     scene_object,
 )
+from mirrorsim.scene.render_settings import AOVS
 
 
 class FrameDataset:
@@ -87,8 +89,8 @@ class FrameDataset:
                 "categories": [i.category for i in inst],
                 "objects": [scene_object(entry, i.object) for i in inst],
                 "views": [i.view for i in inst],
-                "keypoints": [np.array([[k.u, k.v, k.visible] for k in i.keypoints])
-                              for i in inst],
+                # (u, v, visibility) as COCO lists them: 0, 0, 0 off the frame
+                "keypoints": [np.array(flat_keypoints(i), float).reshape(-1, 3) for i in inst],
                 "virtual_camera": np.array(ann.virtual_camera.world_to_camera),
                 "truth": truth,
                 "measurements": load_measurements(self.folder / entry.measurements_file)
@@ -97,7 +99,7 @@ class FrameDataset:
         if self.masks:
             item["masks"] = np.stack([rle.decode(i.mask) for i in inst]) if inst else \
                 np.zeros((0, ann.height, ann.width), bool)
-        for name in ("depth", "normals"):
+        for name in AOVS:
             path = self.folder / Path(entry.image).with_name(f"{entry.frame}.{name}.npy")
             if path.exists():
                 item[name] = np.load(path, allow_pickle=False)

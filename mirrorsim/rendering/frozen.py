@@ -23,7 +23,9 @@ from collections.abc import Callable, Iterator
 import drjit as dr
 import mitsuba as mi
 
-# the frozen render of the scene being rendered (None: outside frozen_renders)
+# the frozen render of the scene being rendered (None: outside frozen_renders); a new
+# thread starts without one (it traces as usual), so one scope's recordings serve only
+# the thread that opened it
 _CURRENT: contextvars.ContextVar[Callable | None] = contextvars.ContextVar(
     "frozen_render", default=None)
 
@@ -55,7 +57,7 @@ def frozen_renders() -> Iterator[None]:
         _CURRENT.reset(token)
 
 
-def render_call(mi_scene, sensor, *, spp: int, seed: int):
+def render_call(mi_scene: mi.Scene, sensor: mi.Sensor, *, spp: int, seed: int) -> mi.TensorXf:
     """One ``mi.render`` of ``sensor``'s film: replayed inside :func:`frozen_renders`
     where :func:`freezing` says so, else traced as usual."""
     frozen = _CURRENT.get()

@@ -178,8 +178,7 @@ def _render_optics(scene: Scene, chosen: str, progress: bool) -> _Optics:
     t0 = time.perf_counter()
     k = scene.bench.distortion
     lens = k != (0.0, 0.0)
-    # a distorting lens: the pinhole render of a wider canvas, warped onto the sensor
-    pinhole = replace(scene, camera=distortion_canvas(scene.camera, k)[0]) if lens else scene
+    pinhole = pinhole_scene(scene)
     box, background, beacon_spp, boxes, passes = _regions(pinhole, spp)
     with variant_scope(chosen):
         tiles = tuple(sorted({t for *_, t in passes}))
@@ -276,7 +275,7 @@ def _tile_pass(spp: int, t: int) -> int:
     return per
 
 
-def _pass_seed(seed: tuple[int, ...], k: int) -> int:
+def pass_seed(seed: tuple[int, ...], k: int) -> int:
     """Mitsuba's 32-bit seed of pass k of a render (seed, stream[, tile]): hashed by a
     SeedSequence, so that any seed ≥ 0 works (Mitsuba refuses seeds ≥ 2³²) and passes
     of different renders, streams or tiles do not share one."""
@@ -289,17 +288,27 @@ def _accumulate(mi_scene, sensor, spp: int, seed: tuple[int, ...],
     each); ``seed`` is (the render's seed, a stream number[, a tile])."""
     passes = [per_pass] * (spp // per_pass) + ([spp % per_pass] if spp % per_pass else [])
     if len(passes) == 1:  # the common case in datasets: no float64 sum to make
-        img = np.array(render_call(mi_scene, sensor, spp=spp, seed=_pass_seed(seed, 0)),
+        img = np.array(render_call(mi_scene, sensor, spp=spp, seed=pass_seed(seed, 0)),
                        dtype=np.float32)
         step(spp)
         return img
     acc = None
     for k, n in enumerate(passes):
-        img = np.asarray(render_call(mi_scene, sensor, spp=n, seed=_pass_seed(seed, k)),
+        img = np.asarray(render_call(mi_scene, sensor, spp=n, seed=pass_seed(seed, k)),
                          dtype=np.float64)
         acc = img * n if acc is None else acc + img * n
         step(n)
     return (acc / spp).astype(np.float32)
+
+
+def pinhole_scene(scene: Scene) -> Scene:
+    """What Mitsuba renders of ``scene``: itself, or under a distorting lens the pinhole
+    render of a wider canvas (:func:`~mirrorsim.camera.sensor.distortion_canvas`), which
+    :func:`~mirrorsim.camera.sensor.distort` warps onto the sensor."""
+    k = scene.bench.distortion
+    if k == (0.0, 0.0):
+        return scene
+    return replace(scene, camera=distortion_canvas(scene.camera, k)[0])
 
 
 def render_ids(scene: Scene, *, variant: str = "auto") -> tuple[np.ndarray, np.ndarray]:
@@ -307,7 +316,7 @@ def render_ids(scene: Scene, *, variant: str = "auto") -> tuple[np.ndarray, np.n
     labels as :func:`render_frame` makes them, a distorting lens's warp included."""
     k = scene.bench.distortion
     lens = k != (0.0, 0.0)
-    pinhole = replace(scene, camera=distortion_canvas(scene.camera, k)[0]) if lens else scene
+    pinhole = pinhole_scene(scene)
     with variant_scope(choose_variant(variant)):
         first, in_mirror = id_pass(mi.load_dict(build_scene_dict(pinhole), optimize=False),
                                    pinhole)

@@ -6,10 +6,10 @@ pass's pixels, as COCO's compressed RLE), its box and area, and its keypoints (a
 tip and foot, the corners of the target's face towards the mirror and of the glass)
 projected exactly: a point in the mirror is the point reflected in the glass's plane as
 the bench stands it (its lean and tilt), then the camera as it stands (pitch, roll) and
-its lens's distortion.  A curved glass reflects as its tangent plane at its centre does
-(to first order in the sag), which docs/annotations.md says.  Beside them, the mirror's
-*virtual camera*: the camera reflected in the glass's plane, whose projection of a
-point is where the point's reflection appears in the frame.
+its lens's distortion.  A curved glass images a point where no plane does: its
+in-mirror keypoints are not labelled (visibility 0).  Beside them, the mirror's
+*virtual camera*: the camera reflected in the glass's plane (a curved glass's tangent
+plane at its centre), whose projection of a point is where a flat glass shows it.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ import numpy as np
 from mirrorsim.formats import rle
 from mirrorsim.scene.model import TARGET_THICKNESS, Scene
 from mirrorsim.scene.projection import camera_axes, distort_pixels, project
-from mirrorsim.truth.visibility import glass_frame
+from mirrorsim.truth.visibility import glass_frame, sag
 from solver.geometry import unit
 
 VIEWS = ("direct", "mirror")
@@ -168,8 +168,12 @@ def keypoints3(scene: Scene) -> dict[str, np.ndarray]:
     out = {"target": corners(np.r_[face, t.z + h / 2], np.r_[a, 0.0], up, w / 2, h / 2)}
     for i, b in enumerate(scene.beacons):
         out[f"beacons[{i}]"] = np.array([[*b.position, b.z + b.height], [*b.position, b.z]])
-    g, along, gup, _ = glass_frame(scene)
-    out["mirror"] = corners(g, along, gup, scene.mirror.size[0] / 2, scene.mirror.size[1] / 2)
+    g, along, gup, n = glass_frame(scene)
+    w2, h2 = scene.mirror.size[0] / 2, scene.mirror.size[1] / 2
+    # a curved glass's rim stands off its tangent plane by the sag at each corner
+    rim = sag(np.array([-w2, w2, w2, -w2]), np.array([h2, h2, -h2, -h2]),
+              scene.bench.curvature_radius)
+    out["mirror"] = corners(g, along, gup, w2, h2) + np.outer(rim, n)
     return out
 
 
@@ -188,6 +192,18 @@ def pixels(scene: Scene, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np
     if bench.distortion != (0.0, 0.0):
         u, v = distort_pixels(scene.camera, u, v, k=bench.distortion)
     return u, v, depth
+
+
+def _on_the_lens(scene: Scene, points: np.ndarray) -> np.ndarray:
+    """Whether the lens images each point where its radial map still grows (a barrel
+    lens folds points far off its axis back onto the frame: those are off it)."""
+    k = scene.bench.distortion
+    forward, right, down = camera_axes(scene.camera, scene.bench.pitch, scene.bench.roll)
+    p = np.asarray(points, float) - scene.camera.center3
+    z = p @ forward
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r2 = ((p @ right) ** 2 + (p @ down) ** 2) / z**2
+    return (z > 0) & (1 + 3 * k[0] * r2 + 5 * k[1] * r2 * r2 > 0)
 
 
 def virtual_camera(scene: Scene) -> VirtualCamera:
@@ -224,11 +240,16 @@ def frame_annotations(scene: Scene, first: np.ndarray, in_mirror: np.ndarray, *,
                 continue
             pts = reflect(scene, points[obj]) if view == "mirror" else points[obj]
             cat = category_of(obj, view)
+            kps = _keypoints(scene, pts, mask, names=cat.keypoints)
+            if view == "mirror" and scene.bench.curvature_radius is not None:
+                # a curved glass images a point where no plane does (its tangent plane's
+                # reflection lay 8-24 px off at R = 700-100 cm): not labelled
+                kps = tuple(Keypoint(k.name, 0.0, 0.0, OFF) for k in kps)
             cols, rows = np.flatnonzero(mask.any(axis=0)), np.flatnonzero(mask.any(axis=1))
             bbox = (int(cols[0]), int(rows[0]), int(cols[-1] - cols[0] + 1),
                     int(rows[-1] - rows[0] + 1))
             out.append(Instance(obj, view, cat.name, bbox, int(mask.sum()), rle.encode(mask),
-                                _keypoints(scene, pts, mask, names=cat.keypoints)))
+                                kps))
     cam = scene.camera
     return Annotations(cam.width, cam.height_px, tuple(out), virtual_camera(scene))
 
@@ -241,11 +262,12 @@ def _keypoints(scene: Scene, pts: np.ndarray, mask: np.ndarray, *, names: tuple[
     u, v, depth = pixels(scene, pts)
     h, w = mask.shape
     out = []
-    for name, uu, vv, d in zip(names, u, v, depth, strict=True):
-        iu, iv = int(round(float(uu))), int(round(float(vv)))
-        if d <= 0 or not (0 <= iu < w and 0 <= iv < h):
+    for name, uu, vv, d, ok in zip(names, u, v, depth, _on_the_lens(scene, pts), strict=True):
+        if d <= 0 or not ok or not (np.isfinite(uu) and np.isfinite(vv)) or not (
+                -0.5 <= uu < w - 0.5 and -0.5 <= vv < h - 0.5):
             flag = OFF
         else:
+            iu, iv = int(round(float(uu))), int(round(float(vv)))
             r = SEEN_WITHIN_PX
             near = mask[max(iv - r, 0):iv + r + 1, max(iu - r, 0):iu + r + 1]
             flag = SEEN if near.any() else HIDDEN
