@@ -19,8 +19,8 @@ from mirrorsim.formats.capture import CaptureRecord
 from mirrorsim.pipelines.frame import render_and_measure
 from mirrorsim.pipelines.scenes import scene_from_dict
 from mirrorsim.rendering.frames import scene_fingerprint
+from mirrorsim.rendering.id_pass import IN_MIRROR
 from mirrorsim.rendering.mitsuba_scene import TARGET_LABEL
-from mirrorsim.rendering.passes import IN_MIRROR
 from mirrorsim.scene import imperfections
 from mirrorsim.scene.model import FRONT_OFFSET, Bench, SensorNoise
 from mirrorsim.truth import groundtruth, optics, visibility

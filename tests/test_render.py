@@ -9,8 +9,8 @@ import pytest
 from mirrorsim.errors import BadParameter
 from mirrorsim.pipelines.frame import render_to_files
 from mirrorsim.pipelines.scenes import load_scene, scene_from_dict
+from mirrorsim.rendering.id_pass import IN_MIRROR
 from mirrorsim.rendering.mitsuba_scene import BEACON_LABEL, MIRROR_LABEL, TARGET_LABEL
-from mirrorsim.rendering.passes import IN_MIRROR
 from mirrorsim.truth import optics
 
 from .conftest import SCENES, small_scene
@@ -385,8 +385,8 @@ def test_a_new_scene_compiles_no_new_kernel(jit_variant):
 def test_the_id_preview_colours_each_label_apart():
     """The preview gives each label its own colour, what the mirror shows lighter than
     the same object seen directly, and the labels file stays the labels."""
+    from mirrorsim.rendering.id_pass import IN_MIRROR
     from mirrorsim.rendering.id_preview import colourise_ids
-    from mirrorsim.rendering.passes import IN_MIRROR
 
     labels = np.array([[0, 2, IN_MIRROR + 2, 3, IN_MIRROR + 3, 4, IN_MIRROR, 7]], np.uint8)
     rgb = colourise_ids(labels, n_beacons=2)[0]
@@ -446,7 +446,7 @@ def test_frozen_renders_are_the_traced_ones_bit_for_bit(monkeypatch, jit_variant
     calls, made = [], []
 
     def counted(*args, **kwargs):
-        calls.append(frozen.freezing())
+        calls.append(frozen._CURRENT.get() is not None)  # a call that may replay
         return frozen.render_call(*args, **kwargs)
 
     def kept():  # each scene's frozen function, to count its recordings
@@ -463,4 +463,4 @@ def test_frozen_renders_are_the_traced_ones_bit_for_bit(monkeypatch, jit_variant
             monkeypatch.setenv("MIRRORSIM_FREEZE", freeze)
             frames[freeze] = render_frame(scene, variant=jit_variant, progress=False).linear
         assert np.array_equal(frames["1"], frames["0"]), scene.name
-    assert sum(f.n_recordings for f in made) < sum(calls)
+    assert made and sum(f.n_recordings for f in made) < sum(calls)

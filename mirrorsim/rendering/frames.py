@@ -27,6 +27,7 @@ from mirrorsim.formats.files import (
     encode_png,
     read_regular_bytes,
 )
+from mirrorsim.rendering.id_pass import IN_MIRROR, encode_ids
 from mirrorsim.rendering.id_preview import id_preview
 from mirrorsim.rendering.mitsuba_scene import (
     BACKGROUND_LABEL,
@@ -34,12 +35,7 @@ from mirrorsim.rendering.mitsuba_scene import (
     MIRROR_LABEL,
     TARGET_LABEL,
 )
-from mirrorsim.rendering.passes import (
-    IN_MIRROR,
-    RenderedFrame,
-    encode_ids,
-    scene_fingerprint,
-)
+from mirrorsim.rendering.passes import RenderedFrame, scene_fingerprint
 from mirrorsim.scene.model import Scene
 from mirrorsim.truth import groundtruth
 from mirrorsim.truth.annotations import frame_annotations

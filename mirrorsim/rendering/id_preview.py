@@ -1,13 +1,13 @@
 """The id labels for a viewer (``<name>.ids.preview.png``): each object's colour, what
 the mirror shows of it lighter, and a legend strip naming each colour.  The labels
-themselves are :func:`mirrorsim.rendering.passes.encode_ids`'."""
+themselves are :func:`mirrorsim.rendering.id_pass.encode_ids`'."""
 
 from __future__ import annotations
 
 import numpy as np
 
+from mirrorsim.rendering.id_pass import IN_MIRROR
 from mirrorsim.rendering.mitsuba_scene import BACKGROUND_LABEL, BEACON_LABEL, TARGET_LABEL
-from mirrorsim.rendering.passes import IN_MIRROR
 
 _ID_COLOURS = {BACKGROUND_LABEL: (40, 40, 40), TARGET_LABEL: (230, 120, 20)}
 _BEACON_COLOURS = ((240, 220, 40), (60, 200, 80), (220, 60, 200), (60, 200, 220),

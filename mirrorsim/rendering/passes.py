@@ -17,7 +17,6 @@ import time
 from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, field, replace
 
-import drjit as dr
 import mitsuba as mi
 import numpy as np
 
@@ -25,13 +24,11 @@ from mirrorsim.camera.sensor import add_noise, distort, distortion_canvas, to_sr
 from mirrorsim.progress import progress_bar
 from mirrorsim.rendering.backend import choose_variant
 from mirrorsim.rendering.frozen import frozen_renders, render_call
+from mirrorsim.rendering.id_pass import id_pass
 from mirrorsim.rendering.mitsuba_scene import (
-    BACKGROUND_LABEL,
-    MIRROR_LABEL,
     aim_tile,
     build_direct_dict,
     build_scene_dict,
-    label_of,
 )
 from mirrorsim.rendering.shapes import COLOURS
 from mirrorsim.scene.imperfections import optics_of
@@ -39,7 +36,6 @@ from mirrorsim.scene.model import STAND_RADIUS, Beacon, Board, Camera, Scene, Ta
 from mirrorsim.truth import optics
 from mirrorsim.truth.groundtruth import RenderInfo
 
-IN_MIRROR = 100  # ids.png: label + IN_MIRROR where the pixel sees it in the mirror
 # samples per render call: one progress step each.  A stratified sampler stratifies
 # within a call, so the passes are large; a dataset's few-spp frame is one call.
 PASS_SPP = 16
@@ -192,10 +188,9 @@ def _render_optics(scene: Scene, chosen: str, progress: bool) -> _Optics:
                           leave=False, desc=f"rendering {scene.name} ({chosen})",
                           bar_format="{l_bar}{bar}| {n:.1f}/{total:.1f} M samples "
                                      "[{elapsed}<{remaining}, {rate_fmt}]") as bar:
-            with frozen_renders():  # a frame's tiles replay one recording a size
-                linear = _render_regions(mi_scene, pinhole.camera,
-                                         spp if box is None else background, passes, seed,
-                                         bar.update)
+            linear = _render_regions(mi_scene, pinhole.camera,
+                                     spp if box is None else background, passes, seed,
+                                     bar.update)
         t_render = time.perf_counter() - t0
         first, in_mirror = id_pass(mi_scene, pinhole)
     if lens:
@@ -241,18 +236,31 @@ def _render_regions(mi_scene, cam: Camera, whole_spp: int,
     H, W = cam.height_px, cam.width
     linear = _accumulate(mi_scene, sensors["sensor"], whole_spp, (seed, 0),
                          lambda m: step(m * W * H / 1e6))
-    for (u0, v0, u1, v1), n, stream, t in passes:
-        sensor = sensors[f"sensor_tile{t}"]
-        params = mi.traverse(sensor)
-        corners = [(u, v) for v in range(v0, v1, t) for u in range(u0, u1, t)]
-        for k, (u, v) in enumerate(corners):
-            aim_tile(params, cam, t, u0=u, v0=v)
-            img = _accumulate(mi_scene, sensor, n, (seed, stream, k),
-                              lambda m, px=t * t: step(m * px / 1e6), _tile_pass(n, t))
-            # the tile's part inside the region (a tile may reach past it, or the film)
-            h, w = min(t, v1 - v, H - v), min(t, u1 - u, W - u)
-            linear[v:v + h, u:u + w] = img[:h, :w]
+    # the boxes' tiles of one size replay one recording (the whole film, rendered once
+    # a frame, is traced as usual: recording it would cost more than it saves)
+    with frozen_renders():
+        for region, n, stream, t in passes:
+            _render_tiles(mi_scene, sensors[f"sensor_tile{t}"], cam, linear,
+                          region=region, spp=n, seed=(seed, stream), step=step)
     return linear
+
+
+def _render_tiles(mi_scene, sensor, cam: Camera, linear: np.ndarray, *,
+                  region: Region, spp: int, seed: tuple[int, int],
+                  step: Callable[[float], object]) -> None:
+    """A box of the film rendered over ``linear`` in square tiles of ``sensor``'s size,
+    each with its own seed stream."""
+    (u0, v0, u1, v1), t = region, int(sensor.film().crop_size()[0])
+    H, W = cam.height_px, cam.width
+    params = mi.traverse(sensor)
+    corners = [(u, v) for v in range(v0, v1, t) for u in range(u0, u1, t)]
+    for k, (u, v) in enumerate(corners):
+        aim_tile(params, cam, t, u0=u, v0=v)
+        img = _accumulate(mi_scene, sensor, spp, (*seed, k),
+                          lambda m, px=t * t: step(m * px / 1e6), _tile_pass(spp, t))
+        # the tile's part inside the region (a tile may reach past it, or the film)
+        h, w = min(t, v1 - v, H - v), min(t, u1 - u, W - u)
+        linear[v:v + h, u:u + w] = img[:h, :w]
 
 
 def render_direct(board: Board, camera: Camera, obj: Target | Beacon, *, spp: int,
@@ -323,78 +331,3 @@ def render_ids(scene: Scene, *, variant: str = "auto") -> tuple[np.ndarray, np.n
     if lens:
         first, in_mirror = (distort(a, scene.camera, k, nearest=True) for a in (first, in_mirror))
     return first, in_mirror
-
-
-def id_pass(mi_scene: mi.Scene, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
-    """Object ids at pixel centres: the first surface hit, and what the mirror shows.
-
-    The ``aov`` integrator's ``shape_index`` only records the first hit, which for
-    every pixel of the mirror is the mirror itself; so the id pass casts the camera
-    ray, and where it meets the glass, the specularly reflected ray.
-
-    Returns
-    -------
-    first, in_mirror : ndarray of uint8, shape (H, W)
-        Labels (MIRROR_LABEL, TARGET_LABEL, BEACON_LABEL + i, …; 0 for anything else).
-        ``in_mirror`` is 0 off the glass.
-    """
-    cam = scene.camera
-    shapes = [(s, label_of(s.id(), len(scene.beacons))) for s in mi_scene.shapes()]
-    sensor = {s.id(): s for s in mi_scene.sensors()}["sensor"]  # the full film
-    cast = _id_pass_jit if dr.is_jit_v(mi.Float) else _id_pass_scalar
-    return cast(mi_scene, sensor, shapes, cam.width, cam.height_px)
-
-
-def _reflected_ray(ray, si):
-    n = si.sh_frame.n  # the shading normal: a curved mirror's (its mesh's vertex normals)
-    return si.spawn_ray(ray.d - 2.0 * dr.dot(ray.d, n) * n)
-
-
-def _id_pass_jit(mi_scene, sensor, shapes, W, H):
-    idx = dr.arange(mi.UInt32, W * H)
-    px = mi.Float(idx % W) + 0.5
-    py = mi.Float(idx // W) + 0.5
-    ray, _ = sensor.sample_ray(0.0, 0.5, mi.Point2f(px / W, py / H), mi.Point2f(0.5, 0.5))
-
-    def labels(si):
-        lab = mi.UInt32(BACKGROUND_LABEL)
-        for shape, label in shapes:
-            if label != BACKGROUND_LABEL:
-                lab = dr.select(si.is_valid() & (si.shape == mi.ShapePtr(shape)), label, lab)
-        return lab
-
-    si = mi_scene.ray_intersect(ray)
-    first = labels(si)
-    on_glass = first == MIRROR_LABEL
-    si2 = mi_scene.ray_intersect(_reflected_ray(ray, si), on_glass)
-    second = dr.select(on_glass, labels(si2), BACKGROUND_LABEL)
-    dr.eval(first, second)  # one kernel for both: evaluated apart, the second recasts the first ray
-    to_np = lambda a: np.asarray(a, dtype=np.uint8).reshape(H, W)  # noqa: E731
-    return to_np(first), to_np(second)
-
-
-def _id_pass_scalar(mi_scene, sensor, shapes, W, H):
-    by_id = {s.id(): label for s, label in shapes}
-    first = np.zeros((H, W), np.uint8)
-    second = np.zeros_like(first)
-    for j in range(H):
-        for i in range(W):
-            ray, _ = sensor.sample_ray(0.0, 0.5, mi.Point2f((i + 0.5) / W, (j + 0.5) / H),
-                                       mi.Point2f(0.5, 0.5))
-            si = mi_scene.ray_intersect(ray)
-            if not si.is_valid():
-                continue
-            lab = by_id.get(si.shape.id(), BACKGROUND_LABEL)
-            first[j, i] = lab
-            if lab == MIRROR_LABEL:
-                si2 = mi_scene.ray_intersect(_reflected_ray(ray, si))
-                if si2.is_valid():
-                    second[j, i] = by_id.get(si2.shape.id(), BACKGROUND_LABEL)
-    return first, second
-
-
-def encode_ids(first: np.ndarray, in_mirror: np.ndarray) -> np.ndarray:
-    """One uint8 image of both id maps: the direct label, or IN_MIRROR + the label that
-    the mirror shows on the glass (so IN_MIRROR alone is glass showing the room)."""
-    return np.where(first == MIRROR_LABEL, IN_MIRROR + in_mirror, first).astype(np.uint8)
-
