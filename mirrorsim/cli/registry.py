@@ -11,9 +11,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from mirrorsim.errors import BadArgument
-from mirrorsim.formats.error_model import ErrorModel
 
 if TYPE_CHECKING:  # the rest is imported where used: `mirrorsim --help` needs none of it
+    from mirrorsim.formats.error_model import ErrorModel
     from mirrorsim.scene.model import Scene
     from solver.selfcal import SelfCalibration
 
