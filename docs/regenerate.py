@@ -202,6 +202,9 @@ RESULTS: tuple[Result, ...] = (
            about="a full-size render per Mitsuba variant (quiet machine)"),
     Result("throughput_dataset", (f"{PY} benchmarks/dataset.py --n 24 --workers 2",),
            markdown=True, about="a new dataset's frames a minute (quiet machine)"),
+    Result("throughput_freeze", (f"{PY} benchmarks/freeze.py --frames 6 --fresh 4",),
+           markdown=True, about="what replaying recorded kernels saves a frame, warm and "
+                                "in a fresh process; the cached code fingerprint"),
     Result("throughput_ratio",
            (f"{PY} benchmarks/pieces.py --scenes 6 --rss 48 --ratio 10",), markdown=True,
            about="a frame's pieces, a worker's memory over 48 scenes, and a frame's wall "

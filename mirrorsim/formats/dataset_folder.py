@@ -183,6 +183,12 @@ def read_table(folder: str | Path) -> dict[str, list]:
     DatasetError
         Saying which of these fails.
     """
+    return read_verified(folder)[0]
+
+
+def read_verified(folder: str | Path) -> tuple[dict[str, list], list[table.DatasetRow]]:
+    """A dataset's table as columns (:func:`read_table`) and the rows it was checked
+    against, each verified (raises as :func:`read_table` does)."""
     path = Path(folder) / "dataset.parquet"
     arrow = _parquet(path)
     cols = arrow.to_pydict()
@@ -218,7 +224,7 @@ def read_table(folder: str | Path) -> dict[str, list]:
     if missing:
         raise DatasetError(path, f"missing columns {', '.join(missing[:4])}"
                            + (f" and {len(missing) - 4} more" if len(missing) > 4 else ""))
-    return cols
+    return cols, rows
 
 
 def _parquet(path: Path) -> Any:

@@ -11,16 +11,16 @@ from __future__ import annotations
 
 import datetime
 import hashlib
-import re
 from dataclasses import dataclass
 from pathlib import Path
 
 from mirrorsim.errors import BadParameter
 from mirrorsim.formats import dataset_table as table
 from mirrorsim.formats import frame_table
-from mirrorsim.formats.dataset_folder import collect_rows, read_table
+from mirrorsim.formats.dataset_folder import read_verified
 from mirrorsim.formats.dataset_rows import DatasetError, read_description
-from mirrorsim.formats.files import dumps, read_regular_bytes, write_json, write_text
+from mirrorsim.formats.files import dumps, write_json, write_text
+from mirrorsim.scene.model import frame_beacon
 from mirrorsim.truth.annotations import CATEGORIES, Annotations, Instance, frame_annotations
 from mirrorsim.truth.groundtruth import GroundTruth, load_truth
 
@@ -103,8 +103,8 @@ def scene_object(entry: FrameEntry, name: str) -> str:
     """An instance's object as its scene names it: a frame per beacon
     (``<scene>_b<k>``) holds that beacon alone, its truth's ``beacons[0]``, which is
     the scene's ``beacons[k]``."""
-    k = re.fullmatch(r".*_b(\d+)", entry.frame)
-    return f"beacons[{k.group(1)}]" if k and name == "beacons[0]" else name
+    k = frame_beacon(entry.row["scene"], entry.frame)
+    return f"beacons[{k}]" if k is not None and name == "beacons[0]" else name
 
 
 def _number(row: table.DatasetRow, name: str) -> float | None:
@@ -119,7 +119,7 @@ def frame_line(entry: FrameEntry, truth: GroundTruth, ann: Annotations) -> dict:
     objects = [{"object": scene_object(entry, i.object), "view": i.view, "category": i.category,
                 "bbox": list(i.bbox), "area": i.area, "mask_counts": i.mask["counts"],
                 "keypoints": flat_keypoints(i)} for i in ann.instances]
-    line = {"file_name": entry.image, "scene": row["scene"], "index": row.index,
+    return {"file_name": entry.image, "scene": row["scene"], "index": row.index,
             "frame": entry.frame, "truth_file": entry.truth_file,
             "measurements_file": entry.measurements_file, "width": ann.width,
             "height": ann.height, "error": row.error,
@@ -131,7 +131,6 @@ def frame_line(entry: FrameEntry, truth: GroundTruth, ann: Annotations) -> dict:
             "virtual_camera": [c for r in ann.virtual_camera.world_to_camera for c in r],
             "lens_distortion": list(ann.virtual_camera.distortion),
             "objects": objects}
-    return line
 
 
 def flat_keypoints(instance: Instance) -> list[float]:
@@ -193,9 +192,8 @@ def write_exports(folder: str | Path, what: tuple[str, ...] = EXPORTS) -> dict[s
     if bad:
         raise BadParameter("what", f"{bad[0]!r}: choose from {', '.join(EXPORTS)}")
     folder = Path(folder)
-    read_table(folder)  # the table, its rows and every file they record, verified
-    meta = read_description(folder)
-    return export_rows(folder, collect_rows(folder, meta["n"], meta), meta, what=what)
+    _, rows = read_verified(folder)  # the table, its rows and every file they record
+    return export_rows(folder, rows, read_description(folder), what=what)
 
 
 def export_rows(folder: Path, rows: list[table.DatasetRow], meta: dict, *,
@@ -218,10 +216,10 @@ def export_rows(folder: Path, rows: list[table.DatasetRow], meta: dict, *,
         lines = [frame_line(*f) for f in frames]
         text = "".join(dumps(line, indent=None) for line in lines)
         written["metadata"] = write_text(folder / "metadata.jsonl", text)
+        digest = hashlib.sha256(text.encode("utf-8")).hexdigest()
     if "hf" in what:
         written["hf"] = _write_front_matter(folder, len(entries), image_globs(entries))
     if "croissant" in what:
-        digest = hashlib.sha256(read_regular_bytes(folder / "metadata.jsonl")).hexdigest()
         name = f"mirrorsim-seed{meta['seed']}-n{meta['n']}"  # not the folder's: it moves
         doc = frame_table.croissant(name, description=desc, image_globs=image_globs(entries),
                                     metadata_sha256=digest,

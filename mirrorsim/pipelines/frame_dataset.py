@@ -17,8 +17,8 @@ import numpy as np
 
 from mirrorsim.arguments import checked
 from mirrorsim.formats import rle
-from mirrorsim.formats.dataset_folder import collect_rows, read_table
-from mirrorsim.formats.dataset_rows import DatasetError, read_description
+from mirrorsim.formats.dataset_folder import read_verified
+from mirrorsim.formats.dataset_rows import DatasetError
 from mirrorsim.formats.measurements import load_measurements
 from mirrorsim.pipelines.dataset_exports import (
     FrameEntry,
@@ -61,9 +61,7 @@ class FrameDataset:
     def __init__(self, folder: str | Path, *, masks: bool = True,
                  transform: Callable[[dict], Any] | None = None):
         self.folder = Path(folder)
-        read_table(self.folder)
-        rows = collect_rows(self.folder, read_description(self.folder)["n"])
-        self.entries: list[FrameEntry] = dataset_frames(rows)
+        self.entries: list[FrameEntry] = dataset_frames(read_verified(self.folder)[1])
         if not self.entries:
             raise DatasetError(self.folder, "has no frames")
         self.masks, self.transform = masks, transform

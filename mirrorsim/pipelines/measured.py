@@ -21,7 +21,7 @@ from mirrorsim.formats.error_model import ErrorModel, ImageFeatures
 from mirrorsim.formats.files import write_png
 from mirrorsim.pipelines.frame import MeasuredFrame
 from mirrorsim.pipelines.score import FrameRecord
-from mirrorsim.scene.model import Scene, pencil_paint_height
+from mirrorsim.scene.model import Scene, beacon_frame_name, pencil_paint_height
 from solver.geometry import wrap_bearing
 from solver.measurements import BeaconMeasurement, ObjectSigmas
 
@@ -88,7 +88,7 @@ def frames_of(scene: Scene) -> list[Scene]:
     several beacons one frame per beacon (``<name>_b<i>``, that beacon alone)."""
     if len(scene.beacons) == 1:
         return [scene]
-    return [replace(scene, name=f"{scene.name}_b{i}", beacons=(b,))
+    return [replace(scene, name=beacon_frame_name(scene.name, i), beacons=(b,))
             for i, b in enumerate(scene.beacons)]
 
 

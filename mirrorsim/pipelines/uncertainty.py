@@ -217,7 +217,7 @@ def reliability_plot(v: Validation, out: str | Path, title: str = "") -> Path:
     r = np.linspace(0, max(4.0, float(np.percentile(m, 99)) if m.size else 4.0), 200)
     b.hist(m, bins=30, range=(0, r[-1]), density=True, color="#c0392b", alpha=0.6,
            label="held-out rows")
-    b.plot(r, Tail().density(r), "k--", lw=1, label="χ with 2 degrees of freedom")
+    b.plot(r, GAUSSIAN.density(r), "k--", lw=1, label="χ with 2 degrees of freedom")
     if not v.tail.gaussian:
         b.plot(r, v.tail.density(r), "k:", lw=1.5,
                label=f"the model's tail (scale {v.tail.scale:.2f}, ν {v.tail.dof:.2f})")

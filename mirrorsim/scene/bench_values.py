@@ -18,6 +18,7 @@ from mirrorsim.scene.model import (
     Bench,
     Scene,
 )
+from mirrorsim.scene.projection import radial_slope
 
 
 def check_bounds(imp: Imperfection, value: float) -> str | None:
@@ -40,7 +41,7 @@ def distortion_monotonic(k: tuple[float, float], r_max: float) -> bool:
     """Whether r·(1 + k1 r² + k2 r⁴) grows on [0, r_max] (normalized radius): a lens
     that folds its image over is no lens."""
     r = np.linspace(0.0, r_max, 512)
-    return bool((1 + 3 * k[0] * r**2 + 5 * k[1] * r**4 > 0).all())
+    return bool((radial_slope(r**2, k) > 0).all())
 
 
 def value_failure(imp: Imperfection, value: Any, scene: Scene) -> str | None:

@@ -376,3 +376,15 @@ def footprints(scene: Scene, bkey: Callable[[int], str] | None = None
         out.append((f"occluders[{i}]", np.asarray(o.start, float), np.asarray(o.end, float),
                     OCCLUDER_THICKNESS / 2))
     return out
+
+
+def beacon_frame_name(scene_name: str, i: int) -> str:
+    """The name of the frame of a scene of several beacons that holds beacon i alone."""
+    return f"{scene_name}_b{i}"
+
+
+def frame_beacon(scene_name: str, frame: str) -> int | None:
+    """Which of its scene's beacons a frame named by :func:`beacon_frame_name` holds
+    (None: the scene's one frame)."""
+    k = frame.removeprefix(f"{scene_name}_b")
+    return int(k) if k != frame and k.isdigit() else None

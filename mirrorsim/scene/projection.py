@@ -66,6 +66,12 @@ def radial_factor(x: np.ndarray, y: np.ndarray, k: tuple[float, float]) -> np.nd
     return 1.0 + k[0] * r2 + k[1] * r2 * r2
 
 
+def radial_slope(r2: np.ndarray, k: tuple[float, float]) -> np.ndarray:
+    """d/dr of r·(1 + k1 r² + k2 r⁴) at r² = ``r2``: where it is not positive, a lens
+    folds its image back (no lens does so over its frame)."""
+    return 1 + 3 * k[0] * r2 + 5 * k[1] * r2 * r2
+
+
 def distort_pixels(camera: Camera, u: np.ndarray, v: np.ndarray, *, k: tuple[float, float]
                    ) -> tuple[np.ndarray, np.ndarray]:
     """Where a lens of radial distortion ``k`` images the pinhole pixels (u, v)."""

@@ -21,7 +21,7 @@ import numpy as np
 
 from mirrorsim.formats import rle
 from mirrorsim.scene.model import TARGET_THICKNESS, Scene
-from mirrorsim.scene.projection import camera_axes, distort_pixels, project
+from mirrorsim.scene.projection import camera_axes, distort_pixels, project, radial_slope
 from mirrorsim.truth.visibility import glass_frame, sag
 from solver.geometry import unit
 
@@ -203,7 +203,7 @@ def _on_the_lens(scene: Scene, points: np.ndarray) -> np.ndarray:
     z = p @ forward
     with np.errstate(divide="ignore", invalid="ignore"):
         r2 = ((p @ right) ** 2 + (p @ down) ** 2) / z**2
-    return (z > 0) & (1 + 3 * k[0] * r2 + 5 * k[1] * r2 * r2 > 0)
+    return (z > 0) & (radial_slope(r2, k) > 0)
 
 
 def virtual_camera(scene: Scene) -> VirtualCamera:
@@ -240,11 +240,11 @@ def frame_annotations(scene: Scene, first: np.ndarray, in_mirror: np.ndarray, *,
                 continue
             pts = reflect(scene, points[obj]) if view == "mirror" else points[obj]
             cat = category_of(obj, view)
-            kps = _keypoints(scene, pts, mask, names=cat.keypoints)
             if view == "mirror" and scene.bench.curvature_radius is not None:
-                # a curved glass images a point where no plane does (its tangent plane's
-                # reflection lay 8-24 px off at R = 700-100 cm): not labelled
-                kps = tuple(Keypoint(k.name, 0.0, 0.0, OFF) for k in kps)
+                # a curved glass images a point where no plane does: not labelled
+                kps = tuple(Keypoint(name, 0.0, 0.0, OFF) for name in cat.keypoints)
+            else:
+                kps = _keypoints(scene, pts, mask, names=cat.keypoints)
             cols, rows = np.flatnonzero(mask.any(axis=0)), np.flatnonzero(mask.any(axis=1))
             bbox = (int(cols[0]), int(rows[0]), int(cols[-1] - cols[0] + 1),
                     int(rows[-1] - rows[0] + 1))
