@@ -111,8 +111,8 @@ def _source_of(name: str) -> Path | None:
 @functools.cache
 def code_fingerprint() -> str:
     """SHA-256 (12 hex digits) of the source of the modules a K depends on
-    (:func:`code_modules`).  Finding them parses every module's source (0.13 s, a
-    tenth of a command's start): the answer is cached, keyed by the digest of every
+    (:func:`code_modules`).  Finding them parses every module's source (a tenth of a
+    command's start, ``benchmarks/freeze.py``): the answer is cached, keyed by the digest of every
     source file of ours, so any change to any of them finds them again.  Key and
     fingerprint hash the same bytes, read once."""
     sources = _our_sources()

@@ -4,8 +4,7 @@ A render call traces Mitsuba's Python and C++ into kernels, then launches them (
 once: Dr.Jit caches kernels by their code).  A frozen call records its kernel launches
 the first time it meets a configuration (the sensor's film size, the sample count) and
 afterwards launches them straight away: a frame's tiles of one size share a recording
-(a full-size default frame's box passes: 13 calls, 4 recordings; 0.80 s a frame
-against 0.85 s traced, in a warm process).
+(``benchmarks/freeze.py`` measures what it saves).
 
 The recordings live for one scene (:func:`frozen_renders`), never longer: a frozen
 function matches a Mitsuba scene by its Python identity, and a process-wide one, given
@@ -53,9 +52,8 @@ def _frozen() -> Callable:
 def frozen_renders() -> Iterator[None]:
     """Within this scope (one scene's renders), :func:`render_call` records and replays;
     the recordings are dropped at its end.  A process's first scope traces as usual:
-    the first recording of a process costs 0.2 s more than tracing (measured on a full
-    frame, freeze on and off, each in a fresh process), more than one frame's replays
-    save (0.04 s), so a one-frame command would only lose by it."""
+    a process's first recordings cost more than one frame's replays save (measured on
+    a full frame, each in a fresh process), so a one-frame command would only lose."""
     global _SCOPES
     _SCOPES += 1
     token = _CURRENT.set(_frozen() if freezing() and _SCOPES > 1 else None)
