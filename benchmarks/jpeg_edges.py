@@ -29,7 +29,7 @@ from exact import spec_scenes  # noqa: E402
 from stamp import stamp  # noqa: E402
 
 from mirrorsim.camera.sensor import to_srgb8  # noqa: E402
-from mirrorsim.detection import edges, regions  # noqa: E402
+from mirrorsim.detection import area_edges, edges, regions  # noqa: E402
 from mirrorsim.formats.files import decode_image, encode_jpeg  # noqa: E402
 from mirrorsim.rendering.passes import render_frame  # noqa: E402
 from mirrorsim.scene.model import pencil_paint_height  # noqa: E402
@@ -57,7 +57,7 @@ def _measure(srgb: np.ndarray, scene, way, pencil_rows) -> tuple[tuple, tuple]:
     img = srgb.astype(np.float32)
     lin = edges.to_linear(img)
     u0, v0, u1, v1 = regions.find_target(img, scene.target.size[0] / scene.target.size[1])
-    target = edges._median_edges((lin, lin), v0, v1, u0, u1, axis=0,
+    target = area_edges.median_edges((lin, lin), (v0, v1), (u0, u1), axis=0,
                                  chroma=(False, target_foot_chroma), near=(False, True))[:2]
     # the mirror pencil's box: the one whose rows are nearest its exact image's
     p0, q0, p1, q1 = min(regions.find_pencils(img), key=lambda b: abs(b[1] - pencil_rows[0])
@@ -66,7 +66,7 @@ def _measure(srgb: np.ndarray, scene, way, pencil_rows) -> tuple[tuple, tuple]:
         m = edges.measure_region(lin, (p0, q0, p1, q1), "beacon", subsampled=True, stored=img)
         return target, (m.v_top, m.v_bottom)
     top_img = np.ascontiguousarray(lin[..., 2:3]) if pencil_top_blue else lin
-    pencil = edges._median_edges((top_img, lin), q0, q1, p0, p1, axis=0,
+    pencil = area_edges.median_edges((top_img, lin), (q0, q1), (p0, p1), axis=0,
                                  chroma=(False, pencil_foot_chroma), slope=(True, True))[:2]
     return target, pencil
 

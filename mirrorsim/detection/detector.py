@@ -59,6 +59,7 @@ from mirrorsim.scene.model import (
     Beacon,
     Camera,
     Point2,
+    pencil_cone_ratio,
     pencil_paint_height,
 )
 from solver.measurements import BeaconMeasurement, Measurements
@@ -114,14 +115,15 @@ class Detection:
 
 
 def measure_object(img: np.ndarray, kind: str, target_ratio: float | None = None,
-                   *, linear: np.ndarray | None = None, subsampled: bool = False
-                   ) -> ImageMeasurement:
+                   *, linear: np.ndarray | None = None, subsampled: bool = False,
+                   cone_ratio: float | None = None) -> ImageMeasurement:
     """Find and measure the largest image of the target (``kind="target"``, with its
     width/height ``target_ratio``) or of a pencil in an 8-bit RGB image, exactly as
     :func:`detect_frame` measures it (calibration uses this on its reference renders).
     ``linear``: the image already converted by :func:`to_linear`, if the caller has it.
     ``subsampled``: measured as a frame whose colour was stored at half resolution
-    (:func:`~mirrorsim.detection.edges.measure_region`).
+    (:func:`~mirrorsim.detection.edges.measure_region`).  ``cone_ratio``: a pencil's
+    cone height over its painted band's (:func:`~mirrorsim.scene.model.pencil_cone_ratio`).
 
     Raises
     ------
@@ -139,7 +141,8 @@ def measure_object(img: np.ndarray, kind: str, target_ratio: float | None = None
     if not boxes:
         raise DetectionError("no pencil (yellow upright band) found in the frame")
     box = max(boxes, key=lambda b: (b[2] - b[0]) * (b[3] - b[1]))
-    return measure_region(linear, box, "beacon", subsampled=subsampled, stored=img)
+    return measure_region(linear, box, "beacon", subsampled=subsampled, stored=img,
+                          cone_ratio=cone_ratio)
 
 
 def detect_frame(image: np.ndarray, view: CaptureRecord, calibration: Calibration,
@@ -163,17 +166,20 @@ def detect_frame(image: np.ndarray, view: CaptureRecord, calibration: Calibratio
     linear = to_linear(img)  # from the 8-bit codes: no float copy to read back
     img = img.astype(np.float32)
     ratio = view.target_size[0] / view.target_size[1]
+    cone = min(pencil_cone_ratio(b.height) for b in view.beacons)  # the shortest cone
     if view.geometry == "3d":  # a leaning mirror rolls its images: each measured upright
         box = find_target(img, ratio, posts=True)
         if box is None:
             raise DetectionError("no target (grey upright panel) found in the frame")
         measured = measure_rolled(linear, img, box, kind="target", subsampled=subsampled,
                                   target_ratio=ratio)
-        pencils = [measure_rolled(linear, img, b, kind="beacon", subsampled=subsampled)
+        pencils = [measure_rolled(linear, img, b, kind="beacon", subsampled=subsampled,
+                                  cone_ratio=cone)
                    for b in find_pencils(img)]
     else:
         measured = measure_object(img, "target", ratio, linear=linear, subsampled=subsampled)
-        pencils = [measure_region(linear, b, "beacon", subsampled=subsampled, stored=img)
+        pencils = [measure_region(linear, b, "beacon", subsampled=subsampled, stored=img,
+                                  cone_ratio=cone)
                    for b in find_pencils(img)]
     target = target_geometry(cam, measured, view.target_size, k=calibration.target_k)
     paint = pencil_paint_height(view.beacons[0].height)

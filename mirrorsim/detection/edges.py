@@ -1,204 +1,28 @@
 """Sub-pixel measurement of an object's image: its upright axis and vertical extent.
 
-Pure numpy.  An edge is located by the *area* method: with the inside and outside
-colours taken a few pixels either side, each pixel's coverage
-c = ((x − out)·(in − out))/|in − out|² is summed over a window spanning the edge; for a
-box-filtered render (area-weighted pixels) this is exact up to noise.  Bands give
-independent estimates; their median resists partial occlusion.
+Pure numpy: each edge by the area method (:mod:`mirrorsim.detection.area_edges`), its
+bands and levels chosen for what stands beside it (a pencil's cone, the board's contact
+shadow, the mirror's frame).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import math
 from dataclasses import replace
 from typing import NamedTuple
 
 import numpy as np
 
 from mirrorsim.camera.sensor import LINEAR_OF_CODE, lookup_codes, to_srgb8
+from mirrorsim.detection.area_edges import SLOPE_ROWS, median_edges
 from mirrorsim.detection.image_measurement import ImageMeasurement, Surround
-
-# ---------------------------------------------------------------- edge measurement
-
-
-def _edge_by_area(profile: np.ndarray, start: int, inside: np.ndarray, outside: np.ndarray,
-                  inside_first: bool) -> float | None:
-    """Sub-pixel edge position in a 1-D colour profile (rows of ``profile``: positions
-    start, start+1, …) by summing pixel coverages; ``None`` if there is no contrast.
-    ``inside`` and ``outside``: one colour each, or one per row of ``profile``."""
-    d = inside - outside
-    dd = np.sum(d * d, axis=-1)
-    if float(np.mean(dd)) < 5.0**2:  # a 0–255 scale (linear, or a JPEG's stored values)
-        return None
-    # not clipped to [0, 1]: clipping noise on the flat parts would bias the sum inwards
-    c = np.sum((profile - outside) * d, axis=-1) / dd
-    if inside_first:
-        return start - 0.5 + float(c.sum())
-    return start - 0.5 + float((1.0 - c).sum())
-
-
-def _level(rows: np.ndarray, offsets: np.ndarray, at: np.ndarray, slope: bool) -> np.ndarray:
-    """A side's colour at the window's rows ``at`` (offsets from the edge's pixel) from
-    its rows at ``offsets``: their median, or (``slope``) their straight-line fit."""
-    if not slope or np.unique(offsets).size < 2:  # a line needs two offsets (a window
-        # cut short at the frame's edge leaves one): the median there
-        return np.median(rows, axis=0)
-    coef = np.polyfit(offsets, rows, 1)  # (2, channels)
-    return coef[0] * at[:, None] + coef[1]
-
-
-SLOPE_ROWS = 8  # pixels each side for a sloped level: a longer line, less noise
-
-
-def _local_edge(img: np.ndarray, band, axis: int, guess: float, inside_first: bool,
-                reach: int = 6, half: int = 1, near: bool = False, chroma: bool = False,
-                slope: bool = False):
-    """An edge near ``guess`` in the mean profile of ``band`` (the columns, or rows,
-    across it): coverages of the 2·half + 1 pixels about it, against the median colours
-    of the next 4 pixels either side (inside: no further than ``reach``).  Local levels
-    keep a shadow or a neighbour a few pixels away (a contact shadow at a foot, another
-    object beside a thin pencil) out of it; medians drop the pegboard's holes.
-
-    ``near``: for an outside that changes towards the edge.  The board in an object's
-    contact shadow brightens over the first pixels away from its foot, so an outside
-    level taken 2–5 px away counts the darker pixels next to the edge as partly inside
-    (the foot measured 0.3–0.6 px low on full-size frames); beside a pencil the board
-    brightens or darkens towards it.  Here the level is the first pixel past the edge's
-    own, and the window ends at the edge's pixel.
-
-    ``chroma``: only the colour across the outside's counts (see :func:`measure_region`).
-    ``slope``: each side's level is its straight-line fit over the next SLOPE_ROWS pixels
-    (not 4), carried to each pixel of the window (a side that brightens or darkens
-    towards the edge, such as a pencil's paint in its contact shadow, or its wood cone
-    below its first facets);
-    the line is fitted to the mean profile, so a hole still moves it.
-
-    Returns (edge or None, outside colour).
-    """
-    n = img.shape[axis]
-    c = int(round(guess))
-
-    def line(i: int) -> np.ndarray:
-        i = min(max(i, 0), n - 1)
-        return (img[i, band] if axis == 0 else img[band, i]).mean(axis=0)
-
-    rows = SLOPE_ROWS if slope else 4
-    k_out = range(half + 1, half + 1 + rows)
-    k_in = range(half + 1, max(half + 2, min(half + 1 + rows, reach)))
-    at = np.arange(-half, half + 1, dtype=float)
-    k_b = np.array(k_in if inside_first else k_out, float)
-    k_a = np.array(k_out if inside_first else k_in, float)
-    rows_b = np.array([line(c - int(k)) for k in k_b])
-    rows_a = np.array([line(c + int(k)) for k in k_a])
-    before, after = _level(rows_b, -k_b, at, slope), _level(rows_a, k_a, at, slope)
-    inside, outside = (before, after) if inside_first else (after, before)
-    flat = _across(np.median(rows_a if inside_first else rows_b, axis=0)) if chroma \
-        else (lambda x: x)
-    if near:
-        # the outside changes towards the edge (a contact shadow on the board): its level
-        # is the first pixel past the edge's, and the window stops at the edge's pixel
-        step = 1 if inside_first else -1
-        level = line(c + step)
-        lo = c - half if inside_first else c
-        window = np.array([line(i) for i in range(lo, lo + half + 1)])
-        return (_edge_by_area(flat(window), lo, flat(inside), flat(level), inside_first),
-                _mean_level(outside))
-    window = np.array([line(i) for i in range(c - half, c + half + 1)])
-    if chroma:
-        return _edge_by_area(flat(window), c - half, flat(inside),
-                             np.zeros(window.shape[-1], window.dtype), inside_first), \
-            _mean_level(outside)
-    return _edge_by_area(window, c - half, inside, outside, inside_first), _mean_level(outside)
-
-
-def _across(outside: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
-    """Projection onto the colours across ``outside``'s (its median over the rows: holes
-    drop out): the outside's shading (a contact shadow, a hole, a facet turned from the
-    light) scales its colour and so drops out."""
-    o = outside / max(float(np.linalg.norm(outside)), 1e-9)
-    return lambda x: x - (x @ o)[..., None] * o
-
-
-def _mean_level(level: np.ndarray) -> np.ndarray:
-    """One colour for a side's level (one per window row with ``slope``)."""
-    return np.atleast_2d(level).mean(axis=0)
-
-
-def _median_edges(imgs, lo, hi, cross_lo, cross_hi, axis, band_px=3,
-                  chroma=(False, False), slope=(False, False), near=(False, False),
-                  max_off: float | None = None, drop_off: float | None = None,
-                  half: tuple[int, int] = (1, 1)):
-    """Edges at both ends of an object spanning [lo, hi] along ``axis`` (0: top and
-    bottom, 1: left and right), robust and precise; ``imgs`` and ``chroma``: the image
-    each end is measured in, and whether on its colour across the outside's; ``slope``:
-    whether its levels are straight-line fits; ``near``: whether its outside level is the
-    first pixel past it (see :func:`_local_edge`).
-
-    Bands of ``band_px`` across the object's middle 60 % each give an edge near the
-    region's boundary (±2 px); bands more than 1 px from their median (partly occluded
-    ones) are dropped; the final edge is measured on the mean profile of the rest (with
-    ``near``: on each of them, and averaged).  ``max_off``: bands whose edge lies farther
-    than this (px) from the region's boundary are dropped too, and an end where fewer
-    than half the bands remain is not measured (None): the region's boundary is then not
-    the object's (see :func:`measure_region`).  ``drop_off``: such bands are dropped
-    without that rule (where many bands find no contrast at all, as on a pencil's side).
-    ``half``: each end's final window, 2·half + 1 px about the edge.
-    Returns (edge_lo, edge_hi, outside_lo, outside_hi).
-    """
-    bands = _bands(cross_lo, cross_hi, band_px)
-    reach = max(2, (hi - lo) // 2)
-    final, outs = [], []
-    for end, guess in ((0, lo), (1, hi)):
-        img, flat = imgs[end], chroma[end]
-        coarse = [_local_edge(img, band, axis, guess, end == 1, reach, half=2, chroma=flat)
-                  for band in bands]
-        off = max_off if max_off is not None else drop_off
-        if off is not None:
-            boundary = guess + (0.5 if end == 1 else -0.5)
-            coarse = [(e if e is not None and abs(e - boundary) <= off else None, o)
-                      for e, o in coarse]
-        vals = [e for e, _ in coarse if e is not None]
-        if not vals or (max_off is not None and len(vals) < 0.5 * len(bands)):
-            final.append(None)
-            outs.append(np.median([o for _, o in coarse], axis=0))
-            continue
-        m = float(np.median(vals))
-        kept = [(band, e) for band, (e, _) in zip(bands, coarse, strict=True)
-                if e is not None and abs(e - m) < 1.0]
-        if near[end]:
-            # the level is the first pixel past the edge: per band, at the band's own
-            # position (in perspective a foot slants by up to a pixel across the object,
-            # and on their mean profile the next row is partly inside)
-            per = [_local_edge(img, band, axis, e0, end == 1, reach, near=True, chroma=flat)
-                   for band, e0 in (kept or [(bd, m) for bd in bands])]
-            got = [e for e, _ in per if e is not None]
-            final.append(float(np.mean(got)) if got else None)
-            outs.append(np.mean([o for _, o in per], axis=0))
-            continue
-        keep = np.concatenate([band for band, _ in kept]) if kept else np.concatenate(bands)
-        # round(m) is the pixel the edge crosses: the window is centred on it
-        e, out = _local_edge(img, keep, axis, m, end == 1, reach, half=half[end],
-                             chroma=flat, slope=slope[end])
-        final.append(e)
-        outs.append(out)
-    return final[0], final[1], outs[0], outs[1]
-
-
-def _bands(cross_lo: int, cross_hi: int, band_px: int) -> list[np.ndarray]:
-    """Bands of ``band_px`` rows (or columns) across the middle 60 % of [cross_lo,
-    cross_hi]."""
-    span = cross_hi - cross_lo + 1
-    a = cross_lo + int(0.2 * span)
-    b = max(a + 1, cross_hi - int(0.2 * span) + 1)
-    return [np.arange(s, min(s + band_px, b)) for s in range(a, b, band_px)]
-
 
 # the note of a JPEG pencil whose sides the blue channel lost and the colour measured
 # (its one side may then stand against what hides part of it: image_geometry checks)
 SIDES_ON_COLOUR = "sides on the image's colour: JPEG's smeared blue lost both"
 
-# the note of a target whose foot had no colour contrast with the board (a panel in
-# shadow) and was measured on the image's colour
+# the note of an image whose foot had no colour contrast with the board (a panel or a
+# pencil in shadow) and was measured on the image's colour
 FOOT_ON_COLOUR = "foot on the image's colour: no colour contrast with the board"
 
 # the note of a raised panel whose foot, against something as neutral as itself, was
@@ -225,7 +49,7 @@ _LINEAR_LUT = (255.0 * LINEAR_OF_CODE).astype(np.float32)
 
 def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str,
                    *, subsampled: bool = False, stored: np.ndarray | None = None,
-                   raised: bool = False) -> ImageMeasurement:
+                   raised: bool = False, cone_ratio: float | None = None) -> ImageMeasurement:
     """Sub-pixel edges of an object's image in ``box``: top and bottom, left and right,
     with the radiance just outside each (pixels only: :mod:`mirrorsim.detection.detector` turns them
     into a bearing and a distance with the camera's geometry).
@@ -241,30 +65,29 @@ def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str,
     as dark as the paint, and the pencil's foot moved with the holes in front of it).
 
     ``subsampled``: the frame stored its colour at half resolution (a JPEG's 4:2:0
-    chroma), which smears the colour across an edge over 2–4 px and moves an edge
-    measured on linear colour by up to 2.5 px (``benchmarks/jpeg_edges.py``).  The
-    target's edges and the pencil's top are then measured on the image's colour, which
-    JPEG keeps at full resolution in its luma.  The pencil's foot stays on the colour
-    across the board's, but of the 8-bit values as stored (``stored``; from ``img`` if
-    not given), over a 5-px window: JPEG averages and interpolates chroma in those
-    values, which moves chroma between neighbouring pixels without changing its sum over
-    the window, so the area method still finds the edge.  On 12 rendered scenes at
-    quality 90 the foot measured so lies −0.15 ± 0.20 px from the geometry (on the image's
-    colour, where the contact shadow and holes count, +0.26 ± 0.35 px); the −0.15 px is
-    coverage summed on gamma-encoded values, and a lossless frame measured so (the
-    calibration's reference) reads −0.15 ± 0.06 px, so it nearly cancels.
+    chroma), which smears the colour across an edge over 2–4 px: the target's edges and
+    the pencil's top are then measured on the image's colour (JPEG keeps its luma whole),
+    the pencil's foot on the colour across the board's of the 8-bit values as stored
+    (``stored``; from ``img`` if not given) over a 5-px window, where JPEG moves chroma
+    between neighbours without changing its sum (figures: docs/method.md).
 
-    ``raised`` (a 3-D scene's frame): the panel may stand off the board, its foot seen
-    against the room (its pale baseboard is as neutral as the panel: across the
-    outside's colour the two are one, and the foot read 2.5 px low); the foot is then
-    measured on the image's colour too, and taken so where the two differ by a pixel.
+    ``raised`` (a 3-D scene's frame): the panel's foot may stand against the room's pale
+    baseboard, as neutral as the panel: it is measured on the image's colour too, and
+    taken so where the two differ by a pixel.
+
+    ``cone_ratio`` (a pencil): its cone's height over its band's (the frame's shortest),
+    which bounds where the top's outside level is read (:func:`_cone_rows`).
     """
     u0, v0, u1, v1 = box
     if kind == "beacon":
-        e = _pencil_edges(img, box, subsampled=subsampled, stored=stored)
+        e = _pencil_edges(img, box, subsampled=subsampled, stored=stored,
+                          cone_ratio=cone_ratio)
     else:
         e = _panel_edges(img, box, on_chroma=not subsampled, raised=raised)
     top, bottom, left, right = e.top, e.bottom, e.left, e.right
+    cut = _cut_by_frame(box, img.shape[0])
+    if cut:  # (a near pencil's direct view runs off the frame: its foot there is not one)
+        top, bottom = (None, bottom) if v0 <= 0 else (top, None)
     core = img[v0 + (v1 - v0) // 4: v1 - (v1 - v0) // 4 + 1,
                u0 + (u1 - u0) // 4: u1 - (u1 - u0) // 4 + 1]
     m = ImageMeasurement(
@@ -276,13 +99,19 @@ def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str,
         outside=Surround(*(float(np.mean(o)) for o in (e.out_left, e.out_right, e.out_top,
                                                        e.out_bottom))),
         inside=float(np.median(core.reshape(-1, img.shape[-1]).mean(axis=1))),
-        notes=e.notes)
+        notes=(*e.notes, *cut))
     if left is not None and right is not None:
         m = replace(m, u_axis=(left + right) / 2)
     if top is None or bottom is None:
         m = replace(m, clipped="top", notes=(*m.notes, "no contrast at the top or bottom "
                                              "edge: height not measured"))
     return m
+
+def _cut_by_frame(box: tuple[int, int, int, int], rows: int) -> tuple[str, ...]:
+    """The note of an image whose region reaches the frame's top or bottom row."""
+    return tuple(f"cut by the frame's {row} row: height not measured"
+                 for row, at in (("top", box[1] <= 0), ("bottom", box[3] >= rows - 1)) if at)
+
 
 class _Edges(NamedTuple):
     """An image's four edges (px; None where not found), the levels just outside each,
@@ -299,29 +128,65 @@ class _Edges(NamedTuple):
     notes: tuple[str, ...]
 
 
+# the middle of a pencil's width whose bands its top is measured on (a margin of 0.35
+# each side): the cone above narrows to its point, so a band farther out leaves it
+# sooner and its outside level takes in what lies behind the cone
+TOP_MARGIN = 0.35
+
+
+def _cone_rows(box: tuple[int, int, int, int], cone_ratio: float | None) -> int | None:
+    """How many pixels above a pencil's painted band its top's outside level may take
+    (None: no bound).  At k px above the band the cone's half-width is r·(1 − k/cone),
+    so a band within the middle 30 % of the width stays on the wood while
+    k < 0.7·cone; the window's own pixel (1 px) comes first.  With the level read
+    8 px up, the top of 2–8 cm pencils whose cone is 5–13 px tall read 0.3–1.8 px low
+    on 20 of 158 images of a user's scenes (the background's level taken for the
+    wood's), 2–4 % of their d_total."""
+    if cone_ratio is None:
+        return None
+    cone_px = cone_ratio * (box[3] - box[1] + 1)
+    inside = 1.0 - 2 * TOP_MARGIN  # the bands' reach from the axis, of the half-width
+    return max(2, int((1.0 - inside) * cone_px - 0.5) - 1)
+
+
 def _pencil_edges(img: np.ndarray, box: tuple[int, int, int, int], *, subsampled: bool,
-                  stored: np.ndarray | None) -> _Edges:
+                  stored: np.ndarray | None, cone_ratio: float | None = None) -> _Edges:
     """A pencil's edges (:func:`measure_region`): its sides and top on the blue channel,
-    its foot on the colour across the board's."""
+    its foot on the colour across the board's; with ``cone_ratio``, its top on the
+    middle of its width and its outside level within the cone (:func:`_cone_rows`)."""
     u0, v0, u1, v1 = box
+    top_rows = _cone_rows(box, cone_ratio)
     sides_note: tuple[str, ...] = ()
     blue = np.ascontiguousarray(img[..., 2:3])
     foot_img = img
     if subsampled:
         foot_img = np.asarray(stored if stored is not None else to_srgb8(img / 255.0),
                               np.float32)
-    top, bottom, out_top, out_bottom = _median_edges((img if subsampled else blue, foot_img),
-                                                     v0, v1, u0, u1, axis=0,
+    top, bottom, out_top, out_bottom = median_edges((img if subsampled else blue, foot_img),
+                                                     (v0, v1), (u0, u1), axis=0,
                                                      chroma=(False, True),
                                                      slope=(True, True),
-                                                     half=(1, 2 if subsampled else 1))
+                                                     half=(1, 2 if subsampled else 1),
+                                                     margin=(0.2 if top_rows is None
+                                                             else TOP_MARGIN, 0.2),
+                                                     out_rows=(top_rows, None))
     if subsampled:  # the board's level below the foot (a mean of stored values) as
         # linear radiance like the rest: the radiance of that value, within a code's
         # step of the mean radiance
         out_bottom = np.interp(out_bottom, np.arange(256), _LINEAR_LUT)
+    elif bottom is None and v1 + SLOPE_ROWS + 2 < img.shape[0]:
+        # (an image cut by the frame's bottom row keeps no foot)
+        # a pencil in deep shade is a dark olive whose colour across a sandy board's is
+        # 3-4 linear levels, under the area method's floor (2 of 120 drawn scenes lost
+        # their only beacon): its foot on the image's colour, the board's contact shadow
+        # counted (as a panel in shadow's, FOOT_ON_COLOUR)
+        _, bottom, _, out_bottom = median_edges((img, img), (v0, v1), (u0, u1), axis=0,
+                                                 near=(False, True))
+        if bottom is not None:
+            sides_note = (FOOT_ON_COLOUR,)
     # a pencil 3 px from the frame's bar: the bar is the coarse pass's outside, the
     # board between reads as coverage and a side lands on the other (14 px in)
-    left, right, out_left, out_right = _median_edges((blue, blue), u0, u1, v0, v1, axis=1,
+    left, right, out_left, out_right = median_edges((blue, blue), (u0, u1), (v0, v1), axis=1,
                                                      near=(True, True),
                                                      drop_off=SIDE_MAX_OFF_PX)
     if subsampled and left is None and right is None:
@@ -329,7 +194,7 @@ def _pencil_edges(img: np.ndarray, box: tuple[int, int, int, int], *, subsampled
         # against the mirror's frame on one side and 2 px from a wall on the other
         # had neither side in it (2 of 40 planned benches), and was dropped.  The
         # image's colour keeps its edges at full resolution in the luma
-        left, right, out_left, out_right = _median_edges((img, img), u0, u1, v0, v1,
+        left, right, out_left, out_right = median_edges((img, img), (u0, u1), (v0, v1),
                                                          axis=1, near=(True, True),
                                                          drop_off=SIDE_MAX_OFF_PX)
         # a side against a grey wall has little contrast in the colour either, and
@@ -348,7 +213,7 @@ def _panel_edges(img: np.ndarray, box: tuple[int, int, int, int], *, on_chroma: 
     outside's, the sides with sloped levels."""
     u0, v0, u1, v1 = box
     sides_note: tuple[str, ...] = ()
-    top, bottom, out_top, out_bottom = _median_edges((img, img), v0, v1, u0, u1, axis=0,
+    top, bottom, out_top, out_bottom = median_edges((img, img), (v0, v1), (u0, u1), axis=0,
                                                      chroma=(False, on_chroma),
                                                      near=(False, True))
     if raised and on_chroma and bottom is not None:
@@ -357,7 +222,7 @@ def _panel_edges(img: np.ndarray, box: tuple[int, int, int, int], *, on_chroma: 
         # lands on the baseboard's far side (2.5 px low).  On the image's colour it is
         # found; where the two disagree by more than a pixel (a foot on the board reads
         # 0.3-0.6 px apart, its contact shadow counted), the image's colour is taken
-        _, plain, _, out_plain = _median_edges((img, img), v0, v1, u0, u1, axis=0,
+        _, plain, _, out_plain = median_edges((img, img), (v0, v1), (u0, u1), axis=0,
                                                near=(False, True))
         if plain is not None and abs(plain - bottom) > 1.0:
             bottom, out_bottom, sides_note = plain, out_plain, (FOOT_AGAINST_ROOM,)
@@ -365,7 +230,7 @@ def _panel_edges(img: np.ndarray, box: tuple[int, int, int, int], *, on_chroma: 
         # a panel in shadow is a dark grey with almost no colour across the board's
         # (a drawn scene's lost its height, 1 of 24): its foot on the image's colour,
         # where the board's contact shadow counts (as on a JPEG frame)
-        _, bottom, _, out_bottom = _median_edges((img, img), v0, v1, u0, u1, axis=0,
+        _, bottom, _, out_bottom = median_edges((img, img), (v0, v1), (u0, u1), axis=0,
                                                  near=(False, True))
         if bottom is not None:
             sides_note = (FOOT_ON_COLOUR,)
@@ -374,8 +239,37 @@ def _panel_edges(img: np.ndarray, box: tuple[int, int, int, int], *, on_chroma: 
     # the strip reads as coverage far above 1 and the edge is pushed 9-13 px out.  The
     # region (found on the panel's own colour) is right; a side far from it is dropped
     # and the axis taken from the other side (image_geometry.target_geometry)
-    left, right, out_left, out_right = _median_edges((img, img), u0, u1, v0, v1, axis=1,
+    left, right, out_left, out_right = median_edges((img, img), (u0, u1), (v0, v1), axis=1,
                                                      slope=(True, True),
                                                      max_off=SIDE_MAX_OFF_PX)
+    sides_note += _darker_sides(img, box, left, right)
     return _Edges(top, bottom, left, right, out_top, out_bottom, out_left, out_right,
                   sides_note)
+
+
+# the note of a panel's side whose pixels just inside it are much darker than the
+# panel's middle: the region took in something dark beside it (the mirror frame's bar,
+# 1-2 px of background away), and the side found is that thing's outer edge
+# (image_geometry drops it where the image is also wider than its height implies)
+DARKER_SIDE = "darker than the panel just inside its edge: "
+DARKER_RATIO = 0.7  # a side strip's level over the middle's (a frame bar: 0.43)
+
+
+def _darker_sides(img: np.ndarray, box: tuple[int, int, int, int], left: float | None,
+                  right: float | None) -> tuple[str, ...]:
+    """Notes of the sides (DARKER_SIDE + 'left' / 'right') whose 2-px strip just inside
+    the edge, over the middle half of the rows, is darker than DARKER_RATIO of the
+    panel's middle."""
+    u0, v0, u1, v1 = box
+    rows = slice(v0 + (v1 - v0) // 4, v1 - (v1 - v0) // 4 + 1)
+    core = float(np.median(img[rows, u0 + (u1 - u0) // 4: u1 - (u1 - u0) // 4 + 1]))
+    notes = []
+    for side, edge, step in (("left", left, 1), ("right", right, -1)):
+        if edge is None or core <= 0:
+            continue
+        first = int(math.floor(edge + 0.5)) + (1 if step > 0 else -1)  # wholly inside
+        cols = sorted((first, first + step))
+        strip = float(np.median(img[rows, max(cols[0], 0): cols[1] + 1]))
+        if strip < DARKER_RATIO * core:
+            notes.append(DARKER_SIDE + side)
+    return tuple(notes)

@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 
-from mirrorsim.detection.edges import SIDES_ON_COLOUR
+from mirrorsim.detection.edges import DARKER_SIDE, SIDES_ON_COLOUR
 from mirrorsim.detection.image_measurement import ImageMeasurement
 from mirrorsim.errors import DetectionError
 from mirrorsim.scene.model import FRONT_OFFSET, PENCIL_RADIUS, Camera, Point2
@@ -239,6 +239,17 @@ def _target_clip(cam: Camera, m: ImageMeasurement, size: Point2, present: list[s
             m = replace(m, clipped=side, notes=(
                 *m.notes, f"image {100 * (1 - r):.1f}% narrower than its height implies, "
                 f"beside a dark edge: clipped on the {side}, axis from the other edge"))
+        elif r > 1 + tol and (darker := [s_ for s_ in present
+                                         if f"{DARKER_SIDE}{s_}" in m.notes]):
+            # wider than the height allows, one side darker just inside: the region took
+            # in something dark beside the panel (its side found at that thing's far
+            # edge, 6 px out, α 0.26° off); that side is dropped
+            side = darker[0] if len(darker) == 1 else None
+            if side is not None:
+                present = [s_ for s_ in present if s_ != side]
+                m = replace(m, notes=(*m.notes, f"image {100 * (r - 1):.1f}% wider than its "
+                                      f"height implies, darker just inside its {side} edge: "
+                                      "that edge is not the panel's, axis from the other"))
         elif abs(r - 1) > tol:
             m = replace(m, notes=(*m.notes, f"angular width {100 * (r - 1):+.1f}% off what "
                                   "its height implies, with no dark edge to clip it: not "

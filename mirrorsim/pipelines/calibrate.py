@@ -31,7 +31,15 @@ from mirrorsim.formats.cache import read_entry, write_entry
 from mirrorsim.formats.capture import REFERENCE_DISTANCE
 from mirrorsim.scene import imperfections
 from mirrorsim.scene.bench_values import check_bounds
-from mirrorsim.scene.model import FRONT_OFFSET, PENCIL_RADIUS, Beacon, Board, Camera, Target
+from mirrorsim.scene.model import (
+    FRONT_OFFSET,
+    PENCIL_RADIUS,
+    Beacon,
+    Board,
+    Camera,
+    Target,
+    pencil_cone_ratio,
+)
 from mirrorsim.truth import optics
 from solver.geometry import unit
 from solver.measurements import is_number
@@ -191,8 +199,9 @@ def measure_reference(camera: Camera, kind: str, size: float | tuple[float, floa
     img = render_direct(Board(size=(80.0, 80.0), hole_pitch=0.0), cam, obj,
                         spp=CALIBRATION_SPP[kind], crop=reference_crop(cam, obj), variant=variant)
     ratio = size[0] / size[1] if kind == "target" else None
+    cone = None if kind == "target" else pencil_cone_ratio(size)
     try:
-        m = measure_object(img, kind, ratio, subsampled=subsampled)
+        m = measure_object(img, kind, ratio, subsampled=subsampled, cone_ratio=cone)
     except DetectionError as exc:
         raise DetectionError(f"calibration: {exc} (the {kind}'s reference render)") from None
     if m.height_px is None:

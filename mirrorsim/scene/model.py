@@ -212,6 +212,12 @@ def pencil_paint_height(height: float) -> float:
     return height - min(1.2, 0.35 * height)
 
 
+def pencil_cone_ratio(height: float) -> float:
+    """A pencil's sharpened cone's height over its painted band's."""
+    paint = pencil_paint_height(height)
+    return (height - paint) / paint
+
+
 @dataclass(frozen=True)
 class Beacon:
     """An upright pencil: its axis over ``position``, ``height`` above the board;

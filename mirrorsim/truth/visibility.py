@@ -55,6 +55,17 @@ def _walls(scene: Scene, obj) -> list[tuple[str, np.ndarray, np.ndarray, float, 
     return walls
 
 
+def _own_panel(obj) -> list[tuple[str, np.ndarray, np.ndarray, float, float]]:
+    """The target's own panel, a blocker of the camera's leg to the glass only: a panel
+    standing between the camera and the mirror hides part of its own image there (a
+    scene's wall that left the panel's end in the camera's view of the glass cut the
+    image, and the detector read its bearing 2.3° off)."""
+    if not isinstance(obj, Target):
+        return []
+    return _box_sides("the target panel itself", *obj.ends(), TARGET_THICKNESS,
+                      obj.z + obj.height, bottom=obj.z)
+
+
 def _box_sides(name: str, start, end, thickness: float, height: float, bottom: float = 0.0):
     a, b = np.asarray(start, float), np.asarray(end, float)
     d = (b - a) / np.linalg.norm(b - a)
@@ -187,7 +198,8 @@ def _flat_upright(scene: Scene) -> bool:
             and not scene.mirror.lean and not scene.mirror.z)
 
 
-def _column_failures(scene: Scene, walls, point, heights: np.ndarray) -> list[str]:
+def _column_failures(scene: Scene, walls, point, heights: np.ndarray, *, camera_walls=()
+                     ) -> list[str]:
     """Why the image of each 3-D point (point, z), z in ``heights``, does not reach the
     camera ('' where it does).  What depends on the board point alone (the mirror's
     side, the reflection point, where each wall crosses the paths in plan) is computed
@@ -223,21 +235,24 @@ def _column_failures(scene: Scene, walls, point, heights: np.ndarray) -> list[st
     outside = (depth <= 0) | (u < -0.5) | (u > cam.width - 0.5) | (v < -0.5) | (
         v > cam.height_px - 0.5)
     blocker = _first_blockers(walls, cam, np.asarray(img.reflection_point, float),
-                              np.asarray(point, float), zc, heights)
+                              np.asarray(point, float), zc, heights,
+                              camera_walls=camera_walls)
     return [_why_lost(scene, offset[k], up_glass[k], lip[k], outside[k], blocker[k],
                       (float(u[k]), float(v[k]))) for k in range(n)]
 
 
 def _first_blockers(walls, cam: Camera, r2: np.ndarray, point: np.ndarray, zc: np.ndarray,
-                    heights: np.ndarray) -> np.ndarray:
+                    heights: np.ndarray, *, camera_walls=()) -> np.ndarray:
     """The first wall (in the walls' order) under each height's path: camera → mirror,
     then mirror → object ('' where none); in plan both paths are the same for every
-    height."""
+    height.  ``camera_walls`` block the first path only (the object's own panel)."""
     n = len(heights)
     blocker = np.full(n, "", dtype=object)
-    for a2, b2, za, zb in ((np.asarray(cam.position, float), r2, np.full(n, cam.height), zc),
-                           (r2, point, zc, heights)):
-        for name, w0, w1, h, bottom in walls:
+    for a2, b2, za, zb, blockers in (
+            (np.asarray(cam.position, float), r2, np.full(n, cam.height), zc,
+             [*walls, *camera_walls]),
+            (r2, point, zc, heights, walls)):
+        for name, w0, w1, h, bottom in blockers:
             cross = segment_crossing(a2, b2, w0, q1=w1)
             if cross is not None:
                 z = za + cross * (zb - za)
@@ -277,7 +292,8 @@ def visibility(scene: Scene, obj: Target | Beacon) -> Visibility:
     walls = _walls(scene, obj)
     heights = obj.z + np.linspace(0.0, object_height(obj), AXIS_SAMPLES)
     cols = _sample_columns(scene, obj)
-    why = [_column_failures(scene, walls, col, heights) for col in cols]
+    own = _own_panel(obj)
+    why = [_column_failures(scene, walls, col, heights, camera_walls=own) for col in cols]
     seen = np.array([[not w for w in col] for col in why])
     axis = float(seen[0].mean())
     reason = ""

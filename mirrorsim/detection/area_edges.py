@@ -1,0 +1,200 @@
+"""Sub-pixel edges by the *area* method, in numpy.
+
+With the inside and outside colours taken a few pixels either side, each pixel's
+coverage c = ((x − out)·(in − out))/|in − out|² is summed over a window spanning the
+edge; for a box-filtered render (area-weighted pixels) this is exact up to noise.  Bands
+across the object give independent estimates; their median resists partial occlusion.
+:mod:`mirrorsim.detection.edges` measures an object's image with these.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+
+def _edge_by_area(profile: np.ndarray, start: int, inside: np.ndarray, outside: np.ndarray,
+                  inside_first: bool) -> float | None:
+    """Sub-pixel edge position in a 1-D colour profile (rows of ``profile``: positions
+    start, start+1, …) by summing pixel coverages; ``None`` if there is no contrast.
+    ``inside`` and ``outside``: one colour each, or one per row of ``profile``."""
+    d = inside - outside
+    dd = np.sum(d * d, axis=-1)
+    if float(np.mean(dd)) < 5.0**2:  # a 0–255 scale (linear, or a JPEG's stored values)
+        return None
+    # not clipped to [0, 1]: clipping noise on the flat parts would bias the sum inwards
+    c = np.sum((profile - outside) * d, axis=-1) / dd
+    if inside_first:
+        return start - 0.5 + float(c.sum())
+    return start - 0.5 + float((1.0 - c).sum())
+
+
+def _level(rows: np.ndarray, offsets: np.ndarray, at: np.ndarray, slope: bool) -> np.ndarray:
+    """A side's colour at the window's rows ``at`` (offsets from the edge's pixel) from
+    its rows at ``offsets``: their median, or (``slope``) their straight-line fit."""
+    if not slope or np.unique(offsets).size < 2:  # a line needs two offsets (a window
+        # cut short at the frame's edge leaves one): the median there
+        return np.median(rows, axis=0)
+    coef = np.polyfit(offsets, rows, 1)  # (2, channels)
+    return coef[0] * at[:, None] + coef[1]
+
+
+SLOPE_ROWS = 8  # pixels each side for a sloped level: a longer line, less noise
+
+
+def _local_edge(img: np.ndarray, band, axis: int, guess: float, inside_first: bool,
+                reach: int = 6, half: int = 1, near: bool = False, chroma: bool = False,
+                slope: bool = False, out_rows: int | None = None):
+    """An edge near ``guess`` in the mean profile of ``band`` (the columns, or rows,
+    across it): coverages of the 2·half + 1 pixels about it, against the median colours
+    of the next 4 pixels either side (inside: no further than ``reach``).  Local levels
+    keep a shadow or a neighbour a few pixels away (a contact shadow at a foot, another
+    object beside a thin pencil) out of it; medians drop the pegboard's holes.
+
+    ``near``: for an outside that changes towards the edge.  The board in an object's
+    contact shadow brightens over the first pixels away from its foot, so an outside
+    level taken 2–5 px away counts the darker pixels next to the edge as partly inside
+    (the foot measured 0.3–0.6 px low on full-size frames); beside a pencil the board
+    brightens or darkens towards it.  Here the level is the first pixel past the edge's
+    own, and the window ends at the edge's pixel.
+
+    ``chroma``: only the colour across the outside's counts (see ``edges.measure_region``).
+    ``slope``: each side's level is its straight-line fit over the next SLOPE_ROWS pixels
+    (not 4), carried to each pixel of the window (a side that brightens or darkens
+    towards the edge, such as a pencil's paint in its contact shadow, or its wood cone
+    below its first facets);
+    the line is fitted to the mean profile, so a hole still moves it.  ``out_rows``: at
+    most this many outside pixels for its level (a narrow outside: a small pencil's cone).
+
+    Returns (edge or None, outside colour).
+    """
+    n = img.shape[axis]
+    c = int(round(guess))
+
+    def line(i: int) -> np.ndarray:
+        i = min(max(i, 0), n - 1)
+        return (img[i, band] if axis == 0 else img[band, i]).mean(axis=0)
+
+    rows = SLOPE_ROWS if slope else 4
+    k_out = range(half + 1, half + 1 + min(rows, out_rows or rows))
+    k_in = range(half + 1, max(half + 2, min(half + 1 + rows, reach)))
+    at = np.arange(-half, half + 1, dtype=float)
+    k_b = np.array(k_in if inside_first else k_out, float)
+    k_a = np.array(k_out if inside_first else k_in, float)
+    rows_b = np.array([line(c - int(k)) for k in k_b])
+    rows_a = np.array([line(c + int(k)) for k in k_a])
+    before, after = _level(rows_b, -k_b, at, slope), _level(rows_a, k_a, at, slope)
+    inside, outside = (before, after) if inside_first else (after, before)
+    flat = _across(np.median(rows_a if inside_first else rows_b, axis=0)) if chroma \
+        else (lambda x: x)
+    if near:
+        # the outside changes towards the edge (a contact shadow on the board): its level
+        # is the first pixel past the edge's, and the window stops at the edge's pixel
+        step = 1 if inside_first else -1
+        level = line(c + step)
+        lo = c - half if inside_first else c
+        window = np.array([line(i) for i in range(lo, lo + half + 1)])
+        return (_edge_by_area(flat(window), lo, flat(inside), flat(level), inside_first),
+                _mean_level(outside))
+    window = np.array([line(i) for i in range(c - half, c + half + 1)])
+    if chroma:
+        return _edge_by_area(flat(window), c - half, flat(inside),
+                             np.zeros(window.shape[-1], window.dtype), inside_first), \
+            _mean_level(outside)
+    return _edge_by_area(window, c - half, inside, outside, inside_first), _mean_level(outside)
+
+
+def _across(outside: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+    """Projection onto the colours across ``outside``'s (its median over the rows: holes
+    drop out): the outside's shading (a contact shadow, a hole, a facet turned from the
+    light) scales its colour and so drops out."""
+    o = outside / max(float(np.linalg.norm(outside)), 1e-9)
+    return lambda x: x - (x @ o)[..., None] * o
+
+
+def _mean_level(level: np.ndarray) -> np.ndarray:
+    """One colour for a side's level (one per window row with ``slope``)."""
+    return np.atleast_2d(level).mean(axis=0)
+
+
+def median_edges(imgs: tuple[np.ndarray, np.ndarray], span: tuple[int, int],
+                 cross: tuple[int, int], *, axis: int, band_px: int = 3,
+                 chroma: tuple[bool, bool] = (False, False),
+                 slope: tuple[bool, bool] = (False, False),
+                 near: tuple[bool, bool] = (False, False),
+                 max_off: float | None = None, drop_off: float | None = None,
+                 half: tuple[int, int] = (1, 1), margin: tuple[float, float] = (0.2, 0.2),
+                 out_rows: tuple[int | None, int | None] = (None, None)
+                 ) -> tuple[float | None, float | None, np.ndarray, np.ndarray]:
+    """Edges at both ends of an object spanning ``span`` = [lo, hi] along ``axis`` (0:
+    top and bottom, 1: left and right) and ``cross`` across it, robust and precise;
+    ``imgs`` and ``chroma``: the image each end is measured in, and whether on its colour
+    across the outside's; ``slope``: whether its levels are straight-line fits; ``near``:
+    whether its outside level is the first pixel past it (see :func:`_local_edge`).
+
+    Bands of ``band_px`` across the object's middle 60 % each give an edge near the
+    region's boundary (±2 px); bands more than 1 px from their median (partly occluded
+    ones) are dropped; the final edge is measured on the mean profile of the rest (with
+    ``near``: on each of them, and averaged).  ``max_off``: bands whose edge lies farther
+    than this (px) from the region's boundary are dropped too, and an end where fewer
+    than half the bands remain is not measured (None): the region's boundary is then not
+    the object's (see ``edges.measure_region``).  ``drop_off``: such bands are dropped
+    without that rule (where many bands find no contrast at all, as on a pencil's side).
+    ``half``: each end's final window, 2·half + 1 px about the edge.  ``margin``: the
+    fraction of the object's width each end's bands leave out at each side;
+    ``out_rows``: each end's outside level from at most that many pixels (see
+    :func:`_local_edge`).
+    Returns (edge_lo, edge_hi, outside_lo, outside_hi).
+    """
+    reach = max(2, (span[1] - span[0]) // 2)
+    ends = [_end_edge(imgs[end], _bands(*cross, band_px, margin[end]), span[end], end == 1,
+                      axis=axis, reach=reach, chroma=chroma[end], slope=slope[end],
+                      near=near[end], half=half[end], out_rows=out_rows[end],
+                      max_off=max_off, drop_off=drop_off)
+            for end in (0, 1)]
+    return ends[0][0], ends[1][0], ends[0][1], ends[1][1]
+
+
+def _end_edge(img: np.ndarray, bands: list[np.ndarray], guess: int, inside_first: bool, *,
+              axis: int, reach: int, chroma: bool, slope: bool, near: bool, half: int,
+              out_rows: int | None, max_off: float | None, drop_off: float | None
+              ) -> tuple[float | None, np.ndarray]:
+    """One end of :func:`median_edges`: (edge or None, outside colour)."""
+    coarse = [_local_edge(img, band, axis, guess, inside_first, reach, half=2, chroma=chroma,
+                          out_rows=out_rows)
+              for band in bands]
+    off = max_off if max_off is not None else drop_off
+    if off is not None:
+        boundary = guess + (0.5 if inside_first else -0.5)
+        coarse = [(e if e is not None and abs(e - boundary) <= off else None, o)
+                  for e, o in coarse]
+    vals = [e for e, _ in coarse if e is not None]
+    if not vals or (max_off is not None and len(vals) < 0.5 * len(bands)):
+        return None, np.median([o for _, o in coarse], axis=0)
+    m = float(np.median(vals))
+    kept = [(band, e) for band, (e, _) in zip(bands, coarse, strict=True)
+            if e is not None and abs(e - m) < 1.0]
+    if near:
+        # the level is the first pixel past the edge: per band, at the band's own
+        # position (in perspective a foot slants by up to a pixel across the object,
+        # and on their mean profile the next row is partly inside)
+        per = [_local_edge(img, band, axis, e0, inside_first, reach, near=True,
+                           chroma=chroma, out_rows=out_rows)
+               for band, e0 in (kept or [(bd, m) for bd in bands])]
+        got = [e for e, _ in per if e is not None]
+        return (float(np.mean(got)) if got else None), np.mean([o for _, o in per], axis=0)
+    keep = np.concatenate([band for band, _ in kept]) if kept else np.concatenate(bands)
+    # round(m) is the pixel the edge crosses: the window is centred on it
+    return _local_edge(img, keep, axis, m, inside_first, reach, half=half, chroma=chroma,
+                       slope=slope, out_rows=out_rows)
+
+
+def _bands(cross_lo: int, cross_hi: int, band_px: int, margin: float = 0.2
+           ) -> list[np.ndarray]:
+    """Bands of ``band_px`` rows (or columns) across [cross_lo, cross_hi] less a
+    ``margin`` of it at each side (0.2: the middle 60 %)."""
+    span = cross_hi - cross_lo + 1
+    a = cross_lo + int(margin * span)
+    b = max(a + 1, cross_hi - int(margin * span) + 1)
+    return [np.arange(s, min(s + band_px, b)) for s in range(a, b, band_px)]
