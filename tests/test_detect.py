@@ -682,3 +682,37 @@ def test_a_panel_region_that_took_in_the_frames_bar_loses_that_side():
     assert edges.DARKER_SIDE + "left" in m.notes
     g = target_geometry(cam, m, size, k=1000.0)
     assert g.u_axis == pytest.approx((left + right) / 2 - 0.5, abs=0.3)
+
+
+def test_a_planar_benchs_rolled_panel_is_measured_upright_where_upright_finds_no_edge():
+    """A bench's camera roll and mirror tilt roll a planar scene's images by up to 5°:
+    measured as it stands, a panel rolled by 4° gave neither a height nor two sides (2
+    of 120 drawn benches lost their target).  Where that happens it is measured turned
+    upright; an upright panel is measured as it stands."""
+    import cv2
+
+    from mirrorsim.detection.detector import _measure
+    from mirrorsim.detection.edges import to_linear
+    from mirrorsim.detection.regions import find_target
+
+    s, length, width = 8, 200.0, 150.0
+    big = np.zeros((400 * s, 400 * s, 3), np.float32)
+    big[:] = (190.0, 170.0, 120.0)  # a sandy wall
+    c = 200 * s
+    big[int(c - length * s / 2):int(c + length * s / 2),
+        int(c - width * s / 2):int(c + width * s / 2)] = (70.0, 70.0, 70.0)
+    out = {}
+    for roll in (0.0, 4.0):
+        M = cv2.getRotationMatrix2D((c, c), roll, 1.0)
+        turned = cv2.warpAffine(big, M, big.shape[1::-1], flags=cv2.INTER_NEAREST,
+                                borderMode=cv2.BORDER_REPLICATE)
+        img = turned.reshape(400, s, 400, s, 3).mean(axis=(1, 3))
+        srgb = np.clip(np.round(img), 0, 255).astype(np.uint8)
+        box = find_target(srgb.astype(np.float32), width / length)
+        out[roll] = _measure(to_linear(srgb), srgb.astype(np.float32), box, kind="target",
+                             subsampled=False, raised=False, target_ratio=width / length)
+    assert not any("roll" in n for n in out[0.0].notes)
+    rolled = out[4.0]
+    assert any("roll of +4" in n or "roll of -4" in n for n in rolled.notes)
+    assert rolled.height_px == pytest.approx(length, abs=0.5)
+    assert rolled.width_px == pytest.approx(width, abs=0.5)

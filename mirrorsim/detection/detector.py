@@ -167,20 +167,15 @@ def detect_frame(image: np.ndarray, view: CaptureRecord, calibration: Calibratio
     img = img.astype(np.float32)
     ratio = view.target_size[0] / view.target_size[1]
     cone = min(pencil_cone_ratio(b.height) for b in view.beacons)  # the shortest cone
-    if view.geometry == "3d":  # a leaning mirror rolls its images: each measured upright
-        box = find_target(img, ratio, posts=True)
-        if box is None:
-            raise DetectionError("no target (grey upright panel) found in the frame")
-        measured = measure_rolled(linear, img, box, kind="target", subsampled=subsampled,
-                                  target_ratio=ratio)
-        pencils = [measure_rolled(linear, img, b, kind="beacon", subsampled=subsampled,
-                                  cone_ratio=cone)
-                   for b in find_pencils(img)]
-    else:
-        measured = measure_object(img, "target", ratio, linear=linear, subsampled=subsampled)
-        pencils = [measure_region(linear, b, "beacon", subsampled=subsampled, stored=img,
-                                  cone_ratio=cone)
-                   for b in find_pencils(img)]
+    raised = view.geometry == "3d"
+    box = find_target(img, ratio, posts=raised)
+    if box is None:
+        raise DetectionError("no target (grey upright panel) found in the frame")
+    measured = _measure(linear, img, box, kind="target", subsampled=subsampled,
+                        target_ratio=ratio, raised=raised)
+    pencils = [_measure(linear, img, b, kind="beacon", subsampled=subsampled,
+                        cone_ratio=cone, raised=raised)
+               for b in find_pencils(img)]
     target = target_geometry(cam, measured, view.target_size, k=calibration.target_k)
     paint = pencil_paint_height(view.beacons[0].height)
     pencils = [pencil_geometry(cam, p, paint, k=calibration.pencil_k) for p in pencils
@@ -195,6 +190,31 @@ def detect_frame(image: np.ndarray, view: CaptureRecord, calibration: Calibratio
                     noise=frame_noise(linear, target.bbox_px), jpeg_quality=jpeg_quality)
     _check_a_mirror_fits(det)
     return det
+
+
+def _measure(linear: np.ndarray, img: np.ndarray, box: tuple[int, int, int, int], *,
+             kind: str, subsampled: bool, raised: bool, target_ratio: float | None = None,
+             cone_ratio: float | None = None) -> ImageMeasurement:
+    """One image's edges.  A 3-D scene's are measured where each stands upright (a
+    leaning mirror rolls its images by twice its lean, at a slant:
+    :func:`~mirrorsim.detection.rolled.measure_rolled`).  A planar scene's are measured
+    as they stand, and turned upright only where that found no height or no side: a
+    bench's camera roll and mirror tilt roll its images by up to 5° (of 120 drawn
+    benches, 2 lost their target so), while an upright image's roll, read on its pixels,
+    scatters by up to 2° (perspective slopes a panel's top off the axis; a small
+    pencil's region is a few pixels wide), and turning it would move edges that hold."""
+    if raised:
+        return measure_rolled(linear, img, box, kind=kind, subsampled=subsampled,
+                              target_ratio=target_ratio, cone_ratio=cone_ratio)
+    m = measure_region(linear, box, kind, subsampled=subsampled, stored=img,
+                       cone_ratio=cone_ratio)
+    lost = m.height_px is None or (m.u_left is None and m.u_right is None)
+    if not lost or box[1] <= 0 or box[3] >= img.shape[0] - 1:  # (cut by the frame: no use)
+        return m
+    turned = measure_rolled(linear, img, box, kind=kind, subsampled=subsampled,
+                            target_ratio=target_ratio, cone_ratio=cone_ratio, raised=False)
+    found = turned.height_px is not None and (turned.u_left, turned.u_right) != (None, None)
+    return turned if found else m
 
 
 FOOT_TOLERANCE = (3.0, 0.05)  # px, and a fraction of the image's height: the larger

@@ -96,16 +96,18 @@ def _boundary_slope(mask: np.ndarray, *, top: bool) -> float | None:
 
 def measure_rolled(linear: np.ndarray, img: np.ndarray, box: tuple[int, int, int, int],
                    *, kind: str, subsampled: bool = False, target_ratio: float | None = None,
-                   cone_ratio: float | None = None) -> ImageMeasurement:
+                   cone_ratio: float | None = None, raised: bool = True) -> ImageMeasurement:
     """:func:`~mirrorsim.detection.edges.measure_region` of an image that may be rolled:
     measured upright in its neighbourhood turned by :func:`image_roll`, its foot and top
     taken back to the frame (see the module's text).  ``linear``: the frame's linear
     radiance; ``img``: its 8-bit values (float), where the regions are found (and a
     JPEG's pencil foot measured); ``target_ratio``: the panel's width over height;
-    ``cone_ratio``: a pencil's cone over its band (see ``measure_region``)."""
+    ``cone_ratio``: a pencil's cone over its band; ``raised``: a 3-D scene's frame (see
+    ``measure_region``; a bench's camera roll and mirror tilt roll a planar scene's
+    images too, by up to 5° within the bench model's tolerances)."""
     roll = image_roll(img, box, kind)
     if abs(roll) < MIN_ROLL_DEG:
-        return measure_region(linear, box, kind, subsampled=subsampled, stored=img, raised=True,
+        return measure_region(linear, box, kind, subsampled=subsampled, stored=img, raised=raised,
                               cone_ratio=cone_ratio)
     u0, v0, u1, v1 = box
     h, w = linear.shape[:2]
@@ -124,11 +126,11 @@ def measure_rolled(linear: np.ndarray, img: np.ndarray, box: tuple[int, int, int
     found = (find_pencils(img_r) if kind == "beacon"
              else [b for b in [find_target(img_r, target_ratio, posts=True)] if b is not None])
     if not found:
-        return measure_region(linear, box, kind, subsampled=subsampled, stored=img, raised=True,
+        return measure_region(linear, box, kind, subsampled=subsampled, stored=img, raised=raised,
                               cone_ratio=cone_ratio)
     near = min(found, key=lambda b: math.hypot((b[0] + b[2]) / 2 - centre[0],
                                                (b[1] + b[3]) / 2 - centre[1]))
-    m = measure_region(lin_r, near, kind, subsampled=subsampled, stored=img_r, raised=True,
+    m = measure_region(lin_r, near, kind, subsampled=subsampled, stored=img_r, raised=raised,
                        cone_ratio=cone_ratio)
     return _back(m, M, (a0, b0), roll)
 
