@@ -626,17 +626,23 @@ def _small_pencil(top: float, foot: float, cone_px: float, *, width: int = 12,
     return img.reshape(h, s, w, s, 3).mean(axis=(1, 3)).astype(np.float32)
 
 
-def test_a_small_pencils_top_is_read_against_its_cone_not_what_lies_behind():
+@pytest.mark.parametrize("top, foot, width, box", [
+    (30.3, 54.6, 12, (20, 30, 31, 54)),  # a 2 cm pencil's band 24 px tall
+    (30.0, 43.0, 8, (20, 30, 27, 43)),  # 13 px: the bands keep half its width
+])
+def test_a_small_pencils_top_is_read_against_its_cone_not_what_lies_behind(top, foot, width,
+                                                                          box):
     """A small pencil's cone is a few pixels tall: the top's outside level read 8 px up
     over the middle 60 % of its width took in the background beyond the cone, and the
     top read low (0.3–1.8 px on 14 of 157 images of drawn scenes).  Given its cone's
-    height over its band's, the level is read over the middle 30 % and within the cone."""
+    height over its band's, the level is read over the middle of the width and within
+    the cone (on a narrow pencil, whose bands keep more of the width, a line through the
+    2 rows left had been carried onto the paint's level: the top read 21 px off)."""
     from mirrorsim.detection.edges import measure_region
 
-    top, foot, cone = 30.3, 54.6, 13.0  # a 2 cm pencil's band 24 px tall: cone 0.54 of it
-    img = _small_pencil(top, foot, cone)
-    box = (20, 30, 31, 54)
-    bounded = measure_region(img, box, "beacon", cone_ratio=cone / (foot - top))
+    ratio = 0.538  # a 2 cm pencil's cone over its band
+    img = _small_pencil(top, foot, ratio * (foot - top), width=width)
+    bounded = measure_region(img, box, "beacon", cone_ratio=ratio)
     unbounded = measure_region(img, box, "beacon")
     assert bounded.v_top == pytest.approx(top, abs=0.1)
     assert abs(unbounded.v_top - top) > 2 * abs(bounded.v_top - top)
@@ -657,6 +663,7 @@ def test_a_pencil_in_deep_shade_keeps_its_foot_and_one_cut_by_the_frame_has_no_h
     cut = img[:55]  # the frame ends at the band's last row
     c = edges.measure_region(cut, (20, 30, 31, 54), "beacon", cone_ratio=0.54)
     assert c.height_px is None and any("bottom row" in n for n in c.notes)
+    assert c.clipped == "bottom"
 
 
 def test_a_panel_region_that_took_in_the_frames_bar_loses_that_side():

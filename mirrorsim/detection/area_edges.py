@@ -45,27 +45,24 @@ SLOPE_ROWS = 8  # pixels each side for a sloped level: a longer line, less noise
 
 def _local_edge(img: np.ndarray, band, axis: int, guess: float, inside_first: bool,
                 reach: int = 6, half: int = 1, near: bool = False, chroma: bool = False,
-                slope: bool = False, out_rows: int | None = None):
+                slope: bool = False, out_reach: int | None = None):
     """An edge near ``guess`` in the mean profile of ``band`` (the columns, or rows,
     across it): coverages of the 2·half + 1 pixels about it, against the median colours
     of the next 4 pixels either side (inside: no further than ``reach``).  Local levels
-    keep a shadow or a neighbour a few pixels away (a contact shadow at a foot, another
-    object beside a thin pencil) out of it; medians drop the pegboard's holes.
+    keep a shadow or a neighbour a few pixels away out of it; medians drop the holes.
 
-    ``near``: for an outside that changes towards the edge.  The board in an object's
-    contact shadow brightens over the first pixels away from its foot, so an outside
-    level taken 2–5 px away counts the darker pixels next to the edge as partly inside
-    (the foot measured 0.3–0.6 px low on full-size frames); beside a pencil the board
-    brightens or darkens towards it.  Here the level is the first pixel past the edge's
-    own, and the window ends at the edge's pixel.
+    ``near``: for an outside that changes towards the edge (the board in a foot's contact
+    shadow, read 2–5 px away, put the foot 0.3–0.6 px low): the level is the first pixel
+    past the edge's own, and the window ends at the edge's pixel.
 
     ``chroma``: only the colour across the outside's counts (see ``edges.measure_region``).
     ``slope``: each side's level is its straight-line fit over the next SLOPE_ROWS pixels
     (not 4), carried to each pixel of the window (a side that brightens or darkens
-    towards the edge, such as a pencil's paint in its contact shadow, or its wood cone
-    below its first facets);
-    the line is fitted to the mean profile, so a hole still moves it.  ``out_rows``: at
-    most this many outside pixels for its level (a narrow outside: a small pencil's cone).
+    towards the edge: a pencil's paint in its contact shadow, its wood cone); the line
+    is fitted to the mean profile, so a hole still moves it.  ``out_reach``: the
+    outside's level from pixels no farther than this from the edge's (a narrow outside:
+    a small pencil's cone), and a median there where it leaves fewer than 4 (a line
+    through 2 or 3 rows, carried into the window, could land on the inside's level).
 
     Returns (edge or None, outside colour).
     """
@@ -77,14 +74,17 @@ def _local_edge(img: np.ndarray, band, axis: int, guess: float, inside_first: bo
         return (img[i, band] if axis == 0 else img[band, i]).mean(axis=0)
 
     rows = SLOPE_ROWS if slope else 4
-    k_out = range(half + 1, half + 1 + min(rows, out_rows or rows))
+    last = half + rows if out_reach is None else max(half + 1, min(half + rows, out_reach))
+    k_out = range(half + 1, last + 1)
+    slope_out = slope and len(k_out) >= 4
     k_in = range(half + 1, max(half + 2, min(half + 1 + rows, reach)))
     at = np.arange(-half, half + 1, dtype=float)
     k_b = np.array(k_in if inside_first else k_out, float)
     k_a = np.array(k_out if inside_first else k_in, float)
     rows_b = np.array([line(c - int(k)) for k in k_b])
     rows_a = np.array([line(c + int(k)) for k in k_a])
-    before, after = _level(rows_b, -k_b, at, slope), _level(rows_a, k_a, at, slope)
+    before = _level(rows_b, -k_b, at, slope if inside_first else slope_out)
+    after = _level(rows_a, k_a, at, slope_out if inside_first else slope)
     inside, outside = (before, after) if inside_first else (after, before)
     flat = _across(np.median(rows_a if inside_first else rows_b, axis=0)) if chroma \
         else (lambda x: x)
@@ -125,7 +125,7 @@ def median_edges(imgs: tuple[np.ndarray, np.ndarray], span: tuple[int, int],
                  near: tuple[bool, bool] = (False, False),
                  max_off: float | None = None, drop_off: float | None = None,
                  half: tuple[int, int] = (1, 1), margin: tuple[float, float] = (0.2, 0.2),
-                 out_rows: tuple[int | None, int | None] = (None, None)
+                 out_reach: tuple[int | None, int | None] = (None, None)
                  ) -> tuple[float | None, float | None, np.ndarray, np.ndarray]:
     """Edges at both ends of an object spanning ``span`` = [lo, hi] along ``axis`` (0:
     top and bottom, 1: left and right) and ``cross`` across it, robust and precise;
@@ -133,7 +133,7 @@ def median_edges(imgs: tuple[np.ndarray, np.ndarray], span: tuple[int, int],
     across the outside's; ``slope``: whether its levels are straight-line fits; ``near``:
     whether its outside level is the first pixel past it (see :func:`_local_edge`).
 
-    Bands of ``band_px`` across the object's middle 60 % each give an edge near the
+    Bands of ``band_px`` across the object (less ``margin`` each side) each give an edge near the
     region's boundary (±2 px); bands more than 1 px from their median (partly occluded
     ones) are dropped; the final edge is measured on the mean profile of the rest (with
     ``near``: on each of them, and averaged).  ``max_off``: bands whose edge lies farther
@@ -143,14 +143,14 @@ def median_edges(imgs: tuple[np.ndarray, np.ndarray], span: tuple[int, int],
     without that rule (where many bands find no contrast at all, as on a pencil's side).
     ``half``: each end's final window, 2·half + 1 px about the edge.  ``margin``: the
     fraction of the object's width each end's bands leave out at each side;
-    ``out_rows``: each end's outside level from at most that many pixels (see
+    ``out_reach``: each end's outside level from no farther than that (see
     :func:`_local_edge`).
     Returns (edge_lo, edge_hi, outside_lo, outside_hi).
     """
     reach = max(2, (span[1] - span[0]) // 2)
     ends = [_end_edge(imgs[end], _bands(*cross, band_px, margin[end]), span[end], end == 1,
                       axis=axis, reach=reach, chroma=chroma[end], slope=slope[end],
-                      near=near[end], half=half[end], out_rows=out_rows[end],
+                      near=near[end], half=half[end], out_reach=out_reach[end],
                       max_off=max_off, drop_off=drop_off)
             for end in (0, 1)]
     return ends[0][0], ends[1][0], ends[0][1], ends[1][1]
@@ -158,11 +158,11 @@ def median_edges(imgs: tuple[np.ndarray, np.ndarray], span: tuple[int, int],
 
 def _end_edge(img: np.ndarray, bands: list[np.ndarray], guess: int, inside_first: bool, *,
               axis: int, reach: int, chroma: bool, slope: bool, near: bool, half: int,
-              out_rows: int | None, max_off: float | None, drop_off: float | None
+              out_reach: int | None, max_off: float | None, drop_off: float | None
               ) -> tuple[float | None, np.ndarray]:
     """One end of :func:`median_edges`: (edge or None, outside colour)."""
     coarse = [_local_edge(img, band, axis, guess, inside_first, reach, half=2, chroma=chroma,
-                          out_rows=out_rows)
+                          out_reach=out_reach)
               for band in bands]
     off = max_off if max_off is not None else drop_off
     if off is not None:
@@ -180,14 +180,14 @@ def _end_edge(img: np.ndarray, bands: list[np.ndarray], guess: int, inside_first
         # position (in perspective a foot slants by up to a pixel across the object,
         # and on their mean profile the next row is partly inside)
         per = [_local_edge(img, band, axis, e0, inside_first, reach, near=True,
-                           chroma=chroma, out_rows=out_rows)
+                           chroma=chroma, out_reach=out_reach)
                for band, e0 in (kept or [(bd, m) for bd in bands])]
         got = [e for e, _ in per if e is not None]
         return (float(np.mean(got)) if got else None), np.mean([o for _, o in per], axis=0)
     keep = np.concatenate([band for band, _ in kept]) if kept else np.concatenate(bands)
     # round(m) is the pixel the edge crosses: the window is centred on it
     return _local_edge(img, keep, axis, m, inside_first, reach, half=half, chroma=chroma,
-                       slope=slope, out_rows=out_rows)
+                       slope=slope, out_reach=out_reach)
 
 
 def _bands(cross_lo: int, cross_hi: int, band_px: int, margin: float = 0.2

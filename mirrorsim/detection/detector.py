@@ -166,7 +166,7 @@ def detect_frame(image: np.ndarray, view: CaptureRecord, calibration: Calibratio
     linear = to_linear(img)  # from the 8-bit codes: no float copy to read back
     img = img.astype(np.float32)
     ratio = view.target_size[0] / view.target_size[1]
-    cone = min(pencil_cone_ratio(b.height) for b in view.beacons)  # the shortest cone
+    cone = min(pencil_cone_ratio(b.height) for b in view.beacons)  # (the tallest pencil's)
     raised = view.geometry == "3d"
     box = find_target(img, ratio, posts=raised)
     if box is None:

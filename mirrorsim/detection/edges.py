@@ -75,8 +75,9 @@ def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str,
     baseboard, as neutral as the panel: it is measured on the image's colour too, and
     taken so where the two differ by a pixel.
 
-    ``cone_ratio`` (a pencil): its cone's height over its band's (the frame's shortest),
-    which bounds where the top's outside level is read (:func:`_cone_rows`).
+    ``cone_ratio`` (a pencil): its cone's height over its band's (the smallest of the
+    frame's pencils: the tallest one's),
+    which bounds where the top's outside level is read (:func:`_cone_reach`).
     """
     u0, v0, u1, v1 = box
     if kind == "beacon":
@@ -102,9 +103,18 @@ def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str,
         notes=(*e.notes, *cut))
     if left is not None and right is not None:
         m = replace(m, u_axis=(left + right) / 2)
-    if top is None or bottom is None:
-        m = replace(m, clipped="top", notes=(*m.notes, "no contrast at the top or bottom "
-                                             "edge: height not measured"))
+    return _with_clipping(m, cut, v0 <= 0)
+
+
+def _with_clipping(m: ImageMeasurement, cut: tuple[str, ...], top_cut: bool
+                   ) -> ImageMeasurement:
+    """``m`` flagged clipped where the frame cuts it (``cut``: :func:`_cut_by_frame`'s
+    note) or an end had no contrast."""
+    if cut:
+        return replace(m, clipped="top" if top_cut else "bottom")
+    if m.v_top is None or m.v_bottom is None:
+        return replace(m, clipped="top", notes=(*m.notes, "no contrast at the top or "
+                                                "bottom edge: height not measured"))
     return m
 
 def _cut_by_frame(box: tuple[int, int, int, int], rows: int) -> tuple[str, ...]:
@@ -134,28 +144,34 @@ class _Edges(NamedTuple):
 TOP_MARGIN = 0.35
 
 
-def _cone_rows(box: tuple[int, int, int, int], cone_ratio: float | None) -> int | None:
-    """How many pixels above a pencil's painted band its top's outside level may take
-    (None: no bound).  At k px above the band the cone's half-width is r·(1 − k/cone),
-    so a band within the middle 30 % of the width stays on the wood while
-    k < 0.7·cone; the window's own pixel (1 px) comes first.  With the level read
-    8 px up, the top of 2–8 cm pencils whose cone is 5–13 px tall read 0.3–1.8 px low
-    on 20 of 158 images of a user's scenes (the background's level taken for the
-    wood's), 2–4 % of their d_total."""
+def _cone_reach(box: tuple[int, int, int, int], cone_ratio: float | None) -> int | None:
+    """How far above a pencil's painted band (px from the edge's pixel) its top's outside
+    level may be read (None: no bound).  At k px above the band the cone's half-width is
+    r·(1 − k/cone), so a column x·r from the axis stays on the wood while
+    k < (1 − x)·cone; x is that of the outermost column the top's bands hold
+    (:func:`~mirrorsim.detection.area_edges.median_edges`, margin TOP_MARGIN; on a
+    narrow pencil the rounding keeps 40–60 % of the width).  With the level read 8 px
+    up over the middle 60 %, the top of 2–8 cm pencils whose cone is 5–13 px tall read
+    0.3–1.8 px low on 14 of 157 images of drawn scenes (the background's level taken for
+    the wood's), 2–4 % of their d_total."""
     if cone_ratio is None:
         return None
-    cone_px = cone_ratio * (box[3] - box[1] + 1)
-    inside = 1.0 - 2 * TOP_MARGIN  # the bands' reach from the axis, of the half-width
-    return max(2, int((1.0 - inside) * cone_px - 0.5) - 1)
+    u0, v0, u1, v1 = box
+    span = u1 - u0 + 1
+    first, last = u0 + int(TOP_MARGIN * span), max(u0 + int(TOP_MARGIN * span) + 1,
+                                                   u1 - int(TOP_MARGIN * span) + 1) - 1
+    axis, half_width = (u0 + u1) / 2, span / 2
+    x = max(abs(first - 0.5 - axis), abs(last + 0.5 - axis)) / half_width
+    return int(max(0.0, 1.0 - x) * cone_ratio * (v1 - v0 + 1) - 0.5)
 
 
 def _pencil_edges(img: np.ndarray, box: tuple[int, int, int, int], *, subsampled: bool,
                   stored: np.ndarray | None, cone_ratio: float | None = None) -> _Edges:
     """A pencil's edges (:func:`measure_region`): its sides and top on the blue channel,
     its foot on the colour across the board's; with ``cone_ratio``, its top on the
-    middle of its width and its outside level within the cone (:func:`_cone_rows`)."""
+    middle of its width and its outside level within the cone (:func:`_cone_reach`)."""
     u0, v0, u1, v1 = box
-    top_rows = _cone_rows(box, cone_ratio)
+    top_reach = _cone_reach(box, cone_ratio)
     sides_note: tuple[str, ...] = ()
     blue = np.ascontiguousarray(img[..., 2:3])
     foot_img = img
@@ -167,9 +183,9 @@ def _pencil_edges(img: np.ndarray, box: tuple[int, int, int, int], *, subsampled
                                                      chroma=(False, True),
                                                      slope=(True, True),
                                                      half=(1, 2 if subsampled else 1),
-                                                     margin=(0.2 if top_rows is None
+                                                     margin=(0.2 if top_reach is None
                                                              else TOP_MARGIN, 0.2),
-                                                     out_rows=(top_rows, None))
+                                                     out_reach=(top_reach, None))
     if subsampled:  # the board's level below the foot (a mean of stored values) as
         # linear radiance like the rest: the radiance of that value, within a code's
         # step of the mean radiance
@@ -269,7 +285,10 @@ def _darker_sides(img: np.ndarray, box: tuple[int, int, int, int], left: float |
             continue
         first = int(math.floor(edge + 0.5)) + (1 if step > 0 else -1)  # wholly inside
         cols = sorted((first, first + step))
-        strip = float(np.median(img[rows, max(cols[0], 0): cols[1] + 1]))
+        cells = img[rows, max(cols[0], 0): cols[1] + 1]
+        if cells.size == 0:  # (a panel a pixel or two wide at the frame's side)
+            continue
+        strip = float(np.median(cells))
         if strip < DARKER_RATIO * core:
             notes.append(DARKER_SIDE + side)
     return tuple(notes)

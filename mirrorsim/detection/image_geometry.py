@@ -239,17 +239,17 @@ def _target_clip(cam: Camera, m: ImageMeasurement, size: Point2, present: list[s
             m = replace(m, clipped=side, notes=(
                 *m.notes, f"image {100 * (1 - r):.1f}% narrower than its height implies, "
                 f"beside a dark edge: clipped on the {side}, axis from the other edge"))
-        elif r > 1 + tol and (darker := [s_ for s_ in present
-                                         if f"{DARKER_SIDE}{s_}" in m.notes]):
+        elif r > 1 + tol and len(darker := [s_ for s_ in present
+                                            if f"{DARKER_SIDE}{s_}" in m.notes]) == 1:
             # wider than the height allows, one side darker just inside: the region took
             # in something dark beside the panel (its side found at that thing's far
             # edge, 6 px out, α 0.26° off); that side is dropped
-            side = darker[0] if len(darker) == 1 else None
-            if side is not None:
-                present = [s_ for s_ in present if s_ != side]
-                m = replace(m, notes=(*m.notes, f"image {100 * (r - 1):.1f}% wider than its "
-                                      f"height implies, darker just inside its {side} edge: "
-                                      "that edge is not the panel's, axis from the other"))
+            side = darker[0]
+            present = [s_ for s_ in present if s_ != side]
+            m = replace(m, **{f"u_{side}": None}, width_px=None, notes=(
+                *m.notes, f"image {100 * (r - 1):.1f}% wider than its height implies, "
+                f"darker just inside its {side} edge: that edge is not the panel's, axis "
+                "from the other"))
         elif abs(r - 1) > tol:
             m = replace(m, notes=(*m.notes, f"angular width {100 * (r - 1):+.1f}% off what "
                                   "its height implies, with no dark edge to clip it: not "

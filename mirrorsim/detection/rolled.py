@@ -11,7 +11,9 @@ So an image is measured where it stands upright: its roll is found on its own pi
 frame's neighbourhood turned by it, the object found and measured there as an upright
 one, and its foot and top taken back to the frame.  The measurement's height is then
 the image's length along its axis, its axis column and foot row those of its foot and
-top as they stand in the frame (what :func:`solver.sltr3d.measured3` predicts).
+top as they stand in the frame (what :func:`solver.sltr3d.measured3` predicts).  A
+planar scene's image is measured so only where, as it stands, it gave no height or no
+side (a bench's camera roll and mirror tilt: ``detector._measure``).
 """
 
 from __future__ import annotations
@@ -124,7 +126,7 @@ def measure_rolled(linear: np.ndarray, img: np.ndarray, box: tuple[int, int, int
 
     lin_r, img_r = turned(linear), np.clip(turned(img), 0.0, 255.0)
     found = (find_pencils(img_r) if kind == "beacon"
-             else [b for b in [find_target(img_r, target_ratio, posts=True)] if b is not None])
+             else [b for b in [find_target(img_r, target_ratio, posts=raised)] if b is not None])
     if not found:
         return measure_region(linear, box, kind, subsampled=subsampled, stored=img, raised=raised,
                               cone_ratio=cone_ratio)
