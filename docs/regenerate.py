@@ -139,13 +139,13 @@ RESULTS: tuple[Result, ...] = (
                  "self-calibrated (about 12 min)",
            fresh=("renders/bench_train3", "renders/bench3_test")),
     Result("acceptance",
-           (f"{PY} benchmarks/acceptance.py --scenes 120 --seed 61206021",
-            f"{PY} benchmarks/acceptance.py --scenes 120 --seed 61206022 --bench",
+           (f"{PY} benchmarks/acceptance.py --scenes 100 --seed 61206021",
+            f"{PY} benchmarks/acceptance.py --scenes 100 --seed 61206022 --bench",
             f"{PY} benchmarks/acceptance.py --report renders/acceptance-61206021-ideal "
             "renders/acceptance-61206022-bench"),
            markdown=True,
-           about="the error bars on 240 scenes of the acceptance generator's own, ideal "
-                 "and bench, with the default model choice (about 50 min)",
+           about="the error bars on 200 scenes of the acceptance generator's own, ideal "
+                 "and bench, with the default model choice (about 45 min)",
            fresh=("renders/acceptance-61206021-ideal", "renders/acceptance-61206022-bench")),
     Result("acceptance_selfcal",
            (f"{PY} benchmarks/acceptance.py --scenes 40 --seed 61206023 --bench --beacons 3",),
