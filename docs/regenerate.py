@@ -148,11 +148,11 @@ RESULTS: tuple[Result, ...] = (
                  "and bench, with the default model choice (about 45 min)",
            fresh=("renders/acceptance-61206021-ideal", "renders/acceptance-61206022-bench")),
     Result("acceptance_selfcal",
-           (f"{PY} benchmarks/acceptance.py --scenes 40 --seed 61206003 --bench --beacons 3",),
+           (f"{PY} benchmarks/acceptance.py --scenes 40 --seed 61206023 --bench --beacons 3",),
            markdown=True,
            about="self-calibration on 40 independent three-beacon benches against plain "
                  "least squares (about 15 min)",
-           fresh=("renders/acceptance-61206003-bench",)),
+           fresh=("renders/acceptance-61206023-bench",)),
     Result("particle", (f"{PY} benchmarks/particle.py",), markdown=True,
            about="the particle filter against the batch smoother, synthetic"),
     Result("track_paths", (f"{PY} benchmarks/track.py",), markdown=True,
