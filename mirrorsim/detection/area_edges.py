@@ -148,7 +148,8 @@ def median_edges(imgs: tuple[np.ndarray, np.ndarray], span: tuple[int, int],
     Returns (edge_lo, edge_hi, outside_lo, outside_hi).
     """
     reach = max(2, (span[1] - span[0]) // 2)
-    ends = [_end_edge(imgs[end], _bands(*cross, band_px, margin[end]), span[end], end == 1,
+    ends = [_end_edge(imgs[end], bands(*cross, band_px=band_px, margin=margin[end]),
+                      span[end], end == 1,
                       axis=axis, reach=reach, chroma=chroma[end], slope=slope[end],
                       near=near[end], half=half[end], out_reach=out_reach[end],
                       max_off=max_off, drop_off=drop_off)
@@ -190,7 +191,7 @@ def _end_edge(img: np.ndarray, bands: list[np.ndarray], guess: int, inside_first
                        slope=slope, out_reach=out_reach)
 
 
-def _bands(cross_lo: int, cross_hi: int, band_px: int, margin: float = 0.2
+def bands(cross_lo: int, cross_hi: int, *, band_px: int, margin: float = 0.2
            ) -> list[np.ndarray]:
     """Bands of ``band_px`` rows (or columns) across [cross_lo, cross_hi] less a
     ``margin`` of it at each side (0.2: the middle 60 %)."""

@@ -43,7 +43,7 @@ import numpy as np
 
 from mirrorsim.camera.sensor import undistort
 from mirrorsim.detection.assign import assign_beacons
-from mirrorsim.detection.edges import measure_region, to_linear
+from mirrorsim.detection.edges import cut_by_frame, measure_region, to_linear
 from mirrorsim.detection.image_geometry import (
     Calibration,
     pencil_geometry,
@@ -209,7 +209,7 @@ def _measure(linear: np.ndarray, img: np.ndarray, box: tuple[int, int, int, int]
     m = measure_region(linear, box, kind, subsampled=subsampled, stored=img,
                        cone_ratio=cone_ratio)
     lost = m.height_px is None or (m.u_left is None and m.u_right is None)
-    if not lost or box[1] <= 0 or box[3] >= img.shape[0] - 1:  # (cut by the frame: no use)
+    if not lost or cut_by_frame(box, img.shape[0]):  # (cut by the frame: turning is no use)
         return m
     turned = measure_rolled(linear, img, box, kind=kind, subsampled=subsampled,
                             target_ratio=target_ratio, cone_ratio=cone_ratio, raised=False)

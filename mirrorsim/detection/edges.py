@@ -14,7 +14,7 @@ from typing import NamedTuple
 import numpy as np
 
 from mirrorsim.camera.sensor import LINEAR_OF_CODE, lookup_codes, to_srgb8
-from mirrorsim.detection.area_edges import SLOPE_ROWS, median_edges
+from mirrorsim.detection.area_edges import SLOPE_ROWS, bands, median_edges
 from mirrorsim.detection.image_measurement import ImageMeasurement, Surround
 
 # the note of a JPEG pencil whose sides the blue channel lost and the colour measured
@@ -86,7 +86,7 @@ def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str,
     else:
         e = _panel_edges(img, box, on_chroma=not subsampled, raised=raised)
     top, bottom, left, right = e.top, e.bottom, e.left, e.right
-    cut = _cut_by_frame(box, img.shape[0])
+    cut = cut_by_frame(box, img.shape[0])
     if cut:  # (a near pencil's direct view runs off the frame: its foot there is not one)
         top, bottom = (None, bottom) if v0 <= 0 else (top, None)
     core = img[v0 + (v1 - v0) // 4: v1 - (v1 - v0) // 4 + 1,
@@ -108,7 +108,7 @@ def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str,
 
 def _with_clipping(m: ImageMeasurement, cut: tuple[str, ...], top_cut: bool
                    ) -> ImageMeasurement:
-    """``m`` flagged clipped where the frame cuts it (``cut``: :func:`_cut_by_frame`'s
+    """``m`` flagged clipped where the frame cuts it (``cut``: :func:`cut_by_frame`'s
     note) or an end had no contrast."""
     if cut:
         return replace(m, clipped="top" if top_cut else "bottom")
@@ -117,7 +117,7 @@ def _with_clipping(m: ImageMeasurement, cut: tuple[str, ...], top_cut: bool
                                                 "bottom edge: height not measured"))
     return m
 
-def _cut_by_frame(box: tuple[int, int, int, int], rows: int) -> tuple[str, ...]:
+def cut_by_frame(box: tuple[int, int, int, int], rows: int) -> tuple[str, ...]:
     """The note of an image whose region reaches the frame's top or bottom row."""
     return tuple(f"cut by the frame's {row} row: height not measured"
                  for row, at in (("top", box[1] <= 0), ("bottom", box[3] >= rows - 1)) if at)
@@ -149,7 +149,7 @@ def _cone_reach(box: tuple[int, int, int, int], cone_ratio: float | None) -> int
     level may be read (None: no bound).  At k px above the band the cone's half-width is
     r·(1 − k/cone), so a column x·r from the axis stays on the wood while
     k < (1 − x)·cone; x is that of the outermost column the top's bands hold
-    (:func:`~mirrorsim.detection.area_edges.median_edges`, margin TOP_MARGIN; on a
+    (:func:`~mirrorsim.detection.area_edges.bands`, margin TOP_MARGIN; on a
     narrow pencil the rounding keeps 40–60 % of the width).  With the level read 8 px
     up over the middle 60 %, the top of 2–8 cm pencils whose cone is 5–13 px tall read
     0.3–1.8 px low on 14 of 157 images of drawn scenes (the background's level taken for
@@ -157,10 +157,9 @@ def _cone_reach(box: tuple[int, int, int, int], cone_ratio: float | None) -> int
     if cone_ratio is None:
         return None
     u0, v0, u1, v1 = box
-    span = u1 - u0 + 1
-    first, last = u0 + int(TOP_MARGIN * span), max(u0 + int(TOP_MARGIN * span) + 1,
-                                                   u1 - int(TOP_MARGIN * span) + 1) - 1
-    axis, half_width = (u0 + u1) / 2, span / 2
+    cols = bands(u0, u1, band_px=3, margin=TOP_MARGIN)  # the top's (median_edges' width)
+    first, last = int(cols[0][0]), int(cols[-1][-1])
+    axis, half_width = (u0 + u1) / 2, (u1 - u0 + 1) / 2
     x = max(abs(first - 0.5 - axis), abs(last + 0.5 - axis)) / half_width
     return int(max(0.0, 1.0 - x) * cone_ratio * (v1 - v0 + 1) - 0.5)
 
