@@ -252,6 +252,47 @@ def _image(alpha, d):
                             alpha_deg=alpha, d_total=d)
 
 
+def test_a_panel_side_behind_a_pencil_is_not_used():
+    """A pencil's region (columns 700-711) over the panel's right side (found at 699.2)
+    along the middle 60 % of its rows: that side is dropped with a note, the left kept;
+    a pencil 3 px clear of the side, or under the panel, or over the side's lowest rows
+    only, or a panel with no height, leaves the measurement as it is;
+    a pencil on each side leaves both (nothing to measure the axis from otherwise)."""
+    from mirrorsim.detection.detector import _sides_behind_pencils
+    from mirrorsim.detection.image_measurement import ImageMeasurement
+
+    m = ImageMeasurement(kind="target", source="mirror", bbox_px=[595, 395, 698, 497],
+                         u_axis=647.0, v_top=394.6, v_bottom=498.5, height_px=103.9,
+                         width_px=104.5, u_left=594.7, u_right=699.2)
+    out = _sides_behind_pencils(m, [(401, 366, 427, 565), (700, 408, 711, 505)])
+    assert (out.u_left, out.u_right, out.width_px) == (594.7, None, None)
+    assert "in front of its right side" in out.notes[-1]
+    assert _sides_behind_pencils(m, [(702, 408, 711, 505)]) is m  # clear of it
+    assert _sides_behind_pencils(m, [(700, 520, 711, 600)]) is m  # under the panel
+    # over the side's lowest rows only (its bands there dropped, the median the panel's)
+    assert _sides_behind_pencils(m, [(700, 460, 711, 505)]) is m
+    assert _sides_behind_pencils(replace(m, height_px=None), [(700, 408, 711, 505)]) \
+        .u_right == 699.2
+    assert _sides_behind_pencils(m, [(590, 400, 596, 490), (700, 408, 711, 505)]) is m
+
+
+def test_a_panel_top_under_a_strip_as_bright_as_it_is_measured_on_the_colour():
+    """A neutral panel whose top stands 4 px under the mirror frame's dark bar, a strip
+    of brown wall between, as bright as the panel: on the image's brightness the top
+    falls on the bar, far above the panel's region; across the outside's colour it is
+    the panel's, at row 63.5 (rows 64 on are the panel's), noted."""
+    from mirrorsim.detection.edges import TOP_ON_CHROMA, measure_region, to_linear
+    from mirrorsim.detection.regions import find_target
+
+    img = np.full((400, 500, 3), (89, 75, 63), np.uint8)  # a brown wall in the glass
+    img[40:60, 50:450] = (45, 41, 39)  # the mirror frame's top bar
+    img[64:300, 150:350] = (73, 72, 70)  # the panel
+    f = img.astype(np.float32)
+    m = measure_region(to_linear(f), find_target(f, 200 / 236), "target", stored=f)
+    assert m.v_top == pytest.approx(63.5, abs=0.05) and TOP_ON_CHROMA in m.notes
+    assert m.v_bottom == pytest.approx(299.5, abs=0.05)
+
+
 def test_assignment_refuses_what_no_mirror_gives_and_ambiguity():
     """The beacon stands 50 cm away at 53.13°.  An image nearer than that cannot be its
     reflection; one at its own bearing and distance is its direct view misread; two
@@ -275,6 +316,27 @@ def test_assignment_refuses_what_no_mirror_gives_and_ambiguity():
     images, chosen = assign_beacons([direct, mirror], view)
     assert chosen == [assigned] and images[0].source == "direct" and images[1] == assigned
     assert direct.source == "mirror"  # the values are frozen: a stage makes new ones
+
+
+def test_a_benchs_direct_view_is_allowed_its_populations_bearing():
+    """A pencil 25 cm away, placed 0.44 cm off across the line of sight on a mount read
+    1.1° off, shows its direct view 2.1° off its believed bearing (1.1° + atan(0.44/25)):
+    a direct view, not a frame refused.  The tolerance is the bench population's sum,
+    computed here from its parts: pan 1.5°, roll 1.5°·h/d, √2·0.5 cm across, 0.5° read."""
+    from mirrorsim.detection.assign import assign_beacons, bench_bearing_tolerance
+    from mirrorsim.formats.capture import CaptureRecord
+    from mirrorsim.scene.model import Beacon, Camera
+
+    cam = Camera((0.0, 0.0), 6.0, (1920, 1088), 65.2, 53.0, 53.0)
+    view = CaptureRecord(camera=cam, beacons=(Beacon((15.0, 20.0), 4.2),),
+                         target_size=(9.9, 15.25))
+    expected = 1.5 + 1.5 * 6.0 / 25.0 + np.degrees(np.arctan2(np.sqrt(2) * 0.5, 25.0)) + 0.5
+    assert bench_bearing_tolerance(cam, 25.0) == pytest.approx(expected, abs=1e-12)
+    assert bench_bearing_tolerance(cam, 25.0) > 3.5 > bench_bearing_tolerance(cam, 100.0)
+    images, chosen = assign_beacons([_image(53.13 + 2.1, 25.2), _image(60.0, 70.0)], view)
+    assert images[0].source == "direct" and chosen[0].d_total == 70.0
+    with pytest.raises(DetectionError, match="off its bearing"):  # beyond it: refused
+        assign_beacons([_image(53.13 + 4.5, 25.2), _image(60.0, 70.0)], view)
 
 
 def _pencil_on_board(top: float, foot: float, hole_rows=(), shadow: float = 1.0):
@@ -576,6 +638,38 @@ def test_a_pencil_in_front_of_the_panel_does_not_split_it():
     alone = find_target(bare.astype(np.float32), 100 / 150)
     assert alone is not None and alone[2] - alone[0] > 95
     assert find_target(img.astype(np.float32), 100 / 150) == alone
+
+
+def test_a_panel_against_a_wide_mirror_bar_is_found():
+    """A long lens near the mirror: the frame's bars 16 px wide, a darker grey close to
+    the panel's, and the panel's image reaching the right bar (as on the acceptance
+    set's 1920 px frame of 46°).  The usual opening keeps the bars and joins them to the
+    panel, no panel-shaped region is left; a wider one, tried only then, takes the other
+    bars off and finds the panel, its box within 3 px of it but for the bar it touches
+    (its colour within the panel's: the edges, not the region, tell them apart)."""
+    from mirrorsim.detection.regions import find_target
+
+    img = np.full((600, 800, 3), (90, 75, 60), np.uint8)  # a brown wall, not neutral
+    img[100:116, 200:600] = img[100:560, 200:216] = img[100:560, 584:600] = (47, 44, 42)
+    img[250:530, 384:584] = (66, 62, 56)  # the panel, 200 × 280 px, against the bar
+    box = find_target(img.astype(np.float32), 200 / 280)
+    assert box is not None
+    assert abs(box[0] - 384) <= 3 and abs(box[1] - 250) <= 3, box
+    assert abs(box[3] - 529) <= 3 and 583 - 3 <= box[2] <= 599, box
+
+
+def test_a_grey_wall_cut_by_the_frame_is_not_taken_for_the_panel():
+    """A wall's grey, panel-shaped as the frame cuts it and larger than the panel,
+    reaching the frame's right and bottom edges (as on a bench frame of the acceptance
+    set): the panel, whole in the frame, is found instead, its box within 3 px."""
+    from mirrorsim.detection.regions import find_target
+
+    img = np.full((544, 960, 3), (200, 170, 120), np.uint8)
+    img[80:544, 800:960] = (120, 122, 124)  # the wall, 160 × 464 px, cut by the frame
+    img[217:335, 423:544] = (88, 88, 86)  # the panel, 121 × 118 px
+    box = find_target(img.astype(np.float32), 1.0)
+    assert box is not None
+    assert np.abs(np.array(box) - (423, 217, 543, 334)).max() <= 3, box
 
 
 def test_a_benchs_direct_view_is_not_taken_for_the_reflection():

@@ -58,3 +58,18 @@ def test_render_and_detect_one_pencil_in_direct_view():
     height = scene.beacons[0].height
     expected = scene.camera.fx * pencil_paint_height(height) / (100 - FRONT_OFFSET["beacon"])
     assert measure_reference(scene.camera, "beacon", height) == pytest.approx(expected, abs=0.1)
+
+
+def test_a_small_reference_pencil_is_measured_on_an_enlarged_film():
+    """A 2.2 cm pencil 100 cm ahead of a 960 × 544 camera of 88°: its painted band (1.43
+    cm) is fx·1.43/99.66 ≈ 7.2 px, under what the detector finds.  It is rendered on a
+    film four times enlarged (same field of view: fx exactly four times) and its height
+    divided back, to within 0.05 px of that projection."""
+    from mirrorsim.pipelines.calibrate import measure_reference, reference_film
+    from mirrorsim.scene.model import Camera
+
+    cam = Camera((0.0, 0.0), 4.5, (960, 544), 87.5, 45.0, 45.0)
+    expected = cam.fx * pencil_paint_height(2.19) / (100 - FRONT_OFFSET["beacon"])
+    assert expected < 8 and reference_film(cam, "beacon", 2.19) == 4
+    assert reference_film(cam, "target", (6.8, 10.7)) == 1
+    assert measure_reference(cam, "beacon", 2.19) == pytest.approx(expected, abs=0.05)

@@ -30,6 +30,13 @@ FOOT_ON_COLOUR = "foot on the image's colour: no colour contrast with the board"
 FOOT_AGAINST_ROOM = ("foot on the image's colour: against something as neutral as the "
                      "panel (a raised panel before the room's baseboard)")
 
+# the note of a panel's top measured across the outside's colour: on the image's it lay
+# far above the panel's region, on something as bright as the panel beyond it
+TOP_ON_CHROMA = "top across the outside's colour: on the image's it lay above the region"
+# how far a panel's top may lie from its region's boundary (px) before it is measured so
+# (of the ideal acceptance set's 88 panel tops, one lay beyond 2 px: 2.7 px, on the bar)
+TOP_MAX_OFF_PX = 2.5
+
 # how far a side edge may lie from its region's boundary (px): good images are within
 # 1.1 px (198 random scenes), a side measured on the mirror frame 8-17 px
 SIDE_MAX_OFF_PX = 2.5
@@ -198,7 +205,7 @@ def _pencil_edges(img: np.ndarray, box: tuple[int, int, int, int], *, subsampled
         _, bottom, _, out_bottom = median_edges((img, img), (v0, v1), (u0, u1), axis=0,
                                                  near=(False, True))
         if bottom is not None:
-            sides_note = (FOOT_ON_COLOUR,)
+            sides_note = (*sides_note, FOOT_ON_COLOUR)
     # a pencil 3 px from the frame's bar: the bar is the coarse pass's outside, the
     # board between reads as coverage and a side lands on the other (14 px in)
     left, right, out_left, out_right = median_edges((blue, blue), (u0, u1), (v0, v1), axis=1,
@@ -231,6 +238,16 @@ def _panel_edges(img: np.ndarray, box: tuple[int, int, int, int], *, on_chroma: 
     top, bottom, out_top, out_bottom = median_edges((img, img), (v0, v1), (u0, u1), axis=0,
                                                      chroma=(False, on_chroma),
                                                      near=(False, True))
+    if on_chroma and top is not None and abs(top - (v0 - 0.5)) > TOP_MAX_OFF_PX:
+        # a top that far above the region (found on the panel's own colour) took in
+        # something as bright as the panel above it: a strip of brown wall in the glass,
+        # 3 px under the mirror frame's dark bar, and the edge fell on the bar (3.8 px
+        # high, d_total 1.5 % short, 12 σ).  Across the outside's colour the strip is
+        # told from the neutral panel: the top is measured so where that lies at the region
+        top_c, _, out_c, _ = median_edges((img, img), (v0, v1), (u0, u1), axis=0,
+                                          chroma=(True, False))
+        if top_c is not None and abs(top_c - (v0 - 0.5)) <= TOP_MAX_OFF_PX:
+            top, out_top, sides_note = top_c, out_c, (*sides_note, TOP_ON_CHROMA)
     if raised and on_chroma and bottom is not None:
         # a raised panel's foot may stand against the room's pale baseboard, as neutral
         # as the panel: across the outside's colour the two read as one and the foot
@@ -240,7 +257,7 @@ def _panel_edges(img: np.ndarray, box: tuple[int, int, int, int], *, on_chroma: 
         _, plain, _, out_plain = median_edges((img, img), (v0, v1), (u0, u1), axis=0,
                                                near=(False, True))
         if plain is not None and abs(plain - bottom) > 1.0:
-            bottom, out_bottom, sides_note = plain, out_plain, (FOOT_AGAINST_ROOM,)
+            bottom, out_bottom, sides_note = plain, out_plain, (*sides_note, FOOT_AGAINST_ROOM)
     if bottom is None and on_chroma:
         # a panel in shadow is a dark grey with almost no colour across the board's
         # (a drawn scene's lost its height, 1 of 24): its foot on the image's colour,
@@ -248,7 +265,7 @@ def _panel_edges(img: np.ndarray, box: tuple[int, int, int, int], *, on_chroma: 
         _, bottom, _, out_bottom = median_edges((img, img), (v0, v1), (u0, u1), axis=0,
                                                  near=(False, True))
         if bottom is not None:
-            sides_note = (FOOT_ON_COLOUR,)
+            sides_note = (*sides_note, FOOT_ON_COLOUR)
     # a side 2-3 px from the mirror frame's inner edge leaves a bright strip of glass
     # between them: the coarse pass's outside level then falls on the dark frame bar,
     # the strip reads as coverage far above 1 and the edge is pushed 9-13 px out.  The

@@ -12,6 +12,11 @@ import cv2
 import numpy as np
 
 FRAME_OPEN_PX = 13  # wider than the mirror frame's bars at the distances of our scenes
+# where no panel is found so, the openings tried next: a long lens near the mirror makes
+# its bars wider (14 px on a 1920 px frame of 46° with the mirror 80 cm away, which
+# joined a panel whose image reached the bar: the panel was not found); a wider opening
+# is tried only where the narrower one found nothing, so no panel found today moves
+WIDER_OPEN_PX = (27, 55)
 # how far (in 0–255 sRGB, each channel) a pixel's colour may lie from the panel's own
 # and still belong to it when the panel's region is grown again
 SAME_GREY = 22.0
@@ -77,25 +82,27 @@ def find_target(img: np.ndarray, ratio: float, *, posts: bool = False
     vmax, vmin = _channel_max(blur), _channel_min(blur)
     neutral = (vmax - vmin) < 0.12 * vmax + 6
     grey = neutral & (vmax > 20) & (vmax < 135)
-    plain = _find_panel(blur, neutral, grey, np.zeros(grey.shape, bool), ratio)
     inside = _between(pencil_mask(img), grey)
     if posts:  # dark pixels (a pencil's post's shade) that are not the panel's grey
         dark = (~grey & (vmax < POST_DARK)).astype(np.uint8)
         inside |= _between(dark, grey, reach_px=POST_FILL_PX)
-    if not inside.any():
-        return plain
-    filled = _find_panel(blur, neutral, grey, inside, ratio)
-    found = [b for b in (plain, filled) if b is not None]
-    if not found:
-        return None
-    return min(found, key=lambda b: abs(math.log((b[2] - b[0] + 1) / (b[3] - b[1] + 1) / ratio)))
+    for open_px in (FRAME_OPEN_PX, *WIDER_OPEN_PX):
+        plain = _find_panel(blur, neutral, grey, np.zeros(grey.shape, bool), ratio, open_px)
+        filled = _find_panel(blur, neutral, grey, inside, ratio, open_px) if inside.any() \
+            else None
+        found = [b for b in (plain, filled) if b is not None]
+        if found:
+            return min(found, key=lambda b: abs(math.log((b[2] - b[0] + 1)
+                                                         / (b[3] - b[1] + 1) / ratio)))
+    return None
 
 
 def _find_panel(blur: np.ndarray, neutral: np.ndarray, grey: np.ndarray, inside: np.ndarray,
-                ratio: float) -> tuple[int, int, int, int] | None:
-    """:func:`find_target` on the mask ``grey`` with the pencil pixels ``inside`` added."""
+                ratio: float, open_px: int = FRAME_OPEN_PX) -> tuple[int, int, int, int] | None:
+    """:func:`find_target` on the mask ``grey`` with the pencil pixels ``inside`` added,
+    opened by a disc ``open_px`` across (the mirror frame's bars taken off)."""
     mask = grey | inside
-    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (FRAME_OPEN_PX, FRAME_OPEN_PX))
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (open_px, open_px))
     mask = cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_OPEN, kernel).astype(bool)
     labels, comps = _components(mask, 300)
     best = None
@@ -108,17 +115,29 @@ def _find_panel(blur: np.ndarray, neutral: np.ndarray, grey: np.ndarray, inside:
         # window around the region (the whole frame only where what matters reaches the
         # window's edge: the same result, without rescanning the frame per region)
         box = (x, y, w, h)
-        found = _regrow(blur, neutral, inside, labels, k, box, whole, ratio, kernel, max(w, h))
+        found = _regrow(blur, neutral, inside, labels, k, box, whole, ratio, kernel, max(w, h),
+                        open_px)
         if found is None:
-            found = _regrow(blur, neutral, inside, labels, k, box, whole, ratio, kernel, None)
+            found = _regrow(blur, neutral, inside, labels, k, box, whole, ratio, kernel, None,
+                            open_px)
         for cand in found:
-            if best is None or cand[4] > best[4]:
+            if best is None or _rank(cand, blur.shape) > _rank(best, blur.shape):
                 best = cand
     return None if best is None else best[:4]
 
 
+def _rank(cand: tuple[int, int, int, int, int], shape: tuple[int, ...]) -> tuple[bool, int]:
+    """A panel region's rank: one whole in the frame before one that reaches its edge (a
+    wall's grey cut by the frame, larger than the panel, had been taken for it, whose
+    image the detector then could not measure), then the larger."""
+    u0, v0, u1, v1, area = cand
+    whole = u0 > 0 and v0 > 0 and u1 < shape[1] - 1 and v1 < shape[0] - 1
+    return whole, area
+
+
 def _regrow(blur, neutral, inside, labels, k, box, whole: bool, ratio: float, kernel,
-            margin: int | None) -> list[tuple[int, int, int, int, int]] | None:
+            margin: int | None, open_px: int = FRAME_OPEN_PX
+            ) -> list[tuple[int, int, int, int, int]] | None:
     """The panel-shaped regions of region ``k``'s own colour that belong to it, as
     (u0, v0, u1, v1, area), looked for within ``margin`` px of its box (None: the
     whole frame); None if one that matters comes near the window's edge, where the
@@ -126,7 +145,7 @@ def _regrow(blur, neutral, inside, labels, k, box, whole: bool, ratio: float, ke
     pixels in front of grey ones, which belong to the panel they cross."""
     x, y, w, h = box
     H, W = labels.shape
-    near = 2 * FRAME_OPEN_PX  # the opening's reach, twice
+    near = 2 * open_px  # the opening's reach, twice
     if margin is None:
         u0, v0, u1, v1 = 0, 0, W, H
     else:

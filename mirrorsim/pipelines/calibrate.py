@@ -33,12 +33,14 @@ from mirrorsim.scene import imperfections
 from mirrorsim.scene.bench_values import check_bounds
 from mirrorsim.scene.model import (
     FRONT_OFFSET,
+    MAX_RESOLUTION,
     PENCIL_RADIUS,
     Beacon,
     Board,
     Camera,
     Target,
     pencil_cone_ratio,
+    pencil_paint_height,
 )
 from mirrorsim.truth import optics
 from solver.geometry import unit
@@ -52,9 +54,15 @@ D_REF = REFERENCE_DISTANCE
 CALIBRATION_SPP = {"target": 64, "beacon": 1024}
 REFERENCE_PAN = 45.0  # the reference camera looks along the board's diagonal
 MARGIN_PX = 24  # rendered around the object's projected outline
+# the least paint height (px) a reference pencil is measured at: a smaller one is
+# rendered with the camera's film enlarged a whole number of times (same field of view,
+# so its fx scales exactly) and its height divided back.  A 2.2 cm pencil at 100 cm on a
+# 960 px frame of 88° is 7 px tall, under what find_pencils takes (2 of the ideal
+# acceptance set's 100 scenes failed so), and a 12 px one reads 1-2 % off
+MIN_REFERENCE_PX = 24.0
 # bump whenever the measurement changes, so that no K measured the old way is reused
 # (seeds-ss: the render seeds hashed by SeedSequence)
-METHOD = "foot-chroma|target-foot-chroma|front-0.338|slope8|seeds-ss"
+METHOD = "foot-chroma|target-foot-chroma|front-0.338|slope8|seeds-ss|film-x24"
 
 
 def calibration_key(camera: Camera, target_size: tuple[float, float], pencil_height: float,
@@ -155,10 +163,24 @@ def _check_fingerprint(value: dict) -> None:
         raise ValueError(f"not a code fingerprint: {f!r}")
 
 
-def reference_camera(camera: Camera) -> Camera:
-    """The scene's camera model at the board's corner, looking along REFERENCE_PAN."""
-    return Camera(position=(0.0, 0.0), height=camera.height, resolution=camera.resolution,
+def reference_camera(camera: Camera, film: int = 1) -> Camera:
+    """The scene's camera model at the board's corner, looking along REFERENCE_PAN;
+    ``film``: its film that many times as many pixels across and down (fx as many)."""
+    w, h = camera.resolution
+    return Camera(position=(0.0, 0.0), height=camera.height, resolution=(w * film, h * film),
                   hfov=camera.hfov, pan=REFERENCE_PAN, pan_deg=REFERENCE_PAN)
+
+
+def reference_film(camera: Camera, kind: str, size: float | tuple[float, float], *,
+                   distance: float = D_REF) -> int:
+    """How many times to enlarge the film for a reference pencil's paint to stand at
+    least MIN_REFERENCE_PX tall at ``distance`` (1 for a panel, or a pencil already so;
+    never past MAX_RESOLUTION)."""
+    if kind != "beacon":
+        return 1
+    px = camera.fx * pencil_paint_height(float(size)) / distance
+    most = min(MAX_RESOLUTION[0] // camera.width, MAX_RESOLUTION[1] // camera.height_px)
+    return int(max(1, min(most, math.ceil(MIN_REFERENCE_PX / px))))
 
 
 def reference_object(kind: str, size: float | tuple[float, float], distance: float = D_REF
@@ -190,10 +212,12 @@ def measure_reference(camera: Camera, kind: str, size: float | tuple[float, floa
                       *, variant: str = "auto", distance: float = D_REF, subsampled: bool = False
                       ) -> float:
     """Pixel height of the object standing at ``distance``, as the detector measures it
-    (``subsampled``: as it measures a JPEG frame)."""
+    (``subsampled``: as it measures a JPEG frame), on the camera's film (a small pencil
+    measured on an enlarged one: :func:`reference_film`)."""
     from mirrorsim.rendering.passes import render_direct  # Mitsuba only when a render is needed
 
-    cam = reference_camera(camera)
+    film = reference_film(camera, kind, size, distance=distance)
+    cam = reference_camera(camera, film)
     obj = reference_object(kind, size, distance)
     # a plain board: a hole under the reference object's foot would bias its calibration
     img = render_direct(Board(size=(80.0, 80.0), hole_pitch=0.0), cam, obj,
@@ -206,7 +230,7 @@ def measure_reference(camera: Camera, kind: str, size: float | tuple[float, floa
         raise DetectionError(f"calibration: {exc} (the {kind}'s reference render)") from None
     if m.height_px is None:
         raise DetectionError(f"calibration: the {kind}'s height could not be measured")
-    return m.height_px
+    return m.height_px / film
 
 
 def _check_distance_error(value) -> None:

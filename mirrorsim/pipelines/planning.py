@@ -8,13 +8,13 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from mirrorsim.detection.assign import REFLECTION_EXCESS
 from mirrorsim.errors import BadParameter
 from mirrorsim.pipelines.scenes import check_given_scene, refuse_3d
 from mirrorsim.scene.model import (
     MIRROR_DEPTH,
     OCCLUDER_THICKNESS,
     PENCIL_RADIUS,
+    REFLECTION_EXCESS,
     TARGET_THICKNESS,
     Beacon,
     Scene,

@@ -51,13 +51,16 @@ PENCIL_RADIUS = 0.4  # circumradius of the hexagonal pencil (0.69 cm across flat
 # 0.035 cm too near (0.05 % at 70 cm, not cancelled by the calibration at 1 m).
 FRONT_OFFSET = {"target": TARGET_THICKNESS / 2, "beacon": 0.338 * PENCIL_RADIUS / 0.4}
 OCCLUDER_THICKNESS = 1.0
+# The detector tells a pencil's direct view (within MISPLACED_DISTANCE of its beacon's
+# own distance) from its reflection (2·depth·cos i farther: REFLECTION_EXCESS and more 4 cm
+# before the glass, where plan places beacons); `check` warns where a scene asks more.  A
+# bench reads distances up to BENCH_SCALE_TOLERANCE off (the bench model's calibration).
+MISPLACED_DISTANCE, REFLECTION_EXCESS, BENCH_SCALE_TOLERANCE = 0.02, 0.05, 0.03
 # 3-D scenes (docs/scenes.md): a raised object stands on a post of this radius (thinner
 # than the pencil, so it neither hides the object nor is taken for it), of STAND colour;
 # a mirror may lean by at most MAX_LEAN_DEG (a lab mirror leans a degree or two; beyond
 # 10° its images leave the frame's rows the detector searches)
-STAND_RADIUS = 0.15
-MAX_LEAN_DEG = 10.0
-
+STAND_RADIUS, MAX_LEAN_DEG = 0.15, 10.0
 PAN_WORDS = ("mirror", "target", "beacon")
 
 Point2 = tuple[float, float]

@@ -241,6 +241,20 @@ def _column_failures(scene: Scene, walls, point, heights: np.ndarray, *, camera_
                       (float(u[k]), float(v[k]))) for k in range(n)]
 
 
+def axis_rows(scene: Scene, obj: Target | Beacon) -> tuple[float, float]:
+    """The frame rows (px) of the object's image's foot and top, through the mirror as
+    :func:`visibility` sees them (the bench's tilt, curvature, pitch and roll; the lens's
+    distortion apart, a pixel or two at a frame's edge)."""
+    pts = np.array([[*obj.position, z] for z in (obj.z, obj.z + object_height(obj))])
+    if _flat_upright(scene):
+        virtual = mirror_image(scene.camera.position, scene.mirror, obj.position).virtual
+        apparent = np.column_stack([np.full(2, virtual[0]), np.full(2, virtual[1]), pts[:, 2]])
+    else:
+        apparent = glass_hits(scene, pts)[2]
+    _, v, _ = project(scene.camera, apparent, scene.bench.pitch, roll=scene.bench.roll)
+    return float(v[0]), float(v[1])
+
+
 def _first_blockers(walls, cam: Camera, r2: np.ndarray, point: np.ndarray, zc: np.ndarray,
                     heights: np.ndarray, *, camera_walls=()) -> np.ndarray:
     """The first wall (in the walls' order) under each height's path: camera → mirror,
