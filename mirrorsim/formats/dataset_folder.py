@@ -30,7 +30,7 @@ from mirrorsim.formats.dataset_rows import (  # noqa: F401 (the folder's names, 
     scene_name,
     settings_digest,
 )
-from mirrorsim.formats.files import atomic_path, jsonable, write_json
+from mirrorsim.formats.files import FRAME_SUFFIXES, atomic_path, jsonable, write_json
 from solver.selfcal import priors_text
 
 if TYPE_CHECKING:
@@ -276,8 +276,8 @@ def load_dataset(folder: str | Path) -> pd.DataFrame:
 
     failed = df["error"].astype(bool)
     # a scene of several beacons has a frame per beacon (<scene>_b<k>): the first's
-    df["frame"] = ["" if f else next(filter(None, (path_of(n, s, f) for s in (
-        ".png", ".jpg", "_b0.png", "_b0.jpg"))), None)
+    suffixes = (*FRAME_SUFFIXES, *(f"_b0{s}" for s in FRAME_SUFFIXES))
+    df["frame"] = ["" if f else next(filter(None, (path_of(n, s, f) for s in suffixes)), None)
         for n, f in zip(df["scene"], failed, strict=True)]
     df["scene_file"] = [str(folder / "scenes" / f"{n}.yaml") for n in df["scene"]]
     df["measurements_file"] = [path_of(n, ".measurements.json", f)

@@ -269,6 +269,15 @@ def write_text(path: str | Path, text: str) -> Path:
     return Path(path)
 
 
+# a frame's file: a lossless PNG, or a JPEG where the bench stores JPEG
+FRAME_SUFFIXES = (".png", ".jpg")
+
+
+def frame_suffix(jpeg_quality: int | None) -> str:
+    """The suffix of a frame stored at ``jpeg_quality`` (None: lossless)."""
+    return FRAME_SUFFIXES[0] if jpeg_quality is None else FRAME_SUFFIXES[1]
+
+
 def encode_png(pixels: np.ndarray) -> bytes:
     """8-bit pixels (H, W, 3) RGB or (H, W) grey as PNG bytes.
 

@@ -15,6 +15,8 @@ from dataclasses import dataclass
 
 import yaml
 
+from mirrorsim.formats.files import FRAME_SUFFIXES
+
 
 @dataclass(frozen=True)
 class Field:
@@ -135,7 +137,7 @@ def croissant(name: str, *, description: str, image_globs: tuple[str, ...],
              "contentUrl": "metadata.jsonl", "encodingFormat": "application/jsonlines",
              "sha256": metadata_sha256},
             *({"@type": "cr:FileSet", "@id": f"frame-files{k}", "name": f"frame-files{k}",
-               "encodingFormat": "image/jpeg" if g.endswith(".jpg") else "image/png",
+               "encodingFormat": "image/jpeg" if g.endswith(FRAME_SUFFIXES[1]) else "image/png",
                "includes": [g]} for k, g in enumerate(image_globs))],
         "recordSet": [{"@type": "cr:RecordSet", "@id": "frames", "name": "frames",
                        "description": "one record per frame", "field": frames},

@@ -19,13 +19,12 @@ from mirrorsim.formats import dataset_table as table
 from mirrorsim.formats import frame_table
 from mirrorsim.formats.dataset_folder import read_verified
 from mirrorsim.formats.dataset_rows import DatasetError, read_description
-from mirrorsim.formats.files import dumps, write_json, write_text
+from mirrorsim.formats.files import FRAME_SUFFIXES, dumps, write_json, write_text
 from mirrorsim.scene.model import frame_beacon
 from mirrorsim.truth.annotations import CATEGORIES, Annotations, Instance, frame_annotations
 from mirrorsim.truth.groundtruth import GroundTruth, load_truth
 
 EXPORTS = ("coco", "hf", "croissant")
-FRAME_SUFFIXES = (".png", ".jpg")
 
 
 @dataclass(frozen=True)

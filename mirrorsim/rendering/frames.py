@@ -25,6 +25,7 @@ from mirrorsim.formats.files import (
     dumps,
     encode_jpeg,
     encode_png,
+    frame_suffix,
     read_regular_bytes,
 )
 from mirrorsim.rendering.id_pass import IN_MIRROR, encode_ids
@@ -132,7 +133,7 @@ def capture_of(scene: Scene, out: Path) -> CaptureRecord:
 def _paths(scene: Scene, out: Path) -> tuple[Path, Path, Path, Path]:
     """The frame (PNG, or JPEG for a bench that stores JPEG), its ids, its truth and its
     capture record."""
-    frame = ".png" if scene.bench.jpeg_quality is None else ".jpg"
+    frame = frame_suffix(scene.bench.jpeg_quality)
     return tuple(out / f"{scene.name}{ext}"
                  for ext in (frame, ".ids.png", ".json", ".capture.json"))
 
