@@ -43,18 +43,19 @@ def main() -> None:
     print("|---|---|---" + "|---" * (1 + len(a.qualities)) + "|")
     board = Board(size=(80.0, 80.0), hole_pitch=0.0)  # as the calibration's
     for model in camera_models(spec):
-        cam = cal.reference_camera(model)
         for kind, size in (("target", tuple(spec.target_size)), ("beacon", spec.beacon_height)):
+            film = cal.reference_film(model, kind, size)  # (as calibrate renders it)
+            cam = cal.reference_camera(model, film)
             obj = cal.reference_object(kind, size)
             u0, v0, u1, v1 = cal.reference_crop(cam, obj)
             crop = (u0 - u0 % BLOCK_PX, v0 - v0 % BLOCK_PX, u1, v1)
             srgb = render_direct(board, cam, obj, spp=cal.CALIBRATION_SPP[kind], crop=crop)
             ratio = size[0] / size[1] if kind == "target" else None
 
-            base = measure_object(srgb, kind, ratio).height_px
+            base = measure_object(srgb, kind, ratio).height_px / film
             cells = [f"{base:.2f}"]
             for img in [srgb] + [decode_image(encode_jpeg(srgb, q)) for q in a.qualities]:
-                h = measure_object(img, kind, ratio, subsampled=True).height_px
+                h = measure_object(img, kind, ratio, subsampled=True).height_px / film
                 cells.append(f"{h:.2f} ({100 * (h / base - 1):+.2f} %)")
             name = "pencil's band" if kind == "beacon" else "target"
             print(f"| {model.hfov:g}°, {model.height:g} cm | {name} | {' | '.join(cells)} |")

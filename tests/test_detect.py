@@ -255,7 +255,7 @@ def _image(alpha, d):
 def test_a_panel_side_behind_a_pencil_is_not_used():
     """A pencil's region (columns 700-711) over the panel's right side (found at 699.2)
     along the middle 60 % of its rows: that side is dropped with a note, the left kept;
-    a pencil 3 px clear of the side, or under the panel, or over the side's lowest rows
+    a pencil 2.8 px clear of the side, or under the panel, or over the side's lowest rows
     only, or a panel with no height, leaves the measurement as it is;
     a pencil on each side leaves both (nothing to measure the axis from otherwise)."""
     from mirrorsim.detection.detector import _sides_behind_pencils

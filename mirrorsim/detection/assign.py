@@ -112,9 +112,11 @@ def _refuse_a_misplaced_direct_view(cands: list[ImageMeasurement], view: Capture
 def _the_mirror_image(cands: list[ImageMeasurement], view: CaptureRecord) -> int:
     """One beacon's mirror image among the candidates: only an image farther than the
     beacon stands can be its reflection (d_total ≥ |OB|); of those, one that sits within
-    DIRECT_SEEN_DEG and DIRECT_SEEN_FAR of the beacon's own bearing and distance is its
-    direct view taken for a mirror image.  More than one left is ambiguous: an error, not
-    a guess."""
+    max(DIRECT_SEEN_DEG, :func:`bench_bearing_tolerance`) and DIRECT_SEEN_FAR of the
+    beacon's own bearing and distance is its direct view taken for a mirror image (the
+    tolerance grows near the camera, 8° at 10 cm: a reflection that near its direct
+    bearing is taken for it where another image is left).  More than one left is
+    ambiguous: an error, not a guess."""
     bearing, dist = _direct(view.camera, view.beacons[0])
     possible = [k for k, p in enumerate(cands) if p.d_total > dist * (1 + 1e-3)]
     if not possible:

@@ -224,7 +224,7 @@ def _pencil_edges(img: np.ndarray, box: tuple[int, int, int, int], *, subsampled
         left = left if left is not None and abs(left - (u0 - 0.5)) <= SIDE_MAX_OFF_PX else None
         right = right if right is not None and abs(right - (u1 + 0.5)) <= SIDE_MAX_OFF_PX \
             else None
-        sides_note = (SIDES_ON_COLOUR,)
+        sides_note = (*sides_note, SIDES_ON_COLOUR)
     return _Edges(top, bottom, left, right, out_top, out_bottom, out_left, out_right,
                   sides_note)
 

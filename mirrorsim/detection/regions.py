@@ -92,8 +92,8 @@ def find_target(img: np.ndarray, ratio: float, *, posts: bool = False
             else None
         found = [b for b in (plain, filled) if b is not None]
         if found:
-            return min(found, key=lambda b: abs(math.log((b[2] - b[0] + 1)
-                                                         / (b[3] - b[1] + 1) / ratio)))
+            return min(found, key=lambda b: (not _rows_whole(b, img.shape), abs(math.log(
+                (b[2] - b[0] + 1) / (b[3] - b[1] + 1) / ratio))))
     return None
 
 
@@ -127,12 +127,15 @@ def _find_panel(blur: np.ndarray, neutral: np.ndarray, grey: np.ndarray, inside:
 
 
 def _rank(cand: tuple[int, int, int, int, int], shape: tuple[int, ...]) -> tuple[bool, int]:
-    """A panel region's rank: one whole in the frame before one that reaches its edge (a
-    wall's grey cut by the frame, larger than the panel, had been taken for it, whose
-    image the detector then could not measure), then the larger."""
-    u0, v0, u1, v1, area = cand
-    whole = u0 > 0 and v0 > 0 and u1 < shape[1] - 1 and v1 < shape[0] - 1
-    return whole, area
+    """A panel region's rank: one whose rows the frame leaves whole before one it cuts at
+    the top or bottom, which has no height to measure (a wall's grey cut by the frame's
+    bottom, larger than the panel, had been taken for it), then the larger."""
+    return _rows_whole(cand, shape), cand[4]
+
+
+def _rows_whole(box: tuple[int, ...], shape: tuple[int, ...]) -> bool:
+    """Whether a region (u0, v0, u1, v1, ...) stays off the frame's first and last rows."""
+    return box[1] > 0 and box[3] < shape[0] - 1
 
 
 def _regrow(blur, neutral, inside, labels, k, box, whole: bool, ratio: float, kernel,

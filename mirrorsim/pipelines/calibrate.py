@@ -253,7 +253,11 @@ def calibrate(camera: Camera, target_size: tuple[float, float], pencil_height: f
     D_REF that K assumes (docs/scenes.md ``calibration.distance_error``), so every K, and
     every d_total measured with it, comes out too small by about that fraction.
     ``subsampled``: K for JPEG frames, whose edges the detector measures otherwise; the
-    references are measured that way, so that a bias of that way common to both cancels.
+    references are measured that way, so that a bias of that way common to both cancels
+    (a small pencil's reference is measured on an enlarged film, :func:`reference_film`:
+    a pixel-sized bias of the way then shrinks by the film's factor there; a 2.9 cm
+    pencil of the ideal acceptance set read d_total 1.59 % off with its reference
+    measured at the frame's own size, 0.36 % with it enlarged).
 
     Raises
     ------
