@@ -20,7 +20,7 @@ from mirrorsim.cli.registry import (
     inputs,
     load,
 )
-from mirrorsim.errors import BadArgument
+from mirrorsim.errors import BadArgument, BadParameter
 
 MAX_ITERATIONS = 1_000_000  # draws per Monte Carlo row: about a second a row at the most
 
@@ -82,12 +82,13 @@ def _solve3(args, m) -> int:
     elevation): the mirror's plane, its lean and the target in 3-D."""
     from mirrorsim.cli.tables3d import solution3_summary
     from mirrorsim.formats.error_model_file import default_error_model
+    from mirrorsim.pipelines.evaluate3d import check_calibration3
 
     calibration = calibration_of(args, len(m.beacons), 1)
-    if calibration.nuisances or calibration.position_sigma:
-        raise BadArgument("--calibrate", "the 3-D solve takes no self-calibration from "
-                          "the command line yet (solver.lsq3 estimates pan, pitch and scale "
-                          "through its API)")
+    try:  # (pan and scale, with the priors --prior states)
+        check_calibration3(str(args.measurements), calibration)
+    except BadParameter as exc:
+        raise BadArgument("--calibrate", exc.message) from None
     model = error_model_of(args)
     source = f"`sigma` of {args.measurements}"
     if model is not None or m.sigma is None:
@@ -97,7 +98,7 @@ def _solve3(args, m) -> int:
                     + ((t.target.alpha_deg, t.target.alpha_deg, t.target.d_total_rel),))
         source = (f"{(model or default_error_model()).name()}'s typical σ's, the "
                   "elevation's taken as the azimuth's (a measurements file holds no pixels)")
-    fit = m.solve()
+    fit = m.solve(nuisances=calibration.nuisances, priors=dict(calibration.priors))
     print(f"σ's from {source}", file=sys.stderr)
     print(solution3_summary(str(args.measurements), fit))
     emit(args, fit.to_json())

@@ -118,7 +118,7 @@ def calibrate_option(p: argparse.ArgumentParser, beacon_sigma_alone: bool = True
                    "(self-calibration; needs 2+ beacons, 3+ for all three): pan, an offset on "
                    "every alpha (the mount's pan reading); scale, a factor on every d_total "
                    "(the calibration); power, the mirror's curvature 1/R, which moves each "
-                   "image by its own amount; comma-separated")
+                   "image by its own amount; comma-separated (the 3-D solve: pan and scale)")
     beacon_sigma_option(p, ("" if beacon_sigma_alone else "with --calibrate only: ")
                         + "each beacon's offset is then estimated with that prior, and the "
                         "ellipse includes it")

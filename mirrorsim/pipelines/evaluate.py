@@ -18,7 +18,12 @@ from mirrorsim.detection.board import (
 from mirrorsim.errors import BadParameter
 from mirrorsim.formats.error_model import ErrorModel
 from mirrorsim.formats.files import claim_run_folder, default_out
-from mirrorsim.pipelines.evaluate3d import Report3, evaluate_into3, geometry_of
+from mirrorsim.pipelines.evaluate3d import (
+    Report3,
+    check_calibration3,
+    evaluate_into3,
+    geometry_of,
+)
 from mirrorsim.pipelines.frame import render_and_measure
 from mirrorsim.pipelines.measured import frame_record, frames_of, seen_of, sigmas_of
 from mirrorsim.pipelines.scenes import check_given_scene
@@ -81,7 +86,8 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
         If ``out_dir`` holds files mirrorsim did not write, or the scene's own file.
     BadParameter
         A ``keep`` that names no extra file; ``board_pose`` on a plain board; a bad
-        ``geometry``; with 3d, ``board_pose`` or a calibration other than plain.
+        ``geometry``; with 3d, ``board_pose``, or a calibration of the mirror's power or
+        of the beacons' positions (the 3-D solve estimates pan and range scale).
     SolverError
         If the measurements do not determine the mirror and the target, or
         ``calibration`` is not a :class:`~solver.selfcal.SelfCalibration`.
@@ -100,7 +106,7 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
                            "out_dir", [("scene", scene.source)])
     if three_d:
         return evaluate_into3(scene, out, variant=variant, progress=progress,
-                              error_model=error_model, keep=keep)
+                              error_model=error_model, keep=keep, calibration=calibration)
     return evaluate_into(scene, out, variant=variant, progress=progress,
                          error_model=error_model, keep=keep, calibration=calibration,
                          board_pose=board_pose)
@@ -115,10 +121,8 @@ def check_geometry(scene: Scene, geometry: str, *, board_pose: bool = False,
     if chosen == "3d" and board_pose:
         raise BadParameter("board_pose", f"{scene.name}: not with the 3-D solve yet (the planar "
                            "solve takes it)")
-    if chosen == "3d" and calibration != PLAIN:
-        raise BadParameter("calibration", f"{scene.name}: the 3-D solve estimates a bench "
-                           "model's pan and range scale with their priors, and takes no "
-                           "other calibration yet (the planar solve does)")
+    if chosen == "3d":
+        check_calibration3(scene.name, calibration)
     return chosen
 
 

@@ -22,7 +22,7 @@ from mirrorsim.formats.error_model import ErrorModel
 from mirrorsim.pipelines.frame import render_and_measure
 from mirrorsim.pipelines.measured import frame_record, frames_of, seen_of, sigmas_of
 from mirrorsim.pipelines.score import KEPT_BY_DEFAULT, FrameRecord
-from mirrorsim.pipelines.solving import model_for
+from mirrorsim.pipelines.solving import model_calibration, model_for
 from mirrorsim.scene import imperfections
 from mirrorsim.scene.model import FRONT_OFFSET, Scene, pencil_paint_height
 from mirrorsim.scene.render_settings import AOVS
@@ -33,6 +33,7 @@ from solver.geometry import yaw_difference
 from solver.lsq import solve_measurements
 from solver.lsq3 import Fit3, Measurements3, crlb3
 from solver.measurements import ObjectSigmas, Sigma
+from solver.selfcal import PLAIN, SelfCalibration
 from solver.sltr3d import measured3
 
 GEOMETRIES = ("auto", "3d", "planar")
@@ -142,10 +143,13 @@ class Report3:
 
 def evaluate_into3(scene: Scene, out: Path, *, variant: str = "auto", progress: bool = True,
                    error_model: ErrorModel | None = None,
-                   keep: tuple[str, ...] = KEPT_BY_DEFAULT) -> Report3:
+                   keep: tuple[str, ...] = KEPT_BY_DEFAULT,
+                   calibration: SelfCalibration = PLAIN) -> Report3:
     """Render (or reuse), detect in 3-D, solve in 3-D and score ``scene`` into ``out``, a
     folder its caller has claimed, its parameters checked
-    (:func:`mirrorsim.pipelines.evaluate.evaluate_scene` with ``geometry``).
+    (:func:`mirrorsim.pipelines.evaluate.evaluate_scene` with ``geometry``);
+    ``calibration``: the pan and range scale to estimate, and what the user states of
+    them (:func:`check_calibration3`), beside the bench model's own.
 
     Raises
     ------
@@ -168,7 +172,7 @@ def evaluate_into3(scene: Scene, out: Path, *, variant: str = "auto", progress: 
     model = model_for(scene, error_model)
     features, sigma = sigmas_of(model, seen2)
     seen = _seen3(scene, measured, sigma, fx=seen2.fx)
-    nuisances, priors = _bench_nuisances(model, sigma)
+    nuisances, priors = nuisances3(model, sigma, calibration)
     fit = seen.solve(nuisances=nuisances, priors=priors)
     try:  # the planar solve of the same frames, beside it
         planar = solve_measurements(scene.camera.position, seen2.beacons, [seen2.target],
@@ -253,15 +257,36 @@ def _seen3(scene: Scene, measured: list, sigma: ObjectSigmas, *, fx: float) -> M
                           sigma=tuple(sig))
 
 
-def _bench_nuisances(model: ErrorModel, sigma: ObjectSigmas
-                     ) -> tuple[tuple[str, ...], dict[str, float]]:
-    """The bench's shared errors the 3-D solve estimates with their priors: the pan and
-    the range scale a bench model's tolerances give, and an α error every image of a
-    frame shares as the pan's (an ideal-bench model: none)."""
-    priors = {n: s for n, s in model.tolerances.priors().items() if n in ("pan", "scale")}
-    if sigma.shared_alpha_deg:
+# what the 3-D solve estimates of a bench's shared errors (solver.lsq3 knows the pitch
+# too, which no calibration names yet; the mirror's power and the beacons' positions it
+# does not estimate)
+CALIBRATED3 = ("pan", "scale")
+
+
+def check_calibration3(name: str, calibration: SelfCalibration) -> None:
+    """Refuse, naming the scene, a calibration the 3-D solve cannot make: a nuisance
+    other than CALIBRATED3, or the beacons' positions estimated (a position σ)."""
+    other = [n for n in calibration.nuisances if n not in CALIBRATED3]
+    if other or calibration.position_sigma:
+        what = ", ".join(other) or f"the beacons' positions (σ {calibration.position_sigma:g} cm)"
+        raise BadParameter("calibration", f"{name}: the 3-D solve estimates "
+                           f"{' and '.join(CALIBRATED3)} and not yet {what} (the planar "
+                           "solve does)")
+
+
+def nuisances3(model: ErrorModel, sigma: ObjectSigmas, asked: SelfCalibration = PLAIN
+               ) -> tuple[tuple[str, ...], dict[str, float]]:
+    """The bench's shared errors the 3-D solve estimates, with their priors: those
+    ``asked`` (a prior the user states wins over the model's, none leaves it free), and
+    the pan and range scale a bench model's tolerances give; an α error every image of
+    a frame shares widens the pan's prior (an ideal-bench model, asked nothing: none)."""
+    cal = model_calibration(model, asked)
+    nuisances = tuple(n for n in cal.nuisances if n in CALIBRATED3)
+    priors = {n: s for n, s in cal.priors.items() if n in nuisances}
+    if sigma.shared_alpha_deg and ("pan" in priors or "pan" not in nuisances):
         priors["pan"] = math.hypot(priors.get("pan", 0.0), sigma.shared_alpha_deg)
-    return tuple(priors), priors
+        nuisances = tuple(dict.fromkeys((*nuisances, "pan")))
+    return nuisances, priors
 
 
 def _score3(scene: Scene, truth: GroundTruth, fit: Fit3, seen: Measurements3,
