@@ -141,11 +141,12 @@ def load_spec(path: str | Path | None = None) -> DatasetSpec:
     # draws find range errors (wrong types, lo > hi) with their key, and a spec under
     # which no usable scene exists
     _draw(spec, np.random.default_rng(0), path)
-    try:
+    try:  # the bench's ranges at their ends first, each refused by its own key: a range
+        # so wide that no draw is usable says which range, not only that none was
+        check_bench_ends(spec, r)
         _sample(spec, 0, "probe", tries=min(PROBE_TRIES, spec.get("max_tries", 5000)))
     except NoValidScene as exc:
         raise r.fail("", str(exc)) from None
-    check_bench_ends(spec, r)
     return DatasetSpec(spec)
 
 
