@@ -136,27 +136,36 @@ def test_commands_in_the_plane_refuse_a_3d_scene_in_one_line(tmp_path, command):
     assert not out.exists()
 
 
-def test_solve_takes_3d_measurements(tmp_path):
-    """A measurement file with an observer's height and elevations is solved in 3-D: the
-    exact readings of a leaning mirror (written out here with measured3) give back its
-    plane and the target."""
+LEANING_TARGET = np.array([57.0, 50.0, 6.0])
+
+
+def _leaning_readings(pan_error_deg: float = 0.0) -> dict:
+    """A 3-D measurements document: the exact readings (measured3) of a mirror leaning
+    2.5° from a camera 9 cm up, two beacons and LEANING_TARGET, every azimuth turned by
+    ``pan_error_deg``."""
     from solver.sltr3d import MirrorPlane, measured3
 
     cam = np.array([0.0, 0.0, 9.0])
     plane = MirrorPlane.from_pose([35.0, 62.0, 0.0], 18.0, 2.5, toward=cam)
     beacons = [np.array([33.0, 53.0, 4.0]), np.array([42.0, 56.0, 0.0])]
-    target = np.array([57.0, 50.0, 6.0])
     heights, fronts = (4.8, 4.8, 10.0), (0.338, 0.338, 0.2)
     read = [measured3(cam, plane, p, height=h, front=f)
-            for p, h, f in zip([*beacons, target], heights, fronts, strict=True)]
+            for p, h, f in zip([*beacons, LEANING_TARGET], heights, fronts, strict=True)]
 
     def image(s):
-        return {"alpha_deg": s[0], "elevation_deg": s[1], "d_total": s[2]}
+        return {"alpha_deg": s[0] + pan_error_deg, "elevation_deg": s[1], "d_total": s[2]}
 
-    doc = {"observer": cam.tolist(), "target": image(read[2]),
-           "beacons": [{"position": b.tolist(), **image(s)}
-                       for b, s in zip(beacons, read, strict=False)],
-           "heights": list(heights), "fronts": list(fronts)}
+    return {"observer": cam.tolist(), "target": image(read[2]),
+            "beacons": [{"position": b.tolist(), **image(s)}
+                        for b, s in zip(beacons, read, strict=False)],
+            "heights": list(heights), "fronts": list(fronts)}
+
+
+def test_solve_takes_3d_measurements(tmp_path):
+    """A measurement file with an observer's height and elevations is solved in 3-D: the
+    exact readings of a leaning mirror (written out here with measured3) give back its
+    plane and the target."""
+    doc, target = _leaning_readings(), LEANING_TARGET
     f = tmp_path / "m3.json"
     f.write_text(json.dumps(doc))
     run = subprocess.run([sys.executable, "-m", "mirrorsim.cli.main", "solve", str(f),
@@ -199,24 +208,9 @@ def test_solve_calibrates_3d_measurements_on_the_command_line(tmp_path):
     """Exact readings of a leaning mirror with every azimuth turned by a 0.4° pan error:
     plain, the target comes out off; with --calibrate pan it comes back to 1e-5 cm and the
     pan to 1e-6°; --calibrate power is refused in one line, exit 2."""
-    from solver.sltr3d import MirrorPlane, measured3
-
-    cam = np.array([0.0, 0.0, 9.0])
-    plane = MirrorPlane.from_pose([35.0, 62.0, 0.0], 18.0, 2.5, toward=cam)
-    beacons = [np.array([33.0, 53.0, 4.0]), np.array([42.0, 56.0, 0.0])]
-    target = np.array([57.0, 50.0, 6.0])
-    heights, fronts = (4.8, 4.8, 10.0), (0.338, 0.338, 0.2)
-    read = [measured3(cam, plane, p, height=h, front=f)
-            for p, h, f in zip([*beacons, target], heights, fronts, strict=True)]
-
-    def image(s):
-        return {"alpha_deg": s[0] + 0.4, "elevation_deg": s[1], "d_total": s[2]}
-
+    target = LEANING_TARGET
     f = tmp_path / "m3.json"
-    f.write_text(json.dumps({"observer": cam.tolist(), "target": image(read[2]),
-                             "beacons": [{"position": b.tolist(), **image(s)}
-                                         for b, s in zip(beacons, read, strict=False)],
-                             "heights": list(heights), "fronts": list(fronts)}))
+    f.write_text(json.dumps(_leaning_readings(pan_error_deg=0.4)))
 
     def solve(*extra):
         return subprocess.run([sys.executable, "-m", "mirrorsim.cli.main", "solve", str(f),

@@ -42,6 +42,7 @@ import cv2
 import numpy as np
 
 from mirrorsim.camera.sensor import undistort
+from mirrorsim.detection.area_edges import bands
 from mirrorsim.detection.assign import assign_beacons
 from mirrorsim.detection.edges import cut_by_frame, measure_region, to_linear
 from mirrorsim.detection.image_geometry import (
@@ -236,7 +237,8 @@ def _sides_behind_pencils(m: ImageMeasurement, boxes: list[tuple[int, int, int, 
     if m.height_px is None:
         return m
     _, v0, _, v1 = m.bbox_px
-    lo, hi = v0 + 0.2 * (v1 - v0), v1 - 0.2 * (v1 - v0)  # (area_edges' default margin)
+    rows = bands(v0, v1, band_px=3)  # those the sides are measured on (median_edges')
+    lo, hi = float(rows[0][0]), float(rows[-1][-1])
     hidden = [side for side, u in (("left", m.u_left), ("right", m.u_right)) if u is not None
               and any(b[0] - BEHIND_PENCIL_PX <= u <= b[2] + BEHIND_PENCIL_PX
                       and min(b[3], hi) - max(b[1], lo) >= 0.5 * (hi - lo) for b in boxes)]

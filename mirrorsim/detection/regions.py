@@ -11,6 +11,8 @@ import math
 import cv2
 import numpy as np
 
+from mirrorsim.detection.edges import cut_by_frame
+
 FRAME_OPEN_PX = 13  # wider than the mirror frame's bars at the distances of our scenes
 # where no panel is found so, the openings tried next: a long lens near the mirror makes
 # its bars wider (14 px on a 1920 px frame of 46° with the mirror 80 cm away, which
@@ -92,7 +94,7 @@ def find_target(img: np.ndarray, ratio: float, *, posts: bool = False
             else None
         found = [b for b in (plain, filled) if b is not None]
         if found:
-            return min(found, key=lambda b: (not _rows_whole(b, img.shape), abs(math.log(
+            return min(found, key=lambda b: (bool(cut_by_frame(b, img.shape[0])), abs(math.log(
                 (b[2] - b[0] + 1) / (b[3] - b[1] + 1) / ratio))))
     return None
 
@@ -128,14 +130,10 @@ def _find_panel(blur: np.ndarray, neutral: np.ndarray, grey: np.ndarray, inside:
 
 def _rank(cand: tuple[int, int, int, int, int], shape: tuple[int, ...]) -> tuple[bool, int]:
     """A panel region's rank: one whose rows the frame leaves whole before one it cuts at
-    the top or bottom, which has no height to measure (a wall's grey cut by the frame's
-    bottom, larger than the panel, had been taken for it), then the larger."""
-    return _rows_whole(cand, shape), cand[4]
-
-
-def _rows_whole(box: tuple[int, ...], shape: tuple[int, ...]) -> bool:
-    """Whether a region (u0, v0, u1, v1, ...) stays off the frame's first and last rows."""
-    return box[1] > 0 and box[3] < shape[0] - 1
+    the top or bottom (:func:`~mirrorsim.detection.edges.cut_by_frame`), which has no
+    height to measure (a wall's grey cut by the frame's bottom, larger than the panel,
+    had been taken for it), then the larger."""
+    return not cut_by_frame(cand[:4], shape[0]), cand[4]
 
 
 def _regrow(blur, neutral, inside, labels, k, box, whole: bool, ratio: float, kernel,
