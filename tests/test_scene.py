@@ -355,6 +355,31 @@ def test_check_warns_of_a_pencil_image_too_thin_for_its_sides():
     assert width == pytest.approx(0.69 * fx / depth, rel=0.05) and width < 3.5
 
 
+def test_check_warns_of_a_pencil_image_too_short_for_its_distance():
+    """A 2 cm pencil (1.3 cm of paint) in the default scene's mirror on an 800 × 450
+    frame: its paint's image is under 12 px tall, and one warning names its key and its
+    height as the pinhole gives it (the paint at the virtual image's depth along the
+    optical axis); on a 960 × 544 frame it is over 12 px, and none."""
+    from mirrorsim.pipelines.scenes import edit_scene
+    from mirrorsim.scene.model import pencil_paint_height
+
+    scene = load_scene(SCENES / "default.yaml")
+    short = [{"position": list(scene.beacons[0].position), "height": 2.0}]
+    wide = edit_scene(scene, {"camera": {"resolution": [960, 544]}, "beacons": short})
+    assert not any("px tall" in w for w in wide.warnings)
+    small = edit_scene(scene, {"camera": {"resolution": [800, 450]}, "beacons": short})
+    said = [w for w in small.warnings if "px tall" in w]
+    assert len(said) == 1 and said[0].startswith("beacons[0].position: the pencil's paint")
+    cam, m, b = small.camera, small.mirror, small.beacons[0]
+    n = np.array([-math.sin(math.radians(m.yaw)), math.cos(math.radians(m.yaw))])
+    p = np.asarray(b.position) - 2 * ((np.asarray(b.position) - m.center) @ n) * n
+    axis = np.array([math.cos(math.radians(cam.pan_deg)), math.sin(math.radians(cam.pan_deg))])
+    depth = (p - cam.position) @ axis
+    fx = cam.resolution[0] / 2 / math.tan(math.radians(cam.hfov) / 2)
+    tall = float(said[0].split(" px tall")[0].rsplit(" ", 1)[1])
+    assert tall == pytest.approx(pencil_paint_height(2.0) * fx / depth, rel=0.05) and tall < 12
+
+
 def test_check_warns_of_a_pencil_whose_reflection_reads_at_its_own_distance():
     """A pencil near the glass: its reflection lies 2·depth·cos i farther than itself
     (worked here by reflecting it in the mirror's line).  Under 3 % (the detector's 2 %

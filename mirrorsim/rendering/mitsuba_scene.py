@@ -163,6 +163,11 @@ def build_direct_dict(board: Board, camera: Camera, obj: Target | Beacon, *, spp
     ``crop`` = (u0, v0, u1, v1) renders only that part of the film.
     """
     d = _stage(board, camera, spp, "independent")
+    # no room floor: its far edge, 2.4 m off, lies just behind a reference panel's top
+    # where the camera stands 6.4 cm above it (at 1 m), and its darker strip there read
+    # as the panel (K 0.4-1.0 % high, every d_total as much too long); the room map's
+    # floor behind the reference is uniform
+    del d["room_floor"]
     d.update(target_shapes(obj) if isinstance(obj, Target) else pencil_shapes(0, obj))
     if crop is not None:
         d["sensor"] = _cropped(d["sensor"], crop)

@@ -30,6 +30,7 @@ from mirrorsim.scene.model import (
     Occluder,
     Scene,
     footprints,
+    pencil_paint_height,
 )
 from mirrorsim.truth import optics, visibility
 from solver.geometry import segment_distance, signed_distance, unit
@@ -241,11 +242,18 @@ def crossing_images(scene: Scene, bkey: Callable[[int], str]) -> list[str]:
 # 4 px that the pencil's width alone decided, two were measured
 MIN_PENCIL_PX = 3.5
 PENCIL_FLATS_HALF = 0.345  # cm: half the hexagon's width across flats, its narrowest
+# the shortest pencil paint image (px) whose d_total the detector reads to within 1 %:
+# of the ideal acceptance sets' scenes (seeds 61206001-61207011, each measured by the
+# detector of its day) whose shortest pencil image was under 12 px, 9 of 10 had an image
+# whose d_total read more than 1 % off (0.1 px on 10 px), and one of 8 px was not found
+# at all (a pencil region is at least 30 px in area); from 12 to 20 px, 8 of 29
+MIN_PENCIL_HEIGHT_PX = 12.0
 
 
 def thin_images(scene: Scene, bkey: Callable[[int], str]) -> list[str]:
-    """Warn of a pencil whose image in the mirror is narrower than MIN_PENCIL_PX: the
-    detector cannot find its sides, so neither its bearing."""
+    """Warn of a pencil whose image in the mirror is narrower than MIN_PENCIL_PX (the
+    detector cannot find its sides, so neither its bearing) or whose paint is shorter
+    than MIN_PENCIL_HEIGHT_PX (its distance is rough, or the pencil is not found)."""
     out = []
     for i, b in enumerate(scene.beacons):
         virtual, z0 = _virtual_base(scene, b)
@@ -256,6 +264,14 @@ def thin_images(scene: Scene, bkey: Callable[[int], str]) -> list[str]:
                        f"{box[2] - box[0]:.1f} px across, and the detector finds a pencil's "
                        f"sides from {MIN_PENCIL_PX:g} px: bring it or the camera nearer the "
                        "mirror, or widen the frame")
+            continue
+        paint = optics.upright_box(scene.camera, virtual, 0.0,
+                                   height=pencil_paint_height(b.height), z0=z0)
+        if paint is not None and paint[3] - paint[1] < MIN_PENCIL_HEIGHT_PX:
+            out.append(f"{bkey(i)}.position: the pencil's paint in the mirror is "
+                       f"{paint[3] - paint[1]:.1f} px tall, and the detector reads a "
+                       f"pencil's distance to 1 % from {MIN_PENCIL_HEIGHT_PX:g} px: bring it "
+                       "or the camera nearer the mirror, or a taller pencil")
     return out
 
 
