@@ -227,6 +227,30 @@ def test_the_sigma_law_recovers_a_known_one_and_stays_positive():
             assert np.all(model.fits[kind][q].log_sigma(far) > 0)
 
 
+def test_the_sigma_law_of_student_t_errors_is_their_scale_and_their_dof():
+    """Errors σ·t₃ with σ = 0.002·(h/100 px)^−1: the law is their scale, not their RMS
+    (√3 times it), within 10 %, with ν within 2–4.5; the model says how far 95 % of them
+    reach (t₃'s 95 % point, 3.18, over 1.96: a tail of 1.6) and does not apply it.  Errors
+    from a Gaussian give ν at its bound."""
+    rng = np.random.default_rng(11)
+    h = rng.uniform(20.0, 400.0, 3000)
+    X = np.log(h)[:, None]
+    law, nu, gross = sigma_laws.gross_free_fit(X, 0.002 * (h / 100) ** -1.0
+                                               * rng.standard_t(3, h.size))
+    assert law(np.log([[100.0]]))[0] == pytest.approx(0.002, rel=0.1)
+    assert 2.0 <= nu <= 4.5 and gross.sum() <= 6
+    cols = synthetic_columns(3000, 3)
+    for kind in ("target", "beacon"):
+        hk = np.asarray(cols[f"{kind}_height_px_meas"])
+        cols[f"{kind}_alpha_err"] = 0.002 * (hk / 100) ** -1.0 * rng.standard_t(3, hk.size)
+    a = errormodel.fit(cols).fits["target"]["alpha"]
+    assert a.tail == pytest.approx(3.182 / 1.96, rel=0.1) and 2.0 <= a.dof <= 4.5
+    x = feature_vector(np.array([100.0]), 0.0, 0.55, noise=0.0125, jpeg_quality=0)
+    assert a.sigma(x)[0] == pytest.approx(a.log_sigma(x)[0])
+    _, nu_gauss, _ = sigma_laws.gross_free_fit(X, rng.normal(0.0, 0.002, h.size))
+    assert nu_gauss > 100
+
+
 def test_a_fit_on_too_few_rows_says_how_many_it_needs():
     with pytest.raises(ValueError, match=r"too few usable rows \(6\).*30 needed"):
         errormodel.fit(synthetic_columns(6, 0))
@@ -249,8 +273,10 @@ def test_validation_of_an_honest_model_on_held_out_rows():
             assert one == pytest.approx(0.683, abs=0.06) and two == pytest.approx(0.954, abs=0.03)
     assert model.tail.dof > 20 and model.tail.scale == pytest.approx(1.0, abs=0.1)
     # a model whose σ's are 3× too small (its tail the honest one's) fails visibly
-    small = replace(model, fits={k: {q: replace(f, tail=f.tail / 3) for q, f in qs.items()}
-                                 for k, qs in model.fits.items()})
+    small = replace(model, fits={
+        k: {q: replace(f, log_sigma=replace(f.log_sigma,
+                                            intercept=f.log_sigma.intercept - math.log(3)))
+            for q, f in qs.items()} for k, qs in model.fits.items()})
     assert uncertainty.validate(small, test).coverage[2].fraction < 0.5
     # fitted on rows whose σ's were 3× too small, the tail says so: it widens the ellipse
     train_small = {**train, **{f"{k}_{q}": np.asarray(train[f"{k}_{q}"]) / 3

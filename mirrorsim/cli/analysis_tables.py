@@ -201,11 +201,17 @@ def track_table(report: TrackReport) -> str:
                       f"{f.mirror_offset_error_cm:.3f} cm"])
 
 
+def _dof(nu: float) -> str:
+    """A degrees-of-freedom figure (∞: a Gaussian's; from 1000 on, as good as one)."""
+    return "∞" if nu >= 1e3 else f"{nu:.2g}"
+
+
 def error_model_summary(model: ErrorModel) -> str:
     """The model in a few printed lines (σ_d in %)."""
-    lines = [f"error model ({model.kind} bench): σ = tail·exp(w·z), z = [1, "
-             + ", ".join(SIGMA_FEATURES) + "] standardized; α in degrees at "
-             f"fx {model.fx_px or float('nan'):.0f} px, d_total in % of d_total"]
+    lines = [f"error model ({model.kind} bench): σ = exp(w·z), the scale of a Student-t of "
+             "ν degrees of freedom, z = [1, " + ", ".join(SIGMA_FEATURES) + "] standardized; "
+             f"α in degrees at fx {model.fx_px or float('nan'):.0f} px, d_total in % of "
+             "d_total; 95 % of the rows' errors within 1.96·tail σ"]
     for kind, qs in model.fits.items():
         for q, m in qs.items():
             scale, unit = (1.0, "°") if q == "alpha" else (100.0, " %")
@@ -213,7 +219,8 @@ def error_model_summary(model: ErrorModel) -> str:
                                                           strict=True))
             lines.append(f"  {kind:6s} {q:5s}: n={m.n} ({m.gross_errors} gross left out of "
                          f"the law), RMS own error {scale * m.rms:.4f}{unit}, typical σ "
-                         f"{scale * m.typical_sigma:.4f}{unit}, tail ×{m.tail:.2f}; log σ "
+                         f"{scale * m.typical_sigma:.4f}{unit}, ν {_dof(m.dof)}, tail "
+                         f"×{m.tail:.2f}; log σ "
                          f"slopes: {w}")
     lines.append(f"  an α offset shared by every image of a frame beyond the tolerances: σ "
                  f"{model.shared_alpha_deg:.4f}°" + (

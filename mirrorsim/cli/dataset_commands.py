@@ -177,8 +177,10 @@ def _errormodel_options(p):
 @command("errormodel", "fit the detector's error model to a dataset, and test it on another",
          "Fit each measurement's σ (target and beacon, alpha and d_total) as a function of what "
          "its frame shows (the image's height in pixels, its angle off the optical axis, its "
-         "edges' contrast, the frame's noise and JPEG quality), with a tail factor that "
-         "holds 95 %% of the errors within 1.96 σ, the domain it was fitted on (a scene "
+         "edges' contrast, the frame's noise and JPEG quality): the scale of a Student-t, "
+         "its degrees of freedom fitted with it (the detector's errors are heavier-tailed "
+         "than a Gaussian's), and the target's tail that says where the solve's ellipses "
+         "are drawn; the domain it was fitted on (a scene "
          "outside it gets a warning) and, for a spec with a bench block, the benches' shared "
          "errors as tolerances the solver estimates with priors; and the errors' bias against "
          "geometry and bench (to explain them).  Needs at least "

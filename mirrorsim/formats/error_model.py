@@ -4,12 +4,15 @@ experimenter can compute for each measurement from what its frame shows; the dom
 the model was fitted on; and, for a model of hand-built benches, the population of
 benches it describes (the tolerances of the errors every image of a frame shares).
 
-A measurement's σ is ``tail · exp(w · z)`` with z = [1, standardized features of the
-image] (:data:`SIGMA_FEATURES`: its height in pixels, its angle off the optical axis,
-the contrast of its edges, the frame's noise and its JPEG compression), all known when
-the photograph is measured, never the truth or a bench's imperfection values.  ``tail``
-widens the Gaussian fit so that 95 % of the training rows' errors lie within 1.96 σ
-(the detector's errors are heavier-tailed than a Gaussian).  The α law is in pixels at
+A measurement's σ is ``exp(w · z)`` with z = [1, standardized features of the image]
+(:data:`SIGMA_FEATURES`: its height in pixels, its angle off the optical axis, the
+contrast of its edges, the frame's noise and its JPEG compression), all known when the
+photograph is measured, never the truth or a bench's imperfection values: the scale of
+a Student-t of ``dof`` degrees of freedom fitted with it (the detector's errors are
+heavier-tailed than a Gaussian's; a Gaussian's σ, their RMS, is wide for most of them).
+``tail`` says how far 95 % of the training rows' errors reach: within 1.96·tail σ.
+The target's :class:`~solver.measurements.Tail` then says where the solve's ellipses
+are drawn.  The α law is in pixels at
 the training frames' median focal length (``fx_px``): σ_α scales as fx_px / fx; the
 d_total law needs no such factor, the image's height in pixels already says it.
 
@@ -48,8 +51,10 @@ from solver.measurements import (
 )
 
 FORMAT = "mirrorsim error model"
-VERSION = 3
+VERSION = 4
 KINDS = ("target", "beacon")
+# the bounds of a σ law's degrees of freedom: from a Cauchy's to a Gaussian's
+SIGMA_DOF_RANGE = (1.0, 1e4)
 QUANTITIES = ("alpha", "d_rel")
 UNITS = {"alpha": "deg", "d_rel": "fraction of d_total (0.002 = 0.2 %)"}
 DEFAULT_NAMES = {"ideal": "error_model.json", "bench": "error_model_bench.json"}
@@ -141,19 +146,22 @@ class QuantityFit:
     n: int
     gross_errors: int
     rms: float
-    typical_sigma: float  # RMS over the training rows of the predicted σ (tail included)
+    typical_sigma: float  # RMS over the training rows (gross errors apart) of the σ
     bias: tuple[float, ...] = ()
-    # the factor on the Gaussian law's σ that puts 95 % of the training rows' errors
-    # within 1.96 σ (≥ 1): the tails a Gaussian fit does not see
+    # how far 95 % of the training rows' errors reach: within 1.96·tail σ (≥ 1; a
+    # Student-t's of ``dof``: 1.6 at ν 3, 1 for a Gaussian).  Said, not applied: the
+    # target's tail widens the ellipse
     tail: float = 1.0
+    dof: float = math.inf  # the Student-t's degrees of freedom fitted with the law
 
     def sigma(self, features: np.ndarray) -> np.ndarray:
         """The σ of images with these feature rows (at the training's focal length)."""
-        return self.tail * self.log_sigma(features)
+        return self.log_sigma(features)
 
     def to_json(self) -> dict:
-        """The file's entry."""
-        return {"log_sigma": self.log_sigma.to_json(), "tail": self.tail, "n": self.n,
+        """The file's entry (an infinite dof as null)."""
+        return {"log_sigma": self.log_sigma.to_json(), "tail": self.tail,
+                "dof": None if math.isinf(self.dof) else self.dof, "n": self.n,
                 "gross_errors": self.gross_errors, "rms": self.rms,
                 "typical_sigma": self.typical_sigma, "bias": list(self.bias)}
 

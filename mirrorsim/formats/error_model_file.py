@@ -16,6 +16,7 @@ from mirrorsim.formats.error_model import (
     FORMAT,
     KINDS,
     QUANTITIES,
+    SIGMA_DOF_RANGE,
     VERSION,
     ErrorModel,
     ErrorModelError,
@@ -161,7 +162,7 @@ def _tolerances(r: Reader, value: Any) -> BenchTolerances:
 
 
 def _quantity(r: Reader, value: Any, key: str, q: str) -> QuantityFit:
-    f = r.mapping(value, key, ("log_sigma", "n", "typical_sigma", "tail"),
+    f = r.mapping(value, key, ("log_sigma", "n", "typical_sigma", "tail", "dof"),
                   optional=("gross_errors", "rms", "bias"))
     ls = r.mapping(f["log_sigma"], f"{key}.log_sigma", ("intercept", "weights", "mean", "scale"))
     k = len(SIGMA_FEATURES)
@@ -185,7 +186,10 @@ def _quantity(r: Reader, value: Any, key: str, q: str) -> QuantityFit:
                        typical,
                        tuple(r.number(b, f"{key}.bias[{i}]")
                              for i, b in enumerate(_list(r, bias, f"{key}.bias"))),
-                       r.number(f["tail"], f"{key}.tail", low=1.0, high=100.0))
+                       r.number(f["tail"], f"{key}.tail", low=1.0, high=100.0),
+                       math.inf if f["dof"] is None else
+                       r.number(f["dof"], f"{key}.dof", low=SIGMA_DOF_RANGE[0],
+                                high=SIGMA_DOF_RANGE[1] * (1 + 1e-9)))
 
 
 def _list(r: Reader, value: Any, key: str, length: int | None = None) -> list:

@@ -5,9 +5,11 @@ For each object kind (target, beacon) and quantity (α error in degrees, relativ
 error):
 
 * **σ** (:mod:`mirrorsim.formats.error_model`): log σ linear in the measured features
-  (log d_total, |off-axis bearing|), fitted by maximum likelihood on the errors about
-  the truth, gross errors (beyond GROSS predicted σ's) left out and counted.  What the
-  solver weights with, and what its error ellipse is made of.
+  (:data:`~mirrorsim.formats.error_model_scope.SIGMA_FEATURES`), fitted with its degrees
+  of freedom ν by maximum likelihood of a Student-t on the errors about the truth, gross
+  errors (beyond GROSS predicted σ's and the t's 99.9 % reach) left out and counted.
+  What the solver weights with, and what its error ellipse is made of; its ``tail``
+  says how far 95 % of the training errors reach, in σ's over 1.96.
 * **bias** (diagnostic): a robust linear fit (Huber loss, scipy's ``least_squares``) in
   the geometry [1, d_total, signed off-axis bearing, mirror incidence, 1/image height]
   and, for a dataset drawn with bench imperfections, each imperfection that varies in it
@@ -79,7 +81,7 @@ MIN_ROWS = 5 * (len(SIGMA_FEATURES) + 1)
 UNSTABLE_REFUSE = 30.0
 UNSTABLE_WARN = 4.0
 SPAN_REFUSE = 1e4
-TAIL_LEVEL = 0.95  # the tail factor puts this share of the training errors within z σ's
+TAIL_LEVEL = 0.95  # the tail factor: this share of the training errors within tail·z σ's
 TAIL_Z = 1.959964
 
 
@@ -161,10 +163,9 @@ def _law(which: str, S: np.ndarray, own: np.ndarray, *, bias: np.ndarray,
     """One quantity's σ law fitted to its rows' own errors (gross errors apart), its tail
     factor on them all; refused where its σ's span more than SPAN_REFUSE or it moves by
     more than UNSTABLE_REFUSE on resamples of its rows (a note beyond UNSTABLE_WARN)."""
-    law, gross = gross_free_fit(S, own)
-    z = np.abs(own) / law(S)
-    tail = max(1.0, float(np.quantile(z, TAIL_LEVEL)) / TAIL_Z)
-    sig = tail * law(S)
+    law, nu, gross = gross_free_fit(S, own)
+    sig = law(S)
+    tail = max(1.0, float(np.quantile(np.abs(own) / sig, TAIL_LEVEL)) / TAIL_Z)
     span = float(sig.max() / sig.min())
     if span > SPAN_REFUSE:
         raise ValueError(f"the {which} law is unstable: its σ's over its own "
@@ -183,7 +184,7 @@ def _law(which: str, S: np.ndarray, own: np.ndarray, *, bias: np.ndarray,
     return QuantityFit(log_sigma=law, n=len(own), gross_errors=int(gross.sum()),
                        rms=float(np.sqrt(np.mean(own ** 2))),
                        typical_sigma=float(np.sqrt(np.mean(sig[~gross] ** 2))),
-                       bias=tuple(bias.tolist()), tail=tail)
+                       bias=tuple(bias.tolist()), tail=tail, dof=nu)
 
 
 def _shared_alpha(fits: dict[str, dict[str, QuantityFit]],
@@ -208,7 +209,7 @@ def _shared_alpha(fits: dict[str, dict[str, QuantityFit]],
         tail = max(1.0, float(np.quantile(np.abs(own[m]) / whole, TAIL_LEVEL)) / TAIL_Z)
         fits[kind]["alpha"] = replace(
             fits[kind]["alpha"], log_sigma=law, tail=tail,
-            typical_sigma=float(np.sqrt(np.mean((tail * law(S[m])) ** 2))))
+            typical_sigma=float(np.sqrt(np.mean(law(S[m]) ** 2))))
     return shared
 
 
