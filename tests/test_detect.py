@@ -601,10 +601,11 @@ def test_a_jpeg_pencil_kept_by_one_side_on_its_colour_is_not_used_when_partly_hi
     m = ImageMeasurement(kind="beacon", source="mirror", bbox_px=[u0, 500, u1, 580],
                          u_axis=float("nan"), v_top=500.0, v_bottom=580.0, height_px=height,
                          width_px=None, u_left=u0 - 0.5, u_right=None,
-                         notes=(SIDES_ON_COLOUR,))
+                         notes=(SIDES_ON_COLOUR,), sides_on_colour=True)
     got = pencil_geometry(cam, m, paint, k=5000.0)
     assert (got.clipped == "") is used and (got.clipped == "left") is not used
-    plain = pencil_geometry(cam, replace(m, notes=()), paint, k=5000.0)
+    plain = pencil_geometry(cam, replace(m, notes=(), sides_on_colour=False), paint,
+                            k=5000.0)
     assert plain.clipped == "" and (plain.alpha_deg == got.alpha_deg) is used
 
 
@@ -794,7 +795,7 @@ def test_a_panel_region_that_took_in_the_frames_bar_loses_that_side():
     img[200:320, int(left) - 2:int(left)] = back * 0.6
     box = (int(left) - 6, int(top), int(right) - 1, int(foot) - 1)
     m = edges.measure_region(img, box, "target")
-    assert edges.DARKER_SIDE + "left" in m.notes
+    assert edges.DARKER_SIDE + "left" in m.notes and m.darker_sides == ("left",)
     g = target_geometry(cam, m, size, k=1000.0)
     assert g.u_axis == pytest.approx((left + right) / 2 - 0.5, abs=0.3)
 

@@ -107,7 +107,8 @@ def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str,
         outside=Surround(*(float(np.mean(o)) for o in (e.out_left, e.out_right, e.out_top,
                                                        e.out_bottom))),
         inside=float(np.median(core.reshape(-1, img.shape[-1]).mean(axis=1))),
-        notes=(*e.notes, *cut))
+        notes=(*e.notes, *cut), sides_on_colour=e.sides_on_colour,
+        darker_sides=e.darker_sides)
     if left is not None and right is not None:
         m = replace(m, u_axis=(left + right) / 2)
     return _with_clipping(m, cut, v0 <= 0)
@@ -143,6 +144,8 @@ class _Edges(NamedTuple):
     out_left: np.ndarray
     out_right: np.ndarray
     notes: tuple[str, ...]
+    sides_on_colour: bool = False  # a JPEG pencil's sides on the image's colour
+    darker_sides: tuple[str, ...] = ()  # a panel's sides darker just inside (DARKER_SIDE)
 
 
 # the middle of a pencil's width whose bands its top is measured on (a margin of 0.35
@@ -226,7 +229,7 @@ def _pencil_edges(img: np.ndarray, box: tuple[int, int, int, int], *, subsampled
             else None
         sides_note = (*sides_note, SIDES_ON_COLOUR)
     return _Edges(top, bottom, left, right, out_top, out_bottom, out_left, out_right,
-                  sides_note)
+                  sides_note, sides_on_colour=SIDES_ON_COLOUR in sides_note)
 
 
 def _panel_edges(img: np.ndarray, box: tuple[int, int, int, int], *, on_chroma: bool,
@@ -274,9 +277,10 @@ def _panel_edges(img: np.ndarray, box: tuple[int, int, int, int], *, on_chroma: 
     left, right, out_left, out_right = median_edges((img, img), (u0, u1), (v0, v1), axis=1,
                                                      slope=(True, True),
                                                      max_off=SIDE_MAX_OFF_PX)
-    sides_note += _darker_sides(img, box, left, right)
+    darker = _darker_sides(img, box, left, right)
     return _Edges(top, bottom, left, right, out_top, out_bottom, out_left, out_right,
-                  sides_note)
+                  (*sides_note, *(DARKER_SIDE + side for side in darker)),
+                  darker_sides=darker)
 
 
 # the note of a panel's side whose pixels just inside it are much darker than the
@@ -289,13 +293,12 @@ DARKER_RATIO = 0.7  # a side strip's level over the middle's (a frame bar: 0.43)
 
 def _darker_sides(img: np.ndarray, box: tuple[int, int, int, int], left: float | None,
                   right: float | None) -> tuple[str, ...]:
-    """Notes of the sides (DARKER_SIDE + 'left' / 'right') whose 2-px strip just inside
-    the edge, over the middle half of the rows, is darker than DARKER_RATIO of the
-    panel's middle."""
+    """The sides ('left', 'right') whose 2-px strip just inside the edge, over the
+    middle half of the rows, is darker than DARKER_RATIO of the panel's middle."""
     u0, v0, u1, v1 = box
     rows = slice(v0 + (v1 - v0) // 4, v1 - (v1 - v0) // 4 + 1)
     core = float(np.median(img[rows, u0 + (u1 - u0) // 4: u1 - (u1 - u0) // 4 + 1]))
-    notes = []
+    sides = []
     for side, edge, step in (("left", left, 1), ("right", right, -1)):
         if edge is None or core <= 0:
             continue
@@ -306,5 +309,5 @@ def _darker_sides(img: np.ndarray, box: tuple[int, int, int, int], left: float |
             continue
         strip = float(np.median(cells))
         if strip < DARKER_RATIO * core:
-            notes.append(DARKER_SIDE + side)
-    return tuple(notes)
+            sides.append(side)
+    return tuple(sides)

@@ -9,7 +9,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 
-from mirrorsim.detection.edges import DARKER_SIDE, SIDES_ON_COLOUR
 from mirrorsim.detection.image_measurement import ImageMeasurement
 from mirrorsim.errors import DetectionError
 from mirrorsim.scene.model import FRONT_OFFSET, PENCIL_RADIUS, Camera, Point2
@@ -161,7 +160,7 @@ def pencil_geometry(cam: Camera, m: ImageMeasurement, paint_height: float, *, k:
         alpha = alpha_of(cam, u_axis)
         notes = (*notes, f"no edge on the {missing} (no contrast there, or not the "
                  "pencil's): axis from the other edge and the pencil's half-width")
-        if SIDES_ON_COLOUR in m.notes:
+        if m.sides_on_colour:
             # its one edge, measured on the colour, may be where the mirror's frame hides
             # part of it: a yellow region narrower than the height implies says so (a
             # whole JPEG pencil's region: 1.03-1.12 of it, widened by the blur)
@@ -240,7 +239,7 @@ def _target_clip(cam: Camera, m: ImageMeasurement, size: Point2, present: list[s
                 *m.notes, f"image {100 * (1 - r):.1f}% narrower than its height implies, "
                 f"beside a dark edge: clipped on the {side}, axis from the other edge"))
         elif r > 1 + tol and len(darker := [s_ for s_ in present
-                                            if f"{DARKER_SIDE}{s_}" in m.notes]) == 1:
+                                            if s_ in m.darker_sides]) == 1:
             # wider than the height allows, one side darker just inside: the region took
             # in something dark beside the panel (its side found at that thing's far
             # edge, 6 px out, α 0.26° off); that side is dropped

@@ -41,3 +41,6 @@ class ImageMeasurement:
     d_total: float | None = None
     beacon_index: int | None = None
     notes: tuple[str, ...] = ()
+    # what the edges' measurement found that the pixel geometry weighs (each also a note)
+    sides_on_colour: bool = False  # a JPEG pencil's sides measured on the image's colour
+    darker_sides: tuple[str, ...] = ()  # a panel's sides darker just inside their edge
