@@ -66,7 +66,8 @@ def _worst_case(rep: Report, bounds: np.ndarray) -> tuple[float, float]:
 def assert_consistent(report: Report) -> None:
     """The two rules every report keeps: its Cramér–Rao bound is its own estimator's,
     never above its covariance's RMS but for the linearization's difference, and its
-    sentence says inside or outside as the distance is (2.45 σ: χ₂'s 95 %); and the
+    sentence says inside or outside as the distance is (against the 95 % radius of its
+    σ's tail: 2.45 σ for a Gaussian's); and the
     target's row shows both of the ellipse's axes.
 
     The same information taken at the estimate instead of the truth is the covariance
@@ -91,7 +92,7 @@ def assert_consistent(report: Report) -> None:
     assert np.sqrt(np.trace(at_estimate[2:4, 2:4])) <= 1.01 * rms
     assert e.target_crlb_cm <= 1.25 * rms
     text = report_table(report)
-    where = "inside" if e.target_mahalanobis <= 2.4477 else "outside"
+    where = "inside" if e.target_mahalanobis <= sol.tail.radius(0.95) else "outside"
     assert f"{e.target_mahalanobis:.2f} σ from the estimate: {where} the 95 % ellipse" in text
     major, minor, _ = sol.ellipse95()
     assert f"(95 %: {major:.3f} × {minor:.3f})" in text
@@ -233,7 +234,8 @@ def test_the_scene_a_new_user_wrote_gets_the_bench_model_and_an_ellipse_that_hol
     report = Report.from_json(json.loads((out / "why.report.json").read_text()))
     assert report.error_model == "the shipped bench model"
     assert set(report.self_calibration.nuisances) == {"pan", "scale", "power"}
-    assert report.errors.target_mahalanobis < 2.4477
+    assert report.errors.target_mahalanobis < report.solution.tail.radius(0.95)
+    assert report.errors.target_inside95
     assert "σ's from the shipped bench model" in report_table(report)
     assert_consistent(report)
 
