@@ -692,8 +692,8 @@ def test_a_benchs_direct_view_is_not_taken_for_the_reflection():
     frame's edge, reads 25 % far: of the two images farther than the beacon stands, the
     one within 2.5° and 40 % of its direct bearing and distance is its direct view, and
     the other is its reflection (57 of the bench domain dataset's 300 scenes failed as
-    'ambiguous' with 1° and 10 %); two images both far from the direct view stay
-    ambiguous."""
+    'ambiguous' with 1° and 10 %); where both lie that near, the one nearer the beacon's
+    own distance; two images both far from the direct view stay ambiguous."""
     from mirrorsim.detection.assign import _direct, _the_mirror_image
     from mirrorsim.detection.image_measurement import ImageMeasurement
     from mirrorsim.errors import DetectionError as Err
@@ -711,6 +711,12 @@ def test_a_benchs_direct_view_is_not_taken_for_the_reflection():
     assert _the_mirror_image([direct, reflection], view) == 1
     with pytest.raises(Err, match="ambiguous"):
         _the_mirror_image([image(bearing - 9.0, dist * 1.5), reflection], view)
+    # a pencil near the glass seen square-on (the bench acceptance set's bench0068): its
+    # reflection 2.3° off its direct bearing and 30 % far, its direct view 2.5 % far,
+    # both within the direct view's tolerances: the nearer in distance is the direct view
+    near_glass = image(bearing + 2.3, dist * 1.30)
+    assert _the_mirror_image([image(bearing - 1.1, dist * 1.025), near_glass], view) == 1
+    assert _the_mirror_image([near_glass, image(bearing - 1.1, dist * 1.025)], view) == 0
 
 
 def _small_pencil(top: float, foot: float, cone_px: float, *, width: int = 12,
