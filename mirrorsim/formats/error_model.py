@@ -276,13 +276,28 @@ class ErrorModel:
                                 float(np.hypot(s.d_total_rel, scale)))
         return ObjectSigmas(whole(t.target), tuple(whole(b) for b in t.beacons))
 
+    def gaussian(self, sigma: ObjectSigmas) -> ObjectSigmas:
+        """These σ's (the Student-t scales :meth:`sigmas` gives) as a Gaussian's that holds
+        95 % of the training errors within 1.96 σ: each times its quantity's ``tail``.
+        For whatever draws or solves with Gaussian errors and no tail (the 3-D solve,
+        Monte Carlo tables, beacon placement, the particle filter): at the t-scales a
+        Gaussian's regions would hold far fewer than they say."""
+        def wide(kind: str, s: Sigma) -> Sigma:
+            return Sigma(s.alpha_deg * self.fits[kind]["alpha"].tail,
+                         s.d_total_rel * self.fits[kind]["d_rel"].tail)
+        return ObjectSigmas(wide("target", sigma.target),
+                            tuple(wide("beacon", b) for b in sigma.beacons),
+                            sigma.shared_alpha_deg)
+
     @property
     def typical(self) -> ObjectSigmas:
-        """The typical σ's (RMS over the training rows) per kind, for analyses without
-        measurements (Monte Carlo tables, beacon placement)."""
+        """The typical σ's (RMS over the training rows) per kind, as a Gaussian's
+        (:meth:`gaussian`), for analyses without measurements (Monte Carlo tables, beacon
+        placement, the particle filter, ``solve`` of measurements without σ's)."""
         pair = lambda k: Sigma(self.fits[k]["alpha"].typical_sigma,  # noqa: E731
                                self.fits[k]["d_rel"].typical_sigma)
-        return ObjectSigmas(pair("target"), (pair("beacon"),), self.shared_alpha_deg)
+        return self.gaussian(ObjectSigmas(pair("target"), (pair("beacon"),),
+                                          self.shared_alpha_deg))
 
     def to_json(self) -> dict:
         """The model file's contents (:func:`sealed` adds their checksum)."""

@@ -171,7 +171,9 @@ def evaluate_into3(scene: Scene, out: Path, *, variant: str = "auto", progress: 
     seen2 = seen_of(scene, measured, board_pose=False)
     model = model_for(scene, error_model)
     features, sigma = sigmas_of(model, seen2)
-    seen = _seen3(scene, measured, sigma, fx=seen2.fx)
+    # the 3-D solve draws a Gaussian's ellipsoid: the σ's as a Gaussian's (the factors
+    # below were fitted on them)
+    seen = _seen3(scene, measured, model.gaussian(sigma), fx=seen2.fx)
     nuisances, priors = nuisances3(model, sigma, calibration)
     fit = seen.solve(nuisances=nuisances, priors=priors)
     try:  # the planar solve of the same frames, beside it
