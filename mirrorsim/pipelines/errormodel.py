@@ -165,6 +165,9 @@ def _law(which: str, S: np.ndarray, own: np.ndarray, *, bias: np.ndarray,
     more than UNSTABLE_REFUSE on resamples of its rows (a note beyond UNSTABLE_WARN)."""
     law, nu, gross = gross_free_fit(S, own)
     sig = law(S)
+    if not (np.isfinite(nu) and np.all(np.isfinite(sig))):
+        raise ValueError(f"the {which} law did not converge (ν {nu:g}); fit it on more "
+                         "rows, or rows that vary more evenly")
     tail = max(1.0, float(np.quantile(np.abs(own) / sig, TAIL_LEVEL)) / TAIL_Z)
     span = float(sig.max() / sig.min())
     if span > SPAN_REFUSE:
