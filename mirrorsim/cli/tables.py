@@ -200,7 +200,9 @@ def _report_notes(report: Report) -> list[str]:
         lines.append(mahalanobis_sentence(e.target_mahalanobis, report.solution.tail))
     if e.target_crlb_cm is not None and s.target_covariance is not None:
         lines.append(f"Cramér–Rao bound of the target's RMS error: {e.target_crlb_cm:.3f} cm "
-                     f"at the truth, for this estimator (its nuisances and priors); its "
+                     f"at the truth, for this estimator (its nuisances and priors) and "
+                     f"Gaussian errors of these σ's (the detector's are heavier-tailed: "
+                     f"its own RMS is larger); its "
                      f"covariance's RMS at the estimate: "
                      f"{np.sqrt(np.trace(s.target_covariance)):.3f} cm")
     if report.error_vs_beacons:
