@@ -231,7 +231,8 @@ def test_the_sigma_law_of_student_t_errors_is_their_scale_and_their_dof():
     """Errors σ·t₃ with σ = 0.002·(h/100 px)^−1: the law is their scale, not their RMS
     (√3 times it), within 10 %, with ν within 2–4.5; the model says how far 95 % of them
     reach (t₃'s 95 % point, 3.18, over 1.96: a tail of 1.6) and does not apply it.  Errors
-    from a Gaussian give ν at its bound."""
+    from a Gaussian give a ν over 100 (a t's that near a Gaussian's cannot be told from
+    it on 3000 rows)."""
     rng = np.random.default_rng(11)
     h = rng.uniform(20.0, 400.0, 3000)
     X = np.log(h)[:, None]
