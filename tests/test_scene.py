@@ -333,6 +333,23 @@ def test_the_evaluation_plot_insets_an_ellipse_too_small_to_see(tmp_path, monkey
         assert (len(close_up.child_axes) == 1) is inset, (scale, sol.ellipse95())
 
 
+def _virtual_px_per_cm(scene) -> float:
+    """Pixels per cm at the first beacon's virtual image, worked here by the pinhole: fx
+    over the image's depth along the optical axis (the beacon reflected in the mirror's
+    line)."""
+    cam, m, b = scene.camera, scene.mirror, scene.beacons[0]
+    n = np.array([-math.sin(math.radians(m.yaw)), math.cos(math.radians(m.yaw))])
+    p = np.asarray(b.position) - 2 * ((np.asarray(b.position) - m.center) @ n) * n
+    axis = np.array([math.cos(math.radians(cam.pan_deg)), math.sin(math.radians(cam.pan_deg))])
+    fx = cam.resolution[0] / 2 / math.tan(math.radians(cam.hfov) / 2)
+    return fx / float((p - cam.position) @ axis)
+
+
+def _said_px(line: str, unit: str) -> float:
+    """The number a warning gives just before ``unit`` (" px across", " px tall")."""
+    return float(line.split(unit)[0].rsplit(" ", 1)[1])
+
+
 def test_check_warns_of_a_pencil_image_too_thin_for_its_sides():
     """A pencil whose image in the mirror is under 3.5 px across gets one warning naming
     its key and its width, that width as the pinhole gives it (worked here: the flats'
@@ -345,14 +362,8 @@ def test_check_warns_of_a_pencil_image_too_thin_for_its_sides():
     small = edit_scene(scene, {"camera": {"resolution": [320, 180]}})
     said = [w for w in small.warnings if "px across" in w]
     assert len(said) == 1 and said[0].startswith("beacon.position: ")
-    cam, m, b = small.camera, small.mirror, small.beacons[0]
-    n = np.array([-math.sin(math.radians(m.yaw)), math.cos(math.radians(m.yaw))])
-    p = np.asarray(b.position) - 2 * ((np.asarray(b.position) - m.center) @ n) * n
-    axis = np.array([math.cos(math.radians(cam.pan_deg)), math.sin(math.radians(cam.pan_deg))])
-    depth = (p - cam.position) @ axis
-    fx = cam.resolution[0] / 2 / math.tan(math.radians(cam.hfov) / 2)
-    width = float(said[0].split(" px across")[0].rsplit(" ", 1)[1])
-    assert width == pytest.approx(0.69 * fx / depth, rel=0.05) and width < 3.5
+    width = _said_px(said[0], " px across")
+    assert width == pytest.approx(0.69 * _virtual_px_per_cm(small), rel=0.05) and width < 3.5
 
 
 def test_check_warns_of_a_pencil_image_too_short_for_its_distance():
@@ -370,14 +381,9 @@ def test_check_warns_of_a_pencil_image_too_short_for_its_distance():
     small = edit_scene(scene, {"camera": {"resolution": [800, 450]}, "beacons": short})
     said = [w for w in small.warnings if "px tall" in w]
     assert len(said) == 1 and said[0].startswith("beacons[0].position: the pencil's paint")
-    cam, m, b = small.camera, small.mirror, small.beacons[0]
-    n = np.array([-math.sin(math.radians(m.yaw)), math.cos(math.radians(m.yaw))])
-    p = np.asarray(b.position) - 2 * ((np.asarray(b.position) - m.center) @ n) * n
-    axis = np.array([math.cos(math.radians(cam.pan_deg)), math.sin(math.radians(cam.pan_deg))])
-    depth = (p - cam.position) @ axis
-    fx = cam.resolution[0] / 2 / math.tan(math.radians(cam.hfov) / 2)
-    tall = float(said[0].split(" px tall")[0].rsplit(" ", 1)[1])
-    assert tall == pytest.approx(pencil_paint_height(2.0) * fx / depth, rel=0.05) and tall < 12
+    tall = _said_px(said[0], " px tall")
+    assert tall == pytest.approx(pencil_paint_height(2.0) * _virtual_px_per_cm(small),
+                                 rel=0.05) and tall < 12
 
 
 def test_check_warns_of_a_pencil_whose_reflection_reads_at_its_own_distance():
