@@ -182,6 +182,7 @@ def _pencil_edges(img: np.ndarray, box: tuple[int, int, int, int], *, subsampled
     u0, v0, u1, v1 = box
     top_reach = _cone_reach(box, cone_ratio)
     sides_note: tuple[str, ...] = ()
+    on_colour = False  # its sides measured on the image's colour (JPEG)
     blue = np.ascontiguousarray(img[..., 2:3])
     foot_img = img
     if subsampled:
@@ -227,9 +228,9 @@ def _pencil_edges(img: np.ndarray, box: tuple[int, int, int, int], *, subsampled
         left = left if left is not None and abs(left - (u0 - 0.5)) <= SIDE_MAX_OFF_PX else None
         right = right if right is not None and abs(right - (u1 + 0.5)) <= SIDE_MAX_OFF_PX \
             else None
-        sides_note = (*sides_note, SIDES_ON_COLOUR)
+        sides_note, on_colour = (*sides_note, SIDES_ON_COLOUR), True
     return _Edges(top, bottom, left, right, out_top, out_bottom, out_left, out_right,
-                  sides_note, sides_on_colour=SIDES_ON_COLOUR in sides_note)
+                  sides_note, sides_on_colour=on_colour)
 
 
 def _panel_edges(img: np.ndarray, box: tuple[int, int, int, int], *, on_chroma: bool,
