@@ -272,6 +272,9 @@ def test_validation_of_an_honest_model_on_held_out_rows():
         for q in ("alpha", "d_rel"):
             one, two = v.within[kind][q]
             assert one == pytest.approx(0.683, abs=0.06) and two == pytest.approx(0.954, abs=0.03)
+            # what the law's t_ν puts there: a Gaussian's, for rows drawn Gaussian
+            e1, e2 = v.expected[kind][q]
+            assert e1 == pytest.approx(0.683, abs=0.03) and e2 == pytest.approx(0.954, abs=0.02)
     assert model.tail.dof > 20 and model.tail.scale == pytest.approx(1.0, abs=0.1)
     # a model whose σ's are 3× too small (its tail the honest one's) fails visibly
     small = replace(model, fits={
@@ -574,3 +577,16 @@ def test_the_model_summary_says_what_its_tail_says_of_its_sigmas():
     assert "larger than the σ's say" in tail_line(Tail(2.0, 1e4))
     assert "taken as Gaussian" in tail_line(Tail())
     assert tail_line(Tail(1.0, 1e4)).endswith("at 2.45 σ, as a Gaussian's")
+
+
+def test_the_within_sigma_reference_is_each_laws_own_student_t():
+    """A law fitted with ν = 2 holds fewer of its errors within 1σ and 2σ of its scale
+    than a Gaussian's σ: t₂'s 2F(1)−1 = 1/√3 and 2F(2)−1 = 2/√6 (closed forms of t₂)."""
+    model = errormodel.fit(_simulated_rows(200, 5))
+    heavy = replace(model, fits={k: {q: replace(f, dof=2.0) for q, f in qs.items()}
+                                 for k, qs in model.fits.items()})
+    v = uncertainty.validate(heavy, _simulated_rows(60, 6))
+    e1, e2 = v.expected["target"]["d_rel"]
+    assert e1 == pytest.approx(1 / math.sqrt(3), abs=1e-9)
+    assert e2 == pytest.approx(2 / math.sqrt(6), abs=1e-9)
+    assert "(0.577), within 2σ" in "\n".join(uncertainty.report_lines(v))

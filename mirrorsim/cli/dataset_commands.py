@@ -166,7 +166,7 @@ def _errormodel_options(p):
     p.add_argument("--test", type=Path, metavar="HELDOUT",
                    help="a dataset the model was not fitted on: print the coverage of the "
                    "target's 50/90/95 %% ellipses, the median Mahalanobis distance and each "
-                   "measurement's errors within 1σ/2σ")
+                   "measurement's errors within 1σ/2σ (beside what its law's Student-t puts there)")
     common(p, scene=False, json="the validation (with --test)",
            error_model="the model to --test, when no DATASET is fitted")
     output(p, "--plot", "file", type=Path, metavar="PNG", suffixes=(".png",),

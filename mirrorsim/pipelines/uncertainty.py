@@ -9,14 +9,15 @@ the model gives them, and the estimate's covariance is held against the true tar
   interval (a model is honest where the interval holds the nominal level);
 * the median Mahalanobis distance, against its tail's median and χ₂'s, √(2 ln 2) = 1.18;
 * for each measurement (target and beacon, α and d_total), the fraction of errors within
-  1σ and 2σ (0.683 and 0.954 for Gaussian errors of those σ's);
+  1σ and 2σ, against what its law's Student-t of ν degrees of freedom puts there (0.683
+  and 0.954 for a Gaussian's);
 * a reliability diagram: nominal against empirical coverage.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -74,6 +75,8 @@ class Validation:
     mahalanobis: np.ndarray  # per solved row
     coverage: tuple[Coverage, ...]
     within: dict[str, dict[str, tuple[float, float]]]  # kind → quantity → (1σ, 2σ)
+    # kind → quantity → what its law's t_ν puts within 1σ and 2σ
+    expected: dict[str, dict[str, tuple[float, float]]] = field(default_factory=dict)
     n_scene_failed: int = 0  # rows whose scene had failed in the dataset (not attempted)
     tail: Tail = GAUSSIAN  # the model's: where each level's ellipse is drawn
 
@@ -93,7 +96,9 @@ class Validation:
                 "tail_median": self.tail.radius(0.5),
                 "within": {k: {q: {"1sigma": a, "2sigma": b} for q, (a, b) in qs.items()}
                            for k, qs in self.within.items()},
-                "expected_within": {"1sigma": 0.6827, "2sigma": 0.9545}}
+                "expected_within": {k: {q: {"1sigma": a, "2sigma": b}
+                                        for q, (a, b) in qs.items()}
+                                    for k, qs in self.expected.items()}}
 
 
 def _col(cols: dict, name: str) -> np.ndarray:
@@ -142,7 +147,19 @@ def validate(model: ErrorModel, cols: dict) -> Validation:
     coverage = tuple(Coverage(p, int(np.sum(m <= model.tail.radius(p))), len(m))
                      for p in LEVELS)
     return Validation(int(ok.sum()), failed, m, coverage, _within(model, cols, ok),
-                      int((~ok).sum()), model.tail)
+                      _expected_within(model), int((~ok).sum()), model.tail)
+
+
+def _expected_within(model: ErrorModel) -> dict[str, dict[str, tuple[float, float]]]:
+    """What each quantity's Student-t of its fitted ν puts within 1σ and 2σ of its scale
+    (0.683 and 0.954 for a Gaussian's, ν infinite)."""
+    from scipy.stats import norm
+    from scipy.stats import t as student
+
+    def inside(k: float, dof: float) -> float:
+        return float(2.0 * (norm.cdf(k) if math.isinf(dof) else student.cdf(k, dof)) - 1.0)
+    return {kind: {q: (inside(1.0, f.dof), inside(2.0, f.dof)) for q, f in qs.items()}
+            for kind, qs in model.fits.items()}
 
 
 def _features(cols: dict, kind: str) -> list[ImageFeatures]:
@@ -174,7 +191,7 @@ def _within(model: ErrorModel, cols: dict, ok: np.ndarray
 
 
 def report_lines(v: Validation) -> list[str]:
-    """The validation as printed lines (σ fractions against their Gaussian values)."""
+    """The validation as printed lines (σ fractions against their laws' t_ν values)."""
     lines = [f"held-out rows: {v.n_rows} ({v.n_failed} not solved again; "
              f"{v.n_scene_failed} whose scene had failed, left out)"]
     for c in v.coverage:
@@ -187,8 +204,9 @@ def report_lines(v: Validation) -> list[str]:
                     "Gaussian errors)"))
     for kind, qs in v.within.items():
         for q, (a, b) in qs.items():
-            lines.append(f"  {kind:6s} {q:5s} errors within 1σ {a:.3f} (0.683), within 2σ "
-                         f"{b:.3f} (0.954)")
+            e1, e2 = v.expected.get(kind, {}).get(q, (0.6827, 0.9545))
+            lines.append(f"  {kind:6s} {q:5s} errors within 1σ {a:.3f} ({e1:.3f}), within "
+                         f"2σ {b:.3f} ({e2:.3f})")
     return lines
 
 
