@@ -44,7 +44,8 @@ SLOPE_ROWS = 8  # pixels each side for a sloped level: a longer line, less noise
 
 
 def _local_edge(img: np.ndarray, band, axis: int, guess: float, inside_first: bool,
-                reach: int = 6, half: int = 1, near: bool = False, chroma: bool = False,
+                reach: int = 6, half: int = 1, near: bool = False,
+                chroma: bool | str = False,
                 slope: bool = False, out_reach: int | None = None):
     """An edge near ``guess`` in the mean profile of ``band`` (the columns, or rows,
     across it): coverages of the 2·half + 1 pixels about it, against the median colours
@@ -55,7 +56,9 @@ def _local_edge(img: np.ndarray, band, axis: int, guess: float, inside_first: bo
     shadow, read 2–5 px away, put the foot 0.3–0.6 px low): the level is the first pixel
     past the edge's own, and the window ends at the edge's pixel.
 
-    ``chroma``: only the colour across the outside's counts (see ``edges.measure_region``).
+    ``chroma``: only the colour across the outside's counts (see ``edges.measure_region``);
+    ``"inside"``: only the colour across the inside's (what differs from the inside in
+    brightness alone, a lit face of the same paint, then reads as inside).
     ``slope``: each side's level is its straight-line fit over the next SLOPE_ROWS pixels
     (not 4), carried to each pixel of the window (a side that brightens or darkens
     towards the edge: a pencil's paint in its contact shadow, its wood cone); the line
@@ -86,8 +89,12 @@ def _local_edge(img: np.ndarray, band, axis: int, guess: float, inside_first: bo
     before = _level(rows_b, -k_b, at, slope if inside_first else slope_out)
     after = _level(rows_a, k_a, at, slope_out if inside_first else slope)
     inside, outside = (before, after) if inside_first else (after, before)
-    flat = _across(np.median(rows_a if inside_first else rows_b, axis=0)) if chroma \
-        else (lambda x: x)
+    if chroma == "inside":  # across the inside's own colour (a panel's lit top face)
+        flat = _across(np.median(rows_b if inside_first else rows_a, axis=0))
+    elif chroma:
+        flat = _across(np.median(rows_a if inside_first else rows_b, axis=0))
+    else:
+        flat = lambda x: x  # noqa: E731
     if near:
         # the outside changes towards the edge (a contact shadow on the board): its level
         # is the first pixel past the edge's, and the window stops at the edge's pixel
@@ -98,6 +105,9 @@ def _local_edge(img: np.ndarray, band, axis: int, guess: float, inside_first: bo
         return (_edge_by_area(flat(window), lo, flat(inside), flat(level), inside_first),
                 _mean_level(outside))
     window = np.array([line(i) for i in range(c - half, c + half + 1)])
+    if chroma == "inside":
+        return _edge_by_area(flat(window), c - half, np.zeros(window.shape[-1], window.dtype),
+                             flat(outside), inside_first), _mean_level(outside)
     if chroma:
         return _edge_by_area(flat(window), c - half, flat(inside),
                              np.zeros(window.shape[-1], window.dtype), inside_first), \
@@ -120,7 +130,7 @@ def _mean_level(level: np.ndarray) -> np.ndarray:
 
 def median_edges(imgs: tuple[np.ndarray, np.ndarray], span: tuple[int, int],
                  cross: tuple[int, int], *, axis: int, band_px: int = 3,
-                 chroma: tuple[bool, bool] = (False, False),
+                 chroma: tuple[bool | str, bool | str] = (False, False),
                  slope: tuple[bool, bool] = (False, False),
                  near: tuple[bool, bool] = (False, False),
                  max_off: float | None = None, drop_off: float | None = None,
@@ -130,8 +140,9 @@ def median_edges(imgs: tuple[np.ndarray, np.ndarray], span: tuple[int, int],
     """Edges at both ends of an object spanning ``span`` = [lo, hi] along ``axis`` (0:
     top and bottom, 1: left and right) and ``cross`` across it, robust and precise;
     ``imgs`` and ``chroma``: the image each end is measured in, and whether on its colour
-    across the outside's; ``slope``: whether its levels are straight-line fits; ``near``:
-    whether its outside level is the first pixel past it (see :func:`_local_edge`).
+    across the outside's (``"inside"``: across the inside's); ``slope``: whether its
+    levels are straight-line fits; ``near``: whether its outside level is the first
+    pixel past it (see :func:`_local_edge`).
 
     Bands of ``band_px`` across the object (less ``margin`` each side) each give an edge near the
     region's boundary (±2 px); bands more than 1 px from their median (partly occluded
@@ -158,7 +169,7 @@ def median_edges(imgs: tuple[np.ndarray, np.ndarray], span: tuple[int, int],
 
 
 def _end_edge(img: np.ndarray, bands: list[np.ndarray], guess: int, inside_first: bool, *,
-              axis: int, reach: int, chroma: bool, slope: bool, near: bool, half: int,
+              axis: int, reach: int, chroma: bool | str, slope: bool, near: bool, half: int,
               out_reach: int | None, max_off: float | None, drop_off: float | None
               ) -> tuple[float | None, np.ndarray]:
     """One end of :func:`median_edges`: (edge or None, outside colour)."""

@@ -44,13 +44,13 @@ import numpy as np
 from mirrorsim.camera.sensor import undistort
 from mirrorsim.detection.area_edges import bands
 from mirrorsim.detection.assign import assign_beacons
-from mirrorsim.detection.edges import cut_by_frame, measure_region, to_linear
+from mirrorsim.detection.edges import cut_by_frame, measure_region, panel_top_face, to_linear
 from mirrorsim.detection.image_geometry import (
     Calibration,
     pencil_geometry,
     target_geometry,
 )
-from mirrorsim.detection.image_measurement import ImageMeasurement
+from mirrorsim.detection.image_measurement import ImageMeasurement, TopFace
 from mirrorsim.detection.regions import find_pencils, find_target
 from mirrorsim.detection.rolled import measure_rolled
 from mirrorsim.errors import DetectionError
@@ -117,7 +117,8 @@ class Detection:
 
 def measure_object(img: np.ndarray, kind: str, target_ratio: float | None = None,
                    *, linear: np.ndarray | None = None, subsampled: bool = False,
-                   cone_ratio: float | None = None) -> ImageMeasurement:
+                   cone_ratio: float | None = None, top_face: TopFace | None = None
+                   ) -> ImageMeasurement:
     """Find and measure the largest image of the target (``kind="target"``, with its
     width/height ``target_ratio``) or of a pencil in an 8-bit RGB image, exactly as
     :func:`detect_frame` measures it (calibration uses this on its reference renders).
@@ -125,6 +126,8 @@ def measure_object(img: np.ndarray, kind: str, target_ratio: float | None = None
     ``subsampled``: measured as a frame whose colour was stored at half resolution
     (:func:`~mirrorsim.detection.edges.measure_region`).  ``cone_ratio``: a pencil's
     cone height over its painted band's (:func:`~mirrorsim.scene.model.pencil_cone_ratio`).
+    ``top_face``: what the camera sees of a panel's top face
+    (:func:`~mirrorsim.detection.edges.panel_top_face`).
 
     Raises
     ------
@@ -137,7 +140,8 @@ def measure_object(img: np.ndarray, kind: str, target_ratio: float | None = None
         box = find_target(img, target_ratio)
         if box is None:
             raise DetectionError("no target (grey upright panel) found in the frame")
-        return measure_region(linear, box, "target", subsampled=subsampled)
+        return measure_region(linear, box, "target", subsampled=subsampled,
+                              top_face=top_face)
     boxes = find_pencils(img)
     if not boxes:
         raise DetectionError("no pencil (yellow upright band) found in the frame")
@@ -173,7 +177,8 @@ def detect_frame(image: np.ndarray, view: CaptureRecord, calibration: Calibratio
     if box is None:
         raise DetectionError("no target (grey upright panel) found in the frame")
     measured = _measure(linear, img, box, kind="target", subsampled=subsampled,
-                        target_ratio=ratio, raised=raised)
+                        target_ratio=ratio, raised=raised,
+                        top_face=None if raised else panel_top_face(cam, view.target_size))
     boxes = find_pencils(img)
     measured = _sides_behind_pencils(measured, boxes)
     pencils = [_measure(linear, img, b, kind="beacon", subsampled=subsampled,
@@ -197,7 +202,8 @@ def detect_frame(image: np.ndarray, view: CaptureRecord, calibration: Calibratio
 
 def _measure(linear: np.ndarray, img: np.ndarray, box: tuple[int, int, int, int], *,
              kind: str, subsampled: bool, raised: bool, target_ratio: float | None = None,
-             cone_ratio: float | None = None) -> ImageMeasurement:
+             cone_ratio: float | None = None, top_face: TopFace | None = None
+             ) -> ImageMeasurement:
     """One image's edges.  A 3-D scene's are measured where each stands upright (a
     leaning mirror rolls its images by twice its lean, at a slant:
     :func:`~mirrorsim.detection.rolled.measure_rolled`).  A planar scene's are measured
@@ -210,7 +216,7 @@ def _measure(linear: np.ndarray, img: np.ndarray, box: tuple[int, int, int, int]
         return measure_rolled(linear, img, box, kind=kind, subsampled=subsampled,
                               target_ratio=target_ratio, cone_ratio=cone_ratio)
     m = measure_region(linear, box, kind, subsampled=subsampled, stored=img,
-                       cone_ratio=cone_ratio)
+                       cone_ratio=cone_ratio, top_face=top_face)
     lost = m.height_px is None or (m.u_left is None and m.u_right is None)
     if not lost or cut_by_frame(box, img.shape[0]):  # (cut by the frame: turning is no use)
         return m

@@ -3,6 +3,7 @@ them, and the bearing and distance derived from them."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 
@@ -14,6 +15,32 @@ class Surround:
     right: float = float("nan")
     top: float = float("nan")
     bottom: float = float("nan")
+
+
+@dataclass(frozen=True)
+class TopFace:
+    """What a level camera sees of an upright panel's top face: it stands ``rise`` cm
+    above the panel's top (≤ 0: the face is hidden), and the panel is ``height`` cm tall
+    and ``thickness`` cm thick, facing the camera (in the mirror: its virtual image);
+    ``fx`` and ``cx``: the film's focal length and principal column (px)."""
+
+    rise: float
+    height: float
+    thickness: float
+    fx: float
+    cx: float
+
+    def width_px(self, front_px: float, u: float) -> float:
+        """The top face's image height (px) above the front face's top edge, for a front
+        face ``front_px`` tall whose axis is column ``u``: the front face's depth along
+        the optical axis is fx·H/s, the back edge's that plus t·cos φ (the face runs t
+        along the line of sight), and a row lies fx·rise/depth below the principal
+        row."""
+        if self.rise <= 0.0 or front_px <= 0.0:
+            return 0.0
+        depth = self.fx * self.height / front_px
+        back = depth + self.thickness * math.cos(math.atan((u - self.cx) / self.fx))
+        return self.fx * self.rise * (1.0 / depth - 1.0 / back)
 
 
 @dataclass(frozen=True)
@@ -44,3 +71,5 @@ class ImageMeasurement:
     # what the edges' measurement found that the pixel geometry weighs (each also a note)
     sides_on_colour: bool = False  # a JPEG pencil's sides measured on the image's colour
     darker_sides: tuple[str, ...] = ()  # a panel's sides darker just inside their edge
+    # a panel's sides measured across the outside's colour (None: not measured so)
+    sides_across_outside: tuple[float | None, float | None] = (None, None)

@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from mirrorsim.detection.detector import measure_object
+from mirrorsim.detection.edges import panel_top_face
 from mirrorsim.detection.image_geometry import Calibration
 from mirrorsim.errors import BadParameter, DetectionError
 from mirrorsim.formats.cache import read_entry, write_entry
@@ -224,8 +225,11 @@ def measure_reference(camera: Camera, kind: str, size: float | tuple[float, floa
                         spp=CALIBRATION_SPP[kind], crop=reference_crop(cam, obj), variant=variant)
     ratio = size[0] / size[1] if kind == "target" else None
     cone = None if kind == "target" else pencil_cone_ratio(size)
+    # (the frame's panel is measured below its lit top face: the reference so too)
+    top = panel_top_face(cam, size) if kind == "target" else None
     try:
-        m = measure_object(img, kind, ratio, subsampled=subsampled, cone_ratio=cone)
+        m = measure_object(img, kind, ratio, subsampled=subsampled, cone_ratio=cone,
+                           top_face=top)
     except DetectionError as exc:
         raise DetectionError(f"calibration: {exc} (the {kind}'s reference render)") from None
     if m.height_px is None:
