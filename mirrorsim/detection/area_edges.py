@@ -44,8 +44,7 @@ SLOPE_ROWS = 8  # pixels each side for a sloped level: a longer line, less noise
 
 
 def _local_edge(img: np.ndarray, band, axis: int, guess: float, inside_first: bool,
-                reach: int = 6, half: int = 1, near: bool = False,
-                chroma: bool | str = False,
+                reach: int = 6, half: int = 1, near: bool = False, chroma: bool | str = False,
                 slope: bool = False, out_reach: int | None = None):
     """An edge near ``guess`` in the mean profile of ``band`` (the columns, or rows,
     across it): coverages of the 2·half + 1 pixels about it, against the median colours
@@ -56,9 +55,8 @@ def _local_edge(img: np.ndarray, band, axis: int, guess: float, inside_first: bo
     shadow, read 2–5 px away, put the foot 0.3–0.6 px low): the level is the first pixel
     past the edge's own, and the window ends at the edge's pixel.
 
-    ``chroma``: only the colour across the outside's counts (see ``edges.measure_region``);
-    ``"inside"``: only the colour across the inside's (what differs from the inside in
-    brightness alone, a lit face of the same paint, then reads as inside).
+    ``chroma``: only the colour across the outside's counts (``edges.measure_region``);
+    ``"inside"``: across the inside's (a lit face of the same paint reads as inside).
     ``slope``: each side's level is its straight-line fit over the next SLOPE_ROWS pixels
     (not 4), carried to each pixel of the window (a side that brightens or darkens
     towards the edge: a pencil's paint in its contact shadow, its wood cone); the line
@@ -89,12 +87,8 @@ def _local_edge(img: np.ndarray, band, axis: int, guess: float, inside_first: bo
     before = _level(rows_b, -k_b, at, slope if inside_first else slope_out)
     after = _level(rows_a, k_a, at, slope_out if inside_first else slope)
     inside, outside = (before, after) if inside_first else (after, before)
-    if chroma == "inside":  # across the inside's own colour (a panel's lit top face)
-        flat = _across(np.median(rows_b if inside_first else rows_a, axis=0))
-    elif chroma:
-        flat = _across(np.median(rows_a if inside_first else rows_b, axis=0))
-    else:
-        flat = lambda x: x  # noqa: E731
+    flat, zero = _projection(chroma, rows_b if inside_first else rows_a,
+                             rows_a if inside_first else rows_b)
     if near:
         # the outside changes towards the edge (a contact shadow on the board): its level
         # is the first pixel past the edge's, and the window stops at the edge's pixel
@@ -105,14 +99,21 @@ def _local_edge(img: np.ndarray, band, axis: int, guess: float, inside_first: bo
         return (_edge_by_area(flat(window), lo, flat(inside), flat(level), inside_first),
                 _mean_level(outside))
     window = np.array([line(i) for i in range(c - half, c + half + 1)])
-    if chroma == "inside":
-        return _edge_by_area(flat(window), c - half, np.zeros(window.shape[-1], window.dtype),
-                             flat(outside), inside_first), _mean_level(outside)
+    none = np.zeros(window.shape[-1], window.dtype)  # the level a projection zeroes
+    return _edge_by_area(flat(window), c - half, none if zero == "inside" else flat(inside),
+                         none if zero == "outside" else flat(outside), inside_first), \
+        _mean_level(outside)
+
+
+def _projection(chroma: bool | str, inside_rows: np.ndarray, outside_rows: np.ndarray
+                ) -> tuple[Callable[[np.ndarray], np.ndarray], str | None]:
+    """What :func:`_local_edge`'s ``chroma`` measures on: the projection, and the side
+    whose colour it takes out (that side's level is then zero)."""
+    if chroma == "inside":  # across the inside's own colour (a panel's lit top face)
+        return _across(np.median(inside_rows, axis=0)), "inside"
     if chroma:
-        return _edge_by_area(flat(window), c - half, flat(inside),
-                             np.zeros(window.shape[-1], window.dtype), inside_first), \
-            _mean_level(outside)
-    return _edge_by_area(window, c - half, inside, outside, inside_first), _mean_level(outside)
+        return _across(np.median(outside_rows, axis=0)), "outside"
+    return (lambda x: x), None
 
 
 def _across(outside: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:

@@ -73,9 +73,8 @@ def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str,
                    *, subsampled: bool = False, stored: np.ndarray | None = None,
                    raised: bool = False, cone_ratio: float | None = None,
                    top_face: TopFace | None = None) -> ImageMeasurement:
-    """Sub-pixel edges of an object's image in ``box``: top and bottom, left and right,
-    with the radiance just outside each (pixels only: :mod:`mirrorsim.detection.detector` turns them
-    into a bearing and a distance with the camera's geometry).
+    """Sub-pixel edges of an object's image in ``box`` and the radiance just outside each
+    (pixels only: :mod:`mirrorsim.detection.detector` turns them into α and d_total).
 
     ``img`` holds linear RGB radiance (see :func:`to_linear`).  The target's top and
     sides are measured on its colour against the outside's (the sides with sloped
@@ -94,17 +93,14 @@ def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str,
     (``stored``; from ``img`` if not given) over a 5-px window, where JPEG moves chroma
     between neighbours without changing its sum (figures: docs/method.md).
 
-    ``raised`` (a 3-D scene's frame): the panel's foot may stand against the room's pale
-    baseboard, as neutral as the panel: it is measured on the image's colour too, and
-    taken so where the two differ by a pixel.
+    ``raised`` (a 3-D frame): a panel's foot, which may stand against the room's pale
+    baseboard, is also measured on the image's colour, taken so where 1 px apart.
 
-    ``cone_ratio`` (a pencil): its cone's height over its band's (the smallest of the
-    frame's pencils: the tallest one's),
-    which bounds where the top's outside level is read (:func:`_cone_reach`).
+    ``cone_ratio`` (a pencil): its cone's height over its band's (the frame's tallest
+    pencil's), which bounds where its top's outside is read (:func:`_cone_reach`).
 
-    ``top_face`` (a panel): what the camera sees of its top face (:func:`panel_top_face`);
-    where the camera stands above it, the front face's top is found below the face's
-    lit strip (:func:`_front_top`).
+    ``top_face`` (a panel): what the camera sees of its top face (:func:`panel_top_face`),
+    whose lit strip the front face's top is found below (:func:`_front_top`).
     """
     u0, v0, u1, v1 = box
     if kind == "beacon":
@@ -344,6 +340,9 @@ def _panel_edges(img: np.ndarray, box: tuple[int, int, int, int], *, on_chroma: 
                   else (None, None))
 
 
+ACROSS_OFF_PX = 5.0  # how far from the region a side across the outside's colour may lie
+
+
 def _sides_across_outside(img: np.ndarray, box: tuple[int, int, int, int]
                           ) -> tuple[float | None, float | None]:
     """A panel's sides measured across the outside's colour: where a shadow of a coloured
@@ -352,7 +351,7 @@ def _sides_across_outside(img: np.ndarray, box: tuple[int, int, int, int]
     u0, v0, u1, v1 = box
     left, right, _, _ = median_edges((img, img), (u0, u1), (v0, v1), axis=1,
                                      slope=(True, True), chroma=(True, True),
-                                     drop_off=2 * SIDE_MAX_OFF_PX)
+                                     drop_off=ACROSS_OFF_PX)
     return left, right
 
 
