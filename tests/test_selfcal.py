@@ -635,3 +635,36 @@ def test_a_nuisance_the_beacons_do_not_separate_is_held_and_said():
                                  calibration=SelfCalibration(("pan",), priors={
         "pan": 0.05}), model=bench)
     assert any(s.startswith("warning: pan came out") for s in said)
+
+
+def test_a_self_calibrated_target_far_from_plain_least_squares_is_said():
+    """Three beacons of a bench whose mount reads the pan 0.5° off: calibrating the pan
+    moves the target over 0.1 cm from plain least squares' estimate, and the line says
+    so with the Hausman test's verdict, that the beacons show the bench error (p < 0.05);
+    a move within the variance the nuisances add reads as plain's being as likely, one
+    under 0.1 cm says nothing, and a plain solve says nothing."""
+    from dataclasses import replace
+    from types import SimpleNamespace
+
+    from mirrorsim.formats.error_model_scope import BenchTolerances
+    from mirrorsim.pipelines.solving import MOVED_CM, moved_from_plain, solve_separated
+    from solver.selfcal import PLAIN
+
+    bench = SimpleNamespace(tolerances=BenchTolerances(pan_deg=1.5))
+    rng = np.random.default_rng(11)
+    bs, ts = _measure(rng, delta=0.5)
+    sol, _, said = solve_separated(OBS, bs, ts, sigma=SIG, calibration=SelfCalibration(("pan",)),
+                                   model=bench)
+    plain = solve_measurements(OBS, bs, ts, sigma=SIG)
+    assert np.linalg.norm(sol.target - plain.target) > MOVED_CM
+    line = [s for s in said if s.startswith("self-calibration moved the target")]
+    assert len(line) == 1 and "show bench errors that plain leaves in" in line[0]
+    assert f"({plain.target[0]:.2f}, {plain.target[1]:.2f})" in line[0]
+    # a move the nuisances' added variance explains: no bench error shows
+    wide = replace(sol, target=plain.target + np.array([0.3, 0.0]),
+                   covariance=sol.covariance * 1e4)
+    assert "plain's is as likely" in moved_from_plain(wide, plain)[0]
+    near = replace(sol, target=plain.target + np.array([0.09, 0.0]))
+    assert moved_from_plain(near, plain) == []
+    _, _, said = solve_separated(OBS, bs, ts, sigma=SIG, calibration=PLAIN, model=bench)
+    assert not any(s.startswith("self-calibration moved") for s in said)
