@@ -259,9 +259,9 @@ def _front_top(img: np.ndarray, box: tuple[int, int, int, int], top: float | Non
     (None where it is not, or the silhouette has no colour against the outside).
 
     The top face, lit from above, shines 3-4 times the front face: a strip of it above the
-    front face's top pulled the top measured on the image's colour 0.2-1.3 px down, 1.5-6
-    times the strip's width (d_total 0.2-0.9 % long on 24 of the ideal acceptance set's
-    76 panels, where the σ said 0.04 %).  The face is the front's paint, brighter: across
+    front face's top pulled the top measured on the image's colour down, up to 0.48 px
+    below the front face's (d_total up to 0.5 % long where σ said 0.04 %: 22 of the ideal
+    acceptance set's panels stood below the camera).  The face is the front's paint: across
     the panel's own colour it reads as panel, and the edge found is the silhouette, the
     face's back edge; the front's top lies the face's width (:meth:`TopFace.width_px`)
     below it."""
