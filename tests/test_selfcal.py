@@ -659,6 +659,7 @@ def test_a_self_calibrated_target_far_from_plain_least_squares_is_said():
     assert np.linalg.norm(sol.target - plain.target) > MOVED_CM
     line = [s for s in said if s.startswith("self-calibration moved the target")]
     assert len(line) == 1 and "show bench errors that plain leaves in" in line[0]
+    assert " on 1, " in line[0]  # one nuisance: the variance it adds has one direction
     assert f"({plain.target[0]:.2f}, {plain.target[1]:.2f})" in line[0]
     # a move the nuisances' added variance explains: no bench error shows
     wide = replace(sol, target=plain.target + np.array([0.3, 0.0]),

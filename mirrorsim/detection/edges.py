@@ -252,6 +252,11 @@ def _pencil_edges(img: np.ndarray, box: tuple[int, int, int, int], *, subsampled
                   sides_note, sides_on_colour=on_colour)
 
 
+# how far the top on the image's colour must lie below the silhouette for the top face's
+# strip to count as seen: at least [0] and at most [1] times the predicted strip plus [2] px
+STRIP_PULL = (0.5, 8.0, 0.5)
+
+
 def _front_top(img: np.ndarray, box: tuple[int, int, int, int], top: float | None,
                bottom: float | None, top_face: TopFace | None
                ) -> tuple[float, np.ndarray] | None:
@@ -272,7 +277,11 @@ def _front_top(img: np.ndarray, box: tuple[int, int, int, int], top: float | Non
     strip = top_face.width_px(bottom - top, axis)
     silhouette, _, out_s, _ = median_edges((img, img), (v0, v1), (u0, u1), axis=0,
                                            chroma=("inside", False))
-    if silhouette is None or abs(silhouette - (v0 - 0.5)) > TOP_MAX_OFF_PX + strip:
+    # the strip must show: the lit face pulls the top on the image's colour below the
+    # silhouette by at least half its width (1.5-6 times it in the acceptance frames);
+    # a mirror tilted back may hide the face, and the two then agree
+    pulled = top - silhouette if silhouette is not None else math.nan
+    if not STRIP_PULL[0] * strip <= pulled <= STRIP_PULL[1] * strip + STRIP_PULL[2]:
         return None
     strip = 0.0
     for _ in range(3):  # (the front's height is the silhouette's less the strip)

@@ -184,7 +184,8 @@ def target_geometry(cam: Camera, m: ImageMeasurement, size: Point2, *, k: float
     its angular width follows from its height, exactly, at any angle off the axis.  An
     image narrower than that, whose missing side runs into something dark (the mirror's
     frame), is clipped there and its axis is β from the other edge; one wider than its
-    height allows, under something dark, is clipped at the top and its height is not used.
+    height allows, under something dark, is clipped at the top, and its height comes from
+    its width where its sides are the panel's (:func:`_height_from_width`).
     """
     edges = {"left": m.u_left, "right": m.u_right}
     present = [k_ for k_, u in edges.items() if u is not None]
@@ -217,8 +218,9 @@ def target_geometry(cam: Camera, m: ImageMeasurement, size: Point2, *, k: float
 def _target_clip(cam: Camera, m: ImageMeasurement, size: Point2, present: list[str]
                  ) -> tuple[ImageMeasurement, list[str], float]:
     """The panel's angular width against the one its height implies: clipped at the top
-    (height dropped), clipped on a side (that edge dropped), or noted.  Returns the
-    measurement, the edges to use and the half-width β the height implies."""
+    (height from its width where its sides allow), clipped on a side (that edge dropped),
+    or noted.  Returns the measurement, the edges to use and the half-width β the height
+    implies."""
     w, h = size
     edges = {"left": m.u_left, "right": m.u_right}
     # (a level not measured is NaN: not dark)
@@ -253,9 +255,7 @@ def _target_clip(cam: Camera, m: ImageMeasurement, size: Point2, present: list[s
                 *m.notes, f"image {100 * (r - 1):.1f}% wider than its height implies, "
                 f"darker just inside its {side} edge: that edge is not the panel's, axis "
                 "from the other"))
-        elif r < 1 - tol and dark["top"]:
-            # its top found on the mirror frame's dark bar above it, across a strip of
-            # glass (4 of 360 domain rows: d_total 7-11 % short)
+        elif r < 1 - tol and dark["top"]:  # its top on the frame's bar (d 7-11 % short)
             m = _height_from_width(cam, m, size, (
                 f"image {100 * (1 - r):.1f}% narrower than its height implies, under a dark "
                 "edge, its sides not: its top is that edge's, height from its width"))
@@ -292,6 +292,7 @@ def _shaded_side(cam: Camera, m: ImageMeasurement, beta: float, r: float
     as panel, the side 3.5 px out (α 0.106° off, 57 σ: ideal0013 of seed 61207021)."""
     inward, gain = SHADED_SIDE
     c_left, c_right = m.sides_across_outside
+    fits = []  # (how far the ratio then lies from 1, side, its column, how far it moved)
     for side, u, moved in (("left", c_left, None if c_left is None else c_left - m.u_left),
                            ("right", c_right, None if c_right is None else m.u_right - c_right)):
         if moved is None or moved <= inward:
@@ -299,19 +300,35 @@ def _shaded_side(cam: Camera, m: ImageMeasurement, beta: float, r: float
         left, right = (u, m.u_right) if side == "left" else (m.u_left, u)
         r_side = (_off_axis(cam, right) - _off_axis(cam, left)) / 2 / beta
         if abs(r_side - 1) <= gain * abs(r - 1):
-            return replace(m, **{f"u_{side}": u}, width_px=right - left, notes=(
-                *m.notes, f"image {100 * (r - 1):.1f}% wider than its height implies; its "
-                f"{side} side across the outside's colour {moved:.1f} px in, "
-                f"{100 * (r_side - 1):+.1f}%: a shadow of the outside's colour beside it"))
-    return None
+            fits.append((abs(r_side - 1), side, u, moved, r_side))
+    if not fits:
+        return None
+    _, side, u, moved, r_side = min(fits)
+    left, right = (u, m.u_right) if side == "left" else (m.u_left, u)
+    return replace(m, **{f"u_{side}": u}, width_px=right - left, notes=(
+        *m.notes, f"image {100 * (r - 1):.1f}% wider than its height implies; its {side} "
+        f"side across the outside's colour {moved:.1f} px in, {100 * (r_side - 1):+.1f}%: "
+        "a shadow of the outside's colour beside it"))
+
+
+# how near (px) a panel's sides across the outside's colour must lie to its sides for
+# its width to stand for its height (a shadow of a coloured wall beside it: 3.5 px)
+WIDTH_SIDES_PX = 1.0
 
 
 def _height_from_width(cam: Camera, m: ImageMeasurement, size: Point2, note: str
                        ) -> ImageMeasurement:
     """``m`` with the height its two sides imply (tan β = w·s·cos φ/(2fH), target_geometry)
     where its top is not the panel's, from its foot (the board's check on the foot then
-    holds it); None without a foot."""
-    if m.v_bottom is None or m.u_left is None or m.u_right is None:
+    holds it).  Only where both sides are the panel's: none beside something dark (the
+    mirror frame's side bar may cut it there), none darker just inside, and each within
+    WIDTH_SIDES_PX of its measure across the outside's colour; else its height is not
+    used."""
+    dark = any(getattr(m.outside, side) < 0.5 * m.inside for side in ("left", "right"))
+    across = [abs(c - u) for c, u in zip(m.sides_across_outside, (m.u_left, m.u_right),
+                                         strict=True) if c is not None and u is not None]
+    if m.v_bottom is None or m.u_left is None or m.u_right is None or dark or \
+            m.darker_sides or any(d > WIDTH_SIDES_PX for d in across):
         return replace(m, height_px=None, notes=(*m.notes, note.replace(
             "height from its width", "height not used")))
     left, right = _off_axis(cam, m.u_left), _off_axis(cam, m.u_right)

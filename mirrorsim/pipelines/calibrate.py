@@ -20,6 +20,7 @@ import functools
 import hashlib
 import importlib.util
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -221,12 +222,15 @@ def measure_reference(camera: Camera, kind: str, size: float | tuple[float, floa
     cam = reference_camera(camera, film)
     obj = reference_object(kind, size, distance)
     # a plain board: a hole under the reference object's foot would bias its calibration
+    crop = reference_crop(cam, obj)
     img = render_direct(Board(size=(80.0, 80.0), hole_pitch=0.0), cam, obj,
-                        spp=CALIBRATION_SPP[kind], crop=reference_crop(cam, obj), variant=variant)
+                        spp=CALIBRATION_SPP[kind], crop=crop, variant=variant)
     ratio = size[0] / size[1] if kind == "target" else None
     cone = None if kind == "target" else pencil_cone_ratio(size)
-    # (the frame's panel is measured below its lit top face: the reference so too)
-    top = panel_top_face(cam, size) if kind == "target" else None
+    # (the frame's panel is measured below its lit top face: the reference so too, its
+    # principal column in the crop's pixels)
+    top = replace(panel_top_face(cam, size), cx=cam.cx - crop[0]) if kind == "target" \
+        else None
     try:
         m = measure_object(img, kind, ratio, subsampled=subsampled, cone_ratio=cone,
                            top_face=top)
