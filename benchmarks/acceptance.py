@@ -338,13 +338,19 @@ def report(folders: list[Path]) -> str:
     if multi:
         worse = [r for r in multi if r["target_cm"] > r["plain_cm"] + 0.1]
         said = [r for r in worse if r["notes"]]
+        moved = [r for r in multi if any(n.startswith("self-calibration moved")
+                                         for n in r["notes"])]
+        shown = [r for r in moved if any("show bench errors" in n for n in r["notes"])]
         ratio = float(np.median([r["target_cm"] for r in multi])
                       / np.median([r["plain_cm"] for r in multi]))
         lines += ["", f"Self-calibration on the {len(multi)} bench scenes of two or three "
                       f"beacons (the bench model's priors) against plain least squares on "
                       f"the same measurements: median error {ratio:.2f} of plain's; "
                       f"{len(worse)} worse than plain by more than 0.1 cm, "
-                      f"{len(said)} of them with a line that says why"]
+                      f"{len(said)} of them with a line that says why; "
+                      f"{len(moved)} of the {len(multi)} say the calibration moved the "
+                      f"target over 0.1 cm from plain's, {len(shown)} of them that the "
+                      "beacons show the bench errors it removes"]
         lines += [f"- {r['scene']}: {r['target_cm']:.3f} cm against plain "
                   f"{r['plain_cm']:.3f} cm" + (f" ({'; '.join(r['notes'])})" if r["notes"]
                                                 else " (nothing said)") for r in worse]
