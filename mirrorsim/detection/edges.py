@@ -312,8 +312,9 @@ def _panel_edges(img: np.ndarray, box: tuple[int, int, int, int], *, on_chroma: 
                                           chroma=(True, False))
         if top_c is not None and abs(top_c - (v0 - 0.5)) <= TOP_MAX_OFF_PX:
             top, out_top, sides_note = top_c, out_c, (*sides_note, TOP_ON_CHROMA)
-        else:  # neither is the panel's top (the frame's bar 1-2 px above it took the
-            # edge 10 px up): none, and the height comes from the width (image_geometry)
+        elif not raised:  # neither is the panel's top (the frame's bar 1-2 px above it
+            # took the edge 10 px up): none, and the height comes from the width
+            # (image_geometry; a raised panel's region, beside its stand, may be short)
             top, sides_note = None, (*sides_note, TOP_OFF_REGION)
     if raised and on_chroma and bottom is not None:
         # a raised panel's foot may stand against the room's pale baseboard, as neutral
