@@ -110,6 +110,20 @@ def _half_angle(cam: Camera, half_width: float, height_px: float, height: float,
     return math.atan(half_width * height_px * math.cos(phi) / (cam.fx * height))
 
 
+def _height_px(cam: Camera, half_width: float, beta: float, height: float, phi: float
+               ) -> float:
+    """The inverse of :func:`_half_angle`: the image height (px) of an upright object of
+    ``half_width`` and ``height`` (cm) whose half-width subtends ``beta`` at φ (rad)."""
+    return math.tan(beta) * cam.fx * height / (half_width * math.cos(phi))
+
+
+def _dark(m: ImageMeasurement, side: str) -> bool:
+    """Whether the level just outside ``side`` of the image is under half its inside's
+    (something dark there, the mirror's frame, may cut it; a level not measured is NaN:
+    not dark)."""
+    return getattr(m.outside, side) < 0.5 * m.inside
+
+
 def _axis_from_edge(cam: Camera, edge_u: float, side: str, half_width: float,
                     height_px: float, height: float) -> float:
     """The axis column of an object seen by one side edge (``side``: which) and its
@@ -223,9 +237,7 @@ def _target_clip(cam: Camera, m: ImageMeasurement, size: Point2, present: list[s
     implies."""
     w, h = size
     edges = {"left": m.u_left, "right": m.u_right}
-    # (a level not measured is NaN: not dark)
-    dark = {side: getattr(m.outside, side) < 0.5 * m.inside
-            for side in ("left", "right", "top")}
+    dark = {side: _dark(m, side) for side in ("left", "right", "top")}
     phi0 = (sum(_off_axis(cam, edges[s_]) for s_ in present) / len(present))
     beta = _half_angle(cam, w / 2, m.height_px, h, phi0)
     if len(present) == 2:
@@ -292,7 +304,7 @@ def _shaded_side(cam: Camera, m: ImageMeasurement, beta: float, r: float
     as panel, the side 3.5 px out (α 0.106° off, 57 σ: ideal0013 of seed 61207021)."""
     inward, gain = SHADED_SIDE
     c_left, c_right = m.sides_across_outside
-    fits = []  # (how far the ratio then lies from 1, side, its column, how far it moved)
+    fits = []  # (how far the ratio then lies from 1, side, its column, moved, the sides)
     for side, u, moved in (("left", c_left, None if c_left is None else c_left - m.u_left),
                            ("right", c_right, None if c_right is None else m.u_right - c_right)):
         if moved is None or moved <= inward:
@@ -300,12 +312,11 @@ def _shaded_side(cam: Camera, m: ImageMeasurement, beta: float, r: float
         left, right = (u, m.u_right) if side == "left" else (m.u_left, u)
         r_side = (_off_axis(cam, right) - _off_axis(cam, left)) / 2 / beta
         if abs(r_side - 1) <= gain * abs(r - 1):
-            fits.append((abs(r_side - 1), side, u, moved, r_side))
+            fits.append((abs(r_side - 1), side, u, moved, r_side, right - left))
     if not fits:
         return None
-    _, side, u, moved, r_side = min(fits)
-    left, right = (u, m.u_right) if side == "left" else (m.u_left, u)
-    return replace(m, **{f"u_{side}": u}, width_px=right - left, notes=(
+    _, side, u, moved, r_side, width = min(fits)
+    return replace(m, **{f"u_{side}": u}, width_px=width, notes=(
         *m.notes, f"image {100 * (r - 1):.1f}% wider than its height implies; its {side} "
         f"side across the outside's colour {moved:.1f} px in, {100 * (r_side - 1):+.1f}%: "
         "a shadow of the outside's colour beside it"))
@@ -324,7 +335,7 @@ def _height_from_width(cam: Camera, m: ImageMeasurement, size: Point2, note: str
     mirror frame's side bar may cut it there), none darker just inside, and each within
     WIDTH_SIDES_PX of its measure across the outside's colour; else its height is not
     used."""
-    dark = any(getattr(m.outside, side) < 0.5 * m.inside for side in ("left", "right"))
+    dark = _dark(m, "left") or _dark(m, "right")
     across = [abs(c - u) for c, u in zip(m.sides_across_outside, (m.u_left, m.u_right),
                                          strict=True) if c is not None and u is not None]
     if m.v_bottom is None or m.u_left is None or m.u_right is None or dark or \
@@ -332,6 +343,5 @@ def _height_from_width(cam: Camera, m: ImageMeasurement, size: Point2, note: str
         return replace(m, height_px=None, notes=(*m.notes, note.replace(
             "height from its width", "height not used")))
     left, right = _off_axis(cam, m.u_left), _off_axis(cam, m.u_right)
-    s = (2 * cam.fx * size[1] * math.tan((right - left) / 2)
-         / (size[0] * math.cos((left + right) / 2)))
+    s = _height_px(cam, size[0] / 2, (right - left) / 2, size[1], (left + right) / 2)
     return replace(m, height_px=s, v_top=m.v_bottom - s, notes=(*m.notes, note))

@@ -153,12 +153,10 @@ def validate(model: ErrorModel, cols: dict) -> Validation:
 def _expected_within(model: ErrorModel) -> dict[str, dict[str, tuple[float, float]]]:
     """What each quantity's Student-t of its fitted ν puts within 1σ and 2σ of its scale
     (0.683 and 0.954 for a Gaussian's, ν infinite)."""
-    from scipy.stats import norm
-    from scipy.stats import t as student
+    from scipy.stats import t as student  # (ν = ∞: the normal's)
 
-    def inside(k: float, dof: float) -> float:
-        return float(2.0 * (norm.cdf(k) if math.isinf(dof) else student.cdf(k, dof)) - 1.0)
-    return {kind: {q: (inside(1.0, f.dof), inside(2.0, f.dof)) for q, f in qs.items()}
+    return {kind: {q: tuple(float(2.0 * student.cdf(k, f.dof) - 1.0) for k in (1.0, 2.0))
+                   for q, f in qs.items()}
             for kind, qs in model.fits.items()}
 
 
@@ -204,7 +202,7 @@ def report_lines(v: Validation) -> list[str]:
                     "Gaussian errors)"))
     for kind, qs in v.within.items():
         for q, (a, b) in qs.items():
-            e1, e2 = v.expected.get(kind, {}).get(q, (0.6827, 0.9545))
+            e1, e2 = v.expected[kind][q]
             lines.append(f"  {kind:6s} {q:5s} errors within 1σ {a:.3f} ({e1:.3f}), within "
                          f"2σ {b:.3f} ({e2:.3f})")
     return lines
