@@ -2,6 +2,7 @@
 
 
 import json
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -293,9 +294,11 @@ def test_a_panel_side_behind_a_pencil_is_not_used():
 
 def test_a_panel_top_under_a_strip_as_bright_as_it_is_measured_on_the_colour():
     """A neutral panel whose top stands 4 px under the mirror frame's dark bar, a strip
-    of brown wall between, as bright as the panel: on the image's brightness the top
-    falls on the bar, far above the panel's region; across the outside's colour it is
-    the panel's, at row 63.5 (rows 64 on are the panel's), noted."""
+    of brown wall between, as bright as the panel: the top lies at row 63.5 (rows 64 on are
+    the panel's).  The outside's level stops at the bar (its rows step towards the
+    panel's colour); where it took the bar in, the top fell on the bar, far above the
+    panel's region, and across the outside's colour it is found, noted."""
+    from mirrorsim.detection import area_edges
     from mirrorsim.detection.edges import TOP_ON_CHROMA, measure_region, to_linear
     from mirrorsim.detection.regions import find_target
 
@@ -304,8 +307,12 @@ def test_a_panel_top_under_a_strip_as_bright_as_it_is_measured_on_the_colour():
     img[64:300, 150:350] = (73, 72, 70)  # the panel
     f = img.astype(np.float32)
     m = measure_region(to_linear(f), find_target(f, 200 / 236), "target", stored=f)
-    assert m.v_top == pytest.approx(63.5, abs=0.05) and TOP_ON_CHROMA in m.notes
+    assert m.v_top == pytest.approx(63.5, abs=0.05) and TOP_ON_CHROMA not in m.notes
     assert m.v_bottom == pytest.approx(299.5, abs=0.05)
+    with pytest.MonkeyPatch.context() as mp:  # the outside's median over the bar
+        mp.setattr(area_edges, "OUTSIDE_STEP", math.inf)
+        m = measure_region(to_linear(f), find_target(f, 200 / 236), "target", stored=f)
+    assert m.v_top == pytest.approx(63.5, abs=0.05) and TOP_ON_CHROMA in m.notes
 
 
 def test_assignment_refuses_what_no_mirror_gives_and_ambiguity():
@@ -483,13 +490,18 @@ def test_pencil_front_depth_is_the_mean_near_side_of_the_measured_columns():
 def test_a_side_beside_a_strip_of_glass_and_the_frame_is_not_measured_on_the_frame(
         monkeypatch):
     """A panel's side 3 px from the mirror frame's dark bar, bright glass between (three
-    of 198 random scenes: α off by 0.13-0.20°): the side is dropped, not measured 6 px out
-    on the bar; the same image without the check is measured there (the case is real)."""
-    from mirrorsim.detection import edges
+    of 198 random scenes: α off by 0.13-0.20°): the outside's level stops where its rows
+    step to the bar, and the side is measured at 47.5; with the bar in the level, the
+    side is dropped, not measured 6 px out on the bar; without that check either, it is
+    measured there (the case is real)."""
+    from mirrorsim.detection import area_edges, edges
 
     img = np.full((220, 220, 3), 80.0, np.float32)  # bright glass
     img[:, 30:45] = 6.0  # the frame's bar
     img[40:180, 48:140] = 25.0  # the panel: its left edge at 48, its right at 140
+    m = edges.measure_region(img, (48, 40, 139, 179), "target")
+    assert m.u_left == pytest.approx(47.5, abs=0.3) and m.u_right == pytest.approx(140.0, abs=0.6)
+    monkeypatch.setattr(area_edges, "OUTSIDE_STEP", math.inf)
     m = edges.measure_region(img, (48, 40, 139, 179), "target")
     assert m.u_left is None and m.u_right == pytest.approx(140.0, abs=0.6)
     monkeypatch.setattr(edges, "SIDE_MAX_OFF_PX", None)
@@ -596,13 +608,18 @@ def test_a_panel_top_under_the_frames_bar_takes_its_height_from_its_width():
 
 def test_a_pencil_beside_the_frame_is_not_measured_on_its_other_side(monkeypatch):
     """A pencil 3 px from the frame's bar (one of 120 random scenes: α off by 0.31°): the
-    bar became the coarse pass's outside and the left side was found on the right one;
-    now that side is dropped (its axis then comes from the other side)."""
-    from mirrorsim.detection import edges
+    bar became the coarse pass's outside and the left side was found on the right one.
+    The outside's level now stops where its rows step to the bar: the side is at 46.5;
+    with the bar in the level, that side is dropped (its axis then comes from the other
+    side)."""
+    from mirrorsim.detection import area_edges, edges
 
     img = np.full((220, 220, 3), 51.0, np.float32)  # the board, in the blue channel too
     img[:, 28:44] = 6.0  # the frame's bar
     img[40:180, 47:65] = (200.0, 150.0, 0.5)  # the yellow paint: blue ≈ 0
+    m = edges.measure_region(img, (47, 40, 64, 179), "beacon")
+    assert m.u_left == pytest.approx(46.5, abs=0.3) and m.u_right == pytest.approx(64.5, abs=0.6)
+    monkeypatch.setattr(area_edges, "OUTSIDE_STEP", math.inf)
     m = edges.measure_region(img, (47, 40, 64, 179), "beacon")
     assert m.u_left is None and m.u_right == pytest.approx(64.5, abs=0.6)
     monkeypatch.setattr(edges, "SIDE_MAX_OFF_PX", None)
