@@ -292,6 +292,23 @@ def test_a_panel_side_behind_a_pencil_is_not_used():
     assert _sides_behind_pencils(m, [(590, 400, 596, 490), (700, 408, 711, 505)]) is m
 
 
+def test_a_pencils_cone_across_the_panel_counts_as_the_panel_it_hides(monkeypatch):
+    """A pencil stands in front of a small panel, its band (filled as the panel's) and its
+    cone of bare wood reaching the panel's top: the cone's notch counts as the panel too,
+    and the panel's region keeps its top row (80); without that, the opening that takes
+    off the mirror frame's bars ate the strips beside the notch and the region began at
+    row 89 (on a JPEG bench frame, no panel was found at all)."""
+    from mirrorsim.detection import regions
+
+    img = np.full((200, 200, 3), (60, 80, 130), np.float32)  # a blue wall in the glass
+    img[80:116, 85:115] = (70, 70, 70)  # the panel, 30 x 36 px
+    img[92:130, 97:103] = (200, 160, 20)  # a pencil's band across it, 6 px wide
+    img[80:92, 97:103] = (120, 90, 60)  # its cone, bare wood: a notch in the panel's top
+    assert regions.find_target(img, 30 / 36)[1] == 80
+    monkeypatch.setattr(regions, "CONE_WIDTHS", 0.0)
+    assert regions.find_target(img, 30 / 36)[1] == 89
+
+
 def test_a_panel_top_under_a_strip_as_bright_as_it_is_measured_on_the_colour():
     """A neutral panel whose top stands 4 px under the mirror frame's dark bar, a strip
     of brown wall between, as bright as the panel: the top lies at row 63.5 (rows 64 on are
