@@ -38,8 +38,11 @@ def budget_table(budget: Budget) -> str:
     nb = max((len(c.delta.beacon_alpha_deg) for c in (*budget.sources, budget.all)
               if c is not None and c.delta is not None), default=1)
     cal = bool(budget.calibration.nuisances)
-    rows = [("source", "value", "Δα_t (°)", "Δd_t (%)",
-             *(h for i in range(nb) for h in (f"Δα_b{i} (°)", f"Δd_b{i} (%)")),
+    three = budget.geometry == "3d"  # each image's elevation beside its α
+    quantities = ("α", "ε", "d") if three else ("α", "d")
+    unit = {"α": "°", "ε": "°", "d": "%"}
+    rows = [("source", "value", *(f"Δ{q}_t ({unit[q]})" for q in quantities),
+             *(f"Δ{q}_b{i} ({unit[q]})" for i in range(nb) for q in quantities),
              "moved (cm)", "1st order", "target (cm)", "1st order",
              *(["self-cal (cm)"] if cal else []))]
     failures = []
@@ -50,16 +53,25 @@ def budget_table(budget: Budget) -> str:
             rows.append((c.source, value, "failed", *[""] * (len(rows[0]) - 3)))
             failures.append(f"  {c.source}: {c.failed}")
             continue
-        per = [x for a, p in zip(d.beacon_alpha_deg, d.beacon_d_total_pct, strict=True)
-               for x in (signed(a, 4), signed(p, 3))]
-        rows.append((c.source, value, signed(d.target_alpha_deg, 4),
-                     signed(d.target_d_total_pct, 3), *per, *[""] * (2 * nb - len(per)),
+        if three:
+            own = (signed(d.target_alpha_deg, 4), signed(d.target_elevation_deg, 4),
+                   signed(d.target_d_total_pct, 3))
+            per = [x for a, e, p in zip(d.beacon_alpha_deg, d.beacon_elevation_deg,
+                                        d.beacon_d_total_pct, strict=True)
+                   for x in (signed(a, 4), signed(e, 4), signed(p, 3))]
+        else:
+            own = (signed(d.target_alpha_deg, 4), signed(d.target_d_total_pct, 3))
+            per = [x for a, p in zip(d.beacon_alpha_deg, d.beacon_d_total_pct, strict=True)
+                   for x in (signed(a, 4), signed(p, 3))]
+        rows.append((c.source, value, *own, *per,
+                     *[""] * (len(quantities) * nb - len(per)),
                      f"{c.shift_cm:.2f}", f"{c.predicted_shift_cm:.2f}",
                      f"{c.target_cm:.2f}", f"{c.predicted_cm:.2f}",
                      *([_cm(c.calibrated_cm)] if cal else [])))
     lines = columns(rows)
     lines.insert(1, "-" * len(lines[0]))
-    head = f"{budget.scene}: ideal bench {budget.ideal_cm:.2f} cm"
+    head = (f"{budget.scene}: ideal bench {budget.ideal_cm:.2f} cm"
+            + (" (solved in 3-D; errors are 3-D distances)" if three else ""))
     if cal:
         head += (f" ({_cm(budget.ideal_calibrated_cm)} cm self-calibrated for "
                  f"{' and '.join(budget.calibration.nuisances)}"

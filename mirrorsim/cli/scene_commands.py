@@ -257,7 +257,9 @@ def _budget_options(p):
          "Render, detect, solve and score SCENE on an ideal bench, with each of its bench "
          "imperfections alone (camera.pan_error, camera.pitch, mirror.curvature_radius, "
          "calibration.distance_error, beacons[i].known_position... see docs/scenes.md) and with "
-         "all of them.  Prints each source's measurement deltas and target error beside the "
+         "all of them (a scene with a raised object or a leaning mirror: solved in 3-D, each "
+         "image's elevation measured too).  Prints each source's measurement deltas and "
+         "target error beside the "
          "first-order prediction (the solver's Jacobian times the measured deltas); writes "
          "DIR/budget.json and a tornado chart DIR/budget.png; each run's frames in its own "
          "sub-folder.",
@@ -267,11 +269,9 @@ def _budget(args) -> int:
     from mirrorsim.cli.plots import plot_budget
     from mirrorsim.formats.files import write_json
     from mirrorsim.pipelines.budget import budget_runs, check_budget_calibration, run_budget
-    from mirrorsim.pipelines.scenes import refuse_3d
     from mirrorsim.scene.imperfections import sources
 
     scene = render_options(args, load(args.scene))
-    refuse_3d(scene, "budget")
     # before anything renders or is written
     calibration = check_budget_calibration(scene, calibration_of(args, len(scene.beacons)))
     model = error_model_of(args)  # read and checked before anything is written

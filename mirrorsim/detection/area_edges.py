@@ -82,16 +82,9 @@ def _local_edge(img: np.ndarray, band, axis: int, guess: float, inside_first: bo
     at = np.arange(-half, half + 1, dtype=float)
     k_b = np.array(k_in if inside_first else k_out, float)
     k_a = np.array(k_out if inside_first else k_in, float)
-    rows_b = np.array([line(c - int(k)) for k in k_b])
-    rows_a = np.array([line(c + int(k)) for k in k_a])
-    # (not for a sloped level, whose line is fitted through what lies there; nor across a
-    # colour: on a JPEG's stored chroma, blurred over 2 px, it cut the rows a pencil's
-    # foot needs and put it up to 2 px off)
-    if not slope_out and not chroma:
-        if inside_first:
-            rows_a, k_a = _outside_to_first_step(rows_a, k_a, np.median(rows_b, axis=0))
-        else:
-            rows_b, k_b = _outside_to_first_step(rows_b, k_b, np.median(rows_a, axis=0))
+    rows_a, k_a, rows_b, k_b = _outside_to_first_step(
+        np.array([line(c + int(k)) for k in k_a]), k_a, np.array([line(c - int(k)) for k in k_b]),
+        k_b, inside_first, keep_all=slope_out or bool(chroma))
     before = _level(rows_b, -k_b, at, slope if inside_first else slope_out)
     after = _level(rows_a, k_a, at, slope_out if inside_first else slope)
     inside, outside = (before, after) if inside_first else (after, before)
@@ -100,8 +93,7 @@ def _local_edge(img: np.ndarray, band, axis: int, guess: float, inside_first: bo
     if near:
         # the outside changes towards the edge (a contact shadow on the board): its level
         # is the first pixel past the edge's, and the window stops at the edge's pixel
-        step = 1 if inside_first else -1
-        level = line(c + step)
+        level = line(c + (1 if inside_first else -1))
         lo = c - half if inside_first else c
         window = np.array([line(i) for i in range(lo, lo + half + 1)])
         return (_edge_by_area(flat(window), lo, flat(inside), flat(level), inside_first),
@@ -118,20 +110,27 @@ def _local_edge(img: np.ndarray, band, axis: int, guess: float, inside_first: bo
 OUTSIDE_STEP = 0.25
 
 
-def _outside_to_first_step(rows: np.ndarray, k: np.ndarray, inside: np.ndarray
-                           ) -> tuple[np.ndarray, np.ndarray]:
-    """The outside's rows (nearest first) up to the first that steps towards the inside's
-    colour by over OUTSIDE_STEP of the contrast: a dark bar 3 px beyond a panel's top (the
-    mirror frame's, with a strip of pale wall between) put the outside's median half on
-    the bar, and the top 1.4 px low (d_total 1.1 % long, 16 σ).  A nearest row still
-    partly inside steps the other way (away from the inside) and keeps every row."""
-    d = inside - rows[0]
+def _outside_to_first_step(rows_a: np.ndarray, k_a: np.ndarray, rows_b: np.ndarray,
+                           k_b: np.ndarray, inside_first: bool, keep_all: bool = False
+                           ) -> tuple[np.ndarray, ...]:
+    """:func:`_local_edge`'s rows after (``rows_a``, at offsets ``k_a``) and before the
+    edge, the outside's (nearest first) kept up to the first that steps towards the
+    inside's colour by over OUTSIDE_STEP of the contrast: a dark bar 3 px beyond a panel's
+    top (the mirror frame's, with a strip of pale wall between) put the outside's median
+    half on the bar, and the top 1.4 px low (d_total 1.1 % long, 16 σ).  A nearest row
+    still partly inside steps the other way (away from the inside) and keeps every row.
+    ``keep_all`` for a sloped level (its line is fitted through what lies there) and
+    across a colour (on a JPEG's stored chroma, blurred over 2 px, the step cut the rows a
+    pencil's foot needs and put it up to 2 px off)."""
+    if keep_all:
+        return rows_a, k_a, rows_b, k_b
+    rows, k, inside = ((rows_a, k_a, rows_b) if inside_first else (rows_b, k_b, rows_a))
+    d = np.median(inside, axis=0) - rows[0]
     dd = float(d @ d)
-    if dd <= 0.0 or len(rows) < 2:
-        return rows, k
-    toward = (rows - rows[0]) @ d / dd
-    steps = np.flatnonzero(toward > OUTSIDE_STEP)
-    return (rows, k) if steps.size == 0 else (rows[:steps[0]], k[:steps[0]])
+    steps = np.flatnonzero((rows - rows[0]) @ d / dd > OUTSIDE_STEP) if dd > 0.0 else []
+    if len(steps):
+        rows, k = rows[:steps[0]], k[:steps[0]]
+    return (rows, k, rows_b, k_b) if inside_first else (rows_a, k_a, rows, k)
 
 
 def _projection(chroma: bool | str, inside_rows: np.ndarray, outside_rows: np.ndarray

@@ -1,5 +1,7 @@
 """The error budget of a bench (``mirrorsim budget``): the scene ideal, with each
-imperfection alone, and with all; each rendered, detected, solved and scored.
+imperfection alone, and with all; each rendered, detected, solved and scored (a 3-D
+scene, one with a raised object or a leaning mirror, in 3-D: each image's elevation
+measured too, the target's error in 3-D).
 
 Beside each measured contribution stands its first-order prediction: the solver's
 Jacobian (the target estimate's derivatives with respect to every measurement and
@@ -11,7 +13,7 @@ part, the effect is not first order (or the solver's conditioning amplifies nois
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -21,7 +23,8 @@ from mirrorsim.errors import BadParameter, DetectionError, SolverError
 from mirrorsim.formats.error_model import ErrorModel
 from mirrorsim.formats.files import claim_run_folder
 from mirrorsim.pipelines.evaluate import evaluate_into
-from mirrorsim.pipelines.scenes import check_given_scene, refuse_3d
+from mirrorsim.pipelines.evaluate3d import Report3, check_calibration3, evaluate_into3
+from mirrorsim.pipelines.scenes import check_given_scene
 from mirrorsim.pipelines.score import Report, check_keep
 from mirrorsim.pipelines.solving import model_for
 from mirrorsim.rendering.backend import check_variant
@@ -29,6 +32,7 @@ from mirrorsim.rendering.passes import reusing_renders
 from mirrorsim.scene import imperfections
 from mirrorsim.scene.model import Scene
 from solver.lsq import solve_measurements
+from solver.lsq3 import Measurements3
 from solver.measurements import BeaconMeasurement, Measurements
 from solver.selfcal import PLAIN, SelfCalibration, as_calibration, check_nuisances
 
@@ -46,14 +50,21 @@ class Delta:
     beacon_alpha_deg: tuple[float, ...]
     beacon_d_total_pct: tuple[float, ...]
     beacon_position_cm: tuple[float, ...]  # |believed − ideal| per beacon
+    # a 3-D budget's: each image's elevation (deg); None and () in the plane
+    target_elevation_deg: float | None = None
+    beacon_elevation_deg: tuple[float, ...] = ()
 
     def to_json(self) -> dict:
         """The ``delta`` block."""
-        return {"target_alpha_deg": self.target_alpha_deg,
-                "target_d_total_pct": self.target_d_total_pct,
-                "beacon_alpha_deg": list(self.beacon_alpha_deg),
-                "beacon_d_total_pct": list(self.beacon_d_total_pct),
-                "beacon_position_cm": list(self.beacon_position_cm)}
+        out = {"target_alpha_deg": self.target_alpha_deg,
+               "target_d_total_pct": self.target_d_total_pct,
+               "beacon_alpha_deg": list(self.beacon_alpha_deg),
+               "beacon_d_total_pct": list(self.beacon_d_total_pct),
+               "beacon_position_cm": list(self.beacon_position_cm)}
+        if self.target_elevation_deg is not None:
+            out |= {"target_elevation_deg": self.target_elevation_deg,
+                    "beacon_elevation_deg": list(self.beacon_elevation_deg)}
+        return out
 
 
 @dataclass(frozen=True)
@@ -95,13 +106,14 @@ class Budget:
     sources: tuple[Contribution, ...]
     calibration: SelfCalibration = PLAIN  # the self-calibrated column's, where asked
     ideal_calibrated_cm: float | None = None
+    geometry: str = "planar"  # "3d": solved in 3-D, each error the 3-D distance
 
     def to_json(self) -> dict:
         """The budget document."""
         ideal = {"target_cm": self.ideal_cm}
         if self.calibration.nuisances:
             ideal["calibrated_target_cm"] = self.ideal_calibrated_cm
-        out = {"scene": self.scene, "ideal": ideal,
+        out = {"scene": self.scene, "geometry": self.geometry, "ideal": ideal,
                "sources": [c.to_json() for c in self.sources]}
         if self.calibration.nuisances:
             out["self_calibration"] = self.calibration.to_json()
@@ -111,64 +123,103 @@ class Budget:
         return out
 
 
-def _vector(m: Measurements) -> np.ndarray:
-    """The solver's inputs as one vector: target α, d; per beacon α, d, x, y."""
+def _vector(m: Measurements | Measurements3) -> np.ndarray:
+    """The solver's inputs as one vector: target α, d; per beacon α, d, x, y (in 3-D:
+    target α, ε, d; per beacon α, ε, d, x, y, z)."""
+    if isinstance(m, Measurements3):
+        return np.array([*m.target, *(v for p, seen in m.beacons for v in (*seen, *p))], float)
     v = list(np.mean(m.targets, axis=0))
     for b in m.beacons:
         v += [b.alpha_deg, b.d_total, *b.position]
     return np.array(v, float)
 
 
-def _estimate(observer, v: np.ndarray, sigma) -> np.ndarray:
-    beacons = [BeaconMeasurement((float(v[k + 2]), float(v[k + 3])), float(v[k]),
-                                 float(v[k + 1])) for k in range(2, len(v), 4)]
-    return solve_measurements(observer, beacons, [(float(v[0]), float(v[1]))], sigma=sigma).target
+def _estimate(m: Measurements | Measurements3, v: np.ndarray) -> np.ndarray:
+    """The target the plain solve makes of ``m`` with its inputs ``v`` (:func:`_vector`'s)."""
+    f = [float(x) for x in v]
+    if isinstance(m, Measurements3):
+        beacons = tuple((tuple(f[k + 3:k + 6]), tuple(f[k:k + 3])) for k in range(3, len(f), 6))
+        return replace(m, target=tuple(f[:3]), beacons=beacons).solve().target
+    beacons = [BeaconMeasurement((f[k + 2], f[k + 3]), f[k], f[k + 1])
+               for k in range(2, len(f), 4)]
+    return solve_measurements(m.observer, beacons, [(f[0], f[1])], sigma=m.sigma).target
 
 
-def jacobian(m: Measurements) -> np.ndarray:
-    """∂(target estimate)/∂(measurement vector) at ``m``, (2, n) by central differences."""
+def jacobian(m: Measurements | Measurements3) -> np.ndarray:
+    """∂(target estimate)/∂(measurement vector) at ``m``, (2, n) by central differences
+    ((3, n) in 3-D, an elevation stepped as an α)."""
     v0 = _vector(m)
-    steps = np.array([STEPS[0], STEPS[1]] + [STEPS[0], STEPS[1], STEPS[2], STEPS[2]]
-                     * len(m.beacons))
+    a, d, p = STEPS
+    if isinstance(m, Measurements3):
+        steps = np.array([a, a, d] + [a, a, d, p, p, p] * len(m.beacons))
+    else:
+        steps = np.array([a, d] + [a, d, p, p] * len(m.beacons))
     cols = []
     for k, h in enumerate(steps):
         e = np.zeros_like(v0)
         e[k] = h
-        cols.append((_estimate(m.observer, v0 + e, m.sigma)
-                     - _estimate(m.observer, v0 - e, m.sigma)) / (2 * h))
+        cols.append((_estimate(m, v0 + e) - _estimate(m, v0 - e)) / (2 * h))
     return np.column_stack(cols)
 
 
-def calibrated_error(report: Report, calibration: SelfCalibration) -> float | None:
+def _measured(report: Report | Report3) -> Measurements | Measurements3:
+    return report.seen if isinstance(report, Report3) else report.measurements
+
+
+def _truth(report: Report | Report3) -> np.ndarray:
+    """The true target (its base in 3-D)."""
+    t = np.asarray(report.truth.target.position, float)
+    return np.r_[t, 0.0] if isinstance(report, Report3) and len(t) == 2 else t
+
+
+def _target(report: Report | Report3) -> np.ndarray:
+    return report.fit.target if isinstance(report, Report3) else report.solution.target
+
+
+def calibrated_error(report: Report | Report3, calibration: SelfCalibration) -> float | None:
     """The target error of the report's measurements solved self-calibrated (None where
     not asked, or where the geometry cannot carry the nuisances)."""
     if not calibration.nuisances:
         return None
-    m = report.measurements
+    m = _measured(report)
     try:
-        sol = solve_measurements(m.observer, m.beacons, m.targets, sigma=m.sigma,
-                                 calibration=calibration)
+        if isinstance(m, Measurements3):
+            target = m.solve(nuisances=calibration.nuisances, priors=calibration.priors).target
+        else:
+            target = solve_measurements(m.observer, m.beacons, m.targets, sigma=m.sigma,
+                                        calibration=calibration).target
     except SolverError:
         return None
-    return float(np.linalg.norm(sol.target - np.asarray(report.truth.target.position, float)))
+    return float(np.linalg.norm(target - _truth(report)))
 
 
-def contribution(source: str, value: Any, ideal: Report, *, report: Report,
-                 J: np.ndarray, calibration: SelfCalibration = PLAIN) -> Contribution:
+def contribution(source: str, value: Any, ideal: Report | Report3, *,
+                 report: Report | Report3, J: np.ndarray,
+                 calibration: SelfCalibration = PLAIN) -> Contribution:
     """Compare a source's report with the ideal one; predict its effect to first order;
     with ``calibration``'s nuisances, also solve its frames self-calibrated."""
-    v0, v1 = _vector(ideal.measurements), _vector(report.measurements)
+    v0, v1 = _vector(_measured(ideal)), _vector(_measured(report))
     dv = v1 - v0
-    truth = np.asarray(ideal.truth.target.position, float)
-    est0, est1 = ideal.solution.target, report.solution.target
+    truth = _truth(ideal)
+    est0, est1 = _target(ideal), _target(report)
     pred = J @ dv
-    nb = len(report.measurements.beacons)
+    nb = len(_measured(report).beacons)
     pct = lambda k: float(100 * dv[k] / v0[k])  # noqa: E731
-    delta = Delta(target_alpha_deg=float(dv[0]), target_d_total_pct=pct(1),
-                  beacon_alpha_deg=tuple(float(dv[2 + 4 * i]) for i in range(nb)),
-                  beacon_d_total_pct=tuple(pct(3 + 4 * i) for i in range(nb)),
-                  beacon_position_cm=tuple(float(np.hypot(*dv[4 + 4 * i:6 + 4 * i]))
-                                           for i in range(nb)))
+    if isinstance(report, Report3):  # (α, ε, d | α, ε, d, x, y, z)
+        b = [3 + 6 * i for i in range(nb)]
+        delta = Delta(target_alpha_deg=float(dv[0]), target_d_total_pct=pct(2),
+                      beacon_alpha_deg=tuple(float(dv[k]) for k in b),
+                      beacon_d_total_pct=tuple(pct(k + 2) for k in b),
+                      beacon_position_cm=tuple(float(np.linalg.norm(dv[k + 3:k + 6]))
+                                               for k in b),
+                      target_elevation_deg=float(dv[1]),
+                      beacon_elevation_deg=tuple(float(dv[k + 1]) for k in b))
+    else:
+        b = [2 + 4 * i for i in range(nb)]
+        delta = Delta(target_alpha_deg=float(dv[0]), target_d_total_pct=pct(1),
+                      beacon_alpha_deg=tuple(float(dv[k]) for k in b),
+                      beacon_d_total_pct=tuple(pct(k + 1) for k in b),
+                      beacon_position_cm=tuple(float(np.hypot(*dv[k + 2:k + 4])) for k in b))
     return Contribution(source=source, value=value,
                         target_cm=float(np.linalg.norm(est1 - truth)),
                         shift_cm=float(np.linalg.norm(est1 - est0)),
@@ -180,8 +231,12 @@ def contribution(source: str, value: Any, ideal: Report, *, report: Report,
 def check_budget_calibration(scene: Scene, calibration: SelfCalibration) -> SelfCalibration:
     """``calibration`` for a budget of ``scene``, refused before anything is rendered or
     written where its self-calibrated column would be empty: nuisances the scene's
-    beacons cannot carry, or a beacons' position σ without nuisances."""
+    beacons cannot carry, or a beacons' position σ without nuisances; for a 3-D scene,
+    a nuisance the 3-D solve does not estimate
+    (:data:`~mirrorsim.pipelines.evaluate3d.CALIBRATED3`)."""
     calibration = as_calibration(calibration)
+    if scene.is_3d:
+        check_calibration3(scene.name, calibration)
     if calibration.position_sigma and not calibration.nuisances:
         raise BadParameter("nuisances", "none given, yet a beacons' position σ is: the "
                            "budget uses that σ in its self-calibrated column only, which "
@@ -222,18 +277,18 @@ def run_budget(scene: Scene, out: str | Path, *, variant: str = "auto", progress
     calibration, model = _checked(scene, keep=keep, calibration=calibration,
                                   error_model=error_model, variant=variant)
     out = claim_run_folder(out, "out", [("scene", scene.source)])
-    found = imperfections.sources(scene)
-    runs = budget_runs(scene)
+    found, runs = imperfections.sources(scene), budget_runs(scene)
     done = iter(range(1, runs + 1))
 
-    def run(label: str, sub: Scene) -> Report:
+    def run(label: str, sub: Scene) -> Report | Report3:
         if on_step is not None:
             on_step(label, next(done), runs)
         # every run weighed by the model the whole scene's bench calls for, and solved
         # as the budget solves (its own calibration, not the model's bench priors): the
-        # runs differ by their imperfections alone
-        return evaluate_into(sub, out / _folder(label), variant=variant, progress=progress,
-                             keep=keep, error_model=model, model_priors=False)
+        # runs differ by their imperfections alone (a 3-D scene's, solved in 3-D)
+        return (evaluate_into3 if scene.is_3d else evaluate_into)(
+            sub, out / _folder(label), variant=variant, progress=progress, keep=keep,
+            error_model=model, model_priors=False)
 
     def measured(label: str, value: Any, sub: Scene) -> Contribution:
         # a bench error can make a frame unmeasurable (an image taken for the wrong one
@@ -252,13 +307,14 @@ def run_budget(scene: Scene, out: str | Path, *, variant: str = "auto", progress
             ideal = run("ideal", imperfections.ideal(scene))
         except DetectionError as exc:
             raise DetectionError(f"the ideal bench: {exc}") from None
-        J = jacobian(ideal.measurements)
+        J = jacobian(_measured(ideal))
         contributions = tuple(measured(s.key, s.value, imperfections.only(scene, s.key))
                               for s in found)
         everything = measured("all", None, scene) if len(found) > 1 else None
     return Budget(scene=scene.name, ideal_cm=ideal.errors.target_cm, all=everything,
                   sources=contributions, calibration=calibration,
-                  ideal_calibrated_cm=calibrated_error(ideal, calibration))
+                  ideal_calibrated_cm=calibrated_error(ideal, calibration),
+                  geometry="3d" if scene.is_3d else "planar")
 
 
 def _checked(scene: Scene, *, keep: tuple[str, ...], calibration: SelfCalibration,
@@ -267,7 +323,6 @@ def _checked(scene: Scene, *, keep: tuple[str, ...], calibration: SelfCalibratio
     """:func:`run_budget`'s arguments checked, and its error model read, before anything
     is written: the calibration it solves with and the model that weighs every run."""
     check_given_scene(scene)  # edited by a script: held to what its file would make
-    refuse_3d(scene, "budget")
     check_keep(keep)
     calibration = check_budget_calibration(scene, calibration)
     model = model_for(scene, error_model)

@@ -145,12 +145,13 @@ class Report3:
 def evaluate_into3(scene: Scene, out: Path, *, variant: str = "auto", progress: bool = True,
                    error_model: ErrorModel | None = None,
                    keep: tuple[str, ...] = KEPT_BY_DEFAULT,
-                   calibration: SelfCalibration = PLAIN) -> Report3:
+                   calibration: SelfCalibration = PLAIN, model_priors: bool = True) -> Report3:
     """Render (or reuse), detect in 3-D, solve in 3-D and score ``scene`` into ``out``, a
     folder its caller has claimed, its parameters checked
     (:func:`mirrorsim.pipelines.evaluate.evaluate_scene` with ``geometry``);
     ``calibration``: the pan and range scale to estimate, and what the user states of
-    them (:func:`check_calibration3`), beside the bench model's own.
+    them (:func:`check_calibration3`), beside the bench model's own (``model_priors``
+    False: ``calibration``'s alone, as a budget compares its runs).
 
     Raises
     ------
@@ -175,7 +176,7 @@ def evaluate_into3(scene: Scene, out: Path, *, variant: str = "auto", progress: 
     # the 3-D solve draws a Gaussian's ellipsoid: the σ's as a Gaussian's (the factors
     # below were fitted on them)
     seen = _seen3(scene, measured, model.gaussian(sigma), fx=seen2.fx)
-    nuisances, priors = nuisances3(model, sigma, calibration)
+    nuisances, priors = nuisances3(model, sigma, calibration, bench=model_priors)
     fit = seen.solve(nuisances=nuisances, priors=priors)
     try:  # the planar solve of the same frames, beside it
         planar = solve_measurements(scene.camera.position, seen2.beacons, [seen2.target],
@@ -277,13 +278,14 @@ def check_calibration3(name: str, calibration: SelfCalibration) -> None:
                            "solve does)")
 
 
-def nuisances3(model: ErrorModel, sigma: ObjectSigmas, asked: SelfCalibration = PLAIN
-               ) -> tuple[tuple[str, ...], dict[str, float]]:
+def nuisances3(model: ErrorModel, sigma: ObjectSigmas, asked: SelfCalibration = PLAIN, *,
+               bench: bool = True) -> tuple[tuple[str, ...], dict[str, float]]:
     """The bench's shared errors the 3-D solve estimates, with their priors: those
     ``asked`` (a prior the user states wins over the model's, none leaves it free), and
-    the pan and range scale a bench model's tolerances give; an α error every image of
-    a frame shares widens the pan's prior (an ideal-bench model, asked nothing: none)."""
-    cal = model_calibration(model, asked)
+    (``bench``) the pan and range scale a bench model's tolerances give; an α error every
+    image of a frame shares widens the pan's prior (an ideal-bench model, asked nothing:
+    none)."""
+    cal = model_calibration(model, asked) if bench else asked
     nuisances = tuple(n for n in cal.nuisances if n in CALIBRATED3)
     priors = {n: s for n, s in cal.priors.items() if n in nuisances}
     if sigma.shared_alpha_deg and ("pan" in priors or "pan" not in nuisances):
