@@ -438,3 +438,38 @@ def test_check_warns_of_an_image_ending_at_the_frames_bottom_row():
         if warned:
             assert said[0].startswith("beacon.position: ") and "bottom row" in said[0]
             assert f"ends {gap:.1f} px" in said[0]
+
+
+def test_check_warns_of_a_foot_just_above_the_glass_bottom_edge():
+    """A pencil before the default scene's glass, the camera lowered to 2 cm, nearer and
+    nearer the glass: its reflection's foot comes down onto the glass's bottom edge.  The
+    gap, worked here from the pinhole (a level camera h cm high: a board point at depth D
+    along the optical axis lies fx·h/D under the centre row; the edge's point is where the
+    line to the virtual foot crosses the glass), decides: under 3 px one warning names the
+    key and the gap, and none at or beyond it."""
+    from mirrorsim.pipelines.scenes import edit_scene
+
+    scene = load_scene(SCENES / "default.yaml")
+    assert not any("glass's bottom edge" in w for w in scene.warnings)
+    scene = edit_scene(scene, {"camera": {"height": 2.0}})
+    cam, m = scene.camera, scene.mirror
+    o = np.asarray(cam.position, float)
+    n = np.array([-math.sin(math.radians(m.yaw)), math.cos(math.radians(m.yaw))])
+    n = n if (o - m.center) @ n > 0 else -n
+    along = np.array([math.cos(math.radians(m.yaw)), math.sin(math.radians(m.yaw))])
+    axis = np.array([math.cos(math.radians(cam.pan_deg)), math.sin(math.radians(cam.pan_deg))])
+    seen = []
+    for depth in (1.5, 2.5, 3.0, 4.0, 5.0):
+        b = np.asarray(m.center) + depth * n + 0.1 * m.size[0] * along
+        v = b - 2 * depth * n  # the virtual foot
+        t = ((o - m.center) @ n) / ((o - v) @ n)  # where the line o → v crosses the glass
+        edge = o + t * (v - o)
+        gap = cam.fx * cam.height * (1 / ((edge - o) @ axis) - 1 / ((v - o) @ axis))
+        edited = edit_scene(scene, {"beacon": {"position": b.round(3).tolist()}})
+        said = [w for w in edited.warnings if "glass's bottom edge" in w]
+        assert len(said) == (gap < 3.0), (depth, gap, edited.warnings)
+        if said:
+            assert said[0].startswith("beacon.position: the pencil's image")
+            assert _said_px(said[0], " px above") == pytest.approx(gap, abs=0.06)
+        seen.append(bool(said))
+    assert True in seen and False in seen
