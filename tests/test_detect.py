@@ -597,7 +597,8 @@ def test_a_panel_top_under_the_frames_bar_takes_its_height_from_its_width():
     """A panel's top 2 px under the mirror frame's dark bar, bright glass between (ideal0022
     of seed 61207021: no contrast at its top, no d_total in any frame; 4 of 360 domain
     rows read their top on the bar, d_total 7-11 % short): the height its two sides imply
-    (tan β = w·s·cos φ/(2fH)) is taken, within 0.2 px of the 140 px drawn."""
+    (tan β = w·s·cos φ/(2fH)) is taken, within 0.2 px of the 140 px drawn; also where the
+    panel's region took in the bar."""
     import math
 
     from mirrorsim.detection import edges
@@ -621,6 +622,15 @@ def test_a_panel_top_under_the_frames_bar_takes_its_height_from_its_width():
         assert m.height_px == pytest.approx(140.0, abs=0.2), (gap, glass)
         assert m.d_total == pytest.approx(1.0e5 / 140 + 0.2, rel=0.002)
         assert any("height from its width" in n for n in m.notes)
+    # the panel's region grown over the bar (its box from the bar's top row, as the grey
+    # mask joined them across the 1 px of glass): the top is found on the bar's far edge,
+    # 12 px high; the bar, darker than the panel just inside that top, says so, and the
+    # width decides
+    m = edges.measure_region(img, (50, 28, 149, 179), "target")
+    assert m.v_top == pytest.approx(27.5, abs=0.3) and "top" in m.darker_sides
+    m = target_geometry(cam, m, size, k=1.0e5)
+    assert m.height_px == pytest.approx(140.0, abs=0.2)
+    assert any("darker just inside its top" in n for n in m.notes)
 
 
 def test_a_pencil_beside_the_frame_is_not_measured_on_its_other_side(monkeypatch):

@@ -342,7 +342,7 @@ def _panel_edges(img: np.ndarray, box: tuple[int, int, int, int], *, on_chroma: 
     left, right, out_left, out_right = median_edges((img, img), (u0, u1), (v0, v1), axis=1,
                                                      slope=(True, True),
                                                      max_off=SIDE_MAX_OFF_PX)
-    darker = _darker_sides(img, box, left, right)
+    darker = _darker_sides(img, box, left, right, top)
     return _Edges(top, bottom, left, right, out_top, out_bottom, out_left, out_right,
                   (*sides_note, *(DARKER_SIDE + side for side in darker)),
                   darker_sides=darker,
@@ -374,19 +374,21 @@ DARKER_RATIO = 0.7  # a side strip's level over the middle's (a frame bar: 0.43)
 
 
 def _darker_sides(img: np.ndarray, box: tuple[int, int, int, int], left: float | None,
-                  right: float | None) -> tuple[str, ...]:
-    """The sides ('left', 'right') whose 2-px strip just inside the edge, over the
-    middle half of the rows, is darker than DARKER_RATIO of the panel's middle."""
+                  right: float | None, top: float | None) -> tuple[str, ...]:
+    """The sides ('left', 'right', 'top') whose 2-px strip just inside the edge, over the
+    middle half of the rows (of the columns, for the top), is darker than DARKER_RATIO of
+    the panel's middle (a top there: the frame's bar, a strip of wall between, taken in)."""
     u0, v0, u1, v1 = box
     rows = slice(v0 + (v1 - v0) // 4, v1 - (v1 - v0) // 4 + 1)
-    core = float(np.median(img[rows, u0 + (u1 - u0) // 4: u1 - (u1 - u0) // 4 + 1]))
+    cols = slice(u0 + (u1 - u0) // 4, u1 - (u1 - u0) // 4 + 1)
+    core = float(np.median(img[rows, cols]))
     sides = []
-    for side, edge, step in (("left", left, 1), ("right", right, -1)):
+    for side, edge, step in (("left", left, 1), ("right", right, -1), ("top", top, 1)):
         if edge is None or core <= 0:
             continue
         first = int(math.floor(edge + 0.5)) + (1 if step > 0 else -1)  # wholly inside
-        cols = sorted((first, first + step))
-        cells = img[rows, max(cols[0], 0): cols[1] + 1]
+        lo, hi = sorted((first, first + step))
+        cells = img[max(lo, 0):hi + 1, cols] if side == "top" else img[rows, max(lo, 0):hi + 1]
         if cells.size == 0:  # (a panel a pixel or two wide at the frame's side)
             continue
         strip = float(np.median(cells))

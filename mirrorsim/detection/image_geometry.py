@@ -271,6 +271,13 @@ def _target_clip(cam: Camera, m: ImageMeasurement, size: Point2, present: list[s
             m = _height_from_width(cam, m, size, (
                 f"image {100 * (1 - r):.1f}% narrower than its height implies, under a dark "
                 "edge, its sides not: its top is that edge's, height from its width"))
+        elif r < 1 - tol and "top" in m.darker_sides:
+            # the region took in the frame's bar above the panel (a strip of wall between
+            # them 1 px tall), and the top was found on the bar's far edge: d_total 7-10 %
+            # short on 4 of the ideal model's 360 rows
+            m = _height_from_width(cam, m, size, (
+                f"image {100 * (1 - r):.1f}% narrower than its height implies, darker just "
+                "inside its top: its top is not the panel's, height from its width"))
         elif r > 1 + tol and (shaded := _shaded_side(cam, m, beta, r)) is not None:
             m = shaded
         elif abs(r - 1) > tol:
@@ -339,7 +346,7 @@ def _height_from_width(cam: Camera, m: ImageMeasurement, size: Point2, note: str
     across = [abs(c - u) for c, u in zip(m.sides_across_outside, (m.u_left, m.u_right),
                                          strict=True) if c is not None and u is not None]
     if m.v_bottom is None or m.u_left is None or m.u_right is None or dark or \
-            m.darker_sides or any(d > WIDTH_SIDES_PX for d in across):
+            {"left", "right"} & set(m.darker_sides) or any(d > WIDTH_SIDES_PX for d in across):
         return replace(m, height_px=None, notes=(*m.notes, note.replace(
             "height from its width", "height not used")))
     left, right = _off_axis(cam, m.u_left), _off_axis(cam, m.u_right)
