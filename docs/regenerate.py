@@ -55,6 +55,9 @@ RESULTS: tuple[Result, ...] = (
     Result("budget_exp1", (f"{MS} budget scenes/bench/exp1.yaml",),
            about="the paper's EXP1 on a hand-built bench: the error budget",
            fresh=("renders/exp1_bench",)),
+    Result("budget_raised", (f"{MS} budget scenes/bench/raised.yaml",),
+           about="the 3-D scene on EXP1's hand-built bench: the error budget in 3-D",
+           fresh=("renders/raised_bench",)),
     Result("evaluate_exp1_board",
            (f"{MS} evaluate scenes/bench/exp1_3beacons.yaml --calibrate pan,scale "
             "--beacon-sigma 0.115 --board-pose --out renders/exp1_board --quiet",),
