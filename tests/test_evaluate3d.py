@@ -124,7 +124,7 @@ def test_evaluate_solves_the_bundled_3d_scene_at_full_size(tmp_path):
     assert e["planar_target_cm"] > e["target_cm"]
 
 
-@pytest.mark.parametrize("command", ["track", "plan"])
+@pytest.mark.parametrize("command", ["track"])
 def test_commands_in_the_plane_refuse_a_3d_scene_in_one_line(tmp_path, command):
     out = tmp_path / ("out.png" if command == "plan" else "out")
     run = subprocess.run([sys.executable, "-m", "mirrorsim.cli.main", command,
@@ -170,6 +170,58 @@ def test_budget_of_a_3d_bench_is_solved_in_3d(tmp_path, capsys):
     for c in (pan, cal):
         assert c["predicted_shift_cm"] == pytest.approx(c["shift_cm"], rel=0.1)
         assert c["shift_cm"] > 0.1
+
+
+def test_plan_of_a_3d_scene_chooses_each_beacons_post():
+    """``plan`` of the bundled 3-D scene: each position (the scene's beacon's, the best)
+    gets the posts 0-15 cm its image shows whole, and the best's bound is the least.  The
+    bound holds against the 3-D solve itself: 300 draws of exact readings (measured3)
+    plus Gaussian noise of those σ's, solved, scatter the target by an RMS within 12 % of
+    it.  Under a glass 9 cm tall, the posts that would lift the pencil's image off the
+    glass are left out."""
+    import math
+
+    from mirrorsim.formats.error_model_file import default_error_model
+    from mirrorsim.pipelines.planning import plan_scene
+    from mirrorsim.pipelines.scenes import edit_scene
+    from mirrorsim.scene.model import FRONT_OFFSET
+    from mirrorsim.truth import optics
+    from solver.lsq3 import solve_lsq3
+    from solver.sltr3d import measured3
+
+    scene = load_scene(SCENES / "raised.yaml")
+    sigma = default_error_model().typical
+    plan = plan_scene(scene, sigma, n_poses=3, step=2.0)
+    assert [h.position for h in plan.heights] == [tuple(scene.beacons[0].position),
+                                                   tuple(plan.best.position)]
+    first = plan.heights[0]
+    assert first.heights == tuple(float(z) for z in range(16))
+    z, bound = first.best
+    assert bound == min(first.rmse) and bound <= first.rmse[0]
+    assert plan.to_json()["beacon_heights"][0]["best_height"] == z
+    # the bound against the solve, at the best post
+    cam, plane = scene.camera, optics.mirror_plane(scene.camera, scene.mirror)
+    base = np.array([*scene.beacons[0].position, z])
+    heights = (pencil_paint_height(scene.beacons[0].height), scene.target.size[1])
+    fronts = (FRONT_OFFSET["beacon"], FRONT_OFFSET["target"])
+    exact = [measured3(cam.center3, plane, p, height=h, front=f, pan_deg=cam.pan_deg)
+             for p, h, f in zip((base, scene.target.base3), heights, fronts, strict=True)]
+    t, b = sigma.target, sigma.beacons[0]
+    sig = np.array([(b.alpha_deg, b.alpha_deg, b.d_total_rel),
+                    (t.alpha_deg, t.alpha_deg, t.d_total_rel)])
+    rng = np.random.default_rng(7)
+    errs = []
+    for _ in range(300):
+        seen = [(a + rng.normal(0, sa), e + rng.normal(0, se), d * (1 + rng.normal(0, sd)))
+                for (a, e, d), (sa, se, sd) in zip(exact, sig, strict=True)]
+        fit = solve_lsq3(cam.center3, [(base, seen[0])], [seen[1]], sigma=sig,
+                         heights=heights, fronts=fronts, pan_deg=cam.pan_deg)
+        errs.append(fit.target - scene.target.base3)
+    rms = math.sqrt(np.mean(np.sum(np.square(errs), axis=1)))
+    assert rms == pytest.approx(bound, rel=0.12)
+    low = plan_scene(edit_scene(scene, {"mirror": {"size": [24, 9]}}), sigma, n_poses=3,
+                     step=2.0)
+    assert 0 < len(low.heights[0].heights) < 16
 
 
 LEANING_TARGET = np.array([57.0, 50.0, 6.0])

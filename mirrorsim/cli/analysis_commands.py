@@ -265,7 +265,6 @@ def _plan(args) -> int:
     from mirrorsim.cli.plots import plot_plan
     from mirrorsim.formats.error_model_file import default_error_model
     from mirrorsim.pipelines.planning import plan_scene
-    from mirrorsim.pipelines.scenes import refuse_3d
     from solver.measurements import SIGMA_D_REL_MAX, SIGMA_D_REL_MIN, ObjectSigmas, Sigma
 
     finite(args, "sigma_alpha", "sigma_d", "eps", "yaw_spread", "d1_spread", "step")
@@ -279,7 +278,6 @@ def _plan(args) -> int:
         raise BadArgument("--sigma-d", f"{args.sigma_d:g}: need {100 * SIGMA_D_REL_MIN:g} ≤ "
                           f"σ_d ≤ {100 * SIGMA_D_REL_MAX:g} (% of d_total)")
     scene = load(args.scene)
-    refuse_3d(scene, "plan")
     sigma = (ObjectSigmas.same(Sigma(args.sigma_alpha, args.sigma_d / 100.0))
              if args.sigma_alpha is not None
              else (error_model_of(args) or default_error_model()).typical)

@@ -170,7 +170,24 @@ def plan_text(scene: Scene, plan: Plan) -> str:
         f"{bb.rmse:.3f} cm" + (f" (seen under {100 * bb.seen_fraction:.0f}% of poses: none "
                                "seen under all passes the placement's test)"
                                if bb.seen_fraction < 1 else ""),
-        *_set_lines(plan.beacon_set)])
+        *_set_lines(plan.beacon_set), *_height_lines(plan)])
+
+
+def _height_lines(plan: Plan) -> list[str]:
+    """A 3-D scene's posts: the best height at each position, beside the board's."""
+    if not plan.heights:
+        return []
+    top = max(max(h.heights, default=0.0) for h in plan.heights)
+    out = [f"  posts (3-D; σ_ε = σ_α): the target's 3-D RMS bound with a beacon alone, on the "
+           f"board and on its best post of 0–{top:g} cm whose image the glass shows whole:"]
+    for h in plan.heights:
+        best = h.best
+        floor = dict(zip(h.heights, h.rmse, strict=True)).get(0.0)
+        out.append(f"    at ({h.position[0]:.1f}, {h.position[1]:.1f}): "
+                   + ("no post shows it whole" if best is None else
+                      f"{best[1]:.3f} cm with a post of {best[0]:g} cm"
+                      + (f" ({floor:.3f} cm on the board)" if floor is not None else "")))
+    return out
 
 
 def _set_lines(bs: BeaconSet | None) -> list[str]:

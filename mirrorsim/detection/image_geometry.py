@@ -267,17 +267,13 @@ def _target_clip(cam: Camera, m: ImageMeasurement, size: Point2, present: list[s
                 *m.notes, f"image {100 * (r - 1):.1f}% wider than its height implies, "
                 f"darker just inside its {side} edge: that edge is not the panel's, axis "
                 "from the other"))
-        elif r < 1 - tol and dark["top"]:  # its top on the frame's bar (d 7-11 % short)
+        elif r < 1 - tol and (dark["top"] or "top" in m.darker_sides):  # its top on the
+            # frame's bar: under it, or the bar taken into the region across 1 px of wall
             m = _height_from_width(cam, m, size, (
-                f"image {100 * (1 - r):.1f}% narrower than its height implies, under a dark "
-                "edge, its sides not: its top is that edge's, height from its width"))
-        elif r < 1 - tol and "top" in m.darker_sides:
-            # the region took in the frame's bar above the panel (a strip of wall between
-            # them 1 px tall), and the top was found on the bar's far edge: d_total 7-10 %
-            # short on 4 of the ideal model's 360 rows
-            m = _height_from_width(cam, m, size, (
-                f"image {100 * (1 - r):.1f}% narrower than its height implies, darker just "
-                "inside its top: its top is not the panel's, height from its width"))
+                f"image {100 * (1 - r):.1f}% narrower than its height implies, " + (
+                    "under a dark edge, its sides not: its top is that edge's" if dark["top"]
+                    else "darker just inside its top: its top is not the panel's")
+                + ", height from its width"))
         elif r > 1 + tol and (shaded := _shaded_side(cam, m, beta, r)) is not None:
             m = shaded
         elif abs(r - 1) > tol:

@@ -9,7 +9,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from mirrorsim.errors import BadParameter
-from mirrorsim.pipelines.scenes import check_given_scene, refuse_3d
+from mirrorsim.pipelines.planning3d import HeightChoice, height_choices
+from mirrorsim.pipelines.scenes import check_given_scene
 from mirrorsim.scene.model import (
     MIRROR_DEPTH,
     OCCLUDER_THICKNESS,
@@ -94,6 +95,9 @@ class Plan:
     # every scene beacon's (rmse, seen fraction), alone
     scene_beacons: tuple[tuple[float, float], ...] = ()
     beacon_set: BeaconSet | None = None  # plan --beacons N (with --calibrate's nuisances)
+    # a 3-D scene's: the post for a beacon at each scene beacon's position, the best
+    # one's and each planned one's (planning3d)
+    heights: tuple[HeightChoice, ...] = ()
 
     def to_json(self) -> dict:
         """The plan's JSON (``plan --json``): its numbers, not its maps."""
@@ -119,6 +123,7 @@ class Plan:
                             "seen_fraction": self.best.seen_fraction},
             "scene_beacons": [{"rmse": r, "seen_fraction": f} for r, f in self.scene_beacons],
             **({"beacon_set": _set_json(self.beacon_set)} if self.beacon_set else {}),
+            **({"beacon_heights": [h.to_json() for h in self.heights]} if self.heights else {}),
         }
 
 
@@ -142,7 +147,8 @@ def plan_scene(scene: Scene, sigma: Sigma | ObjectSigmas | None = None, eps_deg:
     with the given spreads.  With ``n_beacons`` > 1 or ``calibration``'s nuisances: the
     best set of that many beacons, chosen one at a time, with the nuisances estimated
     alongside and known to its priors (:func:`solver.beacon_set.best_beacon_set`), each
-    beacon's position known to its position σ.
+    beacon's position known to its position σ.  A 3-D scene is placed in plan, each
+    position with its post (:func:`~mirrorsim.pipelines.planning3d.height_choices`).
 
     Raises
     ------
@@ -153,7 +159,6 @@ def plan_scene(scene: Scene, sigma: Sigma | ObjectSigmas | None = None, eps_deg:
         A ``calibration`` that is not a :class:`~solver.selfcal.SelfCalibration`.
     """
     check_given_scene(scene)  # edited by a script: held to what its file would make
-    refuse_3d(scene, "plan")
     # independent errors: a shared α offset enters each α whole (docs/limitations.md)
     sigma = as_object_sigmas(sigma or Sigma()).independent()
     if len(sigma.beacons) > 1:  # it was silently taken for the first beacon's
@@ -190,7 +195,18 @@ def plan_scene(scene: Scene, sigma: Sigma | ObjectSigmas | None = None, eps_deg:
         scene_beacon_seen=float(scene_seen[0]),
         scene_beacons=tuple((float(e), float(f)) for e, f in zip(scene_err, scene_seen,
                                                                   strict=True)),
-        beacon_set=chosen)
+        beacon_set=chosen, heights=_posts(scene, sigma, best, chosen))
+
+
+def _posts(scene: Scene, sigma: ObjectSigmas, best: BeaconSearch, chosen: BeaconSet | None
+           ) -> tuple[HeightChoice, ...]:
+    """A 3-D scene's posts at the scene's beacons, the best position and the set's."""
+    if not scene.is_3d:
+        return ()
+    return height_choices(scene, sigma, [*(tuple(b.position) for b in scene.beacons),
+                                         tuple(best.position),
+                                         *(tuple(q) for q in (chosen.positions if chosen
+                                                              else ()))])
 
 
 def _paper_fields(o: np.ndarray, alpha_deg: float, d_total: float, *, s: float,
