@@ -31,7 +31,9 @@ def _solve_options(p):
                         "it from standard input")
     inputs(p, ("measurements", "MEASUREMENTS", "file"))
     common(p, scene=False, json="the solution",
-           error_model="each measurement's σ's; given, it replaces the file's `sigma`")
+           error_model="each measurement's σ's; given, it replaces the file's `sigma`",
+           error_model_default="the file's `sigma`, else the shipped ideal-bench model's "
+           "typical σ's")
     calibrate_option(p)
 
 
@@ -136,7 +138,8 @@ def _montecarlo_options(p):
                    help="a row of your own: σ_α in degrees and σ_d in %% of d_total (0.2 = "
                    "0.2 %%; files hold it as a fraction, 0.002); repeatable")
     common(p, scene=False, json="the table", error_model="add a row with its typical σ's "
-           "(relative σ_d times --d-total; the target's and the beacon's)")
+           "(relative σ_d times --d-total; the target's and the beacon's)",
+           error_model_default="no such row")
 
 
 @command("montecarlo", "the paper's Table 1 protocol",
@@ -251,7 +254,9 @@ def _plan_options(p):
                    "target error most (with --calibrate's nuisances estimated alongside); "
                    "prints what each buys (default 1)")
     calibrate_option(p)
-    common(p, scene=False, error_model="its typical σ's per object (target, beacon)")
+    common(p, scene=False, error_model="its typical σ's per object (target, beacon)",
+           error_model_default="the shipped ideal-bench model's, unless --sigma-alpha and "
+           "--sigma-d give them")
 
 
 @command("plan", "beacon placement analysis and the best beacon position",

@@ -168,7 +168,8 @@ def _errormodel_options(p):
                    "target's 50/90/95 %% ellipses, the median Mahalanobis distance and each "
                    "measurement's errors within 1σ/2σ (beside what its law's Student-t puts there)")
     common(p, scene=False, json="the validation (with --test)",
-           error_model="the model to --test, when no DATASET is fitted")
+           error_model="the model to --test, when no DATASET is fitted",
+           error_model_default="the shipped model the held-out spec's benches call for")
     output(p, "--plot", "file", type=Path, metavar="PNG", suffixes=(".png",),
            help="the reliability diagram (with --test; default: beside a model fitted "
            "here, none for a model given with --error-model, whose folder is yours)")

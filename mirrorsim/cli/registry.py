@@ -53,9 +53,13 @@ def inputs(p: argparse.ArgumentParser, *named: tuple[str, str, str]) -> None:
 
 def common(p: argparse.ArgumentParser, *, scene: bool = True, out: str | None = None,
            out_kind: str = "dir", json: str | None = None, spp: bool = False,
-           variant: bool = False, quiet: bool = False, error_model: str | None = None) -> None:
+           variant: bool = False, quiet: bool = False, error_model: str | None = None,
+           error_model_default: str = "the shipped model the scene's bench calls for: the "
+           "bench model for a scene with bench imperfections, the ideal-bench model "
+           "otherwise") -> None:
     """Add the shared options: SCENE, --out, --json, --spp/--seed, --variant, --quiet,
-    --error-model."""
+    --error-model (``error_model``: what it gives; ``error_model_default``: what is used
+    without it)."""
     if scene:
         p.add_argument("scene", type=Path, help="scene file (YAML, see docs/scenes.md)")
         inputs(p, ("scene", "SCENE", "file"))
@@ -82,8 +86,7 @@ def common(p: argparse.ArgumentParser, *, scene: bool = True, out: str | None = 
         inputs(p, ("error_model", "--error-model", "file"))
         p.add_argument("--error-model", type=Path, metavar="FILE",
                        help=f"an error model (`mirrorsim errormodel`): {error_model} (default: "
-                       "the model shipped for the ideal bench at the default render "
-                       "settings)")
+                       f"{error_model_default})")
 
 
 class _Once(argparse.Action):
