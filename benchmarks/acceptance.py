@@ -385,7 +385,7 @@ def report(folders: list[Path]) -> str:
         lines += [f"- {r['scene']}: α {r['worst_alpha_deg']:.3f}°, d_total "
                   f"{r['worst_d_pct']:.2f} %"
                   + (f", {r['worst_sigma']:.1f} of its σ's" if "worst_sigma" in r else "")
-                  + ("" if r.get("gross_sigma") else " (within 6)")
+                  + ("" if r.get("gross_sigma", True) else " (within 6)")
                   + f"; the target {r['mahalanobis']:.2f} σ"
                   + (" (inside)" if r["inside95"] else " (outside)") for r in gross]
     return "\n".join(lines)

@@ -126,7 +126,7 @@ def test_evaluate_solves_the_bundled_3d_scene_at_full_size(tmp_path):
 
 @pytest.mark.parametrize("command", ["track"])
 def test_commands_in_the_plane_refuse_a_3d_scene_in_one_line(tmp_path, command):
-    out = tmp_path / ("out.png" if command == "plan" else "out")
+    out = tmp_path / "out"
     run = subprocess.run([sys.executable, "-m", "mirrorsim.cli.main", command,
                           str(SCENES / "raised.yaml"), "--out", str(out)],
                          cwd=ROOT, capture_output=True, text=True)
@@ -197,7 +197,7 @@ def test_plan_of_a_3d_scene_chooses_each_beacons_post():
     first = plan.heights[0]
     assert first.heights == tuple(float(z) for z in range(16))
     z, bound = first.best
-    assert bound == min(first.rmse) and bound <= first.rmse[0]
+    assert bound == min(first.rmse)
     assert plan.to_json()["beacon_heights"][0]["best_height"] == z
     # the bound against the solve, at the best post
     cam, plane = scene.camera, optics.mirror_plane(scene.camera, scene.mirror)

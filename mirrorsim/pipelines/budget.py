@@ -23,7 +23,12 @@ from mirrorsim.errors import BadParameter, DetectionError, SolverError
 from mirrorsim.formats.error_model import ErrorModel
 from mirrorsim.formats.files import claim_run_folder
 from mirrorsim.pipelines.evaluate import evaluate_into
-from mirrorsim.pipelines.evaluate3d import Report3, check_calibration3, evaluate_into3
+from mirrorsim.pipelines.evaluate3d import (
+    Report3,
+    check_calibration3,
+    evaluate_into3,
+    with_shared_pan,
+)
 from mirrorsim.pipelines.scenes import check_given_scene
 from mirrorsim.pipelines.score import Report, check_keep
 from mirrorsim.pipelines.solving import model_for
@@ -125,7 +130,9 @@ class Budget:
 
 def _vector(m: Measurements | Measurements3) -> np.ndarray:
     """The solver's inputs as one vector: target α, d; per beacon α, d, x, y (in 3-D:
-    target α, ε, d; per beacon α, ε, d, x, y, z)."""
+    target α, ε, d; per beacon α, ε, d, x, y, z).  Not the pan the mount reports, which a
+    3-D reading is modelled at: a pan error's α's alone predict its shift (1.12 cm on
+    scenes/raised.yaml's 0.5°; with the reported pan moved too, 1.115 cm)."""
     if isinstance(m, Measurements3):
         return np.array([*m.target, *(v for p, seen in m.beacons for v in (*seen, *p))], float)
     v = list(np.mean(m.targets, axis=0))
@@ -134,20 +141,24 @@ def _vector(m: Measurements | Measurements3) -> np.ndarray:
     return np.array(v, float)
 
 
-def _estimate(m: Measurements | Measurements3, v: np.ndarray) -> np.ndarray:
-    """The target the plain solve makes of ``m`` with its inputs ``v`` (:func:`_vector`'s)."""
+def _estimate(m: Measurements | Measurements3, v: np.ndarray, shared_alpha_deg: float = 0.0
+              ) -> np.ndarray:
+    """The target the budget's solve makes of ``m`` with its inputs ``v`` (:func:`_vector`'s;
+    in 3-D, the α error a frame's images share as the pan's prior, as the runs solve)."""
     f = [float(x) for x in v]
     if isinstance(m, Measurements3):
         beacons = tuple((tuple(f[k + 3:k + 6]), tuple(f[k:k + 3])) for k in range(3, len(f), 6))
-        return replace(m, target=tuple(f[:3]), beacons=beacons).solve().target
+        nuisances, priors = with_shared_pan(PLAIN, shared_alpha_deg)
+        return replace(m, target=tuple(f[:3]), beacons=beacons).solve(
+            nuisances=nuisances, priors=priors).target
     beacons = [BeaconMeasurement((f[k + 2], f[k + 3]), f[k], f[k + 1])
                for k in range(2, len(f), 4)]
     return solve_measurements(m.observer, beacons, [(f[0], f[1])], sigma=m.sigma).target
 
 
-def jacobian(m: Measurements | Measurements3) -> np.ndarray:
+def jacobian(m: Measurements | Measurements3, shared_alpha_deg: float = 0.0) -> np.ndarray:
     """∂(target estimate)/∂(measurement vector) at ``m``, (2, n) by central differences
-    ((3, n) in 3-D, an elevation stepped as an α)."""
+    ((3, n) in 3-D, an elevation stepped as an α; ``shared_alpha_deg``: :func:`_estimate`'s)."""
     v0 = _vector(m)
     a, d, p = STEPS
     if isinstance(m, Measurements3):
@@ -158,7 +169,8 @@ def jacobian(m: Measurements | Measurements3) -> np.ndarray:
     for k, h in enumerate(steps):
         e = np.zeros_like(v0)
         e[k] = h
-        cols.append((_estimate(m, v0 + e) - _estimate(m, v0 - e)) / (2 * h))
+        cols.append((_estimate(m, v0 + e, shared_alpha_deg)
+                     - _estimate(m, v0 - e, shared_alpha_deg)) / (2 * h))
     return np.column_stack(cols)
 
 
@@ -183,8 +195,9 @@ def calibrated_error(report: Report | Report3, calibration: SelfCalibration) -> 
         return None
     m = _measured(report)
     try:
-        if isinstance(m, Measurements3):
-            target = m.solve(nuisances=calibration.nuisances, priors=calibration.priors).target
+        if isinstance(m, Measurements3):  # (the runs' shared α as their pan's prior)
+            nuisances, priors = with_shared_pan(calibration, report.shared_alpha_deg)
+            target = m.solve(nuisances=nuisances, priors=priors).target
         else:
             target = solve_measurements(m.observer, m.beacons, m.targets, sigma=m.sigma,
                                         calibration=calibration).target
@@ -307,7 +320,8 @@ def run_budget(scene: Scene, out: str | Path, *, variant: str = "auto", progress
             ideal = run("ideal", imperfections.ideal(scene))
         except DetectionError as exc:
             raise DetectionError(f"the ideal bench: {exc}") from None
-        J = jacobian(_measured(ideal))
+        J = jacobian(_measured(ideal),
+                     ideal.shared_alpha_deg if isinstance(ideal, Report3) else 0.0)
         contributions = tuple(measured(s.key, s.value, imperfections.only(scene, s.key))
                               for s in found)
         everything = measured("all", None, scene) if len(found) > 1 else None

@@ -124,6 +124,9 @@ class Report3:
     render: RenderInfo
     error_model: str
     model_warnings: tuple[str, ...] = ()
+    # the α error every image of a frame shares (the model's): the solve's pan prior
+    # (:func:`with_shared_pan`), which a caller solving these measurements again adds
+    shared_alpha_deg: float = 0.0
 
     @property
     def reused(self) -> bool:
@@ -197,7 +200,8 @@ def evaluate_into3(scene: Scene, out: Path, *, variant: str = "auto", progress: 
     return Report3(scene=scene.name, truth=truth, seen=seen, fit=fit,
                    planar_target=planar_target, errors=errors, frames=frames,
                    render=RenderInfo(done.variant, done.spp, done.seed, done.sampler),
-                   error_model=model.name(), model_warnings=tuple(notes))
+                   error_model=model.name(), model_warnings=tuple(notes),
+                   shared_alpha_deg=sigma.shared_alpha_deg)
 
 
 def frame_measurements3(det: Detection, capture: CaptureRecord) -> Measurements3:
@@ -286,10 +290,18 @@ def nuisances3(model: ErrorModel, sigma: ObjectSigmas, asked: SelfCalibration = 
     image of a frame shares widens the pan's prior (an ideal-bench model, asked nothing:
     none)."""
     cal = model_calibration(model, asked) if bench else asked
-    nuisances = tuple(n for n in cal.nuisances if n in CALIBRATED3)
-    priors = {n: s for n, s in cal.priors.items() if n in nuisances}
-    if sigma.shared_alpha_deg and ("pan" in priors or "pan" not in nuisances):
-        priors["pan"] = math.hypot(priors.get("pan", 0.0), sigma.shared_alpha_deg)
+    return with_shared_pan(cal, sigma.shared_alpha_deg)
+
+
+def with_shared_pan(calibration: SelfCalibration, shared_alpha_deg: float
+                    ) -> tuple[tuple[str, ...], dict[str, float]]:
+    """``calibration``'s nuisances the 3-D solve estimates, with their priors, and an α
+    error every image of a frame shares as the pan's prior (widening the one it has;
+    none where the pan is free)."""
+    nuisances = tuple(n for n in calibration.nuisances if n in CALIBRATED3)
+    priors = {n: s for n, s in calibration.priors.items() if n in nuisances}
+    if shared_alpha_deg and ("pan" in priors or "pan" not in nuisances):
+        priors["pan"] = math.hypot(priors.get("pan", 0.0), shared_alpha_deg)
         nuisances = tuple(dict.fromkeys((*nuisances, "pan")))
     return nuisances, priors
 

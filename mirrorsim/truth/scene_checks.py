@@ -328,8 +328,8 @@ def feet_at_glass_edge(scene: Scene, bkey: Callable[[int], str]) -> list[str]:
         gap = float(v[0]) - foot
         if 0.0 <= gap < GLASS_EDGE_PX:
             out.append(f"{key}: the {what}'s image in the mirror stands {gap:.1f} px above the "
-                       f"glass's bottom edge, and the detector reads a foot from "
-                       f"{GLASS_EDGE_PX:g} px above it: move it out from the glass or "
+                       f"glass's bottom edge, and the detector reads a foot true from "
+                       f"{GLASS_EDGE_PX:g} px above the edge: move it out from the glass or "
                        "raise the camera")
     return out
 
