@@ -58,7 +58,7 @@ RESULTS: tuple[Result, ...] = (
     Result("budget_raised", (f"{MS} budget scenes/bench/raised.yaml",),
            about="the 3-D scene on EXP1's hand-built bench: the error budget in 3-D",
            fresh=("renders/raised_bench",)),
-    Result("plan_raised", (f"{MS} plan scenes/raised.yaml --out renders/raised/plan.png",),
+    Result("plan_raised", (f"{MS} plan scenes/raised.yaml",),
            about="the 3-D scene's beacon placement, each position's post by the 3-D bound"),
     Result("evaluate_exp1_board",
            (f"{MS} evaluate scenes/bench/exp1_3beacons.yaml --calibrate pan,scale "
