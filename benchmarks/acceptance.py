@@ -20,9 +20,9 @@ model declares (its tolerances: docs/reliability.md).  Each scene's record is a 
 Prints (Markdown): the truth inside the 95 % ellipse (drawn where the error model's
 tail puts its edge, with a Clopper–Pearson 95 % interval), the median Mahalanobis
 distance, scenes that failed to evaluate, gross errors on ideal benches (an image's α
-or d_total off by more than 6 of its own σ's; and, in brackets, an absolute count: α off
-by more than 0.05° or d_total by more than 1 %, which a 25 px pencil's σ of 1-2 % alone
-passes), and the same by feature.
+off by more than 0.05° or its d_total by more than 1 %; and, in brackets, how many have
+an image off by more than 6 of its own σ's: the laws' Student-t tails put 7 % of the
+target's α errors there, at its ν of 1.3), and the same by feature.
 """
 
 from __future__ import annotations
