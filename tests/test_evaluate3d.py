@@ -224,6 +224,19 @@ def test_plan_of_a_3d_scene_chooses_each_beacons_post():
     assert 0 < len(low.heights[0].heights) < 16
 
 
+def test_a_3d_budget_refuses_a_calibration_its_beacons_cannot_carry():
+    """One beacon in 3-D: 6 readings (α, elevation, d_total of the beacon's image and of
+    the target's) against the plane's 3 unknowns, the target's 3 and a free pan: refused
+    in one line naming the counts (before anything is rendered); with a prior on the pan,
+    the prior's row carries it."""
+    from mirrorsim.pipelines.budget import check_budget_calibration
+
+    scene = load_scene(SCENES / "raised.yaml")
+    with pytest.raises(BadParameter, match="3 measurements.*6 here.*7 unknowns"):
+        check_budget_calibration(scene, SelfCalibration(("pan",)))
+    assert check_budget_calibration(scene, SelfCalibration(("pan",), priors={"pan": 0.5}))
+
+
 LEANING_TARGET = np.array([57.0, 50.0, 6.0])
 
 

@@ -250,6 +250,14 @@ def check_budget_calibration(scene: Scene, calibration: SelfCalibration) -> Self
     calibration = as_calibration(calibration)
     if scene.is_3d:
         check_calibration3(scene.name, calibration)
+        free = [n for n in calibration.nuisances if n not in calibration.priors]
+        if free and 3 * (len(scene.beacons) + 1) < 6 + len(free):
+            raise BadParameter("nuisances", f"calibrating {' and '.join(free)} in 3-D needs "
+                               "more beacons: each image gives 3 measurements (α, elevation, "
+                               f"d_total), {3 * (len(scene.beacons) + 1)} here, and the "
+                               "mirror's plane, the target and the nuisances without a "
+                               f"prior are {6 + len(free)} unknowns")
+        return calibration
     if calibration.position_sigma and not calibration.nuisances:
         raise BadParameter("nuisances", "none given, yet a beacons' position σ is: the "
                            "budget uses that σ in its self-calibrated column only, which "
