@@ -184,6 +184,12 @@ def _truth(report: Report | Report3) -> np.ndarray:
     return np.r_[t, 0.0] if isinstance(report, Report3) and len(t) == 2 else t
 
 
+def _shared_alpha(report: Report | Report3) -> float:
+    """The α error a 3-D report's frames share, which its solve takes as the pan's prior
+    (a planar report's σ's carry it)."""
+    return report.shared_alpha_deg if isinstance(report, Report3) else 0.0
+
+
 def _target(report: Report | Report3) -> np.ndarray:
     return report.fit.target if isinstance(report, Report3) else report.solution.target
 
@@ -328,8 +334,7 @@ def run_budget(scene: Scene, out: str | Path, *, variant: str = "auto", progress
             ideal = run("ideal", imperfections.ideal(scene))
         except DetectionError as exc:
             raise DetectionError(f"the ideal bench: {exc}") from None
-        J = jacobian(_measured(ideal),
-                     ideal.shared_alpha_deg if isinstance(ideal, Report3) else 0.0)
+        J = jacobian(_measured(ideal), _shared_alpha(ideal))
         contributions = tuple(measured(s.key, s.value, imperfections.only(scene, s.key))
                               for s in found)
         everything = measured("all", None, scene) if len(found) > 1 else None
