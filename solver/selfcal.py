@@ -191,10 +191,13 @@ def check_nuisance_sigma(priors: Mapping[str, float], nuisances: tuple[str, ...]
 
 
 def check_nuisances(nuisances: tuple[str, ...], nb: int | None, nt: int,
-                    *, priors: Mapping[str, float] | None = None) -> None:
+                    *, priors: Mapping[str, float] | None = None, readings: int = 2) -> None:
     """Refuse unknown nuisances, and more unknowns than measurements (``nb`` None: the
     beacons are not known yet, the names only).  A nuisance with a prior brings its own
-    measurement (the prior's row), so it does not count against the beacons."""
+    measurement (the prior's row), so it does not count against the beacons.
+    ``readings``: what each image gives (α and d_total; 3 in 3-D, its elevation besides),
+    and as many unknowns the mirror and the target have each (its line and a point in
+    the plane; its plane and a point in space)."""
     bad = [n for n in nuisances if n not in NUISANCES]
     if bad:
         raise SolverError(f"unknown nuisance(s) {', '.join(map(repr, bad))}: choose from "
@@ -203,15 +206,15 @@ def check_nuisances(nuisances: tuple[str, ...], nb: int | None, nt: int,
     if twice:
         raise SolverError(f"{', '.join(twice)} given twice: name each nuisance once")
     free = [n for n in nuisances if n not in (priors or {})]
-    unknowns = 4 + len(free)
+    unknowns = 2 * readings + len(free)
     # the target's observations (one per frame) repeat one image's measurement: they
     # count once
-    if free and nb is not None and 2 * (nb + min(nt, 1)) < unknowns:
-        need = -(-(unknowns - 2) // 2)
+    if free and nb is not None and readings * (nb + min(nt, 1)) < unknowns:
+        need = -(-(unknowns - readings) // readings)
         raise SolverError(f"calibrating {' and '.join(free)} needs at least {need} beacon "
-                          f"observations ({nb} given): each image gives 2 measurements, and "
-                          f"the mirror, the target and {len(free)} nuisance(s) without a "
-                          f"prior are {unknowns} unknowns")
+                          f"observations ({nb} given): each image gives {readings} "
+                          f"measurements, and the mirror, the target and {len(free)} "
+                          f"nuisance(s) without a prior are {unknowns} unknowns")
 
 
 PLAIN = SelfCalibration()  # plain least squares: nothing estimated, positions exact

@@ -53,16 +53,13 @@ def budget_table(budget: Budget) -> str:
             rows.append((c.source, value, "failed", *[""] * (len(rows[0]) - 3)))
             failures.append(f"  {c.source}: {c.failed}")
             continue
-        if three:
-            own = (signed(d.target_alpha_deg, 4), signed(d.target_elevation_deg, 4),
-                   signed(d.target_d_total_pct, 3))
-            per = [x for a, e, p in zip(d.beacon_alpha_deg, d.beacon_elevation_deg,
-                                        d.beacon_d_total_pct, strict=True)
-                   for x in (signed(a, 4), signed(e, 4), signed(p, 3))]
-        else:
-            own = (signed(d.target_alpha_deg, 4), signed(d.target_d_total_pct, 3))
-            per = [x for a, p in zip(d.beacon_alpha_deg, d.beacon_d_total_pct, strict=True)
-                   for x in (signed(a, 4), signed(p, 3))]
+        def image(a: float, e: float | None, p: float) -> tuple[str, ...]:
+            return (signed(a, 4), *((signed(e, 4),) if three else ()), signed(p, 3))
+
+        own = image(d.target_alpha_deg, d.target_elevation_deg, d.target_d_total_pct)
+        per = [x for a, e, p in zip(d.beacon_alpha_deg, d.beacon_elevation_deg
+                                    or (None,) * len(d.beacon_alpha_deg),
+                                    d.beacon_d_total_pct, strict=True) for x in image(a, e, p)]
         rows.append((c.source, value, *own, *per,
                      *[""] * (len(quantities) * nb - len(per)),
                      f"{c.shift_cm:.2f}", f"{c.predicted_shift_cm:.2f}",

@@ -51,7 +51,7 @@ from mirrorsim.detection.image_geometry import (
     target_geometry,
 )
 from mirrorsim.detection.image_measurement import ImageMeasurement, TopFace
-from mirrorsim.detection.regions import find_pencils, find_target
+from mirrorsim.detection.regions import find_pencils, find_target, pencil_mask
 from mirrorsim.detection.rolled import measure_rolled
 from mirrorsim.errors import DetectionError
 from mirrorsim.formats.capture import CaptureRecord
@@ -173,13 +173,14 @@ def detect_frame(image: np.ndarray, view: CaptureRecord, calibration: Calibratio
     ratio = view.target_size[0] / view.target_size[1]
     cone = min(pencil_cone_ratio(b.height) for b in view.beacons)  # (the tallest pencil's)
     raised = view.geometry == "3d"
-    box = find_target(img, ratio, posts=raised)
+    paint = pencil_mask(img)  # (the panel's search and the pencils' boxes both read it)
+    box = find_target(img, ratio, posts=raised, paint=paint)
     if box is None:
         raise DetectionError("no target (grey upright panel) found in the frame")
     measured = _measure(linear, img, box, kind="target", subsampled=subsampled,
                         target_ratio=ratio, raised=raised,
                         top_face=None if raised else panel_top_face(cam, view.target_size))
-    boxes = find_pencils(img)
+    boxes = find_pencils(img, paint)
     measured = _sides_behind_pencils(measured, boxes)
     pencils = [_measure(linear, img, b, kind="beacon", subsampled=subsampled,
                         cone_ratio=cone, raised=raised)

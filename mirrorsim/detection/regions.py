@@ -66,8 +66,8 @@ POST_FILL_PX = 10
 POST_DARK = 60  # 8-bit: a pencil's post reads 20-45 across a lit panel (sRGB of 0.06)
 
 
-def find_target(img: np.ndarray, ratio: float, *, posts: bool = False
-                ) -> tuple[int, int, int, int] | None:
+def find_target(img: np.ndarray, ratio: float, *, posts: bool = False,
+                paint: np.ndarray | None = None) -> tuple[int, int, int, int] | None:
     """Bounding box (u0, v0, u1, v1) of the grey panel's image, or None.
 
     A pencil standing in front of the panel (its reflection or its direct view crossing
@@ -79,12 +79,14 @@ def find_target(img: np.ndarray, ratio: float, *, posts: bool = False
     grey beyond it, would have widened the filled one.  ``posts`` (a 3-D scene's frame):
     a raised pencil's post, a dark line a few px wide, may cross the panel's image and
     split it (one of its shades is not neutral); its dark pixels between grey ones
-    within POST_FILL_PX in their row are then taken for the panel's too."""
+    within POST_FILL_PX in their row are then taken for the panel's too.  ``paint``:
+    :func:`pencil_mask` of ``img``, where the caller has it."""
     blur = cv2.GaussianBlur(img, (5, 5), 0)
     vmax, vmin = _channel_max(blur), _channel_min(blur)
     neutral = (vmax - vmin) < 0.12 * vmax + 6
     grey = neutral & (vmax > 20) & (vmax < 135)
-    inside = _between(pencil_mask(img), grey) | _cones_between(img, grey)
+    paint = pencil_mask(img) if paint is None else paint  # (the pencils' boxes too)
+    inside = _between(paint, grey) | _cones_between(find_pencils(img, paint), grey)
     if posts:  # dark pixels (a pencil's post's shade) that are not the panel's grey
         dark = (~grey & (vmax < POST_DARK)).astype(np.uint8)
         inside |= _between(dark, grey, reach_px=POST_FILL_PX)
@@ -215,23 +217,26 @@ def _between(pencil: np.ndarray, grey: np.ndarray, reach_px: int = PENCIL_FILL_P
 CONE_WIDTHS = 3.0
 
 
-def _cones_between(img: np.ndarray, grey: np.ndarray) -> np.ndarray:
-    """The pixels of each pencil's cone that lie between ``grey`` ones in their row: a
+def _cones_between(pencils: list[tuple[int, int, int, int]], grey: np.ndarray) -> np.ndarray:
+    """The pixels of each pencil's cone (``pencils``: the bands' boxes,
+    :func:`find_pencils`) that lie between ``grey`` ones in their row: a
     pencil in front of the panel hides it with its cone too, and the notch left in the
     panel's region took its fill below a whole panel's (bench0039 of the bench acceptance
     set, a 5 px pencil across a 44 px JPEG panel: 0.749 of its box, and no panel found)."""
     cone = np.zeros(grey.shape, np.uint8)
-    for u0, v0, u1, _ in find_pencils(img):
+    for u0, v0, u1, _ in pencils:
         cone[max(0, v0 - int(CONE_WIDTHS * (u1 - u0 + 1))):v0, u0:u1 + 1] = 1
     return _between(cone & ~grey, grey)
 
 
-def find_pencils(img: np.ndarray) -> list[tuple[int, int, int, int]]:
+def find_pencils(img: np.ndarray, mask: np.ndarray | None = None
+                 ) -> list[tuple[int, int, int, int]]:
     """Bounding boxes of painted (yellow) pencil bands: upright regions at least 1.6
     times as tall as wide, their width less the pixel the blur adds across their sides
     (a 2 cm pencil's band, 1.95 times its width, was 9 × 6 px in a small frame's
-    calibration render at 103 cm, and was missed at 2·0.8 of the box's width)."""
-    mask = pencil_mask(img)
+    calibration render at 103 cm, and was missed at 2·0.8 of the box's width).
+    ``mask``: :func:`pencil_mask` of ``img``, where the caller has it."""
+    mask = pencil_mask(img) if mask is None else mask
     _, comps = _components(mask, 30)
     return [(x, y, x + w - 1, y + h - 1) for _, x, y, w, h, _ in comps
             if h >= 1.6 * (w - 1)]

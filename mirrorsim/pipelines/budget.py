@@ -12,6 +12,7 @@ part, the effect is not first order (or the solver's conditioning amplifies nois
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -161,10 +162,9 @@ def jacobian(m: Measurements | Measurements3, shared_alpha_deg: float = 0.0) -> 
     ((3, n) in 3-D, an elevation stepped as an α; ``shared_alpha_deg``: :func:`_estimate`'s)."""
     v0 = _vector(m)
     a, d, p = STEPS
-    if isinstance(m, Measurements3):
-        steps = np.array([a, a, d] + [a, a, d, p, p, p] * len(m.beacons))
-    else:
-        steps = np.array([a, d] + [a, d, p, p] * len(m.beacons))
+    n, stride = _layout(m)
+    image = [a] * (n - 1) + [d]  # (α[, ε], d)
+    steps = np.array(image + (image + [p] * (stride - n)) * len(m.beacons))
     cols = []
     for k, h in enumerate(steps):
         e = np.zeros_like(v0)
@@ -172,6 +172,12 @@ def jacobian(m: Measurements | Measurements3, shared_alpha_deg: float = 0.0) -> 
         cols.append((_estimate(m, v0 + e, shared_alpha_deg)
                      - _estimate(m, v0 - e, shared_alpha_deg)) / (2 * h))
     return np.column_stack(cols)
+
+
+def _layout(m: Measurements | Measurements3) -> tuple[int, int]:
+    """How many of :func:`_vector`'s numbers each image takes (α, d; α, ε, d in 3-D) and
+    each beacon (its image's and its position's)."""
+    return (3, 6) if isinstance(m, Measurements3) else (2, 4)
 
 
 def _measured(report: Report | Report3) -> Measurements | Measurements3:
@@ -222,23 +228,16 @@ def contribution(source: str, value: Any, ideal: Report | Report3, *,
     truth = _truth(ideal)
     est0, est1 = _target(ideal), _target(report)
     pred = J @ dv
-    nb = len(_measured(report).beacons)
     pct = lambda k: float(100 * dv[k] / v0[k])  # noqa: E731
-    if isinstance(report, Report3):  # (α, ε, d | α, ε, d, x, y, z)
-        b = [3 + 6 * i for i in range(nb)]
-        delta = Delta(target_alpha_deg=float(dv[0]), target_d_total_pct=pct(2),
-                      beacon_alpha_deg=tuple(float(dv[k]) for k in b),
-                      beacon_d_total_pct=tuple(pct(k + 2) for k in b),
-                      beacon_position_cm=tuple(float(np.linalg.norm(dv[k + 3:k + 6]))
-                                               for k in b),
-                      target_elevation_deg=float(dv[1]),
-                      beacon_elevation_deg=tuple(float(dv[k + 1]) for k in b))
-    else:
-        b = [2 + 4 * i for i in range(nb)]
-        delta = Delta(target_alpha_deg=float(dv[0]), target_d_total_pct=pct(1),
-                      beacon_alpha_deg=tuple(float(dv[k]) for k in b),
-                      beacon_d_total_pct=tuple(pct(k + 1) for k in b),
-                      beacon_position_cm=tuple(float(np.hypot(*dv[k + 2:k + 4])) for k in b))
+    n, stride = _layout(_measured(report))  # (α[, ε], d | α[, ε], d, position)
+    b = range(n, len(dv), stride)  # each beacon's first
+    three = n == 3
+    delta = Delta(target_alpha_deg=float(dv[0]), target_d_total_pct=pct(n - 1),
+                  beacon_alpha_deg=tuple(float(dv[k]) for k in b),
+                  beacon_d_total_pct=tuple(pct(k + n - 1) for k in b),
+                  beacon_position_cm=tuple(math.hypot(*dv[k + n:k + stride]) for k in b),
+                  target_elevation_deg=float(dv[1]) if three else None,
+                  beacon_elevation_deg=tuple(float(dv[k + 1]) for k in b) if three else ())
     return Contribution(source=source, value=value,
                         target_cm=float(np.linalg.norm(est1 - truth)),
                         shift_cm=float(np.linalg.norm(est1 - est0)),
@@ -256,20 +255,13 @@ def check_budget_calibration(scene: Scene, calibration: SelfCalibration) -> Self
     calibration = as_calibration(calibration)
     if scene.is_3d:
         check_calibration3(scene.name, calibration)
-        free = [n for n in calibration.nuisances if n not in calibration.priors]
-        if free and 3 * (len(scene.beacons) + 1) < 6 + len(free):
-            raise BadParameter("nuisances", f"calibrating {' and '.join(free)} in 3-D needs "
-                               "more beacons: each image gives 3 measurements (α, elevation, "
-                               f"d_total), {3 * (len(scene.beacons) + 1)} here, and the "
-                               "mirror's plane, the target and the nuisances without a "
-                               f"prior are {6 + len(free)} unknowns")
-        return calibration
     if calibration.position_sigma and not calibration.nuisances:
         raise BadParameter("nuisances", "none given, yet a beacons' position σ is: the "
                            "budget uses that σ in its self-calibrated column only, which "
                            "needs nuisances to self-calibrate")
     try:
-        check_nuisances(calibration.nuisances, len(scene.beacons), 1, priors=calibration.priors)
+        check_nuisances(calibration.nuisances, len(scene.beacons), 1, priors=calibration.priors,
+                        readings=3 if scene.is_3d else 2)
     except SolverError as exc:
         raise BadParameter("nuisances", str(exc)) from None
     return calibration

@@ -285,14 +285,18 @@ def thin_images(scene: Scene, bkey: Callable[[int], str]) -> list[str]:
 EDGE_ROW_PX = 5.0
 
 
+def _images(scene: Scene, bkey: Callable[[int], str]) -> list[tuple[str, str, Any]]:
+    """Each object whose image a warning looks at: its key, what it is, the object."""
+    return [("target.position", "target", scene.target)] + [
+        (f"{bkey(i)}.position", "pencil", b) for i, b in enumerate(scene.beacons)]
+
+
 def edge_rows(scene: Scene, bkey: Callable[[int], str]) -> list[str]:
     """Warn of an image (in the mirror) whose foot or top comes within EDGE_ROW_PX of the
     frame's top or bottom row: its height is not measured."""
-    sighted = [("target.position", "target", scene.target)] + [
-        (f"{bkey(i)}.position", "pencil", b) for i, b in enumerate(scene.beacons)]
     last = scene.camera.height_px - 1
     out = []
-    for key, what, obj in sighted:
+    for key, what, obj in _images(scene, bkey):
         foot, top = visibility.axis_rows(scene, obj)
         gap = min(foot, top, last - foot, last - top)
         if -0.5 <= gap < EDGE_ROW_PX:  # (beyond the frame: the clipped image's warning)
@@ -314,11 +318,9 @@ GLASS_EDGE_PX = 3.0
 def feet_at_glass_edge(scene: Scene, bkey: Callable[[int], str]) -> list[str]:
     """Warn of an image whose foot stands within GLASS_EDGE_PX above the glass's bottom
     edge (the edge's row below the foot's reflection point): its foot is misread."""
-    sighted = [("target.position", "target", scene.target)] + [
-        (f"{bkey(i)}.position", "pencil", b) for i, b in enumerate(scene.beacons)]
     mir, along = scene.mirror, unit(scene.mirror.yaw)
     out = []
-    for key, what, obj in sighted:
+    for key, what, obj in _images(scene, bkey):
         foot, _ = visibility.axis_rows(scene, obj)
         rp = np.asarray(optics.object_image(scene, obj).reflection_point, float)[:2]
         # the glass's bottom edge where the foot's ray meets the glass (the glass's lines
