@@ -84,7 +84,8 @@ def _local_edge(img: np.ndarray, band, axis: int, guess: float, inside_first: bo
     k_a = np.array(k_out if inside_first else k_in, float)
     rows_a, k_a, rows_b, k_b = _outside_to_first_step(
         np.array([line(c + int(k)) for k in k_a]), k_a, np.array([line(c - int(k)) for k in k_b]),
-        k_b, inside_first, keep_all=slope_out or bool(chroma))
+        k_b, inside_first, keep_all=bool(chroma))
+    slope_out = slope_out and len(k_a if inside_first else k_b) >= 4  # a line through the rest
     before = _level(rows_b, -k_b, at, slope if inside_first else slope_out)
     after = _level(rows_a, k_a, at, slope_out if inside_first else slope)
     inside, outside = (before, after) if inside_first else (after, before)
@@ -119,9 +120,10 @@ def _outside_to_first_step(rows_a: np.ndarray, k_a: np.ndarray, rows_b: np.ndarr
     top (the mirror frame's, with a strip of pale wall between) put the outside's median
     half on the bar, and the top 1.4 px low (d_total 1.1 % long, 16 σ).  A nearest row
     still partly inside steps the other way (away from the inside) and keeps every row.
-    ``keep_all`` for a sloped level (its line is fitted through what lies there) and
-    across a colour (on a JPEG's stored chroma, blurred over 2 px, the step cut the rows a
-    pencil's foot needs and put it up to 2 px off)."""
+    A sloped level is cut too (a panel's side 2.5 px from the frame's bar: its line,
+    fitted through the bar, put α 0.10° off).  ``keep_all`` across a colour (on a JPEG's
+    stored chroma, blurred over 2 px, the step cut the rows a pencil's foot needs and put
+    it up to 2 px off)."""
     if keep_all:
         return rows_a, k_a, rows_b, k_b
     rows, k, inside = ((rows_a, k_a, rows_b) if inside_first else (rows_b, k_b, rows_a))
