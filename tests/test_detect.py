@@ -986,3 +986,108 @@ def test_a_planar_benchs_rolled_panel_is_measured_upright_where_upright_finds_no
     assert any("roll of +4" in n or "roll of -4" in n for n in rolled.notes)
     assert rolled.height_px == pytest.approx(length, abs=0.5)
     assert rolled.width_px == pytest.approx(width, abs=0.5)
+
+
+def test_a_dark_panels_foot_behind_a_pencil_is_measured_on_its_colour():
+    """A dark neutral panel on the board, a yellow pencil standing before its foot:
+    across the board's colour only the pencil's bands had contrast, and its top was
+    taken for the panel's foot (5.5 px high, d_total +9.2 %, ideal0049 of acceptance
+    seed 61207041).  On the image's colour the bands beside the pencil find the foot; the
+    two disagreeing by over a pixel, that is taken, with a note."""
+    from mirrorsim.detection import edges
+
+    top, foot = 40.3, 150.6
+    board, panel = np.array([180.0, 150.0, 100.0]), np.array([10.0, 10.0, 10.5])
+    img = np.empty((220, 200, 3), np.float32)
+    img[:] = board * 0.9
+    img[int(foot + 0.5):] = board
+    rows = np.arange(220)[:, None, None]
+    cover = np.clip(np.minimum(rows + 0.5 - top, foot - (rows - 0.5)), 0, 1)
+    img[:, 60:140] = cover * panel + (1 - cover) * img[:, 60:140]
+    img[146:175, 97:103] = (200.0, 140.0, 5.0)  # a pencil over two bands, 4 px above the foot
+    m = edges.measure_region(img, (60, int(top + 0.5), 139, int(foot - 0.5)), "target")
+    assert m.v_bottom == pytest.approx(foot, abs=0.1), m.v_bottom
+    assert edges.FOOT_NOT_ON_CHROMA in m.notes
+
+
+def test_a_pencil_wider_than_its_height_allows_loses_a_side_on_a_lossless_frame():
+    """A pencil before the panel's side read its left edge on the panel's: 1.16-1.25 of
+    the width its height implies, where a lossless frame's good images read 0.91-1.07
+    (α 0.11° off, ideal0044 of acceptance seed 61207041).  On a lossless frame over
+    PENCIL_WIDTH_MAX_LOSSLESS the side farther from its region is dropped; a JPEG's
+    blurred sides keep the wider bound."""
+    from mirrorsim.detection import image_geometry as g
+    from mirrorsim.detection.image_measurement import ImageMeasurement
+
+    cam = load_scene(SCENES / "default.yaml").camera
+    paint, height, centre = 4.0, 60.0, 900.0
+    unit = g._width_ratio(cam, centre - 5.0, centre + 5.0, height, paint)  # per 10 px
+    half = 5.0 * 1.18 / unit  # a width 1.18 of what the height implies
+    m = ImageMeasurement(kind="beacon", source="mirror",
+                         bbox_px=[int(centre - 5), 400, int(centre + 5), 460],
+                         u_axis=float("nan"), v_top=400.0, v_bottom=460.0, height_px=height,
+                         width_px=2 * half, u_left=centre + 5.0 - 2 * half, u_right=centre + 5.0)
+    lossless = g.pencil_geometry(cam, m, paint, k=1.0)
+    jpeg = g.pencil_geometry(cam, m, paint, k=1.0, subsampled=True)
+    assert lossless.u_left is None and "left edge is not the pencil's" in lossless.notes[0]
+    assert jpeg.u_left == m.u_left and not jpeg.notes
+    # its axis from the right side, half the width its height implies within
+    assert lossless.u_axis == pytest.approx(centre + 5.0 - 5.0 / unit, abs=0.05)
+
+
+def test_a_grey_region_run_off_the_frames_side_is_not_taken_for_the_panel():
+    """A blue-grey occluder near the lens, running off the frame's right side with five
+    times the panel's area (bench0047 of acceptance seed 61207022): the panel, whole in
+    the frame (it is seen in the mirror, which the frame holds), is found."""
+    from mirrorsim.detection.regions import find_target
+
+    img = np.full((544, 960, 3), (200, 170, 120), np.uint8)
+    img[100:460, 760:960] = (102, 113, 119)  # the occluder, 200 × 360 px, cut at the right
+    img[217:335, 423:544] = (88, 88, 86)  # the panel, 121 × 118 px
+    box = find_target(img.astype(np.float32), 1.0)
+    assert box is not None
+    assert np.abs(np.array(box) - (423, 217, 543, 334)).max() <= 3, box
+
+
+def test_a_pencils_dark_faces_belong_to_its_region():
+    """A reflection shows a pencil's back, its faces turned from the light near-black
+    paint (8-bit (21-46, 9-33, 0-9)), too dark for the yellow test: its region had held
+    its lit flank alone, 5 of its 10 px (bench0011 of acceptance seed 61207022).  The
+    dark faces beside the band are taken in, by at most its own width; the sandy board
+    and a grey panel beside a lit pencil are not."""
+    from mirrorsim.detection.regions import find_pencils
+
+    img = np.full((120, 100, 3), (200, 170, 120), np.float32)  # the board
+    img[30:90, 40:45] = (200, 150, 20)  # the lit flank
+    img[30:90, 45:50] = (35, 20, 4)  # the dark faces
+    assert find_pencils(img) == [(40, 30, 49, 89)]
+    lit = np.full((120, 100, 3), (200, 170, 120), np.float32)
+    lit[30:90, 40:50] = (200, 150, 20)
+    lit[20:100, 50:70] = (60, 60, 58)  # a grey panel beside it
+    assert find_pencils(lit) == [(40, 30, 49, 89)]
+
+
+def test_a_pencils_top_lost_on_lines_is_measured_on_medians(monkeypatch):
+    """An unlit cone's shading flattens near the band: the final pass's straight-line
+    level, carried into the window, took the contrast under the floor, where the coarse
+    pass's medians had found the top (ideal0056 of acceptance seed 61207021 lost its only
+    beacon).  Under a cone (``out_reach`` given) the final pass is redone on medians;
+    elsewhere (a panel's sloped sides) an edge lost so stays lost."""
+    from mirrorsim.detection import area_edges
+
+    img = _small_pencil(30.3, 54.6, 13.0)
+    real = area_edges._local_edge
+
+    def lines_lose_it(*a, **k):
+        return (None, real(*a, **k)[1]) if k.get("slope") else real(*a, **k)
+
+    monkeypatch.setattr(area_edges, "_local_edge", lines_lose_it)
+    band = area_edges.bands(20, 31, band_px=3)
+
+    def top(out_reach):
+        return area_edges._end_edge(img, band, 30, False, axis=0, reach=12, chroma=False,
+                                    slope=True, near=False, half=1, out_reach=out_reach,
+                                    max_off=None, drop_off=None)[0]
+
+    assert top(6) == pytest.approx(30.3, abs=0.15)
+    assert top(None) is None

@@ -77,7 +77,6 @@ def _local_edge(img: np.ndarray, band, axis: int, guess: float, inside_first: bo
     rows = SLOPE_ROWS if slope else 4
     last = half + rows if out_reach is None else max(half + 1, min(half + rows, out_reach))
     k_out = range(half + 1, last + 1)
-    slope_out = slope and len(k_out) >= 4
     k_in = range(half + 1, max(half + 2, min(half + 1 + rows, reach)))
     at = np.arange(-half, half + 1, dtype=float)
     k_b = np.array(k_in if inside_first else k_out, float)
@@ -85,7 +84,7 @@ def _local_edge(img: np.ndarray, band, axis: int, guess: float, inside_first: bo
     rows_a, k_a, rows_b, k_b = _outside_to_first_step(
         np.array([line(c + int(k)) for k in k_a]), k_a, np.array([line(c - int(k)) for k in k_b]),
         k_b, inside_first, keep_all=bool(chroma))
-    slope_out = slope_out and len(k_a if inside_first else k_b) >= 4  # a line through the rest
+    slope_out = slope and len(k_a if inside_first else k_b) >= 4  # a line through the rest
     before = _level(rows_b, -k_b, at, slope if inside_first else slope_out)
     after = _level(rows_a, k_a, at, slope_out if inside_first else slope)
     inside, outside = (before, after) if inside_first else (after, before)
@@ -229,8 +228,16 @@ def _end_edge(img: np.ndarray, bands: list[np.ndarray], guess: int, inside_first
         return (float(np.mean(got)) if got else None), np.mean([o for _, o in per], axis=0)
     keep = np.concatenate([band for band, _ in kept]) if kept else np.concatenate(bands)
     # round(m) is the pixel the edge crosses: the window is centred on it
-    return _local_edge(img, keep, axis, m, inside_first, reach, half=half, chroma=chroma,
-                       slope=slope, out_reach=out_reach)
+    edge, level = _local_edge(img, keep, axis, m, inside_first, reach, half=half,
+                              chroma=chroma, slope=slope, out_reach=out_reach)
+    if edge is None and slope and out_reach is not None:
+        # found by the coarse pass on medians, lost on lines: a pencil's top under its
+        # cone, whose shading flattens near the band, and the line carried in took the
+        # contrast under the floor (an unlit cone's blue is 5.5 over the paint's 0.15;
+        # its line put 3.5-4.4 at the window: ideal0056_b0 of seed 61207021 lost its beacon)
+        edge, level = _local_edge(img, keep, axis, m, inside_first, reach, half=half,
+                                  chroma=chroma, out_reach=out_reach)
+    return edge, level
 
 
 def bands(cross_lo: int, cross_hi: int, *, band_px: int, margin: float = 0.2

@@ -187,7 +187,8 @@ def detect_frame(image: np.ndarray, view: CaptureRecord, calibration: Calibratio
                for b in boxes]
     target = target_geometry(cam, measured, view.target_size, k=calibration.target_k)
     paint = pencil_paint_height(view.beacons[0].height)
-    pencils = [pencil_geometry(cam, p, paint, k=calibration.pencil_k) for p in pencils
+    pencils = [pencil_geometry(cam, p, paint, k=calibration.pencil_k, subsampled=subsampled)
+               for p in pencils
                if p.height_px and (p.u_left, p.u_right) != (None, None)]
     pencils = [p for p in pencils if not p.clipped]  # partly hidden: no bearing to trust
     if view.geometry == "planar":  # (in 3-D an image's foot lies where its object stands)

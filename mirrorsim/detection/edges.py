@@ -26,10 +26,10 @@ SIDES_ON_COLOUR = "sides on the image's colour: JPEG's smeared blue lost both"
 # pencil in shadow) and was measured on the image's colour
 FOOT_ON_COLOUR = "foot on the image's colour: no colour contrast with the board"
 
-# the note of a raised panel whose foot, against something as neutral as itself, was
-# measured on the image's colour
-FOOT_AGAINST_ROOM = ("foot on the image's colour: against something as neutral as the "
-                     "panel (a raised panel before the room's baseboard)")
+# the note of a panel whose foot across the board's colour was something else's (see
+# _panel_edges)
+FOOT_NOT_ON_CHROMA = ("foot on the image's colour: across the board's colour it read "
+                      "something else's edge")
 
 # the note of a panel's top measured across the outside's colour: on the image's it lay
 # far above the panel's region, on something as bright as the panel beyond it
@@ -316,16 +316,17 @@ def _panel_edges(img: np.ndarray, box: tuple[int, int, int, int], *, on_chroma: 
             # took the edge 10 px up): none, and the height comes from the width
             # (image_geometry; a raised panel's region, beside its stand, may be short)
             top, sides_note = None, (*sides_note, TOP_OFF_REGION)
-    if raised and on_chroma and bottom is not None:
-        # a raised panel's foot may stand against the room's pale baseboard, as neutral
-        # as the panel: across the outside's colour the two read as one and the foot
-        # lands on the baseboard's far side (2.5 px low).  On the image's colour it is
-        # found; where the two disagree by more than a pixel (a foot on the board reads
-        # 0.3-0.6 px apart, its contact shadow counted), the image's colour is taken
+    if on_chroma and bottom is not None:
+        # across the outside's colour a foot may be read on something else: a raised
+        # panel's against the room's pale baseboard, as neutral as the panel (the foot
+        # on the baseboard's far side, 2.5 px low); a dark neutral panel's with a yellow
+        # pencil before it (only the pencil's bands had contrast, and its top was taken
+        # for the foot: 5.5 px high, d_total +9.2 %).  The foot on the image's colour is
+        # taken where the two lie over a pixel apart (on the board: 0.3-0.6 px apart)
         _, plain, _, out_plain = median_edges((img, img), (v0, v1), (u0, u1), axis=0,
                                                near=(False, True))
         if plain is not None and abs(plain - bottom) > 1.0:
-            bottom, out_bottom, sides_note = plain, out_plain, (*sides_note, FOOT_AGAINST_ROOM)
+            bottom, out_bottom, sides_note = plain, out_plain, (*sides_note, FOOT_NOT_ON_CHROMA)
     if bottom is None and on_chroma:
         # a panel in shadow is a dark grey with almost no colour across the board's
         # (a drawn scene's lost its height, 1 of 24): its foot on the image's colour,

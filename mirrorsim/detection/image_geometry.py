@@ -96,8 +96,11 @@ def elevation_of(camera: Camera, m: ImageMeasurement) -> tuple[float, float]:
 
 
 # a pencil image's angular width over what its height implies: beyond this, one side is
-# wrong
+# wrong.  On a lossless frame the good ones are 0.91-1.07 (237 images of acceptance seeds
+# 61207021-22); a pencil before the panel's side read its left edge on the panel's at
+# 1.16-1.25 (α 0.11°).  A JPEG's blurred sides read up to 1.23
 PENCIL_WIDTH_RATIO = (0.8, 1.25)
+PENCIL_WIDTH_MAX_LOSSLESS = 1.12
 # a JPEG pencil's yellow region narrower than this part of it is partly hidden
 PENCIL_REGION_MIN = 0.95
 
@@ -145,12 +148,13 @@ def _width_ratio(cam: Camera, left: float, right: float, height_px: float,
                                      (a + b) / 2)
 
 
-def pencil_geometry(cam: Camera, m: ImageMeasurement, paint_height: float, *, k: float
-                    ) -> ImageMeasurement:
+def pencil_geometry(cam: Camera, m: ImageMeasurement, paint_height: float, *, k: float,
+                    subsampled: bool = False) -> ImageMeasurement:
     """A pencil's bearing from its edges and its d_total from its height (K = ``k``);
     with one edge (the other side runs into something of the paint's blue, such as the
     mirror's dark frame) its bearing from that edge and the pencil's angular half-width,
-    tan β = r·s·cos φ/(f·H) (r its mean silhouette half-width, H its painted height)."""
+    tan β = r·s·cos φ/(f·H) (r its mean silhouette half-width, H its painted height).
+    ``subsampled``: a JPEG frame's (its sides blur wider)."""
     # (a good mirror image's angular width is 0.91-1.05 of what its height implies)
     notes = m.notes
     if m.u_left is not None and m.u_right is not None and m.height_px:
@@ -158,7 +162,8 @@ def pencil_geometry(cam: Camera, m: ImageMeasurement, paint_height: float, *, k:
         # pencil's (good mirror images: 0.91-1.05 of it); the side farther from its
         # region's edge is dropped
         r = _width_ratio(cam, m.u_left, m.u_right, m.height_px, paint_height)
-        if not PENCIL_WIDTH_RATIO[0] <= r <= PENCIL_WIDTH_RATIO[1]:
+        widest = PENCIL_WIDTH_RATIO[1] if subsampled else PENCIL_WIDTH_MAX_LOSSLESS
+        if not PENCIL_WIDTH_RATIO[0] <= r <= widest:
             u0, _, u1, _ = m.bbox_px
             bad = "left" if abs(m.u_left - (u0 - 0.5)) > abs(m.u_right - (u1 + 0.5)) else "right"
             notes = (*notes, f"width {r:.2f} of what the height implies: the {bad} edge is "

@@ -130,12 +130,21 @@ def _find_panel(blur: np.ndarray, neutral: np.ndarray, grey: np.ndarray, inside:
     return None if best is None else best[:4]
 
 
-def _rank(cand: tuple[int, int, int, int, int], shape: tuple[int, ...]) -> tuple[bool, int]:
+def _rank(cand: tuple[int, int, int, int, int], shape: tuple[int, ...]
+          ) -> tuple[bool, bool, int]:
     """A panel region's rank: one whose rows the frame leaves whole before one it cuts at
     the top or bottom (:func:`~mirrorsim.detection.edges.cut_by_frame`), which has no
     height to measure (a wall's grey cut by the frame's bottom, larger than the panel,
-    had been taken for it), then the larger."""
-    return not cut_by_frame(cand[:4], shape[0]), cand[4]
+    had been taken for it), then one the frame's sides leave whole (the panel is seen in
+    the mirror, whose frame the image holds: a blue-grey occluder near the lens, running
+    off the frame's right side with 5.5 times the panel's area, had been taken for it:
+    bench0047 of the bench acceptance set), then the larger."""
+    return not cut_by_frame(cand[:4], shape[0]), not _at_side(cand[:4], shape[1]), cand[4]
+
+
+def _at_side(box: tuple[int, int, int, int], width: int) -> bool:
+    """Whether a region reaches the frame's first or last column."""
+    return box[0] <= 0 or box[2] >= width - 1
 
 
 def _regrow(blur, neutral, inside, labels, k, box, whole: bool, ratio: float, kernel,
@@ -238,5 +247,38 @@ def find_pencils(img: np.ndarray, mask: np.ndarray | None = None
     ``mask``: :func:`pencil_mask` of ``img``, where the caller has it."""
     mask = pencil_mask(img) if mask is None else mask
     _, comps = _components(mask, 30)
-    return [(x, y, x + w - 1, y + h - 1) for _, x, y, w, h, _ in comps
+    return [_with_dark_faces(img, (x, y, x + w - 1, y + h - 1)) for _, x, y, w, h, _ in comps
             if h >= 1.6 * (w - 1)]
+
+
+# a pencil's faces turned from the light (a reflection shows its back) keep the paint's
+# blue near 0 but are too dark for the yellow test: 8-bit (21-46, 9-33, 0-9), blue at most
+# a fifth of the red, where a sandy board, a grey panel, the wood or a rim blurred into
+# the background hold over a third
+DARK_PAINT_BLUE = 0.25
+
+
+def _with_dark_faces(img: np.ndarray, box: tuple[int, int, int, int]
+                     ) -> tuple[int, int, int, int]:
+    """A pencil band's box widened over the columns beside it that are its paint's dark
+    faces in most of its middle rows, by at most its width each way: its yellow region
+    held its lit flank alone (bench0011 of the bench acceptance set: 5 of the band's 10
+    px, its sides measured within it and the image dropped as partly hidden)."""
+    u0, v0, u1, v1 = box
+    rows = img[v0 + (v1 - v0) // 5: v1 - (v1 - v0) // 5 + 1]
+
+    def dark(u: int) -> bool:
+        if not 0 <= u < img.shape[1]:
+            return False
+        px = np.asarray(rows[:, u], np.float32)
+        vmax, vmin = px.max(axis=1), px.min(axis=1)
+        paint = (vmax - vmin > 0.55 * vmax) & (px[:, 2] < DARK_PAINT_BLUE * px[:, 0]) \
+            & (vmax > 15)
+        return bool(paint.mean() > 0.5)
+
+    lo, hi, w = u0, u1, u1 - u0 + 1
+    while lo > u0 - w and dark(lo - 1):
+        lo -= 1
+    while hi < u1 + w and dark(hi + 1):
+        hi += 1
+    return lo, v0, hi, v1
