@@ -17,7 +17,7 @@ model, 8 spp).  Printed: per lean, the 3-D solve's median and largest target err
 its median height error, how often its 95 % ellipsoid holds the truth, and the planar
 solve's median error (in plan) on the same frames, and the median Mahalanobis distance
 (χ₃'s median is 1.54: below it, the ellipsoids are wider than the errors).
-``--report`` reads the rows of a finished run.  Markdown, stamped.
+``--report`` reads the rows of a finished run.  Markdown (docs/regenerate.py stamps it).
 """
 
 from __future__ import annotations
@@ -30,7 +30,6 @@ from pathlib import Path
 
 import numpy as np
 from clone import ROOT  # noqa: F401 (puts the repository on the path)
-from stamp import stamp
 
 from mirrorsim.errors import InputError
 from mirrorsim.pipelines.evaluate3d import SIGMA3_FACTORS, evaluate_into3
@@ -168,12 +167,11 @@ def run(args) -> Path:
     return out
 
 
-def report(out: Path, command: str) -> str:
+def report(out: Path) -> str:
     rows = [json.loads(p.read_text()) for p in sorted((out / "rows").glob("*.json"))]
     refused = json.loads((out / "drawn.json").read_text())["refused"]
     ok = [r for r in rows if "errors" in r]
-    lines = [f"*`{command}` · {stamp()}*", "",
-             f"{len(rows)} scenes ({refused} draws refused by `check` or clipped); "
+    lines = [f"{len(rows)} scenes ({refused} draws refused by `check` or clipped); "
              f"{len(rows) - len(ok)} failed to evaluate", "",
              "| lean | scenes | 3-D median (cm) | 3-D max (cm) | height median (cm) | "
              "inside the 95 % ellipsoid | median Mahalanobis (honest 1.54) | "
@@ -253,8 +251,7 @@ def main() -> None:
     out = Path(args.out or f"renders/evaluate3d-{'wide-' if args.wide else ''}{args.seed}")
     if not args.report:
         out = run(args)
-    print(report(out, f"python benchmarks/evaluate3d.py --scenes {args.scenes} "
-                      f"--seed {args.seed}{' --wide' if args.wide else ''}"))
+    print(report(out))
 
 
 if __name__ == "__main__":
