@@ -508,7 +508,9 @@ def test_a_side_beside_a_strip_of_glass_and_the_frame_is_not_measured_on_the_fra
         monkeypatch):
     """A panel's side 3 px from the mirror frame's dark bar, bright glass between (three
     of 198 random scenes: α off by 0.13-0.20°): the outside's level stops where its rows
-    step to the bar, and the side is measured at 47.5; with the bar in the level, the
+    step to the bar, its fitted line too, and the side is measured at 47.5 (with the line
+    through the bar, at 47.67; a side 2.5 px from a bar read α 0.103° off, ideal0000 of
+    acceptance seed 61207041); with the bar in the level, the
     side is dropped, not measured 6 px out on the bar; without that check either, it is
     measured there (the case is real)."""
     from mirrorsim.detection import area_edges, edges
@@ -517,7 +519,14 @@ def test_a_side_beside_a_strip_of_glass_and_the_frame_is_not_measured_on_the_fra
     img[:, 30:45] = 6.0  # the frame's bar
     img[40:180, 48:140] = 25.0  # the panel: its left edge at 48, its right at 140
     m = edges.measure_region(img, (48, 40, 139, 179), "target")
-    assert m.u_left == pytest.approx(47.5, abs=0.3) and m.u_right == pytest.approx(140.0, abs=0.6)
+    assert m.u_left == pytest.approx(47.5, abs=0.05) and m.u_right == pytest.approx(140.0, abs=0.6)
+    # the side 4 px from the bar, half a pixel into column 49: the sloped level, cut at
+    # the bar too, keeps it there (fitted through the bar, it read 48.64)
+    half = img.copy()
+    half[40:180, 48] = 80.0
+    half[40:180, 49] = (80.0 + 25.0) / 2
+    assert edges.measure_region(half, (49, 40, 139, 179), "target").u_left == \
+        pytest.approx(49.0, abs=0.05)
     monkeypatch.setattr(area_edges, "OUTSIDE_STEP", math.inf)
     m = edges.measure_region(img, (48, 40, 139, 179), "target")
     assert m.u_left is None and m.u_right == pytest.approx(140.0, abs=0.6)

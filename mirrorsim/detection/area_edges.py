@@ -61,17 +61,17 @@ def _local_edge(img: np.ndarray, band, axis: int, guess: float, inside_first: bo
     (not 4), carried to each pixel of the window (a side that brightens or darkens
     towards the edge: a pencil's paint in its contact shadow, its wood cone); the line
     is fitted to the mean profile, so a hole still moves it.  ``out_reach``: the
-    outside's level from pixels no farther than this from the edge's (a narrow outside:
-    a small pencil's cone), and a median there where it leaves fewer than 4 (a line
-    through 2 or 3 rows, carried into the window, could land on the inside's level).
+    outside's pixels no farther than this from the edge's (a small pencil's cone).  The
+    outside's rows are cut at their first step towards the inside
+    (:func:`_outside_to_first_step`); under 4 left, a median (a line through 2 or 3,
+    carried into the window, could land on the inside's level).
 
     Returns (edge or None, outside colour).
     """
-    n = img.shape[axis]
     c = int(round(guess))
 
     def line(i: int) -> np.ndarray:
-        i = min(max(i, 0), n - 1)
+        i = min(max(i, 0), img.shape[axis] - 1)
         return (img[i, band] if axis == 0 else img[band, i]).mean(axis=0)
 
     rows = SLOPE_ROWS if slope else 4

@@ -93,8 +93,8 @@ def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str,
     (``stored``; from ``img`` if not given) over a 5-px window, where JPEG moves chroma
     between neighbours without changing its sum (figures: docs/method.md).
 
-    ``raised`` (a 3-D frame): a panel's foot, which may stand against the room's pale
-    baseboard, is also measured on the image's colour, taken so where 1 px apart.
+    A lossless panel's foot is also measured on the image's colour, taken so where over
+    1 px apart.  ``raised`` (3-D): a panel's top off its region is kept (_panel_edges).
 
     ``cone_ratio`` (a pencil): its cone's height over its band's (the frame's tallest
     pencil's), which bounds where its top's outside is read (:func:`_cone_reach`).
@@ -292,8 +292,8 @@ def _front_top(img: np.ndarray, box: tuple[int, int, int, int], top: float | Non
 def _panel_edges(img: np.ndarray, box: tuple[int, int, int, int], *, on_chroma: bool,
                  raised: bool = False, top_face: TopFace | None = None) -> _Edges:
     """The target panel's edges (:func:`measure_region`): on its colour against the
-    outside's, the sides with sloped levels; with the camera above it and a lossless
-    frame (``on_chroma``), the top below its top face (:func:`_front_top`)."""
+    outside's, the sides with sloped levels; on a lossless frame (``on_chroma``) the top
+    below its top face where seen (:func:`_front_top`), the foot as measure_region says."""
     u0, v0, u1, v1 = box
     sides_note: tuple[str, ...] = ()
     top, bottom, out_top, out_bottom = median_edges((img, img), (v0, v1), (u0, u1), axis=0,

@@ -155,12 +155,10 @@ def pencil_geometry(cam: Camera, m: ImageMeasurement, paint_height: float, *, k:
     mirror's dark frame) its bearing from that edge and the pencil's angular half-width,
     tan β = r·s·cos φ/(f·H) (r its mean silhouette half-width, H its painted height).
     ``subsampled``: a JPEG frame's (its sides blur wider)."""
-    # (a good mirror image's angular width is 0.91-1.05 of what its height implies)
     notes = m.notes
     if m.u_left is not None and m.u_right is not None and m.height_px:
         # a backstop: a width far from what the height implies means one side is not the
-        # pencil's (good mirror images: 0.91-1.05 of it); the side farther from its
-        # region's edge is dropped
+        # pencil's (PENCIL_WIDTH_RATIO); the side farther from its region's edge is dropped
         r = _width_ratio(cam, m.u_left, m.u_right, m.height_px, paint_height)
         widest = PENCIL_WIDTH_RATIO[1] if subsampled else PENCIL_WIDTH_MAX_LOSSLESS
         if not PENCIL_WIDTH_RATIO[0] <= r <= widest:

@@ -95,9 +95,10 @@ def find_target(img: np.ndarray, ratio: float, *, posts: bool = False,
         filled = _find_panel(blur, neutral, grey, inside, ratio, open_px) if inside.any() \
             else None
         found = [b for b in (plain, filled) if b is not None]
-        if found:
-            return min(found, key=lambda b: (bool(cut_by_frame(b, img.shape[0])), abs(math.log(
-                (b[2] - b[0] + 1) / (b[3] - b[1] + 1) / ratio))))
+        if found:  # ranked as _rank ranks regions, then by shape
+            return min(found, key=lambda b: (
+                bool(cut_by_frame(b, img.shape[0])), _at_side(b, img.shape[1]),
+                abs(math.log((b[2] - b[0] + 1) / (b[3] - b[1] + 1) / ratio))))
     return None
 
 
@@ -252,9 +253,9 @@ def find_pencils(img: np.ndarray, mask: np.ndarray | None = None
 
 
 # a pencil's faces turned from the light (a reflection shows its back) keep the paint's
-# blue near 0 but are too dark for the yellow test: 8-bit (21-46, 9-33, 0-9), blue at most
-# a fifth of the red, where a sandy board, a grey panel, the wood or a rim blurred into
-# the background hold over a third
+# blue near 0 but are too dark for the yellow test (seen at 8-bit (21-46, 9-33, 0-9)):
+# blue under a quarter of the red, where a sandy board, a grey panel, the wood or a rim
+# blurred into the background hold over a third
 DARK_PAINT_BLUE = 0.25
 
 
