@@ -39,7 +39,6 @@ from pathlib import Path
 import numpy as np
 from acceptance_report import report  # noqa: E402  (the Markdown summary)
 from clone import ROOT  # noqa: E402  (the clone first on sys.path)
-from stamp import stamp  # noqa: E402
 
 GROSS_ALPHA_DEG, GROSS_D_PCT = 0.05, 1.0
 RESOLUTIONS = ((960, 544), (1280, 720), (1600, 896), (1920, 1088))
@@ -313,7 +312,6 @@ def main() -> None:
         out = a.out or ROOT / "renders" / f"acceptance-{a.seed}-{'bench' if a.bench else 'ideal'}"
         run(a.scenes, a.seed, a.bench, out, a.workers, a.beacons)
         folders = [out]
-    print(f"*{stamp()}*\n")
     print(report(folders))
 
 
