@@ -139,7 +139,7 @@ def _rank(cand: tuple[int, int, int, int, int], shape: tuple[int, ...]
     had been taken for it), then one the frame's sides leave whole (the panel is seen in
     the mirror, whose frame the image holds: a blue-grey occluder near the lens, running
     off the frame's right side with 5.5 times the panel's area, had been taken for it:
-    bench0047 of the bench acceptance set), then the larger."""
+    bench0047 of acceptance seed 61207022), then the larger."""
     return not cut_by_frame(cand[:4], shape[0]), not _at_side(cand[:4], shape[1]), cand[4]
 
 
@@ -263,7 +263,7 @@ def _with_dark_faces(img: np.ndarray, box: tuple[int, int, int, int]
                      ) -> tuple[int, int, int, int]:
     """A pencil band's box widened over the columns beside it that are its paint's dark
     faces in most of its middle rows, by at most its width each way: its yellow region
-    held its lit flank alone (bench0011 of the bench acceptance set: 5 of the band's 10
+    held its lit flank alone (bench0011 of acceptance seed 61207022: 5 of the band's 10
     px, its sides measured within it and the image dropped as partly hidden)."""
     u0, v0, u1, v1 = box
     rows = img[v0 + (v1 - v0) // 5: v1 - (v1 - v0) // 5 + 1]
