@@ -46,6 +46,10 @@ def budget_table(budget: Budget) -> str:
              "moved (cm)", "1st order", "target (cm)", "1st order",
              *(["self-cal (cm)"] if cal else []))]
     failures = []
+
+    def image(a: float, e: float | None, p: float) -> tuple[str, ...]:  # one image's cells
+        return (signed(a, 4), *((signed(e, 4),) if three else ()), signed(p, 3))
+
     for c in (*budget.sources, *([budget.all] if budget.all else [])):
         d = c.delta
         value = show_value(c.value)
@@ -53,9 +57,6 @@ def budget_table(budget: Budget) -> str:
             rows.append((c.source, value, "failed", *[""] * (len(rows[0]) - 3)))
             failures.append(f"  {c.source}: {c.failed}")
             continue
-        def image(a: float, e: float | None, p: float) -> tuple[str, ...]:
-            return (signed(a, 4), *((signed(e, 4),) if three else ()), signed(p, 3))
-
         own = image(d.target_alpha_deg, d.target_elevation_deg, d.target_d_total_pct)
         per = [x for a, e, p in zip(d.beacon_alpha_deg, d.beacon_elevation_deg
                                     or (None,) * len(d.beacon_alpha_deg),
