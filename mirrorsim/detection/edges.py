@@ -16,6 +16,7 @@ import numpy as np
 from mirrorsim.camera.sensor import LINEAR_OF_CODE, lookup_codes, to_srgb8
 from mirrorsim.detection.area_edges import SLOPE_ROWS, bands, median_edges
 from mirrorsim.detection.image_measurement import ImageMeasurement, Surround, TopFace
+from mirrorsim.detection.panel_sides import foreign_sides, sides_across_outside
 from mirrorsim.scene.model import TARGET_THICKNESS, Camera
 
 # the note of a JPEG pencil whose sides the blue channel lost and the colour measured
@@ -125,7 +126,7 @@ def measure_region(img: np.ndarray, box: tuple[int, int, int, int], kind: str,
                                                        e.out_bottom))),
         inside=float(np.median(core.reshape(-1, img.shape[-1]).mean(axis=1))),
         notes=(*e.notes, *cut), sides_on_colour=e.sides_on_colour,
-        darker_sides=e.darker_sides, sides_across_outside=e.sides_across_outside)
+        foreign_sides=e.foreign_sides, sides_across_outside=e.sides_across_outside)
     if left is not None and right is not None:
         m = replace(m, u_axis=(left + right) / 2)
     return _with_clipping(m, cut, v0 <= 0)
@@ -162,8 +163,8 @@ class _Edges(NamedTuple):
     out_right: np.ndarray
     notes: tuple[str, ...]
     sides_on_colour: bool = False  # a JPEG pencil's sides on the image's colour
-    darker_sides: tuple[str, ...] = ()  # a panel's sides darker just inside (DARKER_SIDE)
-    # a panel's sides across the outside's colour (:func:`_sides_across_outside`)
+    foreign_sides: tuple[str, ...] = ()  # a panel's sides not its own just inside
+    # a panel's sides across the outside's colour (panel_sides.sides_across_outside)
     sides_across_outside: tuple[float | None, float | None] = (None, None)
 
 
@@ -343,56 +344,9 @@ def _panel_edges(img: np.ndarray, box: tuple[int, int, int, int], *, on_chroma: 
     left, right, out_left, out_right = median_edges((img, img), (u0, u1), (v0, v1), axis=1,
                                                      slope=(True, True),
                                                      max_off=SIDE_MAX_OFF_PX)
-    darker = _darker_sides(img, box, left, right, top)
+    foreign, foreign_notes = foreign_sides(img, box, left=left, right=right, top=top,
+                                                   lossless=on_chroma)
     return _Edges(top, bottom, left, right, out_top, out_bottom, out_left, out_right,
-                  (*sides_note, *(DARKER_SIDE + side for side in darker)),
-                  darker_sides=darker,
-                  sides_across_outside=_sides_across_outside(img, box) if on_chroma
+                  (*sides_note, *foreign_notes), foreign_sides=foreign,
+                  sides_across_outside=sides_across_outside(img, box) if on_chroma
                   else (None, None))
-
-
-ACROSS_OFF_PX = 5.0  # how far from the region a side across the outside's colour may lie
-
-
-def _sides_across_outside(img: np.ndarray, box: tuple[int, int, int, int]
-                          ) -> tuple[float | None, float | None]:
-    """A panel's sides measured across the outside's colour: where a shadow of a coloured
-    wall lies beside it, as dark as the panel, this one reads the shadow as outside
-    (image_geometry takes a side so where the width then fits the height)."""
-    u0, v0, u1, v1 = box
-    left, right, _, _ = median_edges((img, img), (u0, u1), (v0, v1), axis=1,
-                                     slope=(True, True), chroma=(True, True),
-                                     drop_off=ACROSS_OFF_PX)
-    return left, right
-
-
-# the note of a panel's side whose pixels just inside it are much darker than the
-# panel's middle: the region took in something dark beside it (the mirror frame's bar,
-# 1-2 px of background away), and the side found is that thing's outer edge
-# (image_geometry drops it where the image is also wider than its height implies)
-DARKER_SIDE = "darker than the panel just inside its edge: "
-DARKER_RATIO = 0.7  # a side strip's level over the middle's (a frame bar: 0.43)
-
-
-def _darker_sides(img: np.ndarray, box: tuple[int, int, int, int], left: float | None,
-                  right: float | None, top: float | None) -> tuple[str, ...]:
-    """The sides ('left', 'right', 'top') whose 2-px strip just inside the edge, over the
-    middle half of the rows (of the columns, for the top), is darker than DARKER_RATIO of
-    the panel's middle (a top there: the frame's bar, a strip of wall between, taken in)."""
-    u0, v0, u1, v1 = box
-    rows = slice(v0 + (v1 - v0) // 4, v1 - (v1 - v0) // 4 + 1)
-    cols = slice(u0 + (u1 - u0) // 4, u1 - (u1 - u0) // 4 + 1)
-    core = float(np.median(img[rows, cols]))
-    sides = []
-    for side, edge, step in (("left", left, 1), ("right", right, -1), ("top", top, 1)):
-        if edge is None or core <= 0:
-            continue
-        first = int(math.floor(edge + 0.5)) + (1 if step > 0 else -1)  # wholly inside
-        lo, hi = sorted((first, first + step))
-        cells = img[max(lo, 0):hi + 1, cols] if side == "top" else img[rows, max(lo, 0):hi + 1]
-        if cells.size == 0:  # (a panel a pixel or two wide at the frame's side)
-            continue
-        strip = float(np.median(cells))
-        if strip < DARKER_RATIO * core:
-            sides.append(side)
-    return tuple(sides)

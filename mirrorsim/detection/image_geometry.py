@@ -259,18 +259,18 @@ def _target_clip(cam: Camera, m: ImageMeasurement, size: Point2, present: list[s
             m = replace(m, clipped=side, notes=(
                 *m.notes, f"image {100 * (1 - r):.1f}% narrower than its height implies, "
                 f"beside a dark edge: clipped on the {side}, axis from the other edge"))
-        elif r > 1 + tol and len(darker := [s_ for s_ in present
-                                            if s_ in m.darker_sides]) == 1:
-            # wider than the height allows, one side darker just inside: the region took
-            # in something dark beside the panel (its side found at that thing's far
-            # edge, 6 px out, α 0.26° off); that side is dropped
-            side = darker[0]
+        elif r > 1 + tol and len(foreign := [s_ for s_ in present
+                                             if s_ in m.foreign_sides]) == 1:
+            # wider than the height allows, one side not the panel's just inside: the
+            # region took in a dark bar (the side at its far edge, 6 px out, α 0.26° off)
+            # or a strip of glass before one (1.4 px out); that side is dropped
+            side = foreign[0]
             present = [s_ for s_ in present if s_ != side]
             m = replace(m, **{f"u_{side}": None}, width_px=None, notes=(
                 *m.notes, f"image {100 * (r - 1):.1f}% wider than its height implies, "
-                f"darker just inside its {side} edge: that edge is not the panel's, axis "
+                f"not the panel's just inside its {side} edge: that edge is not, axis "
                 "from the other"))
-        elif r < 1 - tol and (dark["top"] or "top" in m.darker_sides):  # its top on the
+        elif r < 1 - tol and (dark["top"] or "top" in m.foreign_sides):  # its top on the
             # frame's bar: under it, or the bar taken into the region across 1 px of wall
             m = _height_from_width(cam, m, size, (
                 f"image {100 * (1 - r):.1f}% narrower than its height implies, " + (
@@ -338,14 +338,14 @@ def _height_from_width(cam: Camera, m: ImageMeasurement, size: Point2, note: str
     """``m`` with the height its two sides imply (tan β = w·s·cos φ/(2fH), target_geometry)
     where its top is not the panel's, from its foot (the board's check on the foot then
     holds it).  Only where both sides are the panel's: none beside something dark (the
-    mirror frame's side bar may cut it there), none darker just inside, and each within
+    mirror frame's side bar may cut it there), none foreign just inside, and each within
     WIDTH_SIDES_PX of its measure across the outside's colour; else its height is not
     used."""
     dark = _dark(m, "left") or _dark(m, "right")
     across = [abs(c - u) for c, u in zip(m.sides_across_outside, (m.u_left, m.u_right),
                                          strict=True) if c is not None and u is not None]
     if m.v_bottom is None or m.u_left is None or m.u_right is None or dark or \
-            {"left", "right"} & set(m.darker_sides) or any(d > WIDTH_SIDES_PX for d in across):
+            {"left", "right"} & set(m.foreign_sides) or any(d > WIDTH_SIDES_PX for d in across):
         return replace(m, height_px=None, notes=(*m.notes, note.replace(
             "height from its width", "height not used")))
     left, right = _off_axis(cam, m.u_left), _off_axis(cam, m.u_right)

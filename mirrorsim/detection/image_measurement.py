@@ -70,6 +70,6 @@ class ImageMeasurement:
     notes: tuple[str, ...] = ()
     # what the edges' measurement found that the pixel geometry weighs (each also a note)
     sides_on_colour: bool = False  # a JPEG pencil's sides measured on the image's colour
-    darker_sides: tuple[str, ...] = ()  # a panel's sides darker just inside their edge
+    foreign_sides: tuple[str, ...] = ()  # a panel's sides not its own just inside their edge
     # a panel's sides measured across the outside's colour (None: not measured so)
     sides_across_outside: tuple[float | None, float | None] = (None, None)
