@@ -292,6 +292,21 @@ def test_more_samples_in_the_beacons_image(fast_variant):
     err = lambda f: np.abs(f.linear[inside] - ref.linear[inside]).mean()  # noqa: E731
     assert err(boxed) < 0.5 * err(plain)
     assert boxed.info.beacon_spp == 64 and plain.info.beacon_spp is None
+    # its image, under 40 px tall in the id pass, took more than beacon_spp
+    assert vs.max() - vs.min() + 1 < 40 and boxed.info.beacon_box_spp[0] > 64
+
+
+def test_a_short_beacon_image_takes_more_samples():
+    """A beacon's image under 40 px takes beacon_spp times the square of its shortfall,
+    rounded up to a power of 2, at most 8 times (values worked by hand); none where no
+    box is rendered (beacon_spp not above spp)."""
+    from mirrorsim.scene.render_settings import RenderSettings, small_image_factor
+
+    assert [small_image_factor(h) for h in (100.0, 40.0, 35.0, 30.0, 25.0, 20.0, 15.0, 5.0)] \
+        == [1, 1, 2, 2, 4, 4, 8, 8]
+    r = RenderSettings(spp=8, beacon_spp=128)
+    assert r.beacon_box_spp(image_px=15.0) == 1024 and r.beacon_box_spp(image_px=60.0) == 128
+    assert RenderSettings(spp=8, beacon_spp=4).beacon_box_spp(image_px=15.0) == 8
 
 
 def test_mirror_image_lies_where_the_mirror_puts_it(tmp_path, fast_variant):

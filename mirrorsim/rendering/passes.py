@@ -40,7 +40,7 @@ from mirrorsim.truth.groundtruth import RenderInfo
 # within a call, so the passes are large; a dataset's few-spp frame is one call.
 PASS_SPP = 16
 # part of a frame's fingerprint: bump when renders change
-RENDER_METHOD = "passes16-ss-glass0-tiles"
+RENDER_METHOD = "passes16-ss-glass0-tiles-short"
 # the boxes are rendered in fixed square tiles (one compiled kernel per size for every
 # scene): the mirror's box at the frame's spp in tiles of MIRROR_TILE px, each beacon's
 # box at beacon_spp in tiles of BEACON_TILE px (small: its samples are 16× dearer)
@@ -76,6 +76,7 @@ class _Optics:
     background_spp: int | None
     beacon_spp: int | None
     seconds: float
+    beacon_box_spp: tuple[int, ...] = ()  # each beacon box's (a short image's: more)
 
 
 @dataclass
@@ -162,7 +163,9 @@ def render_frame(scene: Scene, *, variant: str = "auto", progress: bool = True
         linear = add_noise(linear, scene.bench.noise, seed)
     info = RenderInfo(variant=chosen, spp=scene.render.spp, seed=seed,
                       sampler=scene.render.sampler, background_spp=optical.background_spp,
-                      beacon_spp=optical.beacon_spp, seconds_render=optical.seconds,
+                      beacon_spp=optical.beacon_spp,
+                      beacon_box_spp=optical.beacon_box_spp or None,
+                      seconds_render=optical.seconds,
                       seconds_total=round(time.perf_counter() - t0, 3), mitsuba=MITSUBA_VERSION)
     return RenderedFrame(linear=linear, first=optical.first, in_mirror=optical.in_mirror,
                          info=info)
@@ -199,7 +202,8 @@ def _render_optics(scene: Scene, chosen: str, progress: bool) -> _Optics:
     for a in (linear, first, in_mirror):
         a.flags.writeable = False  # a kept render is shared: nobody may draw on it
     return _Optics(linear, first, in_mirror, None if box is None else background,
-                   beacon_spp if boxes else None, round(t_render, 3))
+                   beacon_spp if boxes else None, round(t_render, 3),
+                   tuple(n for _, n, stream, _ in passes if stream >= 2))
 
 
 Region = tuple[int, int, int, int]
@@ -210,14 +214,19 @@ def _regions(pinhole: Scene, spp: int) -> tuple[Region | None, int, int, list[Re
     """Where the samples go: the mirror's box (None: the whole frame at spp), the spp
     outside it, the beacons' spp and boxes, and the passes after the whole film as
     (region, spp, seed stream, tile size): the mirror's region at the full spp, then
-    each beacon's image at beacon_spp (inside the mirror's region: pasted after it)."""
+    each beacon's image at beacon_spp, a short one's at more (inside the mirror's region:
+    pasted after it)."""
     background = pinhole.render.outside_spp(spp)
     box = optics.mirror_box(pinhole) if background < spp else None
     beacon_spp = pinhole.render.beacon_box_spp(spp)
     boxes = [b for b in optics.beacon_boxes(pinhole) if b is not None] \
         if beacon_spp > spp else []
+    # a short image takes more (RenderSettings.beacon_box_spp): its height is its box's
+    # less the margins (a box the film clips reads shorter: more samples, never fewer)
+    margins = 2 * optics.BEACON_BOX_MARGIN_PX + 1
     passes = ([(box, spp, 1, MIRROR_TILE)] if box is not None else []) \
-        + [(b, beacon_spp, 2 + i, BEACON_TILE) for i, b in enumerate(boxes)]
+        + [(b, pinhole.render.beacon_box_spp(spp, image_px=b[3] - b[1] - margins), 2 + i,
+            BEACON_TILE) for i, b in enumerate(boxes)]
     return box, background, beacon_spp, boxes, passes
 
 

@@ -3,6 +3,7 @@ bounds every consumer holds them to."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -32,10 +33,10 @@ class RenderSettings:
     # to spp for a uniform frame).  Every measurement is made in the mirror's image, so
     # the samples are spent there (docs/performance.md)
     background_spp: int = 2
-    # samples per pixel in each beacon's image (renders use max(this, spp)): its painted
-    # band is 45–95 px tall and its d_total rests on two of its edges, whose render noise
-    # at 8 spp was the largest part of its error; the box costs 15 % of a dataset's
-    # throughput (docs/results.md, docs/performance.md)
+    # samples per pixel in each beacon's image (renders use max(this, spp), and more for
+    # an image under SMALL_BEACON_PX): its d_total rests on two of its edges, whose
+    # render noise at 8 spp was the largest part of its error; the box costs 15 % of a
+    # dataset's throughput (docs/results.md, docs/performance.md)
     beacon_spp: int = 128
 
     def __post_init__(self):
@@ -60,10 +61,34 @@ class RenderSettings:
         this setting's): ``min(background_spp, spp)``."""
         return min(self.background_spp, self.spp if spp is None else spp)
 
-    def beacon_box_spp(self, spp: int | None = None) -> int:
-        """Samples per pixel in each beacon's image for a frame of ``spp`` (default this
-        setting's): ``max(beacon_spp, spp)``."""
-        return max(self.beacon_spp, self.spp if spp is None else spp)
+    def beacon_box_spp(self, spp: int | None = None, image_px: float | None = None) -> int:
+        """Samples per pixel in a beacon's image for a frame of ``spp`` (default this
+        setting's): ``max(beacon_spp, spp)``, times :func:`small_image_factor` of its
+        height ``image_px`` where a box is rendered (beacon_spp above spp)."""
+        base = max(self.beacon_spp, self.spp if spp is None else spp)
+        if image_px is None or base <= (self.spp if spp is None else spp):
+            return base
+        return min(MAX_SPP, base * small_image_factor(image_px))
+
+
+# a beacon's image shorter than this (px) takes more samples: at beacon_spp 128 the
+# render noise of its two edges put a 12-20 px image's d_total 0.64 % RMS off (23 images
+# of two ideal acceptance sets, up to 1.16 %); at 1024 the same scene's three images read
+# 0.07-0.30 % off, against 0.09-1.11 % at 128 (three seeds each).  The factor is the
+# square of the shortfall, rounded up to a power of 2 and at most SMALL_BEACON_MAX: the
+# box's area falls as the square of the height, so a small image's samples cost no more
+# than those of one SMALL_BEACON_PX tall, within the tile it is rendered in
+SMALL_BEACON_PX, SMALL_BEACON_MAX = 40.0, 8
+
+
+def small_image_factor(image_px: float) -> int:
+    """How many times beacon_spp a beacon's image ``image_px`` tall takes: 1 from
+    SMALL_BEACON_PX up, else (SMALL_BEACON_PX / image_px)² rounded up to a power of 2, at
+    most SMALL_BEACON_MAX."""
+    if image_px >= SMALL_BEACON_PX:
+        return 1
+    want = (SMALL_BEACON_PX / max(image_px, 1.0)) ** 2
+    return min(SMALL_BEACON_MAX, 1 << max(0, math.ceil(math.log2(want))))
 
 
 # the largest seed every consumer takes, a render's or a run's: numpy's generators take

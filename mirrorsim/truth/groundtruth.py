@@ -105,6 +105,8 @@ class RenderInfo:
     sampler: str = "independent"
     background_spp: int | None = None  # outside the mirror's image (None: spp)
     beacon_spp: int | None = None  # in the beacons' images (None: spp)
+    # each beacon's box's, where a short image took more (RenderSettings.beacon_box_spp)
+    beacon_box_spp: tuple[int, ...] | None = None
     seconds_render: float | None = None
     seconds_total: float | None = None
     mitsuba: str | None = None
@@ -118,6 +120,8 @@ class RenderInfo:
         return {"variant": self.variant, "spp": self.spp, "seed": self.seed,
                 "sampler": self.sampler, "background_spp": self.background_spp,
                 "beacon_spp": self.beacon_spp,
+                **({"beacon_box_spp": list(self.beacon_box_spp)}
+                   if self.beacon_box_spp is not None else {}),
                 "seconds_render": self.seconds_render, "seconds_total": self.seconds_total,
                 "mitsuba": self.mitsuba, "fingerprint": self.fingerprint,
                 **({"files": dict(self.files)} if self.files is not None else {})}
@@ -127,7 +131,9 @@ class RenderInfo:
         """Inverse of :meth:`to_json`."""
         fields = ("variant", "spp", "seed", "background_spp", "beacon_spp", "seconds_render",
                   "seconds_total", "mitsuba", "fingerprint", "files")
-        return cls(**{k: d.get(k) for k in fields}, sampler=d.get("sampler", "independent"))
+        box = d.get("beacon_box_spp")
+        return cls(**{k: d.get(k) for k in fields}, sampler=d.get("sampler", "independent"),
+                   beacon_box_spp=None if box is None else tuple(box))
 
 
 @dataclass(frozen=True)

@@ -171,11 +171,17 @@ def front_face(scene: Scene, obj: Target | Beacon, height: float, *, kind: str
     return u, v
 
 
-def beacon_boxes(scene: Scene, margin_px: int = 16) -> list[tuple[int, int, int, int] | None]:
+# how far (px) a beacon's render box reaches past its image all round: the detector's
+# edge levels reach 9 px past an edge
+BEACON_BOX_MARGIN_PX = 16
+
+
+def beacon_boxes(scene: Scene, margin_px: int = BEACON_BOX_MARGIN_PX
+                 ) -> list[tuple[int, int, int, int] | None]:
     """Per beacon, the film region (u0, v0, u1, v1), end-exclusive, around its image in
     the mirror: its virtual image's outline (the pencil's circumscribed cylinder, board to
-    tip) ``margin_px`` wider all round (the detector's edge levels reach 9 px past an
-    edge) and clipped to the film; None if it lies behind the camera or off the film."""
+    tip) ``margin_px`` wider all round and clipped to the film; None if it lies behind
+    the camera or off the film."""
     cam, bench = scene.camera, scene.bench
     out = []
     for b in scene.beacons:
