@@ -1102,6 +1102,26 @@ def test_a_pencils_dark_faces_belong_to_its_region():
     assert find_pencils(lit) == [(40, 30, 49, 89)]
 
 
+def test_a_piece_of_a_pencils_band_inside_its_box_is_not_another_pencil():
+    """A dark olive band (a reflection's shadowed paint) split by the opening left a
+    6 × 12 px piece beside the band's main part, its box wholly inside the band's: it was
+    measured as a pencil of its own (turned 9.7°, d_total 265 cm for 90) and took the
+    beacon's place (bench0051 of acceptance seed 61207052).  A box inside another's is
+    that pencil's; two pencils side by side are both kept."""
+    from mirrorsim.detection.regions import find_pencils
+
+    img = np.full((120, 100, 3), (200, 170, 120), np.float32)  # the board
+    img[20:100, 40:52] = (200, 150, 20)  # the band
+    img[58:74, 45:52] = (200, 170, 120)  # gaps 2 px wide cut a piece off its side
+    img[60:72, 47:52] = (200, 150, 20)
+    boxes = find_pencils(img)
+    assert boxes == [(40, 20, 51, 99)]
+    two = np.full((120, 100, 3), (200, 170, 120), np.float32)
+    two[20:100, 20:30] = (200, 150, 20)
+    two[50:80, 60:66] = (200, 150, 20)  # a farther one, beside it
+    assert sorted(find_pencils(two)) == [(20, 20, 29, 99), (60, 50, 65, 79)]
+
+
 def test_a_pencils_top_lost_on_lines_is_measured_on_medians(monkeypatch):
     """An unlit cone's shading flattens near the band: the final pass's straight-line
     level, carried into the window, took the contrast under the floor, where the coarse
