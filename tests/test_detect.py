@@ -642,6 +642,38 @@ def test_a_panel_top_under_the_frames_bar_takes_its_height_from_its_width():
     assert any("darker just inside its top" in n for n in m.notes)
 
 
+def test_a_panel_region_short_of_its_foot_takes_its_height_from_its_width():
+    """A JPEG's colour block tinted a panel's last rows with the board's colour, the grey
+    mask lost them and the region ended 9 px above the foot, where the foot was looked for
+    inside the panel: no contrast, no d_total (bench0076 of acceptance seed 61207052).
+    With its top its own and both sides measured, the height its width implies is taken
+    (within 0.2 px of the 140 px drawn), the foot that far below its top; under a dark
+    top there is none."""
+    import math
+
+    from mirrorsim.detection import edges
+    from mirrorsim.detection.image_geometry import target_geometry
+    from mirrorsim.scene.model import Camera
+
+    cam = Camera(position=(0.0, 0.0), height=5.0, resolution=(200, 220),
+                 hfov=2 * math.degrees(math.atan(0.1)), pan=0.0, pan_deg=0.0)
+    size = (2 * 1000 * 0.05 / 140 * 14, 14.0)
+    img = np.empty((220, 200, 3), np.float32)
+    img[:, :] = (99.2, 83.0, 46.6)  # glass showing a beige wall
+    img[40:180, 50:150] = (15.6, 14.3, 11.9)  # the panel: 100 × 140 px
+    img[180:] = (120.0, 90.0, 60.0)  # the board
+    short = (50, 40, 149, 170)  # the region, 9 rows short of the foot
+    m = edges.measure_region(img, short, "target")
+    assert m.v_bottom is None and m.v_top == pytest.approx(39.5, abs=0.2)
+    g = target_geometry(cam, m, size, k=1.0e5)
+    assert g.height_px == pytest.approx(140.0, abs=0.2)
+    assert g.v_bottom == pytest.approx(179.5, abs=0.3)
+    assert g.d_total == pytest.approx(1.0e5 / 140 + 0.2, rel=0.002)
+    img[20:40] = (6.0, 5.5, 5.0)  # the frame's bar on its top: that top may be the bar's
+    g = target_geometry(cam, edges.measure_region(img, short, "target"), size, k=1.0e5)
+    assert g.height_px is None and g.d_total is None
+
+
 def test_a_pencil_beside_the_frame_is_not_measured_on_its_other_side(monkeypatch):
     """A pencil 3 px from the frame's bar (one of 120 random scenes: α off by 0.31°): the
     bar became the coarse pass's outside and the left side was found on the right one.

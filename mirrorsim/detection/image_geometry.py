@@ -223,6 +223,13 @@ def target_geometry(cam: Camera, m: ImageMeasurement, size: Point2, *, k: float
             # no contrast at its top (under the mirror frame's bar, a strip of glass
             # between: ideal0022 of seed 61207021 measured no d_total)
             m = _height_from_width(cam, m, size, "height from its width")
+        elif m.clipped == "top" and m.v_bottom is None and m.v_top is not None \
+                and not (_dark(m, "top") or "top" in m.foreign_sides):
+            # no contrast at its foot, its top its own: a JPEG's colour block took the
+            # panel's last rows out of its region, whose foot then lay inside the panel
+            # (bench0076 of seed 61207052 measured no d_total)
+            m = _height_from_width(cam, m, size, "no contrast at its foot: height from "
+                                   "its width, foot below its top")
     else:
         raise DetectionError("the target's image has neither a measurable height nor two "
                              "side edges")
@@ -337,17 +344,20 @@ def _height_from_width(cam: Camera, m: ImageMeasurement, size: Point2, note: str
                        ) -> ImageMeasurement:
     """``m`` with the height its two sides imply (tan β = w·s·cos φ/(2fH), target_geometry)
     where its top is not the panel's, from its foot (the board's check on the foot then
-    holds it).  Only where both sides are the panel's: none beside something dark (the
-    mirror frame's side bar may cut it there), none foreign just inside, and each within
-    WIDTH_SIDES_PX of its measure across the outside's colour; else its height is not
-    used."""
+    holds it), or where it has no foot, from its top.  Only where both sides are the
+    panel's: none beside something dark (the mirror frame's side bar may cut it there),
+    none foreign just inside, and each within WIDTH_SIDES_PX of its measure across the
+    outside's colour; else its height is not used."""
     dark = _dark(m, "left") or _dark(m, "right")
     across = [abs(c - u) for c, u in zip(m.sides_across_outside, (m.u_left, m.u_right),
                                          strict=True) if c is not None and u is not None]
-    if m.v_bottom is None or m.u_left is None or m.u_right is None or dark or \
+    if (m.v_bottom is None and m.v_top is None) or m.u_left is None or m.u_right is None \
+            or dark or \
             {"left", "right"} & set(m.foreign_sides) or any(d > WIDTH_SIDES_PX for d in across):
         return replace(m, height_px=None, notes=(*m.notes, note.replace(
             "height from its width", "height not used")))
     left, right = _off_axis(cam, m.u_left), _off_axis(cam, m.u_right)
     s = _height_px(cam, size[0] / 2, (right - left) / 2, size[1], (left + right) / 2)
+    if m.v_bottom is None:  # its foot the height below its top
+        return replace(m, height_px=s, v_bottom=m.v_top + s, notes=(*m.notes, note))
     return replace(m, height_px=s, v_top=m.v_bottom - s, notes=(*m.notes, note))
