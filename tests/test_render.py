@@ -267,8 +267,8 @@ def test_the_mirrors_box_does_not_depend_on_the_background(fast_variant):
 
 
 def test_more_samples_in_the_beacons_image(fast_variant):
-    """beacon_spp: the beacon's image box is rendered at beacon_spp (its own seed
-    stream), the rest of the frame exactly as without it; the box holds every pixel of
+    """beacon_spp: the beacon's image box is rendered at beacon_spp or more (its own
+    seed stream), the rest of the frame exactly as without it; the box holds every pixel of
     the beacon's mirror image (its id pass), and inside it the frame is closer to a
     64-spp frame than the 4-spp render is."""
     from dataclasses import replace

@@ -275,8 +275,8 @@ def _target_clip(cam: Camera, m: ImageMeasurement, size: Point2, present: list[s
             present = [s_ for s_ in present if s_ != side]
             m = replace(m, **{f"u_{side}": None}, width_px=None, notes=(
                 *m.notes, f"image {100 * (r - 1):.1f}% wider than its height implies, "
-                f"not the panel's just inside its {side} edge: that edge is not, axis "
-                "from the other"))
+                f"not the panel's just inside its {side} edge: that edge is not its own, "
+                "axis from the other"))
         elif r < 1 - tol and (dark["top"] or "top" in m.foreign_sides):  # its top on the
             # frame's bar: under it, or the bar taken into the region across 1 px of wall
             m = _height_from_width(cam, m, size, (

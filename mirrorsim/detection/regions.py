@@ -253,8 +253,7 @@ def find_pencils(img: np.ndarray, mask: np.ndarray | None = None
     # a band whose box lies wholly within another's is a piece of that pencil's paint (a
     # shadowed band the opening split: a 6 × 12 px piece, measured turned by 9.7°, took a
     # beacon's place at d_total 265 cm for 90, bench0051 of acceptance seed 61207052).
-    # Every pencil of a frame has one height: a second image inside a nearer one's box
-    # is shorter, so farther, and would be hidden behind it
+    # Another pencil's image wholly inside a pencil's box would be hidden behind its paint
     return [b for b in boxes if not any(
         o != b and o[0] <= b[0] and b[2] <= o[2] and o[1] <= b[1] and b[3] <= o[3]
         for o in boxes)]

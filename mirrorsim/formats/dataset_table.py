@@ -40,7 +40,7 @@ RUN = (
     Column("spp", "", "samples per pixel in the mirror's image"),
     Column("background_spp", "", "samples per pixel outside it"),
     Column("beacon_spp", "", "samples per pixel in each beacon's image (one under 40 px "
-           "tall: more, as its truth's render block says)"),
+           "tall, board to tip: more, as its truth's render block says)"),
     Column("sampler", "", "Mitsuba sampler"),
     Column("calibrate", "", "the nuisances the solver estimated (`--calibrate`; empty: "
                             "plain least squares)"),

@@ -40,10 +40,11 @@ from mirrorsim.truth.groundtruth import RenderInfo
 # within a call, so the passes are large; a dataset's few-spp frame is one call.
 PASS_SPP = 16
 # part of a frame's fingerprint: bump when renders change
-RENDER_METHOD = "passes16-ss-glass0-tiles-short"
+RENDER_METHOD = "passes16-ss-glass0-tiles"
 # the boxes are rendered in fixed square tiles (one compiled kernel per size for every
 # scene): the mirror's box at the frame's spp in tiles of MIRROR_TILE px, each beacon's
-# box at beacon_spp in tiles of BEACON_TILE px (small: its samples are 16× dearer)
+# box at beacon_spp (a short image's at more) in tiles of BEACON_TILE px (small: its
+# samples are 16× dearer)
 MIRROR_TILE, BEACON_TILE = 128, 64
 # samples per render call of a tile at most: a beacon's 64² tile takes its 128 spp in
 # two calls, not eight (each call costs ~5 ms besides its samples)
@@ -76,7 +77,7 @@ class _Optics:
     background_spp: int | None
     beacon_spp: int | None
     seconds: float
-    beacon_box_spp: tuple[int, ...] = ()  # each beacon box's (a short image's: more)
+    beacon_box_spp: tuple[int, ...] = ()  # each box's, in the beacons' order (off the film: none)
 
 
 @dataclass
@@ -119,6 +120,12 @@ def scene_fingerprint(scene: Scene) -> str:
             if block.get(key) == 0.0:
                 del block[key]
     text = json.dumps(d, sort_keys=True, default=str) + f"|{RENDER_METHOD}"
+    # a short beacon image's extra samples (RenderSettings.beacon_box_spp), where it has
+    # one: the scenes without keep the fingerprint (and the cached frames) they had
+    boxes = [n for _, n, stream, _ in _regions(pinhole_scene(scene), scene.render.spp)[4]
+             if stream >= 2]
+    if any(n > scene.render.beacon_box_spp() for n in boxes):
+        text += f"|beacon boxes {boxes}"
     if scene.is_3d:  # what only a 3-D scene renders: its posts
         text += f"|posts {COLOURS['stand']} {COLOURS['panel_stand']} {STAND_RADIUS}"
     return hashlib.sha256(text.encode()).hexdigest()[:16]
@@ -221,8 +228,8 @@ def _regions(pinhole: Scene, spp: int) -> tuple[Region | None, int, int, list[Re
     beacon_spp = pinhole.render.beacon_box_spp(spp)
     boxes = [b for b in optics.beacon_boxes(pinhole) if b is not None] \
         if beacon_spp > spp else []
-    # a short image takes more (RenderSettings.beacon_box_spp): its height is its box's
-    # less the margins (a box the film clips reads shorter: more samples, never fewer)
+    # a short image takes more (RenderSettings.beacon_box_spp): its height, board to tip,
+    # is its box's less the margins (a box the film clips reads shorter: more samples)
     margins = 2 * optics.BEACON_BOX_MARGIN_PX + 1
     passes = ([(box, spp, 1, MIRROR_TILE)] if box is not None else []) \
         + [(b, pinhole.render.beacon_box_spp(spp, image_px=b[3] - b[1] - margins), 2 + i,

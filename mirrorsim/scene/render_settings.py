@@ -64,20 +64,22 @@ class RenderSettings:
     def beacon_box_spp(self, spp: int | None = None, image_px: float | None = None) -> int:
         """Samples per pixel in a beacon's image for a frame of ``spp`` (default this
         setting's): ``max(beacon_spp, spp)``, times :func:`small_image_factor` of its
-        height ``image_px`` where a box is rendered (beacon_spp above spp)."""
+        whole image's height ``image_px`` (board to tip) where a box is rendered
+        (beacon_spp above spp)."""
         base = max(self.beacon_spp, self.spp if spp is None else spp)
         if image_px is None or base <= (self.spp if spp is None else spp):
             return base
         return min(MAX_SPP, base * small_image_factor(image_px))
 
 
-# a beacon's image shorter than this (px) takes more samples: at beacon_spp 128 the
-# render noise of its two edges put a 12-20 px image's d_total 0.64 % RMS off (23 images
-# of two ideal acceptance sets, up to 1.16 %); at 1024 the same scene's three images read
-# 0.07-0.30 % off, against 0.09-1.11 % at 128 (three seeds each).  The factor is the
-# square of the shortfall, rounded up to a power of 2 and at most SMALL_BEACON_MAX: the
-# box's area falls as the square of the height, so a small image's samples cost no more
-# than those of one SMALL_BEACON_PX tall, within the tile it is rendered in
+# a beacon whose image, board to tip, is shorter than this (px) takes more samples: at
+# beacon_spp 128 the render noise of its two edges put a band of 12-20 px (whole images
+# of 17-28 px) 0.64 % RMS off in d_total (23 images of two ideal acceptance sets, up to
+# 1.16 %); one such scene's two 15-16 px bands read 0.00-0.37 % off at 512 spp over
+# three seeds, against 0.31-1.11 % at 128.  The factor is the square of the shortfall,
+# rounded up to a power of 2 and at most SMALL_BEACON_MAX: the samples a frame spends on
+# a beacon's image then grow as its image shrinks, at most 8 times those of one 64 px
+# tile at beacon_spp (its box, margins and all, fits one or two such tiles)
 SMALL_BEACON_PX, SMALL_BEACON_MAX = 40.0, 8
 
 

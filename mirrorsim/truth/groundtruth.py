@@ -105,7 +105,8 @@ class RenderInfo:
     sampler: str = "independent"
     background_spp: int | None = None  # outside the mirror's image (None: spp)
     beacon_spp: int | None = None  # in the beacons' images (None: spp)
-    # each beacon's box's, where a short image took more (RenderSettings.beacon_box_spp)
+    # each beacon box's, in the beacons' order (one whose image is off the film has none),
+    # where a short image took more (RenderSettings.beacon_box_spp)
     beacon_box_spp: tuple[int, ...] | None = None
     seconds_render: float | None = None
     seconds_total: float | None = None
