@@ -62,6 +62,7 @@ def foreign_sides(img: np.ndarray, box: tuple[int, int, int, int], *, left: floa
     rows = slice(v0 + (v1 - v0) // 4, v1 - (v1 - v0) // 4 + 1)
     cols = slice(u0 + (u1 - u0) // 4, u1 - (u1 - u0) // 4 + 1)
     core = float(np.median(img[rows, cols]))
+    middle = np.median(img[rows, cols].mean(axis=-1), axis=0)  # its middle columns' levels
     found: list[tuple[str, str]] = []
     for side, edge, step in (("left", left, 1), ("right", right, -1), ("top", top, 1)):
         if edge is None or core <= 0:
@@ -73,21 +74,21 @@ def foreign_sides(img: np.ndarray, box: tuple[int, int, int, int], *, left: floa
             continue
         if float(np.median(cells)) < DARKER_RATIO * core:
             found.append((side, DARKER_SIDE))
-        elif lossless and side != "top" and _paler_inside(img, rows, cols, edge, step):
+        elif lossless and side != "top" and _paler_inside(img, rows, middle, edge, step):
             found.append((side, PALER_SIDE))
     return tuple(s for s, _ in found), tuple(note + s for s, note in found)
 
 
-def _paler_inside(img: np.ndarray, rows: slice, cols: slice, edge: float, step: int
+def _paler_inside(img: np.ndarray, rows: slice, middle: np.ndarray, edge: float, step: int
                   ) -> bool:
     """Whether the column holding a side edge, or one of the next two in, lies paler
-    than the panel's middle columns against a darker column just outside (PALER_SIDE)."""
+    than the panel's ``middle`` columns (their levels over ``rows``) against a darker
+    column just outside (PALER_SIDE)."""
     at = int(math.floor(edge + 0.5))  # the column holding the edge (its centre at +0)
     outside, ins = at - step, (at, at + step, at + 2 * step)
     if min(outside, *ins) < 0 or max(outside, *ins) >= img.shape[1]:
         return False
     level = [float(np.median(img[rows, c].mean(axis=-1))) for c in (outside, *ins)]
-    middle = np.median(img[rows, cols].mean(axis=-1), axis=0)
     core = float(np.median(middle))
     scatter = 1.4826 * float(np.median(np.abs(middle - core)))
     contrast = core - level[0]

@@ -66,8 +66,9 @@ class RenderSettings:
         setting's): ``max(beacon_spp, spp)``, times :func:`small_image_factor` of its
         whole image's height ``image_px`` (board to tip) where a box is rendered
         (beacon_spp above spp)."""
-        base = max(self.beacon_spp, self.spp if spp is None else spp)
-        if image_px is None or base <= (self.spp if spp is None else spp):
+        frame = self.spp if spp is None else spp
+        base = max(self.beacon_spp, frame)
+        if image_px is None or base <= frame:  # no box rendered: none to add to
             return base
         return min(MAX_SPP, base * small_image_factor(image_px))
 
