@@ -250,13 +250,41 @@ def find_pencils(img: np.ndarray, mask: np.ndarray | None = None
     _, comps = _components(mask, 30)
     boxes = [_with_dark_faces(img, (x, y, x + w - 1, y + h - 1)) for _, x, y, w, h, _ in comps
              if h >= 1.6 * (w - 1)]
-    # a band whose box lies wholly within another's is a piece of that pencil's paint (a
-    # shadowed band the opening split: a 6 × 12 px piece, measured turned by 9.7°, took a
-    # beacon's place at d_total 265 cm for 90, bench0051 of acceptance seed 61207052).
-    # Another pencil's image wholly inside a pencil's box would be hidden behind its paint
-    return [b for b in boxes if not any(
-        o != b and o[0] <= b[0] and b[2] <= o[2] and o[1] <= b[1] and b[3] <= o[3]
-        for o in boxes)]
+    return _merged_pieces(boxes)
+
+
+# how far apart (rows) two pieces of one pencil's paint may lie, one above the other
+PIECE_GAP_PX = 2
+
+
+def _merged_pieces(boxes: list[tuple[int, int, int, int]]) -> list[tuple[int, int, int, int]]:
+    """Pencil boxes with the pieces of one pencil's paint made one: two boxes whose
+    columns overlap over half the narrower's width and whose rows overlap or lie within
+    PIECE_GAP_PX are one pencil, split by shadow or JPEG's colour blur and the opening.
+    A 6 × 12 px piece of a shadowed band, measured turned by 9.7°, took a beacon's place
+    at d_total 265 cm for 90 (bench0051 of acceptance seed 61207052); a 13 px piece of
+    a reflection showing the pencil's dark back, its lit flanks in three pieces, took it
+    at 296 cm for 68 (bench0060 of seed 61207072).  Another pencil's image so close in
+    columns and rows would be hidden behind this one's paint."""
+    boxes = list(boxes)
+    i = 0
+    while i < len(boxes):
+        j = next((j for j in range(i + 1, len(boxes)) if _one_pencil(boxes[i], boxes[j])), None)
+        if j is None:
+            i += 1
+            continue
+        a, b = boxes[i], boxes.pop(j)
+        boxes[i] = (min(a[0], b[0]), min(a[1], b[1]), max(a[2], b[2]), max(a[3], b[3]))
+        i = 0  # the union may now reach a box it did not
+    return boxes
+
+
+def _one_pencil(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> bool:
+    """Whether two pencil boxes are pieces of one (:func:`_merged_pieces`)."""
+    across = min(a[2], b[2]) - max(a[0], b[0]) + 1
+    narrower = min(a[2] - a[0], b[2] - b[0]) + 1
+    gap = max(a[1], b[1]) - min(a[3], b[3]) - 1
+    return 2 * across >= narrower and gap <= PIECE_GAP_PX
 
 
 # a pencil's faces turned from the light (a reflection shows its back) keep the paint's

@@ -33,6 +33,7 @@ from mirrorsim.detection.regions import find_pencils, find_target, pencil_mask, 
 # symmetric about its middle; an upright mirror's images read within ±0.1°)
 MIN_ROLL_DEG = 0.25
 MARGIN_PX = 28  # around the object: the edges' windows and levels reach 8 px past it
+ROLL_MARGIN_PX = 6  # around a panel's box, where its boundaries are sought for its roll
 
 
 def image_roll(img: np.ndarray, box: tuple[int, int, int, int], kind: str) -> float:
@@ -53,34 +54,48 @@ def image_roll(img: np.ndarray, box: tuple[int, int, int, int], kind: str) -> fl
         if ax[1] > 0:  # point it up the frame (−v)
             ax = -ax
         return math.degrees(math.atan2(ax[0], -ax[1]))
-    grey = _grey_mask(crop)
-    slopes = [s for s in (_boundary_slope(grey, top=True), _boundary_slope(grey, top=False))
-              if s is not None]
+    grey, inner = _grey_mask(img, box)
+    slopes = [s for s in (_boundary_slope(grey, inner, top=True),
+                          _boundary_slope(grey, inner, top=False)) if s is not None]
     return math.degrees(math.atan(float(np.mean(slopes)))) if slopes else 0.0
 
 
-def _grey_mask(crop: np.ndarray) -> np.ndarray:
-    """The panel's pixels in its box: near the median colour of its middle (the panel's
-    grey), a little blurred against noise."""
-    blur = cv2.GaussianBlur(crop, (5, 5), 0)
-    h, w = blur.shape[:2]
-    core = blur[h // 3: 2 * h // 3 + 1, w // 3: 2 * w // 3 + 1].reshape(-1, 3)
+def _grey_mask(img: np.ndarray, box: tuple[int, int, int, int]
+               ) -> tuple[np.ndarray, tuple[int, int, int, int]]:
+    """The panel's pixels in its box grown by ROLL_MARGIN_PX: near the median colour of
+    the box's middle (the panel's grey), a little blurred against noise; and the box
+    within that crop."""
+    u0, v0, u1, v1 = box
+    h, w = img.shape[:2]
+    a0, b0 = max(0, u0 - ROLL_MARGIN_PX), max(0, v0 - ROLL_MARGIN_PX)
+    a1, b1 = min(w - 1, u1 + ROLL_MARGIN_PX), min(h - 1, v1 + ROLL_MARGIN_PX)
+    blur = cv2.GaussianBlur(np.asarray(img[b0:b1 + 1, a0:a1 + 1], np.float32), (5, 5), 0)
+    inner = (u0 - a0, v0 - b0, u1 - a0, v1 - b0)
+    bw, bh = inner[2] - inner[0] + 1, inner[3] - inner[1] + 1
+    core = blur[inner[1] + bh // 3: inner[1] + 2 * bh // 3 + 1,
+                inner[0] + bw // 3: inner[0] + 2 * bw // 3 + 1].reshape(-1, 3)
     ref = np.median(core, axis=0)
-    return within(blur, ref, 0.12 * float(ref.max()) + 8) > 0
+    return within(blur, ref, 0.12 * float(ref.max()) + 8) > 0, inner
 
 
-def _boundary_slope(mask: np.ndarray, *, top: bool) -> float | None:
-    """The slope (rows per column) of a mask's top or bottom boundary over the middle 60 %
-    of its columns: a line fitted to each column's first (last) masked row, columns
-    more than 1.5 px off it dropped twice."""
-    h, w = mask.shape
-    cols = np.arange(int(0.2 * w), max(int(0.2 * w) + 1, int(0.8 * w)))
+def _boundary_slope(mask: np.ndarray, inner: tuple[int, int, int, int], *, top: bool
+                    ) -> float | None:
+    """The slope (rows per column) of the panel's top or bottom boundary over the middle
+    60 % of the box ``inner``'s columns: a line fitted to each column's first (last)
+    masked row, columns more than 1.5 px off it dropped twice.  A column masked at the
+    crop's edge has no boundary there: something as bright as the panel lies beyond it
+    (a wall in the glass, in a JPEG of a bench: taken for a flat top, it halved a 2°
+    roll, bench0032 of acceptance seed 61207072)."""
+    u0, _, u1, _ = inner
+    first = u0 + int(0.2 * (u1 - u0))
+    cols = np.arange(first, max(first + 1, u0 + int(0.8 * (u1 - u0))))
+    edge = 0 if top else mask.shape[0] - 1
     us, vs = [], []
     for c in cols:
         rows = np.flatnonzero(mask[:, c])
-        if len(rows):
+        if len(rows) and (row := rows[0] if top else rows[-1]) != edge:
             us.append(c)
-            vs.append(rows[0] if top else rows[-1])
+            vs.append(row)
     if len(us) < 6:
         return None
     from scipy.stats import siegelslopes
