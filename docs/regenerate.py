@@ -144,20 +144,20 @@ RESULTS: tuple[Result, ...] = (
                  "self-calibrated (about 12 min)",
            fresh=("renders/bench_train3", "renders/bench3_test")),
     Result("acceptance",
-           (f"{PY} benchmarks/acceptance.py --scenes 100 --seed 61207071",
-            f"{PY} benchmarks/acceptance.py --scenes 100 --seed 61207072 --bench",
-            f"{PY} benchmarks/acceptance.py --report renders/acceptance-61207071-ideal "
-            "renders/acceptance-61207072-bench"),
+           (f"{PY} benchmarks/acceptance.py --scenes 100 --seed 61207081",
+            f"{PY} benchmarks/acceptance.py --scenes 100 --seed 61207082 --bench",
+            f"{PY} benchmarks/acceptance.py --report renders/acceptance-61207081-ideal "
+            "renders/acceptance-61207082-bench"),
            markdown=True,
            about="the error bars on 200 scenes of the acceptance generator's own, ideal "
                  "and bench, with the default model choice (about 45 min)",
-           fresh=("renders/acceptance-61207071-ideal", "renders/acceptance-61207072-bench")),
+           fresh=("renders/acceptance-61207081-ideal", "renders/acceptance-61207082-bench")),
     Result("acceptance_selfcal",
-           (f"{PY} benchmarks/acceptance.py --scenes 40 --seed 61207073 --bench --beacons 3",),
+           (f"{PY} benchmarks/acceptance.py --scenes 40 --seed 61207083 --bench --beacons 3",),
            markdown=True,
            about="self-calibration on 40 independent three-beacon benches against plain "
                  "least squares (about 15 min)",
-           fresh=("renders/acceptance-61207073-bench",)),
+           fresh=("renders/acceptance-61207083-bench",)),
     Result("particle", (f"{PY} benchmarks/particle.py",), markdown=True,
            about="the particle filter against the batch smoother, synthetic"),
     Result("track_paths", (f"{PY} benchmarks/track.py",), markdown=True,
