@@ -1075,6 +1075,47 @@ def test_a_planar_benchs_rolled_panel_is_measured_upright_where_upright_finds_no
     assert rolled.width_px == pytest.approx(width, abs=0.5)
 
 
+def test_a_lost_panel_turned_by_a_roll_read_off_is_turned_by_the_nearest_that_finds_it(
+        monkeypatch):
+    """A panel's roll read on one boundary alone carries that edge's perspective slope
+    (bench0080 of acceptance seed 61207082: 1.29° read for 2.4°, and turned so the
+    panel had no side).  A 4° panel whose roll reads 2.5° short: the rolls near the one
+    read are tried in turn, and the nearest that finds its sides and height is taken,
+    its axis where the true roll puts it."""
+    import cv2
+
+    import mirrorsim.detection.detector as det
+    from mirrorsim.detection.edges import to_linear
+    from mirrorsim.detection.regions import find_target
+    from mirrorsim.detection.rolled import measure_rolled
+
+    s, length, width = 8, 200.0, 150.0
+    big = np.zeros((400 * s, 400 * s, 3), np.float32)
+    big[:] = (190.0, 170.0, 120.0)  # a sandy wall
+    c = 200 * s
+    big[int(c - length * s / 2):int(c + length * s / 2),
+        int(c - width * s / 2):int(c + width * s / 2)] = (70.0, 70.0, 70.0)
+    big = cv2.warpAffine(big, cv2.getRotationMatrix2D((c, c), 4.0, 1.0), big.shape[1::-1],
+                         flags=cv2.INTER_NEAREST, borderMode=cv2.BORDER_REPLICATE)
+    srgb = np.clip(np.round(big.reshape(400, s, 400, s, 3).mean(axis=(1, 3))), 0, 255
+                   ).astype(np.uint8)
+    img, linear = srgb.astype(np.float32), to_linear(srgb)
+    box = find_target(img, width / length)
+    true = measure_rolled(linear, img, box, kind="target", raised=False,
+                          target_ratio=width / length, roll=-4.0)
+    read_off = measure_rolled(linear, img, box, kind="target", raised=False,
+                              target_ratio=width / length, roll=-1.5)
+    assert (read_off.u_left, read_off.u_right) == (None, None)  # what the read roll gives
+    monkeypatch.setattr(det, "image_roll", lambda *_: -1.5)
+    m = det._measure(linear, img, box, kind="target", subsampled=False, raised=False,
+                     target_ratio=width / length)
+    assert any("roll of -2.00°" in n for n in m.notes)
+    assert None not in (m.u_left, m.u_right)
+    assert (m.u_left + m.u_right) / 2 == pytest.approx((true.u_left + true.u_right) / 2,
+                                                       abs=0.1)
+    assert m.height_px == pytest.approx(length, abs=0.5)
+
+
 def test_a_dark_panels_foot_behind_a_pencil_is_measured_on_its_colour():
     """A dark neutral panel on the board, a yellow pencil standing before its foot:
     across the board's colour only the pencil's bands had contrast, and its top was
@@ -1176,6 +1217,32 @@ def test_pieces_of_one_pencils_paint_overlapping_are_one_pencil():
     img[31:98, 56:59] = (200, 150, 20)  # the right flank
     img[33:98, 80:90] = (200, 150, 20)  # another pencil, beside it
     assert sorted(find_pencils(img)) == [(49, 30, 58, 98), (80, 33, 89, 97)]
+
+
+def test_a_pencil_against_its_own_reflection_is_two_pencils_and_a_rolled_one_is_one():
+    """A bench's convex mirror put a pencil's reflection against its direct view: one
+    painted region from the reflection's top to the direct view's foot, measured as one
+    pencil at d_total 26 cm, nearer than the beacon stands (bench0017 of acceptance seed
+    61207082).  Split where the columns either side keep their own top and foot, one
+    side higher at both; a pencil rolled by 5° (its end columns its corners) is not."""
+    import cv2
+
+    from mirrorsim.detection.regions import find_pencils
+
+    img = np.full((180, 120, 3), (200, 170, 120), np.float32)  # the board
+    img[20:81, 40:50] = (200, 150, 20)  # the reflection, far: short
+    img[50:141, 50:70] = (200, 150, 20)  # the direct view, near: tall, touching it
+    (a0, a1, a2, a3), (b0, b1, b2, b3) = sorted(find_pencils(img))
+    assert (a0, a2, b0, b2) == (40, 49, 50, 69)  # split where they touch
+    assert abs(a1 - 20) <= 1 and abs(a3 - 80) <= 1 and abs(b1 - 50) <= 1 and abs(b3 - 140) <= 1
+    s = 8
+    big = np.full((180 * s, 120 * s, 3), (200, 170, 120), np.float32)
+    big[30 * s:150 * s, 50 * s:72 * s] = (200, 150, 20)
+    big = cv2.warpAffine(big, cv2.getRotationMatrix2D((61 * s, 90 * s), 5.0, 1.0),
+                         big.shape[1::-1], flags=cv2.INTER_NEAREST,
+                         borderMode=cv2.BORDER_REPLICATE)
+    rolled = np.round(big.reshape(180, s, 120, s, 3).mean(axis=(1, 3)))
+    assert len(find_pencils(rolled)) == 1
 
 
 def test_a_panels_roll_ignores_a_wall_as_grey_as_it_beyond_its_box():

@@ -247,10 +247,52 @@ def find_pencils(img: np.ndarray, mask: np.ndarray | None = None
     calibration render at 103 cm, and was missed at 2·0.8 of the box's width).
     ``mask``: :func:`pencil_mask` of ``img``, where the caller has it."""
     mask = pencil_mask(img) if mask is None else mask
-    _, comps = _components(mask, 30)
-    boxes = [_with_dark_faces(img, (x, y, x + w - 1, y + h - 1)) for _, x, y, w, h, _ in comps
-             if h >= 1.6 * (w - 1)]
+    labels, comps = _components(mask, 30)
+    boxes = [_with_dark_faces(img, b) for comp in comps for b in _split_at_step(labels, comp)
+             if b[3] - b[1] + 1 >= 1.6 * (b[2] - b[0])]
     return _merged_pieces(boxes)
+
+
+# a region's columns either side of a split must be this many, and their median top or
+# foot rows this far apart (px, and as a fraction of its height)
+SPLIT_MIN_COLS, SPLIT_STEP = 3, (3.0, 0.1)
+
+
+def _split_at_step(labels: np.ndarray, comp: tuple) -> list[tuple[int, int, int, int]]:
+    """A painted region's box, or two where it is two pencils' images side by side and
+    touching: split where the columns either side lie nearest their own median top and
+    foot rows, if one side's top and foot both lie higher than the other's, each by over
+    SPLIT_STEP (the farther pencil's, both below the camera's eye: a rolled pencil's end
+    columns, its corners, share its top or its foot).  A bench's convex mirror put a
+    pencil's reflection against its direct view, one region from the reflection's top
+    to the direct view's foot, read at d_total 26 cm, nearer than the beacon (bench0017
+    of acceptance seed 61207082)."""
+    k, x, y, w, h, _ = comp
+    sub = labels[y:y + h, x:x + w] == k
+    cols = np.flatnonzero(sub.any(axis=0))
+    if len(cols) < 2 * SPLIT_MIN_COLS:
+        return [(x, y, x + w - 1, y + h - 1)]
+    top = sub[:, cols].argmax(axis=0)
+    foot = h - 1 - sub[::-1, cols].argmax(axis=0)
+    step = max(SPLIT_STEP[0], SPLIT_STEP[1] * h)
+
+    def spread(i: int) -> float:  # the two parts' rows about their own medians
+        return sum(float(np.abs(r - np.median(r)).sum())
+                   for r in (top[:i], top[i:], foot[:i], foot[i:]))
+
+    at = min(range(SPLIT_MIN_COLS, len(cols) - SPLIT_MIN_COLS + 1), key=spread)
+    dt = float(np.median(top[at:]) - np.median(top[:at]))
+    df = float(np.median(foot[at:]) - np.median(foot[:at]))
+    if min(abs(dt), abs(df)) <= step or dt * df < 0:
+        return [(x, y, x + w - 1, y + h - 1)]
+    boxes = []
+    for part in (slice(None, at), slice(at, None)):
+        c, t, f = cols[part], top[part], foot[part]
+        # a column where the two touch holds one's top and the other's foot: left out
+        own = (np.abs(t - np.median(t)) <= step) & (np.abs(f - np.median(f)) <= step)
+        c, t, f = c[own], t[own], f[own]
+        boxes.append((x + int(c.min()), y + int(t.min()), x + int(c.max()), y + int(f.max())))
+    return boxes
 
 
 # how far apart (rows) two pieces of one pencil's paint may lie, one above the other
@@ -292,6 +334,7 @@ def _one_pencil(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> b
 # blue under a quarter of the red, where a sandy board, a grey panel, the wood or a rim
 # blurred into the background hold over a third
 DARK_PAINT_BLUE = 0.25
+DARK_PAINT_MAX = 60  # 8-bit: their brightest channel (lit paint, another pencil's: 150-220)
 
 
 def _with_dark_faces(img: np.ndarray, box: tuple[int, int, int, int]
@@ -299,7 +342,8 @@ def _with_dark_faces(img: np.ndarray, box: tuple[int, int, int, int]
     """A pencil band's box widened over the columns beside it that are its paint's dark
     faces in most of its middle rows, by at most its width each way: its yellow region
     held its lit flank alone (bench0011 of acceptance seed 61207022: 5 of the band's 10
-    px, its sides measured within it and the image dropped as partly hidden)."""
+    px, its sides measured within it and the image dropped as partly hidden).  Not over
+    lit paint (above DARK_PAINT_MAX): another pencil's image beside it."""
     u0, v0, u1, v1 = box
     rows = img[v0 + (v1 - v0) // 5: v1 - (v1 - v0) // 5 + 1]
 
@@ -309,7 +353,7 @@ def _with_dark_faces(img: np.ndarray, box: tuple[int, int, int, int]
         px = np.asarray(rows[:, u], np.float32)
         vmax, vmin = px.max(axis=1), px.min(axis=1)
         paint = (vmax - vmin > 0.55 * vmax) & (px[:, 2] < DARK_PAINT_BLUE * px[:, 0]) \
-            & (vmax > 15)
+            & (vmax > 15) & (vmax <= DARK_PAINT_MAX)
         return bool(paint.mean() > 0.5)
 
     lo, hi, w = u0, u1, u1 - u0 + 1

@@ -113,16 +113,18 @@ def _boundary_slope(mask: np.ndarray, inner: tuple[int, int, int, int], *, top: 
 
 def measure_rolled(linear: np.ndarray, img: np.ndarray, box: tuple[int, int, int, int],
                    *, kind: str, subsampled: bool = False, target_ratio: float | None = None,
-                   cone_ratio: float | None = None, raised: bool = True) -> ImageMeasurement:
+                   cone_ratio: float | None = None, raised: bool = True,
+                   roll: float | None = None) -> ImageMeasurement:
     """:func:`~mirrorsim.detection.edges.measure_region` of an image that may be rolled:
-    measured upright in its neighbourhood turned by :func:`image_roll`, its foot and top
+    measured upright in its neighbourhood turned by ``roll`` (deg; by default
+    :func:`image_roll`'s), its foot and top
     taken back to the frame (see the module's text).  ``linear``: the frame's linear
     radiance; ``img``: its 8-bit values (float), where the regions are found (and a
     JPEG's pencil foot measured); ``target_ratio``: the panel's width over height;
     ``cone_ratio``: a pencil's cone over its band; ``raised``: a 3-D scene's frame (see
     ``measure_region``; a bench's camera roll and mirror tilt roll a planar scene's
     images too, by up to 5° within the bench model's tolerances)."""
-    roll = image_roll(img, box, kind)
+    roll = image_roll(img, box, kind) if roll is None else roll
     if abs(roll) < MIN_ROLL_DEG:
         return measure_region(linear, box, kind, subsampled=subsampled, stored=img, raised=raised,
                               cone_ratio=cone_ratio)
