@@ -21,8 +21,8 @@ Prints (Markdown): the truth inside the 95 % ellipse (drawn where the error mode
 tail puts its edge, with a Clopper–Pearson 95 % interval), the median Mahalanobis
 distance, scenes that failed to evaluate, gross errors on ideal benches (an image's α
 off by more than 0.05° or its d_total by more than 1 %; and, in brackets, how many have
-an image off by more than 6 of its own σ's: the laws' Student-t tails put 7 % of the
-target's α errors there, at its ν of 1.3), and the same by feature.
+an image off by more than 6 of its own σ's: the laws' Student-t tails put 3.5 % of the
+target's α errors there, at the shipped ideal model's ν of 1.8), and the same by feature.
 """
 
 from __future__ import annotations
@@ -228,8 +228,8 @@ def run_one(job: tuple) -> dict:
     major, minor, _ = rep.solution.ellipse95()
     worst_z = _worst_image(rep)
     # counted at sigma_laws.GROSS σ's, without the Student-t's 99.9 % reach `errormodel`
-    # adds: at the target α's fitted ν of 1.3 that reach is 165 σ, and next to no error
-    # would count
+    # adds: at the shipped ideal model's target α ν of 1.8 that reach is 45 σ, and next
+    # to no error would count
     from mirrorsim.pipelines.sigma_laws import GROSS
     plain_cm = math.nan
     if len(scene.beacons) > 1:  # plain least squares on the same measurements and σ's
