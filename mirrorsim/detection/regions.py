@@ -261,9 +261,12 @@ SPLIT_MIN_COLS, SPLIT_STEP = 3, (3.0, 0.1)
 def _split_at_step(labels: np.ndarray, comp: tuple) -> list[tuple[int, int, int, int]]:
     """A painted region's box, or two where it is two pencils' images side by side and
     touching: split where the columns either side lie nearest their own median top and
-    foot rows, if one side's top and foot both lie higher than the other's, each by over
-    SPLIT_STEP (the farther pencil's, both below the camera's eye: a rolled pencil's end
-    columns, its corners, share its top or its foot).  A bench's convex mirror put a
+    foot rows, if most of each side's columns lie within SPLIT_STEP of those medians
+    (not a ramp: a narrow pencil rolled 15° shifts its top and foot 3.7 px a column
+    together), and one side's top and foot both lie higher than the other's by over
+    SPLIT_STEP, over the two parts and over the SPLIT_MIN_COLS columns each side of the
+    split alike (the farther pencil's, both below the camera's eye; a wide pencil rolled
+    steps only its top or only its foot at a corner).  A bench's convex mirror put a
     pencil's reflection against its direct view, one region from the reflection's top
     to the direct view's foot, read at d_total 26 cm, nearer than the beacon (bench0017
     of acceptance seed 61207082)."""
@@ -281,18 +284,24 @@ def _split_at_step(labels: np.ndarray, comp: tuple) -> list[tuple[int, int, int,
                    for r in (top[:i], top[i:], foot[:i], foot[i:]))
 
     at = min(range(SPLIT_MIN_COLS, len(cols) - SPLIT_MIN_COLS + 1), key=spread)
-    dt = float(np.median(top[at:]) - np.median(top[:at]))
-    df = float(np.median(foot[at:]) - np.median(foot[:at]))
-    if min(abs(dt), abs(df)) <= step or dt * df < 0:
-        return [(x, y, x + w - 1, y + h - 1)]
-    boxes = []
+    whole = [(x, y, x + w - 1, y + h - 1)]
+    parts = []
     for part in (slice(None, at), slice(at, None)):
         c, t, f = cols[part], top[part], foot[part]
         # a column where the two touch holds one's top and the other's foot: left out
         own = (np.abs(t - np.median(t)) <= step) & (np.abs(f - np.median(f)) <= step)
-        c, t, f = c[own], t[own], f[own]
-        boxes.append((x + int(c.min()), y + int(t.min()), x + int(c.max()), y + int(f.max())))
-    return boxes
+        if own.sum() < max(SPLIT_MIN_COLS, len(c) / 2):  # a ramp (a narrow pencil rolled)
+            return whole
+        parts.append((c[own], t[own], f[own]))
+    (_, lt, lf), (_, rt, rf) = parts
+    n = SPLIT_MIN_COLS
+    steps = [float(np.median(r) - np.median(q)) for q, r in (
+        (lt, rt), (lf, rf), (lt[-n:], rt[:n]), (lf[-n:], rf[:n]))]  # parts, then at the split
+    if min(abs(d) for d in steps) <= step or not (all(d > 0 for d in steps)
+                                                   or all(d < 0 for d in steps)):
+        return whole
+    return [(x + int(c.min()), y + int(t.min()), x + int(c.max()), y + int(f.max()))
+            for c, t, f in parts]
 
 
 # how far apart (rows) two pieces of one pencil's paint may lie, one above the other
@@ -301,13 +310,15 @@ PIECE_GAP_PX = 2
 
 def _merged_pieces(boxes: list[tuple[int, int, int, int]]) -> list[tuple[int, int, int, int]]:
     """Pencil boxes with the pieces of one pencil's paint made one: two boxes whose
-    columns overlap over half the narrower's width and whose rows overlap or lie within
-    PIECE_GAP_PX are one pencil, split by shadow or JPEG's colour blur and the opening.
+    columns overlap over at least half the narrower's width and whose rows overlap or
+    lie within PIECE_GAP_PX are one pencil, split by shadow or JPEG's colour blur and
+    the opening.
     A 6 × 12 px piece of a shadowed band, measured turned by 9.7°, took a beacon's place
     at d_total 265 cm for 90 (bench0051 of acceptance seed 61207052); a 13 px piece of
     a reflection showing the pencil's dark back, its lit flanks in three pieces, took it
-    at 296 cm for 68 (bench0060 of seed 61207072).  Another pencil's image so close in
-    columns and rows would be hidden behind this one's paint."""
+    at 296 cm for 68 (bench0060 of seed 61207072).  Another pencil's band so close in
+    columns and rows is mostly hidden behind this one's paint; one seen beside a nearer
+    pencil's cone, just above its band, would be merged with it (not met so far)."""
     boxes = list(boxes)
     i = 0
     while i < len(boxes):
@@ -334,7 +345,7 @@ def _one_pencil(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> b
 # blue under a quarter of the red, where a sandy board, a grey panel, the wood or a rim
 # blurred into the background hold over a third
 DARK_PAINT_BLUE = 0.25
-DARK_PAINT_MAX = 60  # 8-bit: their brightest channel (lit paint, another pencil's: 150-220)
+DARK_PAINT_MAX = 100  # 8-bit: their brightest channel (lit paint, another pencil's: 150-220)
 
 
 def _with_dark_faces(img: np.ndarray, box: tuple[int, int, int, int]
