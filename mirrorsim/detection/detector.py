@@ -231,9 +231,9 @@ def _measure(linear: np.ndarray, img: np.ndarray, box: tuple[int, int, int, int]
     # wall in the glass as grey as the panel hid the top: its foot sloped 1.2°, its top
     # 3.6°, the roll 2.4°; turned by 1.29° no side was found, bench0080 of seed
     # 61207082): where the roll read gives no height or no side, the nearest of
-    # ROLL_TRIES that gives both;
-    # not where the panel as it stands has both sides (its bearing holds without a
-    # height, and a roll tried took a false one: ideal0041 of seed 61207081)
+    # ROLL_TRIES that gives both; not where the panel as it stands has both sides (its
+    # bearing holds without a height, and a roll tried took a false one: ideal0041 of
+    # seed 61207081)
     both = m.u_left is not None and m.u_right is not None
     for step in (0.0, *ROLL_TRIES) if kind == "target" and not both else (0.0,):
         turned = measure_rolled(linear, img, box, kind=kind, subsampled=subsampled,

@@ -244,7 +244,9 @@ def find_pencils(img: np.ndarray, mask: np.ndarray | None = None
     """Bounding boxes of painted (yellow) pencil bands: upright regions at least 1.6
     times as tall as wide, their width less the pixel the blur adds across their sides
     (a 2 cm pencil's band, 1.95 times its width, was 9 × 6 px in a small frame's
-    calibration render at 103 cm, and was missed at 2·0.8 of the box's width).
+    calibration render at 103 cm, and was missed at 2·0.8 of the box's width); a region
+    that is two pencils touching split (:func:`_split_at_step`), each widened over its
+    dark faces, and pieces of one pencil's paint made one (:func:`_merged_pieces`).
     ``mask``: :func:`pencil_mask` of ``img``, where the caller has it."""
     mask = pencil_mask(img) if mask is None else mask
     labels, comps = _components(mask, 30)
