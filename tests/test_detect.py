@@ -1040,30 +1040,39 @@ def test_a_panel_region_that_took_in_a_strip_of_glass_before_the_bar_loses_that_
     assert "left" not in j.foreign_sides
 
 
-def test_a_planar_benchs_rolled_panel_is_measured_upright_where_upright_finds_no_edge():
-    """A bench's camera roll and mirror tilt roll a planar scene's images by up to 5°:
-    measured as it stands, a panel rolled by 4° gave neither a height nor two sides (2
-    of 120 drawn benches lost their target).  Where that happens it is measured turned
-    upright; an upright panel is measured as it stands."""
+ROLLED_PANEL = (200.0, 150.0)  # the synthetic rolled panel's length and width, px
+
+
+def _rolled_panel(roll: float) -> np.ndarray:
+    """An 8-bit 400 px frame of a grey panel (ROLLED_PANEL) on a sandy wall, rolled by
+    ``roll`` degrees about its centre, each pixel the mean of 8×8 samples."""
     import cv2
 
-    from mirrorsim.detection.detector import _measure
-    from mirrorsim.detection.edges import to_linear
-    from mirrorsim.detection.regions import find_target
-
-    s, length, width = 8, 200.0, 150.0
+    s, (length, width) = 8, ROLLED_PANEL
     big = np.zeros((400 * s, 400 * s, 3), np.float32)
     big[:] = (190.0, 170.0, 120.0)  # a sandy wall
     c = 200 * s
     big[int(c - length * s / 2):int(c + length * s / 2),
         int(c - width * s / 2):int(c + width * s / 2)] = (70.0, 70.0, 70.0)
+    big = cv2.warpAffine(big, cv2.getRotationMatrix2D((c, c), roll, 1.0), big.shape[1::-1],
+                         flags=cv2.INTER_NEAREST, borderMode=cv2.BORDER_REPLICATE)
+    return np.clip(np.round(big.reshape(400, s, 400, s, 3).mean(axis=(1, 3))), 0, 255
+                   ).astype(np.uint8)
+
+
+def test_a_planar_benchs_rolled_panel_is_measured_upright_where_upright_finds_no_edge():
+    """A bench's camera roll and mirror tilt roll a planar scene's images by up to 5°:
+    measured as it stands, a panel rolled by 4° gave neither a height nor two sides (2
+    of 120 drawn benches lost their target).  Where that happens it is measured turned
+    upright; an upright panel is measured as it stands."""
+    from mirrorsim.detection.detector import _measure
+    from mirrorsim.detection.edges import to_linear
+    from mirrorsim.detection.regions import find_target
+
+    length, width = ROLLED_PANEL
     out = {}
     for roll in (0.0, 4.0):
-        M = cv2.getRotationMatrix2D((c, c), roll, 1.0)
-        turned = cv2.warpAffine(big, M, big.shape[1::-1], flags=cv2.INTER_NEAREST,
-                                borderMode=cv2.BORDER_REPLICATE)
-        img = turned.reshape(400, s, 400, s, 3).mean(axis=(1, 3))
-        srgb = np.clip(np.round(img), 0, 255).astype(np.uint8)
+        srgb = _rolled_panel(roll)
         box = find_target(srgb.astype(np.float32), width / length)
         out[roll] = _measure(to_linear(srgb), srgb.astype(np.float32), box, kind="target",
                              subsampled=False, raised=False, target_ratio=width / length)
@@ -1083,23 +1092,13 @@ def test_a_lost_panel_turned_by_a_roll_read_off_is_turned_by_the_nearest_that_fi
     panel had no side).  A 4° panel whose roll reads 2.5° short: the rolls near the one
     read are tried in turn, and the nearest that finds its sides and height is taken,
     its axis where the true roll puts it."""
-    import cv2
-
     import mirrorsim.detection.detector as det
     from mirrorsim.detection.edges import to_linear
     from mirrorsim.detection.regions import find_target
     from mirrorsim.detection.rolled import measure_rolled
 
-    s, length, width = 8, 200.0, 150.0
-    big = np.zeros((400 * s, 400 * s, 3), np.float32)
-    big[:] = (190.0, 170.0, 120.0)  # a sandy wall
-    c = 200 * s
-    big[int(c - length * s / 2):int(c + length * s / 2),
-        int(c - width * s / 2):int(c + width * s / 2)] = (70.0, 70.0, 70.0)
-    big = cv2.warpAffine(big, cv2.getRotationMatrix2D((c, c), 4.0, 1.0), big.shape[1::-1],
-                         flags=cv2.INTER_NEAREST, borderMode=cv2.BORDER_REPLICATE)
-    srgb = np.clip(np.round(big.reshape(400, s, 400, s, 3).mean(axis=(1, 3))), 0, 255
-                   ).astype(np.uint8)
+    length, width = ROLLED_PANEL
+    srgb = _rolled_panel(4.0)
     img, linear = srgb.astype(np.float32), to_linear(srgb)
     box = find_target(img, width / length)
     true = measure_rolled(linear, img, box, kind="target", raised=False,
