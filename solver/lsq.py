@@ -19,7 +19,14 @@ from solver.measurements import (
     as_object_sigmas,
     check_measurements,
 )
-from solver.selfcal import NUISANCES, PLAIN, SelfCalibration, as_calibration, check_nuisances
+from solver.selfcal import (
+    NUISANCES,
+    PLAIN,
+    SelfCalibration,
+    as_calibration,
+    check_nuisances,
+    check_planar,
+)
 from solver.sltr import MirrorLine, Solution, observe, ray_hits_line, solve_single
 
 ArrayLike = np.typing.ArrayLike
@@ -64,7 +71,7 @@ def solve_lsq(observer: ArrayLike, beacons: list[BeaconMeasurement],
     """
     if not beacons or not targets:
         raise SolverError("least squares needs at least one beacon and one target observation")
-    nuisances, priors = calibration.nuisances, calibration.priors
+    nuisances, priors = check_planar(calibration).nuisances, calibration.priors
     check_nuisances(nuisances, len(beacons), len(targets), priors=priors)
     o = np.asarray(observer, float)
     sig = as_object_sigmas(sigma or Sigma())
@@ -275,7 +282,7 @@ def solve_measurements(observer: ArrayLike, beacons: list[BeaconMeasurement],
         that does not determine the unknowns.
     """
     check_measurements(observer, beacons, targets)
-    calibration = as_calibration(calibration)
+    calibration = check_planar(as_calibration(calibration))
     if sigma is not None:
         as_object_sigmas(sigma)  # its type, before the closed form or a fit uses it
     if (len(beacons) == 1 and len(targets) == 1 and not calibration.nuisances

@@ -24,20 +24,26 @@ from solver.measurements import is_number
 # Each: its name in a solution and its neutral value
 NUISANCES = {"pan": ("pan_offset_deg", 0.0), "scale": ("range_scale", 1.0),
              "power": ("mirror_power_per_cm", 0.0)}
+# what the 3-D solve alone estimates besides (:mod:`solver.lsq3`): "pitch", an offset δ
+# (deg) on every elevation (the mount's pitch reading), of which a planar solve reads
+# nothing
+NUISANCES_3D = {"pitch": ("pitch_offset_deg", 0.0)}
+KNOWN = {**NUISANCES, **NUISANCES_3D}
 # how an estimate is said (by its name in a solution: a label, its unit, its format),
 # and a prior's σ (scale's σ is a fraction, said in %)
 WORDS = {"pan_offset_deg": ("pan offset", "°", ".4f"),
          "range_scale": ("range scale", "", ".4f"),
-         "mirror_power_per_cm": ("mirror power 1/R", " /cm", ".2e")}
+         "mirror_power_per_cm": ("mirror power 1/R", " /cm", ".2e"),
+         "pitch_offset_deg": ("pitch offset", "°", ".4f")}
 # the smallest σ a prior or a beacon position may have: below, the prior's weight
 # swamps the measurements' by so much that the fit's information matrix is singular to
 # double precision (pan 1e-7°, scale 1e-7 and power 1e-7/cm still solved a three-beacon
 # exp1; scale 1e-8 and power 1e-8/cm did not).  A nuisance known better than this is
 # known: leave it out of the nuisances; a beacon known better, position_sigma 0
-PRIOR_MIN = {"pan": 1e-6, "scale": 1e-6, "power": 1e-6}
+PRIOR_MIN = {"pan": 1e-6, "scale": 1e-6, "power": 1e-6, "pitch": 1e-6}
 POSITION_SIGMA_MIN_CM = 1e-4
 _PRIOR_UNITS = {"pan": lambda s: f"±{s:.3g}°", "scale": lambda s: f"±{100 * s:.3g} %",
-                "power": lambda s: f"±{s:.3g}/cm"}
+                "power": lambda s: f"±{s:.3g}/cm", "pitch": lambda s: f"±{s:.3g}°"}
 
 
 @dataclass(frozen=True)
@@ -46,16 +52,18 @@ class SelfCalibration:
 
     Attributes
     ----------
-    nuisances : tuple of {'pan', 'scale', 'power'}
+    nuisances : tuple of {'pan', 'scale', 'power', 'pitch'}
         Bench errors shared by every measurement, estimated jointly with the mirror
-        (:data:`NUISANCES`); the target comes out corrected for them.
+        (:data:`NUISANCES`; 'pitch' by the 3-D solve alone, :data:`NUISANCES_3D`); the
+        target comes out corrected for them.
     position_sigma : float
         How well the beacons' positions are known (cm, each axis; 0: exactly).  Where
         > 0, each beacon's offset from its believed position is estimated too, with that
         prior: a misplaced beacon then moves its own image's fit, not the nuisances.
     priors : mapping of nuisance name to σ
         What the bench knows of some of ``nuisances`` before the frames: each gets the
-        prior N(neutral, σ²) (pan in degrees, scale as a fraction of 1, power in 1/cm).
+        prior N(neutral, σ²) (pan and pitch in degrees, scale as a fraction of 1, power
+        in 1/cm).
 
     Raises
     ------
@@ -111,6 +119,16 @@ class SelfCalibration:
     def from_json(cls, d: dict) -> SelfCalibration:
         """Inverse of :meth:`to_json`."""
         return cls(tuple(d["nuisances"]), d["beacon_position_sigma_cm"], d.get("priors", {}))
+
+
+def check_planar(calibration: SelfCalibration) -> SelfCalibration:
+    """``calibration``, refused in one line where it asks a planar solve for a nuisance
+    only the 3-D solve estimates (:data:`NUISANCES_3D`)."""
+    three = [n for n in calibration.nuisances if n in NUISANCES_3D]
+    if three:
+        raise SolverError(f"{', '.join(three)}: an offset on every elevation, which a planar "
+                          "solve does not read (the 3-D solve estimates it)")
+    return calibration
 
 
 def as_calibration(calibration: object) -> SelfCalibration:
@@ -178,9 +196,9 @@ def check_nuisance_sigma(priors: Mapping[str, float], nuisances: tuple[str, ...]
     """Refuse a prior σ for a nuisance that is not estimated, or one that is not a
     finite number of at least :data:`PRIOR_MIN`."""
     for name, s in priors.items():
-        if name not in NUISANCES:
+        if name not in KNOWN:
             raise SolverError(f"a prior σ for an unknown nuisance {name!r}: choose from "
-                              f"{', '.join(NUISANCES)}")
+                              f"{', '.join(KNOWN)}")
         if name not in nuisances:
             raise SolverError(f"a prior σ for {name!r}, which is not estimated (estimated: "
                               f"{', '.join(nuisances) or 'none'})")
@@ -198,10 +216,10 @@ def check_nuisances(nuisances: tuple[str, ...], nb: int | None, nt: int,
     ``readings``: what each image gives (α and d_total; 3 in 3-D, its elevation besides),
     and as many unknowns the mirror and the target have each (its line and a point in
     the plane; its plane and a point in space)."""
-    bad = [n for n in nuisances if n not in NUISANCES]
+    bad = [n for n in nuisances if n not in KNOWN]
     if bad:
         raise SolverError(f"unknown nuisance(s) {', '.join(map(repr, bad))}: choose from "
-                          f"{', '.join(NUISANCES)}")
+                          f"{', '.join(KNOWN)}")
     twice = sorted({n for n in nuisances if nuisances.count(n) > 1})
     if twice:
         raise SolverError(f"{', '.join(twice)} given twice: name each nuisance once")

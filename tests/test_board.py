@@ -15,12 +15,12 @@ import pytest
 from mirrorsim.cli.main import main
 from mirrorsim.detection.board import (
     PAN_SD_FLOOR_DEG,
-    corrected_image,
     frame_pose,
     measure_camera_pose,
     pitch_factor,
 )
 from mirrorsim.detection.frame_files import read_frame
+from mirrorsim.detection.posed import corrected_image
 from mirrorsim.errors import DetectionError
 from mirrorsim.formats.capture import CaptureRecord
 from mirrorsim.formats.files import claim_output_folder
@@ -28,7 +28,7 @@ from mirrorsim.pipelines.evaluate import evaluate_scene
 from mirrorsim.pipelines.frame import render_and_measure, render_to_files
 from mirrorsim.pipelines.scenes import scene_from_dict
 from mirrorsim.pipelines.score import Report
-from mirrorsim.scene.model import Board, Camera
+from mirrorsim.scene.model import FRONT_OFFSET, Board, Camera
 from mirrorsim.truth import optics
 
 from .conftest import SCENES, scene_dict
@@ -138,6 +138,50 @@ def test_corrected_image_undoes_the_pose(offset, pitch, roll):
         a, d = corrected_image(pose, reported, image, top=top)
         assert a == pytest.approx(bearing, abs=1e-9)
         assert d == pytest.approx(dist, rel=2e-4)
+
+
+@pytest.mark.parametrize("offset,pitch,roll", [(0.0, 0.0, 0.0), (-0.3, 1.0, 0.0),
+                                                (0.2, -0.8, 0.5), (0.0, 1.5, -0.5)])
+def test_corrected_image3_reads_what_a_level_camera_reads(offset, pitch, roll):
+    """A raised or sunk object (its foot 8 cm above the lens, on the board, 5 cm below
+    it) imaged by a camera turned, pitched and rolled, and by a level one at the board's
+    pan (the truth wing's projection both): corrected in 3-D, the posed image's (α, ε,
+    d_total) are the level image's as :func:`elevation_of` reads them."""
+    from mirrorsim.detection.board import CameraPose
+    from mirrorsim.detection.image_geometry import elevation_of
+    from mirrorsim.detection.image_measurement import ImageMeasurement
+    from mirrorsim.detection.posed import corrected_image3
+
+    def camera(pan: float) -> Camera:
+        return Camera(position=(3.0, 2.0), height=6.5, resolution=(1920, 1088), hfov=65.2,
+                      pan=pan, pan_deg=pan)
+
+    reported, true_cam = camera(60.0), camera(60.0 + offset)
+    pose = CameraPose(pan_offset_deg=offset, pitch_deg=pitch, roll_deg=roll, holes=100,
+                      residual_px=0.2, pan_sd_deg=0.001)
+
+    def image(pitch: float, roll: float, foot: np.ndarray, top: float, d_total: float):
+        seg = np.array([[*foot[:2], top], foot])
+        u, v, _ = optics.project(true_cam, seg, pitch=pitch, roll=roll)
+        return ImageMeasurement(kind="target", source="mirror", bbox_px=[0, 0, 1, 1],
+                                u_axis=float((u[0] + u[1]) / 2), v_top=float(v[0]),
+                                v_bottom=float(v[1]), height_px=float(v[1] - v[0]),
+                                width_px=None, d_total=d_total)
+
+    for bearing, dist, z, top in ((52.0, 60.0, 14.5, 9.0), (75.0, 90.0, 0.0, 15.25),
+                                  (66.0, 45.0, 1.5, 3.0)):
+        face = dist - FRONT_OFFSET["target"]  # the measured face, where the foot is seen
+        foot = np.array([*(np.array(reported.position) + face * np.array(
+            [math.cos(math.radians(bearing + offset)),
+             math.sin(math.radians(bearing + offset))])), z])
+        level = image(0.0, 0.0, foot, z + top, dist)
+        posed = image(pitch, roll, foot, z + top,
+                      dist * level.height_px / image(pitch, roll, foot, z + top, 0).height_px)
+        a, e, d = corrected_image3(pose, reported, posed, top=top)
+        e_level, d_level = elevation_of(true_cam, level)
+        assert a == pytest.approx(bearing + offset, abs=2e-4)
+        assert e == pytest.approx(e_level, abs=2e-3)
+        assert d == pytest.approx(d_level, rel=3e-4)
 
 
 def test_a_rolled_mount_alone_is_measured(tmp_path):

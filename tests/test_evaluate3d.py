@@ -15,11 +15,12 @@ import pytest
 from mirrorsim.errors import BadParameter
 from mirrorsim.pipelines.evaluate import check_geometry, evaluate_scene
 from mirrorsim.pipelines.evaluate3d import CHI2_3_R95, geometry_of
-from mirrorsim.pipelines.scenes import load_scene
+from mirrorsim.pipelines.scenes import load_scene, scene_from_dict
 from mirrorsim.scene.model import pencil_paint_height
 from mirrorsim.scene.projection import project
+from solver.errors import SolverError
 from solver.selfcal import SelfCalibration
-from tests.conftest import ROOT, SCENES, small_scene
+from tests.conftest import ROOT, SCENES, scene_dict, small_scene
 
 
 def test_auto_solves_a_3d_scene_in_3d_and_a_planar_one_in_the_plane():
@@ -30,8 +31,7 @@ def test_auto_solves_a_3d_scene_in_3d_and_a_planar_one_in_the_plane():
         geometry_of(raised, "2d")
 
 
-@pytest.mark.parametrize("kw", [{"board_pose": True},
-                                {"calibration": SelfCalibration(("pan", "power"))},
+@pytest.mark.parametrize("kw", [{"calibration": SelfCalibration(("pan", "power"))},
                                 {"calibration": SelfCalibration(("pan",), 0.5)}])
 def test_what_the_3d_solve_does_not_do_is_refused_before_a_folder_is_claimed(tmp_path, kw):
     out = tmp_path / "out"
@@ -48,6 +48,33 @@ def raised_report(tmp_path_factory):
     scene = small_scene("raised", 1920, 1088)
     return scene, evaluate_scene(scene, tmp_path_factory.mktemp("raised"), progress=False,
                                  keep=())
+
+
+@pytest.mark.slow
+def test_the_board_pose_corrects_a_3d_scene_elevations_and_all(tmp_path):
+    """scenes/raised.yaml on a mount that reads the pan 0.3° high, pitched 0.7° down and
+    rolled 0.4°: plain, the pitch passes for a lean (every elevation 0.7° off, the target
+    1.9 cm off when written); with ``board_pose`` the pose is measured and in the report,
+    every elevation lies within 0.05° of what an exact detector reads at the true
+    geometry (the truth's, computed apart from the detector), and the target's error is
+    under 1 cm and under half the plain one."""
+    d = scene_dict("raised")
+    d["camera"].update({"pan_error": 0.3, "pitch": -0.7, "roll": 0.4})
+    d["render"] = {"spp": 8}
+    scene = scene_from_dict(d, source="raised.yaml", default_name="raised")
+    plain = evaluate_scene(scene, tmp_path / "run", progress=False, keep=())
+    board = evaluate_scene(scene, tmp_path / "run", progress=False, keep=(), board_pose=True)
+    pose = board.to_json()["camera_pose"]
+    assert pose["pitch_deg"] == pytest.approx(-0.7, abs=0.02)
+    assert pose["pan_offset_deg"] == pytest.approx(-0.3, abs=0.01)
+    assert plain.to_json()["camera_pose"] is None
+    for report, near in ((plain, False), (board, True)):
+        seen = report.seen
+        off = [abs(got[1] - exact[1]) for got, exact in zip(
+            [*(b for _, b in seen.beacons), seen.target], report.errors.exact_readings,
+            strict=True)]
+        assert (max(off) < 0.05) if near else (max(off) > 0.5)
+    assert board.errors.target_cm < min(1.0, plain.errors.target_cm / 2)
 
 
 @pytest.mark.slow
@@ -242,10 +269,10 @@ def test_a_3d_budget_refuses_a_calibration_its_beacons_cannot_carry():
 LEANING_TARGET = np.array([57.0, 50.0, 6.0])
 
 
-def _leaning_readings(pan_error_deg: float = 0.0) -> dict:
+def _leaning_readings(pan_error_deg: float = 0.0, pitch_error_deg: float = 0.0) -> dict:
     """A 3-D measurements document: the exact readings (measured3) of a mirror leaning
     2.5° from a camera 9 cm up, two beacons and LEANING_TARGET, every azimuth turned by
-    ``pan_error_deg``."""
+    ``pan_error_deg`` and every elevation by ``pitch_error_deg``."""
     from solver.sltr3d import MirrorPlane, measured3
 
     cam = np.array([0.0, 0.0, 9.0])
@@ -256,7 +283,8 @@ def _leaning_readings(pan_error_deg: float = 0.0) -> dict:
             for p, h, f in zip([*beacons, LEANING_TARGET], heights, fronts, strict=True)]
 
     def image(s):
-        return {"alpha_deg": s[0] + pan_error_deg, "elevation_deg": s[1], "d_total": s[2]}
+        return {"alpha_deg": s[0] + pan_error_deg, "elevation_deg": s[1] + pitch_error_deg,
+                "d_total": s[2]}
 
     return {"observer": cam.tolist(), "target": image(read[2]),
             "beacons": [{"position": b.tolist(), **image(s)}
@@ -296,15 +324,17 @@ def test_the_3d_solve_takes_what_the_user_asks_of_pan_and_scale():
 
     ideal, bench = default_error_model("ideal"), default_error_model("bench")
     sig = ObjectSigmas(Sigma(0.01, 0.005), (Sigma(0.01, 0.005),))
-    assert nuisances3(ideal, sig) == ((), {})
-    assert nuisances3(ideal, sig, SelfCalibration(("pan", "scale"), priors={"scale": 0.01})) \
+    assert nuisances3(ideal, sig)[:2] == ((), {})
+    assert nuisances3(ideal, sig, SelfCalibration(("pan", "scale"),
+                                                  priors={"scale": 0.01}))[:2] \
         == (("pan", "scale"), {"scale": 0.01})
-    names, priors = nuisances3(bench, sig, SelfCalibration(("scale",), priors={"scale": 0.002}))
+    names, priors, _ = nuisances3(bench, sig, SelfCalibration(("scale",),
+                                                              priors={"scale": 0.002}))
     assert names == ("scale", "pan")
     assert priors == pytest.approx({"scale": 0.002, "pan": 1.5 / np.sqrt(3)})
     shared = ObjectSigmas(sig.target, sig.beacons, shared_alpha_deg=0.2)
-    assert nuisances3(ideal, shared) == (("pan",), {"pan": pytest.approx(0.2)})
-    assert nuisances3(ideal, shared, SelfCalibration(("pan",))) == (("pan",), {})
+    assert nuisances3(ideal, shared)[:2] == (("pan",), {"pan": pytest.approx(0.2)})
+    assert nuisances3(ideal, shared, SelfCalibration(("pan",)))[:2] == (("pan",), {})
 
 
 def test_solve_calibrates_3d_measurements_on_the_command_line(tmp_path):
@@ -330,6 +360,49 @@ def test_solve_calibrates_3d_measurements_on_the_command_line(tmp_path):
     assert cal["nuisances"]["pan"] == pytest.approx(0.4, abs=1e-6)
     bad = solve("--calibrate", "pan,power")
     assert bad.returncode == 2 and "--calibrate" in bad.stderr and "power" in bad.stderr
+    assert len(bad.stderr.strip().splitlines()) == 1
+
+
+def test_solve_calibrates_the_pitch_of_3d_measurements_and_a_planar_solve_refuses_it(
+        tmp_path):
+    """Exact readings with every elevation raised 0.3° (a mount's pitch reading): plain,
+    the target comes out off; with --calibrate pitch it comes back to 1e-5 cm and the
+    pitch to 1e-6°.  A planar solve (the same beacons' α and d_total alone) and a planar
+    scene's evaluation refuse the pitch in one line, exit 2, before any folder."""
+    from solver.lsq import solve_measurements
+    from solver.measurements import BeaconMeasurement
+
+    f = tmp_path / "m3.json"
+    f.write_text(json.dumps(_leaning_readings(pitch_error_deg=0.3)))
+
+    def solve(path, *extra):
+        return subprocess.run([sys.executable, "-m", "mirrorsim.cli.main", "solve", str(path),
+                               *extra], cwd=ROOT, capture_output=True, text=True)
+
+    def target_of(run):
+        assert run.returncode == 0, run.stderr
+        return json.loads(run.stdout[run.stdout.index("{"):])
+
+    plain = target_of(solve(f, "--json", "-"))
+    assert np.linalg.norm(np.array(plain["target"]) - LEANING_TARGET) > 0.05
+    cal = target_of(solve(f, "--calibrate", "pitch", "--json", "-"))
+    np.testing.assert_allclose(cal["target"], LEANING_TARGET, atol=1e-5)
+    assert cal["nuisances"]["pitch"] == pytest.approx(0.3, abs=1e-6)
+    beacons = [BeaconMeasurement((30.0, 50.0), 60.0, 80.0),
+               BeaconMeasurement((40.0, 55.0), 55.0, 90.0)]
+    with pytest.raises(SolverError, match="pitch"):
+        solve_measurements((0.0, 0.0), beacons, [(58.0, 100.0)],
+                           calibration=SelfCalibration(("pan", "pitch")))
+    out = tmp_path / "out"
+    with pytest.raises(BadParameter, match="pitch"):
+        evaluate_scene(load_scene(SCENES / "default.yaml"), out,
+                       calibration=SelfCalibration(("pitch",), priors={"pitch": 0.5}))
+    assert not out.exists()
+    bad = subprocess.run([sys.executable, "-m", "mirrorsim.cli.main", "evaluate",
+                          str(SCENES / "default.yaml"), "--calibrate", "pitch", "--prior",
+                          "pitch=0.5", "--out", str(out)], cwd=ROOT, capture_output=True,
+                         text=True)
+    assert bad.returncode == 2 and "pitch" in bad.stderr and not out.exists()
     assert len(bad.stderr.strip().splitlines()) == 1
 
 

@@ -121,13 +121,15 @@ def calibrate_option(p: argparse.ArgumentParser, beacon_sigma_alone: bool = True
                    "(self-calibration; needs 2+ beacons, 3+ for all three): pan, an offset on "
                    "every alpha (the mount's pan reading); scale, a factor on every d_total "
                    "(the calibration); power, the mirror's curvature 1/R, which moves each "
-                   "image by its own amount; comma-separated (the 3-D solve: pan and scale)")
+                   "image by its own amount; pitch, an offset on every elevation (the "
+                   "3-D solve alone); comma-separated (the 3-D solve: pan, pitch and scale)")
     beacon_sigma_option(p, ("" if beacon_sigma_alone else "with --calibrate only: ")
                         + "each beacon's offset is then estimated with that prior, and the "
                         "ellipse includes it")
     p.add_argument("--prior", default=None, metavar="NAME=SIGMA,...", action=_Once,
                    help="what the bench knows of some of --calibrate's nuisances before the "
-                   "frames, as a σ each: pan in degrees, scale as a fraction (0.006: 0.6 %%), "
+                   "frames, as a σ each: pan and pitch in degrees, scale as a fraction "
+                   "(0.006: 0.6 %%), "
                    "power in 1/cm; e.g. pan=0.3,scale=0.006 for a pan reading good to about "
                    "±0.5° and a reference distance to ±1 cm at 100 cm.  Each such nuisance "
                    "is then estimated with that prior (default: none, each free but pan, "

@@ -178,7 +178,8 @@ def _evaluate_options(p):
                         "ellipse (<name>.eval.png).  Each costs 0.1-2 s, so none by default")
     p.add_argument("--board-pose", action="store_true",
                    help="measure the camera's pan, pitch and roll on the pegboard's holes "
-                        "seen in each frame and correct every α and d_total by them: the "
+                        "seen in each frame and correct every α and d_total (in 3-D each "
+                        "elevation too) by them: the "
                         "bench calibrates its mount (its pan then known to ~0.002°; a "
                         "--prior on pan gives way to it); a mount off by up to ±3.2° in "
                         "pan, pitch and roll.  About 1 s a frame")
@@ -209,8 +210,7 @@ def _evaluate(args) -> int:
         preload("mirrorsim.cli.plots")  # matplotlib imports while the frame renders
     model = error_model_of(args)  # read and checked before anything is written
     check_board_pose(scene, args.board_pose)
-    three_d = check_geometry(scene, args.geometry, board_pose=args.board_pose,
-                             calibration=calibration) == "3d"
+    three_d = check_geometry(scene, args.geometry, calibration=calibration) == "3d"
     if three_d and "plot" in args.keep:
         raise BadArgument("--keep", "plot: the top view draws a planar report; give "
                            "--geometry planar for it")

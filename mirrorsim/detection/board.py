@@ -24,12 +24,10 @@ import cv2
 import numpy as np
 
 from mirrorsim.camera.sensor import undistort
-from mirrorsim.detection.image_measurement import ImageMeasurement
 from mirrorsim.errors import DetectionError
 from mirrorsim.formats.capture import CaptureRecord
 from mirrorsim.scene.model import Board, Camera
-from mirrorsim.scene.projection import camera_axes, project
-from solver.geometry import unit, wrap_bearing
+from mirrorsim.scene.projection import project
 
 # a hand-built bench's mount is good to this (deg) in pan, pitch and roll: the search
 # spans it, a correlation of the holes' image with the grid's under each roll first
@@ -109,12 +107,13 @@ def project_holes(camera: Camera, holes: np.ndarray, pan_offset: float = 0.0,
                   *, pitch: float = 0.0, roll: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Pixel positions (k, 2) of board points (k, 2) at z = 0 for the camera turned by
     ``pan_offset`` and pitched and rolled; and their depth along the optical axis."""
-    u, v, z = project(_turned(camera, pan_offset),
+    u, v, z = project(turned(camera, pan_offset),
                       np.column_stack([holes, np.zeros(len(holes))]), pitch, roll=roll)
     return np.column_stack([u, v]), z
 
 
-def _turned(camera: Camera, pan_offset: float) -> Camera:
+def turned(camera: Camera, pan_offset: float) -> Camera:
+    """``camera`` with its pan turned by ``pan_offset`` (deg)."""
     return replace(camera, pan_deg=camera.pan_deg + pan_offset)
 
 
@@ -352,29 +351,3 @@ def pose_pan_sigma(pose: CameraPose, fx_px: float = FLOOR_FX_PX) -> float:
     focal length ``fx_px`` (a smaller frame sees the holes in fewer pixels)."""
     floor = PAN_SD_FLOOR_DEG * max(1.0, FLOOR_FX_PX / fx_px)
     return float(math.hypot(pose.pan_sd_deg, floor))
-
-
-def corrected_image(pose: CameraPose, camera: Camera, image: ImageMeasurement, *, top: float
-                    ) -> tuple[float, float]:
-    """An image's (α, d_total) as a level camera at the board's pan would have measured
-    them (``camera`` as the mount reports it; ``top``: how high the measured upright
-    object is, the band of a pencil, the panel's height).
-
-    α is the bearing of the ray through the image's axis column and the middle of its band,
-    the camera turned, pitched and rolled as the board says: a roll moves the bearing of an
-    image below the camera's height by about roll·tan(elevation), the pencils' all alike.
-    d_total is multiplied by how much taller that pose makes the object look than a level
-    camera does, where it stands (:func:`pitch_factor` on the optical axis).
-    """
-    cam = _turned(camera, pose.pan_offset_deg)
-    forward, right, down = camera_axes(cam, pose.pitch_deg, pose.roll_deg)
-    v_mid = (cam.cy if image.v_top is None or image.v_bottom is None
-             else (image.v_top + image.v_bottom) / 2)
-    ray = forward + (image.u_axis - cam.cx) / cam.fx * right + (v_mid - cam.cy) / cam.fx * down
-    alpha = math.degrees(math.atan2(ray[1], ray[0]))
-    d = float(image.d_total)
-    foot = np.asarray(camera.position, float) + d * unit(alpha)
-    upright = np.array([[*foot, top], [*foot, 0.0]])
-    _, posed, _ = project(cam, upright, pose.pitch_deg, roll=pose.roll_deg)
-    _, level, _ = project(cam, upright)
-    return float(wrap_bearing(alpha)), d * float((posed[1] - posed[0]) / (level[1] - level[0]))

@@ -91,8 +91,17 @@ def elevation_of(camera: Camera, m: ImageMeasurement) -> tuple[float, float]:
         raise DetectionError(f"the {m.kind}'s image has no measured foot or height: no "
                              "elevation")
     tan_face = (camera.cy - m.v_bottom) * math.cos(_off_axis(camera, m.u_axis)) / camera.fx
-    rise = tan_face * (m.d_total - FRONT_OFFSET[m.kind])
-    return math.degrees(math.atan2(rise, m.d_total)), math.hypot(m.d_total, rise)
+    return rise_reading(tan_face, m.d_total, m.kind)
+
+
+def rise_reading(tan_face: float, d_total: float, kind: str) -> tuple[float, float]:
+    """ε (deg) and the 3-D d_total of an image whose measured face's foot is seen at an
+    elevation of tangent ``tan_face``, ``d_total`` (cm, size constancy's, horizontal)
+    away: the foot lies tan_face·(d_total − the face's offset) above the lens
+    (:func:`elevation_of`; the board's pose gives its own tangent,
+    :func:`~mirrorsim.detection.board.corrected_image3`)."""
+    rise = tan_face * (d_total - FRONT_OFFSET[kind])
+    return math.degrees(math.atan2(rise, d_total)), math.hypot(d_total, rise)
 
 
 # a pencil image's angular width over what its height implies: beyond this, one side is

@@ -40,7 +40,13 @@ from mirrorsim.scene.model import Scene
 from solver.lsq import solve_measurements
 from solver.lsq3 import Measurements3
 from solver.measurements import BeaconMeasurement, Measurements
-from solver.selfcal import PLAIN, SelfCalibration, as_calibration, check_nuisances
+from solver.selfcal import (
+    PLAIN,
+    SelfCalibration,
+    as_calibration,
+    check_nuisances,
+    check_planar,
+)
 
 # central-difference steps: α (deg), d_total (cm), beacon position (cm); the solver is
 # smooth on these scales and far from them its rounding noise (1e-12) is negligible
@@ -260,6 +266,8 @@ def check_budget_calibration(scene: Scene, calibration: SelfCalibration) -> Self
                            "budget uses that σ in its self-calibrated column only, which "
                            "needs nuisances to self-calibrate")
     try:
+        if not scene.is_3d:
+            check_planar(calibration)
         check_nuisances(calibration.nuisances, len(scene.beacons), 1, priors=calibration.priors,
                         readings=3 if scene.is_3d else 2)
     except SolverError as exc:

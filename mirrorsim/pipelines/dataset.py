@@ -62,7 +62,7 @@ from mirrorsim.pipelines.dataset_row import row_of
 from mirrorsim.pipelines.random_scenes import DatasetSpec, NoValidScene
 from mirrorsim.pipelines.workers import run_dask, run_local, usable_cores
 from mirrorsim.progress import progress_bar
-from solver.selfcal import PLAIN, SelfCalibration, check_nuisances
+from solver.selfcal import PLAIN, SelfCalibration, check_nuisances, check_planar
 
 # where the scenes run: warm local worker processes, or a Dask cluster
 EXECUTORS = ("local", "dask")
@@ -299,7 +299,8 @@ def _run_spec(spec_path: str | Path | None, *, sampler: str | None, beacons: int
         spec = spec.with_sampler(sampler)
     if beacons is not None:
         spec = spec.with_beacon_count(beacons)
-    try:  # before anything is written
+    try:  # before anything is written (a dataset's scenes are solved in the plane)
+        check_planar(calibration)
         check_nuisances(calibration.nuisances, spec.beacon_count, 1, priors=calibration.priors)
     except SolverError as exc:
         raise BadParameter("nuisances", f"{exc} (scenes of {spec.beacon_count} beacon(s) "

@@ -11,10 +11,6 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 
-from mirrorsim.detection.board import (
-    CameraPose,
-    pose_pan_sigma,
-)
 from mirrorsim.errors import BadParameter
 from mirrorsim.formats.error_model import ErrorModel
 from mirrorsim.formats.files import claim_run_folder, default_out
@@ -25,7 +21,13 @@ from mirrorsim.pipelines.evaluate3d import (
     geometry_of,
 )
 from mirrorsim.pipelines.frame import render_and_measure
-from mirrorsim.pipelines.measured import frame_record, frames_of, seen_of, sigmas_of
+from mirrorsim.pipelines.measured import (
+    after_board,
+    frame_record,
+    frames_of,
+    seen_of,
+    sigmas_of,
+)
 from mirrorsim.pipelines.scenes import check_given_scene
 from mirrorsim.pipelines.score import (
     KEPT_BY_DEFAULT,
@@ -47,8 +49,8 @@ from mirrorsim.scene.render_settings import AOVS
 from mirrorsim.truth.groundtruth import GroundTruth, RenderInfo
 from solver.errors import SolverError
 from solver.lsq import solve_measurements
-from solver.measurements import Measurements, ObjectSigmas
-from solver.selfcal import PLAIN, SelfCalibration, as_calibration
+from solver.measurements import Measurements
+from solver.selfcal import PLAIN, SelfCalibration, as_calibration, check_planar
 
 
 def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: str = "auto",
@@ -72,7 +74,8 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
     positions are known and what the bench knows of the nuisances.  ``board_pose``: the
     camera's pan, pitch and roll measured on the pegboard's holes in each frame
     (:func:`mirrorsim.detection.board.measure_camera_pose`), every α and d_total
-    corrected by them, and the pan then known to the board's precision (a pan prior of
+    corrected by them (in 3-D each elevation too), and the pan then known to the board's
+    precision (a pan prior of
     ``calibration`` gives way to it); the pose is in the report.  ``geometry``: 3d
     solves in 3-D (a :class:`~mirrorsim.pipelines.evaluate3d.Report3`), planar in the
     board's plane, auto 3d for a scene with a raised object or a leaning mirror.
@@ -86,8 +89,8 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
         If ``out_dir`` holds files mirrorsim did not write, or the scene's own file.
     BadParameter
         A ``keep`` that names no extra file; ``board_pose`` on a plain board; a bad
-        ``geometry``; with 3d, ``board_pose``, or a calibration of the mirror's power or
-        of the beacons' positions (the 3-D solve estimates pan and range scale).
+        ``geometry``; with 3d, a calibration of the mirror's power or of the beacons'
+        positions (the 3-D solve estimates pan, pitch and range scale).
     SolverError
         If the measurements do not determine the mirror and the target, or
         ``calibration`` is not a :class:`~solver.selfcal.SelfCalibration`.
@@ -100,29 +103,31 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
     error_model = as_error_model(error_model)
     check_board_pose(scene, board_pose)
     check_variant(variant)
-    three_d = check_geometry(scene, geometry, board_pose=board_pose,
-                             calibration=calibration) == "3d"
+    three_d = check_geometry(scene, geometry, calibration=calibration) == "3d"
     out = claim_run_folder(out_dir if out_dir is not None else default_out(scene.name),
                            "out_dir", [("scene", scene.source)])
     if three_d:
         return evaluate_into3(scene, out, variant=variant, progress=progress,
-                              error_model=error_model, keep=keep, calibration=calibration)
+                              error_model=error_model, keep=keep, calibration=calibration,
+                              board_pose=board_pose)
     return evaluate_into(scene, out, variant=variant, progress=progress,
                          error_model=error_model, keep=keep, calibration=calibration,
                          board_pose=board_pose)
 
 
-def check_geometry(scene: Scene, geometry: str, *, board_pose: bool = False,
+def check_geometry(scene: Scene, geometry: str, *,
                    calibration: SelfCalibration = PLAIN) -> str:
     """The solve ``scene`` gets (:func:`~mirrorsim.pipelines.evaluate3d.geometry_of`),
     refusing with 3d what the 3-D evaluation does not do yet (before a run claims its
     folder)."""
     chosen = geometry_of(scene, geometry)
-    if chosen == "3d" and board_pose:
-        raise BadParameter("board_pose", f"{scene.name}: not with the 3-D solve yet (the planar "
-                           "solve takes it)")
     if chosen == "3d":
         check_calibration3(scene.name, calibration)
+    else:
+        try:
+            check_planar(calibration)
+        except SolverError as exc:
+            raise BadParameter("calibration", f"{scene.name}: {exc}") from None
     return chosen
 
 
@@ -161,7 +166,7 @@ def evaluate_into(scene: Scene, out: Path, *, variant: str = "auto", progress: b
     if model_priors:
         calibration = model_calibration(model, calibration)
     if seen.pose is not None:
-        calibration, sigma = _after_board(seen.pose, seen.fx, calibration, sigma)
+        calibration, sigma = after_board(seen.pose, calibration, sigma, fx=seen.fx)
     capture = measured[0].files.capture
     notes = model.domain_warnings(
         features[0], list(features[1:]), seen.pan,
@@ -186,18 +191,6 @@ def evaluate_into(scene: Scene, out: Path, *, variant: str = "auto", progress: b
                   camera_pose=seen.pose, error_model=model.name(),
                   model_warnings=tuple(notes), image_features=features,
                   self_calibration=calibration, calibration_notes=tuple(said))
-
-
-def _after_board(pose: CameraPose, fx: float, calibration: SelfCalibration,
-                 sigma: ObjectSigmas) -> tuple[SelfCalibration, ObjectSigmas]:
-    """The pan is the board's to know now, to what is left of it after the board: a prior
-    from the mount's reading (the user's or the bench model's) gives way, and where the
-    pan is not a nuisance, it is every α's shared offset."""
-    left = pose_pan_sigma(pose, fx)
-    if "pan" in calibration.nuisances:
-        return (replace(calibration, priors={**calibration.priors, "pan": left}),
-                replace(sigma, shared_alpha_deg=0.0))
-    return calibration, replace(sigma, shared_alpha_deg=left)
 
 
 def _error_vs_beacons(truth: GroundTruth, measurements: Measurements,

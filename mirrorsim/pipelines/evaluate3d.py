@@ -13,14 +13,22 @@ from pathlib import Path
 
 import numpy as np
 
+from mirrorsim.detection.board import CameraPose
 from mirrorsim.detection.detector import Detection
 from mirrorsim.detection.image_geometry import elevation_of
 from mirrorsim.detection.image_measurement import ImageMeasurement
+from mirrorsim.detection.posed import corrected_image3
 from mirrorsim.errors import BadParameter, DetectionError
 from mirrorsim.formats.capture import CaptureRecord
 from mirrorsim.formats.error_model import ErrorModel
 from mirrorsim.pipelines.frame import render_and_measure
-from mirrorsim.pipelines.measured import frame_record, frames_of, seen_of, sigmas_of
+from mirrorsim.pipelines.measured import (
+    after_board,
+    frame_record,
+    frames_of,
+    seen_of,
+    sigmas_of,
+)
 from mirrorsim.pipelines.score import KEPT_BY_DEFAULT, FrameRecord
 from mirrorsim.pipelines.solving import model_calibration, model_for
 from mirrorsim.scene import imperfections
@@ -127,6 +135,7 @@ class Report3:
     # the α error every image of a frame shares (the model's): the solve's pan prior
     # (:func:`with_shared_pan`), which a caller solving these measurements again adds
     shared_alpha_deg: float = 0.0
+    camera_pose: CameraPose | None = None  # the board's, where measured
 
     @property
     def reused(self) -> bool:
@@ -142,19 +151,24 @@ class Report3:
                 "errors": self.errors.to_json(),
                 "frames": [vars(fr) for fr in self.frames],
                 "render": self.render.to_json(), "error_model": self.error_model,
-                "model_warnings": list(self.model_warnings)}
+                "model_warnings": list(self.model_warnings),
+                "camera_pose": (None if self.camera_pose is None
+                                else self.camera_pose.to_json())}
 
 
 def evaluate_into3(scene: Scene, out: Path, *, variant: str = "auto", progress: bool = True,
                    error_model: ErrorModel | None = None,
                    keep: tuple[str, ...] = KEPT_BY_DEFAULT,
-                   calibration: SelfCalibration = PLAIN, model_priors: bool = True) -> Report3:
+                   calibration: SelfCalibration = PLAIN, model_priors: bool = True,
+                   board_pose: bool = False) -> Report3:
     """Render (or reuse), detect in 3-D, solve in 3-D and score ``scene`` into ``out``, a
     folder its caller has claimed, its parameters checked
     (:func:`mirrorsim.pipelines.evaluate.evaluate_scene` with ``geometry``);
-    ``calibration``: the pan and range scale to estimate, and what the user states of
-    them (:func:`check_calibration3`), beside the bench model's own (``model_priors``
-    False: ``calibration``'s alone, as a budget compares its runs).
+    ``calibration``: the pan, pitch and range scale to estimate, and what the user
+    states of them (:func:`check_calibration3`), beside the bench model's own (``model_priors``
+    False: ``calibration``'s alone, as a budget compares its runs); ``board_pose``: every
+    image read again through the camera's pose the board's holes give
+    (:func:`~mirrorsim.detection.posed.corrected_image3`), the pan then the board's.
 
     Raises
     ------
@@ -173,13 +187,15 @@ def evaluate_into3(scene: Scene, out: Path, *, variant: str = "auto", progress: 
     truths = [m.files.truth for m in measured]
     truth = replace(truths[0], scene=scene.name, id_labels=None, render=None, annotations=None,
                     beacons=tuple(t.beacons[0] for t in truths))
-    seen2 = seen_of(scene, measured, board_pose=False)
+    seen2 = seen_of(scene, measured, board_pose=board_pose)
     model = model_for(scene, error_model)
     features, sigma = sigmas_of(model, seen2)
+    nuisances, priors, sigma = nuisances3(
+        model, sigma, calibration, bench=model_priors,
+        board=None if seen2.pose is None else (seen2.pose, seen2.fx))
     # the 3-D solve draws a Gaussian's ellipsoid: the σ's as a Gaussian's (the factors
     # below were fitted on them)
-    seen = _seen3(scene, measured, model.gaussian(sigma), fx=seen2.fx)
-    nuisances, priors = nuisances3(model, sigma, calibration, bench=model_priors)
+    seen = _seen3(scene, measured, model.gaussian(sigma), fx=seen2.fx, pose=seen2.pose)
     fit = seen.solve(nuisances=nuisances, priors=priors)
     try:  # the planar solve of the same frames, beside it
         planar = solve_measurements(scene.camera.position, seen2.beacons, [seen2.target],
@@ -190,18 +206,16 @@ def evaluate_into3(scene: Scene, out: Path, *, variant: str = "auto", progress: 
     errors = _score3(scene, truth, fit, seen, planar_target, nuisances=nuisances,
                      priors=priors)
     done = truths[0].render
-    notes = model.domain_warnings(features[0], list(features[1:]), seen2.pan,
-                                  scene={"fx_px": seen2.fx,
-                                         "camera_height_cm": scene.camera.height,
-                                         "pencil_height_cm": tuple(b.height
-                                                                   for b in scene.beacons),
-                                         "beacons": len(scene.beacons)},
+    keys = {"fx_px": seen2.fx, "camera_height_cm": scene.camera.height,
+            "pencil_height_cm": tuple(b.height for b in scene.beacons),
+            "beacons": len(scene.beacons)}
+    notes = model.domain_warnings(features[0], list(features[1:]), seen2.pan, scene=keys,
                                   bench=imperfections.judged_values(scene))
     return Report3(scene=scene.name, truth=truth, seen=seen, fit=fit,
                    planar_target=planar_target, errors=errors, frames=frames,
                    render=RenderInfo(done.variant, done.spp, done.seed, done.sampler),
                    error_model=model.name(), model_warnings=tuple(notes),
-                   shared_alpha_deg=sigma.shared_alpha_deg)
+                   shared_alpha_deg=sigma.shared_alpha_deg, camera_pose=seen2.pose)
 
 
 def frame_measurements3(det: Detection, capture: CaptureRecord) -> Measurements3:
@@ -228,23 +242,25 @@ def _reading(capture: CaptureRecord, m: ImageMeasurement) -> tuple[float, float,
 
 
 def _measurements3(capture: CaptureRecord, pencils: list, target: tuple[float, float, float],
-                   sigma: tuple | None = None) -> Measurements3:
+                   sigma: tuple | None = None, pan: float | None = None) -> Measurements3:
     """Measurements3 of ``pencils`` (each beacon and its image's reading) and the
-    target's reading, with what the capture record says: the lens, the pan, the
-    heights measured (each painted band, the panel's) and the faces' offsets."""
+    target's reading, with what the capture record says: the lens, the pan (or ``pan``,
+    the board's), the heights measured (each painted band, the panel's) and the faces'
+    offsets."""
     return Measurements3(
         observer=tuple(float(c) for c in capture.camera.center3),
         beacons=tuple((tuple(float(c) for c in b.base3), seen) for b, seen in pencils),
         target=target,
         heights=(*(pencil_paint_height(b.height) for b, _ in pencils), capture.target_size[1]),
         fronts=(FRONT_OFFSET["beacon"],) * len(pencils) + (FRONT_OFFSET["target"],),
-        sigma=sigma, pan_deg=capture.camera.pan_deg)
+        sigma=sigma, pan_deg=capture.camera.pan_deg if pan is None else pan)
 
 
-def _seen3(scene: Scene, measured: list, sigma: ObjectSigmas, *, fx: float) -> Measurements3:
+def _seen3(scene: Scene, measured: list, sigma: ObjectSigmas, *, fx: float,
+           pose: CameraPose | None = None) -> Measurements3:
     """The frames' measurements together: every beacon's, the target's mean over the
     frames that measured it (each frame's view shares its errors), and each
-    observation's σ's."""
+    observation's σ's; with the board's ``pose``, each read through it."""
     with_target = [m for m in measured if m.detection.target.d_total is not None]
     if not with_target:
         raise DetectionError(f"{scene.name}: the target's d_total could not be measured")
@@ -258,17 +274,23 @@ def _seen3(scene: Scene, measured: list, sigma: ObjectSigmas, *, fx: float) -> M
     sig.append((ft[0] * t.alpha_deg,
                 ft[1] * elevation_sigma_deg(t, with_target[0].detection.target.height_px, fx),
                 ft[2] * t.d_total_rel))
+    def reading(c: CaptureRecord, im: ImageMeasurement, top: float) -> tuple:
+        return (_reading(c, im) if pose is None
+                else corrected_image3(pose, c.camera, im, top=top))
+
     target = tuple(float(v) for v in np.mean(
-        [_reading(m.files.capture, m.detection.target) for m in with_target], axis=0))
-    return _measurements3(with_target[0].files.capture,
-                          [(b, _reading(c, im)) for b, im, c in pencils], target,
-                          sigma=tuple(sig))
+        [reading(m.files.capture, m.detection.target, m.files.capture.target_size[1])
+         for m in with_target], axis=0))
+    capture = with_target[0].files.capture
+    return _measurements3(capture, [(b, reading(c, im, pencil_paint_height(b.height)))
+                                    for b, im, c in pencils], target, sigma=tuple(sig),
+                          pan=capture.camera.pan_deg + (0.0 if pose is None
+                                                        else pose.pan_offset_deg))
 
 
-# what the 3-D solve estimates of a bench's shared errors (solver.lsq3 knows the pitch
-# too, which no calibration names yet; the mirror's power and the beacons' positions it
-# does not estimate)
-CALIBRATED3 = ("pan", "scale")
+# what the 3-D solve estimates of a bench's shared errors (the mirror's power and the
+# beacons' positions it does not estimate)
+CALIBRATED3 = ("pan", "pitch", "scale")
 
 
 def check_calibration3(name: str, calibration: SelfCalibration) -> None:
@@ -278,19 +300,24 @@ def check_calibration3(name: str, calibration: SelfCalibration) -> None:
     if other or calibration.position_sigma:
         what = ", ".join(other) or f"the beacons' positions (σ {calibration.position_sigma:g} cm)"
         raise BadParameter("calibration", f"{name}: the 3-D solve estimates "
-                           f"{' and '.join(CALIBRATED3)} and not yet {what} (the planar "
+                           f"{', '.join(CALIBRATED3)} and not yet {what} (the planar "
                            "solve does)")
 
 
 def nuisances3(model: ErrorModel, sigma: ObjectSigmas, asked: SelfCalibration = PLAIN, *,
-               bench: bool = True) -> tuple[tuple[str, ...], dict[str, float]]:
-    """The bench's shared errors the 3-D solve estimates, with their priors: those
-    ``asked`` (a prior the user states wins over the model's, none leaves it free), and
-    (``bench``) the pan and range scale a bench model's tolerances give; an α error every
-    image of a frame shares widens the pan's prior (an ideal-bench model, asked nothing:
-    none)."""
+               bench: bool = True, board: tuple[CameraPose, float] | None = None
+               ) -> tuple[tuple[str, ...], dict[str, float], ObjectSigmas]:
+    """The bench's shared errors the 3-D solve estimates, with their priors, and the σ's
+    it weighs with: those ``asked`` (a prior the user states wins over the model's, none
+    leaves it free), and (``bench``) the pan and range scale a bench model's tolerances
+    give; an α error every image of a frame shares widens the pan's prior (an
+    ideal-bench model, asked nothing: none).  ``board``: the camera's pose the board
+    gave and the frames' focal length: the pan is then the board's
+    (:func:`~mirrorsim.pipelines.measured.after_board`)."""
     cal = model_calibration(model, asked) if bench else asked
-    return with_shared_pan(cal, sigma.shared_alpha_deg)
+    if board is not None:
+        cal, sigma = after_board(board[0], cal, sigma, fx=board[1])
+    return (*with_shared_pan(cal, sigma.shared_alpha_deg), sigma)
 
 
 def with_shared_pan(calibration: SelfCalibration, shared_alpha_deg: float

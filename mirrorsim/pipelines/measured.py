@@ -11,11 +11,12 @@ import numpy as np
 
 from mirrorsim.detection.board import (
     CameraPose,
-    corrected_image,
     frame_pose,
     mean_pose,
+    pose_pan_sigma,
 )
 from mirrorsim.detection.detector import Detection, annotate
+from mirrorsim.detection.posed import corrected_image
 from mirrorsim.errors import DetectionError
 from mirrorsim.formats.error_model import ErrorModel, ImageFeatures
 from mirrorsim.formats.files import write_png
@@ -24,6 +25,7 @@ from mirrorsim.pipelines.score import FrameRecord
 from mirrorsim.scene.model import Scene, beacon_frame_name, pencil_paint_height
 from solver.geometry import wrap_bearing
 from solver.measurements import BeaconMeasurement, ObjectSigmas
+from solver.selfcal import SelfCalibration
 
 
 @dataclass(frozen=True)
@@ -68,6 +70,20 @@ def seen_of(scene: Scene, measured: list, *, board_pose: bool) -> Seen:
                    for d in detections if d.target.d_total is not None]
     mean_target = tuple(float(v) for v in np.mean(targets, axis=0))
     return Seen(beacons, mean_target, pan, fx, pose, detections)
+
+
+def after_board(pose: CameraPose, calibration: SelfCalibration, sigma: ObjectSigmas, *,
+                fx: float) -> tuple[SelfCalibration, ObjectSigmas]:
+    """What a solve knows once the board has measured the camera's pose: the pan is the
+    board's to know now, to what is left of it after the board: a prior
+    from the mount's reading (the user's or the bench model's) gives way, and where the
+    pan is not a nuisance, it is every α's shared offset (``fx``: the frames' focal
+    length, px)."""
+    left = pose_pan_sigma(pose, fx)
+    if "pan" in calibration.nuisances:
+        return (replace(calibration, priors={**calibration.priors, "pan": left}),
+                replace(sigma, shared_alpha_deg=0.0))
+    return calibration, replace(sigma, shared_alpha_deg=left)
 
 
 def sigmas_of(model: ErrorModel, seen: Seen
