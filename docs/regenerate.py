@@ -112,6 +112,22 @@ RESULTS: tuple[Result, ...] = (
            markdown=True, about="3-D scenes drawn wider than the σ factors' development "
                                 "scenes: the acceptance set",
            fresh=("renders/evaluate3d-wide-61206303",)),
+    Result("evaluate3d_factors",
+           (f"{PY} benchmarks/evaluate3d.py --scenes 35 --seed 7001",
+            f"{PY} benchmarks/evaluate3d.py --scenes 35 --seed 7002",
+            f"{PY} benchmarks/evaluate3d.py --scenes 30 --seed 7003 --wide",
+            f"{PY} benchmarks/evaluate3d.py --scenes 30 --seed 7004 --wide",
+            f"{PY} benchmarks/evaluate3d.py --residuals renders/evaluate3d-7001 "
+            "renders/evaluate3d-7002 renders/evaluate3d-wide-7003 renders/evaluate3d-wide-7004"),
+           markdown=True, about="the 3-D σ factors' development scenes: each reading's "
+                                "errors in the planar model's σ's, and the factor they call for",
+           fresh=("renders/evaluate3d-7001", "renders/evaluate3d-7002",
+                  "renders/evaluate3d-wide-7003", "renders/evaluate3d-wide-7004")),
+    Result("evaluate_raised_board",
+           (f"{MS} evaluate scenes/bench/raised.yaml --board-pose --out renders/raised_board "
+            "--quiet",),
+           about="the 3-D scene on EXP1's hand-built bench, every image read through the "
+                 "camera's pose the board gives", fresh=("renders/raised_board",)),
     Result("reflector_size", (f"{PY} benchmarks/reflector_size.py",), markdown=True,
            about="the paper's open question: the target's error as the reflector shrinks"),
     Result("crlb", (f"{PY} benchmarks/uncertainty.py --scenes 40 --draws 1000",),
