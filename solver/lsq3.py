@@ -1,12 +1,16 @@
 """3-D SLTR by weighted least squares over every beacon and every view of the target:
 the mirror's plane (yaw, lean, offset) and the target in 3-D, robust to one bad image
-(a Huber loss), self-calibrating for the camera's pan and pitch readings and the range
-scale, with priors on them; its covariance, and the Cramér–Rao bound at the truth.
+(a Huber loss), self-calibrating for the camera's pan and pitch readings, the range
+scale and the mirror's power, with priors on them; its covariance, and the Cramér–Rao
+bound at the truth.
 
-The nuisances act on every image alike: ``pan`` adds δ (deg) to every azimuth (the
-mount's pan reading), ``pitch`` adds δ to every elevation (its pitch reading: to first
-order, for images near the optical axis), ``scale`` multiplies every d_total (the
-calibration's K).  The forward model is :mod:`solver.sltr3d`'s.
+The nuisances: ``pan`` adds δ (deg) to every azimuth (the mount's pan reading),
+``pitch`` adds δ to every elevation (its pitch reading: to first order, for images near
+the optical axis), ``scale`` multiplies every d_total (the calibration's K), and
+``power`` c = 1/R (1/cm, > 0 concave) moves each image by its own first-order amount
+(:func:`~solver.sltr3d.power_terms3`, the glass curved about its images' reflection
+points' middle): α + c·A, ε + c·E, s·(d + c·D).  The forward model is
+:mod:`solver.sltr3d`'s.
 """
 
 from __future__ import annotations
@@ -19,10 +23,17 @@ from numpy.typing import ArrayLike
 from solver.errors import SolverError
 from solver.geometry import wrap_bearing
 from solver.lsq import HUBER_K
-from solver.sltr3d import MirrorPlane, measured3, observe3, seen3, solve_single3
+from solver.sltr3d import (
+    MirrorPlane,
+    measured3,
+    observe3,
+    power_terms3,
+    seen3,
+    solve_single3,
+)
 
 # each nuisance: its neutral value
-NUISANCES3 = {"pan": 0.0, "pitch": 0.0, "scale": 1.0}
+NUISANCES3 = {"pan": 0.0, "pitch": 0.0, "scale": 1.0, "power": 0.0}
 Seen = tuple[float, float, float]  # what the camera sees of an image: α, ε (deg), d_total
 
 
@@ -130,11 +141,13 @@ class _Problem:
 
         pr = np.array([image(p, k) for k, p in enumerate(self.positions)]
                       + [image(x[3:6], n_b)] * (len(self.seen) - n_b))
-        for name, value in zip(self.nuisances, x[6:], strict=True):
-            if name == "scale":
-                pr[:, 2] *= value
-            else:
-                pr[:, 0 if name == "pan" else 1] += value
+        v = dict(zip(self.nuisances, x[6:], strict=True))
+        if "power" in v:  # the glass curved about its images' middle: d = s·(d + c·D)
+            terms = power_terms3(self.o, plane, [*self.positions, x[3:6]])
+            pr += v["power"] * np.vstack([terms, np.repeat(terms[-1:], len(pr) - n_b - 1, 0)])
+        pr[:, 0] += v.get("pan", 0.0)
+        pr[:, 1] += v.get("pitch", 0.0)
+        pr[:, 2] *= v.get("scale", 1.0)
         return pr
 
     def residuals(self, x: np.ndarray) -> np.ndarray:
@@ -170,12 +183,12 @@ def solve_lsq3(observer: ArrayLike, beacons: list[tuple[ArrayLike, Seen]], targe
     squares from the first beacon's closed form.  ``sigma``: (σ_α deg, σ_ε deg, σ_d as a
     fraction of d_total) of every measurement, or a row per observation (the beacons',
     then the target's); without it, weights of (0.01°, 0.01°, 0.2 %) and no covariance.
-    ``nuisances``: any of ``pan``, ``pitch``, ``scale``, estimated alongside; ``priors``:
-    the σ of each one known (deg; the scale's as a fraction).  ``heights``, ``fronts``,
-    ``pan_deg``: each beacon's and the target's measured height and face offset (cm)
-    and the camera's pan, to predict each reading as a detector makes it
-    (:func:`~solver.sltr3d.measured3`: a leaning mirror's bias removed); without them
-    the measurements are taken as each base's exact image.
+    ``nuisances``: any of ``pan``, ``pitch``, ``scale``, ``power``, estimated alongside;
+    ``priors``: the σ of each one known (deg; the scale's a fraction; the power's 1/cm).
+    ``heights``, ``fronts``, ``pan_deg``: each beacon's and the target's measured height
+    and face offset (cm) and the camera's pan, to predict each reading as a detector
+    makes it (:func:`~solver.sltr3d.measured3`: a leaning mirror's bias removed);
+    without them the measurements are taken as each base's exact image.
 
     Raises
     ------

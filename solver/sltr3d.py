@@ -137,6 +137,48 @@ def seen3(observer: ArrayLike, plane: MirrorPlane, point: ArrayLike
             float(np.degrees(np.arcsin(rel[2] / d))), d)
 
 
+def power_terms3(observer: ArrayLike, plane: MirrorPlane, points: ArrayLike, *,
+                 vertex: ArrayLike | None = None) -> np.ndarray:
+    """First-order change of each point's (α, ε, d_total) per unit of the mirror's power
+    c = 1/R (1/cm, > 0 concave), the glass curved about ``vertex`` (a point on the
+    plane; None: the middle of the points' reflection points, as the planar solver
+    takes it): :func:`solver.fit_model.power_terms` in 3-D.
+
+    At a reflection point w from the vertex (in the plane) the glass is turned by c·w
+    and stands c·|w|²/2 nearer the camera, which moves the virtual image by
+    c·(2((q·w)·n + (q·n)·w) + |w|²·n) (q: the point from the reflection point, n the
+    normal on the camera's side): across the line of sight, α's and ε's change; along it,
+    a shorter path.  Size constancy reads the sagittal magnification 2·c·cos i as
+    nearer (−2·c·cos i·d1·d2, the mirror equation).  With the glass upright and every
+    point at the lens's height it is the planar terms, ε's change 0 (tested).
+
+    Returns
+    -------
+    (k, 3)
+        Each point's dα (deg), dε (deg) and dd (cm) per unit c.
+    """
+    o = np.asarray(observer, float)
+    pts = np.atleast_2d(np.asarray(points, float))
+    n = plane.normal
+    virtual = plane.reflect(pts)
+    rel = virtual - o  # the line of sight to each image
+    P = np.array([plane.hit(o, r) for r in rel])  # the reflection points
+    w = P - (P.mean(axis=0) if vertex is None else np.asarray(vertex, float))
+    w -= (w @ n)[:, None] * n  # in the plane
+    q = pts - P
+    dv = (2.0 * ((np.sum(q * w, axis=1))[:, None] * n + (q @ n)[:, None] * w)
+          + np.sum(w * w, axis=1)[:, None] * n)
+    dist = np.linalg.norm(rel, axis=1)
+    flat2 = rel[:, 0] ** 2 + rel[:, 1] ** 2
+    dalpha = np.degrees((rel[:, 0] * dv[:, 1] - rel[:, 1] * dv[:, 0]) / flat2)
+    dflat = (rel[:, 0] * dv[:, 0] + rel[:, 1] * dv[:, 1]) / np.sqrt(flat2)
+    delev = np.degrees((np.sqrt(flat2) * dv[:, 2] - rel[:, 2] * dflat) / dist**2)
+    cos_i = np.abs(rel @ n) / dist
+    d1, d2 = np.linalg.norm(P - o, axis=1), np.linalg.norm(q, axis=1)
+    dd = np.sum(rel * dv, axis=1) / dist - 2.0 * cos_i * d1 * d2
+    return np.column_stack([dalpha, delev, dd])
+
+
 def virtual_image3(observer: ArrayLike, seen: tuple[float, float, float]) -> np.ndarray:
     """Where ``seen`` (α, ε, d_total) puts the virtual image: O + d_total·direction(α, ε)."""
     alpha_deg, elevation_deg, d_total = seen

@@ -31,8 +31,7 @@ def test_auto_solves_a_3d_scene_in_3d_and_a_planar_one_in_the_plane():
         geometry_of(raised, "2d")
 
 
-@pytest.mark.parametrize("kw", [{"calibration": SelfCalibration(("pan", "power"))},
-                                {"calibration": SelfCalibration(("pan",), 0.5)}])
+@pytest.mark.parametrize("kw", [{"calibration": SelfCalibration(("pan",), 0.5)}])
 def test_what_the_3d_solve_does_not_do_is_refused_before_a_folder_is_claimed(tmp_path, kw):
     out = tmp_path / "out"
     with pytest.raises(BadParameter):
@@ -316,8 +315,9 @@ def test_solve_takes_3d_measurements(tmp_path):
 def test_the_3d_solve_takes_what_the_user_asks_of_pan_and_scale():
     """What the 3-D solve estimates (nuisances3): nothing on an ideal bench asked
     nothing; the pan and scale asked, a stated prior winning over the bench model's
-    (σ = half-width/√3 of its tolerances: pan 1.5°, scale 3 cm in 100), a pan asked
-    without a prior left free; and a shared α error widening the pan's prior."""
+    (σ = half-width/√3 of its tolerances: pan 1.5°, scale 3 cm in 100, power
+    0.00143/cm), a pan asked without a prior left free; and a shared α error widening
+    the pan's prior."""
     from mirrorsim.formats.error_model_file import default_error_model
     from mirrorsim.pipelines.evaluate3d import nuisances3
     from solver.measurements import ObjectSigmas, Sigma
@@ -330,8 +330,9 @@ def test_the_3d_solve_takes_what_the_user_asks_of_pan_and_scale():
         == (("pan", "scale"), {"scale": 0.01})
     names, priors, _ = nuisances3(bench, sig, SelfCalibration(("scale",),
                                                               priors={"scale": 0.002}))
-    assert names == ("scale", "pan")
-    assert priors == pytest.approx({"scale": 0.002, "pan": 1.5 / np.sqrt(3)})
+    assert names == ("scale", "pan", "power")  # the model's tolerances: 1/R to 0.00143/cm
+    assert priors == pytest.approx({"scale": 0.002, "pan": 1.5 / np.sqrt(3),
+                                    "power": 0.00143 / np.sqrt(3)})
     shared = ObjectSigmas(sig.target, sig.beacons, shared_alpha_deg=0.2)
     assert nuisances3(ideal, shared)[:2] == (("pan",), {"pan": pytest.approx(0.2)})
     assert nuisances3(ideal, shared, SelfCalibration(("pan",)))[:2] == (("pan",), {})
@@ -340,7 +341,7 @@ def test_the_3d_solve_takes_what_the_user_asks_of_pan_and_scale():
 def test_solve_calibrates_3d_measurements_on_the_command_line(tmp_path):
     """Exact readings of a leaning mirror with every azimuth turned by a 0.4° pan error:
     plain, the target comes out off; with --calibrate pan it comes back to 1e-5 cm and the
-    pan to 1e-6°; --calibrate power is refused in one line, exit 2."""
+    pan to 1e-6°; a beacons' position σ is refused in one line, exit 2."""
     target = LEANING_TARGET
     f = tmp_path / "m3.json"
     f.write_text(json.dumps(_leaning_readings(pan_error_deg=0.4)))
@@ -358,8 +359,8 @@ def test_solve_calibrates_3d_measurements_on_the_command_line(tmp_path):
     cal = target_of(solve("--calibrate", "pan", "--json", "-"))
     np.testing.assert_allclose(cal["target"], target, atol=1e-5)
     assert cal["nuisances"]["pan"] == pytest.approx(0.4, abs=1e-6)
-    bad = solve("--calibrate", "pan,power")
-    assert bad.returncode == 2 and "--calibrate" in bad.stderr and "power" in bad.stderr
+    bad = solve("--calibrate", "pan", "--beacon-sigma", "0.5")
+    assert bad.returncode == 2 and "--calibrate" in bad.stderr and "position" in bad.stderr
     assert len(bad.stderr.strip().splitlines()) == 1
 
 

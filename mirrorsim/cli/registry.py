@@ -122,7 +122,7 @@ def calibrate_option(p: argparse.ArgumentParser, beacon_sigma_alone: bool = True
                    "every alpha (the mount's pan reading); scale, a factor on every d_total "
                    "(the calibration); power, the mirror's curvature 1/R, which moves each "
                    "image by its own amount; pitch, an offset on every elevation (the "
-                   "3-D solve alone); comma-separated (the 3-D solve: pan, pitch and scale)")
+                   "3-D solve alone); comma-separated")
     beacon_sigma_option(p, ("" if beacon_sigma_alone else "with --calibrate only: ")
                         + "each beacon's offset is then estimated with that prior, and the "
                         "ellipse includes it")

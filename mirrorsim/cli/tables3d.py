@@ -10,6 +10,7 @@ from mirrorsim.cli.tables import bench_line, columns
 from mirrorsim.pipelines.evaluate3d import CHI2_3_R95, Report3
 from mirrorsim.scene.model import Scene
 from solver.lsq3 import Fit3
+from solver.selfcal import KNOWN, describe_estimates
 
 
 def _xyz(p) -> str:
@@ -57,9 +58,8 @@ def report3_table(report: Report3, report_scene: Scene | None = None) -> str:
     if f.downweighted:
         lines.append("trusted less by the solver (a Huber loss): " + ", ".join(f.downweighted))
     if f.nuisances:
-        lines.append("the bench's shared errors estimated (with their priors): " + ", ".join(
-            f"{k} {v:.5f}" if k == "scale" else f"{k} {v:+.4f}°"
-            for k, v in f.nuisances.items()))
+        lines.append("the bench's shared errors estimated (with their priors): "
+                     + describe_estimates(*_nuisances(f)))
     where = "inside" if e.inside95 else "outside"
     lines.append(f"the true target lies {e.target_mahalanobis:.2f} σ from the estimate: "
                  f"{where} the 95 % ellipsoid, whose edge is at {CHI2_3_R95:.2f} σ")
@@ -92,3 +92,13 @@ def _ellipsoid95(cov: np.ndarray | None) -> tuple[float, ...]:
         return ()
     vals = np.linalg.eigvalsh(np.asarray(cov, float))[::-1]
     return tuple(float(CHI2_3_R95 * np.sqrt(max(v, 0.0))) for v in vals)
+
+
+def _nuisances(fit: Fit3) -> tuple[dict[str, float], dict[str, float]]:
+    """The fit's nuisance estimates and their σ's (where it has a covariance), keyed by
+    their names in a solution (:data:`solver.selfcal.KNOWN`), as describe_estimates
+    says them."""
+    keys = [KNOWN[n][0] for n in fit.nuisances]
+    sd = ({} if fit.covariance is None else
+          {k: float(np.sqrt(fit.covariance[6 + i, 6 + i])) for i, k in enumerate(keys)})
+    return dict(zip(keys, fit.nuisances.values(), strict=True)), sd

@@ -89,8 +89,8 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
         If ``out_dir`` holds files mirrorsim did not write, or the scene's own file.
     BadParameter
         A ``keep`` that names no extra file; ``board_pose`` on a plain board; a bad
-        ``geometry``; with 3d, a calibration of the mirror's power or of the beacons'
-        positions (the 3-D solve estimates pan, pitch and range scale).
+        ``geometry``; with 3d, a calibration of the beacons' positions (the 3-D solve
+        estimates pan, pitch, range scale and the mirror's power).
     SolverError
         If the measurements do not determine the mirror and the target, or
         ``calibration`` is not a :class:`~solver.selfcal.SelfCalibration`.

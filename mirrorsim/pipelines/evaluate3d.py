@@ -164,11 +164,11 @@ def evaluate_into3(scene: Scene, out: Path, *, variant: str = "auto", progress: 
     """Render (or reuse), detect in 3-D, solve in 3-D and score ``scene`` into ``out``, a
     folder its caller has claimed, its parameters checked
     (:func:`mirrorsim.pipelines.evaluate.evaluate_scene` with ``geometry``);
-    ``calibration``: the pan, pitch and range scale to estimate, and what the user
-    states of them (:func:`check_calibration3`), beside the bench model's own (``model_priors``
-    False: ``calibration``'s alone, as a budget compares its runs); ``board_pose``: every
-    image read again through the camera's pose the board's holes give
-    (:func:`~mirrorsim.detection.posed.corrected_image3`), the pan then the board's.
+    ``calibration``: the pan, pitch, range scale and mirror's power to estimate, and what
+    the user states of them (:func:`check_calibration3`), beside the bench model's own
+    (``model_priors`` False: ``calibration``'s alone, as a budget compares its runs);
+    ``board_pose``: every image read again through the camera's pose the board's holes
+    give (:func:`~mirrorsim.detection.posed.corrected_image3`), the pan then the board's.
 
     Raises
     ------
@@ -288,9 +288,9 @@ def _seen3(scene: Scene, measured: list, sigma: ObjectSigmas, *, fx: float,
                                                         else pose.pan_offset_deg))
 
 
-# what the 3-D solve estimates of a bench's shared errors (the mirror's power and the
-# beacons' positions it does not estimate)
-CALIBRATED3 = ("pan", "pitch", "scale")
+# what the 3-D solve estimates of a bench's shared errors (the beacons' positions it
+# does not estimate)
+CALIBRATED3 = ("pan", "pitch", "scale", "power")
 
 
 def check_calibration3(name: str, calibration: SelfCalibration) -> None:
