@@ -123,6 +123,10 @@ RESULTS: tuple[Result, ...] = (
                                 "errors in the planar model's σ's, and the factor they call for",
            fresh=("renders/evaluate3d-7001", "renders/evaluate3d-7002",
                   "renders/evaluate3d-wide-7003", "renders/evaluate3d-wide-7004")),
+    Result("evaluate_raised",
+           (f"{MS} evaluate scenes/bench/raised.yaml --out renders/raised_plain --quiet",),
+           about="the 3-D scene on EXP1's hand-built bench, evaluated as it stands",
+           fresh=("renders/raised_plain",)),
     Result("evaluate_raised_board",
            (f"{MS} evaluate scenes/bench/raised.yaml --board-pose --out renders/raised_board "
             "--quiet",),

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from solver.errors import SolverError
 from solver.geometry import line_normal, unit
 from solver.measurements import (
     ObjectSigmas,
@@ -150,8 +151,10 @@ def nuisance_columns(nuisances: tuple[str, ...], d: np.ndarray,
             ea[:, j] = 1.0
         elif name == "scale":
             ed[:, j] = d
-        else:
+        elif name == "power":
             ea[:, j], ed[:, j] = power
+        else:
+            raise SolverError(f"{name}: not a nuisance of the planar solve")
     return ea, ed
 
 

@@ -233,7 +233,8 @@ def crlb(observer: ArrayLike, beacons: ArrayLike, mirror_yaw_deg: float, *, mirr
     """
     o = np.asarray(observer, float)
     B = np.atleast_2d(np.asarray(beacons, float))
-    calibration = SelfCalibration(tuple(nuisances)) if calibration is None else calibration
+    calibration = check_planar(SelfCalibration(tuple(nuisances)) if calibration is None
+                               else calibration)
     check_nuisances(calibration.nuisances, len(B), n_targets, priors=calibration.priors)
     sig = as_object_sigmas(sigma)
     t = np.asarray(target, float)

@@ -281,7 +281,8 @@ def _check_objects(n_beacons: int, heights: tuple[float, ...] | None,
 
 def _jacobian(p: _Problem, x: np.ndarray) -> np.ndarray:
     """The weighted residuals' Jacobian at ``x`` by central differences (steps a
-    millionth of each parameter's scale: 1e-6° and 1e-6 cm, 1e-9 in the scale)."""
+    millionth of each parameter's scale: 1e-6° and 1e-6 cm, 1e-9 in the scale; 1e-6/cm
+    in the power, in which the model is linear: exact at any step)."""
     steps = np.full(len(x), 1e-6)
     steps[6:] = [1e-9 if n == "scale" else 1e-6 for n in p.nuisances]
     cols = []

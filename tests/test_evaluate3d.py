@@ -368,8 +368,9 @@ def test_solve_calibrates_the_pitch_of_3d_measurements_and_a_planar_solve_refuse
         tmp_path):
     """Exact readings with every elevation raised 0.3° (a mount's pitch reading): plain,
     the target comes out off; with --calibrate pitch it comes back to 1e-5 cm and the
-    pitch to 1e-6°.  A planar solve (the same beacons' α and d_total alone) and a planar
-    scene's evaluation refuse the pitch in one line, exit 2, before any folder."""
+    pitch to 1e-6°, and with pan, pitch and scale on the two beacons to 1e-4 cm.  A
+    planar solve (the same beacons' α and d_total alone), a planar scene's evaluation
+    and its plan refuse the pitch in one line, exit 2, before any folder."""
     from solver.lsq import solve_measurements
     from solver.measurements import BeaconMeasurement
 
@@ -389,6 +390,9 @@ def test_solve_calibrates_the_pitch_of_3d_measurements_and_a_planar_solve_refuse
     cal = target_of(solve(f, "--calibrate", "pitch", "--json", "-"))
     np.testing.assert_allclose(cal["target"], LEANING_TARGET, atol=1e-5)
     assert cal["nuisances"]["pitch"] == pytest.approx(0.3, abs=1e-6)
+    # three nuisances on two beacons: 3-D images give three readings each (9 for 9)
+    three = target_of(solve(f, "--calibrate", "pan,pitch,scale", "--json", "-"))
+    np.testing.assert_allclose(three["target"], LEANING_TARGET, atol=1e-4)
     beacons = [BeaconMeasurement((30.0, 50.0), 60.0, 80.0),
                BeaconMeasurement((40.0, 55.0), 55.0, 90.0)]
     with pytest.raises(SolverError, match="pitch"):
@@ -405,6 +409,11 @@ def test_solve_calibrates_the_pitch_of_3d_measurements_and_a_planar_solve_refuse
                          text=True)
     assert bad.returncode == 2 and "pitch" in bad.stderr and not out.exists()
     assert len(bad.stderr.strip().splitlines()) == 1
+    plan = subprocess.run([sys.executable, "-m", "mirrorsim.cli.main", "plan",
+                           str(SCENES / "exp3.yaml"), "--calibrate", "pitch", "--prior",
+                           "pitch=0.5"], cwd=ROOT, capture_output=True, text=True)
+    assert plan.returncode == 2 and len(plan.stderr.strip().splitlines()) == 1
+    assert "--calibrate" in plan.stderr and "pitch" in plan.stderr
 
 
 def test_a_3d_capture_record_reads_back_as_written():

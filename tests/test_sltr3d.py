@@ -260,18 +260,19 @@ def _on_sphere(o, q, plane, vertex, radius):
     return surface(best.x)
 
 
-def test_the_3d_power_terms_turn_each_ray_as_a_curved_glass_does():
+@pytest.mark.parametrize("radius,within", [(20000.0, 0.01), (2000.0, 0.025)])
+def test_the_3d_power_terms_turn_each_ray_as_a_curved_glass_does(radius, within):
     """Each image's α and ε on a leaning glass curved to R = 200 m about a vertex (the
     reflection point found on the sphere by Fermat's principle, here) against the first
-    order: within 1 % of the larger of the two changes (at R = 20 m, 2 %: the second
-    order)."""
+    order: within 1 % of the larger of the two changes; at R = 20 m within 2.5 % (2.2 %
+    measured: the second order)."""
     from solver.sltr3d import power_terms3
 
     rng = np.random.default_rng(11)
     plane, _, _, pts = _scene(rng)
     vertex = plane.hit(CAMERA, plane.reflect(pts[0]) - CAMERA) + np.array([3.0, -2.0, 4.0])
     vertex -= (vertex @ plane.normal - plane.rho) * plane.normal
-    c = 1.0 / 20000.0
+    c = 1.0 / radius
     terms = power_terms3(CAMERA, plane, pts, vertex=vertex)
     for p, (da, de, _) in zip(pts, terms, strict=True):
         x = _on_sphere(CAMERA, p, plane, vertex, 1.0 / c)
@@ -281,16 +282,18 @@ def test_the_3d_power_terms_turn_each_ray_as_a_curved_glass_does():
         elev = math.degrees(math.asin(ray[2] / np.linalg.norm(ray))
                             - math.asin(flat[2] / np.linalg.norm(flat)))
         scale = max(abs(da), abs(de)) * c
-        assert alpha == pytest.approx(c * da, abs=0.01 * scale)
-        assert elev == pytest.approx(c * de, abs=0.01 * scale)
+        assert alpha == pytest.approx(c * da, abs=within * scale)
+        assert elev == pytest.approx(c * de, abs=within * scale)
 
 
-def test_least_squares_self_calibrates_a_curved_glass():
+@pytest.mark.parametrize("scale", [1.0, 1.006])
+def test_least_squares_self_calibrates_a_curved_glass(scale):
     """Readings of a glass curved to R = 20 m about its centre (the first-order terms at
-    that vertex): estimated with the power (the fit curving about its images' middle,
-    a vertex elsewhere being a turn and a shift of the plane to first order), the
-    target comes back within 0.02 cm (the second order) and the power within 1 %;
-    plain, it is off by ten times that."""
+    that vertex), with (1.006) and without a range scale on them, s·(d + c·D): estimated
+    with the power and the scale (the fit curving about its images' middle, a vertex
+    elsewhere being a turn and a shift of the plane to first order), the target comes
+    back within 0.02 cm, the power within 1 % and the scale within 3e-4 (the second
+    order: 1.0e-4 measured); plain, it is off by ten times that."""
     from solver.lsq3 import solve_lsq3
     from solver.sltr3d import power_terms3
 
@@ -301,11 +304,12 @@ def test_least_squares_self_calibrates_a_curved_glass():
     c = 1.0 / 2000.0
     objects = [*beacons, target]
     terms = power_terms3(CAMERA, plane, objects, vertex=centre)
-    seen = [tuple(np.add(_seen(CAMERA, plane, p), c * t)) for p, t in zip(objects, terms,
-                                                                           strict=True)]
+    seen = [_with_nuisances(np.add(_seen(CAMERA, plane, p), c * t), scale=scale)
+            for p, t in zip(objects, terms, strict=True)]
     fit = solve_lsq3(CAMERA, list(zip(beacons, seen[:-1], strict=True)), [seen[-1]],
-                     nuisances=("power",))
+                     nuisances=("scale", "power"))
     assert fit.nuisances["power"] == pytest.approx(c, rel=0.01)
+    assert fit.nuisances["scale"] == pytest.approx(scale, abs=3e-4)
     assert np.linalg.norm(fit.target - target) < 0.02
     plain = solve_lsq3(CAMERA, list(zip(beacons, seen[:-1], strict=True)), [seen[-1]])
     assert np.linalg.norm(plain.target - target) > 0.2

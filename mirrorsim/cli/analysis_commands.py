@@ -54,7 +54,7 @@ def _solve(args) -> int:
     m = load_measurements(args.measurements)
     if isinstance(m, Measurements3):
         return _solve3(args, m)
-    calibration = calibration_of(args, len(m.beacons), len(m.targets))
+    calibration = calibration_of(args, len(m.beacons), len(m.targets), three_d=False)
     model = error_model_of(args)
     if model is not None and m.sigma is not None:
         print(f"note: --error-model {args.error_model} gives the σ's; the `sigma` of "
@@ -86,8 +86,8 @@ def _solve3(args, m) -> int:
     from mirrorsim.formats.error_model_file import default_error_model
     from mirrorsim.pipelines.evaluate3d import check_calibration3
 
-    calibration = calibration_of(args, len(m.beacons), 1)
-    try:  # (pan and scale, with the priors --prior states)
+    calibration = calibration_of(args, len(m.beacons), 1, three_d=True)
+    try:  # (pan, pitch, scale and power, with the priors --prior states)
         check_calibration3(str(args.measurements), calibration)
     except BadParameter as exc:
         raise BadArgument("--calibrate", exc.message) from None
@@ -288,7 +288,8 @@ def _plan(args) -> int:
              else (error_model_of(args) or default_error_model()).typical)
     plan = plan_scene(scene, sigma, args.eps, yaw_spread_deg=args.yaw_spread,
                       d1_spread=args.d1_spread, step=args.step,
-                      n_beacons=args.beacons, calibration=calibration_of(args))
+                      n_beacons=args.beacons,
+                      calibration=calibration_of(args, three_d=False))
     summ = plan.to_json()
     print(plan_text(scene, plan))
     out = out_file(args, scene, f"{scene.name}.plan.png")

@@ -138,15 +138,18 @@ def calibrate_option(p: argparse.ArgumentParser, beacon_sigma_alone: bool = True
 
 
 def calibration_of(args: argparse.Namespace, n_beacons: int | None = None,
-                   n_targets: int = 1) -> SelfCalibration:
+                   n_targets: int = 1, *, three_d: bool | None = None) -> SelfCalibration:
     """--calibrate, --beacon-sigma and --prior as one checked value (and, where
-    ``n_beacons`` is known, that the measurements can carry the nuisances), before any
-    work is done; a bad one names its flag."""
+    ``n_beacons`` is known, that the measurements can carry the nuisances: each image
+    gives three readings in 3-D, two in the plane), before any work is done; a bad one
+    names its flag.  ``three_d`` False: a planar solve, which refuses the pitch; None:
+    not known yet (the names and a planar count only)."""
     from solver.errors import SolverError
     from solver.selfcal import (
         SelfCalibration,
         check_nuisance_sigma,
         check_nuisances,
+        check_planar,
         parse_priors,
     )
 
@@ -156,7 +159,10 @@ def calibration_of(args: argparse.Namespace, n_beacons: int | None = None,
     except ValueError as exc:
         raise BadArgument("--prior", str(exc)) from None
     try:  # the names always; the count only where the beacons are known
-        check_nuisances(names, n_beacons, n_targets, priors=priors)
+        check_nuisances(names, n_beacons, n_targets, priors=priors,
+                        readings=3 if three_d else 2)
+        if three_d is False:
+            check_planar(SelfCalibration(names))
     except SolverError as exc:
         raise BadArgument("--calibrate", str(exc)) from None
     try:

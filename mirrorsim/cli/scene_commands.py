@@ -179,10 +179,9 @@ def _evaluate_options(p):
     p.add_argument("--board-pose", action="store_true",
                    help="measure the camera's pan, pitch and roll on the pegboard's holes "
                         "seen in each frame and correct every α and d_total (in 3-D each "
-                        "elevation too) by them: the "
-                        "bench calibrates its mount (its pan then known to ~0.002°; a "
-                        "--prior on pan gives way to it); a mount off by up to ±3.2° in "
-                        "pan, pitch and roll.  About 1 s a frame")
+                        "elevation too) by them: the bench calibrates its mount (its pan "
+                        "then known to ~0.002°; a --prior on pan gives way to it); a mount "
+                        "off by up to ±3.2° in pan, pitch and roll.  About 1 s a frame")
     p.add_argument("--geometry", choices=("auto", "3d", "planar"), default="auto",
                    help="3d: measure each image's elevation and solve for the mirror's "
                         "plane (its lean) and the target in 3-D, beside the planar solve "
@@ -205,12 +204,13 @@ def _evaluate(args) -> int:
     from mirrorsim.pipelines.evaluate import check_board_pose, check_geometry, evaluate_scene
 
     scene = render_options(args, load(args.scene))
-    calibration = calibration_of(args, len(scene.beacons))  # before anything renders
+    three_d = check_geometry(scene, args.geometry) == "3d"  # each image: 3 readings, or 2
+    calibration = calibration_of(args, len(scene.beacons), three_d=three_d)  # before rendering
     if "plot" in args.keep:
         preload("mirrorsim.cli.plots")  # matplotlib imports while the frame renders
     model = error_model_of(args)  # read and checked before anything is written
     check_board_pose(scene, args.board_pose)
-    three_d = check_geometry(scene, args.geometry, calibration=calibration) == "3d"
+    check_geometry(scene, args.geometry, calibration=calibration)
     if three_d and "plot" in args.keep:
         raise BadArgument("--keep", "plot: the top view draws a planar report; give "
                            "--geometry planar for it")
@@ -273,7 +273,8 @@ def _budget(args) -> int:
 
     scene = render_options(args, load(args.scene))
     # before anything renders or is written
-    calibration = check_budget_calibration(scene, calibration_of(args, len(scene.beacons)))
+    calibration = check_budget_calibration(
+        scene, calibration_of(args, len(scene.beacons), three_d=scene.is_3d))
     model = error_model_of(args)  # read and checked before anything is written
     found = sources(scene)
     if not found:

@@ -16,6 +16,7 @@ from solver.selfcal import describe_estimates
 from solver.sltr import Solution
 
 if TYPE_CHECKING:  # renders, budgets and tracks: no Mitsuba import to print a table
+    from mirrorsim.detection.board import CameraPose
     from mirrorsim.rendering.frames import FrameFiles
 
 
@@ -169,6 +170,13 @@ def report_table(report: Report, report_scene: Scene | None = None) -> str:
     return "\n".join(lines)
 
 
+def pose_line(p: CameraPose) -> str:
+    """The camera's pose the board gave, as a report's table says it."""
+    return (f"camera pose from the board's holes: pan {p.pan_offset_deg:+.4f}° from the "
+            f"mount's reading (± {p.pan_sd_deg:.4f}°), pitch {p.pitch_deg:+.4f}°, roll "
+            f"{p.roll_deg:+.4f}° ({p.holes} holes, median residual {p.residual_px:.2f} px)")
+
+
 def _report_notes(report: Report) -> list[str]:
     """The lines under :func:`report_table`'s table: the board's pose, the σ's, the
     priors, the images trusted less, the self-calibration, the Mahalanobis distance, the
@@ -176,11 +184,7 @@ def _report_notes(report: Report) -> list[str]:
     m, s, e = report.measurements, report.solution, report.errors
     lines: list[str] = []
     if report.camera_pose is not None:
-        p = report.camera_pose
-        lines.append(f"camera pose from the board's holes: pan {p.pan_offset_deg:+.4f}° from the "
-                     f"mount's reading (± {p.pan_sd_deg:.4f}°), pitch {p.pitch_deg:+.4f}°, roll "
-                     f"{p.roll_deg:+.4f}° ({p.holes} holes, median residual "
-                     f"{p.residual_px:.2f} px)")
+        lines.append(pose_line(report.camera_pose))
     if m.sigma is not None:
         lines.append(f"σ's from {report.error_model or 'the error model'}: "
                      f"{m.sigma.describe()}")

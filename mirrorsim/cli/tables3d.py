@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mirrorsim.cli.tables import bench_line, columns
+from mirrorsim.cli.tables import bench_line, columns, pose_line
 from mirrorsim.pipelines.evaluate3d import CHI2_3_R95, Report3
 from mirrorsim.scene.model import Scene
 from solver.lsq3 import Fit3
@@ -47,6 +47,8 @@ def report3_table(report: Report3, report_scene: Scene | None = None) -> str:
     lines.insert(1, "-" * len(lines[0]))
     if report_scene is not None:
         lines.append(bench_line(report_scene))
+    if report.camera_pose is not None:
+        lines.append(pose_line(report.camera_pose))
     lines.append("the images' truth: what an exact detector reads (in a leaning mirror "
                  "the image leans: its mid-height's bearing, its length along its axis)")
     lines.append(f"solved in 3-D; σ's from {report.error_model} (the elevation's from "

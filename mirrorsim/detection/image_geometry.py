@@ -99,7 +99,7 @@ def rise_reading(tan_face: float, d_total: float, kind: str) -> tuple[float, flo
     elevation of tangent ``tan_face``, ``d_total`` (cm, size constancy's, horizontal)
     away: the foot lies tan_face·(d_total − the face's offset) above the lens
     (:func:`elevation_of`; the board's pose gives its own tangent,
-    :func:`~mirrorsim.detection.board.corrected_image3`)."""
+    :func:`~mirrorsim.detection.posed.corrected_image3`)."""
     rise = tan_face * (d_total - FRONT_OFFSET[kind])
     return math.degrees(math.atan2(rise, d_total)), math.hypot(d_total, rise)
 

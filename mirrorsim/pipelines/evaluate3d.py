@@ -37,7 +37,7 @@ from mirrorsim.scene.render_settings import AOVS
 from mirrorsim.truth import optics
 from mirrorsim.truth.groundtruth import GroundTruth, RenderInfo
 from solver.errors import SolverError
-from solver.geometry import yaw_difference
+from solver.geometry import wrap_bearing, yaw_difference
 from solver.lsq import solve_measurements
 from solver.lsq3 import Fit3, Measurements3, crlb3
 from solver.measurements import ObjectSigmas, Sigma
@@ -284,8 +284,8 @@ def _seen3(scene: Scene, measured: list, sigma: ObjectSigmas, *, fx: float,
     capture = with_target[0].files.capture
     return _measurements3(capture, [(b, reading(c, im, pencil_paint_height(b.height)))
                                     for b, im, c in pencils], target, sigma=tuple(sig),
-                          pan=capture.camera.pan_deg + (0.0 if pose is None
-                                                        else pose.pan_offset_deg))
+                          pan=float(wrap_bearing(capture.camera.pan_deg + (
+                              0.0 if pose is None else pose.pan_offset_deg))))
 
 
 # what the 3-D solve estimates of a bench's shared errors (the beacons' positions it
@@ -309,8 +309,8 @@ def nuisances3(model: ErrorModel, sigma: ObjectSigmas, asked: SelfCalibration = 
                ) -> tuple[tuple[str, ...], dict[str, float], ObjectSigmas]:
     """The bench's shared errors the 3-D solve estimates, with their priors, and the σ's
     it weighs with: those ``asked`` (a prior the user states wins over the model's, none
-    leaves it free), and (``bench``) the pan and range scale a bench model's tolerances
-    give; an α error every image of a frame shares widens the pan's prior (an
+    leaves it free), and (``bench``) the pan, range scale and power a bench model's
+    tolerances give; an α error every image of a frame shares widens the pan's prior (an
     ideal-bench model, asked nothing: none).  ``board``: the camera's pose the board
     gave and the frames' focal length: the pan is then the board's
     (:func:`~mirrorsim.pipelines.measured.after_board`)."""

@@ -46,7 +46,7 @@ from solver.placement import (
     region_area,
     visible_region,
 )
-from solver.selfcal import PLAIN, SelfCalibration, as_calibration
+from solver.selfcal import PLAIN, SelfCalibration, as_calibration, check_planar
 
 AREA_DISTANCES = (25.0, 50.0, 100.0, 200.0, 400.0, 1000.0)
 # cm: finer grids take long without news (exp1 here: 1 cm 7 s, 0.5 cm 11 s, 0.25 cm 26 s)
@@ -165,7 +165,7 @@ def plan_scene(scene: Scene, sigma: Sigma | ObjectSigmas | None = None, eps_deg:
         raise BadParameter("sigma", f"{len(sigma.beacons)} beacon σ pairs: give one (every "
                            "position the plan tries is a pencil like the others)")
     _check_parameters(sigma, eps_deg, step, yaw_spread_deg, d1_spread)
-    calibration = as_calibration(calibration)
+    calibration = check_planar(as_calibration(calibration))  # a planar solve's: no pitch
     for name, v, hi in (("n_beacons", n_beacons, MAX_PLANNED_BEACONS),
                         ("n_poses", n_poses, MAX_POSES)):
         if not (is_whole(v) and 1 <= v <= hi):
