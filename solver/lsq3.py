@@ -57,13 +57,18 @@ class Fit3:
     def to_json(self) -> dict:
         """The 3-D solution document (docs/files.md): the mirror's plane n·x = offset,
         its yaw and lean, the target, its covariance (None without σ's), the nuisances
-        and the measurements the robust fit trusted less."""
+        with their σ's after the fit (None without σ's) and the measurements the robust
+        fit trusted less."""
         cov = self.target_covariance
+        sd = (None if self.covariance is None else
+              {n: float(np.sqrt(self.covariance[6 + i, 6 + i]))
+               for i, n in enumerate(self.nuisances)})
         return {"mirror": {"yaw_deg": self.plane.yaw_deg, "lean_deg": self.plane.lean_deg,
                            "normal": self.plane.normal.tolist(), "offset_cm": self.plane.rho},
                 "target": self.target.tolist(),
                 "target_covariance": None if cov is None else cov.tolist(),
-                "nuisances": dict(self.nuisances), "downweighted": list(self.downweighted)}
+                "nuisances": dict(self.nuisances), "nuisance_sd": sd,
+                "downweighted": list(self.downweighted)}
 
 
 @dataclass(frozen=True)

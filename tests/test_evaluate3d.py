@@ -360,7 +360,7 @@ def test_solve_calibrates_3d_measurements_on_the_command_line(tmp_path):
     np.testing.assert_allclose(cal["target"], target, atol=1e-5)
     assert cal["nuisances"]["pan"] == pytest.approx(0.4, abs=1e-6)
     bad = solve("--calibrate", "pan", "--beacon-sigma", "0.5")
-    assert bad.returncode == 2 and "--calibrate" in bad.stderr and "position" in bad.stderr
+    assert bad.returncode == 2 and "--beacon-sigma" in bad.stderr and "position" in bad.stderr
     assert len(bad.stderr.strip().splitlines()) == 1
 
 
@@ -370,7 +370,9 @@ def test_solve_calibrates_the_pitch_of_3d_measurements_and_a_planar_solve_refuse
     the target comes out off; with --calibrate pitch it comes back to 1e-5 cm and the
     pitch to 1e-6°, and with pan, pitch and scale on the two beacons to 1e-4 cm.  A
     planar solve (the same beacons' α and d_total alone), a planar scene's evaluation
-    and its plan refuse the pitch in one line, exit 2, before any folder."""
+    and its plan refuse the pitch in one line, exit 2, before any folder, and so does a
+    3-D evaluation with the board's pose (which measures the pitch).  The estimate is
+    printed with its σ; a bench model's σ's bring its shared errors' priors."""
     from solver.lsq import solve_measurements
     from solver.measurements import BeaconMeasurement
 
@@ -387,9 +389,15 @@ def test_solve_calibrates_the_pitch_of_3d_measurements_and_a_planar_solve_refuse
 
     plain = target_of(solve(f, "--json", "-"))
     assert np.linalg.norm(np.array(plain["target"]) - LEANING_TARGET) > 0.05
-    cal = target_of(solve(f, "--calibrate", "pitch", "--json", "-"))
+    run = solve(f, "--calibrate", "pitch", "--json", "-")
+    cal = target_of(run)
     np.testing.assert_allclose(cal["target"], LEANING_TARGET, atol=1e-5)
     assert cal["nuisances"]["pitch"] == pytest.approx(0.3, abs=1e-6)
+    assert cal["nuisance_sd"]["pitch"] > 0 and "pitch offset 0.3000°" in run.stderr
+    # a bench model's σ's bring its shared errors with their priors, as in the plane
+    bench = target_of(solve(f, "--error-model", "mirrorsim/data/error_model_bench.json",
+                            "--json", "-"))
+    assert set(bench["nuisances"]) == {"pan", "scale", "power"}
     # three nuisances on two beacons: 3-D images give three readings each (9 for 9)
     three = target_of(solve(f, "--calibrate", "pan,pitch,scale", "--json", "-"))
     np.testing.assert_allclose(three["target"], LEANING_TARGET, atol=1e-4)
@@ -409,6 +417,15 @@ def test_solve_calibrates_the_pitch_of_3d_measurements_and_a_planar_solve_refuse
                          text=True)
     assert bad.returncode == 2 and "pitch" in bad.stderr and not out.exists()
     assert len(bad.stderr.strip().splitlines()) == 1
+    alone = subprocess.run([sys.executable, "-m", "mirrorsim.cli.main", "evaluate",
+                            str(SCENES / "default.yaml"), "--calibrate", "pitch", "--out",
+                            str(out)], cwd=ROOT, capture_output=True, text=True)
+    assert alone.returncode == 2 and "planar solve does not read" in alone.stderr  # not a count
+    posed = subprocess.run([sys.executable, "-m", "mirrorsim.cli.main", "evaluate",
+                            str(SCENES / "raised.yaml"), "--calibrate", "pitch", "--prior",
+                            "pitch=0.5", "--board-pose", "--out", str(out)], cwd=ROOT,
+                           capture_output=True, text=True)
+    assert posed.returncode == 2 and "board" in posed.stderr and not out.exists()
     plan = subprocess.run([sys.executable, "-m", "mirrorsim.cli.main", "plan",
                            str(SCENES / "exp3.yaml"), "--calibrate", "pitch", "--prior",
                            "pitch=0.5"], cwd=ROOT, capture_output=True, text=True)

@@ -84,23 +84,30 @@ def _solve3(args, m) -> int:
     elevation): the mirror's plane, its lean and the target in 3-D."""
     from mirrorsim.cli.tables3d import solution3_summary
     from mirrorsim.formats.error_model_file import default_error_model
-    from mirrorsim.pipelines.evaluate3d import check_calibration3
+    from mirrorsim.pipelines.evaluate3d import check_calibration3, with_shared_pan
+    from mirrorsim.pipelines.solving import model_calibration
 
     calibration = calibration_of(args, len(m.beacons), 1, three_d=True)
     try:  # (pan, pitch, scale and power, with the priors --prior states)
         check_calibration3(str(args.measurements), calibration)
     except BadParameter as exc:
-        raise BadArgument("--calibrate", exc.message) from None
+        flag = "--beacon-sigma" if exc.parameter == "position_sigma" else "--calibrate"
+        raise BadArgument(flag, exc.message) from None
     model = error_model_of(args)
     source = f"`sigma` of {args.measurements}"
+    shared = 0.0
     if model is not None or m.sigma is None:
-        t = (model or default_error_model()).typical
+        model = model or default_error_model()
+        t = model.typical
         b = t.beacons[0]
         m = replace(m, sigma=((b.alpha_deg, b.alpha_deg, b.d_total_rel),) * len(m.beacons)
                     + ((t.target.alpha_deg, t.target.alpha_deg, t.target.d_total_rel),))
-        source = (f"{(model or default_error_model()).name()}'s typical σ's, the "
-                  "elevation's taken as the azimuth's (a measurements file holds no pixels)")
-    fit = m.solve(nuisances=calibration.nuisances, priors=dict(calibration.priors))
+        source = (f"{model.name()}'s typical σ's, the elevation's taken as the azimuth's "
+                  "(a measurements file holds no pixels)")
+        # a bench model's shared errors with their priors, as the planar solve takes them
+        calibration, shared = model_calibration(model, calibration), t.shared_alpha_deg
+    nuisances, priors = with_shared_pan(calibration, shared)
+    fit = m.solve(nuisances=nuisances, priors=priors)
     print(f"σ's from {source}", file=sys.stderr)
     print(solution3_summary(str(args.measurements), fit))
     emit(args, fit.to_json())

@@ -83,7 +83,7 @@ def _dataset(args) -> int:
 
     at_least(("--n", args.n, 1, MAX_SCENES), ("--seed", args.seed, 0, MAX_SEED),
              ("--workers", args.workers, 1, MAX_WORKERS))
-    calibration = calibration_of(args)
+    calibration = calibration_of(args, three_d=False)  # a dataset's scenes solve in the plane
     from mirrorsim.scene.render_settings import AOVS
 
     bad = [a for a in args.aov if a not in AOVS]

@@ -113,12 +113,14 @@ def spp_option(p: argparse.ArgumentParser, default: str) -> None:
 
 
 def calibrate_option(p: argparse.ArgumentParser, beacon_sigma_alone: bool = True) -> None:
-    """``--calibrate pan,scale[,power]``, ``--beacon-sigma CM`` and ``--prior NAME=σ,…``:
+    """``--calibrate pan,scale[,power][,pitch]``, ``--beacon-sigma CM`` and ``--prior NAME=σ,…``:
     self-calibration's settings (:func:`calibration_of`); ``beacon_sigma_alone`` False:
     the command takes --beacon-sigma only with --calibrate."""
-    p.add_argument("--calibrate", default=None, metavar="pan,scale[,power]", action=_Once,
+    p.add_argument("--calibrate", default=None, metavar="pan,scale[,power][,pitch]",
+                   action=_Once,
                    help="estimate bench errors shared by every measurement with the mirror "
-                   "(self-calibration; needs 2+ beacons, 3+ for all three): pan, an offset on "
+                   "(self-calibration; needs 2+ beacons, 3+ for pan, scale and power): pan, "
+                   "an offset on "
                    "every alpha (the mount's pan reading); scale, a factor on every d_total "
                    "(the calibration); power, the mirror's curvature 1/R, which moves each "
                    "image by its own amount; pitch, an offset on every elevation (the "
@@ -159,10 +161,10 @@ def calibration_of(args: argparse.Namespace, n_beacons: int | None = None,
     except ValueError as exc:
         raise BadArgument("--prior", str(exc)) from None
     try:  # the names always; the count only where the beacons are known
+        if three_d is False:  # before the count: more beacons would not help
+            check_planar(SelfCalibration(names))
         check_nuisances(names, n_beacons, n_targets, priors=priors,
                         readings=3 if three_d else 2)
-        if three_d is False:
-            check_planar(SelfCalibration(names))
     except SolverError as exc:
         raise BadArgument("--calibrate", str(exc)) from None
     try:

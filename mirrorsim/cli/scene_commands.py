@@ -209,7 +209,7 @@ def _evaluate(args) -> int:
     if "plot" in args.keep:
         preload("mirrorsim.cli.plots")  # matplotlib imports while the frame renders
     model = error_model_of(args)  # read and checked before anything is written
-    check_board_pose(scene, args.board_pose)
+    check_board_pose(scene, args.board_pose, calibration)
     check_geometry(scene, args.geometry, calibration=calibration)
     if three_d and "plot" in args.keep:
         raise BadArgument("--keep", "plot: the top view draws a planar report; give "

@@ -60,7 +60,8 @@ def report3_table(report: Report3, report_scene: Scene | None = None) -> str:
     if f.downweighted:
         lines.append("trusted less by the solver (a Huber loss): " + ", ".join(f.downweighted))
     if f.nuisances:
-        lines.append("the bench's shared errors estimated (with their priors): "
+        lines.append("the bench's shared errors estimated (with their priors; ± each "
+                     "estimate's σ after the fit): "
                      + describe_estimates(*_nuisances(f)))
     where = "inside" if e.inside95 else "outside"
     lines.append(f"the true target lies {e.target_mahalanobis:.2f} σ from the estimate: "
@@ -83,6 +84,9 @@ def solution3_summary(source: str, fit: Fit3) -> str:
     if axes:
         lines.append("  95 % ellipsoid of the target: " + " × ".join(f"{a:.3f}" for a in axes)
                      + " cm (semi-axes)")
+    if fit.nuisances:
+        lines.append("  self-calibration (each estimate ± its σ after the fit): "
+                     + describe_estimates(*_nuisances(fit)))
     if fit.downweighted:
         lines.append("  trusted less (a Huber loss): " + ", ".join(fit.downweighted))
     return "\n".join(lines)

@@ -101,7 +101,7 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
     check_keep(keep)
     calibration = as_calibration(calibration)  # before anything renders
     error_model = as_error_model(error_model)
-    check_board_pose(scene, board_pose)
+    check_board_pose(scene, board_pose, calibration)
     check_variant(variant)
     three_d = check_geometry(scene, geometry, calibration=calibration) == "3d"
     out = claim_run_folder(out_dir if out_dir is not None else default_out(scene.name),
@@ -131,11 +131,17 @@ def check_geometry(scene: Scene, geometry: str, *,
     return chosen
 
 
-def check_board_pose(scene: Scene, board_pose: bool) -> None:
-    """Refuse ``board_pose`` on a plain board (before a run claims its folder)."""
+def check_board_pose(scene: Scene, board_pose: bool,
+                     calibration: SelfCalibration = PLAIN) -> None:
+    """Refuse ``board_pose`` on a plain board, and with it a pitch to estimate (the board
+    measures it, every elevation read through it), before a run claims its folder."""
     if board_pose and scene.board.hole_pitch <= 0:
         raise BadParameter("board_pose", f"{scene.name}: its board is plain (board.hole_pitch "
                            "0): no holes to measure the camera's pose on")
+    if board_pose and "pitch" in calibration.nuisances:
+        raise BadParameter("nuisances", f"{scene.name}: pitch, with the board's pose: the "
+                           "board measures the camera's pitch, and every elevation is read "
+                           "through it")
 
 
 def evaluate_into(scene: Scene, out: Path, *, variant: str = "auto", progress: bool = True,

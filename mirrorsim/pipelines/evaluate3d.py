@@ -297,21 +297,23 @@ def check_calibration3(name: str, calibration: SelfCalibration) -> None:
     """Refuse, naming the scene, a calibration the 3-D solve cannot make: a nuisance
     other than CALIBRATED3, or the beacons' positions estimated (a position σ)."""
     other = [n for n in calibration.nuisances if n not in CALIBRATED3]
-    if other or calibration.position_sigma:
-        what = ", ".join(other) or f"the beacons' positions (σ {calibration.position_sigma:g} cm)"
-        raise BadParameter("calibration", f"{name}: the 3-D solve estimates "
-                           f"{', '.join(CALIBRATED3)} and not yet {what} (the planar "
-                           "solve does)")
+    if other:
+        raise BadParameter("nuisances", f"{name}: the 3-D solve estimates "
+                           f"{', '.join(CALIBRATED3)}, not {', '.join(other)}")
+    if calibration.position_sigma:
+        raise BadParameter("position_sigma", f"{name}: {calibration.position_sigma:g} cm: "
+                           "the 3-D solve does not yet estimate the beacons' positions "
+                           "(the planar solve does)")
 
 
 def nuisances3(model: ErrorModel, sigma: ObjectSigmas, asked: SelfCalibration = PLAIN, *,
                bench: bool = True, board: tuple[CameraPose, float] | None = None
                ) -> tuple[tuple[str, ...], dict[str, float], ObjectSigmas]:
     """The bench's shared errors the 3-D solve estimates, with their priors, and the σ's
-    it weighs with: those ``asked`` (a prior the user states wins over the model's, none
-    leaves it free), and (``bench``) the pan, range scale and power a bench model's
-    tolerances give; an α error every image of a frame shares widens the pan's prior (an
-    ideal-bench model, asked nothing: none).  ``board``: the camera's pose the board
+    it weighs with: those ``asked`` (a prior the user states wins over the model's), and
+    (``bench``) the pan, range scale and power a bench model's tolerances give; an α
+    error every image of a frame shares widens the pan's prior (an ideal-bench model,
+    asked nothing: none).  ``board``: the camera's pose the board
     gave and the frames' focal length: the pan is then the board's
     (:func:`~mirrorsim.pipelines.measured.after_board`)."""
     cal = model_calibration(model, asked) if bench else asked
