@@ -55,8 +55,8 @@ def test_the_board_pose_corrects_a_3d_scene_elevations_and_all(tmp_path):
     rolled 0.4°: plain, the pitch passes for a lean (every elevation 0.7° off, the target
     1.9 cm off when written); with ``board_pose`` the pose is measured and in the report,
     every elevation lies within 0.05° of what an exact detector reads at the true
-    geometry (the truth's, computed apart from the detector), and the target's error is
-    under 1 cm and under half the plain one."""
+    geometry (the truth's, computed apart from the detector), the pan's prior is the
+    board's, and the target's error is under 1 cm and under half the plain one."""
     d = scene_dict("raised")
     d["camera"].update({"pan_error": 0.3, "pitch": -0.7, "roll": 0.4})
     d["render"] = {"spp": 8}
@@ -67,6 +67,10 @@ def test_the_board_pose_corrects_a_3d_scene_elevations_and_all(tmp_path):
     assert pose["pitch_deg"] == pytest.approx(-0.7, abs=0.02)
     assert pose["pan_offset_deg"] == pytest.approx(-0.3, abs=0.01)
     assert plain.to_json()["camera_pose"] is None
+    # the pan is then the board's to know (its σ a few thousandths of a degree), not the
+    # bench model's tolerance (1.5°/√3, widened by the model's shared α)
+    priors = [r.to_json()["self_calibration"]["priors"]["pan"] for r in (plain, board)]
+    assert priors[0] >= 1.5 / np.sqrt(3) and priors[1] < 0.01
     for report, near in ((plain, False), (board, True)):
         seen = report.seen
         off = [abs(got[1] - exact[1]) for got, exact in zip(

@@ -136,6 +136,8 @@ class Report3:
     # (:func:`with_shared_pan`), which a caller solving these measurements again adds
     shared_alpha_deg: float = 0.0
     camera_pose: CameraPose | None = None  # the board's, where measured
+    # what the solve estimated of the bench's shared errors, with the priors it took
+    self_calibration: SelfCalibration = PLAIN
 
     @property
     def reused(self) -> bool:
@@ -153,7 +155,8 @@ class Report3:
                 "render": self.render.to_json(), "error_model": self.error_model,
                 "model_warnings": list(self.model_warnings),
                 "camera_pose": (None if self.camera_pose is None
-                                else self.camera_pose.to_json())}
+                                else self.camera_pose.to_json()),
+                "self_calibration": self.self_calibration.to_json()}
 
 
 def evaluate_into3(scene: Scene, out: Path, *, variant: str = "auto", progress: bool = True,
@@ -187,8 +190,7 @@ def evaluate_into3(scene: Scene, out: Path, *, variant: str = "auto", progress: 
     truths = [m.files.truth for m in measured]
     truth = replace(truths[0], scene=scene.name, id_labels=None, render=None, annotations=None,
                     beacons=tuple(t.beacons[0] for t in truths))
-    seen2 = seen_of(scene, measured, board_pose=board_pose)
-    model = model_for(scene, error_model)
+    seen2, model = seen_of(scene, measured, board_pose=board_pose), model_for(scene, error_model)
     features, sigma = sigmas_of(model, seen2)
     nuisances, priors, sigma = nuisances3(
         model, sigma, calibration, bench=model_priors,
@@ -215,7 +217,8 @@ def evaluate_into3(scene: Scene, out: Path, *, variant: str = "auto", progress: 
                    planar_target=planar_target, errors=errors, frames=frames,
                    render=RenderInfo(done.variant, done.spp, done.seed, done.sampler),
                    error_model=model.name(), model_warnings=tuple(notes),
-                   shared_alpha_deg=sigma.shared_alpha_deg, camera_pose=seen2.pose)
+                   shared_alpha_deg=sigma.shared_alpha_deg, camera_pose=seen2.pose,
+                   self_calibration=SelfCalibration(nuisances, priors=priors))
 
 
 def frame_measurements3(det: Detection, capture: CaptureRecord) -> Measurements3:
