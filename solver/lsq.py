@@ -283,7 +283,7 @@ def solve_measurements(observer: ArrayLike, beacons: list[BeaconMeasurement],
         that does not determine the unknowns.
     """
     check_measurements(observer, beacons, targets)
-    calibration = check_planar(as_calibration(calibration))
+    calibration = as_calibration(calibration)  # (a pitch: solve_lsq refuses it)
     if sigma is not None:
         as_object_sigmas(sigma)  # its type, before the closed form or a fit uses it
     if (len(beacons) == 1 and len(targets) == 1 and not calibration.nuisances

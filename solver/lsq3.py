@@ -50,6 +50,14 @@ class Fit3:
     downweighted: tuple[str, ...] = ()
 
     @property
+    def nuisance_sd(self) -> dict[str, float] | None:
+        """Each nuisance's σ after the fit, by name (None without σ's)."""
+        if self.covariance is None:
+            return None
+        return {n: float(np.sqrt(self.covariance[6 + i, 6 + i]))
+                for i, n in enumerate(self.nuisances)}
+
+    @property
     def target_covariance(self) -> np.ndarray | None:
         """The target's 3×3 covariance (cm²)."""
         return None if self.covariance is None else self.covariance[3:6, 3:6]
@@ -60,14 +68,11 @@ class Fit3:
         with their σ's after the fit (None without σ's) and the measurements the robust
         fit trusted less."""
         cov = self.target_covariance
-        sd = (None if self.covariance is None else
-              {n: float(np.sqrt(self.covariance[6 + i, 6 + i]))
-               for i, n in enumerate(self.nuisances)})
         return {"mirror": {"yaw_deg": self.plane.yaw_deg, "lean_deg": self.plane.lean_deg,
                            "normal": self.plane.normal.tolist(), "offset_cm": self.plane.rho},
                 "target": self.target.tolist(),
                 "target_covariance": None if cov is None else cov.tolist(),
-                "nuisances": dict(self.nuisances), "nuisance_sd": sd,
+                "nuisances": dict(self.nuisances), "nuisance_sd": self.nuisance_sd,
                 "downweighted": list(self.downweighted)}
 
 

@@ -104,7 +104,6 @@ def _nuisances(fit: Fit3) -> tuple[dict[str, float], dict[str, float]]:
     """The fit's nuisance estimates and their σ's (where it has a covariance), keyed by
     their names in a solution (:data:`solver.selfcal.KNOWN`), as describe_estimates
     says them."""
-    keys = [KNOWN[n][0] for n in fit.nuisances]
-    sd = ({} if fit.covariance is None else
-          {k: float(np.sqrt(fit.covariance[6 + i, 6 + i])) for i, k in enumerate(keys)})
-    return dict(zip(keys, fit.nuisances.values(), strict=True)), sd
+    sd = fit.nuisance_sd or {}
+    return ({KNOWN[n][0]: v for n, v in fit.nuisances.items()},
+            {KNOWN[n][0]: s for n, s in sd.items()})

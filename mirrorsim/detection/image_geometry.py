@@ -87,11 +87,22 @@ def elevation_of(camera: Camera, m: ImageMeasurement) -> tuple[float, float]:
     DetectionError
         The image has no measured foot or distance.
     """
+    require_foot(m)
+    tan_face = (camera.cy - m.v_bottom) * math.cos(_off_axis(camera, m.u_axis)) / camera.fx
+    return rise_reading(tan_face, m.d_total, m.kind)
+
+
+def require_foot(m: ImageMeasurement) -> None:
+    """Refuse an image without a measured foot or distance: it has no elevation.
+
+    Raises
+    ------
+    DetectionError
+        Naming the image's kind.
+    """
     if m.v_bottom is None or m.d_total is None:
         raise DetectionError(f"the {m.kind}'s image has no measured foot or height: no "
                              "elevation")
-    tan_face = (camera.cy - m.v_bottom) * math.cos(_off_axis(camera, m.u_axis)) / camera.fx
-    return rise_reading(tan_face, m.d_total, m.kind)
 
 
 def rise_reading(tan_face: float, d_total: float, kind: str) -> tuple[float, float]:

@@ -11,9 +11,8 @@ import math
 import numpy as np
 
 from mirrorsim.detection.board import CameraPose, turned
-from mirrorsim.detection.image_geometry import rise_reading
+from mirrorsim.detection.image_geometry import require_foot, rise_reading
 from mirrorsim.detection.image_measurement import ImageMeasurement
-from mirrorsim.errors import DetectionError
 from mirrorsim.scene.model import FRONT_OFFSET, Camera
 from mirrorsim.scene.projection import camera_axes, project
 from solver.geometry import unit, wrap_bearing
@@ -59,9 +58,7 @@ def corrected_image3(pose: CameraPose, camera: Camera, image: ImageMeasurement, 
     DetectionError
         The image has no measured foot or distance.
     """
-    if image.v_bottom is None or image.d_total is None:
-        raise DetectionError(f"the {image.kind}'s image has no measured foot or height: no "
-                             "elevation")
+    require_foot(image)
     ray = _posed_ray(turned(camera, pose.pan_offset_deg), pose, image.u_axis, image.v_bottom)
     tan_face = float(ray[2] / math.hypot(ray[0], ray[1]))
     # where the foot's image stands (its rise above the lens, from the uncorrected
