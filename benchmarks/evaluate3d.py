@@ -2,6 +2,7 @@
 frames, on scenes drawn here (never the project's own specs).
 
     python benchmarks/evaluate3d.py [--scenes 40] [--seed S] [--out DIR] [--report]
+    python benchmarks/evaluate3d.py --dataset DIR    # a 3-D dataset's rows, as a table
 
 Each scene is drawn at random and kept where ``check`` accepts it with every image
 whole (a clipped image is refused by the detector, not a 3-D question):
@@ -32,7 +33,7 @@ import numpy as np
 from clone import ROOT  # noqa: F401 (puts the repository on the path)
 
 from mirrorsim.errors import InputError
-from mirrorsim.pipelines.evaluate3d import SIGMA3_FACTORS, evaluate_into3
+from mirrorsim.pipelines.evaluate3d import CHI2_3_R95, SIGMA3_FACTORS, evaluate_into3
 from mirrorsim.pipelines.scenes import scene_from_dict
 
 LEANS = (0.0, 1.0, 2.0, 3.0, 4.0)
@@ -167,37 +168,64 @@ def run(args) -> Path:
     return out
 
 
+HEADER = ["| lean | scenes | 3-D median (cm) | 3-D max (cm) | height median (cm) | "
+          "inside the 95 % ellipsoid | median Mahalanobis (honest 1.54) | "
+          "planar median (cm, in plan) |",
+          "|---|---|---|---|---|---|---|---|"]
+
+
+def _line(name: str, rs: list) -> str:
+    """One row of the table: ``rs``' errors blocks (Score3's JSON)."""
+    if not rs:
+        return f"| {name} | 0 | | | | | | |"
+    e = np.array([r["errors"]["target_cm"] for r in rs])
+    h = np.array([abs(r["errors"]["target_height_cm"]) for r in rs])
+    inside = sum(r["errors"]["target_mahalanobis"] <= CHI2_3_R95 for r in rs)
+    planar = [r["errors"]["planar_target_cm"] for r in rs
+              if r["errors"]["planar_target_cm"] is not None]
+    maha = np.median([r["errors"]["target_mahalanobis"] for r in rs])
+    return (f"| {name} | {len(rs)} | {np.median(e):.3f} | {e.max():.3f} | "
+            f"{np.median(h):.3f} | {inside}/{len(rs)} = {inside / len(rs):.2f} | "
+            f"{maha:.2f} | " + (f"{np.median(planar):.3f} |" if planar else " |"))
+
+
 def report(out: Path) -> str:
     rows = [json.loads(p.read_text()) for p in sorted((out / "rows").glob("*.json"))]
     refused = json.loads((out / "drawn.json").read_text())["refused"]
     ok = [r for r in rows if "errors" in r]
     lines = [f"{len(rows)} scenes ({refused} draws refused by `check` or clipped); "
-             f"{len(rows) - len(ok)} failed to evaluate", "",
-             "| lean | scenes | 3-D median (cm) | 3-D max (cm) | height median (cm) | "
-             "inside the 95 % ellipsoid | median Mahalanobis (honest 1.54) | "
-             "planar median (cm, in plan) |",
-             "|---|---|---|---|---|---|---|---|"]
-
-    def line(name: str, rs: list) -> str:
-        if not rs:
-            return f"| {name} | 0 | | | | | | |"
-        e = np.array([r["errors"]["target_cm"] for r in rs])
-        h = np.array([abs(r["errors"]["target_height_cm"]) for r in rs])
-        inside = sum(r["errors"]["inside95"] for r in rs)
-        planar = [r["errors"]["planar_target_cm"] for r in rs
-                  if r["errors"]["planar_target_cm"] is not None]
-        maha = np.median([r["errors"]["target_mahalanobis"] for r in rs])
-        return (f"| {name} | {len(rs)} | {np.median(e):.3f} | {e.max():.3f} | "
-                f"{np.median(h):.3f} | {inside}/{len(rs)} = {inside / len(rs):.2f} | "
-                f"{maha:.2f} | " + (f"{np.median(planar):.3f} |" if planar else " |"))
-
+             f"{len(rows) - len(ok)} failed to evaluate", "", *HEADER]
     for lean in LEANS:
-        lines.append(line(f"{lean:g}°", [r for r in ok if abs(abs(r["lean"]) - lean) < 1e-9]))
-    lines.append(line("leaning (1–4°)", [r for r in ok if r["lean"] != 0]))
-    lines.append(line("all", ok))
+        lines.append(_line(f"{lean:g}°", [r for r in ok if abs(abs(r["lean"]) - lean) < 1e-9]))
+    lines.append(_line("leaning (1–4°)", [r for r in ok if r["lean"] != 0]))
+    lines.append(_line("all", ok))
     for r in rows:
         if "failed" in r:
             lines.append(f"- failed (lean {r['lean']:g}°): {r['failed']}")
+    return "\n".join(lines)
+
+
+def dataset_report(folder: Path) -> str:
+    """The table of a 3-D dataset's rows (``mirrorsim dataset --spec
+    scenes/dataset_spec_3d.yaml``), its leans drawn from a range: binned by |lean|."""
+    from mirrorsim.formats.dataset_folder import read_table
+
+    cols = read_table(folder)
+    n = len(cols["index"])
+    rows = [{"lean": cols["mirror_lean_deg"][i], "errors": {
+        "target_cm": cols["err_target_cm"][i],
+        "target_height_cm": cols["err_target_height_cm"][i],
+        "target_mahalanobis": cols["target_mahalanobis"][i],
+        "planar_target_cm": cols["planar_err_target_cm"][i]}}
+        for i in range(n) if not cols["error"][i] and cols["geometry"][i] == "3d"]
+    lines = [f"{n} scenes; {n - len(rows)} failed or not solved in 3-D", "", *HEADER]
+    for lo in range(4):
+        name = f"{lo}–{lo + 1}°" if lo else "under 1°"
+        lines.append(_line(name, [r for r in rows if lo <= abs(r["lean"]) < lo + 1]))
+    lines.append(_line("all", rows))
+    for i in range(n):
+        if cols["error"][i]:
+            lines.append(f"- {cols['scene'][i]} failed: {cols['error'][i]}")
     return "\n".join(lines)
 
 
@@ -244,9 +272,15 @@ def main() -> None:
                         "(draw_wide): the acceptance set")
     p.add_argument("--residuals", nargs="+", type=Path, metavar="DIR",
                    help="print the σ factors the runs in DIR... call for, and stop")
+    p.add_argument("--dataset", type=Path, metavar="DIR",
+                   help="print the table of a 3-D dataset's rows (`mirrorsim dataset "
+                        "--spec scenes/dataset_spec_3d.yaml`), and stop")
     args = p.parse_args()
     if args.residuals:
         print(residuals(args.residuals))
+        return
+    if args.dataset:
+        print(dataset_report(args.dataset))
         return
     out = Path(args.out or f"renders/evaluate3d-{'wide-' if args.wide else ''}{args.seed}")
     if not args.report:

@@ -112,6 +112,13 @@ RESULTS: tuple[Result, ...] = (
            markdown=True, about="3-D scenes drawn wider than the σ factors' development "
                                 "scenes: the acceptance set",
            fresh=("renders/evaluate3d-wide-61206303",)),
+    Result("dataset3d",
+           (f"{MS} dataset --spec scenes/dataset_spec_3d.yaml --n 40 --seed 61207001 "
+            "--out renders/dataset3d --quiet",
+            f"{PY} benchmarks/evaluate3d.py --dataset renders/dataset3d"),
+           markdown=True, about="a 3-D dataset of the bundled 3-D spec (a third generator, "
+                                "fitted on nothing): the 3-D solve beside the planar one",
+           fresh=("renders/dataset3d",)),
     Result("evaluate3d_factors",
            (f"{PY} benchmarks/evaluate3d.py --scenes 35 --seed 7001",
             f"{PY} benchmarks/evaluate3d.py --scenes 35 --seed 7002",

@@ -69,6 +69,23 @@ def _dataset_options(p):
                    help="Dask scheduler (tcp://host:8786); default: a local cluster")
 
 
+def _dataset_calibration(args):
+    """--calibrate, --prior and --beacon-sigma checked as the spec's scenes are solved: a
+    3-D spec's in 3-D, the others in the plane."""
+    from mirrorsim.pipelines.evaluate3d import check_calibration3
+    from mirrorsim.pipelines.random_scenes import load_spec
+
+    three_d = load_spec(args.spec).is_3d
+    calibration = calibration_of(args, three_d=three_d)
+    if three_d:
+        try:
+            check_calibration3(str(args.spec), calibration)
+        except BadParameter as exc:
+            flag = "--beacon-sigma" if exc.parameter == "position_sigma" else "--calibrate"
+            raise BadArgument(flag, exc.message) from None
+    return calibration
+
+
 @command("dataset", "many random scenes, rendered, detected and scored",
          "Draw N random valid scenes from a spec (default scenes/dataset_spec.yaml), render, "
          "detect, solve and score each, in parallel worker processes (or on a Dask cluster), "
@@ -83,7 +100,7 @@ def _dataset(args) -> int:
 
     at_least(("--n", args.n, 1, MAX_SCENES), ("--seed", args.seed, 0, MAX_SEED),
              ("--workers", args.workers, 1, MAX_WORKERS))
-    calibration = calibration_of(args, three_d=False)  # a dataset's scenes solve in the plane
+    calibration = _dataset_calibration(args)
     from mirrorsim.scene.render_settings import AOVS
 
     bad = [a for a in args.aov if a not in AOVS]

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from mirrorsim.scene.imperfections import REGISTRY
-from solver.selfcal import NUISANCES
+from solver.selfcal import NUISANCES, NUISANCES_3D
 
 
 @dataclass(frozen=True)
@@ -46,6 +46,9 @@ RUN = (
                             "plain least squares)"),
     Column("calibrate_priors", "", "the σ of each nuisance's prior, as `--prior` takes them "
                                    "(`pan=0.3,scale=0.006`; empty: none)"),
+    Column("geometry", "", "how the scene was solved: `planar`, or `3d` (a spec with a 3-D "
+                           "key: each image's elevation measured, the mirror's plane and "
+                           "the target solved in 3-D)"),
     Column("error", "", "why the scene failed (empty if fine)"),
 )
 SCENE = (
@@ -56,7 +59,10 @@ SCENE = (
     Column("mirror_x", "cm", "mirror centre"), Column("mirror_y", "cm", "mirror centre"),
     Column("mirror_yaw_deg", "deg", "mirror line direction, [0, 180)"),
     Column("mirror_width", "cm", "mirror width"), Column("mirror_height", "cm", "mirror height"),
+    Column("mirror_lean_deg", "deg", "the mirror's lean about its bottom edge (+: its top "
+                                     "away from its face)"),
     Column("target_x", "cm", "target position"), Column("target_y", "cm", "target position"),
+    Column("target_z", "cm", "its base above the board"),
     Column("beacons", "", "how many beacons the scene has (columns `beacon_*` for the first, "
                           "`beacon2_*`… for the others)"),
     Column("pencil_height_cm", "cm", "the first beacon's pencil height"),
@@ -78,7 +84,10 @@ BEACON_KNOWN = tuple(Column(c.name.removeprefix("beacon_"), c.units, c.doc)
 # for each of OBJECTS, as <object>_<name>
 PER_OBJECT = (
     Column("pos_x", "cm", "position"), Column("pos_y", "cm", "position"),
-    Column("alpha_true", "deg", "exact α"), Column("d_true", "cm", "exact d_total"),
+    Column("pos_z", "cm", "its base above the board"),
+    Column("alpha_true", "deg", "exact α (3-D: what an exact detector reads)"),
+    Column("d_true", "cm", "exact d_total (3-D: the path's length, as an exact detector "
+                           "reads it)"),
     Column("d1", "cm", "camera → reflection point"),
     Column("d2", "cm", "reflection point → object"),
     Column("off_axis_deg", "deg", "bearing of the image off the optical axis (+ left)"),
@@ -87,6 +96,10 @@ PER_OBJECT = (
     Column("alpha_meas", "deg", "measured α"), Column("d_meas", "cm", "measured d_total"),
     Column("alpha_err", "deg", "measured − true α"),
     Column("d_rel_err", "1", "(measured − true) / true d_total"),
+    Column("elevation_true", "deg", "exact elevation (3-D: what an exact detector reads; "
+                                    "null in a planar row)"),
+    Column("elevation_meas", "deg", "measured elevation (null in a planar row)"),
+    Column("elevation_err", "deg", "measured − true elevation (null in a planar row)"),
     Column("clipped", "", "the detector found the image clipped"),
     # what the frame showed of the image (the error model's σ features)
     Column("height_px_meas", "px", "measured image height"),
@@ -96,6 +109,8 @@ PER_OBJECT = (
     Column("sigma_alpha_deg", "deg", "σ of the measured α, from the error model"),
     Column("sigma_d_rel", "1", "σ of the measured d_total, relative (a fraction), from the "
                                "error model"),
+    Column("sigma_elevation_deg", "deg", "σ of the measured elevation the 3-D solve weighed "
+                                         "it with (null in a planar row)"),
 )
 SOLUTION = (
     Column("est_target_x", "cm", "estimated target"),
@@ -111,7 +126,21 @@ SOLUTION = (
     Column("target_cov_xy", "cm²", "the estimated target's covariance"),
     Column("target_cov_yy", "cm²", "the estimated target's covariance"),
     Column("target_mahalanobis", "1",
-           "true target's distance from the estimate in σ's of that covariance"),
+           "true target's distance from the estimate in σ's of that covariance (3-D: of "
+           "its 3×3 covariance)"),
+    # a 3-D solve's (null in a planar row)
+    Column("est_target_z", "cm", "estimated target's base above the board"),
+    Column("est_mirror_lean_deg", "deg", "estimated mirror lean"),
+    Column("err_target_height_cm", "cm", "estimated − true height of the target's base"),
+    Column("err_mirror_lean_deg", "deg", "estimated − true mirror lean"),
+    Column("target_cov_xz", "cm²", "the estimated target's covariance"),
+    Column("target_cov_yz", "cm²", "the estimated target's covariance"),
+    Column("target_cov_zz", "cm²", "the estimated target's covariance"),
+    Column("planar_err_target_cm", "cm", "the planar solve's target error (in plan) on the "
+                                         "same frames"),
+    Column("est_pitch_offset_deg", "deg", "estimated pitch offset (null unless `calibrate` "
+                                          "names it)"),
+    Column("est_pitch_offset_deg_sd", "deg", "σ of the estimated pitch offset (likewise)"),
     # the nuisances self-calibration estimates (null where not estimated)
     *(Column(f"est_{key}{sd}", units, f"{what} {doc} (null unless `calibrate` names it)")
       for key, units, doc in (("pan_offset_deg", "deg", "pan offset δ"),
@@ -119,7 +148,8 @@ SOLUTION = (
                               ("mirror_power_per_cm", "1/cm", "mirror's power 1/R"))
       for sd, what in (("", "estimated"), ("_sd", "σ of the estimated"))),
 )
-assert {f"est_{key}" for key, _ in NUISANCES.values()} <= {c.name for c in SOLUTION}
+assert ({f"est_{key}" for key, _ in (*NUISANCES.values(), *NUISANCES_3D.values())}
+        <= {c.name for c in SOLUTION})
 BENCH = tuple(Column(c.name, c.units, c.doc) for imp in REGISTRY for c in imp.columns)
 TIMING = (Column("seconds_sample", "s", "drawing the scene"),
           Column("seconds_total", "s", "the whole scene"))
@@ -153,10 +183,16 @@ COLUMNS = (*RUN, *SCENE, *KNOWN,
 NAMES = tuple(c.name for c in COLUMNS)
 # the columns of the second, third… beacon: in a row exactly when its scene has them
 SLOT_NAMES = {k: tuple(c.name for c in _slot_columns(k)) for k in range(1, MAX_BEACONS)}
+# a planar row's null columns (what it did not measure or solve)
+PLANAR_NULL = ("elevation_true", "elevation_meas", "elevation_err", "sigma_elevation_deg")
+SOLUTION_3D = ("est_target_z", "est_mirror_lean_deg", "err_target_height_cm",
+               "err_mirror_lean_deg", "target_cov_xz", "target_cov_yz", "target_cov_zz",
+               "planar_err_target_cm", "est_pitch_offset_deg", "est_pitch_offset_deg_sd")
 # the columns each layout added besides the bench imperfections', with the value a row of
 # an older layout had for them: schema 3 several beacons and self-calibration, schema 4
 # the self-calibration's priors, schema 5 what the frame showed of each image (unknown for
-# an older row: null).  The first layout is 2.
+# an older row: null), schema 6 the 3-D columns (an older row's scene was planar).  The
+# first layout is 2.
 FIRST_SCHEMA = 2
 _ADDED = {3: {"beacons": 1, "calibrate": "", "beacon_sigma": 0.0,
               **{f"est_{key}{sd}": None for key, _ in NUISANCES.values()
@@ -164,7 +200,11 @@ _ADDED = {3: {"beacons": 1, "calibrate": "", "beacon_sigma": 0.0,
           4: {"calibrate_priors": ""},
           5: {"pencil_height_cm": None,
               **{object_column(k, c): None for k in OBJECTS
-                 for c in ("height_px_meas", "contrast", "noise", "jpeg_quality")}}}
+                 for c in ("height_px_meas", "contrast", "noise", "jpeg_quality")}},
+          6: {"geometry": "planar", "mirror_lean_deg": 0.0, "target_z": 0.0,
+              **{object_column(k, c): v for k in OBJECTS
+                 for c, v in (("pos_z", 0.0), *((c, None) for c in PLANAR_NULL))},
+              **{c: None for c in SOLUTION_3D}}}
 
 
 def layouts(registry: tuple = REGISTRY) -> tuple[int, dict[int, dict[str, Any]]]:
@@ -261,6 +301,23 @@ def card_section(group: tuple[Column, ...], prefix: str = "") -> str:
 def usable_rows(cols: dict) -> np.ndarray:
     """Which rows of a table's columns were measured and solved (their ``error`` empty)."""
     return np.array([not e for e in cols.get("error", [""] * len(cols["index"]))], bool)
+
+
+def require_planar(cols: dict) -> dict:
+    """``cols``, refused if it holds 3-D rows (``geometry`` 3d): the error model's laws
+    and its validation solve the rows in the plane.
+
+    Raises
+    ------
+    ValueError
+        Saying how many rows are 3-D.
+    """
+    n = sum(g == "3d" for g in cols.get("geometry") or [])
+    if n:
+        raise ValueError(f"{n} of its rows were solved in 3-D (a 3-D spec's): the error "
+                         "model is fitted and validated on planar datasets only (its 3-D "
+                         "σ's are the planar model's, widened; docs/limitations.md)")
+    return cols
 
 
 def focal_lengths(cols: dict) -> np.ndarray:

@@ -58,7 +58,7 @@ from mirrorsim.formats.error_model_file import default_error_model, load_error_m
 from mirrorsim.formats.files import dumps, write_json, write_text
 from mirrorsim.pipelines.dataset_exports import dataset_frames as frames_in_rows
 from mirrorsim.pipelines.dataset_exports import export_rows
-from mirrorsim.pipelines.dataset_row import row_of
+from mirrorsim.pipelines.dataset_row import row_of, row_of3
 from mirrorsim.pipelines.random_scenes import DatasetSpec, NoValidScene
 from mirrorsim.pipelines.workers import run_dask, run_local, usable_cores
 from mirrorsim.progress import progress_bar
@@ -101,6 +101,7 @@ def process_one(i: int, seed: int, spec: DatasetSpec, *, out: str, spp: int | No
     ``calibration``: self-calibration, as
     :func:`~mirrorsim.pipelines.evaluate.evaluate_scene` takes it."""
     from mirrorsim.pipelines.evaluate import evaluate_into
+    from mirrorsim.pipelines.evaluate3d import evaluate_into3
     from mirrorsim.pipelines.random_scenes import sample_scene, to_yaml
 
     out_dir = Path(out)
@@ -115,13 +116,14 @@ def process_one(i: int, seed: int, spec: DatasetSpec, *, out: str, spp: int | No
         t1 = time.perf_counter()
         with warnings.catch_warnings():  # a spec that draws JPEG frames knows it does
             warnings.filterwarnings("ignore", message=".*a JPEG frame")
-            # into the dataset's own folder (claimed by run_dataset)
-            rep = evaluate_into(scene, out_dir / "frames" / name, variant=variant,
-                                progress=False, keep=keep, error_model=error_model,
-                                calibration=calibration)
-        write_json(out_dir / "frames" / name / f"{name}.measurements.json",
-                   rep.measurements.to_json())
-        row.update(row_of(scene, rep))
+            # into the dataset's own folder (claimed by run_dataset); a 3-D spec's scenes
+            # solved in 3-D
+            evaluate = evaluate_into3 if spec.is_3d else evaluate_into
+            rep = evaluate(scene, out_dir / "frames" / name, variant=variant, progress=False,
+                           keep=keep, error_model=error_model, calibration=calibration)
+        seen = rep.seen if spec.is_3d else rep.measurements
+        write_json(out_dir / "frames" / name / f"{name}.measurements.json", seen.to_json())
+        row.update(row_of3(scene, rep) if spec.is_3d else row_of(scene, rep))
         row["seconds_sample"] = t1 - t0
         row["error"] = ""
     except SCENE_FAILURES as exc:  # the scene's own: recorded, one bad scene must not stop a run
@@ -292,6 +294,7 @@ def _run_spec(spec_path: str | Path | None, *, sampler: str | None, beacons: int
               calibration: SelfCalibration) -> DatasetSpec:
     """The run's spec: the file's, with the sampler and the beacon count given (part of
     the spec, so that ``--resume`` checks them), able to carry the nuisances."""
+    from mirrorsim.pipelines.evaluate3d import check_calibration3
     from mirrorsim.pipelines.random_scenes import load_spec
 
     spec = load_spec(spec_path)
@@ -299,9 +302,13 @@ def _run_spec(spec_path: str | Path | None, *, sampler: str | None, beacons: int
         spec = spec.with_sampler(sampler)
     if beacons is not None:
         spec = spec.with_beacon_count(beacons)
-    try:  # before anything is written (a dataset's scenes are solved in the plane)
-        check_planar(calibration)
-        check_nuisances(calibration.nuisances, spec.beacon_count, 1, priors=calibration.priors)
+    if spec.is_3d:  # what the 3-D solve estimates (a planar spec's scenes: the plane's)
+        check_calibration3(str(spec_path or "the default spec"), calibration)
+    try:  # before anything is written
+        if not spec.is_3d:
+            check_planar(calibration)
+        check_nuisances(calibration.nuisances, spec.beacon_count, 1, priors=calibration.priors,
+                        readings=3 if spec.is_3d else 2)
     except SolverError as exc:
         raise BadParameter("nuisances", f"{exc} (scenes of {spec.beacon_count} beacon(s) "
                            f"drawn from {spec_path or 'the default spec'})") from None

@@ -100,13 +100,14 @@ def fit(cols: dict, provenance: dict | None = None, bench: dict | None = None) -
     Raises
     ------
     ValueError
-        When too few rows are usable (the message says how many are needed), or a law
-        is unstable (its σ's over its own rows span more than UNSTABLE_REFUSE).
+        When the rows were solved in 3-D, too few rows are usable (the message says how
+        many are needed), or a law is unstable (its σ's over its own rows span more
+        than UNSTABLE_REFUSE).
     """
     names = features_of(cols)
     fits: dict[str, dict[str, QuantityFit]] = {}
     notes: list[str] = []
-    scene_cols = cols
+    scene_cols = table.require_planar(cols)
     # a row per beacon image: every beacon of a scene is fitted, its target once (the
     # pair fit and the shared α take the target beside each of its beacons)
     cols, beacon_of, scene_of = table.image_rows(cols)

@@ -20,7 +20,7 @@ from mirrorsim.detection.image_measurement import ImageMeasurement
 from mirrorsim.detection.posed import corrected_image3
 from mirrorsim.errors import BadParameter, DetectionError
 from mirrorsim.formats.capture import CaptureRecord
-from mirrorsim.formats.error_model import ErrorModel
+from mirrorsim.formats.error_model import ErrorModel, ImageFeatures
 from mirrorsim.pipelines.frame import render_and_measure
 from mirrorsim.pipelines.measured import (
     after_board,
@@ -138,6 +138,8 @@ class Report3:
     camera_pose: CameraPose | None = None  # the board's, where measured
     # what the solve estimated of the bench's shared errors, with the priors it took
     self_calibration: SelfCalibration = PLAIN
+    # what each frame showed of each image (the target's, then each beacon's)
+    image_features: tuple[ImageFeatures, ...] = ()
 
     @property
     def reused(self) -> bool:
@@ -182,8 +184,7 @@ def evaluate_into3(scene: Scene, out: Path, *, variant: str = "auto", progress: 
     """
     per_beacon = frames_of(scene)
     measured = [render_and_measure(sub, out, variant=variant, progress=progress, reuse=True,
-                                   ids="ids" in keep,
-                                   aov=tuple(k for k in keep if k in AOVS))
+                                   ids="ids" in keep, aov=tuple(k for k in keep if k in AOVS))
                 for sub in per_beacon]
     frames = tuple(frame_record(m, out / f"{sub.name}.annotated.png", "annotated" in keep)
                    for sub, m in zip(per_beacon, measured, strict=True))
@@ -218,7 +219,8 @@ def evaluate_into3(scene: Scene, out: Path, *, variant: str = "auto", progress: 
                    render=RenderInfo(done.variant, done.spp, done.seed, done.sampler),
                    error_model=model.name(), model_warnings=tuple(notes),
                    shared_alpha_deg=sigma.shared_alpha_deg, camera_pose=seen2.pose,
-                   self_calibration=SelfCalibration(nuisances, priors=priors))
+                   self_calibration=SelfCalibration(nuisances, priors=priors),
+                   image_features=features)
 
 
 def frame_measurements3(det: Detection, capture: CaptureRecord) -> Measurements3:

@@ -36,6 +36,7 @@ from mirrorsim.pipelines.random_bench import (
     draw_number,
     set_key,
 )
+from mirrorsim.pipelines.random_raised import check_3d_keys, draw_3d_into, spec_is_3d
 from mirrorsim.pipelines.scenes import scene_from_dict
 from mirrorsim.scene.model import MAX_BOARD_CM, Camera, Scene
 from mirrorsim.truth import visibility
@@ -90,6 +91,11 @@ class DatasetSpec:
         bench = self.data.get("bench") or {}
         return (bench.get("calibration") or {}).get("distance_error", 0.0)
 
+    @property
+    def is_3d(self) -> bool:
+        """Whether its scenes leave the board's plane (:mod:`~.random_raised`)."""
+        return spec_is_3d(self.data)
+
     def with_beacon_count(self, count: int) -> DatasetSpec:
         """The spec with ``count`` beacons a scene (part of the spec, so that a resumed
         dataset checks it).
@@ -132,8 +138,10 @@ def load_spec(path: str | Path | None = None) -> DatasetSpec:
     r.mapping(spec["board"], "board", {"size"}, optional={"hole_pitch"})
     r.pair(spec["board"]["size"], "board.size", positive=True, high=MAX_BOARD_CM)
     _check_camera_block(spec, r)
-    r.mapping(spec["mirror"], "mirror", {"x", "y", "yaw", "width", "height"})
+    r.mapping(spec["mirror"], "mirror", {"x", "y", "yaw", "width", "height"},
+              optional={"lean"})
     _check_target_and_beacon(spec, r)
+    check_3d_keys(spec, r)
     r.mapping(spec["occluder"], "occluder", {"at", "length", "height"})
     read_render(r, spec.get("render", {}), seed=False)
     r.integer(spec.get("max_tries", 5000), "max_tries", low=1, high=MAX_TRIES)
@@ -176,7 +184,7 @@ def _check_camera_block(spec: dict, r: Reader) -> None:
 def _check_target_and_beacon(spec: dict, r: Reader) -> None:
     """A spec's ``target`` block (its size a pair of values, each a value or a range) and
     its ``beacon`` block (a count within 1..MAX_BEACONS)."""
-    r.mapping(spec["target"], "target", {"x", "y", "size"})
+    r.mapping(spec["target"], "target", {"x", "y", "size"}, optional={"z"})
     size = spec["target"]["size"]
     if isinstance(size, list) and len(size) == 2 and any(isinstance(x, list) for x in size):
         for k, x in enumerate(size):  # [width, height], each a value or [lo, hi]
@@ -185,7 +193,8 @@ def _check_target_and_beacon(spec: dict, r: Reader) -> None:
                          positive=True)
     else:
         r.pair(size, "target.size", positive=True)
-    r.mapping(spec["beacon"], "beacon", {"depth", "along", "height"}, optional={"count"})
+    r.mapping(spec["beacon"], "beacon", {"depth", "along", "height"},
+              optional={"count", "z"})
     count = spec["beacon"].get("count", 1)
     for k, c in enumerate(count if isinstance(count, list) and len(count) == 2 else [count]):
         r.integer(c, f"beacon.count[{k}]" if isinstance(count, list) else "beacon.count",
@@ -269,6 +278,7 @@ def _draw(spec: dict, rng: np.random.Generator, where="<spec>",
                                                   spec.get("render", {}), seed=False))}
     # from their own stream, so that a bench block leaves the geometry drawn as without it
     _draw_bench_into(d, spec, beacons, bench_rng or rng, where)
+    draw_3d_into(d, spec, rng, where=where)
     return d
 
 

@@ -110,7 +110,9 @@ def _col(cols: dict, name: str) -> np.ndarray:
 
 def validate(model: ErrorModel, cols: dict) -> Validation:
     """Solve each usable row of ``cols`` (dataset columns) again with ``model``'s σ's and
-    score the target's covariance against the true target."""
+    score the target's covariance against the true target (planar rows only:
+    :func:`~mirrorsim.formats.dataset_table.require_planar`)."""
+    table.require_planar(cols)
     n = len(cols["index"])
     ok = table.usable_rows(cols)
     pan = _col(cols, "observer_pan_deg")
