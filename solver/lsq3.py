@@ -9,8 +9,10 @@ The nuisances: ``pan`` adds δ (deg) to every azimuth (the mount's pan reading),
 the optical axis), ``scale`` multiplies every d_total (the calibration's K), and
 ``power`` c = 1/R (1/cm, > 0 concave) moves each image by its own first-order amount
 (:func:`~solver.sltr3d.power_terms3`, the glass curved about its images' reflection
-points' middle): α + c·A, ε + c·E, s·(d + c·D).  The forward model is
-:mod:`solver.sltr3d`'s.
+points' middle): α + c·A, ε + c·E, s·(d + c·D).  A beacon whose position is known to
+σ_p cm per axis (``position_sigma``) has its plan offset (dx, dy) estimated besides,
+with a prior of σ_p on each, as the planar fit does (its height is the stand's, known).
+The forward model is :mod:`solver.sltr3d`'s.
 """
 
 from __future__ import annotations
@@ -40,8 +42,9 @@ Seen = tuple[float, float, float]  # what the camera sees of an image: α, ε (d
 @dataclass(frozen=True)
 class Fit3:
     """A 3-D solution: the plane, the target, the nuisances' estimates, the covariance
-    of (yaw [deg], lean [deg], ρ [cm], x, y, z [cm], *nuisances) where σ's were given,
-    and the measurements the Huber loss trusted less."""
+    of (yaw [deg], lean [deg], ρ [cm], x, y, z [cm], *nuisances, *each beacon's plan
+    offset where estimated) where σ's were given, and the measurements the Huber loss
+    trusted less."""
 
     plane: MirrorPlane
     target: np.ndarray
@@ -112,12 +115,12 @@ class Measurements3:
         return out
 
     def solve(self, *, nuisances: tuple[str, ...] = (),
-              priors: dict[str, float] | None = None) -> Fit3:
+              priors: dict[str, float] | None = None, position_sigma: float = 0.0) -> Fit3:
         """:func:`solve_lsq3` of these measurements."""
         return solve_lsq3(self.observer, list(self.beacons), [self.target],
                           sigma=None if self.sigma is None else np.array(self.sigma),
                           heights=self.heights, fronts=self.fronts, pan_deg=self.pan_deg,
-                          nuisances=nuisances, priors=priors)
+                          nuisances=nuisances, priors=priors, position_sigma=position_sigma)
 
 
 @dataclass(frozen=True)
@@ -135,6 +138,14 @@ class _Problem:
     heights: tuple[float, ...] | None = None  # each object's (beacons', then the target's)
     fronts: tuple[float, ...] | None = None  # each measured face's offset (likewise)
     pan_deg: float | None = None  # the camera's pan, where the readings are a detector's
+    position_sigma: float = 0.0  # each beacon's plan position known to this (cm per axis)
+
+    def offsets(self, x: np.ndarray) -> np.ndarray:
+        """Each beacon's estimated plan offset (zero unless ``position_sigma``)."""
+        k = 6 + len(self.nuisances)
+        if not self.position_sigma:
+            return np.zeros((len(self.positions), 2))
+        return x[k:k + 2 * len(self.positions)].reshape(-1, 2)
 
     def predicted(self, x: np.ndarray) -> np.ndarray:
         """(α, ε, d_total) of every observation at parameters ``x``: of each object's
@@ -142,6 +153,8 @@ class _Problem:
         its image (:func:`~solver.sltr3d.measured3`)."""
         plane = MirrorPlane.from_params(x[0], x[1], x[2], flip=self.flip)
         n_b = len(self.positions)
+        positions = [p + np.r_[d, 0.0] for p, d in zip(self.positions, self.offsets(x),
+                                                       strict=True)]
 
         def image(p: np.ndarray, k: int) -> tuple[float, float, float]:  # object k's
             if self.heights is None:
@@ -149,11 +162,11 @@ class _Problem:
             return measured3(self.o, plane, p, height=self.heights[k],
                              front=self.fronts[k] if self.fronts else 0.0, pan_deg=self.pan_deg)
 
-        pr = np.array([image(p, k) for k, p in enumerate(self.positions)]
+        pr = np.array([image(p, k) for k, p in enumerate(positions)]
                       + [image(x[3:6], n_b)] * (len(self.seen) - n_b))
-        v = dict(zip(self.nuisances, x[6:], strict=True))
+        v = dict(zip(self.nuisances, x[6:6 + len(self.nuisances)], strict=True))
         if "power" in v:  # the glass curved about its images' middle: d = s·(d + c·D)
-            terms = power_terms3(self.o, plane, [*self.positions, x[3:6]])
+            terms = power_terms3(self.o, plane, [*positions, x[3:6]])
             pr += v["power"] * np.vstack([terms, np.repeat(terms[-1:], len(pr) - n_b - 1, 0)])
         pr[:, 0] += v.get("pan", 0.0)
         pr[:, 1] += v.get("pitch", 0.0)
@@ -169,8 +182,11 @@ class _Problem:
         da = wrap_bearing(pr[:, 0] - seen[:, 0])
         rows = [da / sa, (pr[:, 1] - seen[:, 1]) / se, (pr[:, 2] - seen[:, 2]) / (sd * seen[:, 2])]
         rows.append(np.array([(v - NUISANCES3[n]) / self.priors[n]
-                              for n, v in zip(self.nuisances, x[6:], strict=True)
+                              for n, v in zip(self.nuisances, x[6:6 + len(self.nuisances)],
+                                              strict=True)
                               if n in self.priors]))
+        if self.position_sigma:
+            rows.append(self.offsets(x).ravel() / self.position_sigma)
         return np.concatenate(rows)
 
     def names(self) -> list[str]:
@@ -179,7 +195,15 @@ class _Problem:
             f"target {k}" for k in range(len(self.seen) - len(self.positions))]
         return ([f"{w} α" for w in who] + [f"{w} elevation" for w in who]
                 + [f"{w} d_total" for w in who]
-                + [f"the {n} prior" for n in self.nuisances if n in self.priors])
+                + [f"the {n} prior" for n in self.nuisances if n in self.priors]
+                + ([f"beacon {i} position {a} prior" for i in range(len(self.positions))
+                    for a in "xy"] if self.position_sigma else []))
+
+    def start(self, x: np.ndarray) -> np.ndarray:
+        """``x`` (the plane, the target) with each nuisance at its neutral value, and
+        each beacon's offset at 0 where estimated."""
+        return np.array([*x, *(NUISANCES3[n] for n in self.nuisances),
+                         *([0.0] * (2 * len(self.positions) if self.position_sigma else 0))])
 
 
 def solve_lsq3(observer: ArrayLike, beacons: list[tuple[ArrayLike, Seen]], targets: list[Seen],
@@ -187,7 +211,7 @@ def solve_lsq3(observer: ArrayLike, beacons: list[tuple[ArrayLike, Seen]], targe
                nuisances: tuple[str, ...] = (), priors: dict[str, float] | None = None,
                heights: tuple[float, ...] | None = None,
                fronts: tuple[float, ...] | None = None,
-               pan_deg: float | None = None) -> Fit3:
+               pan_deg: float | None = None, position_sigma: float = 0.0) -> Fit3:
     """The mirror's plane and the target from every beacon (its position, and what the
     camera saw of it: α, ε, d_total) and every view of the target, by weighted least
     squares from the first beacon's closed form.  ``sigma``: (σ_α deg, σ_ε deg, σ_d as a
@@ -199,6 +223,8 @@ def solve_lsq3(observer: ArrayLike, beacons: list[tuple[ArrayLike, Seen]], targe
     and face offset (cm) and the camera's pan, to predict each reading as a detector
     makes it (:func:`~solver.sltr3d.measured3`: a leaning mirror's bias removed);
     without them the measurements are taken as each base's exact image.
+    ``position_sigma``: each beacon's plan position known to this (cm per axis; 0:
+    exactly), its offset estimated with that prior.
 
     Raises
     ------
@@ -222,9 +248,9 @@ def solve_lsq3(observer: ArrayLike, beacons: list[tuple[ArrayLike, Seen]], targe
                  (0.01, 0.01, 0.002) if sigma is None else np.asarray(sigma, float),
                  tuple(nuisances), dict(priors or {}),
                  flip=start.plane.flip, heights=None if heights is None else tuple(heights),
-                 fronts=None if fronts is None else tuple(fronts), pan_deg=pan_deg)
-    x0 = np.array([yaw0, start.plane.lean_deg, start.plane.rho, *start.target,
-                   *(NUISANCES3[n] for n in nuisances)])
+                 fronts=None if fronts is None else tuple(fronts), pan_deg=pan_deg,
+                 position_sigma=position_sigma)
+    x0 = p.start([yaw0, start.plane.lean_deg, start.plane.rho, *start.target])
     robust = len(p.residuals(x0)) > len(x0)
     res = least_squares(p.residuals, x0, method="trf" if robust else "lm",
                         loss="huber" if robust else "linear", f_scale=HUBER_K,
@@ -239,7 +265,7 @@ def solve_lsq3(observer: ArrayLike, beacons: list[tuple[ArrayLike, Seen]], targe
     names = p.names()
     plane = MirrorPlane.from_params(res.x[0], res.x[1], res.x[2], flip=p.flip)
     return Fit3(plane, res.x[3:6].copy(),
-                dict(zip(nuisances, map(float, res.x[6:]), strict=True)),
+                dict(zip(nuisances, map(float, res.x[6:6 + len(nuisances)]), strict=True)),
                 np.linalg.inv(jtj) if sigma is not None else None,
                 tuple(f"{names[i]} ({abs(r[i]):.1f} σ off)" for i in np.flatnonzero(w < 1.0)))
 
@@ -250,8 +276,9 @@ def crlb3(observer: ArrayLike, beacons: list[ArrayLike], plane: MirrorPlane, *,
           nuisances: tuple[str, ...] = (), priors: dict[str, float] | None = None,
           heights: tuple[float, ...] | None = None,
           fronts: tuple[float, ...] | None = None,
-          pan_deg: float | None = None) -> np.ndarray:
-    """The Cramér–Rao bound of (yaw, lean, ρ, x, y, z, *nuisances) at the truth, for
+          pan_deg: float | None = None, position_sigma: float = 0.0) -> np.ndarray:
+    """The Cramér–Rao bound of (yaw, lean, ρ, x, y, z, *nuisances, *each beacon's plan
+    offset where ``position_sigma``) at the truth, for
     Gaussian errors of these σ's: the inverse of the Fisher information the fit of
     :func:`solve_lsq3` weighs (no estimator that is unbiased does better).
 
@@ -268,9 +295,9 @@ def crlb3(observer: ArrayLike, beacons: list[ArrayLike], plane: MirrorPlane, *,
     p = _Problem(o, [np.asarray(b, float) for b in beacons], np.array(seen, float), sigma,
                  tuple(nuisances), dict(priors or {}), flip=plane.flip,
                  heights=None if heights is None else tuple(heights),
-                 fronts=None if fronts is None else tuple(fronts), pan_deg=pan_deg)
-    x = np.array([plane.yaw_deg, plane.lean_deg, plane.rho, *t,
-                  *(NUISANCES3[n] for n in nuisances)])
+                 fronts=None if fronts is None else tuple(fronts), pan_deg=pan_deg,
+                 position_sigma=position_sigma)
+    x = p.start([plane.yaw_deg, plane.lean_deg, plane.rho, *t])
     J = _jacobian(p, x)
     info = J.T @ J
     if np.linalg.cond(info) > 1e14:
@@ -294,7 +321,7 @@ def _jacobian(p: _Problem, x: np.ndarray) -> np.ndarray:
     millionth of each parameter's scale: 1e-6° and 1e-6 cm, 1e-9 in the scale; 1e-6/cm
     in the power, in which the model is linear: exact at any step)."""
     steps = np.full(len(x), 1e-6)
-    steps[6:] = [1e-9 if n == "scale" else 1e-6 for n in p.nuisances]
+    steps[6:6 + len(p.nuisances)] = [1e-9 if n == "scale" else 1e-6 for n in p.nuisances]
     cols = []
     for k, h in enumerate(steps):
         e = np.zeros(len(x))

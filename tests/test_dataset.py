@@ -876,19 +876,15 @@ def test_a_planar_dataset_has_no_3d_values(one_worker):
     assert cols["target_elevation_meas"] == [None] * 3 and cols["est_target_z"] == [None] * 3
 
 
-def test_a_3d_dataset_refuses_what_the_3d_solve_cannot_estimate(tmp_path, capsys):
-    """The beacons' positions are not yet estimated in 3-D: refused in one line before
-    anything is written, naming the flag; the pitch, a planar spec's refusal, is not."""
+def test_a_3d_dataset_takes_the_3d_calibration(tmp_path, capsys):
+    """A 3-D spec's scenes take the pitch and the beacons' position σ; a planar spec's
+    refuse the pitch in one line, before anything is written."""
     out = tmp_path / "o"
-    assert main(["dataset", "--n", "1", "--seed", "0", "--out", str(out), "--spec",
-                 str(SPEC_3D), "--beacon-sigma", "0.1", "--quiet"]) == 2
-    err = capsys.readouterr().err
-    assert "--beacon-sigma" in err and len(err.strip().splitlines()) == 1
     assert main(["dataset", "--n", "1", "--seed", "0", "--out", str(out), "--spec",
                  str(SPEC), "--calibrate", "pitch", "--quiet"]) == 2
     assert "pitch" in capsys.readouterr().err and not out.exists()
     from mirrorsim.pipelines.dataset import _run_spec
 
     spec = _run_spec(SPEC_3D, sampler=None, beacons=None,
-                     calibration=SelfCalibration(("pan", "pitch")))
+                     calibration=SelfCalibration(("pan", "pitch"), 0.1))
     assert spec.is_3d

@@ -328,24 +328,31 @@ def test_the_3d_solve_takes_what_the_user_asks_of_pan_and_scale():
 
     ideal, bench = default_error_model("ideal"), default_error_model("bench")
     sig = ObjectSigmas(Sigma(0.01, 0.005), (Sigma(0.01, 0.005),))
-    assert nuisances3(ideal, sig)[:2] == ((), {})
-    assert nuisances3(ideal, sig, SelfCalibration(("pan", "scale"),
-                                                  priors={"scale": 0.01}))[:2] \
-        == (("pan", "scale"), {"scale": 0.01})
-    names, priors, _ = nuisances3(bench, sig, SelfCalibration(("scale",),
-                                                              priors={"scale": 0.002}))
+
+    def taken(*args):
+        cal = nuisances3(*args)[0]
+        return cal.nuisances, cal.priors, cal.position_sigma
+
+    assert taken(ideal, sig) == ((), {}, 0.0)
+    assert taken(ideal, sig, SelfCalibration(("pan", "scale"), 0.2, {"scale": 0.01})) \
+        == (("pan", "scale"), {"scale": 0.01}, 0.2)
+    names, priors, position = taken(bench, sig, SelfCalibration(("scale",),
+                                                                priors={"scale": 0.002}))
     assert names == ("scale", "pan", "power")  # the model's tolerances: 1/R to 0.00143/cm
     assert priors == pytest.approx({"scale": 0.002, "pan": 1.5 / np.sqrt(3),
                                     "power": 0.00143 / np.sqrt(3)})
+    # and the beacons' believed positions, to the tolerance's σ (a stated one wins)
+    assert position == pytest.approx(bench.tolerances.beacon_position_cm / np.sqrt(3))
+    assert taken(bench, sig, SelfCalibration((), 0.05))[2] == 0.05
     shared = ObjectSigmas(sig.target, sig.beacons, shared_alpha_deg=0.2)
-    assert nuisances3(ideal, shared)[:2] == (("pan",), {"pan": pytest.approx(0.2)})
-    assert nuisances3(ideal, shared, SelfCalibration(("pan",)))[:2] == (("pan",), {})
+    assert taken(ideal, shared)[:2] == (("pan",), {"pan": pytest.approx(0.2)})
+    assert taken(ideal, shared, SelfCalibration(("pan",)))[:2] == (("pan",), {})
 
 
 def test_solve_calibrates_3d_measurements_on_the_command_line(tmp_path):
     """Exact readings of a leaning mirror with every azimuth turned by a 0.4° pan error:
     plain, the target comes out off; with --calibrate pan it comes back to 1e-5 cm and the
-    pan to 1e-6°; a beacons' position σ is refused in one line, exit 2."""
+    pan to 1e-6°; with the beacons' positions known to 0.5 cm, to 1e-4 cm."""
     target = LEANING_TARGET
     f = tmp_path / "m3.json"
     f.write_text(json.dumps(_leaning_readings(pan_error_deg=0.4)))
@@ -363,9 +370,11 @@ def test_solve_calibrates_3d_measurements_on_the_command_line(tmp_path):
     cal = target_of(solve("--calibrate", "pan", "--json", "-"))
     np.testing.assert_allclose(cal["target"], target, atol=1e-5)
     assert cal["nuisances"]["pan"] == pytest.approx(0.4, abs=1e-6)
-    bad = solve("--calibrate", "pan", "--beacon-sigma", "0.5")
-    assert bad.returncode == 2 and "--beacon-sigma" in bad.stderr and "position" in bad.stderr
-    assert len(bad.stderr.strip().splitlines()) == 1
+    # the beacons' positions known to 0.5 cm: estimated (exact readings: still exact),
+    # and the target's ellipsoid wider for it
+    loose = target_of(solve("--calibrate", "pan", "--beacon-sigma", "0.5", "--json", "-"))
+    np.testing.assert_allclose(loose["target"], target, atol=1e-4)
+    assert np.trace(loose["target_covariance"]) > np.trace(cal["target_covariance"])
 
 
 def test_solve_calibrates_the_pitch_of_3d_measurements_and_a_planar_solve_refuses_it(

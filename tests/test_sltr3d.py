@@ -488,3 +488,53 @@ def test_the_3d_monte_carlo_sees_the_bias_a_planar_solve_makes_of_a_leaning_mirr
     assert row.rmse_tar_planar == pytest.approx(np.linalg.norm(flat.target - lay.target[:2]),
                                                 rel=1e-9)
     assert row.rmse_tar_planar > 0.5
+
+
+def test_beacons_known_to_a_position_sigma_are_estimated_as_the_planar_fit_does():
+    """Beacons believed 0.3 cm (per axis) off where they stand: known exactly, the target
+    is 0.49 cm off and 30 σ outside its ellipsoid; with their offsets estimated under a
+    0.3 cm prior, it is inside it, and the bound widens.  On the lens's plane, by an
+    upright glass, the 3-D fit is the planar one (a separate fit model: solver.fit_model)
+    to 1e-6 cm, its covariance too."""
+    from solver.lsq import solve_lsq
+    from solver.lsq3 import crlb3, solve_lsq3
+    from solver.measurements import BeaconMeasurement, Sigma
+    from solver.selfcal import SelfCalibration
+
+    def fits(plane, beacons, believed, target, **kw):
+        return solve_lsq3(CAMERA, [(bb, _seen(CAMERA, plane, b))
+                                   for bb, b in zip(believed, beacons, strict=True)],
+                          [_seen(CAMERA, plane, target)], sigma=(0.003, 0.003, 0.001), **kw)
+
+    rng = np.random.default_rng(5)
+    plane, yaw, _, (b0, target) = _scene(rng)
+    beacons = [b0, *_more_beacons(rng, plane, yaw, 3)]
+    off = np.random.default_rng(9)
+    believed = [b + np.r_[off.normal(0, 0.3, 2), 0.0] for b in beacons]
+
+    def mahalanobis(fit):
+        e = fit.target - target
+        return float(np.sqrt(e @ np.linalg.solve(fit.target_covariance, e)))
+
+    known, free = fits(plane, beacons, believed, target), fits(
+        plane, beacons, believed, target, position_sigma=0.3)
+    assert mahalanobis(known) > 10 and mahalanobis(free) < 2.8
+    assert np.linalg.norm(free.target - target) < 0.5 * np.linalg.norm(known.target - target)
+    assert free.covariance.shape == (14, 14) and known.covariance.shape == (6, 6)
+    bounds = [crlb3(CAMERA, believed, plane, target=target, sigma=(0.003, 0.003, 0.001),
+                    position_sigma=s)[3:6, 3:6].trace() for s in (0.0, 0.3)]
+    assert bounds[1] > 2 * bounds[0]
+    # the planar special case
+    rng = np.random.default_rng(11)
+    plane, yaw, _, (b0, target) = _scene(rng, lean_range=0.0)
+    level = [np.r_[p[:2], CAMERA[2]] for p in (b0, *_more_beacons(rng, plane, yaw, 2), target)]
+    beacons, target = level[:-1], level[-1]
+    believed = [b + np.r_[off.normal(0, 0.3, 2), 0.0] for b in beacons]
+    fit3 = fits(plane, beacons, believed, target, position_sigma=0.3)
+    seen = [_seen(CAMERA, plane, b) for b in beacons]
+    ts = _seen(CAMERA, plane, target)
+    fit2 = solve_lsq(CAMERA[:2], [BeaconMeasurement(tuple(bb[:2]), a, d) for bb, (a, _, d)
+                                  in zip(believed, seen, strict=True)], [(ts[0], ts[2])],
+                     sigma=Sigma(0.003, 0.001), calibration=SelfCalibration((), 0.3))
+    assert fit3.target[:2] == pytest.approx(fit2.target, abs=1e-6)
+    assert fit3.target_covariance[:2, :2] == pytest.approx(fit2.target_covariance, rel=1e-5)

@@ -91,8 +91,7 @@ def _solve3(args, m) -> int:
     try:  # (pan, pitch, scale and power, with the priors --prior states)
         check_calibration3(str(args.measurements), calibration)
     except BadParameter as exc:
-        flag = "--beacon-sigma" if exc.parameter == "position_sigma" else "--calibrate"
-        raise BadArgument(flag, exc.message) from None
+        raise BadArgument("--calibrate", exc.message) from None
     model = error_model_of(args)
     source = f"`sigma` of {args.measurements}"
     shared = 0.0
@@ -107,7 +106,8 @@ def _solve3(args, m) -> int:
         # a bench model's shared errors with their priors, as the planar solve takes them
         calibration, shared = model_calibration(model, calibration), t.shared_alpha_deg
     nuisances, priors = with_shared_pan(calibration, shared)
-    fit = m.solve(nuisances=nuisances, priors=priors)
+    fit = m.solve(nuisances=nuisances, priors=priors,
+                  position_sigma=calibration.position_sigma)
     print(f"σ's from {source}", file=sys.stderr)
     print(solution3_summary(str(args.measurements), fit))
     emit(args, fit.to_json())

@@ -81,8 +81,7 @@ def _dataset_calibration(args):
         try:
             check_calibration3(str(args.spec), calibration)
         except BadParameter as exc:
-            flag = "--beacon-sigma" if exc.parameter == "position_sigma" else "--calibrate"
-            raise BadArgument(flag, exc.message) from None
+            raise BadArgument("--calibrate", exc.message) from None
     return calibration
 
 

@@ -215,7 +215,8 @@ def calibrated_error(report: Report | Report3, calibration: SelfCalibration) -> 
     try:
         if isinstance(m, Measurements3):  # (the runs' shared α as their pan's prior)
             nuisances, priors = with_shared_pan(calibration, report.shared_alpha_deg)
-            target = m.solve(nuisances=nuisances, priors=priors).target
+            target = m.solve(nuisances=nuisances, priors=priors,
+                             position_sigma=calibration.position_sigma).target
         else:
             target = solve_measurements(m.observer, m.beacons, m.targets, sigma=m.sigma,
                                         calibration=calibration).target

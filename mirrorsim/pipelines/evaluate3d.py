@@ -193,21 +193,20 @@ def evaluate_into3(scene: Scene, out: Path, *, variant: str = "auto", progress: 
                     beacons=tuple(t.beacons[0] for t in truths))
     seen2, model = seen_of(scene, measured, board_pose=board_pose), model_for(scene, error_model)
     features, sigma = sigmas_of(model, seen2)
-    nuisances, priors, sigma = nuisances3(
-        model, sigma, calibration, bench=model_priors,
-        board=None if seen2.pose is None else (seen2.pose, seen2.fx))
+    cal, sigma = nuisances3(model, sigma, calibration, bench=model_priors,
+                            board=None if seen2.pose is None else (seen2.pose, seen2.fx))
     # the 3-D solve draws a Gaussian's ellipsoid: the σ's as a Gaussian's (the factors
     # below were fitted on them)
     seen = _seen3(scene, measured, model.gaussian(sigma), fx=seen2.fx, pose=seen2.pose)
-    fit = seen.solve(nuisances=nuisances, priors=priors)
+    fit = seen.solve(nuisances=cal.nuisances, priors=cal.priors,
+                     position_sigma=cal.position_sigma)
     try:  # the planar solve of the same frames, beside it
         planar = solve_measurements(scene.camera.position, seen2.beacons, [seen2.target],
                                     sigma=sigma).target
         planar_target = (float(planar[0]), float(planar[1]))
     except SolverError:
         planar_target = None
-    errors = _score3(scene, truth, fit, seen, planar_target, nuisances=nuisances,
-                     priors=priors)
+    errors = _score3(scene, truth, fit, seen, planar_target, calibration=cal)
     done = truths[0].render
     keys = {"fx_px": seen2.fx, "camera_height_cm": scene.camera.height,
             "pencil_height_cm": tuple(b.height for b in scene.beacons),
@@ -219,7 +218,7 @@ def evaluate_into3(scene: Scene, out: Path, *, variant: str = "auto", progress: 
                    render=RenderInfo(done.variant, done.spp, done.seed, done.sampler),
                    error_model=model.name(), model_warnings=tuple(notes),
                    shared_alpha_deg=sigma.shared_alpha_deg, camera_pose=seen2.pose,
-                   self_calibration=SelfCalibration(nuisances, priors=priors),
+                   self_calibration=cal,
                    image_features=features)
 
 
@@ -300,31 +299,29 @@ CALIBRATED3 = ("pan", "pitch", "scale", "power")
 
 def check_calibration3(name: str, calibration: SelfCalibration) -> None:
     """Refuse, naming the scene, a calibration the 3-D solve cannot make: a nuisance
-    other than CALIBRATED3, or the beacons' positions estimated (a position σ)."""
+    other than CALIBRATED3 (the beacons' plan positions it estimates with a position
+    σ, as the planar solve does)."""
     other = [n for n in calibration.nuisances if n not in CALIBRATED3]
     if other:
         raise BadParameter("nuisances", f"{name}: the 3-D solve estimates "
                            f"{', '.join(CALIBRATED3)}, not {', '.join(other)}")
-    if calibration.position_sigma:
-        raise BadParameter("position_sigma", f"{name}: {calibration.position_sigma:g} cm: "
-                           "the 3-D solve does not yet estimate the beacons' positions "
-                           "(the planar solve does)")
 
 
 def nuisances3(model: ErrorModel, sigma: ObjectSigmas, asked: SelfCalibration = PLAIN, *,
                bench: bool = True, board: tuple[CameraPose, float] | None = None
-               ) -> tuple[tuple[str, ...], dict[str, float], ObjectSigmas]:
-    """The bench's shared errors the 3-D solve estimates, with their priors, and the σ's
-    it weighs with: those ``asked`` (a prior the user states wins over the model's), and
-    (``bench``) the pan, range scale and power a bench model's tolerances give; an α
-    error every image of a frame shares widens the pan's prior (an ideal-bench model,
-    asked nothing: none).  ``board``: the camera's pose the board
-    gave and the frames' focal length: the pan is then the board's
-    (:func:`~mirrorsim.pipelines.measured.after_board`)."""
+               ) -> tuple[SelfCalibration, ObjectSigmas]:
+    """The bench's shared errors the 3-D solve estimates, with their priors and the
+    beacons' position σ, and the σ's it weighs with: those ``asked`` (a prior or a
+    position σ the user states wins over the model's), and (``bench``) the pan, range
+    scale, power and beacons' positions a bench model's tolerances give; an α error every
+    image of a frame shares widens the pan's prior (an ideal-bench model, asked nothing:
+    none).  ``board``: the camera's pose the board gave and the frames' focal length:
+    the pan is then the board's (:func:`~mirrorsim.pipelines.measured.after_board`)."""
     cal = model_calibration(model, asked) if bench else asked
     if board is not None:
         cal, sigma = after_board(board[0], cal, sigma, fx=board[1])
-    return (*with_shared_pan(cal, sigma.shared_alpha_deg), sigma)
+    nuisances, priors = with_shared_pan(cal, sigma.shared_alpha_deg)
+    return SelfCalibration(nuisances, cal.position_sigma, priors), sigma
 
 
 def with_shared_pan(calibration: SelfCalibration, shared_alpha_deg: float
@@ -341,8 +338,8 @@ def with_shared_pan(calibration: SelfCalibration, shared_alpha_deg: float
 
 
 def _score3(scene: Scene, truth: GroundTruth, fit: Fit3, seen: Measurements3,
-            planar_target: tuple[float, float] | None, *, nuisances: tuple[str, ...],
-            priors: dict[str, float]) -> Score3:
+            planar_target: tuple[float, float] | None, *,
+            calibration: SelfCalibration) -> Score3:
     """The 3-D estimate against the truth (:class:`Score3`)."""
     t_true = np.asarray(truth.target.position, float)
     if len(t_true) == 2:  # a planar scene solved in 3-D: its target stands on the board
@@ -353,7 +350,8 @@ def _score3(scene: Scene, truth: GroundTruth, fit: Fit3, seen: Measurements3,
     try:
         bound = crlb3(seen.observer, [p for p, _ in seen.beacons], plane, target=t_true,
                       sigma=np.array(seen.sigma), heights=seen.heights, fronts=seen.fronts,
-                      pan_deg=seen.pan_deg, nuisances=nuisances, priors=priors)
+                      pan_deg=seen.pan_deg, nuisances=calibration.nuisances,
+                      priors=calibration.priors, position_sigma=calibration.position_sigma)
         crlb = float(np.sqrt(np.trace(bound[3:6, 3:6])))
     except SolverError:
         crlb = None
