@@ -209,8 +209,7 @@ class _Problem:
 def solve_lsq3(observer: ArrayLike, beacons: list[tuple[ArrayLike, Seen]], targets: list[Seen],
                *, sigma: tuple[float, float, float] | np.ndarray | None = None,
                nuisances: tuple[str, ...] = (), priors: dict[str, float] | None = None,
-               heights: tuple[float, ...] | None = None,
-               fronts: tuple[float, ...] | None = None,
+               heights: tuple[float, ...] | None = None, fronts: tuple[float, ...] | None = None,
                pan_deg: float | None = None, position_sigma: float = 0.0) -> Fit3:
     """The mirror's plane and the target from every beacon (its position, and what the
     camera saw of it: α, ε, d_total) and every view of the target, by weighted least
@@ -222,9 +221,8 @@ def solve_lsq3(observer: ArrayLike, beacons: list[tuple[ArrayLike, Seen]], targe
     ``heights``, ``fronts``, ``pan_deg``: each beacon's and the target's measured height
     and face offset (cm) and the camera's pan, to predict each reading as a detector
     makes it (:func:`~solver.sltr3d.measured3`: a leaning mirror's bias removed);
-    without them the measurements are taken as each base's exact image.
-    ``position_sigma``: each beacon's plan position known to this (cm per axis; 0:
-    exactly), its offset estimated with that prior.
+    without them as each base's exact image.  ``position_sigma``: each beacon's plan
+    position known to this (cm per axis), its offset estimated with that prior.
 
     Raises
     ------
