@@ -240,7 +240,6 @@ def solve_lsq3(observer: ArrayLike, beacons: list[tuple[ArrayLike, Seen]], targe
     _check_objects(len(beacons), heights, fronts)
     o = np.asarray(observer, float)
     start = solve_single3(o, beacons[0][0], beacons[0][1], target_seen=targets[0])
-    yaw0 = start.plane.yaw_deg
     p = _Problem(o, [np.asarray(b, float) for b, _ in beacons],
                  np.array([s for _, s in beacons] + list(targets), float),
                  (0.01, 0.01, 0.002) if sigma is None else np.asarray(sigma, float),
@@ -248,7 +247,9 @@ def solve_lsq3(observer: ArrayLike, beacons: list[tuple[ArrayLike, Seen]], targe
                  flip=start.plane.flip, heights=None if heights is None else tuple(heights),
                  fronts=None if fronts is None else tuple(fronts), pan_deg=pan_deg,
                  position_sigma=position_sigma)
-    x0 = p.start([yaw0, start.plane.lean_deg, start.plane.rho, *start.target])
+    x0 = p.start([start.plane.yaw_deg, start.plane.lean_deg, start.plane.rho, *start.target])
+    if len(p.residuals(x0)) < len(x0):  # (each prior brings its own row)
+        raise SolverError(f"{len(x0)} unknowns from {len(p.residuals(x0))} measurements")
     robust = len(p.residuals(x0)) > len(x0)
     res = least_squares(p.residuals, x0, method="trf" if robust else "lm",
                         loss="huber" if robust else "linear", f_scale=HUBER_K,

@@ -888,3 +888,19 @@ def test_a_3d_dataset_takes_the_3d_calibration(tmp_path, capsys):
     spec = _run_spec(SPEC_3D, sampler=None, beacons=None,
                      calibration=SelfCalibration(("pan", "pitch"), 0.1))
     assert spec.is_3d
+
+
+def test_a_table_of_several_beacons_before_3d_is_read(three_beacons, tmp_path):
+    """A dataset of three beacons made before the 3-D columns (schema 5, its rows and
+    table without them): each beacon's 3-D columns read as a planar scene's."""
+    from mirrorsim.formats.dataset_folder import read_table
+    from mirrorsim.formats.dataset_table import older_values
+
+    out, _ = three_beacons
+    old = tmp_path / "old"
+    dropped = set(older_values(5, 3))
+    assert {"beacon2_pos_z", "beacon3_elevation_err", "target_pos_z"} <= dropped
+    _as_layout(out, old, [5, 5], dropped)
+    read = read_table(old)
+    assert read["geometry"] == ["planar"] * 2
+    assert read["beacon3_pos_z"] == [0.0, 0.0] and read["beacon2_elevation_err"] == [None] * 2

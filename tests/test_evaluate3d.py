@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from mirrorsim.errors import BadParameter
-from mirrorsim.pipelines.evaluate import check_geometry, evaluate_scene
+from mirrorsim.pipelines.evaluate import evaluate_scene
 from mirrorsim.pipelines.evaluate3d import CHI2_3_R95, geometry_of
 from mirrorsim.pipelines.scenes import load_scene, scene_from_dict
 from mirrorsim.scene.model import pencil_paint_height
@@ -31,13 +31,20 @@ def test_auto_solves_a_3d_scene_in_3d_and_a_planar_one_in_the_plane():
         geometry_of(raised, "2d")
 
 
-@pytest.mark.parametrize("kw", [{"calibration": SelfCalibration(("pan",), 0.5)}])
-def test_what_the_3d_solve_does_not_do_is_refused_before_a_folder_is_claimed(tmp_path, kw):
-    out = tmp_path / "out"
-    with pytest.raises(BadParameter):
-        evaluate_scene(load_scene(SCENES / "raised.yaml"), out, **kw)
-    assert not out.exists()
-    check_geometry(load_scene(SCENES / "raised.yaml"), "planar", **kw)  # planar takes them
+def test_what_the_3d_solve_cannot_carry_is_refused():
+    """One beacon and the target give six readings: the plane, the target and a free pan
+    are seven unknowns.  With the beacon's plan offset (two more, with their prior's two
+    rows) the 3-D solve refuses them in one line, as the count does; with the pan's
+    prior it solves."""
+    from solver.lsq3 import solve_lsq3
+
+    o, b, t = np.array([0.0, 0.0, 8.0]), np.array([30.0, 50.0, 3.0]), (60.0, 2.0, 80.0)
+    seen = (59.0, -1.0, 60.0)
+    with pytest.raises(SolverError, match="unknowns"):
+        solve_lsq3(o, [(b, seen)], [t], nuisances=("pan",), position_sigma=0.5)
+    fit = solve_lsq3(o, [(b, seen)], [t], nuisances=("pan",), priors={"pan": 0.3},
+                     position_sigma=0.5)
+    assert np.all(np.isfinite(fit.target))
 
 
 @pytest.fixture(scope="module")

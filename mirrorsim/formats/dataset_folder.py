@@ -250,11 +250,14 @@ def _migrated(cols: dict[str, list]) -> None:
     beacon, plain; no priors); a column its own layout had stays missing."""
     schemas = cols.get("schema") or [None]
     if all(s in (*table.OLDER_SCHEMAS, table.SCHEMA) for s in schemas):
-        older = [table.older_values(s) for s in schemas]
+        beacons = cols.get("beacons") or [1] * len(schemas)
+        older = [table.older_values(s, int(b or 1)) for s, b in zip(schemas, beacons,
+                                                                     strict=True)]
         for c in set().union(*older) - set(cols):
-            if all(c in o for o in older):
-                cols[c] = [None if e else o[c] for e, o in zip(cols["error"], older,
-                                                                strict=True)]
+            # a further beacon's column: null where a row has fewer beacons
+            if c not in table.NAMES or all(c in o for o in older):
+                cols[c] = [None if e else o.get(c) for e, o in zip(cols["error"], older,
+                                                                    strict=True)]
 
 
 def load_dataset(folder: str | Path) -> pd.DataFrame:

@@ -106,9 +106,11 @@ PER_OBJECT = (
     Column("contrast", "1", "relative contrast of the image's edges"),
     Column("noise", "1", "the frame's relative noise (on the target panel)"),
     Column("jpeg_quality", "", "the frame's JPEG quality as its file says (0: lossless)"),
-    Column("sigma_alpha_deg", "deg", "σ of the measured α, from the error model"),
+    Column("sigma_alpha_deg", "deg", "σ of the measured α, from the error model (3-D: "
+                                     "what the 3-D solve weighed it with, the model's "
+                                     "widened)"),
     Column("sigma_d_rel", "1", "σ of the measured d_total, relative (a fraction), from the "
-                               "error model"),
+                               "error model (3-D: likewise)"),
     Column("sigma_elevation_deg", "deg", "σ of the measured elevation the 3-D solve weighed "
                                          "it with (null in a planar row)"),
 )
@@ -116,12 +118,13 @@ SOLUTION = (
     Column("est_target_x", "cm", "estimated target"),
     Column("est_target_y", "cm", "estimated target"),
     Column("est_mirror_yaw_deg", "deg", "estimated mirror line direction"),
-    Column("err_target_cm", "cm", "target error"),
+    Column("err_target_cm", "cm", "target error (3-D: the 3-D distance)"),
     Column("err_mirror_yaw_deg", "deg", "mirror yaw error"),
     Column("err_mirror_offset_cm", "cm",
            "estimated line's distance from the true reflection point"),
     Column("err_reflection_point_cm", "cm", "reflection point error"),
-    Column("target_ellipse95_major_cm", "cm", "semi-major axis of the solver's 95 % ellipse"),
+    Column("target_ellipse95_major_cm", "cm", "semi-major axis of the solver's 95 % ellipse "
+                                              "(3-D: its Gaussian 95 % ellipsoid's)"),
     Column("target_cov_xx", "cm²", "the estimated target's covariance"),
     Column("target_cov_xy", "cm²", "the estimated target's covariance"),
     Column("target_cov_yy", "cm²", "the estimated target's covariance"),
@@ -224,9 +227,16 @@ SCHEMA, ADDED_IN = layouts()
 OLDER_SCHEMAS = tuple(range(FIRST_SCHEMA, SCHEMA))
 
 
-def older_values(schema: int) -> dict[str, Any]:
-    """What a row of layout ``schema`` had for the columns added since."""
-    return {k: v for s, added in ADDED_IN.items() if s > schema for k, v in added.items()}
+def older_values(schema: int, beacons: int = 1) -> dict[str, Any]:
+    """What a row of layout ``schema`` (of ``beacons`` beacons) had for the columns added
+    since: a beacon's column for each of its beacons (``beacon2_*``…)."""
+    out = {k: v for s, added in ADDED_IN.items() if s > schema for k, v in added.items()}
+    per_object = {c.name for c in PER_OBJECT}
+    for name, v in list(out.items()):
+        rest = name.removeprefix("beacon_")
+        if rest != name and rest in per_object:
+            out.update({object_column(beacon_kind(k), rest): v for k in range(1, beacons)})
+    return out
 
 
 def checked_row(row: dict) -> dict:
@@ -283,7 +293,7 @@ class DatasetRow:
         self-calibration; 3: no priors; 4: no image features) takes the values its scene
         had for the columns added since."""
         if d.get("schema") in OLDER_SCHEMAS and not d.get("error"):
-            d = {**older_values(d["schema"]), **d}
+            d = {**older_values(d["schema"], int(d.get("beacons") or 1)), **d}
         files = d.get("files", {})
         if not (isinstance(files, dict) and all(
                 isinstance(k, str) and isinstance(v, str) for k, v in files.items())):

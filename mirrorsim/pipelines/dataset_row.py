@@ -7,18 +7,21 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from mirrorsim.formats import dataset_table as table
 from mirrorsim.formats.error_model import ImageFeatures
-from mirrorsim.pipelines.evaluate3d import CHI2_3_R95, Report3
 from mirrorsim.pipelines.score import Report
 from mirrorsim.scene import imperfections
 from mirrorsim.scene.model import Scene
 from mirrorsim.truth.groundtruth import ObjectTruth
 from solver.geometry import yaw_difference
 from solver.selfcal import KNOWN, NUISANCES, priors_text
+
+if TYPE_CHECKING:  # (evaluate3d imports the renderer: a planar dataset's rows need none)
+    from mirrorsim.pipelines.evaluate3d import Report3
 
 # an image's (α deg, elevation deg or None in the plane, d_total cm), and its σ's (α deg,
 # elevation deg or None, d_total relative)
@@ -166,6 +169,8 @@ def _solution_columns(rep: Report) -> dict:
 def _solution3_columns(rep: Report3) -> dict:
     """The 3-D solution, its errors against the truth and its 3×3 covariance (the planar
     solve's columns it has no value for: null)."""
+    from mirrorsim.pipelines.evaluate3d import CHI2_3_R95
+
     fit, err = rep.fit, rep.errors
     cov = fit.target_covariance
     sd = fit.nuisance_sd or {}
