@@ -261,8 +261,7 @@ def solve_lsq3(observer: ArrayLike, beacons: list[tuple[ArrayLike, Seen]], targe
     if np.linalg.cond(jtj) > 1e14:
         raise SolverError("the beacons and the target do not determine the mirror's plane"
                           + (" and the nuisances" if nuisances else ""))
-    names = p.names()
-    plane = MirrorPlane.from_params(res.x[0], res.x[1], res.x[2], flip=p.flip)
+    names, plane = p.names(), MirrorPlane.from_params(*res.x[:3], flip=p.flip)
     return Fit3(plane, res.x[3:6].copy(),
                 dict(zip(nuisances, map(float, res.x[6:6 + len(nuisances)]), strict=True)),
                 np.linalg.inv(jtj) if sigma is not None else None,

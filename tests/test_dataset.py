@@ -860,6 +860,13 @@ def test_a_3d_dataset_measures_and_solves_each_scene_in_3d(raised_dataset, tmp_p
                         f"scene{i:06d}.measurements.json").read_text())
         assert all("elevation_deg" in b for b in m["beacons"]) and len(m["beacons"]) == 2
     assert max(map(abs, elevations)) > 0.5  # (raised up to 8 cm: not all at the lens's height)
+    # the card says what errormodel takes; the frames' lines carry the table's exact values
+    assert "fits planar datasets only" in (out / "README.md").read_text()
+    lines = [json.loads(x) for x in (out / "metadata.jsonl").read_text().splitlines()]
+    for line in lines:
+        i = line["index"]
+        assert (line["target_alpha_true"], line["target_d_true"]) == (
+            cols["target_alpha_true"][i], cols["target_d_true"][i])
     # its rows are not what the (planar) error model is fitted on: refused in one line
     assert main(["errormodel", str(out), "--out", str(tmp_path / "m.json")]) == 2
     err = capsys.readouterr().err

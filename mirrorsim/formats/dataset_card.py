@@ -81,6 +81,9 @@ def write_card(out: Path, meta: dict, rows: list[table.DatasetRow], *, variant: 
     ok = [r for r in rows if not r.error]
     med = lambda k: float(np.nanmedian([abs(r[k]) for r in ok])) if ok else math.nan  # noqa: E731
     columns = card_columns()
+    fits = ("Its scenes were solved in 3-D (`geometry`): `mirrorsim errormodel` fits "
+            "planar datasets only." if any(r.columns.get("geometry") == "3d" for r in ok)
+            else "`mirrorsim errormodel DIR` fits the error model.")
     text = f"""# mirrorsim dataset
 
 Made with `{made_with(meta, out)}`
@@ -99,8 +102,7 @@ Median |errors| here: target α {med('target_alpha_err'):.4f}°, target d
 {100 * med('beacon_d_rel_err'):.3f} %, target {med('err_target_cm'):.3f} cm.
 
 Scene i is drawn from `SeedSequence({meta['seed']}).spawn({meta['n']})[i]` with the spec in
-`dataset.json` and rendered with seed i.  `mirrorsim errormodel DIR` fits the error
-model.
+`dataset.json` and rendered with seed i.  {fits}
 
 ## Loading it
 

@@ -48,8 +48,10 @@ FIELDS = (
     Field("measurements_file", "string", "what the solver was given (empty: none)"),
     Field("width", "int64", "frame width (px)"), Field("height", "int64", "frame height (px)"),
     Field("error", "string", "why the scene failed to evaluate (empty if fine)"),
-    Field("target_alpha_true", "float64", "exact α of the target's image (deg)"),
-    Field("target_d_true", "float64", "exact d_total of the target's image (cm)"),
+    Field("target_alpha_true", "float64", "exact α of the target's image (deg; the table's "
+                                          "`target_alpha_true`)"),
+    Field("target_d_true", "float64", "exact d_total of the target's image (cm; the table's "
+                                      "`target_d_true`)"),
     Field("target_alpha_meas", "float64", "measured α (deg; null: failed)"),
     Field("target_d_meas", "float64", "measured d_total (cm; null: failed)"),
     Field("err_target_cm", "float64", "the located target's error (cm; null: failed)"),

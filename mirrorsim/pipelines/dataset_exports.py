@@ -122,7 +122,11 @@ def frame_line(entry: FrameEntry, truth: GroundTruth, ann: Annotations) -> dict:
             "frame": entry.frame, "truth_file": entry.truth_file,
             "measurements_file": entry.measurements_file, "width": ann.width,
             "height": ann.height, "error": row.error,
-            "target_alpha_true": truth.target.alpha_deg, "target_d_true": truth.target.d_total,
+            # the table's exact readings (in 3-D what an exact detector reads, which a
+            # leaning glass moves off the base's image); a failed scene's, its truth's
+            "target_alpha_true": float(row.columns.get("target_alpha_true",
+                                                       truth.target.alpha_deg)),
+            "target_d_true": float(row.columns.get("target_d_true", truth.target.d_total)),
             "target_alpha_meas": _number(row, "target_alpha_meas"),
             "target_d_meas": _number(row, "target_d_meas"),
             "err_target_cm": _number(row, "err_target_cm"),
