@@ -145,6 +145,16 @@ def test_the_3d_report_is_consistent_and_beats_the_planar_solve(raised_report):
     m3 = json.loads(run.stdout[run.stdout.index("{"):])
     assert len(m3["observer"]) == 3 and "elevation_deg" in m3["target"]
     assert m3["target"]["alpha_deg"] == pytest.approx(report.seen.target[0], abs=1e-9)
+    # the table says what the solve took of the bench: an ideal bench's nothing; priors
+    # and a position σ where it took them
+    from dataclasses import replace
+
+    from mirrorsim.cli.tables3d import report3_table
+
+    assert "with their priors:" not in report3_table(report)
+    taken = replace(report, self_calibration=SelfCalibration(("pan",), 0.29, {"pan": 0.5}))
+    assert ("estimated with their priors: pan ±0.5°, beacon positions ±0.29 cm"
+            in report3_table(taken))
 
 
 @pytest.mark.slow

@@ -12,7 +12,7 @@ from mirrorsim.pipelines.score import Report
 from mirrorsim.scene.model import Scene
 from mirrorsim.truth import optics, visibility
 from solver.measurements import GAUSSIAN, Tail
-from solver.selfcal import describe_estimates
+from solver.selfcal import SelfCalibration, describe_estimates
 from solver.sltr import Solution
 
 if TYPE_CHECKING:  # renders, budgets and tracks: no Mitsuba import to print a table
@@ -170,6 +170,17 @@ def report_table(report: Report, report_scene: Scene | None = None) -> str:
     return "\n".join(lines)
 
 
+def priors_line(cal: SelfCalibration) -> str:
+    """What a solve took of its bench's shared errors: each prior and the beacons'
+    position σ ('' where none)."""
+    if not (cal.priors or cal.position_sigma):
+        return ""
+    return ("the bench's shared errors estimated with their priors: "
+            + ", ".join(filter(None, [cal.describe_priors(),
+                                      f"beacon positions ±{cal.position_sigma:.3g} cm"
+                                      if cal.position_sigma else ""])))
+
+
 def pose_line(p: CameraPose) -> str:
     """The camera's pose the board gave, as a report's table says it."""
     return (f"camera pose from the board's holes: pan {p.pan_offset_deg:+.4f}° from the "
@@ -188,12 +199,8 @@ def _report_notes(report: Report) -> list[str]:
     if m.sigma is not None:
         lines.append(f"σ's from {report.error_model or 'the error model'}: "
                      f"{m.sigma.describe()}")
-    cal = report.self_calibration
-    if cal.priors or cal.position_sigma:
-        lines.append("the bench's shared errors estimated with their priors: "
-                     + ", ".join(filter(None, [cal.describe_priors(),
-                                               f"beacon positions ±{cal.position_sigma:.3g} cm"
-                                               if cal.position_sigma else ""])))
+    if priors_line(report.self_calibration):
+        lines.append(priors_line(report.self_calibration))
     if s.downweighted:
         lines.append("trusted less by the solver (a Huber loss): " + ", ".join(s.downweighted))
     if s.nuisances:
