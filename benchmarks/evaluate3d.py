@@ -2,6 +2,7 @@
 frames, on scenes drawn here (never the project's own specs).
 
     python benchmarks/evaluate3d.py [--scenes 40] [--seed S] [--out DIR] [--report]
+                                    [--error-model FILE]
     python benchmarks/evaluate3d.py --dataset DIR    # a 3-D dataset's rows, as a table
 
 Each scene is drawn at random and kept where ``check`` accepts it with every image
@@ -33,6 +34,7 @@ import numpy as np
 from clone import ROOT  # noqa: F401 (puts the repository on the path)
 
 from mirrorsim.errors import InputError
+from mirrorsim.formats.error_model_file import load_error_model
 from mirrorsim.pipelines.evaluate3d import CHI2_3_R95, SIGMA3_FACTORS, evaluate_into3
 from mirrorsim.pipelines.scenes import scene_from_dict
 
@@ -147,20 +149,29 @@ def scenes(seed: int, count: int, *, wide: bool = False):
     return out, refused
 
 
+def _rows(out: Path, model: Path | None) -> Path:
+    """Where a run's rows go: ``rows/``, or with a model of its own ``rows-<its stem>/``
+    (the frames, rendered once, are the same)."""
+    return out / ("rows" if model is None else f"rows-{model.stem}")
+
+
 def run(args) -> Path:
     out = Path(args.out or f"renders/evaluate3d-{'wide-' if args.wide else ''}{args.seed}")
-    (out / "rows").mkdir(parents=True, exist_ok=True)
+    model = None if args.error_model is None else load_error_model(args.error_model)
+    factors = ({k: (1.0, 1.0, 1.0) for k in SIGMA3_FACTORS} if model and model.three_d
+               else SIGMA3_FACTORS)
+    _rows(out, args.error_model).mkdir(parents=True, exist_ok=True)
     chosen, refused = scenes(args.seed, args.scenes, wide=args.wide)
     (out / "drawn.json").write_text(json.dumps({"refused": refused}))
     for i, s in enumerate(chosen):
-        row = out / "rows" / f"{s.name}.json"
+        row = _rows(out, args.error_model) / f"{s.name}.json"
         if row.exists():  # resumed: a finished scene is kept
             continue
         try:
-            r = evaluate_into3(s, out / "frames", progress=False, keep=())
+            r = evaluate_into3(s, out / "frames", progress=False, keep=(), error_model=model)
             doc = {"lean": s.mirror.lean, "errors": r.errors.to_json(),
                    "beacons": len(s.beacons), "measurements": r.seen.to_json(),
-                   "sigma_factors": SIGMA3_FACTORS}
+                   "sigma_factors": factors}
         except Exception as exc:  # noqa: BLE001 (a failed scene is a result, said)
             doc = {"lean": s.mirror.lean, "failed": f"{type(exc).__name__}: {exc}"[:300]}
         row.write_text(json.dumps(doc))
@@ -189,8 +200,8 @@ def _line(name: str, rs: list) -> str:
             f"{maha:.2f} | " + (f"{np.median(planar):.3f} |" if planar else " |"))
 
 
-def report(out: Path) -> str:
-    rows = [json.loads(p.read_text()) for p in sorted((out / "rows").glob("*.json"))]
+def report(out: Path, model: Path | None = None) -> str:
+    rows = [json.loads(p.read_text()) for p in sorted(_rows(out, model).glob("*.json"))]
     refused = json.loads((out / "drawn.json").read_text())["refused"]
     ok = [r for r in rows if "errors" in r]
     lines = [f"{len(rows)} scenes ({refused} draws refused by `check` or clipped); "
@@ -272,6 +283,9 @@ def main() -> None:
                         "(draw_wide): the acceptance set")
     p.add_argument("--residuals", nargs="+", type=Path, metavar="DIR",
                    help="print the σ factors the runs in DIR... call for, and stop")
+    p.add_argument("--error-model", type=Path, metavar="FILE",
+                   help="evaluate with this model (a 3-D model's own σ's; default the "
+                        "shipped one), its rows in DIR/rows-<its name>/ beside the frames")
     p.add_argument("--dataset", type=Path, metavar="DIR",
                    help="print the table of a 3-D dataset's rows (`mirrorsim dataset "
                         "--spec scenes/dataset_spec_3d.yaml`), and stop")
@@ -285,7 +299,7 @@ def main() -> None:
     out = Path(args.out or f"renders/evaluate3d-{'wide-' if args.wide else ''}{args.seed}")
     if not args.report:
         out = run(args)
-    print(report(out))
+    print(report(out, args.error_model))
 
 
 if __name__ == "__main__":

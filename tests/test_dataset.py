@@ -826,7 +826,7 @@ def raised_dataset(tmp_path_factory):
     return out, res
 
 
-def test_a_3d_dataset_measures_and_solves_each_scene_in_3d(raised_dataset, tmp_path, capsys):
+def test_a_3d_dataset_measures_and_solves_each_scene_in_3d(raised_dataset, capsys):
     from mirrorsim.formats.dataset_folder import read_table
     from mirrorsim.formats.dataset_table import NAMES, SLOT_NAMES
 
@@ -861,17 +861,16 @@ def test_a_3d_dataset_measures_and_solves_each_scene_in_3d(raised_dataset, tmp_p
         assert all("elevation_deg" in b for b in m["beacons"]) and len(m["beacons"]) == 2
     assert max(map(abs, elevations)) > 0.5  # (raised up to 8 cm: not all at the lens's height)
     # the card says what errormodel takes; the frames' lines carry the table's exact values
-    assert "fits planar datasets only" in (out / "README.md").read_text()
+    assert "fits a 3-D error model" in (out / "README.md").read_text()
     lines = [json.loads(x) for x in (out / "metadata.jsonl").read_text().splitlines()]
     for line in lines:
         i = line["index"]
         assert (line["target_alpha_true"], line["target_d_true"]) == (
             cols["target_alpha_true"][i], cols["target_d_true"][i])
-    # its rows are not what the (planar) error model is fitted on: refused in one line
-    assert main(["errormodel", str(out), "--out", str(tmp_path / "m.json")]) == 2
+    # a model's validation solves planar rows again: these are refused in one line
+    assert main(["errormodel", "--test", str(out)]) == 2
     err = capsys.readouterr().err
     assert "solved in 3-D" in err and len(err.strip().splitlines()) == 1
-    assert not (tmp_path / "m.json").exists()
 
 
 def test_a_planar_dataset_has_no_3d_values(one_worker):
@@ -911,3 +910,38 @@ def test_a_table_of_several_beacons_before_3d_is_read(three_beacons, tmp_path):
     read = read_table(old)
     assert read["geometry"] == ["planar"] * 2
     assert read["beacon3_pos_z"] == [0.0, 0.0] and read["beacon2_elevation_err"] == [None] * 2
+
+
+def test_error_model_fits_a_3d_dataset_s_elevation(tmp_path):
+    """Synthetic 3-D rows, each image's elevation error ~ N(0, σ_ε) (target 0.01°, beacon
+    0.004°): the model fits an elevation law per kind to that σ, writes and reads it
+    back, and gives each image its elevation σ as a Gaussian's; its tail is not fitted
+    (the validation solves planar rows).  Rows of both geometries, or a file with one
+    kind's elevation law alone, are refused."""
+    from mirrorsim.formats.error_model import ImageFeatures
+    from mirrorsim.formats.error_model_file import load_error_model, model_from_dict
+
+    n = 600
+    rng = np.random.default_rng(4)
+    extra = {"geometry": ["3d"] * n}
+    for kind, s in (("target", 0.01), ("beacon", 0.004)):
+        extra[f"{kind}_elevation_err"] = rng.normal(0, s, n)
+    cols = synthetic_columns(n, 3, **extra)
+    model = errormodel.fit(cols)
+    assert model.three_d and "tail_not_fitted" in model.provenance
+    for kind, s in (("target", 0.01), ("beacon", 0.004)):
+        assert model.fits[kind]["elevation"].typical_sigma == pytest.approx(s, rel=0.1)
+    path = tmp_path / "m3.json"
+    errormodel.write_model(model, path)
+    back = load_error_model(path)
+    assert back.three_d and back.fits == model.fits
+    im = ImageFeatures(0.0, 50.0, 200.0, 0.5, 0.01)
+    t, b = back.gaussian_elevations((im, im), 0.0, fx_px=1500.0)
+    assert t / b == pytest.approx(2.5, rel=0.25) and 0.005 < t < 0.03
+    assert errormodel.fit(synthetic_columns(n, 3)).gaussian_elevations((im,), 0.0) is None
+    with pytest.raises(ValueError, match="mix planar and 3-D"):
+        errormodel.fit({**cols, "geometry": ["3d"] * (n - 1) + ["planar"]})
+    doc = json.loads(path.read_text())
+    del doc["sha256"], doc["objects"]["beacon"]["elevation"]
+    with pytest.raises(Exception, match="one kind only"):
+        model_from_dict(doc, "edited.json")

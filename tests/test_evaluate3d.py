@@ -486,3 +486,22 @@ def test_a_3d_scene_solved_in_the_plane_is_scored_in_plan(raised_report, tmp_pat
                                       abs=1e-8)
     # the same frames: its error is the 3-D report's planar solve's
     assert planar.errors.target_cm == pytest.approx(report3.errors.planar_target_cm, abs=1e-9)
+
+
+def test_a_3d_model_weighs_the_3d_solve_with_its_own_laws():
+    """With a 3-D model's elevation σ's the solve takes its σ's as they are; a planar
+    model's are widened by SIGMA3_FACTORS, the elevation's from the d_total's (one edge
+    of two: σ_d·s/(√2 f))."""
+    import math
+
+    from mirrorsim.pipelines.evaluate3d import SIGMA3_FACTORS, _sigma3
+    from solver.measurements import Sigma
+
+    s = [Sigma(0.002, 0.001), Sigma(0.003, 0.002)]  # a beacon's, the target's
+    own = _sigma3(s, [100.0, 200.0], fx=1500.0, elevations=(0.004, 0.009))
+    assert own == [(0.002, 0.004, 0.001), (0.003, 0.009, 0.002)]
+    fb, ft = SIGMA3_FACTORS["beacon"], SIGMA3_FACTORS["target"]
+    wide = _sigma3(s, [100.0, 200.0], fx=1500.0, elevations=None)
+    assert wide[0] == pytest.approx((0.002 * fb[0], fb[1] * math.degrees(
+        0.001 * 100 / math.sqrt(2) / 1500), 0.001 * fb[2]))
+    assert wide[1][0] == pytest.approx(0.003 * ft[0])

@@ -237,11 +237,12 @@ def error_model_summary(model: ErrorModel) -> str:
     """The model in a few printed lines (σ_d in %)."""
     lines = [f"error model ({model.kind} bench): σ = exp(w·z), the scale of a Student-t of "
              "ν degrees of freedom, z = [1, " + ", ".join(SIGMA_FEATURES) + "] standardized; "
-             f"α in degrees at fx {model.fx_px or float('nan'):.0f} px, d_total in % of "
+             f"α (and a 3-D model's elevation) in degrees at fx "
+             f"{model.fx_px or float('nan'):.0f} px, d_total in % of "
              "d_total; 95 % of the rows' errors within 1.96·tail σ"]
     for kind, qs in model.fits.items():
         for q, m in qs.items():
-            scale, unit = (1.0, "°") if q == "alpha" else (100.0, " %")
+            scale, unit = (100.0, " %") if q == "d_rel" else (1.0, "°")
             w = ", ".join(f"{n} {c:+.3f}" for n, c in zip(SIGMA_FEATURES, m.log_sigma.weights,
                                                           strict=True))
             lines.append(f"  {kind:6s} {q:5s}: n={m.n} ({m.gross_errors} gross left out of "

@@ -81,8 +81,9 @@ def write_card(out: Path, meta: dict, rows: list[table.DatasetRow], *, variant: 
     ok = [r for r in rows if not r.error]
     med = lambda k: float(np.nanmedian([abs(r[k]) for r in ok])) if ok else math.nan  # noqa: E731
     columns = card_columns()
-    fits = ("Its scenes were solved in 3-D (`geometry`): `mirrorsim errormodel` fits "
-            "planar datasets only." if any(r.columns.get("geometry") == "3d" for r in ok)
+    fits = ("Its scenes were solved in 3-D (`geometry`): `mirrorsim errormodel DIR` fits "
+            "a 3-D error model (each image's elevation σ besides)."
+            if any(r.columns.get("geometry") == "3d" for r in ok)
             else "`mirrorsim errormodel DIR` fits the error model.")
     text = f"""# mirrorsim dataset
 

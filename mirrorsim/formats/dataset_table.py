@@ -314,8 +314,8 @@ def usable_rows(cols: dict) -> np.ndarray:
 
 
 def require_planar(cols: dict) -> dict:
-    """``cols``, refused if it holds 3-D rows (``geometry`` 3d): the error model's laws
-    and its validation solve the rows in the plane.
+    """``cols``, refused if it holds 3-D rows (``geometry`` 3d): the validation solves
+    each row again in the plane.
 
     Raises
     ------
@@ -324,9 +324,9 @@ def require_planar(cols: dict) -> dict:
     """
     n = sum(g == "3d" for g in cols.get("geometry") or [])
     if n:
-        raise ValueError(f"{n} of its rows were solved in 3-D (a 3-D spec's): the error "
-                         "model is fitted and validated on planar datasets only (its 3-D "
-                         "σ's are the planar model's, widened; docs/limitations.md)")
+        raise ValueError(f"{n} of its rows were solved in 3-D (a 3-D spec's): a model is "
+                         "validated by solving planar rows again (a 3-D model is held to "
+                         "rendered 3-D scenes: docs/limitations.md)")
     return cols
 
 

@@ -56,7 +56,11 @@ KINDS = ("target", "beacon")
 # the bounds of a σ law's degrees of freedom: from a Cauchy's to a Gaussian's
 SIGMA_DOF_RANGE = (1.0, 1e4)
 QUANTITIES = ("alpha", "d_rel")
-UNITS = {"alpha": "deg", "d_rel": "fraction of d_total (0.002 = 0.2 %)"}
+# a model fitted on a 3-D dataset's rows has, besides, each image's elevation (deg): it
+# then weighs the 3-D solve with its own laws (:attr:`ErrorModel.three_d`)
+ELEVATION = "elevation"
+ANGLES = ("alpha", ELEVATION)  # in degrees, their pixel errors scaling as 1/fx
+UNITS = {"alpha": "deg", "d_rel": "fraction of d_total (0.002 = 0.2 %)", ELEVATION: "deg"}
 DEFAULT_NAMES = {"ideal": "error_model.json", "bench": "error_model_bench.json"}
 # the floors of the logged features: a contrast or noise of 0 is "below measurable"
 CONTRAST_FLOOR = 1e-3
@@ -219,7 +223,7 @@ class ErrorModel:
         if not np.isfinite(x).all():  # a feature the frame could not show: as on average
             x = np.where(np.isfinite(x), x, np.asarray(fit.log_sigma.mean))
         s = fit.sigma(x)
-        if quantity == "alpha":
+        if quantity in ANGLES:
             return np.clip(s * self.fx_scale(fx_px), SIGMA_ALPHA_MIN_DEG, SIGMA_ALPHA_MAX_DEG)
         return np.clip(s, SIGMA_D_REL_MIN, SIGMA_D_REL_MAX)
 
@@ -243,6 +247,24 @@ class ErrorModel:
         return ObjectSigmas(self.sigma("target", target, pan_deg, fx_px=fx_px),
                             tuple(self.sigma("beacon", b, pan_deg, fx_px=fx_px) for b in beacons),
                             self.shared_alpha_deg, self.tail)
+
+    @property
+    def three_d(self) -> bool:
+        """Whether it was fitted on a 3-D dataset's rows: an elevation law for each kind,
+        its α and d_total laws fitted on 3-D frames' readings."""
+        return all(ELEVATION in qs for qs in self.fits.values())
+
+    def gaussian_elevations(self, images: tuple[ImageFeatures, ...], pan_deg: float, *,
+                            fx_px: float | None = None) -> tuple[float, ...] | None:
+        """Each image's elevation σ (deg; ``images``: the target's, then each beacon's) as
+        a Gaussian's (its law's Student-t scale times its tail, as :meth:`gaussian`);
+        None for a model without elevation laws (not :attr:`three_d`)."""
+        if not self.three_d:
+            return None
+        return tuple(float(self.own_sigma(kind, ELEVATION, im.vector(pan_deg), fx_px=fx_px)
+                           * self.fits[kind][ELEVATION].tail)
+                     for kind, im in zip(["target"] + ["beacon"] * (len(images) - 1), images,
+                                         strict=True))
 
     def domain_warnings(self, target: ImageFeatures, beacons: list[ImageFeatures],
                         pan_deg: float, *, scene: dict[str, Any] | None = None,

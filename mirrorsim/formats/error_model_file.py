@@ -13,6 +13,8 @@ import numpy as np
 
 from mirrorsim.formats.cache import seal, unseal
 from mirrorsim.formats.error_model import (
+    ANGLES,
+    ELEVATION,
     FORMAT,
     KINDS,
     QUANTITIES,
@@ -75,8 +77,11 @@ def model_from_dict(data: Any, source: str | Path) -> ErrorModel:
     objects = r.mapping(top["objects"], "objects", KINDS)
     fits: dict[str, dict[str, QuantityFit]] = {}
     for kind in KINDS:
-        qs = r.mapping(objects[kind], f"objects.{kind}", QUANTITIES)
-        fits[kind] = {q: _quantity(r, qs[q], f"objects.{kind}.{q}", q) for q in QUANTITIES}
+        qs = r.mapping(objects[kind], f"objects.{kind}", QUANTITIES, optional=(ELEVATION,))
+        fits[kind] = {q: _quantity(r, qs[q], f"objects.{kind}.{q}", q) for q in qs}
+    if len({ELEVATION in qs for qs in fits.values()}) > 1:  # a 3-D model's, for each kind
+        raise r.fail(f"objects.target.{ELEVATION}", "an elevation law for one kind only: "
+                     "a 3-D model has one for each")
     bias_features = top.get("bias_features", [])
     if not isinstance(bias_features, list) or not all(isinstance(b, str) for b in bias_features):
         raise r.fail("bias_features", "expected a list of names")
@@ -176,7 +181,7 @@ def _quantity(r: Reader, value: Any, key: str, q: str) -> QuantityFit:
     if not all(abs(w) <= 20 for w in law.weights):
         raise r.fail(f"{key}.log_sigma.weights", f"{list(law.weights)}: a slope beyond ±20 "
                      "per standard deviation of its feature is no fit")
-    low, high = ((SIGMA_ALPHA_MIN_DEG, SIGMA_ALPHA_MAX_DEG) if q == "alpha"
+    low, high = ((SIGMA_ALPHA_MIN_DEG, SIGMA_ALPHA_MAX_DEG) if q in ANGLES
                  else (SIGMA_D_REL_MIN, SIGMA_D_REL_MAX))
     typical = r.number(f["typical_sigma"], f"{key}.typical_sigma", low=low, high=high)
     bias = f.get("bias", [])

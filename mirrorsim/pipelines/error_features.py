@@ -10,6 +10,9 @@ import numpy as np
 
 from mirrorsim.formats import dataset_table as table
 from mirrorsim.formats.error_model import (
+    ANGLES,
+    ELEVATION,
+    QUANTITIES,
     ErrorModel,
     feature_vector,
     off_axis,
@@ -21,7 +24,23 @@ FEATURES = ("1", "d_total_cm", "off_axis_deg", "incidence_deg", "inv_height_px")
 # its first-order effect is linear in (declared with its imperfection in the registry).
 # A feature enters the bias fit only where its column varies.
 BENCH_FEATURES = {f.name: f for f in imperfections.FEATURES}
-QUANTITY_COLUMNS = {"alpha": "alpha_err", "d_rel": "d_rel_err"}
+# each quantity's error column (the elevation's in a 3-D dataset's rows alone)
+QUANTITY_COLUMNS = {"alpha": "alpha_err", "d_rel": "d_rel_err", ELEVATION: "elevation_err"}
+
+
+def quantities_of(cols: dict) -> tuple[str, ...]:
+    """What a table's rows measured of each image: α and d_total, and in a 3-D dataset's
+    rows (``geometry`` 3d) the elevation besides.
+
+    Raises
+    ------
+    ValueError
+        For rows of both geometries (a model is fitted on one).
+    """
+    kinds = set(cols.get("geometry") or ["planar"]) - {None}
+    if len(kinds) > 1:
+        raise ValueError("its rows mix planar and 3-D solves: fit a model on one of them")
+    return (*QUANTITIES, ELEVATION) if kinds == {"3d"} else QUANTITIES
 
 
 def _feature(cols: dict, kind: str, name: str) -> np.ndarray:
@@ -92,13 +111,13 @@ SHARED_FEATURES = {"alpha": ("pan_error_deg",),
 def own_errors(cols: dict, kind: str, q: str, *, names: tuple[str, ...] | list[str],
                bias: tuple[float, ...] | np.ndarray, fx_px: float | None) -> np.ndarray:
     """Each row's own error of ``kind``'s ``q``: its error less the parts every image of
-    its frame shares (SHARED_FEATURES' bias coefficients times their values), and for α
-    as at the focal length ``fx_px`` (pixel errors scale as 1/fx)."""
+    its frame shares (SHARED_FEATURES' bias coefficients times their values), and for an
+    angle (α, elevation) as at the focal length ``fx_px`` (pixel errors scale as 1/fx)."""
     y = np.asarray(cols[table.object_column(kind, QUANTITY_COLUMNS[q])], float)
     X = _design(cols, kind, names)
-    idx = [list(names).index(f) for f in SHARED_FEATURES[q] if f in names]
+    idx = [list(names).index(f) for f in SHARED_FEATURES.get(q, ()) if f in names]
     own = y - X[:, idx] @ np.asarray(bias, float)[idx] if idx else y
-    if q == "alpha":
+    if q in ANGLES:
         fx = table.focal_lengths(cols)
         own = own * np.where(np.isfinite(fx), fx / (fx_px or 1.0), 1.0)
     return own

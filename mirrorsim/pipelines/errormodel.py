@@ -48,6 +48,7 @@ from mirrorsim.pipelines.error_features import (
     _design,
     features_of,
     own_errors,
+    quantities_of,
     sigma_features_of,
 )
 from mirrorsim.pipelines.sigma_laws import (
@@ -100,14 +101,14 @@ def fit(cols: dict, provenance: dict | None = None, bench: dict | None = None) -
     Raises
     ------
     ValueError
-        When the rows were solved in 3-D, too few rows are usable (the message says how
-        many are needed), or a law is unstable (its σ's over its own rows span more
+        When the rows mix planar and 3-D solves, too few rows are usable (the message
+        says how many are needed), or a law is unstable (its σ's over its own rows span more
         than UNSTABLE_REFUSE).
     """
     names = features_of(cols)
     fits: dict[str, dict[str, QuantityFit]] = {}
     notes: list[str] = []
-    scene_cols = table.require_planar(cols)
+    scene_cols, quantities = cols, quantities_of(cols)  # (a 3-D dataset's: the elevation)
     # a row per beacon image: every beacon of a scene is fitted, its target once (the
     # pair fit and the shared α take the target beside each of its beacons)
     cols, beacon_of, scene_of = table.image_rows(cols)
@@ -123,8 +124,8 @@ def fit(cols: dict, provenance: dict | None = None, bench: dict | None = None) -
         X_all = _design(cols, kind, names)
         S_all = sigma_features_of(cols, kind)
         fits[kind] = {}
-        for q, col in QUANTITY_COLUMNS.items():
-            y = np.asarray(cols[table.object_column(kind, col)], float)
+        for q in quantities:
+            y = np.asarray(cols[table.object_column(kind, QUANTITY_COLUMNS[q])], float)
             m = (ok & once[kind] & np.isfinite(y) & np.isfinite(X_all).all(axis=1)
                  & np.isfinite(S_all).all(1))
             if m.sum() < need:

@@ -195,9 +195,10 @@ def evaluate_into3(scene: Scene, out: Path, *, variant: str = "auto", progress: 
     features, sigma = sigmas_of(model, seen2)
     cal, sigma = nuisances3(model, sigma, calibration, bench=model_priors,
                             board=None if seen2.pose is None else (seen2.pose, seen2.fx))
-    # the 3-D solve draws a Gaussian's ellipsoid: the σ's as a Gaussian's (the factors
-    # below were fitted on them)
-    seen = _seen3(scene, measured, model.gaussian(sigma), fx=seen2.fx, pose=seen2.pose)
+    # the 3-D solve draws a Gaussian's ellipsoid: the σ's as a Gaussian's (a 3-D model's
+    # own, the elevation's too; a planar model's widened by the factors fitted on them)
+    seen = _seen3(scene, measured, model.gaussian(sigma), fx=seen2.fx, pose=seen2.pose,
+                  elevations=model.gaussian_elevations(features, seen2.pan, fx_px=seen2.fx))
     fit = seen.solve(nuisances=cal.nuisances, priors=cal.priors,
                      position_sigma=cal.position_sigma)
     try:  # the planar solve of the same frames, beside it
@@ -261,23 +262,23 @@ def _measurements3(capture: CaptureRecord, pencils: list, target: tuple[float, f
 
 
 def _seen3(scene: Scene, measured: list, sigma: ObjectSigmas, *, fx: float,
-           pose: CameraPose | None = None) -> Measurements3:
+           pose: CameraPose | None = None,
+           elevations: tuple[float, ...] | None = None) -> Measurements3:
     """The frames' measurements together: every beacon's, the target's mean over the
     frames that measured it (each frame's view shares its errors), and each
-    observation's σ's; with the board's ``pose``, each read through it."""
+    observation's σ's: ``sigma``'s with ``elevations`` (a 3-D model's: the target's, then
+    each beacon's), or a planar model's widened by SIGMA3_FACTORS, the elevation's from
+    the d_total's; with the board's ``pose``, each read through it."""
     with_target = [m for m in measured if m.detection.target.d_total is not None]
     if not with_target:
         raise DetectionError(f"{scene.name}: the target's d_total could not be measured")
     pencils = [(b, im, m.files.capture) for m in measured for b, im in m.detection.beacons]
     per_beacon = (sigma.beacons if len(sigma.beacons) == len(pencils)
                   else sigma.beacons[:1] * len(pencils))
-    fb, ft = SIGMA3_FACTORS["beacon"], SIGMA3_FACTORS["target"]
-    sig = [(fb[0] * s.alpha_deg, fb[1] * elevation_sigma_deg(s, im.height_px, fx),
-            fb[2] * s.d_total_rel) for s, (_, im, _) in zip(per_beacon, pencils, strict=True)]
-    t = sigma.target
-    sig.append((ft[0] * t.alpha_deg,
-                ft[1] * elevation_sigma_deg(t, with_target[0].detection.target.height_px, fx),
-                ft[2] * t.d_total_rel))
+    sig = _sigma3([*per_beacon, sigma.target],
+                  [im.height_px for _, im, _ in pencils]
+                  + [with_target[0].detection.target.height_px], fx=fx,
+                  elevations=None if elevations is None else (*elevations[1:], elevations[0]))
     def reading(c: CaptureRecord, im: ImageMeasurement, top: float) -> tuple:
         return (_reading(c, im) if pose is None
                 else corrected_image3(pose, c.camera, im, top=top))
@@ -290,6 +291,20 @@ def _seen3(scene: Scene, measured: list, sigma: ObjectSigmas, *, fx: float,
                                     for b, im, c in pencils], target, sigma=tuple(sig),
                           pan=float(wrap_bearing(capture.camera.pan_deg + (
                               0.0 if pose is None else pose.pan_offset_deg))))
+
+
+def _sigma3(sigmas: list[Sigma], heights: list[float], *, fx: float,
+            elevations: tuple[float, ...] | None) -> list[tuple[float, float, float]]:
+    """Each image's (σ_α, σ_ε, σ_d) as the 3-D solve weighs it (the beacons', then the
+    target's): a 3-D model's, or a planar model's widened (:func:`_seen3`)."""
+    if elevations is not None:
+        return [(s.alpha_deg, e, s.d_total_rel)
+                for s, e in zip(sigmas, elevations, strict=True)]
+    kinds = ["beacon"] * (len(sigmas) - 1) + ["target"]
+    return [(SIGMA3_FACTORS[k][0] * s.alpha_deg,
+             SIGMA3_FACTORS[k][1] * elevation_sigma_deg(s, h, fx),
+             SIGMA3_FACTORS[k][2] * s.d_total_rel)
+            for k, s, h in zip(kinds, sigmas, heights, strict=True)]
 
 
 # what the 3-D solve estimates of a bench's shared errors (the beacons' positions it
