@@ -928,13 +928,25 @@ def test_error_model_fits_a_3d_dataset_s_elevation(tmp_path):
         extra[f"{kind}_elevation_err"] = rng.normal(0, s, n)
     cols = synthetic_columns(n, 3, **extra)
     model = errormodel.fit(cols)
-    assert model.three_d and "tail_not_fitted" in model.provenance
+    assert model.three_d and model.ellipsoid_scale == 1.0 and model.tail.gaussian
     for kind, s in (("target", 0.01), ("beacon", 0.004)):
         assert model.fits[kind]["elevation"].typical_sigma == pytest.approx(s, rel=0.1)
+    # its ellipsoid's scale: the 95th percentile of its rows' distances over χ₃'s radius
+    import mirrorsim.pipelines.validate3d as v3
+    from mirrorsim.pipelines.evaluate3d import CHI2_3_R95
+
+    d = np.linspace(0.0, 2 * CHI2_3_R95, 201)  # its 95th percentile: 1.9 radii
+    real, v3.distances3 = v3.distances3, lambda *_: d
+    try:
+        model = errormodel.with_its_ellipsoid(model, tmp_path, cols)
+    finally:
+        v3.distances3 = real
+    assert model.ellipsoid_scale == pytest.approx(1.9)
     path = tmp_path / "m3.json"
     errormodel.write_model(model, path)
     back = load_error_model(path)
     assert back.three_d and back.fits == model.fits
+    assert back.ellipsoid_scale == model.ellipsoid_scale
     im = ImageFeatures(0.0, 50.0, 200.0, 0.5, 0.01)
     t, b = back.gaussian_elevations((im, im), 0.0, fx_px=1500.0)
     assert t / b == pytest.approx(2.5, rel=0.25) and 0.005 < t < 0.03
@@ -945,3 +957,17 @@ def test_error_model_fits_a_3d_dataset_s_elevation(tmp_path):
     del doc["sha256"], doc["objects"]["beacon"]["elevation"]
     with pytest.raises(Exception, match="one kind only"):
         model_from_dict(doc, "edited.json")
+
+
+def test_a_3d_dataset_s_rows_solved_again_are_its_own(raised_dataset):
+    """Each 3-D row solved again from its measurements file and its columns, with the
+    model that made it (the shipped ideal one): the truth's distance is the row's own,
+    to 1e-6 (the features, σ's, calibration and solve are evaluate's)."""
+    from mirrorsim.formats.dataset_folder import read_table
+    from mirrorsim.formats.error_model_file import default_error_model
+    from mirrorsim.pipelines.validate3d import distances3
+
+    out, _ = raised_dataset
+    cols = read_table(out)
+    assert distances3(default_error_model(), out, cols) == pytest.approx(
+        cols["target_mahalanobis"], rel=1e-6)

@@ -494,14 +494,46 @@ def test_a_3d_model_weighs_the_3d_solve_with_its_own_laws():
     of two: σ_d·s/(√2 f))."""
     import math
 
-    from mirrorsim.pipelines.evaluate3d import SIGMA3_FACTORS, _sigma3
+    from mirrorsim.pipelines.evaluate3d import SIGMA3_FACTORS, sigma3
     from solver.measurements import Sigma
 
     s = [Sigma(0.002, 0.001), Sigma(0.003, 0.002)]  # a beacon's, the target's
-    own = _sigma3(s, [100.0, 200.0], fx=1500.0, elevations=(0.004, 0.009))
+    own = sigma3(s, [100.0, 200.0], fx=1500.0, elevations=(0.004, 0.009))
     assert own == [(0.002, 0.004, 0.001), (0.003, 0.009, 0.002)]
     fb, ft = SIGMA3_FACTORS["beacon"], SIGMA3_FACTORS["target"]
-    wide = _sigma3(s, [100.0, 200.0], fx=1500.0, elevations=None)
+    wide = sigma3(s, [100.0, 200.0], fx=1500.0, elevations=None)
     assert wide[0] == pytest.approx((0.002 * fb[0], fb[1] * math.degrees(
         0.001 * 100 / math.sqrt(2) / 1500), 0.001 * fb[2]))
     assert wide[1][0] == pytest.approx(0.003 * ft[0])
+
+
+def test_solve_takes_a_3d_model_s_elevation_sigma_and_its_ellipsoid(tmp_path):
+    """3-D measurements solved with a 3-D model (fitted here on synthetic rows, its
+    ellipsoid scale set to 2): its typical elevation σ's, not the azimuth's, and a
+    covariance four times the unscaled one's."""
+    from dataclasses import replace
+
+    from mirrorsim.pipelines import errormodel
+    from tests.conftest import synthetic_columns
+
+    n = 400
+    rng = np.random.default_rng(2)
+    cols = synthetic_columns(n, 1, geometry=["3d"] * n,
+                             target_elevation_err=rng.normal(0, 0.01, n),
+                             beacon_elevation_err=rng.normal(0, 0.004, n))
+    model = errormodel.fit(cols)
+    f = tmp_path / "m3.json"
+    f.write_text(json.dumps(_leaning_readings(pan_error_deg=0.0)))
+    runs = []
+    for scale in (1.0, 2.0):
+        path = tmp_path / f"model{scale:g}.json"
+        errormodel.write_model(replace(model, ellipsoid_scale=scale), path)
+        runs.append(subprocess.run([sys.executable, "-m", "mirrorsim.cli.main", "solve",
+                                    str(f), "--error-model", str(path), "--json", "-"],
+                                   cwd=ROOT, capture_output=True, text=True))
+    for run in runs:
+        assert run.returncode == 0, run.stderr
+        assert "typical σ's" in run.stderr and "azimuth" not in run.stderr
+    cov = [np.array(json.loads(r.stdout[r.stdout.index("{"):])["target_covariance"])
+           for r in runs]
+    np.testing.assert_allclose(cov[1], 4 * cov[0], rtol=1e-9)

@@ -84,8 +84,9 @@ def _solve3(args, m) -> int:
     elevation): the mirror's plane, its lean and the target in 3-D."""
     from mirrorsim.cli.tables3d import solution3_summary
     from mirrorsim.formats.error_model_file import default_error_model
-    from mirrorsim.pipelines.evaluate3d import check_calibration3, with_shared_pan
+    from mirrorsim.pipelines.evaluate3d import check_calibration3, solved3, with_shared_pan
     from mirrorsim.pipelines.solving import model_calibration
+    from solver.selfcal import SelfCalibration
 
     calibration = calibration_of(args, len(m.beacons), 1, three_d=True)
     try:  # (pan, pitch, scale and power, with the priors --prior states)
@@ -93,21 +94,23 @@ def _solve3(args, m) -> int:
     except BadParameter as exc:
         raise BadArgument("--calibrate", exc.message) from None
     model = error_model_of(args)
-    source = f"`sigma` of {args.measurements}"
-    shared = 0.0
+    source, shared, scale = f"`sigma` of {args.measurements}", 0.0, 1.0
     if model is not None or m.sigma is None:
         model = model or default_error_model()
-        t = model.typical
+        t, e = model.typical, model.typical_elevations
         b = t.beacons[0]
-        m = replace(m, sigma=((b.alpha_deg, b.alpha_deg, b.d_total_rel),) * len(m.beacons)
-                    + ((t.target.alpha_deg, t.target.alpha_deg, t.target.d_total_rel),))
-        source = (f"{model.name()}'s typical σ's, the elevation's taken as the azimuth's "
-                  "(a measurements file holds no pixels)")
-        # a bench model's shared errors with their priors, as the planar solve takes them
+        m = replace(m, sigma=((b.alpha_deg, e[1] if e else b.alpha_deg, b.d_total_rel),)
+                    * len(m.beacons) + ((t.target.alpha_deg, e[0] if e else t.target.alpha_deg,
+                                         t.target.d_total_rel),))
+        source = f"{model.name()}'s typical σ's" + (
+            "" if e else ", the elevation's taken as the azimuth's (a measurements file "
+                         "holds no pixels)")
+        # a bench model's shared errors with their priors, as the planar solve takes them;
+        # a 3-D model's ellipsoid widened as its training rows call for
         calibration, shared = model_calibration(model, calibration), t.shared_alpha_deg
+        scale = model.ellipsoid_scale
     nuisances, priors = with_shared_pan(calibration, shared)
-    fit = m.solve(nuisances=nuisances, priors=priors,
-                  position_sigma=calibration.position_sigma)
+    fit = solved3(m, SelfCalibration(nuisances, calibration.position_sigma, priors), scale)
     print(f"σ's from {source}", file=sys.stderr)
     print(solution3_summary(str(args.measurements), fit))
     emit(args, fit.to_json())

@@ -238,8 +238,10 @@ def _errormodel(args) -> int:
                               "which is not a model's: choose another name")
         cols = errormodel.read_columns(args.dataset)
         try:
-            model = errormodel.fit(cols, errormodel.provenance_of(args.dataset, cols),
-                                   errormodel.spec_of(args.dataset).get("bench"))
+            model = errormodel.with_its_ellipsoid(
+                errormodel.fit(cols, errormodel.provenance_of(args.dataset, cols),
+                               errormodel.spec_of(args.dataset).get("bench")),
+                args.dataset, cols)
         except ValueError as exc:
             raise BadArgument(str(args.dataset), str(exc)) from None
         errormodel.write_model(model, out)

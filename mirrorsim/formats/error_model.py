@@ -189,6 +189,10 @@ class ErrorModel:
     # tailed than a Gaussian's), so that a 95 % ellipse holds 95 % (a file without it:
     # the σ's at their word)
     tail: Tail = GAUSSIAN
+    # a 3-D model's: how much wider than its σ's make it the 3-D solve's covariance is
+    # taken, so that 95 % of its training rows' truths lie in the 95 % ellipsoid (the
+    # 95th percentile of their Mahalanobis distances over χ₃'s radius, ≥ 1)
+    ellipsoid_scale: float = 1.0
     # the file it was read from (None: made in memory), for records that name it (a
     # dataset's card); not part of the model, so not in its file, digest or equality
     source: str | None = field(default=None, compare=False)
@@ -266,6 +270,15 @@ class ErrorModel:
                      for kind, im in zip(["target"] + ["beacon"] * (len(images) - 1), images,
                                          strict=True))
 
+    @property
+    def typical_elevations(self) -> tuple[float, float] | None:
+        """A 3-D model's typical elevation σ (the target's, a beacon's) as a Gaussian's,
+        as :attr:`typical`'s (None: not :attr:`three_d`)."""
+        if not self.three_d:
+            return None
+        return tuple(self.fits[k][ELEVATION].typical_sigma * self.fits[k][ELEVATION].tail
+                     for k in KINDS)
+
     def domain_warnings(self, target: ImageFeatures, beacons: list[ImageFeatures],
                         pan_deg: float, *, scene: dict[str, Any] | None = None,
                         bench: dict[str, float] | None = None) -> list[str]:
@@ -331,6 +344,8 @@ class ErrorModel:
                "domain": self.domain.to_json(), "tolerances": self.tolerances.to_json(),
                "objects": {k: {q: f.to_json() for q, f in qs.items()}
                            for k, qs in self.fits.items()}}
+        if self.three_d:
+            out["ellipsoid_scale"] = self.ellipsoid_scale
         if self.provenance:
             out["provenance"] = self.provenance
         return out

@@ -67,7 +67,7 @@ def model_from_dict(data: Any, source: str | Path) -> ErrorModel:
                                    "model)") from None
     top = r.mapping(data, "", ("format", "version", "objects", "domain", "tolerances"),
                     optional=("units", "sigma_features", "bias_features", "provenance", "fx_px",
-                     "shared_alpha_deg", "kind", "target_tail"))
+                     "shared_alpha_deg", "kind", "target_tail", "ellipsoid_scale"))
     if top["format"] != FORMAT or top["version"] != VERSION:
         raise r.fail("version", f"{top['version']!r}: not a version-{VERSION} {FORMAT}; fit it "
                                 "again with this mirrorsim (`mirrorsim errormodel DATASET`)")
@@ -91,7 +91,9 @@ def model_from_dict(data: Any, source: str | Path) -> ErrorModel:
     shared = read_shared_alpha(r, top.get("shared_alpha_deg", 0.0), "shared_alpha_deg")
     model = ErrorModel(fits, _domain(r, top["domain"]), _tolerances(r, top["tolerances"]),
                        tuple(bias_features), prov if isinstance(prov, dict) else None, fx,
-                       shared, _tail(r, top.get("target_tail")))
+                       shared, _tail(r, top.get("target_tail")),
+                       r.number(top.get("ellipsoid_scale", 1.0), "ellipsoid_scale", low=1.0,
+                                high=1e3))
     _check_consistent(r, model)
     if "kind" in top and top["kind"] != model.kind:
         raise r.fail("kind", f"{top['kind']!r}, but its tolerances and bench domain make it "

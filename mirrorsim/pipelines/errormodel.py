@@ -151,7 +151,10 @@ def fit(cols: dict, provenance: dict | None = None, bench: dict | None = None) -
 def _with_tail(model: ErrorModel, cols: dict) -> ErrorModel:
     """``model`` with the tail of its own rows solved again with its σ's
     (:func:`~mirrorsim.pipelines.sigma_laws.fit_tail`); rows without the geometry to
-    solve them again (a table made by hand) leave the σ's at their word, and say so."""
+    solve them again (a table made by hand) leave the σ's at their word, and say so.  A
+    3-D model's rows are solved again in 3-D (:func:`with_its_ellipsoid`)."""
+    if model.three_d:
+        return model
     try:
         distances = validate(model, cols).mahalanobis
     except ValueError as exc:  # a column the solve needs is missing
@@ -258,7 +261,21 @@ def fit_dataset(dataset_dir: str | Path) -> ErrorModel:
         If the folder holds no verified dataset table.
     """
     cols = read_columns(dataset_dir)
-    return fit(cols, provenance_of(dataset_dir, cols), spec_of(dataset_dir).get("bench"))
+    return with_its_ellipsoid(
+        fit(cols, provenance_of(dataset_dir, cols), spec_of(dataset_dir).get("bench")),
+        dataset_dir, cols)
+
+
+def with_its_ellipsoid(model: ErrorModel, dataset_dir: str | Path, cols: dict) -> ErrorModel:
+    """A 3-D model (:attr:`~ErrorModel.three_d`) with the ellipsoid scale its training
+    rows, solved again in 3-D, give
+    (:func:`~mirrorsim.pipelines.validate3d.with_ellipsoid_scale`); a planar one as it
+    is (its target tail is fitted with it)."""
+    if not model.three_d:
+        return model
+    from mirrorsim.pipelines.validate3d import with_ellipsoid_scale
+
+    return with_ellipsoid_scale(model, dataset_dir, cols)
 
 
 def spec_of(dataset_dir: str | Path) -> dict:

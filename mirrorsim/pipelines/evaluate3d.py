@@ -199,8 +199,7 @@ def evaluate_into3(scene: Scene, out: Path, *, variant: str = "auto", progress: 
     # own, the elevation's too; a planar model's widened by the factors fitted on them)
     seen = _seen3(scene, measured, model.gaussian(sigma), fx=seen2.fx, pose=seen2.pose,
                   elevations=model.gaussian_elevations(features, seen2.pan, fx_px=seen2.fx))
-    fit = seen.solve(nuisances=cal.nuisances, priors=cal.priors,
-                     position_sigma=cal.position_sigma)
+    fit = solved3(seen, cal, model.ellipsoid_scale)
     try:  # the planar solve of the same frames, beside it
         planar = solve_measurements(scene.camera.position, seen2.beacons, [seen2.target],
                                     sigma=sigma).target
@@ -275,7 +274,7 @@ def _seen3(scene: Scene, measured: list, sigma: ObjectSigmas, *, fx: float,
     pencils = [(b, im, m.files.capture) for m in measured for b, im in m.detection.beacons]
     per_beacon = (sigma.beacons if len(sigma.beacons) == len(pencils)
                   else sigma.beacons[:1] * len(pencils))
-    sig = _sigma3([*per_beacon, sigma.target],
+    sig = sigma3([*per_beacon, sigma.target],
                   [im.height_px for _, im, _ in pencils]
                   + [with_target[0].detection.target.height_px], fx=fx,
                   elevations=None if elevations is None else (*elevations[1:], elevations[0]))
@@ -293,7 +292,17 @@ def _seen3(scene: Scene, measured: list, sigma: ObjectSigmas, *, fx: float,
                               0.0 if pose is None else pose.pan_offset_deg))))
 
 
-def _sigma3(sigmas: list[Sigma], heights: list[float], *, fx: float,
+def solved3(seen: Measurements3, calibration: SelfCalibration, scale: float = 1.0) -> Fit3:
+    """``seen`` solved in 3-D with ``calibration``'s nuisances, priors and position σ, its
+    covariance widened by ``scale`` (a 3-D model's ellipsoid scale)."""
+    fit = seen.solve(nuisances=calibration.nuisances, priors=calibration.priors,
+                     position_sigma=calibration.position_sigma)
+    if scale == 1.0 or fit.covariance is None:
+        return fit
+    return replace(fit, covariance=fit.covariance * scale**2)
+
+
+def sigma3(sigmas: list[Sigma], heights: list[float], *, fx: float,
             elevations: tuple[float, ...] | None) -> list[tuple[float, float, float]]:
     """Each image's (σ_α, σ_ε, σ_d) as the 3-D solve weighs it (the beacons', then the
     target's): a 3-D model's, or a planar model's widened (:func:`_seen3`)."""

@@ -127,8 +127,8 @@ def validate(model: ErrorModel, cols: dict) -> Validation:
     calibrate = cols.get("calibrate") or [""] * n
     beacon_sigma = cols.get("beacon_sigma") or [0.0] * n
     priors = cols.get("calibrate_priors") or [""] * n
-    t_feat = _features(cols, "target")
-    b_feat = _features(images, "beacon")
+    t_feat = image_features_of(cols, "target")
+    b_feat = image_features_of(images, "beacon")
     dist, failed = [], 0
     for i in np.flatnonzero(ok):
         t = tuple(target[i])
@@ -162,7 +162,7 @@ def _expected_within(model: ErrorModel) -> dict[str, dict[str, tuple[float, floa
             for kind, qs in model.fits.items()}
 
 
-def _features(cols: dict, kind: str) -> list[ImageFeatures]:
+def image_features_of(cols: dict, kind: str) -> list[ImageFeatures]:
     """Each row's ``kind`` image as the error model weighs it, from its columns."""
     c = lambda name: _col(cols, table.object_column(kind, name))  # noqa: E731
     return [ImageFeatures(*row) for row in zip(
