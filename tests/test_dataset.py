@@ -957,6 +957,12 @@ def test_error_model_fits_a_3d_dataset_s_elevation(tmp_path):
     del doc["sha256"], doc["objects"]["beacon"]["elevation"]
     with pytest.raises(Exception, match="one kind only"):
         model_from_dict(doc, "edited.json")
+    # a planar model writes what it wrote before (its digest: a dataset resumes with it),
+    # and refuses a 3-D model's scale
+    planar = errormodel.fit(synthetic_columns(n, 3)).to_json()
+    assert "ellipsoid_scale" not in planar and set(planar["units"]) == {"alpha", "d_rel"}
+    with pytest.raises(Exception, match="ellipsoid_scale"):
+        model_from_dict({**planar, "ellipsoid_scale": 1.5}, "edited.json")
 
 
 def test_a_3d_dataset_s_rows_solved_again_are_its_own(raised_dataset):

@@ -255,6 +255,10 @@ def error_model_summary(model: ErrorModel) -> str:
                      " (each α law above is the image's own part)" if model.shared_alpha_deg
                      else " (none found)"))
     lines.append(tail_line(model.tail))
+    if model.three_d:
+        lines.append(f"  a 3-D model: its 3-D solves' covariance widened ×"
+                     f"{model.ellipsoid_scale:.2f} (95 % of its rows' truths in their 95 % "
+                     "ellipsoid)")
     t = model.tolerances
     if not t.ideal:
         lines.append(f"  its benches' shared errors (half-widths), estimated with priors: pan "

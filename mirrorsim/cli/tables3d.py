@@ -51,8 +51,10 @@ def report3_table(report: Report3, report_scene: Scene | None = None) -> str:
         lines.append(pose_line(report.camera_pose))
     lines.append("the images' truth: what an exact detector reads (in a leaning mirror "
                  "the image leans: its mid-height's bearing, its length along its axis)")
-    lines.append(f"solved in 3-D; σ's from {report.error_model} (the elevation's from "
-                 "each image's d_total σ)")
+    lines.append(f"solved in 3-D; σ's from {report.error_model} " + (
+        "(the elevation's from each image's d_total σ)" if report.ellipsoid_scale is None
+        else f"(its own elevation laws; the covariance widened ×{report.ellipsoid_scale:.2f} "
+             "for the errors' tails, beyond the Cramér–Rao bound's σ's)"))
     if report.planar_target is not None and e.planar_target_cm is not None:
         lines.append(f"the planar solve of the same frames: target ({report.planar_target[0]:.2f}, "
                      f"{report.planar_target[1]:.2f}), {e.planar_target_cm:.3f} cm off in plan "

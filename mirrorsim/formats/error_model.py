@@ -336,7 +336,9 @@ class ErrorModel:
 
     def to_json(self) -> dict:
         """The model file's contents (:func:`sealed` adds their checksum)."""
-        out = {"format": FORMAT, "version": VERSION, "kind": self.kind, "units": UNITS,
+        quantities = (*QUANTITIES, *((ELEVATION,) if self.three_d else ()))
+        out = {"format": FORMAT, "version": VERSION, "kind": self.kind,
+               "units": {q: UNITS[q] for q in quantities},
                "fx_px": self.fx_px, "shared_alpha_deg": self.shared_alpha_deg,
                "target_tail": self.tail.to_json(),
                "sigma_features": list(SIGMA_FEATURES),

@@ -95,6 +95,9 @@ def model_from_dict(data: Any, source: str | Path) -> ErrorModel:
                        r.number(top.get("ellipsoid_scale", 1.0), "ellipsoid_scale", low=1.0,
                                 high=1e3))
     _check_consistent(r, model)
+    if "ellipsoid_scale" in top and not model.three_d:
+        raise r.fail("ellipsoid_scale", "a 3-D model's (its 3-D solves' covariance widened): "
+                     "this model has no elevation laws")
     if "kind" in top and top["kind"] != model.kind:
         raise r.fail("kind", f"{top['kind']!r}, but its tolerances and bench domain make it "
                              f"a {model.kind}-bench model")

@@ -140,6 +140,9 @@ class Report3:
     self_calibration: SelfCalibration = PLAIN
     # what each frame showed of each image (the target's, then each beacon's)
     image_features: tuple[ImageFeatures, ...] = ()
+    # a 3-D model's ellipsoid scale, which widened the covariance (None: a planar model,
+    # its σ's widened by SIGMA3_FACTORS)
+    ellipsoid_scale: float | None = None
 
     @property
     def reused(self) -> bool:
@@ -218,8 +221,8 @@ def evaluate_into3(scene: Scene, out: Path, *, variant: str = "auto", progress: 
                    render=RenderInfo(done.variant, done.spp, done.seed, done.sampler),
                    error_model=model.name(), model_warnings=tuple(notes),
                    shared_alpha_deg=sigma.shared_alpha_deg, camera_pose=seen2.pose,
-                   self_calibration=cal,
-                   image_features=features)
+                   self_calibration=cal, image_features=features,
+                   ellipsoid_scale=model.ellipsoid_scale if model.three_d else None)
 
 
 def frame_measurements3(det: Detection, capture: CaptureRecord) -> Measurements3:

@@ -11,6 +11,7 @@ target tail widens its ellipses.
 
 from __future__ import annotations
 
+import json
 from dataclasses import replace
 from pathlib import Path
 
@@ -23,7 +24,7 @@ from mirrorsim.pipelines.evaluate3d import CHI2_3_R95, nuisances3, sigma3, solve
 from mirrorsim.pipelines.uncertainty import image_features_of
 from solver.errors import SolverError
 from solver.lsq3 import Measurements3
-from solver.selfcal import SelfCalibration, parse_priors
+from solver.selfcal import SelfCalibration
 
 SCALE_LEVEL = 0.95  # the share of the training rows' truths the 95 % ellipsoid holds
 
@@ -35,6 +36,11 @@ def distances3(model: ErrorModel, dataset_dir: str | Path, cols: dict) -> np.nda
     self-calibration and the model's priors (a row the geometry cannot solve is left
     out)."""
     folder = Path(dataset_dir)
+    # what the user asked of the dataset's solves (the rows hold what the solves took:
+    # the pan's prior widened by the shared α already, and the making model's priors)
+    asked = json.loads((folder / "dataset.json").read_text()).get("calibrate") or {}
+    asked = SelfCalibration(tuple(asked.get("nuisances", ())),
+                            float(asked.get("position_sigma", 0.0)), asked.get("priors", {}))
     ok = table.usable_rows(cols)
     images, _, scene_of = table.image_rows(cols)
     targets, beacons = image_features_of(cols, "target"), image_features_of(images, "beacon")
@@ -46,9 +52,6 @@ def distances3(model: ErrorModel, dataset_dir: str | Path, cols: dict) -> np.nda
             raise ValueError(f"{name}: its measurements are planar: not a 3-D dataset's row")
         seen = (targets[i], *(beacons[j] for j in np.flatnonzero(scene_of == i)))
         pan, fx = float(cols["observer_pan_deg"][i]), float(cols["fx_px"][i])
-        asked = SelfCalibration(tuple(x for x in (cols["calibrate"][i] or "").split(",") if x),
-                                float(cols["beacon_sigma"][i] or 0.0),
-                                parse_priors(cols["calibrate_priors"][i] or ""))
         cal, sigma = nuisances3(model, model.sigmas(seen[0], list(seen[1:]), pan, fx_px=fx),
                                 asked)
         wide = model.gaussian(sigma)
@@ -58,7 +61,7 @@ def distances3(model: ErrorModel, dataset_dir: str | Path, cols: dict) -> np.nda
                      else (*elevations[1:], elevations[0]))
         try:
             fit = solved3(replace(m, sigma=tuple(sig)), cal)
-        except SolverError:
+        except (SolverError, np.linalg.LinAlgError):
             continue
         err = fit.target - np.array([cols[f"target_{a}"][i] for a in "xyz"], float)
         out.append(float(np.sqrt(err @ np.linalg.solve(fit.target_covariance, err))))
