@@ -4,6 +4,7 @@ frames, on scenes drawn here (never the project's own specs).
     python benchmarks/evaluate3d.py [--scenes 40] [--seed S] [--out DIR] [--report]
                                     [--error-model FILE]
     python benchmarks/evaluate3d.py --dataset DIR    # a 3-D dataset's rows, as a table
+    python benchmarks/evaluate3d.py --acceptance DIR... [--error-model FILE]  # a line each
 
 Each scene is drawn at random and kept where ``check`` accepts it with every image
 whole (a clipped image is refused by the detector, not a 3-D question):
@@ -216,19 +217,39 @@ def report(out: Path, model: Path | None = None) -> str:
     return "\n".join(lines)
 
 
-def dataset_report(folder: Path) -> str:
-    """The table of a 3-D dataset's rows (``mirrorsim dataset --spec
-    scenes/dataset_spec_3d.yaml``), its leans drawn from a range: binned by |lean|."""
+def _dataset_rows(folder: Path) -> tuple[dict, list[dict]]:
+    """A 3-D dataset's table, and its solved rows as :func:`_line` takes them."""
     from mirrorsim.formats.dataset_folder import read_table
 
     cols = read_table(folder)
-    n = len(cols["index"])
-    rows = [{"lean": cols["mirror_lean_deg"][i], "errors": {
+    return cols, [{"lean": cols["mirror_lean_deg"][i], "errors": {
         "target_cm": cols["err_target_cm"][i],
         "target_height_cm": cols["err_target_height_cm"][i],
         "target_mahalanobis": cols["target_mahalanobis"][i],
         "planar_target_cm": cols["planar_err_target_cm"][i]}}
-        for i in range(n) if not cols["error"][i] and cols["geometry"][i] == "3d"]
+        for i in range(len(cols["index"]))
+        if not cols["error"][i] and cols["geometry"][i] == "3d"]
+
+
+def acceptance(folders: list[Path], model: Path | None) -> str:
+    """One line per acceptance set (a run's folder, its rows with ``model``; or a 3-D
+    dataset's folder), all its scenes together."""
+    lines = HEADER[:]
+    for folder in folders:
+        if (folder / "dataset.parquet").exists():
+            rows = _dataset_rows(folder)[1]
+        else:
+            rows = [json.loads(p.read_text()) for p in sorted(_rows(folder, model).glob("*.json"))]
+            rows = [r for r in rows if "errors" in r]
+        lines.append(_line(folder.name, rows))
+    return "\n".join(lines).replace("| lean |", "| set |", 1)
+
+
+def dataset_report(folder: Path) -> str:
+    """The table of a 3-D dataset's rows (``mirrorsim dataset --spec
+    scenes/dataset_spec_3d.yaml``), its leans drawn from a range: binned by |lean|."""
+    cols, rows = _dataset_rows(folder)
+    n = len(cols["index"])
     lines = [f"{n} scenes; {n - len(rows)} failed or not solved in 3-D", "", *HEADER]
     for lo in range(4):
         name = f"{lo}–{lo + 1}°" if lo else "under 1°"
@@ -289,7 +310,13 @@ def main() -> None:
     p.add_argument("--dataset", type=Path, metavar="DIR",
                    help="print the table of a 3-D dataset's rows (`mirrorsim dataset "
                         "--spec scenes/dataset_spec_3d.yaml`), and stop")
+    p.add_argument("--acceptance", nargs="+", type=Path, metavar="DIR",
+                   help="print one line per finished set (runs' folders with --error-model's "
+                        "rows, or 3-D datasets), and stop")
     args = p.parse_args()
+    if args.acceptance:
+        print(acceptance(args.acceptance, args.error_model))
+        return
     if args.residuals:
         print(residuals(args.residuals))
         return

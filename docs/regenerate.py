@@ -119,6 +119,25 @@ RESULTS: tuple[Result, ...] = (
            markdown=True, about="a 3-D dataset of the bundled 3-D spec (a third generator, "
                                 "fitted on nothing): the 3-D solve beside the planar one",
            fresh=("renders/dataset3d",)),
+    Result("error_model_3d",
+           (f"{MS} dataset --spec scenes/dataset_spec_3d.yaml --n 200 --seed 7101 "
+            "--out renders/em-3d --workers 2 --quiet",
+            f"{MS} errormodel renders/em-3d",
+            f"{PY} benchmarks/evaluate3d.py --scenes 60 --seed 61206302 "
+            "--error-model renders/em-3d/error_model.json",
+            f"{PY} benchmarks/evaluate3d.py --scenes 40 --seed 61206303 --wide "
+            "--error-model renders/em-3d/error_model.json",
+            f"{MS} dataset --spec scenes/dataset_spec_3d.yaml --n 40 --seed 61207001 "
+            "--out renders/dataset3d-em3d --error-model renders/em-3d/error_model.json "
+            "--quiet",
+            f"{PY} benchmarks/evaluate3d.py --acceptance renders/evaluate3d-61206302 "
+            "renders/evaluate3d-wide-61206303 renders/dataset3d-em3d "
+            "--error-model renders/em-3d/error_model.json"),
+           markdown=True, about="a 3-D error model fitted on 200 scenes of the 3-D spec, "
+                                "on the three 3-D acceptance sets",
+           fresh=("renders/em-3d", "renders/dataset3d-em3d",
+                  "renders/evaluate3d-61206302/rows-error_model",
+                  "renders/evaluate3d-wide-61206303/rows-error_model")),
     Result("evaluate3d_factors",
            (f"{PY} benchmarks/evaluate3d.py --scenes 35 --seed 7001",
             f"{PY} benchmarks/evaluate3d.py --scenes 35 --seed 7002",
