@@ -221,7 +221,10 @@ def _dataset_rows(folder: Path) -> tuple[dict, list[dict]]:
     """A 3-D dataset's table, and its solved rows as :func:`_line` takes them."""
     from mirrorsim.formats.dataset_folder import read_table
 
-    cols = read_table(folder)
+    try:
+        cols = read_table(folder)
+    except InputError as exc:
+        sys.exit(f"error: {exc}")
     return cols, [{"lean": cols["mirror_lean_deg"][i], "errors": {
         "target_cm": cols["err_target_cm"][i],
         "target_height_cm": cols["err_target_height_cm"][i],
@@ -239,8 +242,11 @@ def acceptance(folders: list[Path], model: Path | None) -> str:
         if (folder / "dataset.parquet").exists():
             rows = _dataset_rows(folder)[1]
         else:
-            rows = [json.loads(p.read_text()) for p in sorted(_rows(folder, model).glob("*.json"))]
-            rows = [r for r in rows if "errors" in r]
+            found = sorted(_rows(folder, model).glob("*.json"))
+            if not found:
+                sys.exit(f"error: {folder}: neither a 3-D dataset nor a finished run's rows "
+                         f"({_rows(folder, model).name}/)")
+            rows = [r for r in map(lambda p: json.loads(p.read_text()), found) if "errors" in r]
         lines.append(_line(folder.name, rows))
     return "\n".join(lines).replace("| lean |", "| set |", 1)
 
@@ -254,6 +260,9 @@ def dataset_report(folder: Path) -> str:
     for lo in range(4):
         name = f"{lo}–{lo + 1}°" if lo else "under 1°"
         lines.append(_line(name, [r for r in rows if lo <= abs(r["lean"]) < lo + 1]))
+    steep = [r for r in rows if abs(r["lean"]) >= 4]  # (a spec may lean the glass to 10°)
+    if steep:
+        lines.append(_line("4° or more", steep))
     lines.append(_line("all", rows))
     for i in range(n):
         if cols["error"][i]:
@@ -271,6 +280,8 @@ def residuals(outs: list[Path]) -> str:
     names = ("α", "elevation", "d_total")
     acc: dict[tuple[str, int], list[float]] = {}
     for out in outs:
+        if not any((out / "rows").glob("*.json")):
+            sys.exit(f"error: {out}: no finished run's rows (rows/)")
         for p in sorted((out / "rows").glob("*.json")):
             r = json.loads(p.read_text())
             if "errors" not in r:

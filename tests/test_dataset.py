@@ -867,10 +867,13 @@ def test_a_3d_dataset_measures_and_solves_each_scene_in_3d(raised_dataset, capsy
         i = line["index"]
         assert (line["target_alpha_true"], line["target_d_true"]) == (
             cols["target_alpha_true"][i], cols["target_d_true"][i])
-    # a model's validation solves planar rows again: these are refused in one line
-    assert main(["errormodel", "--test", str(out)]) == 2
+    # a model's validation solves planar rows again: these are refused in one line,
+    # before a model is fitted and written
+    model = out.parent / "m.json"
+    assert main(["errormodel", str(out), "--test", str(out), "--out", str(model)]) == 2
     err = capsys.readouterr().err
     assert "solved in 3-D" in err and len(err.strip().splitlines()) == 1
+    assert not model.exists() and not model.with_suffix(".png").exists()
 
 
 def test_a_planar_dataset_has_no_3d_values(one_worker):
@@ -954,8 +957,11 @@ def test_error_model_fits_a_3d_dataset_s_elevation(tmp_path):
     with pytest.raises(ValueError, match="mix planar and 3-D"):
         errormodel.fit({**cols, "geometry": ["3d"] * (n - 1) + ["planar"]})
     doc = json.loads(path.read_text())
-    del doc["sha256"], doc["objects"]["beacon"]["elevation"]
-    with pytest.raises(Exception, match="one kind only"):
+    del doc["sha256"]
+    with pytest.raises(Exception, match="ellipsoid_scale: .*missing"):  # (not 1 by default)
+        model_from_dict({k: v for k, v in doc.items() if k != "ellipsoid_scale"}, "e.json")
+    del doc["objects"]["beacon"]["elevation"]
+    with pytest.raises(Exception, match="objects.beacon.elevation: missing"):
         model_from_dict(doc, "edited.json")
     # a planar model writes what it wrote before (its digest: a dataset resumes with it),
     # and refuses a 3-D model's scale

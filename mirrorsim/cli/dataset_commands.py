@@ -214,6 +214,7 @@ def _errormodel_options(p):
 def _errormodel(args) -> int:
     from mirrorsim.cli.analysis_tables import error_model_summary
     from mirrorsim.cli.plots import plot_error_model
+    from mirrorsim.formats import dataset_table as table
     from mirrorsim.formats.error_model_file import default_error_model
     from mirrorsim.pipelines import errormodel
 
@@ -228,6 +229,11 @@ def _errormodel(args) -> int:
     if args.out is not None and args.out.suffix != ".json":
         raise BadArgument("--out", f"{args.out}: the model is JSON: give a *.json path (its "
                           "plots go beside it as *.png)")
+    if args.test is not None:  # a held-out set the validation cannot take: before a fit
+        try:
+            table.require_planar(errormodel.read_columns(args.test))
+        except ValueError as exc:
+            raise BadArgument(str(args.test), str(exc)) from None
     out = None
     if args.dataset is not None:
         out = args.out or args.dataset / "error_model.json"

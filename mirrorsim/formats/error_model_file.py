@@ -79,9 +79,10 @@ def model_from_dict(data: Any, source: str | Path) -> ErrorModel:
     for kind in KINDS:
         qs = r.mapping(objects[kind], f"objects.{kind}", QUANTITIES, optional=(ELEVATION,))
         fits[kind] = {q: _quantity(r, qs[q], f"objects.{kind}.{q}", q) for q in qs}
-    if len({ELEVATION in qs for qs in fits.values()}) > 1:  # a 3-D model's, for each kind
-        raise r.fail(f"objects.target.{ELEVATION}", "an elevation law for one kind only: "
-                     "a 3-D model has one for each")
+    lacking = [k for k in KINDS if ELEVATION not in fits[k]]
+    if 0 < len(lacking) < len(KINDS):  # a 3-D model's, for each kind
+        raise r.fail(f"objects.{lacking[0]}.{ELEVATION}", "missing: a 3-D model has an "
+                     "elevation law for each kind")
     bias_features = top.get("bias_features", [])
     if not isinstance(bias_features, list) or not all(isinstance(b, str) for b in bias_features):
         raise r.fail("bias_features", "expected a list of names")
@@ -95,9 +96,10 @@ def model_from_dict(data: Any, source: str | Path) -> ErrorModel:
                        r.number(top.get("ellipsoid_scale", 1.0), "ellipsoid_scale", low=1.0,
                                 high=1e3))
     _check_consistent(r, model)
-    if "ellipsoid_scale" in top and not model.three_d:
+    if ("ellipsoid_scale" in top) != model.three_d:  # a 3-D model's, and only its
         raise r.fail("ellipsoid_scale", "a 3-D model's (its 3-D solves' covariance widened): "
-                     "this model has no elevation laws")
+                     + ("this model has no elevation laws" if "ellipsoid_scale" in top
+                        else "missing beside its elevation laws"))
     if "kind" in top and top["kind"] != model.kind:
         raise r.fail("kind", f"{top['kind']!r}, but its tolerances and bench domain make it "
                              f"a {model.kind}-bench model")
