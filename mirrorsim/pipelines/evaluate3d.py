@@ -278,9 +278,9 @@ def _seen3(scene: Scene, measured: list, sigma: ObjectSigmas, *, fx: float,
     per_beacon = (sigma.beacons if len(sigma.beacons) == len(pencils)
                   else sigma.beacons[:1] * len(pencils))
     sig = sigma3([*per_beacon, sigma.target],
-                  [im.height_px for _, im, _ in pencils]
-                  + [with_target[0].detection.target.height_px], fx=fx,
-                  elevations=None if elevations is None else (*elevations[1:], elevations[0]))
+                 [im.height_px for _, im, _ in pencils]
+                 + [with_target[0].detection.target.height_px], fx=fx,
+                 elevations=None if elevations is None else (*elevations[1:], elevations[0]))
     def reading(c: CaptureRecord, im: ImageMeasurement, top: float) -> tuple:
         return (_reading(c, im) if pose is None
                 else corrected_image3(pose, c.camera, im, top=top))
@@ -306,7 +306,7 @@ def solved3(seen: Measurements3, calibration: SelfCalibration, scale: float = 1.
 
 
 def sigma3(sigmas: list[Sigma], heights: list[float], *, fx: float,
-            elevations: tuple[float, ...] | None) -> list[tuple[float, float, float]]:
+           elevations: tuple[float, ...] | None) -> list[tuple[float, float, float]]:
     """Each image's (σ_α, σ_ε, σ_d) as the 3-D solve weighs it (the beacons', then the
     target's): a 3-D model's, or a planar model's widened (:func:`_seen3`)."""
     if elevations is not None:
@@ -319,8 +319,8 @@ def sigma3(sigmas: list[Sigma], heights: list[float], *, fx: float,
             for k, s, h in zip(kinds, sigmas, heights, strict=True)]
 
 
-# what the 3-D solve estimates of a bench's shared errors (the beacons' positions it
-# does not estimate)
+# what the 3-D solve estimates of a bench's shared errors (and, with a position σ, each
+# beacon's plan offset)
 CALIBRATED3 = ("pan", "pitch", "scale", "power")
 
 

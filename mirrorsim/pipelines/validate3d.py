@@ -32,9 +32,10 @@ SCALE_LEVEL = 0.95  # the share of the training rows' truths the 95 % ellipsoid 
 def distances3(model: ErrorModel, dataset_dir: str | Path, cols: dict) -> np.ndarray:
     """The truth's Mahalanobis distance from each usable 3-D row's estimate, its
     measurements (``frames/<scene>/<scene>.measurements.json``) weighed with ``model``'s
-    σ's (a planar model's widened as ``evaluate`` widens them) and solved with the row's
-    self-calibration and the model's priors (a row the geometry cannot solve is left
-    out)."""
+    σ's (a planar model's widened as ``evaluate`` widens them) and solved with the
+    self-calibration the dataset's run was asked for and the model's priors (a row the
+    geometry cannot solve is left out).  The table ``cols`` is the folder's, verified
+    (its scene files' checksums: :func:`~mirrorsim.formats.dataset_folder.read_table`)."""
     folder = Path(dataset_dir)
     # what the user asked of the dataset's solves (the rows hold what the solves took:
     # the pan's prior widened by the shared α already, and the making model's priors)
