@@ -20,7 +20,7 @@ from mirrorsim.cli.registry import (
     inputs,
     load,
 )
-from mirrorsim.errors import BadArgument, BadParameter
+from mirrorsim.errors import BadArgument
 
 MAX_ITERATIONS = 1_000_000  # draws per Monte Carlo row: about a second a row at the most
 
@@ -84,15 +84,11 @@ def _solve3(args, m) -> int:
     elevation): the mirror's plane, its lean and the target in 3-D."""
     from mirrorsim.cli.tables3d import solution3_summary
     from mirrorsim.formats.error_model_file import default_error_model
-    from mirrorsim.pipelines.evaluate3d import check_calibration3, solved3, with_shared_pan
+    from mirrorsim.pipelines.evaluate3d import solved3, with_shared_pan
     from mirrorsim.pipelines.solving import model_calibration
     from solver.selfcal import SelfCalibration
 
     calibration = calibration_of(args, len(m.beacons), 1, three_d=True)
-    try:  # (pan, pitch, scale and power, with the priors --prior states)
-        check_calibration3(str(args.measurements), calibration)
-    except BadParameter as exc:
-        raise BadArgument("--calibrate", exc.message) from None
     model = error_model_of(args)
     source, shared, scale = f"`sigma` of {args.measurements}", 0.0, 1.0
     if model is not None or m.sigma is None:

@@ -71,18 +71,10 @@ def _dataset_options(p):
 
 def _dataset_calibration(args):
     """--calibrate, --prior and --beacon-sigma checked as the spec's scenes are solved: a
-    3-D spec's in 3-D, the others in the plane."""
-    from mirrorsim.pipelines.evaluate3d import check_calibration3
+    3-D spec's in 3-D, the others in the plane (which refuses the pitch)."""
     from mirrorsim.pipelines.random_scenes import load_spec
 
-    three_d = load_spec(args.spec).is_3d
-    calibration = calibration_of(args, three_d=three_d)
-    if three_d:
-        try:
-            check_calibration3(str(args.spec), calibration)
-        except BadParameter as exc:
-            raise BadArgument("--calibrate", exc.message) from None
-    return calibration
+    return calibration_of(args, three_d=load_spec(args.spec).is_3d)
 
 
 @command("dataset", "many random scenes, rendered, detected and scored",

@@ -199,8 +199,7 @@ def _report_notes(report: Report) -> list[str]:
     if m.sigma is not None:
         lines.append(f"σ's from {report.error_model or 'the error model'}: "
                      f"{m.sigma.describe()}")
-    if priors_line(report.self_calibration):
-        lines.append(priors_line(report.self_calibration))
+    lines += filter(None, [priors_line(report.self_calibration)])
     if s.downweighted:
         lines.append("trusted less by the solver (a Huber loss): " + ", ".join(s.downweighted))
     if s.nuisances:

@@ -59,8 +59,7 @@ def report3_table(report: Report3, report_scene: Scene | None = None) -> str:
         lines.append(f"the planar solve of the same frames: target ({report.planar_target[0]:.2f}, "
                      f"{report.planar_target[1]:.2f}), {e.planar_target_cm:.3f} cm off in plan "
                      f"(the 3-D solve: {e.target_plan_cm:.3f} cm)")
-    if priors_line(report.self_calibration):
-        lines.append(priors_line(report.self_calibration))
+    lines += filter(None, [priors_line(report.self_calibration)])
     if f.downweighted:
         lines.append("trusted less by the solver (a Huber loss): " + ", ".join(f.downweighted))
     if f.nuisances:

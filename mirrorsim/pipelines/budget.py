@@ -26,7 +26,6 @@ from mirrorsim.formats.files import claim_run_folder
 from mirrorsim.pipelines.evaluate import evaluate_into
 from mirrorsim.pipelines.evaluate3d import (
     Report3,
-    check_calibration3,
     evaluate_into3,
     with_shared_pan,
 )
@@ -256,12 +255,8 @@ def contribution(source: str, value: Any, ideal: Report | Report3, *,
 def check_budget_calibration(scene: Scene, calibration: SelfCalibration) -> SelfCalibration:
     """``calibration`` for a budget of ``scene``, refused before anything is rendered or
     written where its self-calibrated column would be empty: nuisances the scene's
-    beacons cannot carry, or a beacons' position σ without nuisances; for a 3-D scene,
-    a nuisance the 3-D solve does not estimate
-    (:data:`~mirrorsim.pipelines.evaluate3d.CALIBRATED3`)."""
+    beacons cannot carry, or a beacons' position σ without nuisances."""
     calibration = as_calibration(calibration)
-    if scene.is_3d:
-        check_calibration3(scene.name, calibration)
     if calibration.position_sigma and not calibration.nuisances:
         raise BadParameter("nuisances", "none given, yet a beacons' position σ is: the "
                            "budget uses that σ in its self-calibrated column only, which "

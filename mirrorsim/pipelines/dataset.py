@@ -294,7 +294,6 @@ def _run_spec(spec_path: str | Path | None, *, sampler: str | None, beacons: int
               calibration: SelfCalibration) -> DatasetSpec:
     """The run's spec: the file's, with the sampler and the beacon count given (part of
     the spec, so that ``--resume`` checks them), able to carry the nuisances."""
-    from mirrorsim.pipelines.evaluate3d import check_calibration3
     from mirrorsim.pipelines.random_scenes import load_spec
 
     spec = load_spec(spec_path)
@@ -302,9 +301,7 @@ def _run_spec(spec_path: str | Path | None, *, sampler: str | None, beacons: int
         spec = spec.with_sampler(sampler)
     if beacons is not None:
         spec = spec.with_beacon_count(beacons)
-    if spec.is_3d:  # what the 3-D solve estimates (a planar spec's scenes: the plane's)
-        check_calibration3(str(spec_path or "the default spec"), calibration)
-    try:  # before anything is written
+    try:  # before anything is written (a planar spec's scenes refuse the pitch)
         if not spec.is_3d:
             check_planar(calibration)
         check_nuisances(calibration.nuisances, spec.beacon_count, 1, priors=calibration.priors,

@@ -16,7 +16,6 @@ from mirrorsim.formats.error_model import ErrorModel
 from mirrorsim.formats.files import claim_run_folder, default_out
 from mirrorsim.pipelines.evaluate3d import (
     Report3,
-    check_calibration3,
     evaluate_into3,
     geometry_of,
 )
@@ -118,12 +117,10 @@ def evaluate_scene(scene: Scene, out_dir: str | Path | None = None, *, variant: 
 def check_geometry(scene: Scene, geometry: str, *,
                    calibration: SelfCalibration = PLAIN) -> str:
     """The solve ``scene`` gets (:func:`~mirrorsim.pipelines.evaluate3d.geometry_of`),
-    refusing with 3d what the 3-D evaluation does not do yet (before a run claims its
-    folder)."""
+    refusing a planar solve's pitch before a run claims its folder (a 3-D solve takes
+    every nuisance a SelfCalibration admits)."""
     chosen = geometry_of(scene, geometry)
-    if chosen == "3d":
-        check_calibration3(scene.name, calibration)
-    else:
+    if chosen == "planar":
         try:
             check_planar(calibration)
         except SolverError as exc:

@@ -173,7 +173,7 @@ def evaluate_into3(scene: Scene, out: Path, *, variant: str = "auto", progress: 
     folder its caller has claimed, its parameters checked
     (:func:`mirrorsim.pipelines.evaluate.evaluate_scene` with ``geometry``);
     ``calibration``: the pan, pitch, range scale and mirror's power to estimate, and what
-    the user states of them (:func:`check_calibration3`), beside the bench model's own
+    the user states of them, beside the bench model's own
     (``model_priors`` False: ``calibration``'s alone, as a budget compares its runs);
     ``board_pose``: every image read again through the camera's pose the board's holes
     give (:func:`~mirrorsim.detection.posed.corrected_image3`), the pan then the board's.
@@ -322,16 +322,6 @@ def sigma3(sigmas: list[Sigma], heights: list[float], *, fx: float,
 # what the 3-D solve estimates of a bench's shared errors (and, with a position σ, each
 # beacon's plan offset)
 CALIBRATED3 = ("pan", "pitch", "scale", "power")
-
-
-def check_calibration3(name: str, calibration: SelfCalibration) -> None:
-    """Refuse, naming the scene, a calibration the 3-D solve cannot make: a nuisance
-    other than CALIBRATED3 (the beacons' plan positions it estimates with a position
-    σ, as the planar solve does)."""
-    other = [n for n in calibration.nuisances if n not in CALIBRATED3]
-    if other:
-        raise BadParameter("nuisances", f"{name}: the 3-D solve estimates "
-                           f"{', '.join(CALIBRATED3)}, not {', '.join(other)}")
 
 
 def nuisances3(model: ErrorModel, sigma: ObjectSigmas, asked: SelfCalibration = PLAIN, *,

@@ -11,13 +11,13 @@ target tail widens its ellipses.
 
 from __future__ import annotations
 
-import json
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from mirrorsim.formats import dataset_table as table
+from mirrorsim.formats.dataset_rows import read_description
 from mirrorsim.formats.error_model import ErrorModel
 from mirrorsim.formats.measurements import load_measurements
 from mirrorsim.pipelines.evaluate3d import CHI2_3_R95, nuisances3, sigma3, solved3
@@ -39,7 +39,7 @@ def distances3(model: ErrorModel, dataset_dir: str | Path, cols: dict) -> np.nda
     folder = Path(dataset_dir)
     # what the user asked of the dataset's solves (the rows hold what the solves took:
     # the pan's prior widened by the shared α already, and the making model's priors)
-    asked = json.loads((folder / "dataset.json").read_text()).get("calibrate") or {}
+    asked = read_description(folder).get("calibrate") or {}
     asked = SelfCalibration(tuple(asked.get("nuisances", ())),
                             float(asked.get("position_sigma", 0.0)), asked.get("priors", {}))
     ok = table.usable_rows(cols)
