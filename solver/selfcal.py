@@ -188,8 +188,9 @@ def check_position_sigma(position_sigma: float) -> None:
     least :data:`POSITION_SIGMA_MIN_CM` (cm per axis)."""
     if not (is_number(position_sigma) and np.isfinite(position_sigma)
             and (position_sigma == 0 or position_sigma >= POSITION_SIGMA_MIN_CM)):
-        raise SolverError(f"position_sigma must be 0 (known exactly) or a finite number ≥ "
-                          f"{POSITION_SIGMA_MIN_CM:g} (cm), got {position_sigma!r}")
+        # (its callers name the parameter, or the flag)
+        raise SolverError(f"{position_sigma!r} must be 0 (known exactly) or a finite number "
+                          f"≥ {POSITION_SIGMA_MIN_CM:g} (cm)")
 
 
 def check_nuisance_sigma(priors: Mapping[str, float], nuisances: tuple[str, ...]) -> None:

@@ -802,6 +802,8 @@ def test_a_3d_spec_draws_the_planar_geometry_then_raises_it(tmp_path):
 @pytest.mark.parametrize("block, key, value, named", [
     ("target", "z", -1, "target.z"),
     ("beacon", "z", [0, 2, 4], "beacon.z"),
+    # a height no scene takes: the draws' refusal names the spec's key beside the scene's
+    ("target", "z", 300, "the scene's target.position[2] (the spec's target.z)"),
     ("mirror", "lean", [0, 20], "mirror.lean[1]"),
     ("mirror", "lean", "steep", "mirror.lean"),
 ])

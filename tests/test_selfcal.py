@@ -446,6 +446,9 @@ def test_priors_are_refused_for_nuisances_not_estimated_and_when_not_positive(tm
         SelfCalibration(("pan",), priors={"pan": True})
     with pytest.raises(BadParameter, match="^position_sigma: nan is not a finite number"):
         SelfCalibration(("pan",), np.nan)
+    # named once, by the caller (the flag, on the command line)
+    with pytest.raises(BadParameter, match=r"^position_sigma: -1\.0 must be 0 \(known "):
+        SelfCalibration(("pan",), -1.0)
     # numpy numbers are numbers, kept as plain floats (a dataset writes them as text)
     cal = SelfCalibration(("pan",), np.int64(1), {"pan": np.float32(0.25)})
     assert type(cal.position_sigma) is float and type(cal.priors["pan"]) is float

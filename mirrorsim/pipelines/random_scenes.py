@@ -10,6 +10,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
+import re
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -338,7 +339,7 @@ def _sample(spec: dict, rng: int | np.random.Generator | None, name: str,
         try:
             s = scene_from_dict(d, source=name, default_name=name)
         except SceneError as exc:
-            why = f"the scene's {exc.key or 'file'}"
+            why = f"the scene's {exc.key or 'file'}{_drawn_from(exc.key)}"
             reasons[why] = reasons.get(why, 0) + 1
             continue
         if s.warnings:
@@ -353,6 +354,15 @@ def _sample(spec: dict, rng: int | np.random.Generator | None, name: str,
     why = ", then ".join(f"{c}: {reasons.get(c, 0)} times" for c in common)
     raise NoValidScene(f"no usable scene in {tries} draws (refused most often for {why}); "
                        "widen the spec's ranges")
+
+
+def _drawn_from(key: str) -> str:
+    """`` (the spec's <key>)`` for a scene key drawn from a spec key of another name (an
+    object's height above the board: its position's z), else nothing."""
+    spec_key = ("target.z" if key == "target.position[2]"
+                else "beacon.z" if re.fullmatch(r"beacons\[\d+\]\.position\[2\]", key or "")
+                else None)
+    return "" if spec_key is None else f" (the spec's {spec_key})"
 
 
 def to_yaml(scene: Scene) -> str:
