@@ -1280,6 +1280,40 @@ def test_a_panels_roll_ignores_a_wall_as_grey_as_it_beyond_its_box():
     assert rolls[True] == pytest.approx(rolls[False], abs=0.15)
 
 
+@pytest.mark.parametrize("roll", [0.0, 2.0, -3.0])
+def test_a_raised_panels_roll_is_read_on_its_sides(roll):
+    """A panel raised above the camera's eye: perspective slopes its top and its foot
+    the same way, by different amounts (here 4° and 1.5°), while a level camera keeps
+    its sides upright.  Read on its top and foot, an upright one's roll was 2.75°, and
+    turning it so had read a 3-D frame's panel 3 % tall (s3d0060 of development seed
+    7002, an upright glass, its top sloped 3.8° and its foot 0.6°: d_total 2.9 % short,
+    2.8 cm off).  Where its top and foot disagree by over a degree, a 3-D frame's panel
+    takes its roll from its sides; rolled, it reads its roll."""
+    import math
+
+    import cv2
+
+    from mirrorsim.detection.regions import find_target
+    from mirrorsim.detection.rolled import image_roll
+
+    s, w, h, x0, v0 = 8, 120.0, 100.0, 140.0, 150.0
+    top, foot = (math.tan(math.radians(a)) for a in (4.0, 1.5))
+    corners = np.array([[x0, v0], [x0 + w, v0 + w * top], [x0 + w, v0 + h + w * foot],
+                        [x0, v0 + h]])
+    a = math.radians(roll)  # its top to the right: clockwise on the frame (v down)
+    turn = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+    corners = (corners - corners.mean(axis=0)) @ turn.T + corners.mean(axis=0)
+    mask = np.zeros((400 * s, 400 * s), np.uint8)
+    cv2.fillPoly(mask, [np.round(corners * s).astype(np.int32)], 1)
+    big = np.empty((400 * s, 400 * s, 3), np.float32)
+    big[:] = (190.0, 170.0, 120.0)
+    big[mask > 0] = (70.0, 70.0, 70.0)
+    img = np.round(big.reshape(400, s, 400, s, 3).mean(axis=(1, 3)))
+    box = find_target(img, w / h)
+    assert image_roll(img, box, "target", sides=True) == pytest.approx(roll, abs=0.3)
+    assert abs(image_roll(img, box, "target") - roll) > 2.0  # on its top and foot
+
+
 def test_a_pencils_top_lost_on_lines_is_measured_on_medians(monkeypatch):
     """An unlit cone's shading flattens near the band: the final pass's straight-line
     level, carried into the window, took the contrast under the floor, where the coarse

@@ -32,16 +32,22 @@ from mirrorsim.detection.regions import find_pencils, find_target, pencil_mask, 
 # would only blur it (across a 200 px panel, 0.25° moves an edge 0.4 px end to end,
 # symmetric about its middle; an upright mirror's images read within ±0.1°)
 MIN_ROLL_DEG = 0.25
+# how far (deg) a panel's top and foot may slope apart and still give its roll (beyond
+# it perspective has sloped them, image_roll); its two sides must agree as closely
+SLOPES_AGREE_DEG = 1.0
 MARGIN_PX = 28  # around the object: the edges' windows and levels reach 8 px past it
 ROLL_MARGIN_PX = 6  # around a panel's box, where its boundaries are sought for its roll
 
 
-def image_roll(img: np.ndarray, box: tuple[int, int, int, int], kind: str) -> float:
+def image_roll(img: np.ndarray, box: tuple[int, int, int, int], kind: str, *,
+               sides: bool = False) -> float:
     """The roll (deg) of the object's image in ``box`` of the 8-bit frame ``img``: the
     angle of its axis from the frame's vertical, positive with its top to the right.
     A pencil's from its painted region's long axis (its second moments), a panel's from
     the slopes of its top and bottom boundaries (robust line fits, which drop the
-    columns a pencil in front of it covers); 0 where neither can be found."""
+    columns a pencil in front of it covers); 0 where neither can be found.  With
+    ``sides`` (a 3-D frame's panel), where its top and foot slope apart by over
+    SLOPES_AGREE_DEG, from its sides' slopes: one side's, or both where they agree."""
     u0, v0, u1, v1 = box
     crop = np.asarray(img[v0:v1 + 1, u0:u1 + 1], np.float32)
     if kind == "beacon":
@@ -57,7 +63,27 @@ def image_roll(img: np.ndarray, box: tuple[int, int, int, int], kind: str) -> fl
     grey, inner = _grey_mask(img, box)
     slopes = [s for s in (_boundary_slope(grey, inner, top=True),
                           _boundary_slope(grey, inner, top=False)) if s is not None]
+    if sides and len(slopes) == 2 and not _agree(slopes):
+        # the top and the foot slope apart: perspective, not a roll (a panel raised
+        # above the camera's eye slopes both the same way, by different amounts: read
+        # so, an upright glass's panel was turned by 3.9° and read 3 % tall, s3d0060 of
+        # development seed 7002), and no turn makes both level.  A level camera keeps
+        # upright edges upright: the roll is the sides' (columns per row, transposed
+        # into _boundary_slope's rows; the frame's v runs down, so a top to the right
+        # slopes them negative)
+        u0, v0, u1, v1 = inner
+        leans = [s for s in (_boundary_slope(grey.T, (v0, u0, v1, u1), top=True),
+                             _boundary_slope(grey.T, (v0, u0, v1, u1), top=False))
+                 if s is not None]
+        if len(leans) == 1 or _agree(leans):
+            return math.degrees(math.atan(-float(np.mean(leans))))
     return math.degrees(math.atan(float(np.mean(slopes)))) if slopes else 0.0
+
+
+def _agree(slopes: list[float]) -> bool:
+    """Whether two boundaries' slopes lie within SLOPES_AGREE_DEG of each other."""
+    return len(slopes) == 2 and abs(math.degrees(math.atan(slopes[0]) - math.atan(slopes[1]))
+                                    ) <= SLOPES_AGREE_DEG
 
 
 def _grey_mask(img: np.ndarray, box: tuple[int, int, int, int]
@@ -124,7 +150,7 @@ def measure_rolled(linear: np.ndarray, img: np.ndarray, box: tuple[int, int, int
     ``cone_ratio``: a pencil's cone over its band; ``raised``: a 3-D scene's frame (see
     ``measure_region``; a bench's camera roll and mirror tilt roll a planar scene's
     images too, by up to 5° within the bench model's tolerances)."""
-    roll = image_roll(img, box, kind) if roll is None else roll
+    roll = image_roll(img, box, kind, sides=raised) if roll is None else roll
     if abs(roll) < MIN_ROLL_DEG:
         return measure_region(linear, box, kind, subsampled=subsampled, stored=img, raised=raised,
                               cone_ratio=cone_ratio)
