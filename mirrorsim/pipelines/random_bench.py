@@ -12,6 +12,7 @@ import numpy as np
 from mirrorsim.errors import SceneError
 from mirrorsim.formats.reader import Reader, show
 from mirrorsim.scene.imperfections import REGISTRY
+from solver.measurements import is_number
 
 BY_SPEC_PATH = {imp.spec_path: imp for imp in REGISTRY}
 
@@ -97,3 +98,14 @@ def check_bench_keys(spec: dict, r: Reader) -> None:
     for block, keys in BENCH_SPEC_KEYS.items():
         if block in bench:
             r.mapping(bench[block], f"bench.{block}", set(), optional=keys)
+
+
+def range_end(raw: Any, end: int) -> Any:
+    """A spec value with each [lo, hi] range replaced by its low (0) or high (1) end."""
+    if isinstance(raw, dict):
+        return {k: range_end(v, end) for k, v in raw.items()}
+    if isinstance(raw, list) and len(raw) == 2 and all(is_number(x) for x in raw):
+        return raw[end]
+    if isinstance(raw, list):
+        return [range_end(v, end) for v in raw]
+    return raw

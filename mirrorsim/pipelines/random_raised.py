@@ -9,6 +9,7 @@ elevations.
 
 from __future__ import annotations
 
+import re
 from typing import Any
 
 import numpy as np
@@ -57,3 +58,13 @@ def draw_3d_into(d: dict, spec: dict, rng: np.random.Generator, *, where: Any) -
     if "z" in spec["beacon"]:
         for b in d.get("beacons") or [d["beacon"]]:
             b["position"] = [*b["position"][:2], drawn("beacon", "z")]
+
+
+def drawn_from(key: str | None) -> str:
+    """`` (the spec's <key>)`` for a scene's key that a spec's key of another name draws
+    (an object's height above the board: its position's z), else nothing: a spec whose
+    draws that key refuses is told by the key it wrote."""
+    spec_key = ("target.z" if key == "target.position[2]"
+                else "beacon.z" if re.fullmatch(r"beacons\[\d+\]\.position\[2\]", key or "")
+                else None)
+    return "" if spec_key is None else f" (the spec's {spec_key})"

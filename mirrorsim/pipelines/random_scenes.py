@@ -10,7 +10,6 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
-import re
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -35,13 +34,18 @@ from mirrorsim.pipelines.random_bench import (
     check_bench_keys,
     draw_bench,
     draw_number,
+    range_end,
     set_key,
 )
-from mirrorsim.pipelines.random_raised import check_3d_keys, draw_3d_into, spec_is_3d
+from mirrorsim.pipelines.random_raised import (
+    check_3d_keys,
+    draw_3d_into,
+    drawn_from,
+    spec_is_3d,
+)
 from mirrorsim.pipelines.scenes import scene_from_dict
 from mirrorsim.scene.model import MAX_BOARD_CM, Camera, Scene
 from mirrorsim.truth import visibility
-from solver.measurements import is_number
 
 # the bundled spec, from the package's data (a wheel carries the clone's scenes/)
 DEFAULT_SPEC = Path(__file__).resolve().parents[1] / "data" / "scenes" / "dataset_spec.yaml"
@@ -339,7 +343,7 @@ def _sample(spec: dict, rng: int | np.random.Generator | None, name: str,
         try:
             s = scene_from_dict(d, source=name, default_name=name)
         except SceneError as exc:
-            why = f"the scene's {exc.key or 'file'}{_drawn_from(exc.key)}"
+            why = f"the scene's {exc.key or 'file'}{drawn_from(exc.key)}"
             reasons[why] = reasons.get(why, 0) + 1
             continue
         if s.warnings:
@@ -354,15 +358,6 @@ def _sample(spec: dict, rng: int | np.random.Generator | None, name: str,
     why = ", then ".join(f"{c}: {reasons.get(c, 0)} times" for c in common)
     raise NoValidScene(f"no usable scene in {tries} draws (refused most often for {why}); "
                        "widen the spec's ranges")
-
-
-def _drawn_from(key: str) -> str:
-    """`` (the spec's <key>)`` for a scene key drawn from a spec key of another name (an
-    object's height above the board: its position's z), else nothing."""
-    spec_key = ("target.z" if key == "target.position[2]"
-                else "beacon.z" if re.fullmatch(r"beacons\[\d+\]\.position\[2\]", key or "")
-                else None)
-    return "" if spec_key is None else f" (the spec's {spec_key})"
 
 
 def to_yaml(scene: Scene) -> str:
@@ -383,8 +378,8 @@ def check_bench_ends(spec: dict, r: Reader) -> None:
         for key, raw in (bench.get(block) or {}).items():
             for end in (0, 1):  # each range's low end, then its high end
                 lens = BY_SPEC_PATH[f"{block}.{key}"].form == "lens"
-                pick = ([_range_end(x, end) for x in raw] if lens and isinstance(raw, list)
-                        else _range_end(raw, end))
+                pick = ([range_end(x, end) for x in raw] if lens and isinstance(raw, list)
+                        else range_end(raw, end))
                 d = copy.deepcopy(base)
                 for path, value in draw_bench({block: {key: pick}},
                                                np.random.default_rng(0), r.source).items():
@@ -394,15 +389,3 @@ def check_bench_ends(spec: dict, r: Reader) -> None:
                 except SceneError as exc:  # named by the spec's key, with the reason
                     raise r.fail(f"bench.{block}.{key}", f"{show(raw)}: {exc.key}: "
                                  f"{exc.message}") from None
-
-
-def _range_end(raw: Any, end: int) -> Any:
-    """A spec value with each [lo, hi] range replaced by its low (0) or high (1) end."""
-    if isinstance(raw, dict):
-        return {k: _range_end(v, end) for k, v in raw.items()}
-    if isinstance(raw, list) and len(raw) == 2 and all(
-            is_number(x) for x in raw):
-        return raw[end]
-    if isinstance(raw, list):
-        return [_range_end(v, end) for v in raw]
-    return raw
