@@ -1281,14 +1281,17 @@ def test_a_panels_roll_ignores_a_wall_as_grey_as_it_beyond_its_box():
 
 
 @pytest.mark.parametrize("roll", [0.0, 2.0, -3.0])
-def test_a_raised_panels_roll_is_read_on_its_sides(roll):
+@pytest.mark.parametrize("one_side", [False, True])
+def test_a_raised_panels_roll_is_read_on_its_sides(roll, one_side):
     """A panel raised above the camera's eye: perspective slopes its top and its foot
     the same way, by different amounts (here 4° and 1.5°), while a level camera keeps
-    its sides upright.  Read on its top and foot, an upright one's roll was 2.75°, and
+    its sides upright.  Read on its top and foot, an upright one's roll was 2.6°, and
     turning it so had read a 3-D frame's panel 3 % tall (s3d0060 of development seed
-    7002, an upright glass, its top sloped 3.8° and its foot 0.6°: d_total 2.9 % short,
-    2.8 cm off).  Where its top and foot disagree by over a degree, a 3-D frame's panel
-    takes its roll from its sides; rolled, it reads its roll."""
+    7002, an upright glass, its top sloped 6.5° and its foot 1.3°: turned by 3.9°,
+    d_total 2.9 % short, 2.8 cm off).  Where its top and foot disagree by over a
+    degree, a 3-D frame's panel takes its roll from its sides, or from the one found
+    (``one_side``: a wall as grey as the panel beyond its right side, the case of
+    s3d0060); rolled, it reads its roll."""
     import math
 
     import cv2
@@ -1305,13 +1308,36 @@ def test_a_raised_panels_roll_is_read_on_its_sides(roll):
     corners = (corners - corners.mean(axis=0)) @ turn.T + corners.mean(axis=0)
     mask = np.zeros((400 * s, 400 * s), np.uint8)
     cv2.fillPoly(mask, [np.round(corners * s).astype(np.int32)], 1)
-    big = np.empty((400 * s, 400 * s, 3), np.float32)
-    big[:] = (190.0, 170.0, 120.0)
-    big[mask > 0] = (70.0, 70.0, 70.0)
-    img = np.round(big.reshape(400, s, 400, s, 3).mean(axis=(1, 3)))
-    box = find_target(img, w / h)
+    frames = []
+    for wall in (False, True):
+        big = np.empty((400 * s, 400 * s, 3), np.float32)
+        big[:] = (190.0, 170.0, 120.0)
+        if wall:  # from the panel's right side on, over its middle rows
+            big[int((v0 + 20) * s):int((v0 + h - 20) * s), int((x0 + w - 10) * s):] = 70.0
+        big[mask > 0] = (70.0, 70.0, 70.0)
+        frames.append(np.round(big.reshape(400, s, 400, s, 3).mean(axis=(1, 3))))
+    box = find_target(frames[0], w / h)  # the panel's region, as found without the wall
+    img = frames[one_side]
     assert image_roll(img, box, "target", sides=True) == pytest.approx(roll, abs=0.3)
-    assert abs(image_roll(img, box, "target") - roll) > 2.0  # on its top and foot
+    assert abs(image_roll(frames[0], box, "target") - roll) > 2.0  # on its top and foot
+
+
+def test_only_a_3d_frame_reads_a_panels_roll_on_its_sides(monkeypatch):
+    """measure_rolled asks image_roll for the sides' roll in a 3-D frame (raised) and
+    for the top and foot's in a planar one, whose readings stay as they were."""
+    from mirrorsim.detection import rolled
+
+    asked = []
+    monkeypatch.setattr(rolled, "image_roll",
+                        lambda *_, sides=False: asked.append(sides) or 0.0)
+    img = np.full((60, 60, 3), 128.0, np.float32)
+    for raised in (True, False):
+        try:
+            rolled.measure_rolled(img, img, (20, 20, 40, 40), kind="target", raised=raised,
+                                  target_ratio=1.0)
+        except Exception:  # noqa: BLE001 (a blank frame measures nothing: the roll is asked)
+            pass
+    assert asked == [True, False]
 
 
 def test_a_pencils_top_lost_on_lines_is_measured_on_medians(monkeypatch):

@@ -7,7 +7,8 @@ foot read 1–1.5 px outwards (a 150 px panel's height 1.6 % long, on a frame re
 a 3° lean).
 
 So an image is measured where it stands upright: its roll is found on its own pixels
-(the pencil's painted region's long axis, the panel's top and bottom boundaries), the
+(the pencil's painted region's long axis, the panel's top and bottom boundaries, or its
+sides where perspective slopes its top and bottom apart: :func:`image_roll`), the
 frame's neighbourhood turned by it, the object found and measured there as an upright
 one, and its foot and top taken back to the frame.  The measurement's height is then
 the image's length along its axis, its axis column and foot row those of its foot and
@@ -47,7 +48,8 @@ def image_roll(img: np.ndarray, box: tuple[int, int, int, int], kind: str, *,
     the slopes of its top and bottom boundaries (robust line fits, which drop the
     columns a pencil in front of it covers); 0 where neither can be found.  With
     ``sides`` (a 3-D frame's panel), where its top and foot slope apart by over
-    SLOPES_AGREE_DEG, from its sides' slopes: one side's, or both where they agree."""
+    SLOPES_AGREE_DEG, from its sides' slopes: one side's where only one is found, both
+    where they agree; else from its top and foot as without."""
     u0, v0, u1, v1 = box
     crop = np.asarray(img[v0:v1 + 1, u0:u1 + 1], np.float32)
     if kind == "beacon":
@@ -82,8 +84,9 @@ def image_roll(img: np.ndarray, box: tuple[int, int, int, int], kind: str, *,
 
 def _agree(slopes: list[float]) -> bool:
     """Whether two boundaries' slopes lie within SLOPES_AGREE_DEG of each other."""
-    return len(slopes) == 2 and abs(math.degrees(math.atan(slopes[0]) - math.atan(slopes[1]))
-                                    ) <= SLOPES_AGREE_DEG
+    apart = abs(math.degrees(math.atan(slopes[0]) - math.atan(slopes[1]))) if len(slopes) == 2 \
+        else math.inf
+    return apart <= SLOPES_AGREE_DEG
 
 
 def _grey_mask(img: np.ndarray, box: tuple[int, int, int, int]
