@@ -389,9 +389,20 @@ def test_solve_calibrates_3d_measurements_on_the_command_line(tmp_path):
     assert cal["nuisances"]["pan"] == pytest.approx(0.4, abs=1e-6)
     # the beacons' positions known to 0.5 cm: estimated (exact readings: still exact),
     # and the target's ellipsoid wider for it
-    loose = target_of(solve("--calibrate", "pan", "--beacon-sigma", "0.5", "--json", "-"))
+    run = solve("--calibrate", "pan", "--beacon-sigma", "0.5", "--json", "-")
+    loose = target_of(run)
     np.testing.assert_allclose(loose["target"], target, atol=1e-4)
     assert np.trace(loose["target_covariance"]) > np.trace(cal["target_covariance"])
+    assert "barely locate" not in run.stderr
+    # positions known to 10 cm and every nuisance estimated under a loose prior: the fit
+    # is held by its priors, its ellipsoid wider than a tenth of the target's distance,
+    # and one warning says so
+    run = solve("--calibrate", "pan,pitch,scale,power", "--prior",
+                "pan=5,pitch=5,scale=0.5,power=0.01", "--beacon-sigma", "10", "--json", "-")
+    rms = np.sqrt(np.trace(target_of(run)["target_covariance"]))
+    far = np.linalg.norm(np.array(target) - np.array(_leaning_readings()["observer"]))
+    assert rms > 0.1 * far
+    assert run.stderr.count("warning: the measurements barely locate the target") == 1
 
 
 def test_solve_calibrates_the_pitch_of_3d_measurements_and_a_planar_solve_refuses_it(

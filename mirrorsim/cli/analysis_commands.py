@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import sys
+import warnings
 from dataclasses import replace
 from pathlib import Path
 
@@ -74,6 +75,7 @@ def _solve(args) -> int:
                   "features: `evaluate` gives each image its own)")
     sol = solve_measurements(m.observer, m.beacons, m.targets, sigma=sigma, calibration=calibration)
     print(f"σ's from {source}", file=sys.stderr)
+    _warn_if_loose(sol.target_covariance, sol.target, m.observer)
     print(solution_summary(str(args.measurements), sol))
     emit(args, sol.to_json())
     return 0
@@ -108,9 +110,19 @@ def _solve3(args, m) -> int:
     nuisances, priors = with_shared_pan(calibration, shared)
     fit = solved3(m, SelfCalibration(nuisances, calibration.position_sigma, priors), scale)
     print(f"σ's from {source}", file=sys.stderr)
+    _warn_if_loose(fit.target_covariance, fit.target, m.observer)
     print(solution3_summary(str(args.measurements), fit))
     emit(args, fit.to_json())
     return 0
+
+
+def _warn_if_loose(covariance, target, observer) -> None:
+    """:func:`~mirrorsim.cli.tables.loose_fit_warning`'s warning, where there is one."""
+    from mirrorsim.cli.tables import loose_fit_warning
+
+    said = loose_fit_warning(covariance, target, observer)
+    if said is not None:
+        warnings.warn(said, RuntimeWarning, stacklevel=2)
 
 
 def _montecarlo_options(p):

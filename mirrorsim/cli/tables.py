@@ -131,6 +131,28 @@ def solution_summary(source: str, sol: Solution) -> str:
     return "\n".join(lines)
 
 
+# a target whose RMS error is over this share of its distance from the lens is barely
+# located: the priors hold the fit (its nuisances, each beacon's position) more than the
+# readings do, and its ellipse says little more than that
+LOOSE_SHARE = 0.1
+
+
+def loose_fit_warning(covariance: np.ndarray | None, target: np.ndarray,
+                      observer: np.ndarray) -> str | None:
+    """The warning of a target barely located (:data:`LOOSE_SHARE`), else None;
+    ``covariance``: its 2×2 or 3×3 covariance (cm²), ``target`` and ``observer`` in the
+    same coordinates."""
+    if covariance is None:
+        return None
+    rms = float(np.sqrt(np.trace(np.asarray(covariance, float))))
+    far = float(np.linalg.norm(np.asarray(target, float) - np.asarray(observer, float)))
+    if rms <= LOOSE_SHARE * far:
+        return None
+    return (f"the measurements barely locate the target: its RMS error, {rms:.3g} cm, is "
+            f"{rms / far:.0%} of its distance from the lens ({far:.3g} cm); the priors and "
+            "the beacons' position σ weigh more than the readings")
+
+
 def nuisance_text(sol: Solution) -> str:
     """Self-calibration's estimates with their σ's (from the covariance, where there)."""
     return describe_estimates(sol.nuisances, sol.nuisance_sd)
