@@ -804,6 +804,8 @@ def test_a_3d_spec_draws_the_planar_geometry_then_raises_it(tmp_path):
     ("beacon", "z", [0, 2, 4], "beacon.z"),
     # a height no scene takes: the draws' refusal names the spec's key beside the scene's
     ("target", "z", 300, "the scene's target.position[2] (the spec's target.z)"),
+    ("beacon", "z", 300, "(the spec's beacon.z)"),
+    ("beacon", "count", 1, "the scene's beacon.position[2] (the spec's beacon.z)"),
     ("mirror", "lean", [0, 20], "mirror.lean[1]"),
     ("mirror", "lean", "steep", "mirror.lean"),
 ])
@@ -812,6 +814,8 @@ def test_bad_3d_keys_are_refused_with_their_key(tmp_path, capsys, block, key, va
 
     d = yaml.safe_load(SPEC_3D.read_text())
     d[block][key] = value
+    if key == "count":  # one beacon, raised where no scene takes it: its key is beacon.
+        d["beacon"]["z"] = 300
     spec = tmp_path / "bad.yaml"
     spec.write_text(yaml.safe_dump(d))
     assert main(["dataset", "--n", "1", "--seed", "0", "--out", str(tmp_path / "o"),

@@ -375,3 +375,17 @@ def test_montecarlo_in_3d_prints_both_solves_and_refuses_bad_rises(tmp_path, cap
                        (["--lean", "1", "--sigma-elevation", "99"], "--sigma-elevation")):
         assert main(["montecarlo", *argv]) == 2
         assert flag in capsys.readouterr().err
+
+
+def test_the_loose_fit_warning_needs_a_distance():
+    """The warning of a target barely located: its RMS over a tenth of its distance from
+    the lens; none for a target at the lens (a share of nothing: it had divided by
+    zero) or within a centimetre of it, none without a covariance."""
+    from mirrorsim.cli.tables import loose_fit_warning
+
+    cov = np.diag([4.0, 5.0])  # an RMS of 3 cm
+    assert "barely locate" in loose_fit_warning(cov, np.array([20.0, 0.0]), np.zeros(2))
+    assert loose_fit_warning(cov, np.array([40.0, 0.0]), np.zeros(2)) is None
+    assert loose_fit_warning(cov, np.zeros(2), np.zeros(2)) is None
+    assert loose_fit_warning(cov, np.array([1e-9, 0.0]), np.zeros(2)) is None
+    assert loose_fit_warning(None, np.array([20.0, 0.0]), np.zeros(2)) is None

@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import sys
-import warnings
 from dataclasses import replace
 from pathlib import Path
 
@@ -117,12 +116,14 @@ def _solve3(args, m) -> int:
 
 
 def _warn_if_loose(covariance, target, observer) -> None:
-    """:func:`~mirrorsim.cli.tables.loose_fit_warning`'s warning, where there is one."""
+    """:func:`~mirrorsim.cli.tables.loose_fit_warning`'s warning, where there is one, on
+    stderr as the command's other warnings (not through ``warnings``, which a filter
+    would turn into an error or hide, and which says a repeated one once)."""
     from mirrorsim.cli.tables import loose_fit_warning
 
     said = loose_fit_warning(covariance, target, observer)
     if said is not None:
-        warnings.warn(said, RuntimeWarning, stacklevel=2)
+        print(f"warning: {said}", file=sys.stderr)
 
 
 def _montecarlo_options(p):

@@ -132,9 +132,12 @@ def solution_summary(source: str, sol: Solution) -> str:
 
 
 # a target whose RMS error is over this share of its distance from the lens is barely
-# located: the priors hold the fit (its nuisances, each beacon's position) more than the
-# readings do, and its ellipse says little more than that
+# located: its ellipse says little more than that the σ's, the priors or the beacons'
+# position σ leave it loose
 LOOSE_SHARE = 0.1
+# nearer the lens than this (cm) a share of the distance means nothing (a target at the
+# lens itself would divide by zero)
+LOOSE_NEAREST_CM = 1.0
 
 
 def loose_fit_warning(covariance: np.ndarray | None, target: np.ndarray,
@@ -146,11 +149,11 @@ def loose_fit_warning(covariance: np.ndarray | None, target: np.ndarray,
         return None
     rms = float(np.sqrt(np.trace(np.asarray(covariance, float))))
     far = float(np.linalg.norm(np.asarray(target, float) - np.asarray(observer, float)))
-    if rms <= LOOSE_SHARE * far:
+    if far < LOOSE_NEAREST_CM or rms <= LOOSE_SHARE * far:
         return None
     return (f"the measurements barely locate the target: its RMS error, {rms:.3g} cm, is "
-            f"{rms / far:.0%} of its distance from the lens ({far:.3g} cm); the priors and "
-            "the beacons' position σ weigh more than the readings")
+            f"{rms / far:.0%} of its distance from the lens ({far:.3g} cm); the σ's, the "
+            "priors or the beacons' position σ leave it that loose")
 
 
 def nuisance_text(sol: Solution) -> str:

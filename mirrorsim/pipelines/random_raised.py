@@ -62,9 +62,11 @@ def draw_3d_into(d: dict, spec: dict, rng: np.random.Generator, *, where: Any) -
 
 def drawn_from(key: str | None) -> str:
     """`` (the spec's <key>)`` for a scene's key that a spec's key of another name draws
-    (an object's height above the board: its position's z), else nothing: a spec whose
-    draws that key refuses is told by the key it wrote."""
+    (an object's height above the board: its position's z; ``beacon.`` in a scene of
+    one beacon, ``beacons[i].`` of several), else nothing: a spec whose draws that key
+    refuses is told by the key it wrote."""
     spec_key = ("target.z" if key == "target.position[2]"
-                else "beacon.z" if re.fullmatch(r"beacons\[\d+\]\.position\[2\]", key or "")
+                else "beacon.z" if re.fullmatch(r"beacons?(\[\d+\])?\.position\[2\]",
+                                                key or "")
                 else None)
     return "" if spec_key is None else f" (the spec's {spec_key})"
