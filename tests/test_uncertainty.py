@@ -362,8 +362,11 @@ def test_the_shipped_models_rows_are_what_make_error_model_renders(kind, tmp_pat
                                                                    monkeypatch):
     """Each shipped model comes from `make error-model`: the rows its provenance records
     (scenes of its dataset's seed and spec), made again here, measure the same errors
-    and features (to 1e-6: the render is bit for bit the same with the same seed, the
-    calibration is made afresh)."""
+    and features (to 1e-6, and 1e-8 near 0: the render is bit for bit the same with
+    the same seed, the calibration is made afresh; the measurement's float arithmetic
+    is not, across numpy and OpenCV releases: installed afresh on 2026-12-08 (numpy
+    2.4.6, OpenCV 5.1.0.95) a pencil's height moved by 1e-7 px and a d_total error of
+    8e-5 by 1.3e-9)."""
     from pathlib import Path
 
     from mirrorsim.pipelines.dataset import process_one
@@ -381,7 +384,7 @@ def test_the_shipped_models_rows_are_what_make_error_model_renders(kind, tmp_pat
                            variant="auto", error_model=model)
         assert done.row is not None and not done.row.error
         for c in errormodel.CHECK_COLUMNS:
-            assert done.row[c] == pytest.approx(row[c], rel=1e-6, abs=1e-9), c
+            assert done.row[c] == pytest.approx(row[c], rel=1e-6, abs=1e-8), c
 
 
 def test_one_bad_image_does_not_drag_the_estimate_and_is_named():
