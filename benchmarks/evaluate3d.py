@@ -246,7 +246,7 @@ def acceptance(folders: list[Path], model: Path | None) -> str:
             if not found:
                 sys.exit(f"error: {folder}: neither a 3-D dataset nor a finished run's rows "
                          f"({_rows(folder, model).name}/)")
-            rows = [r for r in map(lambda p: json.loads(p.read_text()), found) if "errors" in r]
+            rows = [r for r in (json.loads(p.read_text()) for p in found) if "errors" in r]
         lines.append(_line(folder.name, rows))
     return "\n".join(lines).replace("| lean |", "| set |", 1)
 

@@ -84,9 +84,8 @@ def image_roll(img: np.ndarray, box: tuple[int, int, int, int], kind: str, *,
 
 def _agree(slopes: list[float]) -> bool:
     """Whether two boundaries' slopes lie within SLOPES_AGREE_DEG of each other."""
-    apart = abs(math.degrees(math.atan(slopes[0]) - math.atan(slopes[1]))) if len(slopes) == 2 \
-        else math.inf
-    return apart <= SLOPES_AGREE_DEG
+    return len(slopes) == 2 and (abs(math.degrees(math.atan(slopes[0]) - math.atan(slopes[1])))
+                                 <= SLOPES_AGREE_DEG)
 
 
 def _grey_mask(img: np.ndarray, box: tuple[int, int, int, int]

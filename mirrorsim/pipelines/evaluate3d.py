@@ -320,11 +320,6 @@ def sigma3(sigmas: list[Sigma], heights: list[float], *, fx: float,
             for k, s, h in zip(kinds, sigmas, heights, strict=True)]
 
 
-# what the 3-D solve estimates of a bench's shared errors (and, with a position σ, each
-# beacon's plan offset)
-CALIBRATED3 = ("pan", "pitch", "scale", "power")
-
-
 def nuisances3(model: ErrorModel, sigma: ObjectSigmas, asked: SelfCalibration = PLAIN, *,
                bench: bool = True, board: tuple[CameraPose, float] | None = None
                ) -> tuple[SelfCalibration, ObjectSigmas]:
@@ -344,11 +339,12 @@ def nuisances3(model: ErrorModel, sigma: ObjectSigmas, asked: SelfCalibration = 
 
 def with_shared_pan(calibration: SelfCalibration, shared_alpha_deg: float
                     ) -> tuple[tuple[str, ...], dict[str, float]]:
-    """``calibration``'s nuisances the 3-D solve estimates, with their priors, and an α
-    error every image of a frame shares as the pan's prior (widening the one it has;
-    none where the pan is free)."""
-    nuisances = tuple(n for n in calibration.nuisances if n in CALIBRATED3)
-    priors = {n: s for n, s in calibration.priors.items() if n in nuisances}
+    """``calibration``'s nuisances (the 3-D solve estimates every one a SelfCalibration
+    admits, :data:`solver.selfcal.KNOWN`), with their priors, and an α error every image
+    of a frame shares as the pan's prior (widening the one it has; none where the pan is
+    free)."""
+    nuisances = calibration.nuisances
+    priors = dict(calibration.priors)
     if shared_alpha_deg and ("pan" in priors or "pan" not in nuisances):
         priors["pan"] = math.hypot(priors.get("pan", 0.0), shared_alpha_deg)
         nuisances = tuple(dict.fromkeys((*nuisances, "pan")))
